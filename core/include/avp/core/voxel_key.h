@@ -1,0 +1,43 @@
+#pragma once
+
+#include <Eigen/Core>
+
+#include <cmath>
+#include <cstdint>
+#include <functional>
+
+namespace avp {
+
+/// Integer voxel coordinates on a grid of edge `voxel_size_m` anchored at the world origin:
+/// voxel k covers [k * s, (k + 1) * s) on each axis, its centre is (k + 0.5) * s. This is the same
+/// lattice as OctoMap's keys (key = k + 32768), so our voxels and OctoMap's coincide.
+struct VoxelKey {
+  int32_t x = 0;
+  int32_t y = 0;
+  int32_t z = 0;
+
+  static VoxelKey FromPoint(const Eigen::Vector3d& p, double voxel_size_m) {
+    const double inv = 1.0 / voxel_size_m;
+    return {static_cast<int32_t>(std::floor(p.x() * inv)),
+            static_cast<int32_t>(std::floor(p.y() * inv)),
+            static_cast<int32_t>(std::floor(p.z() * inv))};
+  }
+  Eigen::Vector3d Center(double voxel_size_m) const {
+    return {(x + 0.5) * voxel_size_m, (y + 0.5) * voxel_size_m, (z + 0.5) * voxel_size_m};
+  }
+
+  friend bool operator==(const VoxelKey&, const VoxelKey&) = default;
+  friend auto operator<=>(const VoxelKey&, const VoxelKey&) = default;
+};
+
+struct VoxelKeyHash {
+  size_t operator()(const VoxelKey& k) const {
+    // Large primes (Teschner et al. 2003), mixed into 64 bits.
+    const uint64_t h = static_cast<uint64_t>(static_cast<uint32_t>(k.x)) * 73856093ULL ^
+                       static_cast<uint64_t>(static_cast<uint32_t>(k.y)) * 19349663ULL ^
+                       static_cast<uint64_t>(static_cast<uint32_t>(k.z)) * 83492791ULL;
+    return static_cast<size_t>(h ^ (h >> 29));
+  }
+};
+
+}  // namespace avp
