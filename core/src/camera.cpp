@@ -1,7 +1,7 @@
-#include <fmt/format.h>
-
 #include <cmath>
 #include <vector>
+
+#include <fmt/format.h>
 
 #include <avp/core/camera.h>
 #include <avp/core/error.h>
@@ -52,11 +52,16 @@ Status CameraIntrinsics::Validate() const {
           fmt::format("max_depth_m ({}) must be finite and > min_depth_m ({})", max_depth_m,
                       min_depth_m));
   if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError("invalid camera intrinsics: " + fmt::format("{}", fmt::join(errors, "; ")));
+  return InvalidArgumentError("invalid camera intrinsics: " +
+                              fmt::format("{}", fmt::join(errors, "; ")));
 }
 
-double CameraIntrinsics::fov_x_deg() const { return 2.0 * std::atan(0.5 * width / fx) * 180.0 / EIGEN_PI; }
-double CameraIntrinsics::fov_y_deg() const { return 2.0 * std::atan(0.5 * height / fy) * 180.0 / EIGEN_PI; }
+double CameraIntrinsics::fov_x_deg() const {
+  return 2.0 * std::atan(0.5 * width / fx) * 180.0 / EIGEN_PI;
+}
+double CameraIntrinsics::fov_y_deg() const {
+  return 2.0 * std::atan(0.5 * height / fy) * 180.0 / EIGEN_PI;
+}
 
 std::optional<Eigen::Vector2d> CameraIntrinsics::Project(const Eigen::Vector3d& p_C) const {
   if (!(p_C.z() > 0.0)) return std::nullopt;

@@ -7,8 +7,9 @@ namespace avp {
 Status RgbdFrame::Validate() const {
   AVP_RETURN_IF_ERROR(K.Validate().WithContext("RGB-D frame"));
   if (!rgb.SameSizeAs(K.width, K.height)) {
-    return InvalidArgumentError(fmt::format("RGB-D frame: rgb size {}x{} differs from intrinsics {}x{}",
-                                            rgb.width(), rgb.height(), K.width, K.height));
+    return InvalidArgumentError(
+        fmt::format("RGB-D frame: rgb size {}x{} differs from intrinsics {}x{}", rgb.width(),
+                    rgb.height(), K.width, K.height));
   }
   if (!depth_m.SameSizeAs(K.width, K.height)) {
     return InvalidArgumentError(

@@ -13,12 +13,16 @@ uint64_t MixSeed(uint64_t x) {
   return x ^ (x >> 31);
 }
 
-Rng Rng::Fork(uint64_t stream) const { return Rng(MixSeed(MixSeed(seed_) ^ MixSeed(stream + 1))); }
+Rng Rng::Fork(uint64_t stream) const {
+  // Seed and stream go through different hashes: the symmetric MixSeed(seed) ^ MixSeed(stream + 1)
+  // made Rng(a).Fork(b) equal Rng(b + 1).Fork(a - 1), e.g. Rng(1).Fork(0) == Rng(2).Fork(1).
+  return Rng(MixSeed(MixSeed(seed_) + MixSeed(MixSeed(stream))));
+}
 
-Rng Rng::Fork(const char* stream_name) const {
+Rng Rng::Fork(std::string_view stream_name) const {
   // FNV-1a over the name: stable across platforms.
   uint64_t h = 0xcbf29ce484222325ULL;
-  for (char c : std::string_view(stream_name)) {
+  for (char c : stream_name) {
     h ^= static_cast<uint8_t>(c);
     h *= 0x100000001b3ULL;
   }
@@ -35,7 +39,8 @@ int64_t Rng::UniformInt(int64_t lo, int64_t hi) {
   do {
     x = engine_();
   } while (x >= limit);
-  return lo + static_cast<int64_t>(x % n);
+  // In unsigned arithmetic: lo + offset overflows int64_t for ranges wider than INT64_MAX.
+  return static_cast<int64_t>(static_cast<uint64_t>(lo) + x % n);
 }
 
 double Rng::Normal() {

@@ -21,7 +21,7 @@ std::optional<SemanticClass> SemanticClassFromString(std::string_view name) {
 
 const std::array<SemanticClass, kNumSemanticClasses>& AllSemanticClasses() {
   static const std::array<SemanticClass, kNumSemanticClasses> all = {
-      SemanticClass::kBackground, SemanticClass::kFruit,  SemanticClass::kLeaf,
+      SemanticClass::kBackground, SemanticClass::kFruit,   SemanticClass::kLeaf,
       SemanticClass::kStem,       SemanticClass::kSupport, SemanticClass::kGround,
       SemanticClass::kOther};
   return all;

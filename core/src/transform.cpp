@@ -1,8 +1,8 @@
-#include <fmt/format.h>
-
 #include <algorithm>
 #include <cmath>
 #include <ostream>
+
+#include <fmt/format.h>
 
 #include <avp/core/error.h>
 #include <avp/core/transform.h>
@@ -11,7 +11,8 @@ namespace avp {
 
 bool IsRotationMatrix(const Eigen::Matrix3d& R, double tolerance) {
   if (!R.allFinite()) return false;
-  const double orthogonality = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  const double orthogonality =
+      (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
   return orthogonality <= tolerance && std::abs(R.determinant() - 1.0) <= tolerance;
 }
 
@@ -51,7 +52,7 @@ RigidTransform RigidTransform::LookAt(const Eigen::Vector3d& p_WEye,
   const double distance = forward.norm();
   AVP_THROW_UNLESS(distance > 1e-9, p_WEye.transpose(), p_WTarget.transpose());
   const Eigen::Vector3d z = forward / distance;
-  Eigen::Vector3d x = z.cross(-up_W);  // image right = forward x down
+  Eigen::Vector3d x = z.cross(up_W);  // image right = forward x up (= down x forward)
   const double x_norm = x.norm();
   AVP_THROW_UNLESS(x_norm > 1e-9, z.transpose(), up_W.transpose());
   x /= x_norm;
@@ -64,16 +65,16 @@ RigidTransform RigidTransform::LookAt(const Eigen::Vector3d& p_WEye,
 }
 
 Eigen::Vector3d RigidTransform::rpy() const {
-  // Inverse of R = Rz(yaw) Ry(pitch) Rx(roll).
-  const double pitch = std::asin(std::clamp(-R_(2, 0), -1.0, 1.0));
-  double roll = 0.0;
-  double yaw = 0.0;
-  if (std::abs(std::cos(pitch)) > 1e-9) {
-    roll = std::atan2(R_(2, 1), R_(2, 2));
-    yaw = std::atan2(R_(1, 0), R_(0, 0));
-  } else {  // gimbal lock: put everything into yaw
-    yaw = std::atan2(-R_(0, 1), R_(1, 1));
-  }
+  // Inverse of R = Rz(yaw) Ry(pitch) Rx(roll). Roll from the last row, then yaw from
+  // N = R Rx(-roll) = Rz(yaw) Ry(pitch): every atan2 sees O(1) arguments, so FromRpy(rpy())
+  // reproduces R to rounding error even at and near gimbal lock (asin(-R20) and a cos(pitch)
+  // threshold lost up to ~1e-8 rad there). At exact gimbal lock roll is 0 and yaw takes the rest.
+  const double c_pitch = std::hypot(R_(2, 1), R_(2, 2));
+  const double roll = c_pitch > 0.0 ? std::atan2(R_(2, 1), R_(2, 2)) : 0.0;
+  const double pitch = std::atan2(-R_(2, 0), c_pitch);
+  const double c = std::cos(roll);
+  const double s = std::sin(roll);
+  const double yaw = std::atan2(-(R_(0, 1) * c - R_(0, 2) * s), R_(1, 1) * c - R_(1, 2) * s);
   return {roll, pitch, yaw};
 }
 
@@ -92,15 +93,20 @@ Eigen::Isometry3d RigidTransform::ToIsometry() const {
 }
 
 double RigidTransform::AngleTo(const RigidTransform& other) const {
+  // atan2(sin, cos) keeps full precision near 0 and pi, where acos((trace - 1) / 2) alone
+  // resolves only ~1e-8 rad.
   const Eigen::Matrix3d R_rel = R_.transpose() * other.R_;
-  const double c = std::clamp((R_rel.trace() - 1.0) / 2.0, -1.0, 1.0);
-  return std::acos(c);
+  const Eigen::Vector3d two_sin_axis(R_rel(2, 1) - R_rel(1, 2), R_rel(0, 2) - R_rel(2, 0),
+                                     R_rel(1, 0) - R_rel(0, 1));
+  return std::atan2(0.5 * two_sin_axis.norm(), 0.5 * (R_rel.trace() - 1.0));
 }
 
 std::string RigidTransform::ToString() const {
-  const Eigen::Vector3d e = rpy();
-  return fmt::format("xyz [{:.6g}, {:.6g}, {:.6g}] m, rpy [{:.6g}, {:.6g}, {:.6g}] rad", p_.x(),
-                     p_.y(), p_.z(), e.x(), e.y(), e.z());
+  // Adding 0.0 prints -0 as 0.
+  const Eigen::Vector3d e = rpy().array() + 0.0;
+  const Eigen::Vector3d p = p_.array() + 0.0;
+  return fmt::format("xyz [{:.6g}, {:.6g}, {:.6g}] m, rpy [{:.6g}, {:.6g}, {:.6g}] rad", p.x(),
+                     p.y(), p.z(), e.x(), e.y(), e.z());
 }
 
 std::ostream& operator<<(std::ostream& os, const RigidTransform& X) { return os << X.ToString(); }

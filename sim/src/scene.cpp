@@ -1,9 +1,9 @@
-#include <fmt/format.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <unordered_set>
+
+#include <fmt/format.h>
 
 #include <avp/core/error.h>
 #include <avp/sim/scene.h>
@@ -43,8 +43,9 @@ Status TriangleMesh::Validate() const {
   for (size_t i = 0; i < triangles.size(); ++i) {
     const Eigen::Vector3i& t = triangles[i];
     if ((t.array() < 0).any() || (t.array() >= n).any()) {
-      return InvalidArgumentError(fmt::format(
-          "mesh triangle {} has index out of range [0, {}): ({}, {}, {})", i, n, t.x(), t.y(), t.z()));
+      return InvalidArgumentError(
+          fmt::format("mesh triangle {} has index out of range [0, {}): ({}, {}, {})", i, n, t.x(),
+                      t.y(), t.z()));
     }
   }
   return Status::Ok();
@@ -131,24 +132,26 @@ Status Scene::Validate() const {
   std::unordered_set<uint16_t> ids;
   for (const SceneObject& o : objects) {
     if (o.instance_id == 0) {
-      return InvalidArgumentError(fmt::format("scene '{}': object '{}' has instance id 0 (reserved "
-                                              "for background)", name, o.name));
+      return InvalidArgumentError(
+          fmt::format("scene '{}': object '{}' has instance id 0 (reserved "
+                      "for background)",
+                      name, o.name));
     }
     if (!ids.insert(o.instance_id).second) {
-      return InvalidArgumentError(fmt::format("scene '{}': instance id {} is used twice (object '{}')",
-                                              name, o.instance_id, o.name));
+      return InvalidArgumentError(fmt::format(
+          "scene '{}': instance id {} is used twice (object '{}')", name, o.instance_id, o.name));
     }
     if (const auto* mesh = std::get_if<TriangleMesh>(&o.shape)) {
-      AVP_RETURN_IF_ERROR(mesh->Validate().WithContext(
-          fmt::format("scene '{}', object '{}'", name, o.name)));
+      AVP_RETURN_IF_ERROR(
+          mesh->Validate().WithContext(fmt::format("scene '{}', object '{}'", name, o.name)));
     } else {
       const Ellipsoid& e = std::get<Ellipsoid>(o.shape);
       if (!e.center_W.allFinite() || !e.radii.allFinite() || (e.radii.array() <= 0.0).any()) {
         return InvalidArgumentError(fmt::format(
             "scene '{}', object '{}': ellipsoid centre ({}, {}, {}) radii ({}, {}, {}) must be "
             "finite with radii > 0",
-            name, o.name, e.center_W.x(), e.center_W.y(), e.center_W.z(), e.radii.x(),
-            e.radii.y(), e.radii.z()));
+            name, o.name, e.center_W.x(), e.center_W.y(), e.center_W.z(), e.radii.x(), e.radii.y(),
+            e.radii.z()));
       }
     }
   }

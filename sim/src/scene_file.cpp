@@ -1,1 +1,577 @@
-// placeholder: being written
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <assimp/Importer.hpp>
+#include <assimp/config.h>
+#include <assimp/material.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+#include <yaml-cpp/yaml.h>
+
+#include <avp/core/error.h>
+#include <avp/core/semantic_class.h>
+#include <avp/io/yaml.h>
+#include <avp/sim/mesh_builder.h>
+#include <avp/sim/scenario.h>
+#include <avp/sim/scene_file.h>
+
+namespace avp::sim {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+enum class UpAxis { kAuto, kY, kZ };
+enum class FruitInstances { kObjects, kComponents };
+
+struct ClassRule {
+  std::string pattern;
+  SemanticClass semantic_class = SemanticClass::kOther;
+  std::optional<Eigen::Vector3f> color;
+};
+
+struct MeshEntry {
+  fs::path file;  // resolved
+  std::string file_text;
+  RigidTransform X_WM;
+  Eigen::Vector3d scale = Eigen::Vector3d::Ones();
+  UpAxis up_axis = UpAxis::kAuto;
+  SemanticClass default_class = SemanticClass::kOther;
+  std::optional<Eigen::Vector3f> color;
+  FruitInstances fruit_instances = FruitInstances::kObjects;
+  std::vector<ClassRule> rules;
+};
+
+/// Default colours per class when neither the file nor a rule gives one (linear RGB).
+Eigen::Vector3f DefaultColor(SemanticClass c) {
+  switch (c) {
+    case SemanticClass::kFruit:
+      return {0.55f, 0.05f, 0.03f};
+    case SemanticClass::kLeaf:
+      return {0.08f, 0.25f, 0.05f};
+    case SemanticClass::kStem:
+      return {0.16f, 0.30f, 0.07f};
+    case SemanticClass::kSupport:
+      return {0.33f, 0.22f, 0.11f};
+    case SemanticClass::kGround:
+      return {0.15f, 0.10f, 0.065f};
+    default:
+      return {0.5f, 0.5f, 0.5f};
+  }
+}
+
+std::string KnownClasses() {
+  std::vector<std::string> names;
+  for (const SemanticClass c : AllSemanticClasses()) names.emplace_back(ToString(c));
+  return fmt::format("{}", fmt::join(names, ", "));
+}
+
+Result<SemanticClass> ReadClass(const YAML::Node& node, std::string_view key,
+                                std::string_view context) {
+  AVP_ASSIGN_OR_RETURN(const std::string name, io::ReadString(node, key, context));
+  const std::optional<SemanticClass> c = SemanticClassFromString(name);
+  if (!c) {
+    return InvalidArgumentError(fmt::format("{}.{}: unknown semantic class '{}' (known: {})",
+                                            context, key, name, KnownClasses()));
+  }
+  return *c;
+}
+
+Result<Eigen::Vector3f> ReadColor(const YAML::Node& node, std::string_view key,
+                                  std::string_view context) {
+  AVP_ASSIGN_OR_RETURN(const Eigen::VectorXd v, io::ReadVector(node, key, 3, context));
+  if ((v.array() < 0.0).any() || (v.array() > 1.0).any()) {
+    return InvalidArgumentError(
+        fmt::format("{}.{}: colour [{}, {}, {}] must be linear RGB with every value in [0, 1]",
+                    context, key, v[0], v[1], v[2]));
+  }
+  return Eigen::Vector3f(v.cast<float>());
+}
+
+Result<MeshEntry> ReadMeshEntry(const YAML::Node& node, const fs::path& base_dir,
+                                const std::string& context) {
+  AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(
+      node,
+      {"file", "pose", "scale", "up_axis", "default_class", "color", "fruit_instances", "classes"},
+      context));
+  MeshEntry entry;
+  AVP_ASSIGN_OR_RETURN(entry.file_text, io::ReadString(node, "file", context));
+  const fs::path file(entry.file_text);
+  entry.file = file.is_absolute() ? file : base_dir / file;
+  std::error_code ec;
+  if (!fs::is_regular_file(entry.file, ec)) {
+    return NotFoundError(fmt::format("{}.file: mesh file '{}' does not exist (given as '{}')",
+                                     context, entry.file.lexically_normal().string(),
+                                     entry.file_text));
+  }
+  if (node["pose"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(entry.X_WM, io::ReadPose(node, "pose", context));
+  }
+  if (const YAML::Node scale = node["scale"]; scale.IsDefined()) {
+    if (scale.IsSequence()) {
+      AVP_ASSIGN_OR_RETURN(const Eigen::VectorXd s, io::ReadVector(node, "scale", 3, context));
+      entry.scale = s;
+    } else {
+      AVP_ASSIGN_OR_RETURN(const double s, io::ReadDouble(node, "scale", context));
+      entry.scale = Eigen::Vector3d::Constant(s);
+    }
+    if ((entry.scale.array() <= 0.0).any()) {
+      return InvalidArgumentError(fmt::format("{}.scale: [{}, {}, {}] must be > 0", context,
+                                              entry.scale.x(), entry.scale.y(), entry.scale.z()));
+    }
+  }
+  if (node["up_axis"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(const std::string up, io::ReadString(node, "up_axis", context));
+    if (up == "y") {
+      entry.up_axis = UpAxis::kY;
+    } else if (up == "z") {
+      entry.up_axis = UpAxis::kZ;
+    } else {
+      return InvalidArgumentError(
+          fmt::format("{}.up_axis: must be 'y' or 'z', got '{}'", context, up));
+    }
+  }
+  if (node["default_class"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(entry.default_class, ReadClass(node, "default_class", context));
+  }
+  if (node["color"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(entry.color, ReadColor(node, "color", context));
+  }
+  if (node["fruit_instances"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(const std::string mode, io::ReadString(node, "fruit_instances", context));
+    if (mode == "objects") {
+      entry.fruit_instances = FruitInstances::kObjects;
+    } else if (mode == "components") {
+      entry.fruit_instances = FruitInstances::kComponents;
+    } else {
+      return InvalidArgumentError(fmt::format(
+          "{}.fruit_instances: must be 'objects' or 'components', got '{}'", context, mode));
+    }
+  }
+  if (const YAML::Node classes = node["classes"]; classes.IsDefined()) {
+    if (!classes.IsSequence()) {
+      return InvalidArgumentError(
+          fmt::format("{}.classes: must be a list of {{match, class, color}} rules", context));
+    }
+    for (size_t i = 0; i < classes.size(); ++i) {
+      const std::string rule_context = fmt::format("{}.classes[{}]", context, i);
+      const YAML::Node r = classes[i];
+      AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(r, {"match", "class", "color"}, rule_context));
+      ClassRule rule;
+      AVP_ASSIGN_OR_RETURN(rule.pattern, io::ReadString(r, "match", rule_context));
+      AVP_ASSIGN_OR_RETURN(rule.semantic_class, ReadClass(r, "class", rule_context));
+      if (r["color"].IsDefined()) {
+        AVP_ASSIGN_OR_RETURN(rule.color, ReadColor(r, "color", rule_context));
+      }
+      entry.rules.push_back(std::move(rule));
+    }
+  }
+  return entry;
+}
+
+std::string LowerExtension(const fs::path& p) {
+  std::string ext = p.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
+
+Eigen::Matrix4d ToEigen(const aiMatrix4x4& m) {
+  Eigen::Matrix4d out;
+  for (unsigned r = 0; r < 4; ++r) {
+    for (unsigned c = 0; c < 4; ++c) out(r, c) = m[r][c];
+  }
+  return out;
+}
+
+/// Everything one mesh file contributes, before it is added to the scene.
+struct ImportedPart {
+  std::string name;
+  SemanticClass semantic_class = SemanticClass::kOther;
+  Eigen::Vector3f albedo;
+  TriangleMesh mesh;
+};
+
+Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::string& context) {
+  Assimp::Importer importer;
+  const std::string ext = LowerExtension(entry.file);
+  const bool is_collada = ext == ".dae";
+  const bool is_gltf = ext == ".gltf" || ext == ".glb";
+  // Up axis: COLLADA declares one (assimp turns the file into its Y-up convention unless told to
+  // ignore it), glTF is Y-up by specification, other formats are taken as Z-up (ROS/URDF habit).
+  // An explicit up_axis describes the raw file coordinates and switches assimp's conversion off.
+  bool y_up = is_collada || is_gltf;
+  if (entry.up_axis != UpAxis::kAuto) {
+    importer.SetPropertyBool(AI_CONFIG_IMPORT_COLLADA_IGNORE_UP_DIRECTION, true);
+    y_up = entry.up_axis == UpAxis::kY;
+  }
+  importer.SetPropertyBool(AI_CONFIG_IMPORT_COLLADA_USE_COLLADA_NAMES, true);
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE,
+                              aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+  const aiScene* ai = importer.ReadFile(
+      entry.file.string(), aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
+                               aiProcess_SortByPType | aiProcess_ValidateDataStructure);
+  if (ai == nullptr || ai->mRootNode == nullptr || (ai->mFlags & AI_SCENE_FLAGS_INCOMPLETE) != 0) {
+    return ParseError(fmt::format("{}.file: cannot import mesh '{}': {}", context,
+                                  entry.file.string(),
+                                  ai == nullptr ? importer.GetErrorString() : "incomplete scene"));
+  }
+
+  // p_W = X_WM * diag(scale) * U * M_node * p_file, U: the up-axis correction.
+  Eigen::Matrix4d pre = Eigen::Matrix4d::Identity();
+  if (y_up) {
+    pre.topLeftCorner<3, 3>() =
+        Eigen::AngleAxisd(EIGEN_PI / 2.0, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  }
+  pre.topLeftCorner<3, 3>() = entry.scale.asDiagonal() * pre.topLeftCorner<3, 3>();
+  const Eigen::Matrix4d X_WM = entry.X_WM.ToMatrix4() * pre;
+
+  std::vector<ImportedPart> parts;
+  const std::string stem = entry.file.stem().string();
+  // Iterative depth-first traversal (children in file order) with accumulated transforms.
+  struct Item {
+    const aiNode* node;
+    Eigen::Matrix4d X;
+  };
+  std::vector<Item> stack = {{ai->mRootNode, X_WM * ToEigen(ai->mRootNode->mTransformation)}};
+  while (!stack.empty()) {
+    const Item item = std::move(stack.back());
+    stack.pop_back();
+    const std::string node_name = item.node->mName.C_Str();
+    for (unsigned k = 0; k < item.node->mNumMeshes; ++k) {
+      const aiMesh* m = ai->mMeshes[item.node->mMeshes[k]];
+      if ((m->mPrimitiveTypes & aiPrimitiveType_TRIANGLE) == 0 || m->mNumFaces == 0) continue;
+      const aiMaterial* material =
+          m->mMaterialIndex < ai->mNumMaterials ? ai->mMaterials[m->mMaterialIndex] : nullptr;
+      aiString material_name;
+      if (material != nullptr) material->Get(AI_MATKEY_NAME, material_name);
+      const std::string mat = material_name.C_Str();
+      const std::string mesh_name = m->mName.C_Str();
+
+      // Class: the first rule matching the node, mesh or material name.
+      ImportedPart part;
+      part.semantic_class = entry.default_class;
+      std::optional<Eigen::Vector3f> color = entry.color;
+      for (const ClassRule& rule : entry.rules) {
+        if (GlobMatch(rule.pattern, node_name) || GlobMatch(rule.pattern, mesh_name) ||
+            (!mat.empty() && GlobMatch(rule.pattern, mat))) {
+          part.semantic_class = rule.semantic_class;
+          if (rule.color) color = rule.color;
+          break;
+        }
+      }
+      if (!color && material != nullptr && !mat.empty() && mat != AI_DEFAULT_MATERIAL_NAME) {
+        aiColor3D kd;
+        if (material->Get(AI_MATKEY_COLOR_DIFFUSE, kd) == AI_SUCCESS) {
+          color = Eigen::Vector3f(std::clamp(kd.r, 0.0f, 1.0f), std::clamp(kd.g, 0.0f, 1.0f),
+                                  std::clamp(kd.b, 0.0f, 1.0f));
+        }
+      }
+      part.albedo = color.value_or(DefaultColor(part.semantic_class));
+
+      for (unsigned v = 0; v < m->mNumVertices; ++v) {
+        const aiVector3D& p = m->mVertices[v];
+        const Eigen::Vector4d p_W = item.X * Eigen::Vector4d(p.x, p.y, p.z, 1.0);
+        part.mesh.vertices.emplace_back(p_W.head<3>().cast<float>());
+      }
+      for (unsigned f = 0; f < m->mNumFaces; ++f) {
+        const aiFace& face = m->mFaces[f];
+        if (face.mNumIndices != 3) continue;
+        part.mesh.triangles.emplace_back(static_cast<int>(face.mIndices[0]),
+                                         static_cast<int>(face.mIndices[1]),
+                                         static_cast<int>(face.mIndices[2]));
+      }
+      if (part.mesh.empty()) continue;
+      std::string name = fmt::format("{}/{}", stem, node_name.empty() ? stem : node_name);
+      if (!mesh_name.empty() && mesh_name != node_name) name += "/" + mesh_name;
+      if (item.node->mNumMeshes > 1 && mesh_name.empty()) name += fmt::format("/{}", k);
+      part.name = std::move(name);
+      parts.push_back(std::move(part));
+    }
+    for (unsigned c = item.node->mNumChildren; c-- > 0;) {
+      const aiNode* child = item.node->mChildren[c];
+      stack.push_back({child, item.X * ToEigen(child->mTransformation)});
+    }
+  }
+  if (parts.empty()) {
+    return ParseError(
+        fmt::format("{}.file: mesh '{}' contains no triangles", context, entry.file.string()));
+  }
+  return parts;
+}
+
+Result<RigidTransform> ReadStartCamera(const YAML::Node& node, const std::string& context) {
+  AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(node, {"eye", "target", "up"}, context));
+  AVP_ASSIGN_OR_RETURN(const Eigen::VectorXd eye, io::ReadVector(node, "eye", 3, context));
+  AVP_ASSIGN_OR_RETURN(const Eigen::VectorXd target, io::ReadVector(node, "target", 3, context));
+  Eigen::Vector3d up = Eigen::Vector3d::UnitZ();
+  if (node["up"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(const Eigen::VectorXd u, io::ReadVector(node, "up", 3, context));
+    up = u;
+  }
+  const Eigen::Vector3d forward = target - eye;
+  if (forward.norm() < 1e-6 || forward.normalized().cross(up).norm() < 1e-6) {
+    return InvalidArgumentError(fmt::format(
+        "{}: eye [{}, {}, {}] and target [{}, {}, {}] must differ and the view must not be "
+        "parallel to up [{}, {}, {}]",
+        context, eye[0], eye[1], eye[2], target[0], target[1], target[2], up[0], up[1], up[2]));
+  }
+  return RigidTransform::LookAt(eye, target, up);
+}
+
+std::string FileSafe(std::string_view name) {
+  std::string out;
+  for (const char c : name) {
+    out +=
+        (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.') ? c : '_';
+  }
+  return out.empty() ? "scene" : out;
+}
+
+/// OBJ object names: no whitespace (assimp would split them).
+std::string ObjSafe(std::string_view name) {
+  std::string out;
+  for (const char c : name) out += std::isspace(static_cast<unsigned char>(c)) ? '_' : c;
+  return out;
+}
+
+}  // namespace
+
+bool GlobMatch(std::string_view pattern, std::string_view text) {
+  // Iterative matcher with single-star backtracking: O(|pattern| * |text|) worst case.
+  size_t p = 0;
+  size_t t = 0;
+  size_t star = std::string_view::npos;
+  size_t star_t = 0;
+  while (t < text.size()) {
+    if (p < pattern.size() && (pattern[p] == '?' || pattern[p] == text[t])) {
+      ++p;
+      ++t;
+    } else if (p < pattern.size() && pattern[p] == '*') {
+      star = p++;
+      star_t = t;
+    } else if (star != std::string_view::npos) {
+      p = star + 1;
+      t = ++star_t;
+    } else {
+      return false;
+    }
+  }
+  while (p < pattern.size() && pattern[p] == '*') ++p;
+  return p == pattern.size();
+}
+
+Result<Scene> LoadSceneFile(const fs::path& yaml) {
+  AVP_ASSIGN_OR_RETURN(const YAML::Node root, io::LoadYamlFile(yaml));
+  const std::string file = yaml.filename().string();
+  AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(
+      root,
+      {"version", "name", "description", "start_joints_deg", "start_camera", "ground", "meshes"},
+      file));
+  if (!root.IsMap()) {
+    return InvalidArgumentError(fmt::format("{}: a scene file must be a YAML map", file));
+  }
+  AVP_ASSIGN_OR_RETURN(const int64_t version, io::ReadInt(root, "version", file));
+  if (version != kSceneFileVersion) {
+    return InvalidArgumentError(fmt::format("{}: unsupported scene file version {} (supported: {})",
+                                            file, version, kSceneFileVersion));
+  }
+
+  Scene scene;
+  scene.name = yaml.stem().string();
+  if (root["name"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(scene.name, io::ReadString(root, "name", file));
+  }
+  if (root["description"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(scene.description, io::ReadString(root, "description", file));
+  }
+
+  // Start configuration: joints default to the reference start; the camera defaults to the
+  // reference camera for the reference joints (any joint-1 yaw) and must be given otherwise.
+  std::vector<double> joints_deg(std::begin(kReferenceStartJointsDeg),
+                                 std::end(kReferenceStartJointsDeg));
+  if (root["start_joints_deg"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(joints_deg, io::ReadDoubles(root, "start_joints_deg", file));
+    if (joints_deg.empty()) {
+      return InvalidArgumentError(fmt::format("{}: 'start_joints_deg' must not be empty", file));
+    }
+  }
+  for (const double deg : joints_deg) scene.start_joints_rad.push_back(DegToRad(deg));
+  if (root["start_camera"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(scene.X_WC_start,
+                         ReadStartCamera(root["start_camera"], file + ": start_camera"));
+  } else {
+    bool reference = joints_deg.size() == 6;
+    for (size_t i = 1; reference && i < 6; ++i) {
+      reference = std::abs(joints_deg[i] - kReferenceStartJointsDeg[i]) < 1e-9;
+    }
+    if (!reference) {
+      return InvalidArgumentError(fmt::format(
+          "{}: 'start_camera' (eye, target) is required when start_joints_deg [{}] differs from "
+          "the reference start [{}] in joints 2-6",
+          file, fmt::join(joints_deg, ", "), fmt::join(kReferenceStartJointsDeg, ", ")));
+    }
+    scene.X_WC_start = ReferenceStartCameraPose(joints_deg[0]);
+  }
+
+  // Ground: `ground: true`, or a map {z_m, color}; absent or false: none.
+  if (const YAML::Node ground = root["ground"]; ground.IsDefined() && !ground.IsNull()) {
+    bool on = true;
+    double z_m = 0.0;
+    std::optional<Eigen::Vector3f> color;
+    if (ground.IsScalar()) {
+      AVP_ASSIGN_OR_RETURN(on, io::ReadBool(root, "ground", file));
+    } else {
+      const std::string context = file + ": ground";
+      AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(ground, {"z_m", "color"}, context));
+      if (ground["z_m"].IsDefined()) {
+        AVP_ASSIGN_OR_RETURN(z_m, io::ReadDouble(ground, "z_m", context));
+      }
+      if (ground["color"].IsDefined()) {
+        AVP_ASSIGN_OR_RETURN(color, ReadColor(ground, "color", context));
+      }
+    }
+    if (on) {
+      AddGroundPlane(scene, z_m);
+      if (color) scene.objects.back().albedo = *color;
+    }
+  }
+
+  const YAML::Node meshes = root["meshes"];
+  if (!meshes.IsDefined() || !meshes.IsSequence() || meshes.size() == 0) {
+    return InvalidArgumentError(
+        fmt::format("{}: 'meshes' must be a non-empty list of mesh entries", file));
+  }
+  const fs::path base_dir = yaml.parent_path();
+  for (size_t i = 0; i < meshes.size(); ++i) {
+    const std::string context = fmt::format("{}: meshes[{}]", file, i);
+    AVP_ASSIGN_OR_RETURN(const MeshEntry entry, ReadMeshEntry(meshes[i], base_dir, context));
+    AVP_ASSIGN_OR_RETURN(std::vector<ImportedPart> parts, ImportMesh(entry, context));
+    for (ImportedPart& part : parts) {
+      std::vector<TriangleMesh> pieces;
+      if (part.semantic_class == SemanticClass::kFruit &&
+          entry.fruit_instances == FruitInstances::kComponents) {
+        pieces = ConnectedComponents(part.mesh);
+      } else {
+        pieces.push_back(std::move(part.mesh));
+      }
+      for (size_t k = 0; k < pieces.size(); ++k) {
+        SceneObject object;
+        object.name = pieces.size() > 1 ? fmt::format("{}#{}", part.name, k) : part.name;
+        object.semantic_class = part.semantic_class;
+        object.albedo = part.albedo;
+        object.shape = std::move(pieces[k]);
+        scene.Add(std::move(object));
+      }
+    }
+  }
+  AVP_RETURN_IF_ERROR(scene.Validate().WithContext(file));
+  scene.UpdatePlantBounds();
+  return scene;
+}
+
+Status SaveSceneFiles(const Scene& scene, const fs::path& dir) {
+  AVP_RETURN_IF_ERROR(scene.Validate());
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) {
+    return IoError(fmt::format("cannot create directory '{}': {}", dir.string(), ec.message()));
+  }
+  const std::string stem = FileSafe(scene.name);
+  const fs::path obj_path = dir / (stem + ".obj");
+  const fs::path mtl_path = dir / (stem + ".mtl");
+  const fs::path yaml_path = dir / (stem + ".yaml");
+
+  std::ofstream mtl(mtl_path);
+  std::ofstream obj(obj_path);
+  if (!mtl || !obj) {
+    return IoError(fmt::format("cannot write '{}' or '{}'", obj_path.string(), mtl_path.string()));
+  }
+  obj << fmt::format("# avp scene '{}' (seed {}), world frame, metres\nmtllib {}\n", scene.name,
+                     scene.seed, mtl_path.filename().string());
+  std::vector<SemanticClass> classes_used;
+  size_t vertex_base = 1;
+  for (const SceneObject& o : scene.objects) {
+    const TriangleMesh mesh = std::holds_alternative<TriangleMesh>(o.shape)
+                                  ? std::get<TriangleMesh>(o.shape)
+                                  : TessellateEllipsoid(std::get<Ellipsoid>(o.shape), 3);
+    const std::string material = fmt::format("m{}", o.instance_id);
+    mtl << fmt::format("newmtl {}\nKd {:.6f} {:.6f} {:.6f}\n", material, o.albedo.x(), o.albedo.y(),
+                       o.albedo.z());
+    obj << fmt::format("o {}__{}__{}\nusemtl {}\n", ToString(o.semantic_class), o.instance_id,
+                       ObjSafe(o.name), material);
+    for (const Eigen::Vector3f& v : mesh.vertices) {
+      obj << fmt::format("v {:.7g} {:.7g} {:.7g}\n", v.x(), v.y(), v.z());
+    }
+    for (const Eigen::Vector3i& t : mesh.triangles) {
+      obj << fmt::format("f {} {} {}\n", vertex_base + static_cast<size_t>(t[0]),
+                         vertex_base + static_cast<size_t>(t[1]),
+                         vertex_base + static_cast<size_t>(t[2]));
+    }
+    vertex_base += mesh.vertices.size();
+    if (std::find(classes_used.begin(), classes_used.end(), o.semantic_class) ==
+        classes_used.end()) {
+      classes_used.push_back(o.semantic_class);
+    }
+  }
+  obj.close();
+  mtl.close();
+  if (!obj || !mtl) {
+    return IoError(
+        fmt::format("writing '{}' or '{}' failed", obj_path.string(), mtl_path.string()));
+  }
+
+  YAML::Emitter out;
+  out.SetDoublePrecision(10);
+  out << YAML::BeginMap;
+  out << YAML::Key << "version" << YAML::Value << kSceneFileVersion;
+  out << YAML::Key << "name" << YAML::Value << scene.name;
+  out << YAML::Key << "description" << YAML::Value << scene.description;
+  if (!scene.start_joints_rad.empty()) {
+    std::vector<double> deg;
+    for (const double q : scene.start_joints_rad) deg.push_back(RadToDeg(q));
+    out << YAML::Key << "start_joints_deg" << YAML::Value << YAML::Flow << deg;
+  }
+  const Eigen::Vector3d eye = scene.X_WC_start.translation();
+  const Eigen::Vector3d target = eye + scene.X_WC_start.rotation().col(2);
+  const Eigen::Vector3d up = -scene.X_WC_start.rotation().col(1);
+  const auto vec = [](const Eigen::Vector3d& v) {
+    return std::vector<double>{v.x(), v.y(), v.z()};
+  };
+  out << YAML::Key << "start_camera" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "eye" << YAML::Value << YAML::Flow << vec(eye);
+  out << YAML::Key << "target" << YAML::Value << YAML::Flow << vec(target);
+  out << YAML::Key << "up" << YAML::Value << YAML::Flow << vec(up);
+  out << YAML::EndMap;
+  out << YAML::Key << "ground" << YAML::Value << false;  // a ground object is saved as a mesh
+  out << YAML::Key << "meshes" << YAML::Value << YAML::BeginSeq << YAML::BeginMap;
+  out << YAML::Key << "file" << YAML::Value << obj_path.filename().string();
+  out << YAML::Key << "up_axis" << YAML::Value << "z";
+  out << YAML::Key << "fruit_instances" << YAML::Value << "objects";
+  out << YAML::Key << "default_class" << YAML::Value << "other";
+  out << YAML::Key << "classes" << YAML::Value << YAML::BeginSeq;
+  for (const SemanticClass c : classes_used) {
+    out << YAML::Flow << YAML::BeginMap;
+    out << YAML::Key << "match" << YAML::Value << fmt::format("{}__*", ToString(c));
+    out << YAML::Key << "class" << YAML::Value << std::string(ToString(c));
+    out << YAML::EndMap;
+  }
+  out << YAML::EndSeq << YAML::EndMap << YAML::EndSeq << YAML::EndMap;
+  std::ofstream yaml_file(yaml_path);
+  yaml_file << "# Written by avp::sim::SaveSceneFiles (format: docs/scene-format.md)\n"
+            << out.c_str() << "\n";
+  yaml_file.close();
+  if (!yaml_file) return IoError(fmt::format("writing '{}' failed", yaml_path.string()));
+  return Status::Ok();
+}
+
+}  // namespace avp::sim

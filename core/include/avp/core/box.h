@@ -1,10 +1,10 @@
 #pragma once
 
-#include <Eigen/Core>
-
 #include <limits>
 #include <optional>
 #include <string>
+
+#include <Eigen/Core>
 
 #include <avp/core/ray.h>
 
@@ -24,7 +24,9 @@ class Box3 {
   const Eigen::Vector3d& max() const { return max_; }
   bool IsEmpty() const { return (min_.array() > max_.array()).any(); }
   Eigen::Vector3d center() const { return 0.5 * (min_ + max_); }
-  Eigen::Vector3d size() const { return IsEmpty() ? Eigen::Vector3d::Zero() : Eigen::Vector3d(max_ - min_); }
+  Eigen::Vector3d size() const {
+    return IsEmpty() ? Eigen::Vector3d::Zero() : Eigen::Vector3d(max_ - min_);
+  }
   double Volume() const { return size().prod(); }
 
   bool Contains(const Eigen::Vector3d& p) const {

@@ -1,9 +1,9 @@
 #pragma once
 
-#include <Eigen/Core>
-
 #include <optional>
 #include <string>
+
+#include <Eigen/Core>
 
 #include <avp/core/status.h>
 
@@ -29,8 +29,8 @@ struct CameraIntrinsics {
   /// Square pixels, centred principal point, horizontal field of view in degrees.
   static CameraIntrinsics FromHorizontalFov(int width, int height, double fov_x_deg,
                                             double min_depth_m = 0.1, double max_depth_m = 3.0);
-  /// RealSense D435-like colour-aligned depth at 640x480: fx = fy = 615 px (69.0 deg x 42.6 deg
-  /// as the colour sensor that depth is aligned to), range 0.1 - 3 m.
+  /// RealSense D435-like colour-aligned depth at 640x480: fx = fy = 615 px (55.0 deg x 42.6 deg:
+  /// the colour sensor's 69 deg width is at 16:9; 4:3 crops it), range 0.1 - 3 m.
   static CameraIntrinsics RealSenseD435();
 
   /// Every bad field at once: "invalid camera intrinsics: width (-13) must be > 0; fx (inf) ...".

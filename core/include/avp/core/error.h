@@ -1,13 +1,13 @@
 #pragma once
 
-#include <fmt/format.h>
-#include <fmt/ostream.h>
-
 #include <sstream>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include <fmt/format.h>
+#include <fmt/ostream.h>
 
 namespace avp {
 
@@ -59,11 +59,11 @@ std::string FormatNamedValues(std::string_view names, const Ts&... values) {
 
 /// Throws avp::Error unless `cond` holds; the message shows `cond` and the named values.
 ///   AVP_THROW_UNLESS(width > 0, width, height);
-#define AVP_THROW_UNLESS(cond, ...)                                                        \
-  do {                                                                                     \
-    if (!(cond)) {                                                                         \
-      ::avp::internal::ThrowRequirementFailed(                                             \
+#define AVP_THROW_UNLESS(cond, ...)                                                           \
+  do {                                                                                        \
+    if (!(cond)) {                                                                            \
+      ::avp::internal::ThrowRequirementFailed(                                                \
           #cond, ::avp::internal::FormatNamedValues(#__VA_ARGS__ __VA_OPT__(, ) __VA_ARGS__), \
-          __FILE__, __LINE__);                                                             \
-    }                                                                                      \
+          __FILE__, __LINE__);                                                                \
+    }                                                                                         \
   } while (false)

@@ -1,8 +1,8 @@
 #pragma once
 
-#include <Eigen/Core>
-
 #include <array>
+
+#include <Eigen/Core>
 
 #include <avp/core/box.h>
 #include <avp/core/camera.h>

@@ -77,6 +77,8 @@ using InstanceImage = Image<uint16_t, 1>;
 using ClassImage = Image<uint8_t, 1>;
 
 /// True for a usable depth: finite and > 0.
-inline bool IsValidDepth(float depth_m) { return depth_m > 0.0f && depth_m == depth_m && depth_m < 1e30f; }
+inline bool IsValidDepth(float depth_m) {
+  return depth_m > 0.0f && depth_m == depth_m && depth_m < 1e30f;
+}
 
 }  // namespace avp

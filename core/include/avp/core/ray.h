@@ -1,8 +1,8 @@
 #pragma once
 
-#include <Eigen/Core>
-
 #include <limits>
+
+#include <Eigen/Core>
 
 namespace avp {
 

@@ -2,6 +2,7 @@
 
 #include <cstdint>
 #include <random>
+#include <string_view>
 
 namespace avp {
 
@@ -19,7 +20,7 @@ class Rng {
   /// A new generator for an independent sub-stream, e.g. `rng.Fork("leaves")` or `Fork(step)`.
   /// Deterministic in (this generator's seed, stream) and does not advance this generator.
   Rng Fork(uint64_t stream) const;
-  Rng Fork(const char* stream_name) const;
+  Rng Fork(std::string_view stream_name) const;
 
   uint64_t NextU64() { return engine_(); }
   /// Uniform in [0, 1) with 53 random bits.

@@ -13,10 +13,10 @@ enum class SemanticClass : uint8_t {
   kBackground = 0,  ///< nothing / sky / out of range
   kFruit = 1,       ///< the target organ (tomato, apple, ...)
   kLeaf = 2,
-  kStem = 3,        ///< main stem, branches, cordons, petioles, peduncles
-  kSupport = 4,     ///< stakes, wires, posts, pots
-  kGround = 5,      ///< floor, soil, table
-  kOther = 6,       ///< anything else in the scene (walls, robot base, ...)
+  kStem = 3,     ///< main stem, branches, cordons, petioles, peduncles
+  kSupport = 4,  ///< stakes, wires, posts, pots
+  kGround = 5,   ///< floor, soil, table
+  kOther = 6,    ///< anything else in the scene (walls, robot base, ...)
 };
 
 inline constexpr int kNumSemanticClasses = 7;

@@ -65,7 +65,7 @@ Status InternalError(std::string message);
 template <typename T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : data_(std::move(value)) {}  // NOLINT(google-explicit-constructor)
+  Result(T value) : data_(std::move(value)) {}        // NOLINT(google-explicit-constructor)
   Result(Status status) : data_(std::move(status)) {  // NOLINT(google-explicit-constructor)
     assert(!std::get<Status>(data_).ok() && "Result<T> built from an OK status without a value");
   }
@@ -111,9 +111,9 @@ void Result<T>::ThrowIfError() const {
 }  // namespace avp
 
 /// Returns early from a function returning Status or Result<T> when `expr` (a Status) is not OK.
-#define AVP_RETURN_IF_ERROR(expr)                \
-  do {                                           \
-    ::avp::Status avp_status_tmp_ = (expr);      \
+#define AVP_RETURN_IF_ERROR(expr)                      \
+  do {                                                 \
+    ::avp::Status avp_status_tmp_ = (expr);            \
     if (!avp_status_tmp_.ok()) return avp_status_tmp_; \
   } while (false)
 

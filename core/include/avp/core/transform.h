@@ -1,9 +1,9 @@
 #pragma once
 
+#include <string>
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
-
-#include <string>
 
 namespace avp {
 
@@ -50,9 +50,7 @@ class RigidTransform {
   Eigen::Vector3d operator*(const Eigen::Vector3d& p) const { return R_ * p + p_; }
 
   /// Translation distance in metres.
-  double TranslationDistanceTo(const RigidTransform& other) const {
-    return (p_ - other.p_).norm();
-  }
+  double TranslationDistanceTo(const RigidTransform& other) const { return (p_ - other.p_).norm(); }
   /// Angle in radians of the relative rotation R_this^T R_other, in [0, pi].
   double AngleTo(const RigidTransform& other) const;
 

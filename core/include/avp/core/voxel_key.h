@@ -1,10 +1,10 @@
 #pragma once
 
-#include <Eigen/Core>
-
 #include <cmath>
 #include <cstdint>
 #include <functional>
+
+#include <Eigen/Core>
 
 namespace avp {
 

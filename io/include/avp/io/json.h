@@ -1,8 +1,8 @@
 #pragma once
 
-#include <nlohmann/json.hpp>
-
 #include <filesystem>
+
+#include <nlohmann/json.hpp>
 
 #include <avp/core/camera.h>
 #include <avp/core/status.h>

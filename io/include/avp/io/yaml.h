@@ -1,13 +1,12 @@
 #pragma once
 
-#include <yaml-cpp/yaml.h>
-
-#include <Eigen/Core>
-
 #include <filesystem>
 #include <initializer_list>
 #include <string>
 #include <string_view>
+
+#include <Eigen/Core>
+#include <yaml-cpp/yaml.h>
 
 #include <avp/core/status.h>
 #include <avp/core/transform.h>

@@ -1,11 +1,11 @@
 #pragma once
 
-#include <Eigen/Core>
-
 #include <cstdint>
 #include <string>
 #include <variant>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include <avp/core/box.h>
 #include <avp/core/semantic_class.h>

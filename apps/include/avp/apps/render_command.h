@@ -1,0 +1,47 @@
+#pragma once
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <avp/apps/scene_source.h>
+#include <avp/core/camera.h>
+#include <avp/core/status.h>
+#include <avp/core/transform.h>
+
+namespace avp::apps {
+
+/// `avp render`: one simulated RGB-D + labels view written to a folder.
+struct RenderOptions {
+  SceneSource scene;
+  /// Arm joints in degrees (URDF convention); the camera pose is FK + mount.
+  std::optional<std::vector<double>> joints_deg;
+  /// Camera optical frame pose x, y, z (m), roll, pitch, yaw (deg) in the world (robot base) frame.
+  std::optional<std::vector<double>> camera_pose;
+  /// Arm configuration YAML; empty = the default igus ReBeL with a D435.
+  std::filesystem::path arm_config;
+  CameraIntrinsics intrinsics = CameraIntrinsics::RealSenseD435();
+  /// Apply the seeded D435-like depth noise model (seeded from scene.seed).
+  bool noise = false;
+  std::filesystem::path out_dir = "out/render";
+};
+
+struct RenderSummary {
+  RigidTransform X_WC;
+  std::vector<double> joints_deg;  ///< empty when the pose was given directly
+  size_t num_triangles = 0;
+  size_t fruit_pixels = 0;
+  size_t visible_fruits = 0;  ///< fruits with at least one pixel
+  size_t total_fruits = 0;
+  size_t valid_depth_pixels = 0;
+  double render_ms = 0.0;
+  std::vector<std::filesystem::path> files;
+};
+
+/// Renders and writes rgb.png, depth.png (uint16 mm), instance.png (uint16), class.png (uint8),
+/// labels_preview.png, camera.json and fruits.json. Errors name the bad value (unknown scenario,
+/// wrong joint count, unreachable or out-of-limit joints, unwritable folder ...).
+Result<RenderSummary> RunRender(const RenderOptions& options);
+
+}  // namespace avp::apps

@@ -1,0 +1,82 @@
+// Checks the dependency rules of docs/architecture.md by reading every source file's includes:
+// modules include only modules below them, and only apps/ (and later interop/) may include
+// command-line, middleware or network headers.
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <regex>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kSourceRoot = fs::path(AVP_CONFIG_DIR).parent_path();
+
+// Which avp modules each module may include.
+const std::map<std::string, std::set<std::string>> kAllowed = {
+    {"core", {"core"}},
+    {"io", {"core", "io"}},
+    {"sim", {"core", "io", "sim"}},
+    {"robot", {"core", "io", "robot"}},
+};
+
+const std::vector<std::string> kForbiddenPrefixes = {"CLI/",  "grpc",        "grpcpp/", "dds/",
+                                                     "ddsc/", "rclcpp",      "ros/",    "httplib",
+                                                     "curl/", "onnxruntime", "spdlog/"};
+
+struct Include {
+  fs::path file;
+  int line;
+  std::string header;
+};
+
+std::vector<Include> IncludesOf(const std::string& module) {
+  std::vector<Include> out;
+  const std::regex include_re(R"(^\s*#\s*include\s*[<"]([^>"]+)[>"])");
+  for (const auto& entry : fs::recursive_directory_iterator(kSourceRoot / module)) {
+    const std::string ext = entry.path().extension().string();
+    if (ext != ".h" && ext != ".cpp") continue;
+    std::ifstream in(entry.path());
+    std::string line;
+    int number = 0;
+    while (std::getline(in, line)) {
+      ++number;
+      std::smatch m;
+      if (std::regex_search(line, m, include_re)) out.push_back({entry.path(), number, m[1]});
+    }
+  }
+  return out;
+}
+
+TEST(ArchitectureTest, ModulesIncludeOnlyModulesBelowThem) {
+  for (const auto& [module, allowed] : kAllowed) {
+    const auto includes = IncludesOf(module);
+    ASSERT_FALSE(includes.empty()) << "no sources found for module " << module;
+    for (const Include& inc : includes) {
+      if (inc.header.rfind("avp/", 0) != 0) continue;
+      const std::string target = inc.header.substr(4, inc.header.find('/', 4) - 4);
+      EXPECT_TRUE(allowed.count(target) > 0)
+          << inc.file.string() << ":" << inc.line << " (module " << module << ") includes <"
+          << inc.header << ">, but " << module << " may not depend on " << target;
+    }
+  }
+}
+
+TEST(ArchitectureTest, CoreModulesIncludeNoMiddlewareOrCommandLineHeaders) {
+  for (const auto& [module, allowed] : kAllowed) {
+    for (const Include& inc : IncludesOf(module)) {
+      for (const std::string& prefix : kForbiddenPrefixes) {
+        EXPECT_NE(inc.header.rfind(prefix, 0), 0u)
+            << inc.file.string() << ":" << inc.line << " includes <" << inc.header
+            << ">: only apps/ and interop/ may include " << prefix << "* headers";
+      }
+    }
+  }
+}
+
+}  // namespace
