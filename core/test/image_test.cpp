@@ -138,24 +138,30 @@ TEST(ImageTest, ZeroSizeIsAllowed) {
   EXPECT_EQ(image.num_pixels(), 0u);
 }
 
-TEST(ImageTest, OutOfBoundsAccessThrowsInDebugBuilds) {
-#ifdef NDEBUG
-  GTEST_SKIP() << "bounds checks are compiled out with NDEBUG";
-#else
+TEST(ImageTest, CheckedAccessThrowsOutOfBoundsInEveryBuild) {
   ImageRgb8 rgb(4, 3);
   try {
-    (void)rgb.at(4, 0);
+    (void)rgb.AtChecked(4, 0);
     FAIL() << "expected avp::Error";
   } catch (const Error& e) {
     EXPECT_THAT(e.what(), HasSubstr("u = 4, v = 0, c = 0, width_ = 4, height_ = 3"));
   }
-  EXPECT_THROW((void)rgb.at(0, 3), Error);
-  EXPECT_THROW((void)rgb.at(-1, 0), Error);
-  EXPECT_THROW((void)rgb.at(0, 0, 3), Error);
+  EXPECT_THROW((void)rgb.AtChecked(0, 3), Error);
+  EXPECT_THROW((void)rgb.AtChecked(-1, 0), Error);
+  EXPECT_THROW((void)rgb.AtChecked(0, 0, 3), Error);
+  rgb.AtChecked(3, 2, 2) = 7;
+  EXPECT_EQ(rgb.at(3, 2, 2), 7);
+}
+
+#ifndef NDEBUG
+// Unchecked at()/pixel() are also bounds-checked in builds without NDEBUG (compiled only there).
+TEST(ImageTest, UncheckedAccessIsCheckedInDebugBuilds) {
+  ImageRgb8 rgb(4, 3);
+  EXPECT_THROW((void)rgb.at(4, 0), Error);
   EXPECT_THROW((void)rgb.pixel(0, -1), Error);
   EXPECT_NO_THROW((void)rgb.at(3, 2, 2));
-#endif
 }
+#endif
 
 TEST(ImageTest, IsValidDepth) {
   EXPECT_TRUE(IsValidDepth(0.5f));

@@ -37,6 +37,15 @@ class Image {
   /// Unchecked access (debug builds assert).
   T& at(int u, int v, int c = 0) { return data_[Index(u, v, c)]; }
   const T& at(int u, int v, int c = 0) const { return data_[Index(u, v, c)]; }
+  /// Bounds-checked access in every build: throws avp::Error naming (u, v, c) and the size.
+  T& AtChecked(int u, int v, int c = 0) {
+    CheckBounds(u, v, c);
+    return data_[(static_cast<size_t>(v) * width_ + u) * kChannels + c];
+  }
+  const T& AtChecked(int u, int v, int c = 0) const {
+    CheckBounds(u, v, c);
+    return data_[(static_cast<size_t>(v) * width_ + u) * kChannels + c];
+  }
   T& operator()(int u, int v, int c = 0) { return at(u, v, c); }
   const T& operator()(int u, int v, int c = 0) const { return at(u, v, c); }
 
@@ -55,9 +64,12 @@ class Image {
   bool operator==(const Image&) const = default;
 
  private:
+  void CheckBounds(int u, int v, int c) const {
+    AVP_THROW_UNLESS(Contains(u, v) && c >= 0 && c < kChannels, u, v, c, width_, height_);
+  }
   size_t Index(int u, int v, int c) const {
 #ifndef NDEBUG
-    AVP_THROW_UNLESS(Contains(u, v) && c >= 0 && c < kChannels, u, v, c, width_, height_);
+    CheckBounds(u, v, c);
 #endif
     return (static_cast<size_t>(v) * width_ + u) * kChannels + c;
   }
