@@ -157,15 +157,6 @@ EspalierInfo AddEspalier(const EspalierParams& params, Rng& rng, Scene& scene) {
   const Eigen::Vector3d& B = params.trunk_base_W;
   EspalierInfo info;
   const size_t first_object = scene.objects.size();
-  const auto add_object = [&](std::string name, SemanticClass cls, Eigen::Vector3f albedo,
-                              std::variant<TriangleMesh, Ellipsoid> shape) {
-    SceneObject object;
-    object.name = std::move(name);
-    object.semantic_class = cls;
-    object.albedo = albedo;
-    object.shape = std::move(shape);
-    return scene.Add(std::move(object));
-  };
 
   // ---- Frame: tiers, trunk ----------------------------------------------------------------------
   Rng frame_rng = tree_rng.Fork("frame");
@@ -194,8 +185,8 @@ EspalierInfo AddEspalier(const EspalierParams& params, Rng& rng, Scene& scene) {
       trunk.line.push_back(trunk_at(h));
       trunk.radii.push_back(params.trunk_radius_m * (1.0 - 0.3 * h / info.trunk_height_m));
     }
-    add_object(prefix + "/trunk", SemanticClass::kStem, VaryAlbedo(kBarkColor, 0.08, frame_rng),
-               MakeTube(trunk.line, trunk.radii, 12, true));
+    scene.Add(prefix + "/trunk", SemanticClass::kStem, VaryAlbedo(kBarkColor, 0.08, frame_rng),
+              MakeTube(trunk.line, trunk.radii, 12, true));
     branches.push_back(std::move(trunk));
   }
 
@@ -210,16 +201,16 @@ EspalierInfo AddEspalier(const EspalierParams& params, Rng& rng, Scene& scene) {
       const Eigen::Vector3d centre(B.x() + 0.02, B.y() + side * post_y, B.z() + 0.5 * post_height);
       TriangleMesh post = MakeBox(Eigen::Vector3d(0.035, 0.035, 0.5 * post_height));
       post.Transform(RigidTransform(centre));
-      add_object(fmt::format("{}/post_{}", prefix, side > 0 ? "L" : "R"), SemanticClass::kSupport,
-                 VaryAlbedo(kWoodColor, 0.1, support_rng), std::move(post));
+      scene.Add(fmt::format("{}/post_{}", prefix, side > 0 ? "L" : "R"), SemanticClass::kSupport,
+                VaryAlbedo(kWoodColor, 0.1, support_rng), std::move(post));
     }
     for (int i = 0; i < tiers; ++i) {
       const double z = B.z() + info.tier_heights_m[static_cast<size_t>(i)] + 0.004;
       const Eigen::Vector3d a(wire_x, B.y() - post_y, z);
       const Eigen::Vector3d b(wire_x, B.y() + post_y, z);
       wires.emplace_back(a, b);
-      add_object(fmt::format("{}/wire_{}", prefix, i), SemanticClass::kSupport,
-                 VaryAlbedo(kWireColor, 0.05, support_rng), MakeCylinder(a, b, 0.0015, 6, true));
+      scene.Add(fmt::format("{}/wire_{}", prefix, i), SemanticClass::kSupport,
+                VaryAlbedo(kWireColor, 0.05, support_rng), MakeCylinder(a, b, 0.0015, 6, true));
     }
   }
 
@@ -354,8 +345,8 @@ EspalierInfo AddEspalier(const EspalierParams& params, Rng& rng, Scene& scene) {
       if (!blades.empty()) {
         Eigen::Vector3f green = kLeafColor;
         green *= static_cast<float>(r.Uniform(0.85, 1.15));
-        add_object(fmt::format("{}/leaves_{}", prefix, suffix), SemanticClass::kLeaf,
-                   VaryAlbedo(green, 0.1, r), std::move(blades));
+        scene.Add(fmt::format("{}/leaves_{}", prefix, suffix), SemanticClass::kLeaf,
+                  VaryAlbedo(green, 0.1, r), std::move(blades));
       }
       branches.push_back(std::move(cordon));
     }
@@ -430,8 +421,8 @@ EspalierInfo AddEspalier(const EspalierParams& params, Rng& rng, Scene& scene) {
         const bool red = r.Bernoulli(params.red_fraction);
         const double blush = red ? r.Uniform(0.65, 1.0) : r.Uniform(0.0, 0.3);
         const uint16_t id =
-            add_object(fmt::format("{}/apple_{:02}", prefix, apples.size() - 1),
-                       SemanticClass::kFruit, VaryAlbedo(AppleColor(blush), 0.06, r), apple);
+            scene.Add(fmt::format("{}/apple_{:02}", prefix, apples.size() - 1),
+                      SemanticClass::kFruit, VaryAlbedo(AppleColor(blush), 0.06, r), apple);
         info.fruit_ids.push_back(id);
         // Stalk from the top of the apple (in its cavity) towards the spur base.
         const Eigen::Vector3d top = centre + 0.8 * apple.radii.z() * axis;
@@ -444,8 +435,8 @@ EspalierInfo AddEspalier(const EspalierParams& params, Rng& rng, Scene& scene) {
     }
   }
   for (size_t i = 0; i < cordon_meshes.size(); ++i) {
-    add_object(cordon_names[i], SemanticClass::kStem, VaryAlbedo(kBarkColor, 0.1, frame_rng),
-               std::move(cordon_meshes[i]));
+    scene.Add(cordon_names[i], SemanticClass::kStem, VaryAlbedo(kBarkColor, 0.1, frame_rng),
+              std::move(cordon_meshes[i]));
   }
 
   // ---- Occlusion screen -------------------------------------------------------------------------
@@ -507,10 +498,10 @@ EspalierInfo AddEspalier(const EspalierParams& params, Rng& rng, Scene& scene) {
       }
       visibility.AddOccluder(wood);
       visibility.AddOccluder(blades);
-      add_object(fmt::format("{}/screen_shoot_{:02}", prefix, k), SemanticClass::kStem,
-                 VaryAlbedo(kBarkColor, 0.1, r), std::move(wood));
-      add_object(fmt::format("{}/screen_leaves_{:02}", prefix, k), SemanticClass::kLeaf,
-                 VaryAlbedo(kLeafColor, 0.12, r), std::move(blades));
+      scene.Add(fmt::format("{}/screen_shoot_{:02}", prefix, k), SemanticClass::kStem,
+                VaryAlbedo(kBarkColor, 0.1, r), std::move(wood));
+      scene.Add(fmt::format("{}/screen_leaves_{:02}", prefix, k), SemanticClass::kLeaf,
+                VaryAlbedo(kLeafColor, 0.12, r), std::move(blades));
       ++info.num_screen_leaves;
     }
     info.num_visible_samples = visibility.CountVisible();

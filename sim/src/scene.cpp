@@ -82,6 +82,16 @@ uint16_t Scene::Add(SceneObject object) {
   return objects.back().instance_id;
 }
 
+uint16_t Scene::Add(std::string object_name, SemanticClass semantic_class,
+                    const Eigen::Vector3f& albedo, std::variant<TriangleMesh, Ellipsoid> shape) {
+  SceneObject object;
+  object.name = std::move(object_name);
+  object.semantic_class = semantic_class;
+  object.albedo = albedo;
+  object.shape = std::move(shape);
+  return Add(std::move(object));
+}
+
 std::vector<FruitTruth> Scene::Fruits() const {
   std::vector<FruitTruth> fruits;
   for (const SceneObject& o : objects) {

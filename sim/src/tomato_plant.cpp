@@ -285,16 +285,6 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
   TomatoPlantInfo info;
   const size_t first_object = scene.objects.size();
 
-  const auto add_object = [&](std::string name, SemanticClass cls, Eigen::Vector3f albedo,
-                              std::variant<TriangleMesh, Ellipsoid> shape) {
-    SceneObject object;
-    object.name = std::move(name);
-    object.semantic_class = cls;
-    object.albedo = albedo;
-    object.shape = std::move(shape);
-    return scene.Add(std::move(object));
-  };
-
   // ---- Stem -------------------------------------------------------------------------------------
   Rng stem_rng = plant_rng.Fork("stem");
   StemModel stem;
@@ -318,8 +308,8 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
       line.push_back(stem.At(h));
       radii.push_back(stem.RadiusAt(h));
     }
-    add_object(prefix + "/stem", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.08, stem_rng),
-               MakeTube(line, radii, 12, true));
+    scene.Add(prefix + "/stem", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.08, stem_rng),
+              MakeTube(line, radii, 12, true));
   }
 
   // ---- Compound leaves (phyllotaxis) ------------------------------------------------------------
@@ -365,9 +355,9 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
       spec.intercalary = params.intercalary_leaflets;
       CompoundLeaf leaf = BuildCompoundLeaf(spec, r);
       const std::string name = fmt::format("{}/leaf_{:02}", prefix, k);
-      add_object(name + "/rachis", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.1, r),
-                 std::move(leaf.rachis));
-      add_object(name, SemanticClass::kLeaf, LeafColor(fh, r), std::move(leaf.leaflets));
+      scene.Add(name + "/rachis", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.1, r),
+                std::move(leaf.rachis));
+      scene.Add(name, SemanticClass::kLeaf, LeafColor(fh, r), std::move(leaf.leaflets));
       ++info.num_leaves;
     }
   }
@@ -377,9 +367,9 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
   const Eigen::Vector3d stake_base = params.stem_base_W + params.stake_offset_m;
   const double stake_top = stem.height_m * stake_rng.Uniform(0.9, 1.05);
   if (params.stake) {
-    add_object(prefix + "/stake", SemanticClass::kSupport,
-               VaryAlbedo(Eigen::Vector3f(0.33f, 0.22f, 0.11f), 0.1, stake_rng),
-               MakeCylinder(stake_base, stake_base + stake_top * kUp, params.stake_radius_m, 8));
+    scene.Add(prefix + "/stake", SemanticClass::kSupport,
+              VaryAlbedo(Eigen::Vector3f(0.33f, 0.22f, 0.11f), 0.1, stake_rng),
+              MakeCylinder(stake_base, stake_base + stake_top * kUp, params.stake_radius_m, 8));
   }
 
   // ---- Trusses and fruits -----------------------------------------------------------------------
@@ -485,8 +475,8 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
       const double mapped =
           params.ripeness_min + (params.ripeness_max - params.ripeness_min) * ripeness;
       const uint16_t id =
-          add_object(fmt::format("{}/fruit_{}_{}", prefix, t, placed), SemanticClass::kFruit,
-                     VaryAlbedo(TomatoColor(mapped), 0.05, r), fruit);
+          scene.Add(fmt::format("{}/fruit_{}_{}", prefix, t, placed), SemanticClass::kFruit,
+                    VaryAlbedo(TomatoColor(mapped), 0.05, r), fruit);
       info.fruit_ids.push_back(id);
       ++placed;
 
@@ -519,8 +509,8 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
     std::vector<Eigen::Vector3d> rachis_line;
     for (int i = 0; i < m; ++i) rachis_line.push_back(rachis_at(rachis_length * i / (m - 1)));
     truss_mesh.Append(MakeTube(rachis_line, LinearRadii(0.0025, 0.0015, m), 6, true));
-    add_object(fmt::format("{}/truss_{}", prefix, t), SemanticClass::kStem,
-               VaryAlbedo(kStemColor, 0.1, r), std::move(truss_mesh));
+    scene.Add(fmt::format("{}/truss_{}", prefix, t), SemanticClass::kStem,
+              VaryAlbedo(kStemColor, 0.1, r), std::move(truss_mesh));
     info.fruits_per_truss.push_back(placed);
   }
 
@@ -590,10 +580,10 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
       visibility.AddOccluder(leaf.rachis);
       visibility.AddOccluder(leaf.leaflets);
       const std::string name = fmt::format("{}/screen_leaf_{:02}", prefix, k);
-      add_object(name + "/rachis", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.1, r),
-                 std::move(leaf.rachis));
-      add_object(name, SemanticClass::kLeaf, LeafColor(h_node / stem.height_m, r),
-                 std::move(leaf.leaflets));
+      scene.Add(name + "/rachis", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.1, r),
+                std::move(leaf.rachis));
+      scene.Add(name, SemanticClass::kLeaf, LeafColor(h_node / stem.height_m, r),
+                std::move(leaf.leaflets));
       ++info.num_screen_leaves;
     }
     info.num_visible_samples = visibility.CountVisible();

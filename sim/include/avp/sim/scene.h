@@ -84,6 +84,9 @@ struct Scene {
   /// Adds an object, assigns the next free instance id and returns it.
   /// @throws avp::Error when more than 65535 objects are added.
   uint16_t Add(SceneObject object);
+  /// Shorthand for Add(SceneObject{object_name, semantic_class, 0, albedo, shape}).
+  uint16_t Add(std::string object_name, SemanticClass semantic_class, const Eigen::Vector3f& albedo,
+               std::variant<TriangleMesh, Ellipsoid> shape);
   /// The fruits, in instance-id order.
   std::vector<FruitTruth> Fruits() const;
   size_t num_triangles() const;
