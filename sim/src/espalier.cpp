@@ -442,11 +442,7 @@ EspalierInfo AddEspalier(const EspalierParams& params, Rng& rng, Scene& scene) {
   // ---- Occlusion screen -------------------------------------------------------------------------
   if (params.occlusion.enabled) {
     FruitVisibility visibility(params.occlusion, apples);
-    for (size_t i = first_object; i < scene.objects.size(); ++i) {
-      const SceneObject& o = scene.objects[i];
-      if (o.semantic_class == SemanticClass::kFruit) continue;
-      if (const auto* mesh = std::get_if<TriangleMesh>(&o.shape)) visibility.AddOccluder(*mesh);
-    }
+    visibility.AddSceneOccluders(scene, first_object);
     Rng screen_rng = tree_rng.Fork("screen");
     const Eigen::Vector3d eye = params.occlusion.eye_W;
     for (int k = 0; k < params.occlusion.max_leaves; ++k) {
@@ -455,15 +451,9 @@ EspalierInfo AddEspalier(const EspalierParams& params, Rng& rng, Scene& scene) {
       Rng r = screen_rng.Fork(static_cast<uint64_t>(k));
       const Eigen::Vector3d p = visible->first;
       const Eigen::Vector3d to_eye = (eye - p).normalized();
-      Eigen::Vector3d q = p + 0.04 * to_eye;
-      for (double dist = 0.04; dist < 0.25; dist += 0.01) {
-        q = p + (dist + r.Uniform(0.0, 0.01)) * to_eye;
-        bool clear = true;
-        for (const Ellipsoid& a : apples) {
-          if ((a.center_W - q).norm() < a.radii.maxCoeff() + 0.01) clear = false;
-        }
-        if (clear) break;
-      }
+      // The covering leaf's centre q sits on the line of sight, a few centimetres in front of the
+      // fruit and clear of every fruit.
+      const Eigen::Vector3d q = ScreenLeafCentre(p, eye, apples, 0.04, 0.01, r);
       // A shoot from the nearest branch to the covering leaf, which faces the eye.
       Eigen::Vector3d anchor = branches.front().line.front();
       double best = std::numeric_limits<double>::infinity();

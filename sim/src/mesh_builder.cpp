@@ -558,6 +558,30 @@ FruitVisibility::FruitVisibility(const OcclusionScreen& screen, std::span<const 
   num_samples_ = pending_.size();
 }
 
+void FruitVisibility::AddSceneOccluders(const Scene& scene, size_t first_object) {
+  for (size_t i = first_object; i < scene.objects.size(); ++i) {
+    const SceneObject& o = scene.objects[i];
+    if (o.semantic_class == SemanticClass::kFruit) continue;
+    if (const auto* mesh = std::get_if<TriangleMesh>(&o.shape)) AddOccluder(*mesh);
+  }
+}
+
+Eigen::Vector3d ScreenLeafCentre(const Eigen::Vector3d& p_W, const Eigen::Vector3d& eye_W,
+                                 std::span<const Ellipsoid> fruits, double min_distance_m,
+                                 double clearance_m, Rng& rng) {
+  const Eigen::Vector3d to_eye = (eye_W - p_W).normalized();
+  Eigen::Vector3d q = p_W + min_distance_m * to_eye;
+  for (double dist = min_distance_m; dist < 0.25; dist += 0.01) {
+    q = p_W + (dist + rng.Uniform(0.0, 0.01)) * to_eye;
+    bool clear = true;
+    for (const Ellipsoid& f : fruits) {
+      if ((f.center_W - q).norm() < f.radii.maxCoeff() + clearance_m) clear = false;
+    }
+    if (clear) break;
+  }
+  return q;
+}
+
 std::optional<std::pair<Eigen::Vector3d, size_t>> FruitVisibility::FindVisible() {
   size_t keep = 0;
   std::optional<size_t> found;

@@ -168,4 +168,32 @@ Status Scene::Validate() const {
   return Status::Ok();
 }
 
+std::string DescribeDifference(const Scene& a, const Scene& b) {
+  if (a.objects.size() != b.objects.size()) {
+    return fmt::format("{} objects vs {}", a.objects.size(), b.objects.size());
+  }
+  for (size_t i = 0; i < a.objects.size(); ++i) {
+    const SceneObject& x = a.objects[i];
+    const SceneObject& y = b.objects[i];
+    if (x.name != y.name || x.semantic_class != y.semantic_class ||
+        x.instance_id != y.instance_id || x.albedo != y.albedo ||
+        x.shape.index() != y.shape.index()) {
+      return fmt::format("object {}: '{}' vs '{}'", i, x.name, y.name);
+    }
+    if (const auto* m = std::get_if<TriangleMesh>(&x.shape)) {
+      const TriangleMesh& n = std::get<TriangleMesh>(y.shape);
+      if (m->vertices != n.vertices || m->triangles != n.triangles) {
+        return fmt::format("object {}: mesh of '{}' differs", i, x.name);
+      }
+    } else {
+      const Ellipsoid& e = std::get<Ellipsoid>(x.shape);
+      const Ellipsoid& f = std::get<Ellipsoid>(y.shape);
+      if (e.center_W != f.center_W || e.radii != f.radii || e.R_WE != f.R_WE) {
+        return fmt::format("object {}: ellipsoid '{}' differs", i, x.name);
+      }
+    }
+  }
+  return {};
+}
+
 }  // namespace avp::sim

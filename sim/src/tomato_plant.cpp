@@ -517,11 +517,7 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
   // ---- Occlusion screen -------------------------------------------------------------------------
   if (params.occlusion.enabled) {
     FruitVisibility visibility(params.occlusion, fruits);
-    for (size_t i = first_object; i < scene.objects.size(); ++i) {
-      const SceneObject& o = scene.objects[i];
-      if (o.semantic_class == SemanticClass::kFruit) continue;
-      if (const auto* mesh = std::get_if<TriangleMesh>(&o.shape)) visibility.AddOccluder(*mesh);
-    }
+    visibility.AddSceneOccluders(scene, first_object);
     Rng screen_rng = plant_rng.Fork("screen");
     const Eigen::Vector3d eye = params.occlusion.eye_W;
     for (int k = 0; k < params.occlusion.max_leaves; ++k) {
@@ -530,17 +526,9 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
       Rng r = screen_rng.Fork(static_cast<uint64_t>(k));
       const Eigen::Vector3d p = visible->first;
       const Eigen::Vector3d to_eye = (eye - p).normalized();
-      // The covering leaflet's centre q sits on the line of sight, a few centimetres in front of
-      // the fruit and clear of every fruit.
-      Eigen::Vector3d q = p + 0.05 * to_eye;
-      for (double dist = 0.05; dist < 0.25; dist += 0.01) {
-        q = p + (dist + r.Uniform(0.0, 0.01)) * to_eye;
-        bool clear = true;
-        for (const Ellipsoid& f : fruits) {
-          if ((f.center_W - q).norm() < f.radii.maxCoeff() + 0.012) clear = false;
-        }
-        if (clear) break;
-      }
+      // The covering leaf's centre q sits on the line of sight, a few centimetres in front of the
+      // fruit and clear of every fruit.
+      const Eigen::Vector3d q = ScreenLeafCentre(p, eye, fruits, 0.05, 0.012, r);
       // Blade facing the eye (tilted a little), pointing outwards and down from the stem.
       const double length = r.Uniform(0.10, 0.13) * size_scale;
       const double h_q = std::clamp(q.z() - stem.base_W.z(), 0.0, stem.height_m);

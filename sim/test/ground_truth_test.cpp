@@ -1,5 +1,4 @@
 #include <cmath>
-#include <map>
 #include <unordered_set>
 
 #include <gmock/gmock.h>
@@ -8,6 +7,7 @@
 #include <avp/core/error.h>
 #include <avp/core/rng.h>
 #include <avp/sim/ground_truth.h>
+#include <avp/sim/mesh_builder.h>
 
 namespace avp::sim {
 namespace {
@@ -31,42 +31,10 @@ SceneObject SphereFruit(const Eigen::Vector3d& centre, double r) {
   return Fruit(centre, Eigen::Vector3d::Constant(r));
 }
 
-/// Icosphere: an icosahedron subdivided `levels` times, vertices projected onto the sphere.
+/// Icosphere of radius r about `centre` (the mesh builder's tessellation, moved).
 TriangleMesh Icosphere(const Eigen::Vector3d& centre, double r, int levels) {
-  const double t = (1.0 + std::sqrt(5.0)) / 2.0;
-  std::vector<Eigen::Vector3d> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
-                                    {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
-                                    {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
-  for (auto& p : v) p.normalize();
-  std::vector<Eigen::Vector3i> f = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
-                                    {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
-                                    {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
-                                    {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
-  for (int level = 0; level < levels; ++level) {
-    std::map<std::pair<int, int>, int> midpoints;
-    auto mid = [&](int a, int b) {
-      const auto key = std::minmax(a, b);
-      auto it = midpoints.find(key);
-      if (it != midpoints.end()) return it->second;
-      v.push_back((v[a] + v[b]).normalized());
-      midpoints[key] = static_cast<int>(v.size()) - 1;
-      return static_cast<int>(v.size()) - 1;
-    };
-    std::vector<Eigen::Vector3i> next;
-    for (const auto& tri : f) {
-      const int ab = mid(tri[0], tri[1]);
-      const int bc = mid(tri[1], tri[2]);
-      const int ca = mid(tri[2], tri[0]);
-      next.emplace_back(tri[0], ab, ca);
-      next.emplace_back(tri[1], bc, ab);
-      next.emplace_back(tri[2], ca, bc);
-      next.emplace_back(ab, bc, ca);
-    }
-    f = std::move(next);
-  }
-  TriangleMesh mesh;
-  for (const auto& p : v) mesh.vertices.push_back((centre + r * p).cast<float>());
-  mesh.triangles = f;
+  TriangleMesh mesh = MakeIcosphere(r, levels);
+  mesh.Transform(RigidTransform(centre));
   return mesh;
 }
 

@@ -25,35 +25,9 @@ Scene Make(std::string_view name, uint64_t seed) {
 }
 
 ::testing::AssertionResult SameScene(const Scene& a, const Scene& b) {
-  if (a.objects.size() != b.objects.size()) {
-    return ::testing::AssertionFailure() << a.objects.size() << " vs " << b.objects.size();
-  }
-  for (size_t i = 0; i < a.objects.size(); ++i) {
-    const SceneObject& x = a.objects[i];
-    const SceneObject& y = b.objects[i];
-    if (x.name != y.name || x.semantic_class != y.semantic_class ||
-        x.instance_id != y.instance_id || x.albedo != y.albedo ||
-        x.shape.index() != y.shape.index()) {
-      return ::testing::AssertionFailure() << "object " << i << ": " << x.name << " vs " << y.name;
-    }
-    if (const auto* m = std::get_if<TriangleMesh>(&x.shape)) {
-      const TriangleMesh& n = std::get<TriangleMesh>(y.shape);
-      if (m->vertices != n.vertices || m->triangles != n.triangles) {
-        return ::testing::AssertionFailure() << "mesh of " << x.name << " differs";
-      }
-    } else {
-      const Ellipsoid& e = std::get<Ellipsoid>(x.shape);
-      const Ellipsoid& f = std::get<Ellipsoid>(y.shape);
-      if (e.center_W != f.center_W || e.radii != f.radii || e.R_WE != f.R_WE) {
-        return ::testing::AssertionFailure() << "ellipsoid " << x.name << " differs";
-      }
-    }
-  }
-  if (a.start_joints_rad != b.start_joints_rad ||
-      !a.X_WC_start.IsNearlyEqualTo(b.X_WC_start, 0.0, 0.0)) {
-    return ::testing::AssertionFailure() << "start configurations differ";
-  }
-  return ::testing::AssertionSuccess();
+  const std::string difference = DescribeDifference(a, b);
+  if (difference.empty()) return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << difference;
 }
 
 /// Fruit centres that project into a D435 image from the scene's start camera.

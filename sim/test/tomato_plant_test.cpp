@@ -38,31 +38,9 @@ const SceneObject& Find(const Scene& scene, const std::string& name) {
 
 /// True when both scenes hold the same objects with bit-identical geometry.
 ::testing::AssertionResult SameScene(const Scene& a, const Scene& b) {
-  if (a.objects.size() != b.objects.size()) {
-    return ::testing::AssertionFailure() << a.objects.size() << " vs " << b.objects.size();
-  }
-  for (size_t i = 0; i < a.objects.size(); ++i) {
-    const SceneObject& x = a.objects[i];
-    const SceneObject& y = b.objects[i];
-    if (x.name != y.name || x.semantic_class != y.semantic_class ||
-        x.instance_id != y.instance_id || x.albedo != y.albedo ||
-        x.shape.index() != y.shape.index()) {
-      return ::testing::AssertionFailure() << "object " << i << ": " << x.name << " vs " << y.name;
-    }
-    if (const auto* m = std::get_if<TriangleMesh>(&x.shape)) {
-      const TriangleMesh& n = std::get<TriangleMesh>(y.shape);
-      if (m->vertices != n.vertices || m->triangles != n.triangles) {
-        return ::testing::AssertionFailure() << "mesh of " << x.name << " differs";
-      }
-    } else {
-      const Ellipsoid& e = std::get<Ellipsoid>(x.shape);
-      const Ellipsoid& f = std::get<Ellipsoid>(y.shape);
-      if (e.center_W != f.center_W || e.radii != f.radii || e.R_WE != f.R_WE) {
-        return ::testing::AssertionFailure() << "ellipsoid " << x.name << " differs";
-      }
-    }
-  }
-  return ::testing::AssertionSuccess();
+  const std::string difference = DescribeDifference(a, b);
+  if (difference.empty()) return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << difference;
 }
 
 std::vector<Ellipsoid> FruitShapes(const Scene& scene) {

@@ -156,6 +156,8 @@ class FruitVisibility {
   /// @throws avp::Error if `screen` fails Validate().
   FruitVisibility(const OcclusionScreen& screen, std::span<const Ellipsoid> fruits);
   void AddOccluder(const TriangleMesh& mesh) { occluders_.Add(mesh); }
+  /// Adds the mesh of every non-fruit object in scene.objects[first_object, end).
+  void AddSceneOccluders(const Scene& scene, size_t first_object);
   /// A fruit surface point (slightly lifted off the surface) still visible from the eye, with the
   /// index of its fruit; nullopt when every sample is hidden.
   std::optional<std::pair<Eigen::Vector3d, size_t>> FindVisible();
@@ -173,6 +175,13 @@ class FruitVisibility {
   size_t num_samples_ = 0;
   SegmentOcclusionTester occluders_;
 };
+
+/// The centre of a leaf that hides fruit point `p_W` from `eye_W`: the first point on the line of
+/// sight at distance min_distance_m, min_distance_m + 1 cm, ... (< 0.25 m; each with up to 1 cm of
+/// jitter from `rng`) that lies at least `clearance_m` outside every fruit's bounding sphere.
+Eigen::Vector3d ScreenLeafCentre(const Eigen::Vector3d& p_W, const Eigen::Vector3d& eye_W,
+                                 std::span<const Ellipsoid> fruits, double min_distance_m,
+                                 double clearance_m, Rng& rng);
 
 /// A rotation whose x axis is `direction` (normalised) and whose z axis is as close as possible
 /// to `up_hint` (the frame of a leaf blade: x along the midrib, z the upper side). Falls back to

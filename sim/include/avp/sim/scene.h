@@ -98,4 +98,8 @@ struct Scene {
   Status Validate() const;
 };
 
+/// Empty when `a` and `b` hold the same objects with bit-identical geometry, names, classes, ids
+/// and colours (same seed, same scene); otherwise a description of the first difference.
+std::string DescribeDifference(const Scene& a, const Scene& b);
+
 }  // namespace avp::sim
