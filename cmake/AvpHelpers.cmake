@@ -37,7 +37,8 @@ endfunction()
 function(avp_add_test name)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
-  target_link_libraries(${name} PRIVATE ${ARG_DEPS} GTest::gtest GTest::gmock GTest::gtest_main)
+  target_link_libraries(${name} PRIVATE ${ARG_DEPS} avp_test_support GTest::gtest GTest::gmock
+                                        GTest::gtest_main)
   avp_set_compile_options(${name})
   target_compile_definitions(${name} PRIVATE AVP_CONFIG_DIR="${AVP_CONFIG_DIR}"
                                              AVP_TEST_DATA_DIR="${CMAKE_SOURCE_DIR}/tests/data")

@@ -9,13 +9,13 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
-#include <unistd.h>
 
 #include <avp/core/camera.h>
 #include <avp/core/rng.h>
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/io/json.h>
+#include <avp/test/temp_dir_test.h>
 
 namespace avp::io {
 namespace {
@@ -26,21 +26,7 @@ using ::testing::HasSubstr;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kPi = std::numbers::pi;
 
-class JsonFileTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::path(::testing::TempDir()) /
-           ("avp_json_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  fs::path dir_;
-};
+class JsonFileTest : public test::TempDirTest {};
 
 CameraIntrinsics OddIntrinsics() {
   CameraIntrinsics K;

@@ -9,13 +9,13 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <avp/core/image.h>
 #include <avp/core/rng.h>
 #include <avp/core/status.h>
 #include <avp/io/depth.h>
 #include <avp/io/png.h>
+#include <avp/test/temp_dir_test.h>
 
 namespace avp::io {
 namespace {
@@ -79,20 +79,8 @@ std::vector<uint8_t> MakePng(uint32_t width, uint32_t height, uint8_t bit_depth,
   return png;
 }
 
-class PngTest : public ::testing::Test {
+class PngTest : public test::TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::path(::testing::TempDir()) /
-           ("avp_png_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-
   void WriteBytes(const fs::path& path, const std::vector<uint8_t>& bytes) {
     std::ofstream out(path, std::ios::binary);
     out.write(reinterpret_cast<const char*>(bytes.data()),
@@ -103,8 +91,6 @@ class PngTest : public ::testing::Test {
     std::ifstream in(path, std::ios::binary);
     return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
   }
-
-  fs::path dir_;
 };
 
 ImageRgb8 TestPattern(int width, int height) {

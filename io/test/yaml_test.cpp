@@ -6,12 +6,12 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/io/yaml.h>
+#include <avp/test/temp_dir_test.h>
 
 namespace avp::io {
 namespace {
@@ -22,26 +22,7 @@ using ::testing::HasSubstr;
 
 constexpr double kPi = std::numbers::pi;
 
-class YamlFileTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::path(::testing::TempDir()) /
-           ("avp_yaml_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  fs::path Write(const std::string& name, const std::string& text) {
-    const fs::path path = dir_ / name;
-    std::ofstream(path) << text;
-    return path;
-  }
-  fs::path dir_;
-};
+class YamlFileTest : public test::TempDirTest {};
 
 // ---- LoadYamlFile -------------------------------------------------------------------------------
 

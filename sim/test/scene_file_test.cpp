@@ -12,6 +12,7 @@
 #include <avp/sim/mesh_builder.h>
 #include <avp/sim/scenario.h>
 #include <avp/sim/scene_file.h>
+#include <avp/test/temp_dir_test.h>
 
 namespace avp::sim {
 namespace {
@@ -44,21 +45,11 @@ TriangleMesh Sphere(const Eigen::Vector3d& c, double r) {
   return s;
 }
 
-class SceneFileTest : public ::testing::Test {
+class SceneFileTest : public test::TempDirTest {
  protected:
   void SetUp() override {
-    const ::testing::TestInfo* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() / ("avp_scene_file_test_" + std::string(info->name()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    TempDirTest::SetUp();
     WritePlantObj();
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
-  fs::path Write(const std::string& name, const std::string& text) {
-    const fs::path p = dir_ / name;
-    std::ofstream(p) << text;
-    return p;
   }
 
   /// plant.obj: a stem box, a leaf quad, two separate fruits and one object with two spheres.
@@ -95,8 +86,6 @@ class SceneFileTest : public ::testing::Test {
     ADD_FAILURE() << "no object " << name;
     return s.objects.front();
   }
-
-  fs::path dir_;
 };
 
 const char* kPlantYaml = R"(version: 1
