@@ -1,0 +1,448 @@
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <avp/apps/map_command.h>
+#include <avp/core/rng.h>
+#include <avp/core/segmentation.h>
+#include <avp/io/json.h>
+#include <avp/mapping/ply_export.h>
+#include <avp/mapping/semantic_map.h>
+#include <avp/sim/ground_truth.h>
+#include <avp/sim/rgbd_renderer.h>
+#include <avp/sim/sensor_noise.h>
+
+namespace avp::apps {
+
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+std::string HumanBytes(uint64_t bytes) {
+  if (bytes < 1024) return fmt::format("{} B", bytes);
+  if (bytes < 1024 * 1024) return fmt::format("{:.1f} KiB", static_cast<double>(bytes) / 1024.0);
+  if (bytes < uint64_t{1} << 30) {
+    return fmt::format("{:.1f} MiB", static_cast<double>(bytes) / (1024.0 * 1024.0));
+  }
+  return fmt::format("{:.2f} GiB", static_cast<double>(bytes) / (1024.0 * 1024.0 * 1024.0));
+}
+
+std::string FormatPoint(const Eigen::Vector3d& p, int decimals = 3) {
+  return fmt::format("({:.{}f}, {:.{}f}, {:.{}f})", p.x(), decimals, p.y(), decimals, p.z(),
+                     decimals);
+}
+
+size_t CountOccupiedOfClass(const mapping::OccupancyGrid& grid, SemanticClass c) {
+  size_t n = 0;
+  grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& cell) {
+    if (cell.cls() == c && grid.State(k) == mapping::VoxelState::kOccupied) ++n;
+  });
+  return n;
+}
+
+Status ValidateBuildOptions(const MapBuildOptions& o) {
+  std::vector<std::string> errors;
+  if (o.views < 1 || o.views > 360) {
+    errors.push_back(fmt::format("views ({}) must be in [1, 360]", o.views));
+  }
+  if (!(o.arc_deg >= 0.0 && o.arc_deg <= 360.0)) {
+    errors.push_back(fmt::format("arc ({} deg) must be in [0, 360]", o.arc_deg));
+  }
+  if (!(o.radius_m >= 0.0 && o.radius_m <= 3.0)) {
+    errors.push_back(
+        fmt::format("radius ({} m) must be in [0, 3] (0 = the start distance)", o.radius_m));
+  }
+  if (!std::isfinite(o.roi_margin_m)) {
+    errors.push_back(fmt::format("ROI margin ({}) must be finite", o.roi_margin_m));
+  }
+  if (!(o.mask_confidence > 0.0f && o.mask_confidence < 1.0f)) {
+    errors.push_back(fmt::format("mask confidence ({}) must be in (0, 1)", o.mask_confidence));
+  }
+  if (o.threads < 0) errors.push_back(fmt::format("threads ({}) must be >= 0", o.threads));
+  if (o.out.empty()) errors.push_back("the output file (--out) is empty");
+  if (errors.empty()) return Status::Ok();
+  return InvalidArgumentError(
+      fmt::format("invalid map build options: {}", fmt::join(errors, "; ")));
+}
+
+}  // namespace
+
+// ---- build
+// ---------------------------------------------------------------------------------------
+
+std::vector<RigidTransform> ArcViewPoses(const Eigen::Vector3d& target_W,
+                                         const Eigen::Vector3d& start_eye_W, int views,
+                                         double arc_deg, double radius_m,
+                                         std::vector<double>* azimuths_deg) {
+  const Eigen::Vector2d d = (start_eye_W - target_W).head<2>();
+  const double start_azimuth = d.norm() > 1e-9 ? std::atan2(d.y(), d.x()) : std::numbers::pi;
+  const bool ring = arc_deg >= 360.0;
+  std::vector<RigidTransform> poses;
+  for (int i = 0; i < views; ++i) {
+    double offset_deg = 0.0;
+    if (ring) {
+      offset_deg = 360.0 * i / views;
+    } else if (views > 1) {
+      offset_deg = arc_deg * (static_cast<double>(i) / (views - 1) - 0.5);
+    }
+    const double a = start_azimuth + offset_deg * std::numbers::pi / 180.0;
+    const Eigen::Vector3d eye(target_W.x() + radius_m * std::cos(a),
+                              target_W.y() + radius_m * std::sin(a), start_eye_W.z());
+    poses.push_back(RigidTransform::LookAt(eye, target_W, Eigen::Vector3d::UnitZ()));
+    if (azimuths_deg != nullptr) azimuths_deg->push_back(a * 180.0 / std::numbers::pi);
+  }
+  return poses;
+}
+
+Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options) {
+  const auto t_start = Clock::now();
+  AVP_RETURN_IF_ERROR(ValidateBuildOptions(options));
+  AVP_RETURN_IF_ERROR(options.intrinsics.Validate());
+  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(options.scene));
+  if (scene.plant_bounds.IsEmpty()) {
+    return InvalidArgumentError(fmt::format("scene '{}' has no plant to map", scene.name));
+  }
+
+  mapping::MapOptions map_options;
+  map_options.grid.voxel_size_m = options.voxel_size_m;
+  if (options.roi_margin_m >= 0.0) {
+    map_options.grid.roi = scene.plant_bounds.Inflated(options.roi_margin_m);
+  }
+  map_options.semantics.policy = options.policy;
+  AVP_RETURN_IF_ERROR(map_options.Validate());
+  mapping::IntegratorOptions integrator_options;
+  integrator_options.carving = options.carving;
+  integrator_options.num_threads = options.threads;
+  AVP_RETURN_IF_ERROR(integrator_options.Validate());
+
+  MapBuildSummary summary;
+  summary.scene_name = scene.name;
+  summary.out = options.out;
+  summary.total_fruits = scene.Fruits().size();
+  summary.target_W = scene.plant_bounds.center();
+  const Eigen::Vector3d start_eye = scene.X_WC_start.translation();
+  summary.radius_m =
+      options.radius_m > 0.0 ? options.radius_m : (start_eye - summary.target_W).head<2>().norm();
+  if (summary.radius_m < 0.15) {
+    return InvalidArgumentError(fmt::format(
+        "the start camera of scene '{}' is {:.3f} m from the plant centre {} horizontally: give "
+        "--radius",
+        scene.name, summary.radius_m, FormatPoint(summary.target_W)));
+  }
+  std::vector<double> azimuths;
+  const std::vector<RigidTransform> poses = ArcViewPoses(
+      summary.target_W, start_eye, options.views, options.arc_deg, summary.radius_m, &azimuths);
+
+  mapping::SemanticMap map(map_options);
+  const mapping::Integrator integrator(integrator_options);
+  const sim::RgbdRenderer renderer(scene);
+  const Rng noise_rng = Rng(options.scene.seed).Fork("map-build-noise");
+  for (int i = 0; i < options.views; ++i) {
+    MapBuildView view;
+    view.index = i;
+    view.views = options.views;
+    view.azimuth_deg = azimuths[static_cast<size_t>(i)];
+    view.X_WC = poses[static_cast<size_t>(i)];
+    auto t0 = Clock::now();
+    sim::RenderedFrame frame =
+        renderer.Render(options.intrinsics, view.X_WC, static_cast<int64_t>(i) * 100'000'000);
+    if (options.noise) {
+      sim::DepthNoiseConfig noise;
+      noise.enabled = true;
+      Rng rng = noise_rng.Fork(static_cast<uint64_t>(i));
+      sim::ApplyDepthNoise(noise, frame, rng);
+    }
+    view.render_ms = MsSince(t0);
+    const Segmentation segmentation =
+        Segmentation::FromLabelImages(frame.instance_ids, frame.class_ids, options.mask_confidence);
+    view.masks = segmentation.instances.size();
+    for (uint8_t c : frame.class_ids.data()) {
+      if (c == static_cast<uint8_t>(SemanticClass::kFruit)) ++view.fruit_pixels;
+    }
+    t0 = Clock::now();
+    AVP_ASSIGN_OR_RETURN(view.stats, integrator.Integrate(frame.rgbd, &segmentation, map));
+    view.integrate_ms = MsSince(t0);
+    view.known_voxels = map.grid().CountKnownVoxels();
+    view.occupied_voxels = map.grid().CountOccupiedVoxels();
+    view.labelled_voxels = map.grid().CountSemanticVoxels();
+    view.instances = map.Instances().size();
+    if (options.on_view) options.on_view(view);
+    summary.views.push_back(view);
+  }
+
+  summary.known_voxels = map.grid().CountKnownVoxels();
+  summary.occupied_voxels = map.grid().CountOccupiedVoxels();
+  summary.labelled_voxels = map.grid().CountSemanticVoxels();
+  summary.fruit_voxels = CountOccupiedOfClass(map.grid(), SemanticClass::kFruit);
+  summary.instances = map.Instances();
+
+  mapping::MapSaveOptions save;
+  save.note = fmt::format(
+      "avp map build --scenario {} --seed {} --views {} --voxel-size {} --policy {} --carving {} "
+      "--arc-deg {} --radius {:.3f}{}",
+      scene.name, options.scene.seed, options.views, options.voxel_size_m,
+      mapping::ToString(options.policy), mapping::ToString(options.carving), options.arc_deg,
+      summary.radius_m, options.noise ? " --noise" : "");
+  AVP_RETURN_IF_ERROR(mapping::SaveMap(map, options.out, save));
+  std::error_code ec;
+  summary.file_bytes = fs::file_size(options.out, ec);
+  summary.seconds = MsSince(t_start) / 1000.0;
+  return summary;
+}
+
+// ---- gt
+// ------------------------------------------------------------------------------------------
+
+Result<MapGtSummary> RunMapGt(const MapGtOptions& options) {
+  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(options.scene));
+  mapping::GridOptions grid_options;
+  grid_options.voxel_size_m = options.voxel_size_m;
+  AVP_RETURN_IF_ERROR(grid_options.Validate());
+  const sim::FruitVoxels truth = sim::VoxelizeFruitSurfaces(scene, options.voxel_size_m);
+  mapping::OccupancyGrid grid(grid_options);
+  for (const VoxelKey& k : truth.SortedKeys()) grid.SetLogOdds(k, grid.clamp_max_log_odds());
+  AVP_ASSIGN_OR_RETURN(const mapping::OctomapExportStats stats,
+                       mapping::ExportOctomapBinary(grid, options.out));
+  MapGtSummary summary;
+  summary.scene_name = scene.name;
+  summary.fruits = scene.Fruits().size();
+  summary.voxels = stats.occupied_voxels;
+  summary.file_bytes = stats.file_bytes;
+  return summary;
+}
+
+// ---- info
+// ----------------------------------------------------------------------------------------
+
+Result<MapInfo> RunMapInfo(const fs::path& path) {
+  MapInfo info;
+  info.path = path;
+  AVP_ASSIGN_OR_RETURN(const mapping::SemanticMap map, mapping::LoadMap(path, &info.file));
+  const mapping::OccupancyGrid& grid = map.grid();
+  info.options = map.options();
+  info.blocks = grid.num_blocks();
+  info.semantic_blocks = grid.num_semantic_blocks();
+  info.known_voxels = grid.CountKnownVoxels();
+  info.occupied_voxels = grid.CountOccupiedVoxels();
+  info.free_voxels = info.known_voxels - info.occupied_voxels;
+  info.labelled_voxels = grid.CountSemanticVoxels();
+  grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& cell) {
+    if (cell.semantic_class >= kNumSemanticClasses) return;
+    ++info.labelled_by_class[cell.semantic_class];
+    if (grid.State(k) == mapping::VoxelState::kOccupied)
+      ++info.occupied_by_class[cell.semantic_class];
+  });
+  info.instances = map.Instances();
+  info.known_bounds = grid.KnownBounds();
+  info.memory_bytes = grid.MemoryBytes();
+  return info;
+}
+
+std::string FormatMapInfo(const MapInfo& info) {
+  const mapping::GridOptions& g = info.options.grid;
+  const mapping::SemanticOptions& s = info.options.semantics;
+  std::string out;
+  const auto line = [&](std::string_view key, const std::string& value) {
+    out += fmt::format("{:<13}{}\n", key, value);
+  };
+  line("map file",
+       fmt::format("{} ({}, format version {}, CRC-32 0x{:08x})", info.path.string(),
+                   HumanBytes(info.file.file_bytes), info.file.version, info.file.crc32));
+  if (!info.file.note.empty()) line("made by", info.file.note);
+  line("voxel size", fmt::format("{:g} mm", g.voxel_size_m * 1000.0));
+  line("ROI", g.roi ? fmt::format("{} - {} m", FormatPoint(g.roi->min()), FormatPoint(g.roi->max()))
+                    : std::string("none"));
+  line("sensor model", fmt::format("hit {:g}, miss {:g}, clamp [{:g}, {:g}], occupied at p >= {:g}",
+                                   g.sensor.hit, g.sensor.miss, g.sensor.clamp_min,
+                                   g.sensor.clamp_max, g.sensor.occupied_threshold));
+  if (s.policy == mapping::FusionPolicy::kReferenceMax) {
+    line("fusion",
+         fmt::format("{} (penalty {:g})", mapping::ToString(s.policy), s.reference_penalty));
+  } else {
+    line("fusion", fmt::format("{} (class log-odds [{:g}, {:g}], miss {:g}, label at p >= {:g})",
+                               mapping::ToString(s.policy), s.class_log_odds_min,
+                               s.class_log_odds_max, s.miss_log_odds, s.label_threshold));
+  }
+  line("blocks",
+       fmt::format("{} of 8^3 voxels ({} with semantics)", info.blocks, info.semantic_blocks));
+  line("voxels", fmt::format("{} known: {} free, {} occupied; {} labelled", info.known_voxels,
+                             info.free_voxels, info.occupied_voxels, info.labelled_voxels));
+  std::string classes;
+  for (SemanticClass c : AllSemanticClasses()) {
+    const auto i = static_cast<size_t>(c);
+    if (info.labelled_by_class[i] == 0) continue;
+    if (!classes.empty()) classes += ", ";
+    classes += fmt::format("{} {} ({} occupied)", ToString(c), info.labelled_by_class[i],
+                           info.occupied_by_class[i]);
+  }
+  line("labels", classes.empty() ? std::string("none") : classes);
+  line("bounds", info.known_bounds.IsEmpty()
+                     ? std::string("empty")
+                     : fmt::format("{} - {} m (known voxels)", FormatPoint(info.known_bounds.min()),
+                                   FormatPoint(info.known_bounds.max())));
+  line("memory", HumanBytes(info.memory_bytes) + " (blocks, semantic payload, hash table)");
+  line("instances", std::to_string(info.instances.size()));
+  if (!info.instances.empty()) {
+    out += fmt::format("  {:>5}  {:<8} {:>7}  {:<26} {}\n", "id", "class", "voxels", "centroid (m)",
+                       "mean confidence");
+    for (const mapping::InstanceInfo& inst : info.instances) {
+      out += fmt::format("  {:>5}  {:<8} {:>7}  {:<26} {:.3f}\n", inst.id,
+                         ToString(inst.semantic_class), inst.voxels, FormatPoint(inst.centroid_W),
+                         inst.mean_confidence);
+    }
+  }
+  return out;
+}
+
+// ---- export
+// --------------------------------------------------------------------------------------
+
+std::optional<MapExportFormat> MapExportFormatFromString(std::string_view name) {
+  if (name == "bt") return MapExportFormat::kBt;
+  if (name == "ot") return MapExportFormat::kOt;
+  if (name == "ply") return MapExportFormat::kPly;
+  return std::nullopt;
+}
+
+Result<MapExportSummary> RunMapExport(const MapExportOptions& options) {
+  if (options.out.empty()) return InvalidArgumentError("give the output file with --out");
+  std::string format = options.format;
+  if (format.empty()) {
+    format = options.out.extension().string();
+    if (!format.empty() && format[0] == '.') format.erase(0, 1);
+  }
+  const std::optional<MapExportFormat> f = MapExportFormatFromString(format);
+  if (!f) {
+    return InvalidArgumentError(
+        fmt::format("unknown export format '{}' (from {}): use bt, ot or ply", format,
+                    options.format.empty() ? "the extension of --out" : "--format"));
+  }
+  AVP_ASSIGN_OR_RETURN(const mapping::SemanticMap map, mapping::LoadMap(options.map));
+  MapExportSummary summary;
+  summary.format = *f;
+  summary.out = options.out;
+  if (*f == MapExportFormat::kPly) {
+    mapping::PlyExportOptions ply;
+    ply.binary = !options.ply_ascii;
+    ply.occupied_only = !options.ply_all_labelled;
+    AVP_ASSIGN_OR_RETURN(const mapping::PlyExportStats stats,
+                         mapping::ExportSemanticPly(map.grid(), options.out, ply));
+    summary.labelled_voxels = stats.vertices;
+    summary.file_bytes = stats.file_bytes;
+    return summary;
+  }
+  AVP_ASSIGN_OR_RETURN(const mapping::OctomapExportStats stats,
+                       *f == MapExportFormat::kBt
+                           ? mapping::ExportOctomapBinary(map.grid(), options.out)
+                           : mapping::ExportOctomapColor(map, options.out));
+  summary.occupied_voxels = stats.occupied_voxels;
+  summary.free_voxels = stats.free_voxels;
+  summary.labelled_voxels = stats.labelled_voxels;
+  summary.file_bytes = stats.file_bytes;
+  return summary;
+}
+
+// ---- compare
+// -------------------------------------------------------------------------------------
+
+Result<MapCompareSummary> RunMapCompare(const MapCompareOptions& options) {
+  mapping::GroundTruthCompareOptions compare;
+  compare.tolerance_voxels = options.tolerance_voxels;
+  compare.semantic_class = options.semantic_class;
+  AVP_RETURN_IF_ERROR(compare.Validate());
+  AVP_ASSIGN_OR_RETURN(const mapping::SemanticMap map, mapping::LoadMap(options.map));
+  AVP_ASSIGN_OR_RETURN(const mapping::VoxelSet gt, mapping::ImportOctomapOccupied(options.gt));
+  MapCompareSummary summary;
+  summary.map = options.map;
+  summary.gt = options.gt;
+  summary.semantic_class = options.semantic_class;
+  summary.gt_occupied_leaves = gt.occupied_leaves;
+  summary.gt_coarse_leaves = gt.coarse_leaves;
+  std::vector<int> tolerances = {0};
+  if (options.tolerance_voxels > 0) tolerances.push_back(options.tolerance_voxels);
+  for (int t : tolerances) {
+    compare.tolerance_voxels = t;
+    AVP_ASSIGN_OR_RETURN(mapping::GroundTruthComparison r,
+                         mapping::CompareToGroundTruth(map.grid(), gt, compare));
+    summary.results.push_back(r);
+  }
+  if (!options.json_out.empty()) {
+    AVP_RETURN_IF_ERROR(io::WriteJsonFile(options.json_out, ToJson(summary)));
+  }
+  return summary;
+}
+
+std::string FormatMapCompare(const MapCompareSummary& s) {
+  std::string out;
+  const mapping::GroundTruthComparison& first = s.results.front();
+  out += fmt::format("map          {} ({:g} mm voxels)\n", s.map.string(),
+                     first.map_resolution_m * 1000.0);
+  out += fmt::format(
+      "ground truth {} ({:g} mm voxels, {} occupied voxels from {} leaves, {} of "
+      "them pruned)\n",
+      s.gt.string(), first.gt_resolution_m * 1000.0, first.gt_voxels_original, s.gt_occupied_leaves,
+      s.gt_coarse_leaves);
+  if (first.resampled) {
+    out += fmt::format(
+        "note         resolutions differ: GT voxel centres were mapped onto the map's {:g} mm "
+        "lattice ({} GT voxels -> {})\n",
+        first.map_resolution_m * 1000.0, first.gt_voxels_original, first.ground_truth);
+  }
+  out += fmt::format("predicted    {} occupied voxels labelled {}\n", first.predicted,
+                     ToString(s.semantic_class));
+  out += fmt::format("{:<12} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}\n", "tolerance", "TP", "FP",
+                     "GT found", "FN", "precision", "recall", "F1");
+  for (const mapping::GroundTruthComparison& r : s.results) {
+    out += fmt::format("{:<12} {:>9} {:>9} {:>9} {:>9} {:>9.4f} {:>9.4f} {:>9.4f}\n",
+                       r.tolerance_voxels == 0 ? std::string("exact")
+                                               : fmt::format("+-{} voxel", r.tolerance_voxels),
+                       r.tp, r.fp, r.gt_found, r.fn, r.precision, r.recall, r.f1);
+  }
+  out +=
+      "TP: predicted voxels with a GT voxel within the tolerance (FP = predicted - TP); GT found: "
+      "GT voxels with a predicted voxel within it (FN = GT - found). precision = TP / predicted, "
+      "recall = found / GT.\n";
+  return out;
+}
+
+nlohmann::json ToJson(const MapCompareSummary& s) {
+  nlohmann::json results = nlohmann::json::array();
+  for (const mapping::GroundTruthComparison& r : s.results) {
+    results.push_back({{"tolerance_voxels", r.tolerance_voxels},
+                       {"predicted", r.predicted},
+                       {"ground_truth", r.ground_truth},
+                       {"tp", r.tp},
+                       {"fp", r.fp},
+                       {"gt_found", r.gt_found},
+                       {"fn", r.fn},
+                       {"precision", r.precision},
+                       {"recall", r.recall},
+                       {"f1", r.f1}});
+  }
+  const mapping::GroundTruthComparison& first = s.results.front();
+  return {{"map", s.map.string()},
+          {"ground_truth", s.gt.string()},
+          {"class", std::string(ToString(s.semantic_class))},
+          {"map_resolution_m", first.map_resolution_m},
+          {"gt_resolution_m", first.gt_resolution_m},
+          {"resampled", first.resampled},
+          {"gt_voxels_original", first.gt_voxels_original},
+          {"gt_occupied_leaves", s.gt_occupied_leaves},
+          {"gt_coarse_leaves", s.gt_coarse_leaves},
+          {"definitions",
+           "tp: predicted voxels with a GT voxel within the tolerance cube; fp = predicted - tp; "
+           "gt_found: GT voxels with a predicted voxel within it; fn = ground_truth - gt_found; "
+           "precision = tp / predicted; recall = gt_found / ground_truth"},
+          {"results", results}};
+}
+
+}  // namespace avp::apps

@@ -1,0 +1,76 @@
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include <avp/core/box.h>
+#include <avp/core/status.h>
+#include <avp/core/voxel_key.h>
+#include <avp/mapping/voxel_grid.h>
+
+namespace avp::mapping {
+
+/// A dense, read-only copy of the map over a box, one byte per voxel, for view evaluation:
+/// bits 0-1 hold the VoxelState, bits 2-4 the semantic class of labelled voxels (0 = none).
+/// Voxels outside the box read as unknown; build the box over KnownBounds() (the default) and
+/// that is exact.
+class PlanningSnapshot {
+ public:
+  static constexpr uint8_t kStateMask = 0x3;
+  static constexpr int kClassShift = 2;
+
+  /// Counts of one ray: voxels visited before the first occupied one, by state and class.
+  struct RayCounts {
+    uint32_t unknown = 0;
+    uint32_t free = 0;
+    /// Visited voxels (unknown + free + the occupied one, if hit).
+    uint32_t visited = 0;
+    /// The ray stopped at an occupied voxel.
+    bool hit = false;
+    /// Class of the occupied voxel it stopped at (0 = none / no hit).
+    uint8_t hit_class = 0;
+  };
+
+  PlanningSnapshot() = default;
+
+  /// Copies `grid` over the voxels whose centres lie in `box_W` (the ROI). Fails with a clear
+  /// error when the box is empty or would need more than `max_bytes`.
+  static Result<PlanningSnapshot> Build(const OccupancyGrid& grid, const Box3& box_W,
+                                        size_t max_bytes = size_t{1} << 30);
+  /// Build() over the bounding box of every known voxel (exact: everything outside is unknown).
+  static Result<PlanningSnapshot> BuildOverKnown(const OccupancyGrid& grid,
+                                                 size_t max_bytes = size_t{1} << 30);
+
+  double voxel_size_m() const { return voxel_size_m_; }
+  VoxelKey min_key() const { return min_; }
+  /// Voxels per axis.
+  Eigen::Vector3i dims() const { return dims_; }
+  size_t bytes() const { return cells_.size(); }
+  Box3 box() const;
+
+  uint8_t Cell(const VoxelKey& k) const {
+    const int64_t x = int64_t{k.x} - min_.x, y = int64_t{k.y} - min_.y, z = int64_t{k.z} - min_.z;
+    if (x < 0 || y < 0 || z < 0 || x >= dims_.x() || y >= dims_.y() || z >= dims_.z()) return 0;
+    return cells_[static_cast<size_t>(x + sx_ * y + sxy_ * z)];
+  }
+  VoxelState State(const VoxelKey& k) const {
+    return static_cast<VoxelState>(Cell(k) & kStateMask);
+  }
+
+  /// Walks the segment [from, to) like OctoMap's computeRayKeys + search (the voxel of `to` is not
+  /// visited), counting unknown and free voxels until the first occupied one (which is counted in
+  /// `visited` and stops the ray). Exact integer traversal (RayWalker); voxels outside the box
+  /// are unknown and cost no memory access.
+  RayCounts CastRay(const Eigen::Vector3d& from, const Eigen::Vector3d& to) const;
+
+ private:
+  double voxel_size_m_ = 0.0;
+  VoxelKey min_;
+  Eigen::Vector3i dims_ = Eigen::Vector3i::Zero();
+  int64_t sx_ = 0, sxy_ = 0;
+  std::vector<uint8_t> cells_;
+};
+
+}  // namespace avp::mapping

@@ -1,0 +1,144 @@
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <limits>
+
+#include <Eigen/Core>
+
+#include <avp/core/voxel_key.h>
+
+namespace avp::mapping {
+
+/// Exact voxel traversal of a segment, in integer arithmetic.
+///
+/// Both end points are floored once onto a fixed-point lattice of 2^-16 voxel (which keeps each in
+/// its VoxelKey::FromPoint voxel); from then on every
+/// decision is exact: the walker compares the crossing parameters t_i = N_i / A_i of the three axes
+/// by cross-multiplication (N_i * A_j vs N_j * A_i, maintained incrementally in 64-bit integers),
+/// so it never drifts, visits exactly the 6-connected chain of voxels the segment passes through,
+/// and always ends in the end point's voxel after exactly |dk_x| + |dk_y| + |dk_z| steps. When the
+/// segment crosses an edge or corner exactly (ties), the lower axis (x, then y, then z) steps
+/// first. Voxels follow VoxelKey's lattice (floor(p / voxel)), i.e. OctoMap's.
+class RayWalker {
+ public:
+  static constexpr int kFractionBits = 16;
+  /// Longest segment accepted, in voxels (32 m at 2 mm): keeps every product inside 62 bits.
+  static constexpr int64_t kMaxLengthVoxels = int64_t{1} << 14;
+
+  RayWalker(const Eigen::Vector3d& from, const Eigen::Vector3d& to, double voxel_size_m) {
+    // p * (1 / s) exactly as VoxelKey::FromPoint and OctoMap's coordToKey compute it; the scaling
+    // by 2^16 is exact, so floor() keeps every end point in the same voxel as FromPoint.
+    const double inv = 1.0 / voxel_size_m;
+    constexpr double kScale = static_cast<double>(int64_t{1} << kFractionBits);
+    int64_t u0[3], u1[3];
+    for (int i = 0; i < 3; ++i) {
+      const double a = from[i] * inv * kScale;
+      const double b = to[i] * inv * kScale;
+      constexpr double kLimit = static_cast<double>(int64_t{1} << (23 + kFractionBits));
+      if (!(std::abs(a) < kLimit && std::abs(b) < kLimit)) {
+        ok_ = false;
+        remaining_ = 0;
+        return;
+      }
+      u0[i] = static_cast<int64_t>(std::floor(a));
+      u1[i] = static_cast<int64_t>(std::floor(b));
+    }
+    constexpr int64_t kOne = int64_t{1} << kFractionBits;
+    int64_t n[3], a[3];
+    remaining_ = 0;
+    for (int i = 0; i < 3; ++i) {
+      const int64_t k0 = u0[i] >> kFractionBits;  // floor (arithmetic shift)
+      const int64_t k1 = u1[i] >> kFractionBits;
+      key_[i] = static_cast<int32_t>(k0);
+      const int64_t d = u1[i] - u0[i];
+      a[i] = d < 0 ? -d : d;
+      step_[i] = d > 0 ? 1 : (d < 0 ? -1 : 0);
+      n[i] =
+          d > 0 ? ((k0 + 1) << kFractionBits) - u0[i] : (d < 0 ? u0[i] - (k0 << kFractionBits) : 1);
+      axis_remaining_[i] = k1 > k0 ? k1 - k0 : k0 - k1;
+      remaining_ += axis_remaining_[i];
+      if (a[i] > kMaxLengthVoxels * kOne) ok_ = false;
+    }
+    if (!ok_) {
+      remaining_ = 0;
+      return;
+    }
+    // p_[i][j] = N_i * A_j: t_i <= t_j  <=>  p_[i][j] <= p_[j][i].
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        p_[i][j] = n[i] * a[j];
+        inc_[i][j] = kOne * a[j];
+      }
+      if (axis_remaining_[i] == 0) p_[i][(i + 1) % 3] = p_[i][(i + 2) % 3] = kNever;
+    }
+  }
+
+  /// False when an end point is outside the key range or the segment is longer than
+  /// kMaxLengthVoxels; such a walker visits nothing.
+  bool ok() const { return ok_; }
+  VoxelKey key() const { return {key_[0], key_[1], key_[2]}; }
+  /// Steps left until the end point's voxel; 0 when the current voxel is the last.
+  int64_t remaining() const { return remaining_; }
+  /// Axis of the last step (0, 1, 2), -1 before the first.
+  int last_axis() const { return last_axis_; }
+  int step(int axis) const { return step_[axis]; }
+
+  /// Moves to the next voxel and returns the axis it stepped along. @pre remaining() > 0.
+  int Step() {
+    const bool xy = p_[0][1] <= p_[1][0];
+    const bool xz = p_[0][2] <= p_[2][0];
+    const bool yz = p_[1][2] <= p_[2][1];
+    const int axis = xy ? (xz ? 0 : 2) : (yz ? 1 : 2);
+    key_[axis] += step_[axis];
+    --remaining_;
+    last_axis_ = axis;
+    const int j = (axis + 1) % 3;
+    const int k = (axis + 2) % 3;
+    if (--axis_remaining_[axis] == 0) {
+      p_[axis][j] = p_[axis][k] = kNever;
+    } else {
+      p_[axis][j] += inc_[axis][j];
+      p_[axis][k] += inc_[axis][k];
+    }
+    return axis;
+  }
+
+ private:
+  static constexpr int64_t kNever = std::numeric_limits<int64_t>::max();
+  bool ok_ = true;
+  int32_t key_[3] = {0, 0, 0};
+  int step_[3] = {0, 0, 0};
+  int64_t axis_remaining_[3] = {0, 0, 0};
+  int64_t remaining_ = 0;
+  int last_axis_ = -1;
+  int64_t p_[3][3] = {};
+  int64_t inc_[3][3] = {};
+};
+
+/// The voxel of a point as RayWalker sees it: always VoxelKey::FromPoint (end points are floored
+/// onto the 2^-16 voxel lattice, which never moves them across a voxel face).
+inline VoxelKey FixedPointKey(const Eigen::Vector3d& p, double voxel_size_m) {
+  return VoxelKey::FromPoint(p, voxel_size_m);
+}
+
+/// Visits the voxels of the segment [from, to] in order, from the voxel of `from` to the voxel of
+/// `to` inclusive, calling visit(const VoxelKey&) -> bool; stops early when it returns false.
+/// Returns the number of voxels visited (0 if the walker is not ok()).
+template <typename Visitor>
+int64_t TraverseRay(const Eigen::Vector3d& from, const Eigen::Vector3d& to, double voxel_size_m,
+                    Visitor&& visit) {
+  RayWalker w(from, to, voxel_size_m);
+  if (!w.ok()) return 0;
+  int64_t visited = 0;
+  while (true) {
+    ++visited;
+    if (!visit(w.key())) break;
+    if (w.remaining() == 0) break;
+    w.Step();
+  }
+  return visited;
+}
+
+}  // namespace avp::mapping

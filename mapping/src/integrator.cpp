@@ -1,0 +1,748 @@
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <thread>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include <avp/core/error.h>
+#include <avp/mapping/integrator.h>
+#include <avp/mapping/ray_traversal.h>
+
+namespace avp::mapping {
+
+std::string_view ToString(FreeSpaceCarving carving) {
+  switch (carving) {
+    case FreeSpaceCarving::kRayCast:
+      return "raycast";
+    case FreeSpaceCarving::kProjective:
+      return "projective";
+    case FreeSpaceCarving::kNone:
+      return "none";
+  }
+  return "invalid";
+}
+
+std::optional<FreeSpaceCarving> FreeSpaceCarvingFromString(std::string_view name) {
+  for (auto c :
+       {FreeSpaceCarving::kRayCast, FreeSpaceCarving::kProjective, FreeSpaceCarving::kNone}) {
+    if (ToString(c) == name) return c;
+  }
+  return std::nullopt;
+}
+
+Status IntegratorOptions::Validate() const {
+  std::vector<std::string> errors;
+  if (!std::isfinite(max_range_m) || max_range_m <= 0.0 || max_range_m > 100.0) {
+    errors.push_back(fmt::format("max_range_m ({}) must be in (0, 100]", max_range_m));
+  }
+  if (num_threads < 0 || num_threads > 256) {
+    errors.push_back(fmt::format("num_threads ({}) must be in [0, 256]", num_threads));
+  }
+  if (errors.empty()) return Status::Ok();
+  std::string msg = "invalid integrator options: ";
+  for (size_t i = 0; i < errors.size(); ++i) msg += (i ? "; " : "") + errors[i];
+  return InvalidArgumentError(msg);
+}
+
+std::string IntegrationStats::ToString() const {
+  return fmt::format(
+      "pixels {}, invalid depth {}, beyond max range {}, rejected {}, endpoints {}, occupied "
+      "updates {}, free updates {}, masked endpoints {}, semantic observations {}, {:.1f} ms",
+      pixels, invalid_depth, beyond_max_range, rejected_points, endpoints, occupied_updates,
+      free_updates, masked_endpoints, semantics.observations, seconds * 1e3);
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// One ray of a frame: its end point and whether the end point is a return (a hit) or the
+/// max-range truncation of a longer ray (free space only).
+struct RayEnd {
+  Eigen::Vector3d end;
+  bool hit = false;
+  int32_t label = -1;  ///< mask index of the pixel (hits only), -1 outside every mask
+};
+
+int ResolveThreads(int requested) {
+  if (requested > 0) return requested;
+  const unsigned hw = std::thread::hardware_concurrency();
+  return hw == 0 ? 1 : static_cast<int>(hw);
+}
+
+/// Runs fn(thread_index) on `n` threads (the calling thread is thread 0).
+template <typename F>
+void RunParallel(int n, F&& fn) {
+  if (n <= 1) {
+    fn(0);
+    return;
+  }
+  std::vector<std::thread> threads;
+  threads.reserve(static_cast<size_t>(n - 1));
+  for (int t = 1; t < n; ++t) threads.emplace_back([&fn, t] { fn(t); });
+  fn(0);
+  for (auto& th : threads) th.join();
+}
+
+/// Ray i belongs to thread (i / kChunk) % n: interleaved chunks balance near and far rays.
+constexpr size_t kChunk = 512;
+
+/// Marks the endpoints (one hit per voxel per frame) and collects semantic observations.
+/// Single-threaded: it allocates the endpoint blocks.
+void ApplyHits(const std::vector<RayEnd>& rays, OccupancyGrid& grid, bool collect_semantics,
+               IntegrationStats& stats, std::vector<std::pair<VoxelKey, int32_t>>& sem_hits) {
+  OccupancyGrid::Accessor acc(grid);
+  const double s = grid.voxel_size_m();
+  const float hit = grid.hit_log_odds();
+  for (const RayEnd& r : rays) {
+    if (!r.hit) continue;
+    if (!(r.end.cwiseAbs().maxCoeff() < 1e5)) {  // beyond any key range (and llround's)
+      ++stats.rejected_points;
+      continue;
+    }
+    const VoxelKey k = FixedPointKey(r.end, s);
+    if (!grid.Admits(k)) {
+      ++stats.rejected_points;
+      continue;
+    }
+    if (acc.UpdateOnce(k, hit)) ++stats.occupied_updates;
+    if (!collect_semantics) continue;
+    if (r.label >= 0) {
+      sem_hits.emplace_back(k, r.label);
+    } else {
+      const OccupancyBlock* b = acc.BlockFor(k);
+      if (b->semantics != nullptr) {
+        const SemanticCell& c = (*b->semantics)[LocalIndex(k)];
+        if (c.has_label() || c.observations > 0) sem_hits.emplace_back(k, -1);
+      }
+    }
+  }
+}
+
+/// Free space by ray casting: every voxel from the origin's up to (excluding) the end point's.
+void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, OccupancyGrid& grid,
+               int threads, IntegrationStats& stats) {
+  const double s = grid.voxel_size_m();
+  const float miss = grid.miss_log_odds();
+  if (threads <= 1) {
+    OccupancyGrid::Accessor acc(grid);
+    size_t updates = 0;
+    for (const RayEnd& r : rays) {
+      RayWalker w(origin, r.end, s);
+      if (!w.ok()) continue;
+      while (w.remaining() > 0) {
+        const VoxelKey k = w.key();
+        if (grid.Admits(k) && acc.UpdateOnce(k, miss)) ++updates;
+        w.Step();
+      }
+    }
+    stats.free_updates += updates;
+    return;
+  }
+
+  // 1. Blocks the rays cross, found by walking the block lattice (8x fewer steps), allocated and
+  //    prepared single-threaded in sorted order (deterministic layout).
+  std::vector<std::vector<BlockKey>> per_thread(static_cast<size_t>(threads));
+  const double block_size = s * kBlockEdge;
+  RunParallel(threads, [&](int t) {
+    std::vector<BlockKey>& out = per_thread[static_cast<size_t>(t)];
+    std::array<uint64_t, 4096> seen;
+    seen.fill(~uint64_t{0});
+    for (size_t i = static_cast<size_t>(t) * kChunk; i < rays.size();
+         i += static_cast<size_t>(threads) * kChunk) {
+      const size_t stop = std::min(rays.size(), i + kChunk);
+      for (size_t j = i; j < stop; ++j) {
+        RayWalker w(origin, rays[j].end, block_size);
+        if (!w.ok()) continue;
+        while (true) {
+          const VoxelKey bk = w.key();
+          const uint64_t packed =
+              (static_cast<uint64_t>(static_cast<uint32_t>(bk.x)) & 0x1FFFFF) |
+              ((static_cast<uint64_t>(static_cast<uint32_t>(bk.y)) & 0x1FFFFF) << 21) |
+              ((static_cast<uint64_t>(static_cast<uint32_t>(bk.z)) & 0x1FFFFF) << 42);
+          uint64_t& slot = seen[(packed * 0x9E3779B97F4A7C15ULL) >> 52];
+          if (slot != packed) {
+            slot = packed;
+            out.push_back({bk.x, bk.y, bk.z});
+          }
+          if (w.remaining() == 0) break;
+          w.Step();
+        }
+      }
+    }
+  });
+  std::vector<BlockKey> blocks;
+  for (auto& v : per_thread) blocks.insert(blocks.end(), v.begin(), v.end());
+  per_thread.clear();
+  grid.PrepareFrameBlocks(blocks);
+
+  // 2. Voxel walks in parallel; a voxel is claimed atomically, so each is updated once. Voxels
+  //    whose block was missed by the block walk (rounding at exact block corners) are deferred.
+  std::vector<size_t> updates(static_cast<size_t>(threads), 0);
+  std::vector<std::vector<VoxelKey>> deferred(static_cast<size_t>(threads));
+  RunParallel(threads, [&](int t) {
+    OccupancyGrid::NoAllocAccessor acc(grid);
+    size_t n = 0;
+    std::vector<VoxelKey>& later = deferred[static_cast<size_t>(t)];
+    for (size_t i = static_cast<size_t>(t) * kChunk; i < rays.size();
+         i += static_cast<size_t>(threads) * kChunk) {
+      const size_t stop = std::min(rays.size(), i + kChunk);
+      for (size_t j = i; j < stop; ++j) {
+        RayWalker w(origin, rays[j].end, s);
+        if (!w.ok()) continue;
+        while (w.remaining() > 0) {
+          const VoxelKey k = w.key();
+          if (acc.UpdateOnce(k, miss)) {
+            ++n;
+          } else if (acc.last_missing()) {
+            later.push_back(k);
+          }
+          w.Step();
+        }
+      }
+    }
+    updates[static_cast<size_t>(t)] = n;
+  });
+  OccupancyGrid::Accessor acc(grid);
+  for (const auto& later : deferred) {
+    for (const VoxelKey& k : later) {
+      if (acc.UpdateOnce(k, miss)) ++stats.free_updates;
+    }
+  }
+  for (size_t n : updates) stats.free_updates += n;
+}
+
+/// Free space by projection, with ray casting's result. A ray through pixel p (direction D_p from
+/// the optical centre o, parameter t = camera z) carves voxel V iff it passes through V before its
+/// end point and the end point is not in V (OctoMap's computeRayKeys excludes the end voxel). This
+/// visits voxels instead of rays: for each voxel of the frustum it looks for one pixel whose ray
+/// carves it, first the pixel under the voxel centre (which settles almost every free voxel),
+/// then, unless a max-depth pyramid proves no ray in the voxel's footprint gets that far, every
+/// pixel of the footprint. Voxels within kNearRadius voxels of the optical centre, whose
+/// footprint is unbounded, are carved by walking the rays themselves. The result equals ray
+/// casting up to floating-point ties at voxel edges (see bench_map).
+struct PixelRay {
+  Eigen::Vector3d
+      inv_dir_W;       ///< 1 / (R_WC (x, y, 1)) per axis: t is the depth along the optical axis
+  float t_end = 0.0f;  ///< parameter of the end point (0 for invalid pixels)
+  VoxelKey end_key;    ///< voxel of the end point (or of the max-range point)
+};
+
+constexpr double kNearRadius = 8.0;  // voxels
+
+bool RayCarvesVoxel(const PixelRay& r, const Eigen::Vector3d& o, const Eigen::Vector3d& lo,
+                    const Eigen::Vector3d& hi, const VoxelKey& key) {
+  if (r.t_end <= 0.0f || r.end_key == key) return false;
+  // Slab test; 1/0 = +-inf makes an axis-parallel ray pass or miss its slab as it should (the
+  // NaN of 0 * inf, for an origin exactly on a slab face, is ignored by max/min below).
+  double tmin = 0.0, tmax = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    const double inv = r.inv_dir_W[a];
+    double t1 = (lo[a] - o[a]) * inv, t2 = (hi[a] - o[a]) * inv;
+    if (t1 > t2) std::swap(t1, t2);
+    tmin = t1 > tmin ? t1 : tmin;
+    tmax = t2 < tmax ? t2 : tmax;
+  }
+  return tmin < tmax && tmin < static_cast<double>(r.t_end);
+}
+
+void CarveProjective(const RgbdFrame& frame, const std::vector<RayEnd>& rays, OccupancyGrid& grid,
+                     int threads, IntegrationStats& stats) {
+  const CameraIntrinsics& K = frame.K;
+  const DepthImage& depth = frame.depth_m;
+  const int w = K.width, h = K.height;
+  const double s = grid.voxel_size_m();
+  const float miss = grid.miss_log_odds();
+  const RigidTransform X_CW = frame.X_WC.inverse();
+  const Eigen::Matrix3d& R_CW = X_CW.rotation();
+  const Eigen::Matrix3d& R_WC = frame.X_WC.rotation();
+  const Eigen::Vector3d& t_CW = X_CW.translation();
+  const Eigen::Vector3d o = frame.X_WC.translation();
+
+  // Per-pixel rays (same end points as the ray-cast path).
+  std::vector<PixelRay> px(static_cast<size_t>(w) * h);
+  size_t ray_index = 0;
+  double far_t = 0.0;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const float d = depth.at(u, v);
+      if (!std::isfinite(d) || d <= 0.0f) continue;
+      PixelRay& r = px[static_cast<size_t>(v) * w + u];
+      const Eigen::Vector3d dir_C((u - K.cx) / K.fx, (v - K.cy) / K.fy, 1.0);
+      r.inv_dir_W = (R_WC * dir_C).cwiseInverse();
+      const RayEnd& e = rays[ray_index++];
+      r.end_key = VoxelKey::FromPoint(e.end, s);
+      r.t_end = static_cast<float>((R_CW * e.end + t_CW).z());
+      if (!(r.t_end > 0.0f)) r.t_end = 0.0f;
+      far_t = std::max(far_t, static_cast<double>(r.t_end));
+    }
+  }
+  if (far_t <= 0.0) return;
+
+  std::vector<float> t_end(px.size());
+  for (size_t i = 0; i < px.size(); ++i) t_end[i] = px[i].t_end;
+  // The 8 corners of a voxel relative to its centre, in the camera frame.
+  std::array<Eigen::Vector3d, 8> corner_offsets;
+  for (int c = 0; c < 8; ++c) {
+    corner_offsets[static_cast<size_t>(c)] =
+        R_CW *
+        (Eigen::Vector3d((c & 1) ? 0.5 : -0.5, (c & 2) ? 0.5 : -0.5, (c & 4) ? 0.5 : -0.5) * s);
+  }
+  // Max pyramid of t_end: level l holds the max over 2^l x 2^l pixel tiles.
+  std::vector<std::vector<float>> pyr;
+  std::vector<std::pair<int, int>> pyr_size;
+  {
+    pyr.push_back(t_end);
+    pyr_size.emplace_back(w, h);
+    while (pyr_size.back().first > 1 || pyr_size.back().second > 1) {
+      const auto [pw, ph] = pyr_size.back();
+      const int nw = (pw + 1) / 2, nh = (ph + 1) / 2;
+      std::vector<float> next(static_cast<size_t>(nw) * nh, 0.0f);
+      const std::vector<float>& prev = pyr.back();
+      for (int y = 0; y < ph; ++y) {
+        for (int x = 0; x < pw; ++x) {
+          float& m = next[static_cast<size_t>(y / 2) * nw + x / 2];
+          m = std::max(m, prev[static_cast<size_t>(y) * pw + x]);
+        }
+      }
+      pyr.push_back(std::move(next));
+      pyr_size.emplace_back(nw, nh);
+    }
+  }
+  // Max of t_end over the pixel rectangle [u0, u1] x [v0, v1] (clipped, non-empty), conservative.
+  const auto max_t_over = [&](int u0, int v0, int u1, int v1) {
+    int level = 0;
+    while ((u1 >> level) - (u0 >> level) > 1 || (v1 >> level) - (v0 >> level) > 1) ++level;
+    const auto [pw, ph] = pyr_size[static_cast<size_t>(level)];
+    const std::vector<float>& p = pyr[static_cast<size_t>(level)];
+    float m = 0.0f;
+    for (int y = v0 >> level; y <= std::min(v1 >> level, ph - 1); ++y) {
+      for (int x = u0 >> level; x <= std::min(u1 >> level, pw - 1); ++x) {
+        m = std::max(m, p[static_cast<size_t>(y) * pw + x]);
+      }
+    }
+    return m;
+  };
+
+  // 1. Near the optical centre: walk the rays (only while inside the near sphere).
+  const VoxelKey ok = VoxelKey::FromPoint(o, s);
+  const int nr = static_cast<int>(kNearRadius) + 2;
+  const int nd = 2 * nr + 1;
+  const double near_r2 = (kNearRadius * s) * (kNearRadius * s);
+  const auto is_near = [&](const VoxelKey& k) { return (k.Center(s) - o).squaredNorm() < near_r2; };
+  std::vector<std::vector<uint8_t>> near_parts(static_cast<size_t>(threads));
+  RunParallel(threads, [&](int th) {
+    std::vector<uint8_t>& part = near_parts[static_cast<size_t>(th)];
+    part.assign(static_cast<size_t>(nd) * nd * nd, 0);
+    for (size_t i = static_cast<size_t>(th); i < rays.size(); i += static_cast<size_t>(threads)) {
+      RayWalker walker(o, rays[i].end, s);
+      if (!walker.ok()) continue;
+      while (walker.remaining() > 0) {
+        const VoxelKey k = walker.key();
+        if (!is_near(k)) break;
+        part[static_cast<size_t>((k.x - ok.x + nr) +
+                                 nd * ((k.y - ok.y + nr) + nd * (k.z - ok.z + nr)))] = 1;
+        walker.Step();
+      }
+    }
+  });
+  std::vector<uint8_t> near_carved = std::move(near_parts[0]);
+  for (size_t t = 1; t < near_parts.size(); ++t) {
+    for (size_t i = 0; i < near_carved.size(); ++i) near_carved[i] |= near_parts[t][i];
+  }
+  // 2. Candidate blocks: in the AABB of the frustum up to far_t, not entirely behind the camera.
+  Box3 aabb;
+  aabb.Extend(o);
+  const double us[2] = {-0.5, w - 0.5};
+  const double vs[2] = {-0.5, h - 0.5};
+  for (double u : us) {
+    for (double v : vs) {
+      aabb.Extend(frame.X_WC *
+                  (Eigen::Vector3d((u - K.cx) / K.fx, (v - K.cy) / K.fy, 1.0) * far_t));
+    }
+  }
+  const BlockKey blo = BlockOf(VoxelKey::FromPoint(aabb.min(), s));
+  const BlockKey bhi = BlockOf(VoxelKey::FromPoint(aabb.max(), s));
+  // Half extent along the optical axis of a cube of edge e, and its bounding-sphere radius.
+  const double z_half_per_edge =
+      0.5 * (std::abs(R_CW(2, 0)) + std::abs(R_CW(2, 1)) + std::abs(R_CW(2, 2)));
+  std::vector<BlockKey> candidates;
+  const double be = kBlockEdge * s;
+  for (int32_t bz = blo.z; bz <= bhi.z; ++bz) {
+    for (int32_t by = blo.y; by <= bhi.y; ++by) {
+      for (int32_t bx = blo.x; bx <= bhi.x; ++bx) {
+        const Eigen::Vector3d c_W =
+            (Eigen::Vector3d(bx, by, bz) + Eigen::Vector3d::Constant(0.5)) * be;
+        const Eigen::Vector3d c_C = R_CW * c_W + t_CW;
+        const double zh = z_half_per_edge * be;
+        if (c_C.z() + zh <= 0.0 || c_C.z() - zh >= far_t) continue;
+        if (c_C.z() - zh > 1e-6) {
+          // Box of the 8 projected corners; reject when outside the image or entirely behind
+          // every return in it.
+          const double zn = c_C.z() - zh;
+          double umin = std::numeric_limits<double>::infinity(), umax = -umin;
+          double vmin = umin, vmax = -umin;
+          for (const Eigen::Vector3d& off : corner_offsets) {
+            const Eigen::Vector3d q = c_C + off * kBlockEdge;
+            const double cu = K.fx * q.x() / q.z(), cv = K.fy * q.y() / q.z();
+            umin = std::min(umin, cu);
+            umax = std::max(umax, cu);
+            vmin = std::min(vmin, cv);
+            vmax = std::max(vmax, cv);
+          }
+          const int u0 = static_cast<int>(std::floor(umin + K.cx));
+          const int u1 = static_cast<int>(std::ceil(umax + K.cx));
+          const int v0 = static_cast<int>(std::floor(vmin + K.cy));
+          const int v1 = static_cast<int>(std::ceil(vmax + K.cy));
+          if (u1 < 0 || v1 < 0 || u0 >= w || v0 >= h) continue;
+          if (max_t_over(std::max(u0, 0), std::max(v0, 0), std::min(u1, w - 1),
+                         std::min(v1, h - 1)) <= zn) {
+            continue;
+          }
+        }
+        candidates.push_back({bx, by, bz});
+      }
+    }
+  }
+
+  // 3. Per candidate block, the voxels some ray carves (parallel, no map access).
+  std::vector<BlockBits> carve(candidates.size());
+  const double zh_voxel = z_half_per_edge * s;
+  RunParallel(threads, [&](int th) {
+    for (size_t ci = static_cast<size_t>(th); ci < candidates.size();
+         ci += static_cast<size_t>(threads)) {
+      const BlockKey& bk = candidates[ci];
+      BlockBits& bits = carve[ci];
+      for (int i = 0; i < kBlockVoxels; ++i) {
+        const VoxelKey k = mapping::KeyOf(bk, i);
+        const Eigen::Vector3d c_W = k.Center(s);
+        if ((c_W - o).squaredNorm() < near_r2) {
+          const size_t ni = static_cast<size_t>((k.x - ok.x + nr) +
+                                                nd * ((k.y - ok.y + nr) + nd * (k.z - ok.z + nr)));
+          if (near_carved[ni]) bits.set(i);
+          continue;
+        }
+        const Eigen::Vector3d c_C = R_CW * c_W + t_CW;
+        const double zn = c_C.z() - zh_voxel;
+        // Outside the near sphere, a voxel reaching behind the image plane is outside any
+        // field of view below 150 degrees (checked in Integrate()).
+        if (zn <= 0.0 || zn >= far_t) continue;
+        const Eigen::Vector3d lo = Eigen::Vector3d(k.x, k.y, k.z) * s;
+        const Eigen::Vector3d hi = lo + Eigen::Vector3d::Constant(s);
+        const double uc = K.fx * c_C.x() / c_C.z() + K.cx, vc = K.fy * c_C.y() / c_C.z() + K.cy;
+        const int pu = static_cast<int>(std::lround(uc)), pv = static_cast<int>(std::lround(vc));
+        if (pu >= 0 && pv >= 0 && pu < w && pv < h &&
+            RayCarvesVoxel(px[static_cast<size_t>(pv) * w + pu], o, lo, hi, k)) {
+          bits.set(i);
+          continue;
+        }
+        // Pixels whose centres may lie in the voxel's projection: the box of its 8 corners.
+        double umin = std::numeric_limits<double>::infinity(), umax = -umin;
+        double vmin = umin, vmax = -umin;
+        for (const Eigen::Vector3d& off : corner_offsets) {
+          const Eigen::Vector3d q = c_C + off;
+          const double iz = 1.0 / q.z();
+          const double cu = K.fx * q.x() * iz, cv = K.fy * q.y() * iz;
+          umin = std::min(umin, cu);
+          umax = std::max(umax, cu);
+          vmin = std::min(vmin, cv);
+          vmax = std::max(vmax, cv);
+        }
+        const int u0 = std::max(0, static_cast<int>(std::floor(umin + K.cx)));
+        const int u1 = std::min(w - 1, static_cast<int>(std::ceil(umax + K.cx)));
+        const int v0 = std::max(0, static_cast<int>(std::floor(vmin + K.cy)));
+        const int v1 = std::min(h - 1, static_cast<int>(std::ceil(vmax + K.cy)));
+        if (u0 > u1 || v0 > v1) continue;
+        if (max_t_over(u0, v0, u1, v1) <= zn) continue;
+        bool carved = false;
+        for (int y = v0; y <= v1 && !carved; ++y) {
+          const float* row = t_end.data() + static_cast<size_t>(y) * w;
+          for (int x = u0; x <= u1; ++x) {
+            if (row[x] <= zn) continue;
+            if (RayCarvesVoxel(px[static_cast<size_t>(y) * w + x], o, lo, hi, k)) {
+              carved = true;
+              break;
+            }
+          }
+        }
+        if (carved) bits.set(i);
+      }
+    }
+  });
+
+  // 4. Apply: allocate the blocks with something to carve, then update them in parallel (each
+  //    block belongs to one thread; voxels hit in this frame keep their hit).
+  std::vector<BlockKey> to_prepare;
+  std::vector<size_t> carving;
+  for (size_t ci = 0; ci < candidates.size(); ++ci) {
+    if (!carve[ci].any()) continue;
+    const VoxelKey first = mapping::KeyOf(candidates[ci], 0);
+    if (!grid.Admits(first) || !grid.Admits(mapping::KeyOf(candidates[ci], kBlockVoxels - 1))) {
+      // Partly outside the ROI: apply voxel by voxel below.
+      continue;
+    }
+    to_prepare.push_back(candidates[ci]);
+    carving.push_back(ci);
+  }
+  grid.PrepareFrameBlocks(to_prepare);
+  std::vector<size_t> applied(static_cast<size_t>(threads), 0);
+  RunParallel(threads, [&](int th) {
+    size_t n = 0;
+    for (size_t j = static_cast<size_t>(th); j < carving.size();
+         j += static_cast<size_t>(threads)) {
+      const size_t ci = carving[j];
+      OccupancyBlock& b = *grid.MutableBlock(candidates[ci]);
+      carve[ci].ForEachSet([&](int i) {
+        if (b.touched.test(i)) return;
+        b.touched.set(i);
+        b.known.set(i);
+        b.changed.set(i);
+        grid.ApplyUpdate(b, i, miss);
+        ++n;
+      });
+      b.dirty = true;
+      carve[ci].clear();
+    }
+    applied[static_cast<size_t>(th)] = n;
+  });
+  for (size_t n : applied) stats.free_updates += n;
+  OccupancyGrid::Accessor acc(grid);
+  for (size_t ci = 0; ci < candidates.size(); ++ci) {  // blocks partly outside the ROI
+    if (!carve[ci].any()) continue;
+    carve[ci].ForEachSet([&](int i) {
+      const VoxelKey k = mapping::KeyOf(candidates[ci], i);
+      if (grid.Admits(k) && acc.UpdateOnce(k, miss)) ++stats.free_updates;
+    });
+  }
+  // Near voxels outside every candidate block (e.g. behind the image plane).
+  for (int z = 0; z < nd; ++z) {
+    for (int y = 0; y < nd; ++y) {
+      for (int x = 0; x < nd; ++x) {
+        if (!near_carved[static_cast<size_t>(x + nd * (y + nd * z))]) continue;
+        const VoxelKey k{ok.x + x - nr, ok.y + y - nr, ok.z + z - nr};
+        if (grid.Admits(k) && acc.UpdateOnce(k, miss)) ++stats.free_updates;
+      }
+    }
+  }
+}
+
+/// Reduces a frame's (voxel, mask) pairs to one observation per voxel: the label with most
+/// pixels; ties go to the higher mask confidence (outside-every-mask counts as 0), then to the
+/// lower mask index.
+std::vector<VoxelObservation> ReduceObservations(std::vector<std::pair<VoxelKey, int32_t>>& hits,
+                                                 const Segmentation& seg) {
+  std::sort(hits.begin(), hits.end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first < b.first : a.second < b.second;
+  });
+  std::vector<VoxelObservation> out;
+  size_t i = 0;
+  while (i < hits.size()) {
+    const VoxelKey key = hits[i].first;
+    VoxelObservation best{key, -1, 0};
+    float best_conf = -1.0f;
+    while (i < hits.size() && hits[i].first == key) {
+      const int32_t label = hits[i].second;
+      uint32_t n = 0;
+      while (i < hits.size() && hits[i].first == key && hits[i].second == label) {
+        ++n;
+        ++i;
+      }
+      const float conf = label >= 0 ? seg.instances[static_cast<size_t>(label)].confidence : 0.0f;
+      if (n > best.pixels || (n == best.pixels && conf > best_conf)) {
+        best.mask_index = label;
+        best.pixels = n;
+        best_conf = conf;
+      }
+    }
+    out.push_back(best);
+  }
+  return out;
+}
+
+/// Rays must fit RayWalker's length limit and start inside the key range; otherwise they would be
+/// skipped, so the frame is refused with a clear error instead.
+Status CheckRayLimits(const IntegratorOptions& options, const OccupancyGrid& grid,
+                      const Eigen::Vector3d& origin) {
+  const double s = grid.voxel_size_m();
+  if (options.max_range_m / s > static_cast<double>(RayWalker::kMaxLengthVoxels - 2)) {
+    return InvalidArgumentError(fmt::format(
+        "max_range_m ({}) spans {:.0f} voxels of {} m, more than the ray traversal's limit of {}: "
+        "use a shorter max range or a coarser map",
+        options.max_range_m, options.max_range_m / s, s, RayWalker::kMaxLengthVoxels - 2));
+  }
+  if (!(origin.cwiseAbs().maxCoeff() < 1e5) || !KeyInRange(VoxelKey::FromPoint(origin, s))) {
+    return OutOfRangeError(fmt::format("sensor origin ({}, {}, {}) is outside the map's key range",
+                                       origin.x(), origin.y(), origin.z()));
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Integrator::Integrator(const IntegratorOptions& options) : options_(options) {
+  const Status s = options.Validate();
+  if (!s.ok()) throw Error(s.message());
+}
+
+Result<IntegrationStats> Integrator::Integrate(const RgbdFrame& frame,
+                                               const Segmentation* segmentation,
+                                               SemanticMap& map) const {
+  const auto t0 = Clock::now();
+  AVP_RETURN_IF_ERROR(frame.Validate());
+  if (!frame.X_WC.translation().allFinite() || !frame.X_WC.rotation().allFinite()) {
+    return InvalidArgumentError("frame pose X_WC is not finite: " + frame.X_WC.ToString());
+  }
+  const int w = frame.depth_m.width(), h = frame.depth_m.height();
+  if (segmentation != nullptr) {
+    AVP_RETURN_IF_ERROR(segmentation->ValidateFor(w, h));
+  }
+  if (options_.carving == FreeSpaceCarving::kProjective) {
+    // Projective carving leaves voxels near the image plane to ray walking (kNearRadius), which
+    // is complete only for fields of view below 150 degrees (see CarveProjective).
+    double max_tan = 0.0;
+    for (double u : {-0.5, w - 0.5}) {
+      for (double v : {-0.5, h - 0.5}) {
+        max_tan = std::max(
+            max_tan, std::hypot((u - frame.K.cx) / frame.K.fx, (v - frame.K.cy) / frame.K.fy));
+      }
+    }
+    if (std::atan(max_tan) * 2.0 > 150.0 * M_PI / 180.0) {
+      return InvalidArgumentError(fmt::format(
+          "projective carving needs a diagonal field of view below 150 deg, this camera has {:.1f} "
+          "deg: use carving raycast",
+          std::atan(max_tan) * 360.0 / M_PI));
+    }
+  }
+  OccupancyGrid& grid = map.grid();
+  const CameraIntrinsics& K = frame.K;
+  const Eigen::Vector3d origin = frame.X_WC.translation();
+  AVP_RETURN_IF_ERROR(CheckRayLimits(options_, grid, origin));
+  IntegrationStats stats;
+  stats.pixels = static_cast<size_t>(w) * static_cast<size_t>(h);
+
+  // Per-pixel mask label: the most confident mask containing the pixel (lower index on ties).
+  std::vector<int32_t> label;
+  if (segmentation != nullptr && !segmentation->instances.empty()) {
+    label.assign(stats.pixels, -1);
+    for (size_t m = 0; m < segmentation->instances.size(); ++m) {
+      const InstanceMask& inst = segmentation->instances[m];
+      const auto mask = inst.mask.data();
+      for (size_t p = 0; p < mask.size(); ++p) {
+        if (mask[p] == 0) continue;
+        const int32_t cur = label[p];
+        if (cur < 0 ||
+            inst.confidence > segmentation->instances[static_cast<size_t>(cur)].confidence) {
+          label[p] = static_cast<int32_t>(m);
+        }
+      }
+    }
+  }
+
+  std::vector<RayEnd> rays;
+  rays.reserve(stats.pixels);
+  const double max_range = options_.max_range_m;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const float d = frame.depth_m.at(u, v);
+      if (!std::isfinite(d) || d <= 0.0f) {
+        ++stats.invalid_depth;
+        continue;
+      }
+      const Eigen::Vector3d p_C((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
+      const Eigen::Vector3d p_W = frame.X_WC * p_C;
+      const double range = (p_W - origin).norm();
+      RayEnd r;
+      if (range > max_range) {
+        ++stats.beyond_max_range;
+        r.end = origin + (p_W - origin) * (max_range / range);
+        r.hit = false;
+      } else {
+        ++stats.endpoints;
+        r.end = p_W;
+        r.hit = true;
+        if (!label.empty()) {
+          r.label = label[static_cast<size_t>(v) * w + u];
+          if (r.label >= 0) ++stats.masked_endpoints;
+        }
+      }
+      rays.push_back(r);
+    }
+  }
+
+  const uint32_t frame_number = grid.BeginFrame();
+  const bool semantics = segmentation != nullptr;
+  std::vector<std::pair<VoxelKey, int32_t>> sem_hits;
+  ApplyHits(rays, grid, semantics, stats, sem_hits);
+  const int threads = ResolveThreads(options_.num_threads);
+  switch (options_.carving) {
+    case FreeSpaceCarving::kRayCast:
+      CarveRays(rays, origin, grid, threads, stats);
+      break;
+    case FreeSpaceCarving::kProjective:
+      CarveProjective(frame, rays, grid, threads, stats);
+      break;
+    case FreeSpaceCarving::kNone:
+      break;
+  }
+  if (semantics) {
+    const std::vector<VoxelObservation> obs = ReduceObservations(sem_hits, *segmentation);
+    stats.semantics = map.semantics().Fuse(grid, obs, *segmentation, frame_number);
+    if (map.semantics().options().remove_outliers_each_frame) {
+      map.semantics().RemoveOutliers(grid);
+    }
+  }
+  stats.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  return stats;
+}
+
+Result<IntegrationStats> Integrator::IntegratePointCloud(std::span<const Eigen::Vector3f> points_W,
+                                                         const Eigen::Vector3d& origin_W,
+                                                         OccupancyGrid& grid) const {
+  const auto t0 = Clock::now();
+  if (!origin_W.allFinite()) {
+    return InvalidArgumentError(fmt::format("sensor origin ({}, {}, {}) is not finite",
+                                            origin_W.x(), origin_W.y(), origin_W.z()));
+  }
+  if (options_.carving == FreeSpaceCarving::kProjective) {
+    return InvalidArgumentError(
+        "projective carving needs a depth image: use Integrate(), or carving raycast/none");
+  }
+  AVP_RETURN_IF_ERROR(CheckRayLimits(options_, grid, origin_W));
+  IntegrationStats stats;
+  stats.pixels = points_W.size();
+  std::vector<RayEnd> rays;
+  rays.reserve(points_W.size());
+  const double max_range = options_.max_range_m;
+  for (const Eigen::Vector3f& pf : points_W) {
+    if (!pf.allFinite()) {
+      ++stats.invalid_depth;
+      continue;
+    }
+    const Eigen::Vector3d p = pf.cast<double>();
+    const double range = (p - origin_W).norm();
+    RayEnd r;
+    if (range > max_range) {
+      ++stats.beyond_max_range;
+      r.end = origin_W + (p - origin_W) * (max_range / range);
+    } else {
+      ++stats.endpoints;
+      r.end = p;
+      r.hit = true;
+    }
+    rays.push_back(r);
+  }
+  grid.BeginFrame();
+  std::vector<std::pair<VoxelKey, int32_t>> unused;
+  ApplyHits(rays, grid, false, stats, unused);
+  if (options_.carving == FreeSpaceCarving::kRayCast) {
+    CarveRays(rays, origin_W, grid, ResolveThreads(options_.num_threads), stats);
+  }
+  stats.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  return stats;
+}
+
+}  // namespace avp::mapping

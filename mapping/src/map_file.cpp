@@ -1,0 +1,607 @@
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <optional>
+#include <string_view>
+#include <system_error>
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <avp/core/error.h>
+#include <avp/mapping/map_file.h>
+
+namespace avp::mapping {
+
+namespace {
+
+// ---- Layout constants (docs/map-format.md)
+// -------------------------------------------------------
+constexpr size_t kMagicBytes = sizeof(kMapFileMagic);
+constexpr size_t kVersionEnd = 12;    // magic + u32 version
+constexpr size_t kFileBytesEnd = 24;  // + u32 flags + u64 file_bytes
+constexpr size_t kCrcBytes = 4;
+constexpr size_t kCellBytes = 12 + 2 * kNumSemanticClasses;  // 26 with 7 classes
+// Smallest block record: key (12) + known bitset (64) + has_semantics (1).
+constexpr size_t kMinBlockBytes = 12 + 8 * kBlockWords + 1;
+
+std::array<uint32_t, 256> MakeCrcTable() {
+  std::array<uint32_t, 256> table{};
+  for (uint32_t n = 0; n < 256; ++n) {
+    uint32_t c = n;
+    for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+    table[n] = c;
+  }
+  return table;
+}
+
+// ---- Little-endian writer
+// -------------------------------------------------------------------------
+class ByteWriter {
+ public:
+  void U8(uint8_t v) { out_.push_back(v); }
+  void U16(uint16_t v) {
+    for (int i = 0; i < 2; ++i) out_.push_back(static_cast<uint8_t>(v >> (8 * i)));
+  }
+  void U32(uint32_t v) {
+    for (int i = 0; i < 4; ++i) out_.push_back(static_cast<uint8_t>(v >> (8 * i)));
+  }
+  void U64(uint64_t v) {
+    for (int i = 0; i < 8; ++i) out_.push_back(static_cast<uint8_t>(v >> (8 * i)));
+  }
+  void I16(int16_t v) { U16(static_cast<uint16_t>(v)); }
+  void I32(int32_t v) { U32(static_cast<uint32_t>(v)); }
+  void F32(float v) { U32(std::bit_cast<uint32_t>(v)); }
+  void F64(double v) { U64(std::bit_cast<uint64_t>(v)); }
+  void Bytes(const void* data, size_t n) {
+    const auto* p = static_cast<const uint8_t*>(data);
+    out_.insert(out_.end(), p, p + n);
+  }
+  /// Overwrites 8 bytes at `offset` (the file size, known only at the end).
+  void PatchU64(size_t offset, uint64_t v) {
+    for (int i = 0; i < 8; ++i) out_[offset + i] = static_cast<uint8_t>(v >> (8 * i));
+  }
+  std::vector<uint8_t>& bytes() { return out_; }
+
+ private:
+  std::vector<uint8_t> out_;
+};
+
+// ---- Bounds-checked little-endian reader
+// ----------------------------------------------------------- Every getter checks the remaining
+// size first; on failure the reader remembers the first error
+// ("truncated at byte X while reading <what>") and every later read fails too.
+class ByteReader {
+ public:
+  ByteReader(std::span<const uint8_t> bytes, size_t end) : bytes_(bytes), end_(end) {}
+
+  size_t position() const { return pos_; }
+  size_t remaining() const { return end_ - pos_; }
+  bool ok() const { return error_.empty(); }
+  const std::string& error() const { return error_; }
+
+  bool Need(size_t n, std::string_view what) {
+    if (!ok()) return false;
+    if (n > remaining()) {
+      error_ = fmt::format("truncated at byte {} while reading {} ({} bytes needed, {} left)", end_,
+                           what, n, remaining());
+      return false;
+    }
+    return true;
+  }
+  bool U8(uint8_t& v, std::string_view what) {
+    if (!Need(1, what)) return false;
+    v = bytes_[pos_++];
+    return true;
+  }
+  bool U16(uint16_t& v, std::string_view what) {
+    uint64_t x = 0;
+    if (!Unsigned(2, x, what)) return false;
+    v = static_cast<uint16_t>(x);
+    return true;
+  }
+  bool U32(uint32_t& v, std::string_view what) {
+    uint64_t x = 0;
+    if (!Unsigned(4, x, what)) return false;
+    v = static_cast<uint32_t>(x);
+    return true;
+  }
+  bool U64(uint64_t& v, std::string_view what) { return Unsigned(8, v, what); }
+  bool I16(int16_t& v, std::string_view what) {
+    uint16_t x = 0;
+    if (!U16(x, what)) return false;
+    v = static_cast<int16_t>(x);
+    return true;
+  }
+  bool I32(int32_t& v, std::string_view what) {
+    uint32_t x = 0;
+    if (!U32(x, what)) return false;
+    v = static_cast<int32_t>(x);
+    return true;
+  }
+  bool F32(float& v, std::string_view what) {
+    uint32_t x = 0;
+    if (!U32(x, what)) return false;
+    v = std::bit_cast<float>(x);
+    return true;
+  }
+  bool F64(double& v, std::string_view what) {
+    uint64_t x = 0;
+    if (!U64(x, what)) return false;
+    v = std::bit_cast<double>(x);
+    return true;
+  }
+  bool String(size_t n, std::string& v, std::string_view what) {
+    if (!Need(n, what)) return false;
+    v.assign(reinterpret_cast<const char*>(bytes_.data() + pos_), n);
+    pos_ += n;
+    return true;
+  }
+
+ private:
+  bool Unsigned(int n, uint64_t& v, std::string_view what) {
+    if (!Need(static_cast<size_t>(n), what)) return false;
+    v = 0;
+    for (int i = 0; i < n; ++i) v |= static_cast<uint64_t>(bytes_[pos_ + i]) << (8 * i);
+    pos_ += static_cast<size_t>(n);
+    return true;
+  }
+
+  std::span<const uint8_t> bytes_;
+  size_t end_;
+  size_t pos_ = 0;
+  std::string error_;
+};
+
+std::string HexPrefix(std::span<const uint8_t> bytes, size_t n) {
+  std::string s;
+  for (size_t i = 0; i < std::min(n, bytes.size()); ++i) {
+    if (i > 0) s += ' ';
+    s += fmt::format("{:02x}", bytes[i]);
+  }
+  return s;
+}
+
+Status Corrupt(const std::string& message) { return ParseError(message); }
+
+}  // namespace
+
+uint32_t Crc32(std::span<const uint8_t> bytes, uint32_t crc) {
+  static const std::array<uint32_t, 256> kTable = MakeCrcTable();
+  uint32_t c = crc ^ 0xFFFFFFFFu;
+  for (uint8_t b : bytes) c = kTable[(c ^ b) & 0xFFu] ^ (c >> 8);
+  return c ^ 0xFFFFFFFFu;
+}
+
+Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map, const MapSaveOptions& options) {
+  if (options.note.size() > kMaxMapNoteBytes) {
+    return InvalidArgumentError(fmt::format("map note has {} bytes; at most {} fit in a map file",
+                                            options.note.size(), kMaxMapNoteBytes));
+  }
+  const OccupancyGrid& grid = map.grid();
+  const GridOptions& go = grid.options();
+  const SemanticOptions& so = map.semantics().options();
+  const float occupied = grid.occupied_log_odds();
+
+  // Counts first (they go into the header).
+  uint64_t known = 0, occupied_voxels = 0, cells = 0, labelled = 0;
+  grid.ForEachBlock([&](const OccupancyBlock& b) {
+    b.known.ForEachSet([&](int i) {
+      ++known;
+      if (b.log_odds[static_cast<size_t>(i)] >= occupied) ++occupied_voxels;
+    });
+    if (b.semantics) {
+      for (const SemanticCell& c : *b.semantics) {
+        if (c == SemanticCell{}) continue;
+        ++cells;
+        if (c.has_label()) ++labelled;
+      }
+    }
+  });
+
+  ByteWriter w;
+  w.Bytes(kMapFileMagic, kMagicBytes);
+  w.U32(kMapFileVersion);
+  w.U32(0);  // flags (reserved)
+  w.U64(0);  // file_bytes, patched below
+  w.F64(go.voxel_size_m);
+  w.U8(go.roi.has_value() ? 1 : 0);
+  for (int i = 0; i < 3; ++i) w.F64(go.roi ? go.roi->min()[i] : 0.0);
+  for (int i = 0; i < 3; ++i) w.F64(go.roi ? go.roi->max()[i] : 0.0);
+  w.F64(go.sensor.hit);
+  w.F64(go.sensor.miss);
+  w.F64(go.sensor.clamp_min);
+  w.F64(go.sensor.clamp_max);
+  w.F64(go.sensor.occupied_threshold);
+  w.U8(static_cast<uint8_t>(so.policy));
+  w.F32(so.reference_penalty);
+  w.F32(so.class_log_odds_min);
+  w.F32(so.class_log_odds_max);
+  w.F32(so.miss_log_odds);
+  w.F32(so.label_threshold);
+  w.F32(so.instance_join_fraction);
+  w.F32(so.instance_merge_fraction);
+  w.I32(so.outlier_min_neighbours);
+  w.U8(so.remove_outliers_each_frame ? 1 : 0);
+  w.U8(static_cast<uint8_t>(kNumSemanticClasses));
+  w.U64(grid.num_blocks());
+  w.U64(known);
+  w.U64(occupied_voxels);
+  w.U64(cells);
+  w.U64(labelled);
+  w.U32(static_cast<uint32_t>(options.note.size()));
+  w.Bytes(options.note.data(), options.note.size());
+
+  grid.ForEachBlock([&](const OccupancyBlock& b) {
+    w.I32(b.key.x);
+    w.I32(b.key.y);
+    w.I32(b.key.z);
+    for (uint64_t word : b.known.words) w.U64(word);
+    b.known.ForEachSet([&](int i) { w.F32(b.log_odds[static_cast<size_t>(i)]); });
+    w.U8(b.semantics ? 1 : 0);
+    if (!b.semantics) return;
+    BlockBits present;
+    for (int i = 0; i < kBlockVoxels; ++i) {
+      if (!((*b.semantics)[static_cast<size_t>(i)] == SemanticCell{})) present.set(i);
+    }
+    for (uint64_t word : present.words) w.U64(word);
+    present.ForEachSet([&](int i) {
+      const SemanticCell& c = (*b.semantics)[static_cast<size_t>(i)];
+      w.U8(c.semantic_class);
+      w.U8(c.flags);
+      w.U16(c.instance_id);
+      w.U16(c.observations);
+      w.U16(c.misses);
+      w.F32(c.confidence);
+      for (int16_t v : c.class_log_odds) w.I16(v);
+    });
+  });
+
+  const uint64_t total = w.bytes().size() + kCrcBytes;
+  w.PatchU64(16, total);
+  w.U32(Crc32(w.bytes()));
+  return std::move(w.bytes());
+}
+
+Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* info) {
+  const size_t size = bytes.size();
+  if (size == 0) return Corrupt("truncated at byte 0: the file is empty");
+  // 1. Magic: a shorter file whose bytes match the magic so far is truncated, otherwise not ours.
+  const bool magic_prefix_ok =
+      std::memcmp(bytes.data(), kMapFileMagic, std::min(size, kMagicBytes)) == 0;
+  if (!magic_prefix_ok) {
+    return Corrupt(fmt::format(
+        "bad magic: not an avp map file (starts with {}; expected 89 41 56 50 4d 41 50 0a, "
+        "\"\\x89AVPMAP\\n\")",
+        HexPrefix(bytes, kMagicBytes)));
+  }
+  ByteReader header(bytes, size);
+  if (!header.Need(kMagicBytes, "the magic")) return Corrupt(header.error());
+  std::string magic;
+  (void)header.String(kMagicBytes, magic, "the magic");
+
+  // 2. Version.
+  uint32_t version = 0;
+  if (!header.U32(version, "the format version")) return Corrupt(header.error());
+  if (version != kMapFileVersion) {
+    return Corrupt(fmt::format("unsupported map file version {} (this build reads version {})",
+                               version, kMapFileVersion));
+  }
+  // 3. Declared size against the real size.
+  uint32_t flags = 0;
+  uint64_t file_bytes = 0;
+  if (!header.U32(flags, "the flags") || !header.U64(file_bytes, "the file size")) {
+    return Corrupt(header.error());
+  }
+  if (file_bytes != size) {
+    if (size < file_bytes) {
+      return Corrupt(
+          fmt::format("truncated at byte {}: the header declares {} bytes", size, file_bytes));
+    }
+    return Corrupt(
+        fmt::format("file has {} bytes but its header declares {} ({} unexpected "
+                    "bytes at the end, or a corrupted size field)",
+                    size, file_bytes, size - file_bytes));
+  }
+  if (size < kFileBytesEnd + kCrcBytes) {
+    return Corrupt(fmt::format("truncated at byte {}: too short for a map file", size));
+  }
+  // 4. Checksum over everything before the last 4 bytes.
+  const size_t body = size - kCrcBytes;
+  uint32_t stored_crc = 0;
+  for (size_t i = 0; i < kCrcBytes; ++i) {
+    stored_crc |= static_cast<uint32_t>(bytes[body + i]) << (8 * i);
+  }
+  const uint32_t computed_crc = Crc32(bytes.first(body));
+  if (stored_crc != computed_crc) {
+    return Corrupt(fmt::format(
+        "checksum mismatch: stored CRC-32 0x{:08x}, computed 0x{:08x} (the file is corrupted)",
+        stored_crc, computed_crc));
+  }
+  if (flags != 0) {
+    return Corrupt(fmt::format("unknown flags 0x{:08x} (this build knows none)", flags));
+  }
+
+  // 5. Header fields. From here on the reader stops before the checksum.
+  ByteReader r(bytes, body);
+  {
+    std::string skip;
+    (void)r.String(kFileBytesEnd, skip, "the fixed header");
+  }
+  MapOptions options;
+  GridOptions& go = options.grid;
+  SemanticOptions& so = options.semantics;
+  uint8_t has_roi = 0, policy = 0, remove_outliers = 0, num_classes = 0;
+  double roi[6] = {};
+  uint64_t num_blocks = 0, known = 0, occupied = 0, cells = 0, labelled = 0;
+  uint32_t note_bytes = 0;
+  std::string note;
+  r.F64(go.voxel_size_m, "voxel_size_m");
+  r.U8(has_roi, "the ROI flag");
+  for (double& v : roi) r.F64(v, "the ROI");
+  r.F64(go.sensor.hit, "sensor.hit");
+  r.F64(go.sensor.miss, "sensor.miss");
+  r.F64(go.sensor.clamp_min, "sensor.clamp_min");
+  r.F64(go.sensor.clamp_max, "sensor.clamp_max");
+  r.F64(go.sensor.occupied_threshold, "sensor.occupied_threshold");
+  r.U8(policy, "the fusion policy");
+  r.F32(so.reference_penalty, "reference_penalty");
+  r.F32(so.class_log_odds_min, "class_log_odds_min");
+  r.F32(so.class_log_odds_max, "class_log_odds_max");
+  r.F32(so.miss_log_odds, "miss_log_odds");
+  r.F32(so.label_threshold, "label_threshold");
+  r.F32(so.instance_join_fraction, "instance_join_fraction");
+  r.F32(so.instance_merge_fraction, "instance_merge_fraction");
+  r.I32(so.outlier_min_neighbours, "outlier_min_neighbours");
+  r.U8(remove_outliers, "remove_outliers_each_frame");
+  r.U8(num_classes, "the number of semantic classes");
+  r.U64(num_blocks, "the block count");
+  r.U64(known, "the known voxel count");
+  r.U64(occupied, "the occupied voxel count");
+  r.U64(cells, "the semantic cell count");
+  r.U64(labelled, "the labelled voxel count");
+  r.U32(note_bytes, "the note length");
+  if (!r.ok()) return Corrupt(r.error());
+  if (note_bytes > kMaxMapNoteBytes) {
+    return Corrupt(
+        fmt::format("note length {} exceeds the maximum {}", note_bytes, kMaxMapNoteBytes));
+  }
+  if (!r.String(note_bytes, note, "the note")) return Corrupt(r.error());
+
+  std::vector<std::string> errors;
+  if (has_roi > 1) errors.push_back(fmt::format("ROI flag ({}) must be 0 or 1", has_roi));
+  if (policy > static_cast<uint8_t>(FusionPolicy::kBayesian)) {
+    errors.push_back(
+        fmt::format("fusion policy ({}) is unknown (0 reference-max, 1 bayesian)", policy));
+  }
+  if (remove_outliers > 1) {
+    errors.push_back(
+        fmt::format("remove_outliers_each_frame ({}) must be 0 or 1", remove_outliers));
+  }
+  if (num_classes != kNumSemanticClasses) {
+    errors.push_back(fmt::format("the file has {} semantic classes, this build knows {}",
+                                 num_classes, kNumSemanticClasses));
+  }
+  if (has_roi == 1) {
+    bool finite = true;
+    for (double v : roi) finite = finite && std::isfinite(v);
+    if (!finite || roi[0] > roi[3] || roi[1] > roi[4] || roi[2] > roi[5]) {
+      errors.push_back(fmt::format("ROI [{}, {}, {}] - [{}, {}, {}] is not a finite box", roi[0],
+                                   roi[1], roi[2], roi[3], roi[4], roi[5]));
+    }
+  }
+  // Every block needs at least kMinBlockBytes: bound the count before anything is allocated.
+  if (num_blocks > r.remaining() / kMinBlockBytes) {
+    errors.push_back(fmt::format("block count {} cannot fit in the {} bytes that remain",
+                                 num_blocks, r.remaining()));
+  }
+  if (!errors.empty()) {
+    return Corrupt(fmt::format("invalid header: {}", fmt::join(errors, "; ")));
+  }
+  so.policy = static_cast<FusionPolicy>(policy);
+  so.remove_outliers_each_frame = remove_outliers == 1;
+  if (has_roi == 1) {
+    go.roi = Box3(Eigen::Vector3d(roi[0], roi[1], roi[2]), Eigen::Vector3d(roi[3], roi[4], roi[5]));
+  }
+  if (Status s = options.Validate(); !s.ok()) {
+    return Corrupt("invalid map options in the header: " + s.message());
+  }
+
+  std::optional<SemanticMap> loaded;
+  try {
+    loaded.emplace(options);
+  } catch (const Error& e) {
+    return Corrupt(fmt::format("invalid map options in the header: {}", e.what()));
+  }
+  OccupancyGrid& grid = loaded->grid();
+  const float occupied_log_odds = grid.occupied_log_odds();
+
+  // 6. Blocks.
+  constexpr int32_t kMaxBlockCoord = kMaxKeyMagnitude >> kBlockShift;
+  uint64_t seen_known = 0, seen_occupied = 0, seen_cells = 0, seen_labelled = 0;
+  for (uint64_t n = 0; n < num_blocks; ++n) {
+    const size_t block_start = r.position();
+    BlockKey bk;
+    BlockBits known_bits;
+    r.I32(bk.x, "a block key");
+    r.I32(bk.y, "a block key");
+    r.I32(bk.z, "a block key");
+    for (uint64_t& word : known_bits.words) r.U64(word, "a block's known bitset");
+    if (!r.ok()) return Corrupt(r.error());
+    const auto where = [&] {
+      return fmt::format("block {} of {} at byte {}, key ({}, {}, {})", n + 1, num_blocks,
+                         block_start, bk.x, bk.y, bk.z);
+    };
+    if (std::abs(int64_t{bk.x}) >= kMaxBlockCoord || std::abs(int64_t{bk.y}) >= kMaxBlockCoord ||
+        std::abs(int64_t{bk.z}) >= kMaxBlockCoord) {
+      return Corrupt(
+          fmt::format("{}: key out of range (|coordinate| must be < {})", where(), kMaxBlockCoord));
+    }
+    if (grid.Lookup(bk) >= 0) return Corrupt(fmt::format("{}: the block appears twice", where()));
+    const size_t count = static_cast<size_t>(known_bits.count());
+    if (!r.Need(4 * count, "a block's log-odds")) return Corrupt(r.error());
+    grid.GetOrCreateBlock(bk);  // also blocks without known voxels: allocation order is kept
+    std::string bad;
+    known_bits.ForEachSet([&](int i) {
+      float v = 0.0f;
+      r.F32(v, "a log-odds");
+      if (!bad.empty()) return;
+      const VoxelKey k = KeyOf(bk, i);
+      if (!(v >= grid.clamp_min_log_odds() && v <= grid.clamp_max_log_odds())) {
+        bad = fmt::format(
+            "voxel ({}, {}, {}) has a log-odds ({}) outside the sensor model's clamping range "
+            "[{}, {}]",
+            k.x, k.y, k.z, v, grid.clamp_min_log_odds(), grid.clamp_max_log_odds());
+      } else if (!grid.SetLogOdds(k, v)) {
+        bad = fmt::format("voxel ({}, {}, {}) lies outside the map's ROI", k.x, k.y, k.z);
+      } else {
+        ++seen_known;
+        if (*grid.LogOdds(k) >= occupied_log_odds) ++seen_occupied;
+      }
+    });
+    if (!r.ok()) return Corrupt(r.error());
+    if (!bad.empty()) return Corrupt(fmt::format("{}: {}", where(), bad));
+
+    uint8_t has_semantics = 0;
+    if (!r.U8(has_semantics, "a block's semantics flag")) return Corrupt(r.error());
+    if (has_semantics > 1) {
+      return Corrupt(fmt::format("{}: semantics flag ({}) must be 0 or 1", where(), has_semantics));
+    }
+    if (has_semantics == 0) continue;
+    BlockBits present;
+    for (uint64_t& word : present.words) r.U64(word, "a block's semantic bitset");
+    if (!r.ok()) return Corrupt(r.error());
+    const size_t num_cells = static_cast<size_t>(present.count());
+    if (!r.Need(kCellBytes * num_cells, "a block's semantic cells")) return Corrupt(r.error());
+    if (num_cells == 0) {
+      // An allocated but empty semantic payload: allocate it again so the maps match exactly.
+      for (int i = 0; i < kBlockVoxels; ++i) {
+        if (grid.MutableSemantic(KeyOf(bk, i)) != nullptr) break;
+      }
+      continue;
+    }
+    present.ForEachSet([&](int i) {
+      SemanticCell c;
+      r.U8(c.semantic_class, "a semantic cell");
+      r.U8(c.flags, "a semantic cell");
+      r.U16(c.instance_id, "a semantic cell");
+      r.U16(c.observations, "a semantic cell");
+      r.U16(c.misses, "a semantic cell");
+      r.F32(c.confidence, "a semantic cell");
+      for (int16_t& v : c.class_log_odds) r.I16(v, "a semantic cell");
+      if (!bad.empty() || !r.ok()) return;
+      const VoxelKey k = KeyOf(bk, i);
+      if (c.semantic_class >= kNumSemanticClasses) {
+        bad = fmt::format("voxel ({}, {}, {}) has an unknown semantic class {}", k.x, k.y, k.z,
+                          c.semantic_class);
+        return;
+      }
+      if (!(c.confidence >= 0.0f && c.confidence <= 1.0f)) {
+        bad = fmt::format("voxel ({}, {}, {}) has a confidence ({}) outside [0, 1]", k.x, k.y, k.z,
+                          c.confidence);
+        return;
+      }
+      SemanticCell* cell = grid.MutableSemantic(k);
+      if (cell == nullptr) {
+        bad = fmt::format("semantic voxel ({}, {}, {}) lies outside the map's ROI", k.x, k.y, k.z);
+        return;
+      }
+      *cell = c;
+      ++seen_cells;
+      if (c.has_label()) ++seen_labelled;
+    });
+    if (!r.ok()) return Corrupt(r.error());
+    if (!bad.empty()) return Corrupt(fmt::format("{}: {}", where(), bad));
+  }
+  if (r.remaining() != 0) {
+    return Corrupt(fmt::format("{} unexpected bytes after the last block (at byte {})",
+                               r.remaining(), r.position()));
+  }
+  if (seen_known != known || seen_occupied != occupied || seen_cells != cells ||
+      seen_labelled != labelled) {
+    return Corrupt(fmt::format(
+        "the counts in the header (known {}, occupied {}, semantic cells {}, labelled {}) do not "
+        "match the blocks (known {}, occupied {}, semantic cells {}, labelled {})",
+        known, occupied, cells, labelled, seen_known, seen_occupied, seen_cells, seen_labelled));
+  }
+
+  grid.ClearChanges();
+  loaded->semantics().ResetFromGrid(grid);
+  if (info != nullptr) {
+    info->version = version;
+    info->file_bytes = file_bytes;
+    info->crc32 = stored_crc;
+    info->num_blocks = num_blocks;
+    info->known_voxels = known;
+    info->occupied_voxels = occupied;
+    info->semantic_cells = cells;
+    info->labelled_voxels = labelled;
+    info->note = std::move(note);
+  }
+  return std::move(*loaded);
+}
+
+Status SaveMap(const SemanticMap& map, const std::filesystem::path& path,
+               const MapSaveOptions& options) {
+  AVP_ASSIGN_OR_RETURN(const std::vector<uint8_t> bytes, SerializeMap(map, options));
+  std::error_code ec;
+  if (path.has_parent_path()) {
+    std::filesystem::create_directories(path.parent_path(), ec);
+    if (ec) {
+      return IoError(fmt::format("cannot create folder '{}' for map file: {}",
+                                 path.parent_path().string(), ec.message()));
+    }
+  }
+  std::filesystem::path tmp = path;
+  tmp += ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) {
+      return IoError(
+          fmt::format("cannot open '{}' for writing: {}", tmp.string(), std::strerror(errno)));
+    }
+    out.write(reinterpret_cast<const char*>(bytes.data()),
+              static_cast<std::streamsize>(bytes.size()));
+    out.close();
+    if (!out) {
+      std::filesystem::remove(tmp, ec);
+      return IoError(fmt::format("writing map file '{}' failed", tmp.string()));
+    }
+  }
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    return IoError(
+        fmt::format("cannot move '{}' to '{}': {}", tmp.string(), path.string(), ec.message()));
+  }
+  return Status::Ok();
+}
+
+Result<SemanticMap> LoadMap(const std::filesystem::path& path, MapFileInfo* info) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) {
+    return NotFoundError(fmt::format("map file '{}' does not exist", path.string()));
+  }
+  if (std::filesystem::is_directory(path, ec)) {
+    return IoError(fmt::format("map file '{}' is a folder", path.string()));
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    return IoError(
+        fmt::format("cannot open map file '{}': {}", path.string(), std::strerror(errno)));
+  }
+  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
+                             std::istreambuf_iterator<char>());
+  if (in.bad()) return IoError(fmt::format("reading map file '{}' failed", path.string()));
+  Result<SemanticMap> map = DeserializeMap(bytes, info);
+  if (!map.ok()) return map.status().WithContext(fmt::format("map file '{}'", path.string()));
+  return map;
+}
+
+}  // namespace avp::mapping

@@ -1,0 +1,138 @@
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include <avp/mapping/planning_snapshot.h>
+#include <avp/mapping/ray_traversal.h>
+
+namespace avp::mapping {
+
+Result<PlanningSnapshot> PlanningSnapshot::Build(const OccupancyGrid& grid, const Box3& box_W,
+                                                 size_t max_bytes) {
+  if (box_W.IsEmpty() || !box_W.min().allFinite() || !box_W.max().allFinite()) {
+    return InvalidArgumentError(
+        fmt::format("planning snapshot box ({}) must be finite and non-empty", box_W.ToString()));
+  }
+  const double s = grid.voxel_size_m();
+  // Voxels whose centre lies in the box.
+  const Eigen::Vector3d lo = (box_W.min() / s).array() - 0.5;
+  const Eigen::Vector3d hi = (box_W.max() / s).array() - 0.5;
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(lo[a]) >= kMaxKeyMagnitude || std::abs(hi[a]) >= kMaxKeyMagnitude) {
+      return OutOfRangeError(
+          fmt::format("planning snapshot box ({}) exceeds the key range", box_W.ToString()));
+    }
+  }
+  PlanningSnapshot snap;
+  snap.voxel_size_m_ = s;
+  snap.min_ = {static_cast<int32_t>(std::ceil(lo.x())), static_cast<int32_t>(std::ceil(lo.y())),
+               static_cast<int32_t>(std::ceil(lo.z()))};
+  const VoxelKey max_key{static_cast<int32_t>(std::floor(hi.x())),
+                         static_cast<int32_t>(std::floor(hi.y())),
+                         static_cast<int32_t>(std::floor(hi.z()))};
+  const int64_t nx = int64_t{max_key.x} - snap.min_.x + 1;
+  const int64_t ny = int64_t{max_key.y} - snap.min_.y + 1;
+  const int64_t nz = int64_t{max_key.z} - snap.min_.z + 1;
+  if (nx <= 0 || ny <= 0 || nz <= 0) {
+    return InvalidArgumentError(fmt::format(
+        "planning snapshot box ({}) contains no voxel centre at {} m", box_W.ToString(), s));
+  }
+  const double bytes = static_cast<double>(nx) * static_cast<double>(ny) * static_cast<double>(nz);
+  if (bytes > static_cast<double>(max_bytes)) {
+    return InvalidArgumentError(fmt::format(
+        "planning snapshot of {} x {} x {} voxels ({:.0f} MB) exceeds max_bytes ({:.0f} MB): use a "
+        "smaller box or a coarser map",
+        nx, ny, nz, bytes / 1e6, static_cast<double>(max_bytes) / 1e6));
+  }
+  snap.dims_ = Eigen::Vector3i(static_cast<int>(nx), static_cast<int>(ny), static_cast<int>(nz));
+  snap.sx_ = nx;
+  snap.sxy_ = nx * ny;
+  snap.cells_.assign(static_cast<size_t>(bytes), 0);
+
+  const float occ = grid.occupied_log_odds();
+  grid.ForEachBlock([&](const OccupancyBlock& b) {
+    const int64_t bx = int64_t{b.key.x} * kBlockEdge - snap.min_.x;
+    const int64_t by = int64_t{b.key.y} * kBlockEdge - snap.min_.y;
+    const int64_t bz = int64_t{b.key.z} * kBlockEdge - snap.min_.z;
+    if (bx + kBlockEdge <= 0 || by + kBlockEdge <= 0 || bz + kBlockEdge <= 0 || bx >= nx ||
+        by >= ny || bz >= nz) {
+      return;
+    }
+    b.known.ForEachSet([&](int i) {
+      const int64_t x = bx + (i & 7), y = by + ((i >> 3) & 7), z = bz + (i >> 6);
+      if (x < 0 || y < 0 || z < 0 || x >= nx || y >= ny || z >= nz) return;
+      uint8_t cell = b.log_odds[i] >= occ ? static_cast<uint8_t>(VoxelState::kOccupied)
+                                          : static_cast<uint8_t>(VoxelState::kFree);
+      if (b.semantics != nullptr) {
+        const uint8_t cls = (*b.semantics)[i].semantic_class;
+        cell = static_cast<uint8_t>(cell | (std::min<uint8_t>(cls, 7) << kClassShift));
+      }
+      snap.cells_[static_cast<size_t>(x + snap.sx_ * y + snap.sxy_ * z)] = cell;
+    });
+  });
+  return snap;
+}
+
+Result<PlanningSnapshot> PlanningSnapshot::BuildOverKnown(const OccupancyGrid& grid,
+                                                          size_t max_bytes) {
+  const Box3 known = grid.KnownBounds();
+  if (known.IsEmpty()) {
+    return FailedPreconditionError("planning snapshot: the map has no known voxel");
+  }
+  return Build(grid, known, max_bytes);
+}
+
+Box3 PlanningSnapshot::box() const {
+  if (cells_.empty()) return Box3();
+  const double s = voxel_size_m_;
+  return Box3(Eigen::Vector3d(min_.x, min_.y, min_.z) * s,
+              Eigen::Vector3d(int64_t{min_.x} + dims_.x(), int64_t{min_.y} + dims_.y(),
+                              int64_t{min_.z} + dims_.z()) *
+                  s);
+}
+
+PlanningSnapshot::RayCounts PlanningSnapshot::CastRay(const Eigen::Vector3d& from,
+                                                      const Eigen::Vector3d& to) const {
+  RayCounts c;
+  if (cells_.empty()) return c;
+  RayWalker w(from, to, voxel_size_m_);
+  if (!w.ok()) return c;
+  int64_t left = w.remaining();  // voxels to visit: the start voxel up to (excluding) the end's
+  if (left == 0) return c;
+  const VoxelKey k = w.key();
+  int64_t rel[3] = {int64_t{k.x} - min_.x, int64_t{k.y} - min_.y, int64_t{k.z} - min_.z};
+  const uint64_t dim[3] = {static_cast<uint64_t>(dims_.x()), static_cast<uint64_t>(dims_.y()),
+                           static_cast<uint64_t>(dims_.z())};
+  const int64_t stride[3] = {1, sx_, sxy_};
+  const int64_t dstep[3] = {w.step(0) * stride[0], w.step(1) * stride[1], w.step(2) * stride[2]};
+  const int64_t step[3] = {w.step(0), w.step(1), w.step(2)};
+  int64_t idx = rel[0] + sx_ * rel[1] + sxy_ * rel[2];
+  const uint8_t* cells = cells_.data();
+  uint32_t unknown = 0, free = 0, visited = 0;
+  while (true) {
+    const bool inside = static_cast<uint64_t>(rel[0]) < dim[0] &&
+                        static_cast<uint64_t>(rel[1]) < dim[1] &&
+                        static_cast<uint64_t>(rel[2]) < dim[2];
+    const uint8_t cell = inside ? cells[idx] : 0;
+    const uint8_t state = cell & kStateMask;
+    ++visited;
+    if (state == static_cast<uint8_t>(VoxelState::kOccupied)) {
+      c.hit = true;
+      c.hit_class = static_cast<uint8_t>(cell >> kClassShift);
+      break;
+    }
+    free += state;  // kFree == 1, kUnknown == 0
+    unknown += 1u - state;
+    if (--left == 0) break;
+    const int axis = w.Step();
+    idx += dstep[axis];
+    rel[axis] += step[axis];
+  }
+  c.unknown = unknown;
+  c.free = free;
+  c.visited = visited;
+  return c;
+}
+
+}  // namespace avp::mapping

@@ -1,0 +1,538 @@
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include <avp/core/error.h>
+#include <avp/mapping/semantics.h>
+
+namespace avp::mapping {
+namespace {
+
+/// |log-odds| bound that keeps round(l * kClassLogOddsScale) inside int16.
+constexpr float kMaxAbsClassLogOdds = 31.0f;
+constexpr uint32_t kMaxInstanceId = 65535;
+
+uint16_t SaturatingIncrement(uint16_t v) { return v == 0xFFFF ? v : static_cast<uint16_t>(v + 1); }
+
+bool IsObjectClass(SemanticClass cls) {
+  const int c = static_cast<int>(cls);
+  return c >= 1 && c < kNumSemanticClasses;
+}
+
+int32_t Quantize(float log_odds) {
+  const float bounded = std::clamp(log_odds, -64.0f, 64.0f);
+  return static_cast<int32_t>(std::lround(bounded * kClassLogOddsScale));
+}
+
+void AddClassLogOdds(SemanticCell& cell, int cls, float delta, const SemanticOptions& options) {
+  const int32_t q =
+      std::clamp(cell.class_log_odds[cls] + Quantize(delta), Quantize(options.class_log_odds_min),
+                 Quantize(options.class_log_odds_max));
+  cell.class_log_odds[cls] = static_cast<int16_t>(q);
+}
+
+/// semantic_class and confidence from the log-odds (Bayesian policy).
+void DeriveBayesianLabel(SemanticCell& cell, const SemanticOptions& options) {
+  const std::array<float, kNumSemanticClasses> p = BayesianPosteriors(cell);
+  int best = 1;  // integer comparison: exact, ties to the lower class
+  for (int c = 2; c < kNumSemanticClasses; ++c) {
+    if (cell.class_log_odds[c] > cell.class_log_odds[best]) best = c;
+  }
+  cell.confidence = p[best];
+  cell.semantic_class = p[best] >= options.label_threshold ? static_cast<uint8_t>(best) : 0;
+}
+
+int Contest(const SemanticCell& cell) { return cell.flags & kSemanticFlagContestMask; }
+void SetContest(SemanticCell& cell, int value) {
+  cell.flags = static_cast<uint8_t>((cell.flags & ~kSemanticFlagContestMask) |
+                                    (std::min(value, 3) & kSemanticFlagContestMask));
+}
+void ClearInstance(SemanticCell& cell) {
+  cell.instance_id = 0;
+  SetContest(cell, 0);
+}
+
+/// Sum, sum of squares and count of voxel centres: centroid and radius of gyration.
+struct Moments {
+  size_t n = 0;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double sum_sq = 0.0;
+
+  void Add(const Eigen::Vector3d& p) {
+    ++n;
+    sum += p;
+    sum_sq += p.squaredNorm();
+  }
+  void Add(const Moments& o) {
+    n += o.n;
+    sum += o.sum;
+    sum_sq += o.sum_sq;
+  }
+  Eigen::Vector3d Centroid() const {
+    return n == 0 ? Eigen::Vector3d::Zero() : Eigen::Vector3d(sum / static_cast<double>(n));
+  }
+  /// sqrt(mean |p - centroid|^2).
+  double Radius() const {
+    if (n == 0) return 0.0;
+    const double mean_sq = sum_sq / static_cast<double>(n);
+    return std::sqrt(std::max(0.0, mean_sq - Centroid().squaredNorm()));
+  }
+};
+
+/// part >= fraction * whole, forgiving the float rounding of `fraction` (0.1f * 10 counts as 1).
+bool AtLeastFraction(size_t part, size_t whole, float fraction) {
+  return static_cast<double>(part) >=
+         static_cast<double>(fraction) * static_cast<double>(whole) * (1.0 - 1e-6);
+}
+
+}  // namespace
+
+// ---- Names and options ------------------------------------------------------------------------
+
+std::string_view ToString(FusionPolicy policy) {
+  switch (policy) {
+    case FusionPolicy::kReferenceMax:
+      return "reference-max";
+    case FusionPolicy::kBayesian:
+      return "bayesian";
+  }
+  return "unknown";
+}
+
+std::optional<FusionPolicy> FusionPolicyFromString(std::string_view name) {
+  if (name == "reference-max") return FusionPolicy::kReferenceMax;
+  if (name == "bayesian") return FusionPolicy::kBayesian;
+  return std::nullopt;
+}
+
+Status SemanticOptions::Validate() const {
+  std::vector<std::string> errors;
+  auto require = [&](bool ok, std::string message) {
+    if (!ok) errors.push_back(std::move(message));
+  };
+  require(policy == FusionPolicy::kReferenceMax || policy == FusionPolicy::kBayesian,
+          fmt::format("policy ({}) must be reference-max (0) or bayesian (1)",
+                      static_cast<int>(policy)));
+  require(std::isfinite(reference_penalty) && reference_penalty > 0.0f && reference_penalty <= 1.0f,
+          fmt::format("reference_penalty ({}) must be in (0, 1]", reference_penalty));
+  require(std::isfinite(class_log_odds_min) && class_log_odds_min >= -kMaxAbsClassLogOdds &&
+              class_log_odds_min < 0.0f,
+          fmt::format("class_log_odds_min ({}) must be in [-{}, 0)", class_log_odds_min,
+                      kMaxAbsClassLogOdds));
+  require(std::isfinite(class_log_odds_max) && class_log_odds_max > 0.0f &&
+              class_log_odds_max <= kMaxAbsClassLogOdds,
+          fmt::format("class_log_odds_max ({}) must be in (0, {}]", class_log_odds_max,
+                      kMaxAbsClassLogOdds));
+  require(std::isfinite(miss_log_odds) && miss_log_odds >= 0.0f &&
+              miss_log_odds <= 2.0f * kMaxAbsClassLogOdds,
+          fmt::format("miss_log_odds ({}) must be in [0, {}]", miss_log_odds,
+                      2.0f * kMaxAbsClassLogOdds));
+  require(std::isfinite(label_threshold) && label_threshold > 0.0f && label_threshold <= 1.0f,
+          fmt::format("label_threshold ({}) must be in (0, 1]", label_threshold));
+  require(std::isfinite(score_epsilon) && score_epsilon > 0.0f && score_epsilon < 0.5f,
+          fmt::format("score_epsilon ({}) must be in (0, 0.5)", score_epsilon));
+  require(std::isfinite(instance_join_fraction) && instance_join_fraction > 0.0f &&
+              instance_join_fraction <= 1.0f,
+          fmt::format("instance_join_fraction ({}) must be in (0, 1]", instance_join_fraction));
+  require(std::isfinite(instance_min_overlap_fraction) && instance_min_overlap_fraction > 0.0f &&
+              instance_min_overlap_fraction <= 1.0f,
+          fmt::format("instance_min_overlap_fraction ({}) must be in (0, 1]",
+                      instance_min_overlap_fraction));
+  require(std::isfinite(instance_merge_fraction) && instance_merge_fraction > 0.0f &&
+              instance_merge_fraction <= 1.0f,
+          fmt::format("instance_merge_fraction ({}) must be in (0, 1]", instance_merge_fraction));
+  require(std::isfinite(instance_merge_max_separation) && instance_merge_max_separation >= 0.0f,
+          fmt::format("instance_merge_max_separation ({}) must be finite and >= 0",
+                      instance_merge_max_separation));
+  require(instance_flip_frames >= 1 && instance_flip_frames <= 3,
+          fmt::format("instance_flip_frames ({}) must be in [1, 3]", instance_flip_frames));
+  require(outlier_min_neighbours >= 0 && outlier_min_neighbours <= 26,
+          fmt::format("outlier_min_neighbours ({}) must be in [0, 26]", outlier_min_neighbours));
+  if (errors.empty()) return Status::Ok();
+  return InvalidArgumentError(fmt::format("invalid semantic options: {}", fmt::join(errors, "; ")));
+}
+
+// ---- Per-cell fusion ----------------------------------------------------------------------------
+
+void FuseReferenceMax(SemanticCell& cell, SemanticClass cls, float confidence, float penalty) {
+  if (!IsObjectClass(cls) || !std::isfinite(confidence)) return;
+  cell.observations = SaturatingIncrement(cell.observations);
+  const auto c = static_cast<uint8_t>(cls);
+  if (cell.semantic_class == c) {
+    cell.confidence = (cell.confidence + confidence) / 2.0f;
+  } else if (confidence > cell.confidence) {
+    cell.semantic_class = c;
+    cell.confidence = penalty * confidence;
+  } else {
+    cell.confidence = penalty * cell.confidence;
+  }
+}
+
+void FuseBayesianHit(SemanticCell& cell, SemanticClass cls, float confidence,
+                     const SemanticOptions& options) {
+  if (!IsObjectClass(cls) || !std::isfinite(confidence)) return;
+  cell.observations = SaturatingIncrement(cell.observations);
+  const double eps = options.score_epsilon;
+  const double s = std::clamp(static_cast<double>(confidence), eps, 1.0 - eps);
+  const double delta = std::log(s / (1.0 - s)) + std::log(double{kNumSemanticClasses - 1});
+  AddClassLogOdds(cell, static_cast<int>(cls), static_cast<float>(delta), options);
+  DeriveBayesianLabel(cell, options);
+}
+
+void FuseBayesianMiss(SemanticCell& cell, const SemanticOptions& options) {
+  cell.misses = SaturatingIncrement(cell.misses);
+  for (int c = 1; c < kNumSemanticClasses; ++c) {
+    AddClassLogOdds(cell, c, -options.miss_log_odds, options);
+  }
+  DeriveBayesianLabel(cell, options);
+}
+
+std::array<float, kNumSemanticClasses> BayesianPosteriors(const SemanticCell& cell) {
+  std::array<double, kNumSemanticClasses> l{};
+  double max_l = 0.0;  // background's log-odds
+  for (int c = 1; c < kNumSemanticClasses; ++c) {
+    l[c] = cell.class_log_odds[c] / static_cast<double>(kClassLogOddsScale);
+    max_l = std::max(max_l, l[c]);
+  }
+  std::array<double, kNumSemanticClasses> e{};
+  double sum = 0.0;
+  for (int c = 0; c < kNumSemanticClasses; ++c) {
+    e[c] = std::exp(l[c] - max_l);
+    sum += e[c];
+  }
+  std::array<float, kNumSemanticClasses> p{};
+  for (int c = 0; c < kNumSemanticClasses; ++c) p[c] = static_cast<float>(e[c] / sum);
+  return p;
+}
+
+// ---- SemanticFusion -----------------------------------------------------------------------------
+
+SemanticFusion::SemanticFusion(const SemanticOptions& options) : options_(options) {
+  const Status valid = options.Validate();
+  AVP_THROW_UNLESS(valid.ok(), valid.message());
+}
+
+void SemanticFusion::FuseHit(SemanticCell& cell, SemanticClass cls, float confidence) const {
+  if (options_.policy == FusionPolicy::kReferenceMax) {
+    FuseReferenceMax(cell, cls, confidence, options_.reference_penalty);
+  } else {
+    FuseBayesianHit(cell, cls, confidence, options_);
+  }
+}
+
+uint16_t SemanticFusion::NewInstance(uint32_t frame) {
+  if (next_instance_id_ > kMaxInstanceId) return 0;
+  const auto id = static_cast<uint16_t>(next_instance_id_++);
+  if (frames_of_instance_.size() <= id) frames_of_instance_.resize(size_t{id} + 1, {0, 0});
+  frames_of_instance_[id] = {frame, frame};
+  return id;
+}
+
+void SemanticFusion::TouchInstance(uint16_t id, uint32_t frame) {
+  if (id == 0) return;
+  if (frames_of_instance_.size() <= id) frames_of_instance_.resize(size_t{id} + 1, {0, 0});
+  uint32_t& last = frames_of_instance_[id].second;
+  last = std::max(last, frame);
+}
+
+SemanticFrameStats SemanticFusion::Fuse(OccupancyGrid& grid,
+                                        std::span<const VoxelObservation> observations,
+                                        const Segmentation& segmentation, uint32_t frame) {
+  SemanticFrameStats stats;
+  stats.observations = observations.size();
+
+  // Bucket the observations by mask; invalid masks and indices are skipped.
+  const size_t num_masks = segmentation.instances.size();
+  std::vector<bool> mask_ok(num_masks);
+  for (size_t m = 0; m < num_masks; ++m) {
+    const InstanceMask& mask = segmentation.instances[m];
+    mask_ok[m] = IsObjectClass(mask.semantic_class) && std::isfinite(mask.confidence) &&
+                 mask.confidence >= 0.0f && mask.confidence <= 1.0f;
+  }
+  std::vector<std::vector<VoxelKey>> keys_of_mask(num_masks);
+  std::vector<VoxelKey> misses;
+  for (const VoxelObservation& obs : observations) {
+    if (obs.mask_index == -1) {
+      misses.push_back(obs.key);
+    } else if (obs.mask_index < 0 || static_cast<size_t>(obs.mask_index) >= num_masks ||
+               !mask_ok[static_cast<size_t>(obs.mask_index)]) {
+      ++stats.skipped;
+    } else {
+      keys_of_mask[static_cast<size_t>(obs.mask_index)].push_back(obs.key);
+    }
+  }
+
+  // Negative evidence first (Bayesian only; the reference has none), on voxels with evidence.
+  if (options_.policy == FusionPolicy::kBayesian) {
+    for (const VoxelKey& key : misses) {
+      const SemanticCell* existing = grid.Semantic(key);
+      if (existing == nullptr || existing->observations == 0) continue;
+      SemanticCell* cell = grid.MutableSemantic(key);
+      if (cell == nullptr) continue;
+      const uint8_t was = cell->semantic_class;
+      FuseBayesianMiss(*cell, options_);
+      if (cell->semantic_class != was) ClearInstance(*cell);
+      ++stats.miss_updates;
+    }
+  }
+
+  for (size_t m = 0; m < num_masks; ++m) {
+    if (keys_of_mask[m].empty()) continue;
+    FuseMask(grid, segmentation.instances[m], keys_of_mask[m], frame, stats);
+  }
+
+  if (options_.remove_outliers_each_frame) stats.outliers_removed = RemoveOutliers(grid).removed;
+  return stats;
+}
+
+void SemanticFusion::FuseMask(OccupancyGrid& grid, const InstanceMask& mask,
+                              std::span<const VoxelKey> keys, uint32_t frame,
+                              SemanticFrameStats& stats) {
+  const auto k = static_cast<uint8_t>(mask.semantic_class);
+  const size_t n = keys.size();
+
+  // 1. Votes: the mask's voxels already labelled with its class, by owning instance.
+  std::map<uint16_t, size_t> votes;
+  for (const VoxelKey& key : keys) {
+    const SemanticCell* cell = grid.Semantic(key);
+    if (cell != nullptr && cell->semantic_class == k && cell->instance_id != 0) {
+      ++votes[cell->instance_id];
+    }
+  }
+
+  // 2. Spanned instances: enough of the votes and of the mask; the best one is the target.
+  size_t total_votes = 0;
+  for (const auto& [id, count] : votes) total_votes += count;
+  std::vector<uint16_t> spanned;  // ascending id
+  uint16_t best = 0;
+  size_t best_votes = 0;
+  for (const auto& [id, count] : votes) {
+    if (!AtLeastFraction(count, total_votes, options_.instance_join_fraction) ||
+        !AtLeastFraction(count, n, options_.instance_min_overlap_fraction)) {
+      continue;
+    }
+    spanned.push_back(id);
+    if (count > best_votes) {  // ties to the lower id
+      best = id;
+      best_votes = count;
+    }
+  }
+
+  // Instances this mask keeps voxels for, with their centroids (used only when there are several).
+  struct Accepted {
+    uint16_t id;
+    Eigen::Vector3d centroid_W;
+  };
+  std::vector<Accepted> accepted;
+  uint16_t target = best;
+
+  if (spanned.size() >= 2) {
+    // Merge candidates: moments of every spanned instance (one pass over the labelled voxels).
+    std::map<uint16_t, Moments> moments;
+    std::map<uint16_t, std::vector<VoxelKey>> members;
+    for (uint16_t id : spanned) moments[id] = Moments{};
+    grid.ForEachSemanticVoxel([&](const VoxelKey& key, const SemanticCell& cell) {
+      auto it = moments.find(cell.instance_id);
+      if (it == moments.end()) return;
+      it->second.Add(grid.CenterOf(key));
+      members[cell.instance_id].push_back(key);
+    });
+
+    Moments group = moments[best];
+    size_t group_votes = votes[best];
+    std::vector<uint16_t> group_ids = {best};
+    std::vector<uint16_t> separate;
+    for (uint16_t j : spanned) {
+      if (j == best) continue;
+      const Moments& mj = moments[j];
+      const bool covers_both =
+          AtLeastFraction(votes[j], mj.n, options_.instance_merge_fraction) &&
+          AtLeastFraction(group_votes, group.n, options_.instance_merge_fraction);
+      const double separation = (group.Centroid() - mj.Centroid()).norm();
+      const bool close = options_.instance_merge_max_separation > 0.0f &&
+                         separation <= static_cast<double>(options_.instance_merge_max_separation) *
+                                           (group.Radius() + mj.Radius());
+      if (covers_both && close) {
+        group.Add(mj);
+        group_votes += votes[j];
+        group_ids.push_back(j);
+      } else {
+        separate.push_back(j);
+      }
+    }
+
+    target = *std::min_element(group_ids.begin(), group_ids.end());
+    for (uint16_t id : group_ids) {
+      if (id == target) continue;
+      for (const VoxelKey& key : members[id]) {
+        if (SemanticCell* cell = grid.MutableSemantic(key)) cell->instance_id = target;
+      }
+      if (id < frames_of_instance_.size()) {
+        // The merged instance spans both histories; the retired id keeps none.
+        const auto [first, last] = frames_of_instance_[id];
+        TouchInstance(target, last);
+        uint32_t& target_first = frames_of_instance_[target].first;
+        target_first = std::min(target_first, first);
+        frames_of_instance_[id] = {0, 0};
+      }
+      ++stats.merged_instances;
+    }
+    accepted.push_back({target, group.Centroid()});
+    for (uint16_t j : separate) accepted.push_back({j, moments[j].Centroid()});
+    std::sort(accepted.begin(), accepted.end(),
+              [](const Accepted& a, const Accepted& b) { return a.id < b.id; });
+  } else if (target != 0) {
+    accepted.push_back({target, Eigen::Vector3d::Zero()});
+  }
+
+  auto is_accepted = [&](uint16_t id) {
+    return std::any_of(accepted.begin(), accepted.end(),
+                       [id](const Accepted& a) { return a.id == id; });
+  };
+  // The instance a voxel of this mask goes to: the nearest accepted centroid when the mask spans
+  // several separate instances (ties to the lower id), else the target (created on first use).
+  auto destination = [&](const VoxelKey& key) -> uint16_t {
+    if (accepted.empty()) {
+      target = NewInstance(frame);
+      if (target == 0) return 0;
+      ++stats.new_instances;
+      accepted.push_back({target, Eigen::Vector3d::Zero()});
+    }
+    if (accepted.size() == 1) return accepted.front().id;
+    const Eigen::Vector3d p = grid.CenterOf(key);
+    const Accepted* nearest = &accepted.front();
+    double best_d2 = (p - nearest->centroid_W).squaredNorm();
+    for (const Accepted& a : accepted) {
+      const double d2 = (p - a.centroid_W).squaredNorm();
+      if (d2 < best_d2) {
+        best_d2 = d2;
+        nearest = &a;
+      }
+    }
+    return nearest->id;
+  };
+
+  // 3. Fuse every voxel, then place it.
+  for (const VoxelKey& key : keys) {
+    SemanticCell* cell = grid.MutableSemantic(key);
+    if (cell == nullptr) {
+      ++stats.skipped;
+      continue;
+    }
+    const uint8_t was = cell->semantic_class;
+    FuseHit(*cell, mask.semantic_class, mask.confidence);
+    ++stats.labelled_updates;
+    if (cell->semantic_class != was) ClearInstance(*cell);
+    if (cell->semantic_class != k) continue;  // the mask lost (reference) or is below threshold
+
+    const uint16_t owner = cell->instance_id;
+    if (owner != 0 && is_accepted(owner)) {
+      SetContest(*cell, 0);
+      TouchInstance(owner, frame);
+      continue;
+    }
+    if (owner == 0) {
+      const uint16_t id = destination(key);
+      cell->instance_id = id;
+      TouchInstance(id, frame);
+      continue;
+    }
+    // Owned by an instance this mask does not span: move only on repeated claims.
+    const int contest = Contest(*cell) + 1;
+    if (contest < options_.instance_flip_frames) {
+      SetContest(*cell, contest);
+      continue;
+    }
+    const uint16_t id = destination(key);
+    if (id == 0) continue;
+    cell->instance_id = id;
+    SetContest(*cell, 0);
+    TouchInstance(id, frame);
+    ++stats.reassigned_voxels;
+  }
+}
+
+OutlierStats SemanticFusion::RemoveOutliers(OccupancyGrid& grid) const {
+  OutlierStats stats;
+  const int min_neighbours = options_.outlier_min_neighbours;
+  std::vector<VoxelKey> remove;
+  grid.ForEachSemanticVoxel([&](const VoxelKey& key, const SemanticCell& cell) {
+    ++stats.examined;
+    if (min_neighbours == 0) return;
+    int found = 0;
+    for (int dz = -1; dz <= 1; ++dz) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          if (dx == 0 && dy == 0 && dz == 0) continue;
+          const SemanticCell* nb = grid.Semantic({key.x + dx, key.y + dy, key.z + dz});
+          if (nb == nullptr || !nb->has_label()) continue;
+          const bool same = cell.instance_id != 0 ? nb->instance_id == cell.instance_id
+                                                  : nb->semantic_class == cell.semantic_class;
+          if (same && ++found >= min_neighbours) return;
+        }
+      }
+    }
+    remove.push_back(key);
+  });
+  for (const VoxelKey& key : remove) {
+    SemanticCell* cell = grid.MutableSemantic(key);
+    if (cell == nullptr) continue;
+    cell->semantic_class = 0;
+    cell->confidence = 0.0f;
+    cell->class_log_odds.fill(0);
+    ClearInstance(*cell);
+    ++stats.removed;
+  }
+  return stats;
+}
+
+std::vector<InstanceInfo> SemanticFusion::Instances(const OccupancyGrid& grid) const {
+  struct Accumulator {
+    std::array<size_t, kNumSemanticClasses> classes{};
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    double confidence = 0.0;
+    size_t n = 0;
+  };
+  std::map<uint16_t, Accumulator> by_id;
+  grid.ForEachSemanticVoxel([&](const VoxelKey& key, const SemanticCell& cell) {
+    if (cell.instance_id == 0) return;
+    Accumulator& a = by_id[cell.instance_id];
+    ++a.classes[cell.semantic_class < kNumSemanticClasses ? cell.semantic_class : 0];
+    a.sum += grid.CenterOf(key);
+    a.confidence += cell.confidence;
+    ++a.n;
+  });
+  std::vector<InstanceInfo> out;
+  out.reserve(by_id.size());
+  for (const auto& [id, a] : by_id) {
+    InstanceInfo info;
+    info.id = id;
+    const auto majority = std::max_element(a.classes.begin(), a.classes.end());
+    info.semantic_class = static_cast<SemanticClass>(majority - a.classes.begin());
+    info.voxels = a.n;
+    info.centroid_W = a.sum / static_cast<double>(a.n);
+    info.mean_confidence = a.confidence / static_cast<double>(a.n);
+    if (id < frames_of_instance_.size()) {
+      info.first_frame = frames_of_instance_[id].first;
+      info.last_frame = frames_of_instance_[id].second;
+    }
+    out.push_back(info);
+  }
+  return out;
+}
+
+void SemanticFusion::ResetFromGrid(const OccupancyGrid& grid) {
+  uint16_t max_id = 0;
+  grid.ForEachSemanticVoxel([&](const VoxelKey&, const SemanticCell& cell) {
+    max_id = std::max(max_id, cell.instance_id);
+  });
+  next_instance_id_ = uint32_t{max_id} + 1;
+  frames_of_instance_.assign(size_t{max_id} + 1, {0, 0});
+}
+
+}  // namespace avp::mapping
