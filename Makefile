@@ -1,7 +1,8 @@
 # The two commands (see README.md):
 #   make demo   set up, build, run the main job (a simulated view of the default scenario)
 #   make test   set up, build, run every test
-# Also: make build, make bench (Google Benchmark programs, JSON under bench-results/), make format.
+# Also: make build, make bench (benchmark programs, one JSON file each under bench-results/),
+# make format.
 
 BUILD_DIR  ?= build
 BUILD_TYPE ?= Release
@@ -30,8 +31,10 @@ test: build
 demo: build
 	@./scripts/demo $(BUILD_DIR) $(DEMO_OUT)
 
+# One JSON file of records per program under bench-results/ (docs/benchmarks.md). Pass options to
+# the OctoMap comparison with BENCH_MAP_ARGS, e.g. make bench BENCH_MAP_ARGS=--quick
 bench: build
-	@./scripts/bench $(BUILD_DIR) bench-results
+	@BENCH_MAP_ARGS="$(BENCH_MAP_ARGS)" ./scripts/bench $(BUILD_DIR) bench-results
 
 format:
 	@git ls-files '*.h' '*.cpp' | xargs clang-format -i

@@ -11,6 +11,8 @@
 
 namespace avp::mapping {
 
+class PlanningSnapshot;
+
 /// Exact voxel traversal of a segment, in integer arithmetic.
 ///
 /// Both end points are floored once onto a fixed-point lattice of 2^-16 voxel (which keeps each in
@@ -106,6 +108,7 @@ class RayWalker {
   }
 
  private:
+  friend class PlanningSnapshot;  // its CastRay runs the same decisions in registers
   static constexpr int64_t kNever = std::numeric_limits<int64_t>::max();
   bool ok_ = true;
   int32_t key_[3] = {0, 0, 0};

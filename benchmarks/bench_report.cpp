@@ -1,0 +1,183 @@
+#include "bench_report.h"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <string_view>
+#include <utility>
+
+#include <benchmark/benchmark.h>
+#include <nlohmann/json.hpp>
+#include <unistd.h>
+
+namespace avp::bench {
+namespace {
+
+using Json = nlohmann::ordered_json;  // keeps the record fields in schema order
+
+Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(); }
+
+template <typename T>
+Json Optional(const std::optional<T>& v) {
+  if (!v) return Json();
+  if constexpr (std::is_same_v<T, double>) {
+    return Number(*v);
+  } else {
+    return Json(*v);
+  }
+}
+
+/// The run name without the "/iterations:N" and "/real_time" parts that Iterations() and
+/// UseRealTime() append (before any aggregate suffix such as "_mean").
+std::string BaseName(std::string name) {
+  static const std::string kRealTime = "/real_time";
+  size_t at = name.find(kRealTime);
+  if (at != std::string::npos) name.erase(at, kRealTime.size());
+  static const std::string kIterations = "/iterations:";
+  at = name.find(kIterations);
+  if (at != std::string::npos) {
+    size_t end = at + kIterations.size();
+    while (end < name.size() && name[end] >= '0' && name[end] <= '9') ++end;
+    name.erase(at, end - at);
+  }
+  return name;
+}
+
+/// The console reporter, plus a copy of every run for the records.
+class CollectingReporter : public benchmark::ConsoleReporter {
+ public:
+  explicit CollectingReporter(OutputOptions options) : ConsoleReporter(options) {}
+  void ReportRuns(const std::vector<Run>& runs) override {
+    for (const Run& run : runs) runs_.push_back(run);
+    ConsoleReporter::ReportRuns(runs);
+  }
+  const std::vector<Run>& runs() const { return runs_; }
+
+ private:
+  std::vector<Run> runs_;
+};
+
+}  // namespace
+
+std::optional<bool> EvaluateTarget(const std::string& target, double value,
+                                   std::optional<double> ratio) {
+  std::string t = target;
+  bool on_ratio = false;
+  if (!t.empty() && (t.back() == 'x' || t.back() == 'X')) {
+    on_ratio = true;
+    t.pop_back();
+  }
+  std::string_view op;
+  for (const std::string_view candidate : {">=", "<=", ">", "<", "=="}) {
+    if (std::string_view(t).substr(0, candidate.size()) == candidate) {
+      op = candidate;
+      break;
+    }
+  }
+  if (op.empty()) return std::nullopt;
+  const std::string number = t.substr(op.size());
+  char* end = nullptr;
+  const double bound = std::strtod(number.c_str(), &end);
+  if (number.empty() || end == nullptr || *end != '\0') return std::nullopt;
+  if (on_ratio && !ratio) return std::nullopt;
+  const double x = on_ratio ? *ratio : value;
+  if (!std::isfinite(x)) return false;
+  if (op == ">=") return x >= bound;
+  if (op == "<=") return x <= bound;
+  if (op == ">") return x > bound;
+  if (op == "<") return x < bound;
+  return x == bound;
+}
+
+BenchRecord MakeRecord(std::string name, double value, std::string unit,
+                       std::optional<std::string> reference, std::optional<double> reference_value,
+                       std::optional<double> ratio, std::optional<std::string> target) {
+  BenchRecord r;
+  r.name = std::move(name);
+  r.value = value;
+  r.unit = std::move(unit);
+  r.reference = std::move(reference);
+  r.reference_value = reference_value;
+  r.ratio = ratio;
+  r.target = std::move(target);
+  if (r.target) r.meets_target = EvaluateTarget(*r.target, r.value, r.ratio);
+  return r;
+}
+
+bool WriteBenchRecords(const std::string& path, const std::vector<BenchRecord>& records) {
+  Json list = Json::array();
+  for (const BenchRecord& r : records) {
+    list.push_back({{"name", r.name},
+                    {"value", Number(r.value)},
+                    {"unit", r.unit},
+                    {"reference", Optional(r.reference)},
+                    {"reference_value", Optional(r.reference_value)},
+                    {"ratio", Optional(r.ratio)},
+                    {"target", Optional(r.target)},
+                    {"meets_target", Optional(r.meets_target)}});
+  }
+  std::ofstream out(path);
+  out << list.dump(1) << "\n";
+  out.close();
+  if (!out) {
+    std::fprintf(stderr, "cannot write benchmark records to '%s'\n", path.c_str());
+    return false;
+  }
+  return true;
+}
+
+std::string TakeJsonPathArgument(int& argc, char** argv) {
+  static constexpr char kFlag[] = "--avp_json";
+  std::string path;
+  int out = 1;
+  for (int i = 1; i < argc; ++i) {
+    const char* a = argv[i];
+    if (std::strncmp(a, kFlag, sizeof(kFlag) - 1) == 0 && a[sizeof(kFlag) - 1] == '=') {
+      path = a + sizeof(kFlag);
+    } else if (std::strcmp(a, kFlag) == 0 && i + 1 < argc) {
+      path = argv[++i];
+    } else {
+      argv[out++] = argv[i];
+    }
+  }
+  argc = out;
+  argv[argc] = nullptr;
+  return path;
+}
+
+int GoogleBenchmarkMain(int argc, char** argv, const std::vector<GoogleBenchmarkTarget>& targets) {
+  const std::string json_path = TakeJsonPathArgument(argc, argv);
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  CollectingReporter reporter(isatty(STDOUT_FILENO) != 0 ? benchmark::ConsoleReporter::OO_Defaults
+                                                         : benchmark::ConsoleReporter::OO_Tabular);
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  benchmark::Shutdown();
+  if (json_path.empty()) return 0;
+
+  std::vector<BenchRecord> records;
+  for (const auto& run : reporter.runs()) {
+    if (run.error_occurred) continue;
+    const std::string name = run.benchmark_name();
+    const std::string unit = benchmark::GetTimeUnitString(run.time_unit);
+    const std::string base = BaseName(name);
+    std::optional<std::string> target;
+    for (const GoogleBenchmarkTarget& t : targets) {
+      // Aggregates (mean/median/stddev of --benchmark_repetitions) carry the target only on
+      // the mean and median.
+      if (base == t.benchmark || base == t.benchmark + "_mean" || base == t.benchmark + "_median")
+        target = t.target;
+    }
+    records.push_back(MakeRecord(base, run.GetAdjustedRealTime(), unit, std::nullopt, std::nullopt,
+                                 std::nullopt, target));
+    records.push_back(MakeRecord(base + "/cpu_time", run.GetAdjustedCPUTime(), unit));
+    for (const auto& [counter, value] : run.counters) {
+      records.push_back(MakeRecord(base + "/" + counter, value.value, ""));
+    }
+  }
+  return WriteBenchRecords(json_path, records) ? 0 : 1;
+}
+
+}  // namespace avp::bench
