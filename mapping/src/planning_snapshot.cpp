@@ -38,7 +38,9 @@ Result<PlanningSnapshot> PlanningSnapshot::Build(const OccupancyGrid& grid, cons
     return InvalidArgumentError(fmt::format(
         "planning snapshot box ({}) contains no voxel centre at {} m", box_W.ToString(), s));
   }
-  const double bytes = static_cast<double>(nx) * static_cast<double>(ny) * static_cast<double>(nz);
+  const int64_t bx_count = (nx + 7) / 8, by_count = (ny + 7) / 8, bz_count = (nz + 7) / 8;
+  const double bytes = static_cast<double>(bx_count) * static_cast<double>(by_count) *
+                       static_cast<double>(bz_count) * 512.0;
   if (bytes > static_cast<double>(max_bytes)) {
     return InvalidArgumentError(fmt::format(
         "planning snapshot of {} x {} x {} voxels ({:.0f} MB) exceeds max_bytes ({:.0f} MB): use a "
@@ -46,8 +48,8 @@ Result<PlanningSnapshot> PlanningSnapshot::Build(const OccupancyGrid& grid, cons
         nx, ny, nz, bytes / 1e6, static_cast<double>(max_bytes) / 1e6));
   }
   snap.dims_ = Eigen::Vector3i(static_cast<int>(nx), static_cast<int>(ny), static_cast<int>(nz));
-  snap.sx_ = nx;
-  snap.sxy_ = nx * ny;
+  snap.sx_ = bx_count;
+  snap.sy_ = by_count;
   snap.cells_.assign(static_cast<size_t>(bytes), 0);
 
   const float occ = grid.occupied_log_odds();
@@ -68,7 +70,7 @@ Result<PlanningSnapshot> PlanningSnapshot::Build(const OccupancyGrid& grid, cons
         const uint8_t cls = (*b.semantics)[i].semantic_class;
         cell = static_cast<uint8_t>(cell | (std::min<uint8_t>(cls, 7) << kClassShift));
       }
-      snap.cells_[static_cast<size_t>(x + snap.sx_ * y + snap.sxy_ * z)] = cell;
+      snap.cells_[snap.Index(x, y, z)] = cell;
     });
   });
   return snap;
@@ -116,14 +118,12 @@ PlanningSnapshot::RayCounts PlanningSnapshot::CastRay(const Eigen::Vector3d& fro
   const int64_t sx = w.step_[0], sy = w.step_[1], sz = w.step_[2];
   const uint64_t dx = static_cast<uint64_t>(dims_.x()), dy = static_cast<uint64_t>(dims_.y()),
                  dz = static_cast<uint64_t>(dims_.z());
-  const int64_t stride_y = sx_, stride_z = sxy_;
-  int64_t idx = relx + stride_y * rely + stride_z * relz;
   const uint8_t* cells = cells_.data();
   uint32_t unknown = 0, free = 0, visited = 0;
   while (true) {
     const bool inside = static_cast<uint64_t>(relx) < dx && static_cast<uint64_t>(rely) < dy &&
                         static_cast<uint64_t>(relz) < dz;
-    const uint8_t cell = inside ? cells[idx] : uint8_t{0};
+    const uint8_t cell = inside ? cells[Index(relx, rely, relz)] : uint8_t{0};
     const uint32_t state = cell & kStateMask;
     ++visited;
     if (state == static_cast<uint32_t>(VoxelState::kOccupied)) {
@@ -142,7 +142,6 @@ PlanningSnapshot::RayCounts PlanningSnapshot::CastRay(const Eigen::Vector3d& fro
     relx += sx & mx;
     rely += sy & my;
     relz += sz & mz;
-    idx += (sx & mx) + ((sy * stride_y) & my) + ((sz * stride_z) & mz);
     rx += mx;  // -1 on the stepped axis
     ry += my;
     rz += mz;

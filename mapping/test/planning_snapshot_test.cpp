@@ -122,7 +122,9 @@ TEST(PlanningSnapshotTest, BuildOverKnownCopiesEveryVoxelExactly) {
   });
   EXPECT_EQ(snap->min_key(), lo);
   EXPECT_EQ(snap->dims(), Eigen::Vector3i(hi.x - lo.x + 1, hi.y - lo.y + 1, hi.z - lo.z + 1));
-  EXPECT_EQ(snap->bytes(), static_cast<size_t>(snap->dims().prod()));
+  // Stored in whole 8^3 bricks.
+  const Eigen::Vector3i bricks = (snap->dims().array() + 7) / 8;
+  EXPECT_EQ(snap->bytes(), static_cast<size_t>(bricks.prod()) * 512u);
   EXPECT_TRUE(snap->box().min().isApprox(grid.KnownBounds().min(), 1e-12));
   EXPECT_TRUE(snap->box().max().isApprox(grid.KnownBounds().max(), 1e-12));
 
@@ -187,7 +189,8 @@ TEST(PlanningSnapshotTest, BuildOverASubBoxCopiesOnlyVoxelsWithCentresInside) {
       }
     }
   }
-  EXPECT_EQ(static_cast<size_t>(inside), snap->bytes());
+  EXPECT_EQ(inside, snap->dims().prod());
+  EXPECT_EQ(snap->bytes(), static_cast<size_t>(((snap->dims().array() + 7) / 8).prod()) * 512u);
   // A box larger than the map: everything known is copied, the rest reads unknown.
   const Box3 big(Eigen::Vector3d::Constant(-0.2), Eigen::Vector3d::Constant(0.2));
   const auto all = PlanningSnapshot::Build(grid, big);
@@ -215,16 +218,16 @@ TEST(PlanningSnapshotTest, ErrorsForEmptyBoxesAndSizeLimits) {
                    grid, Box3(Eigen::Vector3d(0.0001, 0, 0), Eigen::Vector3d(0.002, 0.1, 0.1)))
                    .ok());
 
-  // 100 x 100 x 100 voxels = 1,000,000 bytes.
+  // 100 x 100 x 100 voxels = 13 x 13 x 13 bricks of 512 bytes = 1,124,864 bytes.
   ASSERT_TRUE(grid.SetLogOdds({0, 0, 0}, 1.0f));
   ASSERT_TRUE(grid.SetLogOdds({99, 99, 99}, 1.0f));
-  const auto too_big = PlanningSnapshot::BuildOverKnown(grid, 999999);
+  const auto too_big = PlanningSnapshot::BuildOverKnown(grid, 1124863);
   ASSERT_FALSE(too_big.ok());
   EXPECT_THAT(too_big.status().message(), HasSubstr("max_bytes"));
   EXPECT_THAT(too_big.status().message(), HasSubstr("100 x 100 x 100"));
-  const auto fits = PlanningSnapshot::BuildOverKnown(grid, 1000000);
+  const auto fits = PlanningSnapshot::BuildOverKnown(grid, 1124864);
   ASSERT_TRUE(fits.ok()) << fits.status().ToString();
-  EXPECT_EQ(fits->bytes(), 1000000u);
+  EXPECT_EQ(fits->bytes(), 1124864u);
   EXPECT_EQ(fits->State({99, 99, 99}), VoxelState::kOccupied);
   EXPECT_EQ(fits->State({50, 50, 50}), VoxelState::kUnknown);
   // Absurd boxes fail cleanly instead of allocating.

@@ -12,7 +12,8 @@
 
 namespace avp::mapping {
 
-/// A dense, read-only copy of the map over a box, one byte per voxel, for view evaluation:
+/// A dense, read-only copy of the map over a box, one byte per voxel (in 8^3 bricks), for view
+/// evaluation:
 /// bits 0-1 hold the VoxelState, bits 2-4 the semantic class of labelled voxels (0 = none).
 /// Voxels outside the box read as unknown; build the box over KnownBounds() (the default) and
 /// that is exact.
@@ -47,13 +48,14 @@ class PlanningSnapshot {
   VoxelKey min_key() const { return min_; }
   /// Voxels per axis.
   Eigen::Vector3i dims() const { return dims_; }
+  /// Bytes held (the box rounded up to whole 8^3 bricks).
   size_t bytes() const { return cells_.size(); }
   Box3 box() const;
 
   uint8_t Cell(const VoxelKey& k) const {
     const int64_t x = int64_t{k.x} - min_.x, y = int64_t{k.y} - min_.y, z = int64_t{k.z} - min_.z;
     if (x < 0 || y < 0 || z < 0 || x >= dims_.x() || y >= dims_.y() || z >= dims_.z()) return 0;
-    return cells_[static_cast<size_t>(x + sx_ * y + sxy_ * z)];
+    return cells_[Index(x, y, z)];
   }
   VoxelState State(const VoxelKey& k) const {
     return static_cast<VoxelState>(Cell(k) & kStateMask);
@@ -69,7 +71,13 @@ class PlanningSnapshot {
   double voxel_size_m_ = 0.0;
   VoxelKey min_;
   Eigen::Vector3i dims_ = Eigen::Vector3i::Zero();
-  int64_t sx_ = 0, sxy_ = 0;
+  /// Cells are stored in 8^3 bricks of 512 bytes (x fastest inside a brick, bricks x-fastest),
+  /// so a ray crossing a brick stays within 8 cache lines.
+  size_t Index(int64_t x, int64_t y, int64_t z) const {
+    return static_cast<size_t>((((x >> 3) + sx_ * ((y >> 3) + sy_ * (z >> 3))) << 9) | (x & 7) |
+                               ((y & 7) << 3) | ((z & 7) << 6));
+  }
+  int64_t sx_ = 0, sy_ = 0;  ///< bricks along x and y
   std::vector<uint8_t> cells_;
 };
 
