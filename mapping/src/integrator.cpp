@@ -7,6 +7,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <avp/core/error.h>
 #include <avp/mapping/integrator.h>
@@ -43,9 +44,8 @@ Status IntegratorOptions::Validate() const {
     errors.push_back(fmt::format("num_threads ({}) must be in [0, 256]", num_threads));
   }
   if (errors.empty()) return Status::Ok();
-  std::string msg = "invalid integrator options: ";
-  for (size_t i = 0; i < errors.size(); ++i) msg += (i ? "; " : "") + errors[i];
-  return InvalidArgumentError(msg);
+  return InvalidArgumentError("invalid integrator options: " +
+                              fmt::format("{}", fmt::join(errors, "; ")));
 }
 
 std::string IntegrationStats::ToString() const {
@@ -159,15 +159,13 @@ void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, O
         RayWalker w(origin, rays[j].end, block_size);
         if (!w.ok()) continue;
         while (true) {
-          const VoxelKey bk = w.key();
-          const uint64_t packed =
-              (static_cast<uint64_t>(static_cast<uint32_t>(bk.x)) & 0x1FFFFF) |
-              ((static_cast<uint64_t>(static_cast<uint32_t>(bk.y)) & 0x1FFFFF) << 21) |
-              ((static_cast<uint64_t>(static_cast<uint32_t>(bk.z)) & 0x1FFFFF) << 42);
+          const VoxelKey k = w.key();  // a block key: the walk is on the block lattice
+          const BlockKey bk{k.x, k.y, k.z};
+          const uint64_t packed = OccupancyGrid::Pack(bk);
           uint64_t& slot = seen[(packed * 0x9E3779B97F4A7C15ULL) >> 52];
           if (slot != packed) {
             slot = packed;
-            out.push_back({bk.x, bk.y, bk.z});
+            out.push_back(bk);
           }
           if (w.remaining() == 0) break;
           w.Step();
@@ -334,6 +332,10 @@ void CarveProjective(const RgbdFrame& frame, const std::vector<RayEnd>& rays, Oc
   const int nd = 2 * nr + 1;
   const double near_r2 = (kNearRadius * s) * (kNearRadius * s);
   const auto is_near = [&](const VoxelKey& k) { return (k.Center(s) - o).squaredNorm() < near_r2; };
+  const auto near_index = [&](const VoxelKey& k) {
+    return static_cast<size_t>((k.x - ok.x + nr) +
+                               nd * ((k.y - ok.y + nr) + nd * (k.z - ok.z + nr)));
+  };
   std::vector<std::vector<uint8_t>> near_parts(static_cast<size_t>(threads));
   RunParallel(threads, [&](int th) {
     std::vector<uint8_t>& part = near_parts[static_cast<size_t>(th)];
@@ -344,8 +346,7 @@ void CarveProjective(const RgbdFrame& frame, const std::vector<RayEnd>& rays, Oc
       while (walker.remaining() > 0) {
         const VoxelKey k = walker.key();
         if (!is_near(k)) break;
-        part[static_cast<size_t>((k.x - ok.x + nr) +
-                                 nd * ((k.y - ok.y + nr) + nd * (k.z - ok.z + nr)))] = 1;
+        part[near_index(k)] = 1;
         walker.Step();
       }
     }
@@ -421,9 +422,7 @@ void CarveProjective(const RgbdFrame& frame, const std::vector<RayEnd>& rays, Oc
         const VoxelKey k = mapping::KeyOf(bk, i);
         const Eigen::Vector3d c_W = k.Center(s);
         if ((c_W - o).squaredNorm() < near_r2) {
-          const size_t ni = static_cast<size_t>((k.x - ok.x + nr) +
-                                                nd * ((k.y - ok.y + nr) + nd * (k.z - ok.z + nr)));
-          if (near_carved[ni]) bits.set(i);
+          if (near_carved[near_index(k)]) bits.set(i);
           continue;
         }
         const Eigen::Vector3d c_C = R_CW * c_W + t_CW;

@@ -8,6 +8,7 @@
 #include <unordered_set>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <octomap/ColorOcTree.h>
 #include <octomap/OcTree.h>
 
@@ -276,9 +277,8 @@ Status GroundTruthCompareOptions::Validate() const {
                                  static_cast<int>(semantic_class)));
   }
   if (errors.empty()) return Status::Ok();
-  std::string message = "invalid ground-truth comparison options: ";
-  for (size_t i = 0; i < errors.size(); ++i) message += (i ? "; " : "") + errors[i];
-  return InvalidArgumentError(message);
+  return InvalidArgumentError("invalid ground-truth comparison options: " +
+                              fmt::format("{}", fmt::join(errors, "; ")));
 }
 
 std::vector<VoxelKey> OccupiedVoxelsOfClass(const OccupancyGrid& grid,

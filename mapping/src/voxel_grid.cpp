@@ -4,6 +4,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <avp/core/error.h>
 #include <avp/mapping/voxel_grid.h>
@@ -36,9 +37,7 @@ Status GridOptions::Validate() const {
   }
   if (Status s = sensor.Validate(); !s.ok()) errors.push_back(s.message());
   if (errors.empty()) return Status::Ok();
-  std::string msg = "invalid map options: ";
-  for (size_t i = 0; i < errors.size(); ++i) msg += (i ? "; " : "") + errors[i];
-  return InvalidArgumentError(msg);
+  return InvalidArgumentError("invalid map options: " + fmt::format("{}", fmt::join(errors, "; ")));
 }
 
 OccupancyGrid::OccupancyGrid(const GridOptions& options) : options_(options) {

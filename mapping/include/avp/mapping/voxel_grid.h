@@ -372,6 +372,14 @@ class OccupancyGrid {
     const int32_t i = Lookup(b);
     return i < 0 ? nullptr : blocks_[static_cast<size_t>(i)].get();
   }
+  /// A block key packed into 63 bits (21 per axis, offset by 2^20): the hash table's key.
+  static uint64_t Pack(const BlockKey& b) {
+    constexpr int64_t kOffset = int64_t{1} << 20;
+    constexpr uint64_t kMask = (uint64_t{1} << 21) - 1;
+    return (static_cast<uint64_t>(b.x + kOffset) & kMask) |
+           ((static_cast<uint64_t>(b.y + kOffset) & kMask) << 21) |
+           ((static_cast<uint64_t>(b.z + kOffset) & kMask) << 42);
+  }
   /// Index of a block in allocation order, or -1.
   int32_t Lookup(const BlockKey& b) const {
     if (table_keys_.empty()) return -1;
@@ -387,13 +395,6 @@ class OccupancyGrid {
 
  private:
   static constexpr uint64_t kEmptySlot = ~uint64_t{0};
-  static uint64_t Pack(const BlockKey& b) {
-    constexpr int64_t kOffset = int64_t{1} << 20;
-    constexpr uint64_t kMask = (uint64_t{1} << 21) - 1;
-    return (static_cast<uint64_t>(b.x + kOffset) & kMask) |
-           ((static_cast<uint64_t>(b.y + kOffset) & kMask) << 21) |
-           ((static_cast<uint64_t>(b.z + kOffset) & kMask) << 42);
-  }
   static size_t Hash(uint64_t packed) {
     return static_cast<size_t>((packed * 0x9E3779B97F4A7C15ULL) >> 17);
   }
