@@ -51,6 +51,15 @@ Result<PlanningSnapshot> PlanningSnapshot::Build(const OccupancyGrid& grid, cons
   snap.sx_ = bx_count;
   snap.sy_ = by_count;
   snap.cells_.assign(static_cast<size_t>(bytes), 0);
+  const int64_t n[3] = {nx, ny, nz};
+  for (int a = 0; a < 3; ++a) {
+    std::vector<int64_t>& t = snap.axis_offsets_[a];
+    t.assign(static_cast<size_t>(n[a] + 2 * kPad), kOutsideOffset);
+    for (int64_t i = 0; i < n[a]; ++i) {
+      t[static_cast<size_t>(i + kPad)] =
+          static_cast<int64_t>(snap.Index(a == 0 ? i : 0, a == 1 ? i : 0, a == 2 ? i : 0));
+    }
+  }
 
   const float occ = grid.occupied_log_odds();
   grid.ForEachBlock([&](const OccupancyBlock& b) {
@@ -102,8 +111,110 @@ PlanningSnapshot::RayCounts PlanningSnapshot::CastRay(const Eigen::Vector3d& fro
   if (!w.ok()) return c;
   int64_t left = w.remaining();  // voxels to visit: the start voxel up to (excluding) the end's
   if (left == 0) return c;
+  if (w.exhausted_tie_) return CastRayGuarded(w);
 
-  // RayWalker's decisions, with its state in scalars (registers) and a branchless axis choice:
+  // RayWalker's decisions on three pairwise differences d_ij = N_i A_j - N_j A_i (axis i steps
+  // before j iff d_ij <= 0; a step along i adds 2^16 A_j to d_ij and subtracts it from d_ji).
+  // No exhaustion guard is needed: an exhausted axis's next crossing lies beyond the end point
+  // (t > 1; the t == 1 tie went to the guarded loop above), every pending crossing at t <= 1, and
+  // the loop stops after exactly remaining() steps.
+  int64_t dxy = w.diff_[0], dxz = w.diff_[1], dyz = w.diff_[2];
+  const int64_t ax = w.inc_[1][0], ay = w.inc_[0][1], az = w.inc_[0][2];  // 2^16 A_i
+  const int64_t sx = w.step_[0], sy = w.step_[1], sz = w.step_[2];
+  const int64_t total = left;
+  // Each key coordinate is monotone along the ray, so the ray meets the box in one run of voxels
+  // at most: walk up to it, walk through it, and count everything after it as unknown.
+  int64_t relx = int64_t{w.key_[0]} - min_.x, rely = int64_t{w.key_[1]} - min_.y,
+          relz = int64_t{w.key_[2]} - min_.z;
+  const int64_t nx = dims_.x(), ny = dims_.y(), nz = dims_.z();
+  const auto step = [&] {
+    const bool x_first = (dxy <= 0) & (dxz <= 0);
+    const bool y_first = !x_first & (dyz <= 0);
+    const int64_t mx = -static_cast<int64_t>(x_first), my = -static_cast<int64_t>(y_first),
+                  mz = ~(mx | my);
+    relx += sx & mx;
+    rely += sy & my;
+    relz += sz & mz;
+    dxy += (ay & mx) - (ax & my);
+    dxz += (az & mx) - (ax & mz);
+    dyz += (az & my) - (ay & mz);
+  };
+  while (!(static_cast<uint64_t>(relx) < static_cast<uint64_t>(nx) &&
+           static_cast<uint64_t>(rely) < static_cast<uint64_t>(ny) &&
+           static_cast<uint64_t>(relz) < static_cast<uint64_t>(nz))) {
+    // Outside, before the box: stop as soon as one coordinate is outside on the side the ray
+    // moves away to (or does not move): it never enters.
+    const bool never = (relx < 0 && sx <= 0) || (relx >= nx && sx >= 0) || (rely < 0 && sy <= 0) ||
+                       (rely >= ny && sy >= 0) || (relz < 0 && sz <= 0) || (relz >= nz && sz >= 0);
+    if (never || --left == 0) {
+      c.visited = c.unknown = static_cast<uint32_t>(total);
+      return c;
+    }
+    step();
+  }
+
+  // Inside: the cell offset is a sum of three per-axis table entries, walked by pointer; leaving
+  // the box lands on a kOutsideOffset entry, so one compare tests the box. The walk goes in
+  // chunks: the offsets of up to kChunk voxels first (the DDA alone, no memory dependence), then
+  // their cells, whose loads are independent of each other and overlap.
+  const int64_t* px = axis_offsets_[0].data() + kPad + relx;
+  const int64_t* py = axis_offsets_[1].data() + kPad + rely;
+  const int64_t* pz = axis_offsets_[2].data() + kPad + relz;
+  const uint8_t* const cells = cells_.data();
+  const uint64_t size = cells_.size();
+  uint64_t offsets[kChunk];
+  uint32_t free = 0;
+  while (true) {
+    const int n = static_cast<int>(std::min<int64_t>(left, kChunk));
+    for (int i = 0; i < n; ++i) {
+      const uint64_t offset = static_cast<uint64_t>(*px + *py + *pz);
+      offsets[i] = offset;
+      // Start the cell's load now (a prefetch never faults, so offsets past the box are harmless).
+      __builtin_prefetch(
+          reinterpret_cast<const void*>(reinterpret_cast<uintptr_t>(cells) + offset));
+      // All-ones masks of d <= 0 (|d| < 2^62, so d - 1 cannot overflow).
+      const int64_t le_xy = (dxy - 1) >> 63, le_xz = (dxz - 1) >> 63, le_yz = (dyz - 1) >> 63;
+      const int64_t mx = le_xy & le_xz, my = ~mx & le_yz, mz = ~(mx | my);
+      px += sx & mx;
+      py += sy & my;
+      pz += sz & mz;
+      dxy += (ay & mx) - (ax & my);
+      dxz += (az & mx) - (ax & mz);
+      dyz += (az & my) - (ay & mz);
+    }
+    for (int i = 0; i < n; ++i) {
+      const uint64_t offset = offsets[i];
+      if (offset >= size) [[unlikely]] {  // left the box: the rest is unknown
+        left = 0;
+        goto done;
+      }
+      const uint8_t cell = cells[offset];
+      const uint32_t state = cell & kStateMask;
+      if (state == static_cast<uint32_t>(VoxelState::kOccupied)) [[unlikely]] {
+        c.hit = true;
+        c.hit_class = static_cast<uint8_t>(cell >> kClassShift);
+        left -= i + 1;
+        goto done;
+      }
+      free += state;  // kFree == 1, kUnknown == 0
+    }
+    left -= n;
+    if (left == 0) break;
+  }
+done:
+  const uint32_t visited = static_cast<uint32_t>(total - left);
+  c.free = free;
+  c.visited = visited;
+  c.unknown = visited - free - (c.hit ? 1u : 0u);
+  return c;
+}
+
+PlanningSnapshot::RayCounts PlanningSnapshot::CastRayGuarded(const RayWalker& w) const {
+  RayCounts c;
+  int64_t left = w.remaining();
+
+  // RayWalker's decisions exactly, exhausted axes included, with its state in scalars (registers)
+  // and a branchless axis choice:
   // p_ij = N_i * A_j, axis i steps first iff p_ij <= p_ji against both others (lower axis on
   // ties); an exhausted axis gets kNever so it is never chosen again.
   constexpr int64_t kNever = RayWalker::kNever;

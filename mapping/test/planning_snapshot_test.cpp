@@ -23,8 +23,10 @@ constexpr double kVoxel = 0.005;
 /// A 40^3-voxel region around (-20 .. 19) with ~35 % known voxels, 3 % of them occupied, and
 /// labels (fruit, leaf, support) on some known voxels (occupied and free) and on a few unknown
 /// ones (payload without occupancy).
-OccupancyGrid RandomGrid(uint64_t seed) {
-  OccupancyGrid grid;
+OccupancyGrid RandomGrid(uint64_t seed, double voxel_size_m = kVoxel) {
+  GridOptions options;
+  options.voxel_size_m = voxel_size_m;
+  OccupancyGrid grid(options);
   Rng rng(seed);
   for (int32_t z = -20; z < 20; ++z) {
     for (int32_t y = -20; y < 20; ++y) {
@@ -73,9 +75,9 @@ bool InSnapshot(const PlanningSnapshot& snap, const VoxelKey& k) {
 /// `state_of`, stopping at (and counting) the first occupied one.
 template <typename StateOf>
 PlanningSnapshot::RayCounts ReferenceCast(const Eigen::Vector3d& from, const Eigen::Vector3d& to,
-                                          StateOf&& state_of) {
+                                          StateOf&& state_of, double voxel_size_m = kVoxel) {
   std::vector<VoxelKey> keys;
-  TraverseRay(from, to, kVoxel, [&](const VoxelKey& k) {
+  TraverseRay(from, to, voxel_size_m, [&](const VoxelKey& k) {
     keys.push_back(k);
     return true;
   });
@@ -352,6 +354,41 @@ TEST(PlanningSnapshotTest, CastRayMatchesBruteForceOnRandomRays) {
   EXPECT_GT(hits, 1000);
   EXPECT_GT(misses, 1000);
   EXPECT_GT(outside_starts, 1000);
+}
+
+// End points exactly on voxel faces, edges and corners (a power-of-two voxel makes the lattice
+// exact): rays whose exhausted axis would cross exactly at the end point go through the guarded
+// loop, every other ray through the fast one; both must equal the brute-force walk.
+TEST(PlanningSnapshotTest, CastRayMatchesBruteForceWithEndPointsOnVoxelFaces) {
+  constexpr double kPow2Voxel = 1.0 / 128.0;  // 7.8125 mm, exact in binary
+  const OccupancyGrid grid = RandomGrid(5, kPow2Voxel);
+  const auto snap = PlanningSnapshot::BuildOverKnown(grid);
+  ASSERT_TRUE(snap.ok());
+  const auto grid_state = [&](const VoxelKey& k) {
+    return std::pair<VoxelState, uint8_t>(grid.State(k), ClassOf(grid, k));
+  };
+  Rng rng(71);
+  int hits = 0, negative_face_ends = 0;
+  for (int i = 0; i < 6000; ++i) {
+    Eigen::Vector3d from, to;
+    for (int a = 0; a < 3; ++a) {
+      // Half the coordinates on a face (an integer multiple of the voxel), half in between.
+      const auto coord = [&] {
+        const double k = static_cast<double>(rng.UniformInt(-24, 24));
+        return rng.Bernoulli(0.5) ? k * kPow2Voxel : (k + rng.Uniform(0.0, 1.0)) * kPow2Voxel;
+      };
+      from[a] = coord();
+      to[a] = coord();
+      negative_face_ends += to[a] < from[a] && std::floor(to[a] / kPow2Voxel) * kPow2Voxel == to[a];
+    }
+    const auto got = snap->CastRay(from, to);
+    const auto want = ReferenceCast(from, to, grid_state, kPow2Voxel);
+    ASSERT_TRUE(Same(got, want)) << "ray " << i << ": got " << Describe(got) << ", want "
+                                 << Describe(want);
+    hits += got.hit;
+  }
+  EXPECT_GT(hits, 500);
+  EXPECT_GT(negative_face_ends, 3000);
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include <avp/core/box.h>
 #include <avp/core/status.h>
 #include <avp/core/voxel_key.h>
+#include <avp/mapping/ray_traversal.h>
 #include <avp/mapping/voxel_grid.h>
 
 namespace avp::mapping {
@@ -68,6 +69,10 @@ class PlanningSnapshot {
   RayCounts CastRay(const Eigen::Vector3d& from, const Eigen::Vector3d& to) const;
 
  private:
+  /// CastRay with RayWalker's exhaustion guards, for the rare rays whose end point lies exactly
+  /// on a voxel face that an exhausted axis would cross on a tie.
+  RayCounts CastRayGuarded(const RayWalker& w) const;
+
   double voxel_size_m_ = 0.0;
   VoxelKey min_;
   Eigen::Vector3i dims_ = Eigen::Vector3i::Zero();
@@ -79,6 +84,16 @@ class PlanningSnapshot {
   }
   int64_t sx_ = 0, sy_ = 0;  ///< bricks along x and y
   std::vector<uint8_t> cells_;
+  /// CastRay walks the ray in chunks of this many steps: first the cell offsets (pure integer
+  /// work), then the cells (independent loads the CPU overlaps).
+  static constexpr int kChunk = 32;
+  /// Index(x, y, z) == axis_offsets_[0][x + kPad] + axis_offsets_[1][y + kPad] +
+  /// axis_offsets_[2][z + kPad] for coordinates inside the box; the kPad entries on either side
+  /// are kOutsideOffset, so any sum that involves one is >= cells_.size() (a one-compare box
+  /// test), and a chunk that walks on past the box stays inside the table.
+  static constexpr int kPad = kChunk + 1;
+  static constexpr int64_t kOutsideOffset = int64_t{1} << 40;
+  std::vector<int64_t> axis_offsets_[3];
 };
 
 }  // namespace avp::mapping

@@ -44,8 +44,8 @@ class RayWalker {
         remaining_ = 0;
         return;
       }
-      u0[i] = static_cast<int64_t>(std::floor(a));
-      u1[i] = static_cast<int64_t>(std::floor(b));
+      u0[i] = FloorToInt(a);
+      u1[i] = FloorToInt(b);
     }
     constexpr int64_t kOne = int64_t{1} << kFractionBits;
     int64_t n[3], a[3];
@@ -66,6 +66,15 @@ class RayWalker {
     if (!ok_) {
       remaining_ = 0;
       return;
+    }
+    // Raw pairwise differences for the unguarded loop (PlanningSnapshot::CastRay): axis i steps
+    // before axis j iff d <= 0. An exhausted axis's next crossing lies at t >= 1, every pending
+    // crossing at t <= 1, so without guards only a tie at t == 1 could pick an exhausted axis.
+    diff_[0] = n[0] * a[1] - n[1] * a[0];
+    diff_[1] = n[0] * a[2] - n[2] * a[0];
+    diff_[2] = n[1] * a[2] - n[2] * a[1];
+    for (int i = 0; i < 3; ++i) {
+      if (a[i] > 0 && n[i] + axis_remaining_[i] * kOne == a[i]) exhausted_tie_ = true;
     }
     // p_[i][j] = N_i * A_j: t_i <= t_j  <=>  p_[i][j] <= p_[j][i].
     for (int i = 0; i < 3; ++i) {
@@ -108,6 +117,12 @@ class RayWalker {
   }
 
  private:
+  /// floor(v) for |v| < 2^52, without a libm call (baseline x86-64 has no SSE4.1 round).
+  static int64_t FloorToInt(double v) {
+    const int64_t t = static_cast<int64_t>(v);  // truncates toward zero
+    return t - static_cast<int64_t>(v < static_cast<double>(t));
+  }
+
   friend class PlanningSnapshot;  // its CastRay runs the same decisions in registers
   static constexpr int64_t kNever = std::numeric_limits<int64_t>::max();
   bool ok_ = true;
@@ -118,6 +133,11 @@ class RayWalker {
   int last_axis_ = -1;
   int64_t p_[3][3] = {};
   int64_t inc_[3][3] = {};
+  /// N_x A_y - N_y A_x, N_x A_z - N_z A_x, N_y A_z - N_z A_y (no kNever substitution).
+  int64_t diff_[3] = {0, 0, 0};
+  /// Some axis's first crossing after its last step lies exactly at the end point (t == 1): the
+  /// unguarded decisions could pick it on a tie, so CastRay takes the guarded loop.
+  bool exhausted_tie_ = false;
 };
 
 /// The voxel of a point as RayWalker sees it: always VoxelKey::FromPoint (end points are floored
