@@ -24,6 +24,11 @@ const std::map<std::string, std::set<std::string>> kAllowed = {
     {"sim", {"core", "io", "sim"}},
     {"robot", {"core", "io", "robot"}},
     {"mapping", {"core", "io", "mapping"}},
+    {"segmentation", {"core", "io", "segmentation"}},
+    {"planning", {"core", "io", "robot", "mapping", "planning"}},
+    {"pipeline", {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "pipeline"}},
+    {"eval",
+     {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "pipeline", "eval"}},
 };
 
 const std::vector<std::string> kForbiddenPrefixes = {"CLI/",  "grpc",        "grpcpp/", "dds/",

@@ -1,4 +1,4 @@
-// The `avp` command line. Subcommands: scenes, render, map (run, bench, serve come later).
+// The `avp` command line. Subcommands: scenes, render, map, run, bench (serve comes later).
 #include <cstdio>
 #include <iostream>
 
@@ -8,6 +8,7 @@
 
 #include <avp/apps/map_command.h>
 #include <avp/apps/render_command.h>
+#include <avp/apps/run_command.h>
 #include <avp/core/error.h>
 #include <avp/sim/scenario.h>
 
@@ -126,6 +127,67 @@ int MapCompareAndReport(const avp::apps::MapCompareOptions& options) {
   }
   std::fputs(avp::apps::FormatMapCompare(*result).c_str(), stdout);
   if (!options.json_out.empty()) std::printf("wrote %s\n", options.json_out.string().c_str());
+  return 0;
+}
+
+std::string Join(const std::vector<std::string>& v) {
+  std::string out;
+  for (const std::string& s : v) out += (out.empty() ? "" : ", ") + s;
+  return out;
+}
+
+int RunAndReport(const avp::apps::RunOptions& options) {
+  avp::apps::RunOptions o = options;
+  o.on_step = [](const avp::pipeline::StepRecord& s) {
+    const Eigen::Vector3d eye = s.X_WC.translation();
+    std::printf(
+        "view %d/%d  eye (%.3f, %.3f, %.3f)  %zu masks  F1 %.3f (tol %.3f)  fruits %.0f/%.0f  "
+        "[segment %.0f ms, integrate %.0f ms, plan %.0f ms%s]\n",
+        s.view + 1, s.views_total, eye.x(), eye.y(), eye.z(), s.masks, s.Metric("f1"),
+        s.Metric("f1_tol"), s.Metric("fruits_found"), s.Metric("fruits_total"), s.times.segment_ms,
+        s.times.integrate_ms, s.times.plan_ms,
+        s.planned ? fmt::format(", {} of {} candidates reachable", s.candidates_reachable,
+                                s.candidates_generated)
+                        .c_str()
+                  : "");
+    std::fflush(stdout);
+  };
+  const auto result = avp::apps::RunRun(o);
+  if (!result.ok()) {
+    spdlog::error("run failed: {}", result.status().ToString());
+    return 1;
+  }
+  const auto& r = result->result;
+  std::printf(
+      "%s with %s / %s, seed %llu: %d views (%s%s%s) in %.1f s; final F1 %.3f, fruits found "
+      "%zu/%zu\n",
+      result->scene_name.c_str(), options.config.planner.c_str(), options.config.segmenter.c_str(),
+      static_cast<unsigned long long>(options.config.seed), r.episode.views_fused(),
+      std::string(avp::pipeline::ToString(r.episode.end)).c_str(),
+      r.episode.end_reason.empty() ? "" : ": ", r.episode.end_reason.c_str(), result->seconds,
+      r.final_metrics.exact.f1, r.final_metrics.fruits.found, r.final_metrics.fruits.total);
+  std::printf("wrote %zu files to %s:\n", result->files.size(), options.out_dir.string().c_str());
+  for (const auto& f : result->files) std::printf("  %s\n", f.string().c_str());
+  return 0;
+}
+
+int BenchAndReport(const avp::apps::BenchOptions& options) {
+  const auto result = avp::apps::RunBench(options);
+  if (!result.ok()) {
+    spdlog::error("bench failed: {}", result.status().ToString());
+    return 1;
+  }
+  std::printf("%zu episodes (%zu failed) in %.1f s. Final view, mean ± 95 %% CI over %zu seeds:\n",
+              result->episodes, result->failed, result->seconds, options.seeds.size());
+  std::printf("  %-28s %-16s %-17s %-17s %s\n", "scenario", "planner", "F1 (exact)", "fruits found",
+              "plan ms/step");
+  for (const auto& c : result->cells) {
+    std::printf("  %-28s %-16s %.3f ± %.3f     %.3f ± %.3f     %.0f\n", c.scenario.c_str(),
+                c.planner.c_str(), c.final_f1_mean, c.final_f1_ci95, c.final_found_mean,
+                c.final_found_ci95, c.plan_ms_mean);
+  }
+  std::printf("wrote %s and the per-run records under %s\n", result->files.front().string().c_str(),
+              (options.out_dir / "runs").string().c_str());
   return 0;
 }
 
@@ -252,6 +314,63 @@ int main(int argc, char** argv) {
       ->default_val(cmp_class);
   compare_cmd->add_option("--json", cmp_json, "Also write the result as JSON to this file");
 
+  // avp run
+  avp::apps::RunOptions run;
+  std::string run_scene_file, run_policy = "bayesian", run_carving = "projective", run_gt;
+  bool run_no_noise = false;
+  auto* run_cmd = app.add_subcommand(
+      "run", "One simulated active-vision episode into a run folder (docs/experiments.md)");
+  run_cmd->add_option("--scenario", run.config.scenario, "Built-in scenario (see avp scenes)");
+  run_cmd->add_option("--scene", run_scene_file, "YAML scene file instead of a scenario");
+  run_cmd->add_option("--seed", run.config.seed, "Seed of the plant, the noise and every choice")
+      ->default_val(0);
+  run_cmd
+      ->add_option("--planner", run.config.planner,
+                   "View planner: " + Join(avp::eval::PlannerNames()))
+      ->default_val(run.config.planner);
+  run_cmd
+      ->add_option("--segmenter", run.config.segmenter,
+                   "Segmenter: " + Join(avp::eval::SegmenterNames()))
+      ->default_val(run.config.segmenter);
+  run_cmd->add_option("--views", run.config.views, "Fused views, start view included")
+      ->default_val(run.config.views);
+  run_cmd->add_option("--prompt", run.config.prompt, "Text prompt")->default_val(run.config.prompt);
+  run_cmd->add_option("--voxel-size", run.config.voxel_size_m, "Voxel edge in metres")
+      ->default_val(run.config.voxel_size_m);
+  run_cmd->add_option("--policy", run_policy, "Semantic fusion: bayesian or reference-max")
+      ->default_val(run_policy);
+  run_cmd->add_option("--carving", run_carving, "Free space: projective, raycast or none")
+      ->default_val(run_carving);
+  run_cmd->add_flag("--no-noise", run_no_noise, "Noise-free depth");
+  run_cmd->add_option("--gt", run_gt,
+                      "Ground truth from an OctoMap .bt instead of the observable fruit surface");
+  run_cmd
+      ->add_option("--threads", run.config.threads,
+                   "Threads (0 = all; results do not depend on it)")
+      ->default_val(0);
+  run_cmd->add_option("--out", run.out_dir, "Run folder")->default_val(run.out_dir.string());
+
+  // avp bench
+  avp::apps::BenchOptions bench;
+  std::string bench_config, bench_scenarios, bench_planners, bench_seeds, bench_out = "out/bench";
+  int bench_seed_count = 0;
+  auto* bench_cmd = app.add_subcommand(
+      "bench", "Scenarios x planners x seeds in parallel, with summary tables and plots");
+  bench_cmd->add_option("--config", bench_config,
+                        "Experiment YAML (e.g. configs/experiments/paper.yaml)");
+  bench_cmd->add_option("--scenarios", bench_scenarios,
+                        "Comma-separated scenarios (overrides the config)");
+  bench_cmd->add_option("--planners", bench_planners,
+                        "Comma-separated planners (overrides the config)");
+  bench_cmd->add_option("--seeds", bench_seeds,
+                        "Comma-separated seeds, or N for 0..N-1 (overrides the config)");
+  bench_cmd->add_option("--views", bench.base.views, "Fused views per episode")->default_val(8);
+  bench_cmd->add_option("--segmenter", bench.base.segmenter, "Segmenter")->default_val("oracle");
+  bench_cmd->add_option("--jobs", bench.jobs, "Episodes at once (0 = hardware threads)")
+      ->default_val(0);
+  bench_cmd->add_option("--out", bench_out, "Output folder")->default_val(bench_out);
+  (void)bench_seed_count;
+
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -263,6 +382,81 @@ int main(int argc, char** argv) {
       if (joints_opt->count() > 0) render.joints_deg = joints;
       if (pose_opt->count() > 0) render.camera_pose = pose;
       return RenderAndReport(render);
+    }
+    if (run_cmd->parsed()) {
+      run.config.scene_file = run_scene_file;
+      run.config.gt_file = run_gt;
+      run.config.depth_noise = !run_no_noise;
+      const auto policy = avp::mapping::FusionPolicyFromString(run_policy);
+      const auto carving = avp::mapping::FreeSpaceCarvingFromString(run_carving);
+      if (!policy || !carving) {
+        spdlog::error("run: unknown {} '{}'", policy ? "carving" : "policy",
+                      policy ? run_carving : run_policy);
+        return 1;
+      }
+      run.config.policy = *policy;
+      run.config.carving = *carving;
+      if (run.config.scenario.empty() && run.config.scene_file.empty()) {
+        run.config.scenario = std::string(avp::sim::DefaultScenarioName());
+      }
+      return RunAndReport(run);
+    }
+    if (bench_cmd->parsed()) {
+      if (!bench_config.empty()) {
+        const int views = bench.base.views;
+        const std::string segmenter = bench.base.segmenter;
+        const int jobs = bench.jobs;
+        auto loaded = avp::apps::LoadBenchConfig(bench_config);
+        if (!loaded.ok()) {
+          spdlog::error("bench: {}", loaded.status().ToString());
+          return 1;
+        }
+        bench = *loaded;
+        bench.jobs = jobs;
+        if (bench_cmd->get_option("--views")->count() > 0) bench.base.views = views;
+        if (bench_cmd->get_option("--segmenter")->count() > 0) bench.base.segmenter = segmenter;
+      }
+      auto split = [](const std::string& s) {
+        std::vector<std::string> out;
+        size_t start = 0;
+        while (start <= s.size()) {
+          const size_t comma = s.find(',', start);
+          std::string item =
+              s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+          item.erase(0, item.find_first_not_of(" \t"));
+          item.erase(item.find_last_not_of(" \t") + 1);
+          if (!item.empty()) out.push_back(item);
+          if (comma == std::string::npos) break;
+          start = comma + 1;
+        }
+        return out;
+      };
+      if (!bench_scenarios.empty()) bench.scenarios = split(bench_scenarios);
+      if (!bench_planners.empty()) bench.planners = split(bench_planners);
+      if (bench.scenarios.empty()) {
+        for (const auto& s : avp::sim::ListScenarios()) bench.scenarios.push_back(s.name);
+      }
+      if (bench.planners.empty()) bench.planners = {"avp-nbv", "predefined", "reference-nbv"};
+      if (!bench_seeds.empty()) {
+        bench.seeds.clear();
+        try {
+          const std::vector<std::string> items = split(bench_seeds);
+          if (items.size() == 1 && bench_seeds.find(',') == std::string::npos) {
+            const unsigned long long n = std::stoull(items[0]);
+            for (unsigned long long i = 0; i < n; ++i) bench.seeds.push_back(i);
+          } else {
+            for (const std::string& item : items) bench.seeds.push_back(std::stoull(item));
+          }
+        } catch (const std::exception&) {
+          spdlog::error("bench: bad --seeds '{}' (a count N, or a list like 0,1,5)", bench_seeds);
+          return 1;
+        }
+      }
+      if (bench.seeds.empty()) {
+        for (uint64_t i = 0; i < 10; ++i) bench.seeds.push_back(i);
+      }
+      bench.out_dir = bench_out;
+      return BenchAndReport(bench);
     }
     if (map_cmd->parsed()) {
       if (build_cmd->parsed()) {

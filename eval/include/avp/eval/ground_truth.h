@@ -1,0 +1,116 @@
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include <avp/core/camera.h>
+#include <avp/core/status.h>
+#include <avp/core/transform.h>
+#include <avp/core/voxel_key.h>
+#include <avp/robot/arm_model.h>
+#include <avp/sim/scene.h>
+
+namespace avp::eval {
+
+/// How the observable ground truth is computed (docs/evaluation.md).
+struct GroundTruthOptions {
+  /// Voxel edge of the ground truth; must equal the evaluated map's (2 - 20 mm).
+  double voxel_size_m = 0.005;
+  /// Observation views: for each fruit, camera positions on spheres of these radii (metres)
+  /// around its centre, over a fan of azimuths and elevations facing the robot base (the world
+  /// origin), looking at the fruit; kept only when the arm reaches them (ArmModel::SolveCameraIk
+  /// from the start joints, seeded), i.e. views the arm could really take.
+  std::vector<double> radii_m = {0.28, 0.40, 0.55};
+  /// Azimuths per radius and elevation, spread evenly over the fan centred on the direction from
+  /// the fruit to the base, +-azimuth_half_range_deg wide (one azimuth: the centre only).
+  int azimuths = 9;
+  /// Elevations of the camera above the fruit's horizontal plane, degrees, each in (-89, 89).
+  std::vector<double> elevations_deg = {-30.0, 0.0, 30.0, 55.0};
+  double azimuth_half_range_deg = 85.0;
+  /// Render size of the observation views; fx, fy, cx, cy are scaled from the episode camera
+  /// (its field of view is kept), its depth range is kept.
+  int image_width = 320;
+  int image_height = 240;
+  /// Returns farther from the camera than this (Euclidean) are ignored, as the integrator's
+  /// max_range_m ignores them (mapping::IntegratorOptions, default 1.5 m).
+  double max_range_m = 1.5;
+  /// Seed of the IK restarts (each view draws from its own stream of it).
+  uint64_t seed = 0;
+  /// Worker threads (0 = all hardware threads). The result does not depend on it.
+  int num_threads = 0;
+
+  /// OK, or InvalidArgument naming every bad field and its value.
+  Status Validate() const;
+};
+
+/// One candidate observation view of ObservableGroundTruth.
+struct ObservationView {
+  uint16_t fruit_id = 0;  ///< the fruit it looks at
+  double radius_m = 0.0;
+  double azimuth_deg = 0.0;    ///< of the camera seen from the fruit, about world z
+  double elevation_deg = 0.0;  ///< of the camera above the fruit's horizontal plane
+  RigidTransform X_WC;         ///< camera optical frame looking at the fruit centre, image up = +z
+};
+
+/// The fruit-surface voxels a map is scored against, with the fruits they belong to.
+struct GroundTruth {
+  double voxel_size_m = 0.0;
+  /// Observable fruit-surface voxels -> fruit instance id (0 = unknown fruit, for a file read
+  /// without a scene).
+  std::unordered_map<VoxelKey, uint16_t, VoxelKeyHash> voxels;
+  /// Every fruit of the scene, in instance-id order (empty for a file read without a scene).
+  std::vector<sim::FruitTruth> fruits;
+  /// Observable voxels per fruit of `fruits` (0 = never observable).
+  std::unordered_map<uint16_t, size_t> voxels_per_fruit;
+  /// Observation views generated and those the arm reaches (0 for files).
+  size_t views_tried = 0;
+  size_t views_reachable = 0;
+  /// The reachable observation views, in candidate order (empty for files).
+  std::vector<ObservationView> views;
+  /// "observable:<scene name>" or "file:<path>".
+  std::string source;
+
+  /// The voxel keys in ascending (x, y, z) order.
+  std::vector<VoxelKey> SortedKeys() const;
+  /// Fruits with at least one observable voxel.
+  size_t ObservableFruits() const;
+};
+
+/// Every candidate view of every fruit, in order fruit (id) -> radius -> elevation -> azimuth;
+/// views whose camera would be below the ground plane (z <= 0) are left out.
+/// @pre options.Validate() is OK (throws avp::Error otherwise).
+std::vector<ObservationView> ObservationViews(const std::vector<sim::FruitTruth>& fruits,
+                                              const GroundTruthOptions& options);
+
+/// The intrinsics of the observation views: `K`'s field of view, principal point and depth range
+/// at options.image_width x options.image_height.
+CameraIntrinsics ObservationIntrinsics(const CameraIntrinsics& K,
+                                       const GroundTruthOptions& options);
+
+/// The observable ground truth: the voxels (VoxelKey lattice, options.voxel_size_m) that contain a
+/// point of a fruit's surface seen in at least one reachable observation view. Every fruit pixel
+/// of a view with a valid depth within options.max_range_m is back-projected to its 3-D point;
+/// its voxel joins the set with the pixel's instance id (the smaller id when two fruits share a
+/// voxel). This is what a perfect map integrating those views would mark as occupied fruit, so
+/// F1 = 1 is attainable. Deterministic: the same inputs give the same set for any thread count.
+/// Errors: InvalidArgument for bad options, intrinsics, a q_start of the wrong size or with a
+/// non-finite entry, or an invalid scene.
+Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::ArmModel& arm,
+                                          const Eigen::VectorXd& q_start, const CameraIntrinsics& K,
+                                          const GroundTruthOptions& options);
+
+/// A ground truth read from an OctoMap file (.bt, or .ot): its occupied voxels at the finest
+/// resolution (mapping::ImportOctomapOccupied). With a scene, each voxel goes to the fruit whose
+/// surface is nearest its centre (distance | |p - c| - mean radius |, ties to the smaller id) and
+/// `fruits` / `voxels_per_fruit` are filled; without one (nullptr) every voxel has id 0 and there
+/// are no fruits. Errors: those of ImportOctomapOccupied (NotFound, ParseError, OutOfRange).
+Result<GroundTruth> GroundTruthFromOctomapFile(const std::filesystem::path& bt,
+                                               const sim::Scene* scene);
+
+}  // namespace avp::eval

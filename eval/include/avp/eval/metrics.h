@@ -1,0 +1,115 @@
+#pragma once
+
+#include <cstddef>
+#include <limits>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include <avp/core/box.h>
+#include <avp/core/semantic_class.h>
+#include <avp/core/status.h>
+#include <avp/core/voxel_key.h>
+#include <avp/eval/ground_truth.h>
+#include <avp/mapping/semantic_map.h>
+
+namespace avp::eval {
+
+/// Voxel precision / recall of a predicted set against the ground truth (docs/evaluation.md).
+///
+/// Exact (tolerance 0): tp = predicted voxels that are GT voxels, fp = predicted - tp,
+/// fn = GT - tp. With a tolerance of t voxels (Chebyshev, t = 1: the 26-neighbourhood) the two
+/// sides are counted separately: tp = GT voxels with a predicted voxel within t (recalled),
+/// fn = GT - tp, fp = predicted voxels with no GT voxel within t; precision =
+/// (predicted - fp) / predicted, recall = tp / GT. With t = 0 both definitions agree.
+/// f1 = 2 p r / (p + r); each ratio is 0 when its denominator is 0.
+struct VoxelScores {
+  size_t tp = 0;
+  size_t fp = 0;
+  size_t fn = 0;
+  double precision = 0.0;
+  double recall = 0.0;
+  double f1 = 0.0;
+  size_t predicted = 0;     ///< distinct predicted voxels
+  size_t ground_truth = 0;  ///< GT voxels
+};
+
+/// Fruit-level results (docs/evaluation.md).
+struct FruitScores {
+  /// GT fruits found (see EvalOptions), of `total` fruits in the scene, `observable` of which have
+  /// at least one GT voxel.
+  size_t found = 0;
+  size_t total = 0;
+  size_t observable = 0;
+  /// found / total (0 when total is 0).
+  double found_fraction = 0.0;
+  /// Over the found fruits: mean |fitted centre - true centre| and |fitted radius - true mean
+  /// radius|, metres; NaN when no fruit is found.
+  double mean_center_error_m = std::numeric_limits<double>::quiet_NaN();
+  double mean_radius_error_m = std::numeric_limits<double>::quiet_NaN();
+  /// Instances of the target class in the map (SemanticMap::Instances()).
+  size_t map_instances = 0;
+};
+
+struct EvalOptions {
+  /// The class whose occupied, labelled voxels are the prediction.
+  SemanticClass target = SemanticClass::kFruit;
+  /// A GT fruit is found when at least max(found_min_voxels, found_min_fraction x its observable
+  /// voxels) of its GT voxels are recalled with the one-voxel tolerance.
+  double found_min_fraction = 0.10;
+  size_t found_min_voxels = 3;
+  /// Region whose coverage (fraction of its voxels the map knows) is reported; empty = skip.
+  Box3 roi;
+
+  /// OK, or InvalidArgument naming every bad field and its value.
+  Status Validate() const;
+};
+
+struct MapMetrics {
+  VoxelScores exact;     ///< voxel identity (comparable with the paper)
+  VoxelScores tolerant;  ///< one-voxel tolerance
+  FruitScores fruits;
+  /// Binary entropy (bits) of the confidence of every target-labelled voxel, occupied or not:
+  /// sum and mean (0 when there is none).
+  double entropy_sum_bits = 0.0;
+  double entropy_mean_bits = 0.0;
+  size_t labelled_voxels = 0;   ///< target-labelled voxels the entropy is taken over
+  size_t predicted_voxels = 0;  ///< target-labelled and occupied
+  /// Known voxels / voxels whose centre lies in EvalOptions::roi (0 when the ROI is empty).
+  double roi_coverage = 0.0;
+  size_t roi_voxels = 0;
+  size_t roi_known_voxels = 0;
+};
+
+/// Scores a map against a ground truth. Predicted voxels: labelled `options.target` and occupied.
+/// @throws avp::Error if the options are invalid or the map's voxel size differs from gt's.
+MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
+                       const EvalOptions& options = {});
+
+/// Scores a set of predicted keys (duplicates ignored) on gt's lattice with a Chebyshev tolerance
+/// of `tolerance_voxels` (0 = exact, 1 = 26-neighbourhood). O(N (2t + 1)^3) with hashed sets.
+/// @throws avp::Error unless 0 <= tolerance_voxels <= 8.
+VoxelScores ScoreVoxelSets(const std::vector<VoxelKey>& predicted, const GroundTruth& gt,
+                           int tolerance_voxels);
+
+/// A sphere fitted to points.
+struct SphereFit {
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  double radius_m = 0.0;
+  /// True for the least-squares fit; false for the centroid fallback (fewer than 10 points or a
+  /// degenerate fit), whose radius is the mean distance of the points to their centroid.
+  bool fitted = false;
+};
+
+/// Algebraic (linear) least-squares sphere fit: minimises sum (|p|^2 - 2 c.p - d)^2 over c and
+/// d = r^2 - |c|^2, on points centred on their centroid. Falls back to the centroid with fewer than
+/// 10 points or when the fit is degenerate: rank-deficient, r^2 <= 0, not finite, or a radius
+/// larger than twice the diagonal of the points' bounding box (a nearly flat patch).
+/// @pre points is not empty (throws avp::Error otherwise).
+SphereFit FitSphere(const std::vector<Eigen::Vector3d>& points);
+
+/// Binary entropy in bits of probability p, with p clamped to [1e-6, 1 - 1e-6] (NaN counts as
+/// 0.5).
+double BinaryEntropyBits(double p);
+
+}  // namespace avp::eval

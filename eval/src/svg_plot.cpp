@@ -1,0 +1,454 @@
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <string_view>
+#include <utility>
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <avp/eval/svg_plot.h>
+
+namespace avp::eval {
+
+namespace {
+
+// Layout, pixels.
+constexpr double kMarginLeft = 72.0;
+constexpr double kMarginRightPlain = 24.0;
+constexpr double kMarginRightAxis = 72.0;
+constexpr double kMarginTop = 44.0;
+constexpr double kAxisBelow = 58.0;  ///< x tick labels and the x label, under the plot area
+constexpr double kLegendRow = 20.0;
+constexpr double kCharWidth = 7.0;  ///< estimated width of one character at 12 px
+constexpr int kTargetTicks = 6;
+constexpr int kTargetIntegerTicks = 10;  ///< views: every one up to ten
+
+constexpr std::array<std::string_view, 10> kPalette = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728",
+                                                       "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+                                                       "#bcbd22", "#17becf"};
+
+/// A data interval and its ticks.
+struct Axis {
+  double lo = 0.0;
+  double hi = 1.0;
+  double step = 0.2;
+  std::vector<double> ticks;
+  int decimals = 1;
+};
+
+/// 1, 2 or 5 times a power of ten, the nearest at or above `raw`.
+double NiceStep(double raw) {
+  const double p = std::pow(10.0, std::floor(std::log10(raw)));
+  const double f = raw / p;
+  if (f <= 1.0) return p;
+  if (f <= 2.0) return 2.0 * p;
+  if (f <= 5.0) return 5.0 * p;
+  return 10.0 * p;
+}
+
+/// Ticks over [lo, hi]: fixed ends stay, free ends are widened to whole steps.
+Axis MakeAxis(double lo, double hi, bool fixed_lo, bool fixed_hi, bool integer) {
+  if (!(hi > lo)) {  // one value (or none): a unit interval around it
+    const double pad = integer ? 1.0 : (lo == 0.0 ? 1.0 : 0.5 * std::abs(lo));
+    if (!fixed_lo) lo -= pad;
+    if (!fixed_hi) hi += pad;
+    if (!(hi > lo)) hi = lo + pad;
+  }
+  Axis a;
+  a.step = NiceStep((hi - lo) / (integer ? kTargetIntegerTicks : kTargetTicks));
+  if (integer) a.step = std::max(1.0, std::round(a.step));
+  if (integer) {  // half a unit of room so that the first and last points are not on the frame
+    a.lo = fixed_lo ? lo : lo - 0.5;
+    a.hi = fixed_hi ? hi : hi + 0.5;
+  } else {
+    a.lo = fixed_lo ? lo : std::floor(lo / a.step + 1e-9) * a.step;
+    a.hi = fixed_hi ? hi : std::ceil(hi / a.step - 1e-9) * a.step;
+  }
+  const double first = std::ceil(a.lo / a.step - 1e-9) * a.step;
+  for (int i = 0;; ++i) {
+    const double t = first + i * a.step;
+    if (t > a.hi + 1e-9 * a.step || i > 1000) break;
+    a.ticks.push_back(t);
+  }
+  a.decimals = std::max(0, -static_cast<int>(std::floor(std::log10(a.step) + 1e-9)));
+  return a;
+}
+
+std::string TickLabel(double v, int decimals) {
+  if (std::abs(v) < 1e-12) v = 0.0;  // no "-0"
+  return fmt::format("{:.{}f}", v, decimals);
+}
+
+std::string Num(double v) { return fmt::format("{:.2f}", v); }
+
+/// Finite data range of the series on one axis (bands included).
+std::pair<double, double> DataRange(const LinePlot& plot, bool right) {
+  double lo = std::numeric_limits<double>::infinity();
+  double hi = -lo;
+  for (const LineSeries& s : plot.series) {
+    if (s.right_axis != right) continue;
+    for (size_t i = 0; i < s.y.size(); ++i) {
+      if (!std::isfinite(s.y[i])) continue;
+      const double b = i < s.band.size() && std::isfinite(s.band[i]) ? s.band[i] : 0.0;
+      lo = std::min(lo, s.y[i] - b);
+      hi = std::max(hi, s.y[i] + b);
+    }
+  }
+  if (lo > hi) return {0.0, 1.0};
+  return {lo, hi};
+}
+
+Axis MakeYAxis(const LinePlot& plot, bool right) {
+  const double fixed_lo = right ? plot.y2_min : plot.y_min;
+  const double fixed_hi = right ? plot.y2_max : plot.y_max;
+  auto [lo, hi] = DataRange(plot, right);
+  if (std::isfinite(fixed_lo)) lo = fixed_lo;
+  if (std::isfinite(fixed_hi)) hi = fixed_hi;
+  if (std::isfinite(fixed_lo) && !std::isfinite(fixed_hi)) hi = std::max(hi, lo);
+  if (std::isfinite(fixed_hi) && !std::isfinite(fixed_lo)) lo = std::min(lo, hi);
+  return MakeAxis(lo, hi, std::isfinite(fixed_lo), std::isfinite(fixed_hi), false);
+}
+
+/// Runs of consecutive indices where `ok(i)` holds.
+template <typename F>
+std::vector<std::pair<size_t, size_t>> Runs(size_t n, F&& ok) {
+  std::vector<std::pair<size_t, size_t>> runs;
+  size_t i = 0;
+  while (i < n) {
+    if (!ok(i)) {
+      ++i;
+      continue;
+    }
+    size_t j = i;
+    while (j + 1 < n && ok(j + 1)) ++j;
+    runs.emplace_back(i, j);
+    i = j + 1;
+  }
+  return runs;
+}
+
+}  // namespace
+
+std::string EscapeXml(std::string_view text) {
+  std::string out;
+  out.reserve(text.size());
+  for (char c : text) {
+    switch (c) {
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&apos;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+Status LinePlot::Validate() const {
+  std::vector<std::string> errors;
+  if (width_px < 200 || width_px > 4000) {
+    errors.push_back(fmt::format("width_px ({}) must be in [200, 4000]", width_px));
+  }
+  if (height_px < 200 || height_px > 4000) {
+    errors.push_back(fmt::format("height_px ({}) must be in [200, 4000]", height_px));
+  }
+  const auto check_range = [&](double lo, double hi, std::string_view name) {
+    if (std::isinf(lo) || std::isinf(hi)) {
+      errors.push_back(
+          fmt::format("{} range [{}, {}] must be finite or NaN (automatic)", name, lo, hi));
+    } else if (std::isfinite(lo) && std::isfinite(hi) && !(lo < hi)) {
+      errors.push_back(fmt::format("{} range [{}, {}] must have min < max", name, lo, hi));
+    }
+  };
+  check_range(y_min, y_max, "y");
+  check_range(y2_min, y2_max, "y2");
+  for (size_t k = 0; k < series.size(); ++k) {
+    const LineSeries& s = series[k];
+    const std::string who = fmt::format("series {} ('{}')", k, s.name);
+    if (s.x.size() != s.y.size()) {
+      errors.push_back(fmt::format("{}: x has {} values, y {}", who, s.x.size(), s.y.size()));
+    }
+    if (!s.band.empty() && s.band.size() != s.y.size()) {
+      errors.push_back(fmt::format("{}: band has {} values, y {}", who, s.band.size(), s.y.size()));
+    }
+    for (size_t i = 0; i < s.x.size(); ++i) {
+      if (!std::isfinite(s.x[i])) {
+        errors.push_back(fmt::format("{}: x[{}] ({}) must be finite", who, i, s.x[i]));
+        break;
+      }
+    }
+    for (size_t i = 0; i < s.band.size(); ++i) {
+      if (s.band[i] < 0.0) {
+        errors.push_back(fmt::format("{}: band[{}] ({}) must be >= 0", who, i, s.band[i]));
+        break;
+      }
+    }
+    if (s.color.find_first_of("<>&\"'") != std::string::npos) {
+      errors.push_back(fmt::format("{}: color ('{}') is not an SVG colour", who, s.color));
+    }
+  }
+  if (errors.empty()) return Status::Ok();
+  return InvalidArgumentError(fmt::format("invalid line plot: {}", fmt::join(errors, "; ")));
+}
+
+Result<std::string> RenderLinePlotSvg(const LinePlot& plot) {
+  AVP_RETURN_IF_ERROR(plot.Validate());
+  const bool has_right = std::any_of(plot.series.begin(), plot.series.end(),
+                                     [](const LineSeries& s) { return s.right_axis; });
+
+  // Legend rows: entries flow left to right under the x label.
+  struct LegendEntry {
+    size_t series;
+    double x;
+    int row;
+  };
+  const double W = plot.width_px;
+  const double H = plot.height_px;
+  const double left = kMarginLeft;
+  const double right = W - (has_right ? kMarginRightAxis : kMarginRightPlain);
+  std::vector<LegendEntry> legend;
+  {
+    double x = left;
+    int row = 0;
+    for (size_t k = 0; k < plot.series.size(); ++k) {
+      if (plot.series[k].name.empty()) continue;
+      const double w = 34.0 + kCharWidth * static_cast<double>(plot.series[k].name.size()) + 18.0;
+      if (x > left && x + w > right) {
+        x = left;
+        ++row;
+      }
+      legend.push_back({k, x, row});
+      x += w;
+    }
+  }
+  const int legend_rows = legend.empty() ? 0 : legend.back().row + 1;
+  const double top = kMarginTop;
+  const double bottom = std::max(top + 60.0, H - kAxisBelow - legend_rows * kLegendRow - 8.0);
+
+  // Axes.
+  double x_lo = std::numeric_limits<double>::infinity();
+  double x_hi = -x_lo;
+  for (const LineSeries& s : plot.series) {
+    for (double x : s.x) {
+      x_lo = std::min(x_lo, x);
+      x_hi = std::max(x_hi, x);
+    }
+  }
+  if (x_lo > x_hi) {
+    x_lo = 0.0;
+    x_hi = 1.0;
+  }
+  const Axis ax = MakeAxis(x_lo, x_hi, false, false, plot.integer_x);
+  const Axis ay = MakeYAxis(plot, false);
+  const Axis ay2 = has_right ? MakeYAxis(plot, true) : Axis{};
+  const auto px = [&](double x) { return left + (x - ax.lo) / (ax.hi - ax.lo) * (right - left); };
+  const auto py = [&](double y, bool r) {
+    const Axis& a = r ? ay2 : ay;
+    return bottom - (y - a.lo) / (a.hi - a.lo) * (bottom - top);
+  };
+
+  std::string svg;
+  svg += fmt::format(
+      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{0}\" height=\"{1}\" "
+      "viewBox=\"0 0 {0} {1}\" font-family=\"Helvetica, Arial, sans-serif\" font-size=\"12\">\n",
+      plot.width_px, plot.height_px);
+  if (!plot.title.empty()) svg += fmt::format("<title>{}</title>\n", EscapeXml(plot.title));
+  svg += fmt::format(
+      "<defs><clipPath id=\"plot-area\"><rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\"/>"
+      "</clipPath></defs>\n",
+      Num(left), Num(top), Num(right - left), Num(bottom - top));
+  svg += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
+
+  // Grid and ticks.
+  svg += "<g class=\"grid\" stroke=\"#e5e5e5\" stroke-width=\"1\">\n";
+  for (double t : ax.ticks) {
+    svg += fmt::format("<line x1=\"{0}\" y1=\"{1}\" x2=\"{0}\" y2=\"{2}\"/>\n", Num(px(t)),
+                       Num(top), Num(bottom));
+  }
+  for (double t : ay.ticks) {
+    svg += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\"/>\n", Num(py(t, false)),
+                       Num(left), Num(right));
+  }
+  svg += "</g>\n";
+  svg += "<g class=\"axes\" stroke=\"#333333\" stroke-width=\"1\" fill=\"none\">\n";
+  svg += fmt::format("<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\"/>\n", Num(left), Num(top),
+                     Num(right - left), Num(bottom - top));
+  for (double t : ax.ticks) {
+    svg += fmt::format("<line x1=\"{0}\" y1=\"{1}\" x2=\"{0}\" y2=\"{2}\"/>\n", Num(px(t)),
+                       Num(bottom), Num(bottom + 5.0));
+  }
+  for (double t : ay.ticks) {
+    svg += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\"/>\n", Num(py(t, false)),
+                       Num(left - 5.0), Num(left));
+  }
+  for (double t : ay2.ticks) {
+    svg += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\"/>\n", Num(py(t, true)),
+                       Num(right), Num(right + 5.0));
+  }
+  svg += "</g>\n";
+  svg += "<g class=\"tick-labels\" fill=\"#333333\">\n";
+  for (double t : ax.ticks) {
+    svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n", Num(px(t)),
+                       Num(bottom + 19.0), TickLabel(t, ax.decimals));
+  }
+  for (double t : ay.ticks) {
+    svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{}</text>\n", Num(left - 8.0),
+                       Num(py(t, false) + 4.0), TickLabel(t, ay.decimals));
+  }
+  for (double t : ay2.ticks) {
+    svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"start\">{}</text>\n",
+                       Num(right + 8.0), Num(py(t, true) + 4.0), TickLabel(t, ay2.decimals));
+  }
+  svg += "</g>\n";
+
+  // Title and axis labels.
+  if (!plot.title.empty()) {
+    svg += fmt::format(
+        "<text class=\"title\" x=\"{}\" y=\"{}\" text-anchor=\"middle\" font-size=\"15\" "
+        "font-weight=\"bold\">{}</text>\n",
+        Num(0.5 * (left + right)), Num(top - 16.0), EscapeXml(plot.title));
+  }
+  if (!plot.x_label.empty()) {
+    svg +=
+        fmt::format("<text class=\"x-label\" x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n",
+                    Num(0.5 * (left + right)), Num(bottom + 40.0), EscapeXml(plot.x_label));
+  }
+  if (!plot.y_label.empty()) {
+    svg += fmt::format(
+        "<text class=\"y-label\" transform=\"translate({},{}) rotate(-90)\" "
+        "text-anchor=\"middle\">{}</text>\n",
+        Num(18.0), Num(0.5 * (top + bottom)), EscapeXml(plot.y_label));
+  }
+  if (has_right && !plot.y2_label.empty()) {
+    svg += fmt::format(
+        "<text class=\"y2-label\" transform=\"translate({},{}) rotate(90)\" "
+        "text-anchor=\"middle\">{}</text>\n",
+        Num(W - 18.0), Num(0.5 * (top + bottom)), EscapeXml(plot.y2_label));
+  }
+
+  // Series: bands first (under every line), then lines and markers.
+  std::vector<std::string> colors;
+  size_t palette = 0;
+  for (const LineSeries& s : plot.series) {
+    colors.push_back(s.color.empty() ? std::string(kPalette[palette++ % kPalette.size()])
+                                     : s.color);
+  }
+  svg += "<g class=\"series\" clip-path=\"url(#plot-area)\">\n";
+  for (size_t k = 0; k < plot.series.size(); ++k) {
+    const LineSeries& s = plot.series[k];
+    if (s.band.empty()) continue;
+    const auto ok = [&](size_t i) { return std::isfinite(s.y[i]) && std::isfinite(s.band[i]); };
+    for (const auto& [a, b] : Runs(s.y.size(), ok)) {
+      std::string points;
+      for (size_t i = a; i <= b; ++i) {
+        points += fmt::format("{},{} ", Num(px(s.x[i])), Num(py(s.y[i] + s.band[i], s.right_axis)));
+      }
+      for (size_t i = b + 1; i-- > a;) {
+        points += fmt::format("{},{} ", Num(px(s.x[i])), Num(py(s.y[i] - s.band[i], s.right_axis)));
+      }
+      points.pop_back();
+      svg += fmt::format(
+          "<polygon points=\"{}\" fill=\"{}\" fill-opacity=\"0.18\" stroke=\"none\"/>\n", points,
+          colors[k]);
+    }
+  }
+  for (size_t k = 0; k < plot.series.size(); ++k) {
+    const LineSeries& s = plot.series[k];
+    const std::string dash = s.right_axis ? " stroke-dasharray=\"6 3\"" : "";
+    const auto ok = [&](size_t i) { return std::isfinite(s.y[i]); };
+    for (const auto& [a, b] : Runs(s.y.size(), ok)) {
+      std::string points;
+      for (size_t i = a; i <= b; ++i) {
+        points += fmt::format("{},{} ", Num(px(s.x[i])), Num(py(s.y[i], s.right_axis)));
+      }
+      points.pop_back();
+      svg += fmt::format(
+          "<polyline points=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"2\"{}/>\n", points,
+          colors[k], dash);
+      if (!s.markers) continue;
+      for (size_t i = a; i <= b; ++i) {
+        svg += fmt::format("<circle cx=\"{}\" cy=\"{}\" r=\"3\" fill=\"{}\"/>\n", Num(px(s.x[i])),
+                           Num(py(s.y[i], s.right_axis)), colors[k]);
+      }
+    }
+  }
+  svg += "</g>\n";
+
+  // Legend.
+  if (!legend.empty()) {
+    svg += "<g class=\"legend\">\n";
+    for (const LegendEntry& e : legend) {
+      const LineSeries& s = plot.series[e.series];
+      const double y = bottom + kAxisBelow + 4.0 + e.row * kLegendRow;
+      if (!s.band.empty()) {
+        svg += fmt::format(
+            "<rect x=\"{}\" y=\"{}\" width=\"26\" height=\"10\" fill=\"{}\" "
+            "fill-opacity=\"0.18\"/>\n",
+            Num(e.x), Num(y - 5.0), colors[e.series]);
+      }
+      svg += fmt::format(
+          "<line x1=\"{0}\" y1=\"{2}\" x2=\"{1}\" y2=\"{2}\" stroke=\"{3}\" "
+          "stroke-width=\"2\"{4}/>\n",
+          Num(e.x), Num(e.x + 26.0), Num(y), colors[e.series],
+          s.right_axis ? " stroke-dasharray=\"6 3\"" : "");
+      svg += fmt::format("<text x=\"{}\" y=\"{}\" fill=\"#333333\">{}{}</text>\n", Num(e.x + 32.0),
+                         Num(y + 4.0), EscapeXml(s.name), s.right_axis ? " (right)" : "");
+    }
+    svg += "</g>\n";
+  }
+  svg += "</svg>\n";
+  return svg;
+}
+
+Status WriteLinePlotSvg(const std::filesystem::path& path, const LinePlot& plot) {
+  AVP_ASSIGN_OR_RETURN(const std::string svg, RenderLinePlotSvg(plot));
+  std::error_code ec;
+  if (path.has_parent_path()) {
+    std::filesystem::create_directories(path.parent_path(), ec);
+    if (ec) {
+      return IoError(fmt::format("cannot create folder '{}' for plot: {}",
+                                 path.parent_path().string(), ec.message()));
+    }
+  }
+  std::filesystem::path tmp = path;
+  tmp += ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) {
+      return IoError(
+          fmt::format("cannot open '{}' for writing: {}", tmp.string(), std::strerror(errno)));
+    }
+    out.write(svg.data(), static_cast<std::streamsize>(svg.size()));
+    out.close();
+    if (!out) {
+      std::filesystem::remove(tmp, ec);
+      return IoError(fmt::format("writing plot '{}' failed", tmp.string()));
+    }
+  }
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    return IoError(
+        fmt::format("cannot move '{}' to '{}': {}", tmp.string(), path.string(), ec.message()));
+  }
+  return Status::Ok();
+}
+
+}  // namespace avp::eval

@@ -1,0 +1,370 @@
+// The observable ground truth on a real scenario (on the fruit surfaces, a subset of the
+// voxelised surfaces, deterministic, perfectly reachable by a map of its own views), the
+// observation views, option errors, and the OctoMap file round trip.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <unordered_set>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <avp/core/segmentation.h>
+#include <avp/eval/ground_truth.h>
+#include <avp/eval/metrics.h>
+#include <avp/mapping/integrator.h>
+#include <avp/mapping/octomap_io.h>
+#include <avp/mapping/semantic_map.h>
+#include <avp/robot/arm_model.h>
+#include <avp/sim/ground_truth.h>
+#include <avp/sim/rgbd_renderer.h>
+#include <avp/sim/scenario.h>
+#include <avp/test/temp_dir_test.h>
+
+namespace avp::eval {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::StartsWith;
+
+/// The episode camera of the demo: 640 x 480, fx = fy = 525 px, centred, 0.1 - 3 m.
+CameraIntrinsics EpisodeCamera() {
+  CameraIntrinsics K;
+  K.width = 640;
+  K.height = 480;
+  K.fx = 525.0;
+  K.fy = 525.0;
+  K.cx = 319.5;
+  K.cy = 239.5;
+  K.min_depth_m = 0.1;
+  K.max_depth_m = 3.0;
+  return K;
+}
+
+Eigen::VectorXd StartJoints(const sim::Scene& scene, const robot::ArmModel& arm) {
+  if (scene.start_joints_rad.empty()) return arm.home_joints();
+  return Eigen::Map<const Eigen::VectorXd>(
+      scene.start_joints_rad.data(), static_cast<Eigen::Index>(scene.start_joints_rad.size()));
+}
+
+/// One scenario's ground truth, computed once for the suite (it takes about a second).
+class ObservableGroundTruthTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    Result<sim::Scene> scene = sim::MakeScenario("tomato-single-cluster", 1);
+    ASSERT_TRUE(scene.ok()) << scene.status().ToString();
+    scene_ = new sim::Scene(std::move(*scene));
+    Result<robot::ArmModel> arm = robot::LoadDefaultArm();
+    ASSERT_TRUE(arm.ok()) << arm.status().ToString();
+    arm_ = new robot::ArmModel(std::move(*arm));
+    const auto t0 = std::chrono::steady_clock::now();
+    Result<GroundTruth> gt = ObservableGroundTruth(*scene_, *arm_, StartJoints(*scene_, *arm_),
+                                                   EpisodeCamera(), GroundTruthOptions{});
+    seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ASSERT_TRUE(gt.ok()) << gt.status().ToString();
+    gt_ = new GroundTruth(std::move(*gt));
+    std::printf("[ observable GT ] %s: %zu voxels, %zu of %zu views reachable, %.3f s\n",
+                scene_->name.c_str(), gt_->voxels.size(), gt_->views_reachable, gt_->views_tried,
+                seconds_);
+  }
+  static void TearDownTestSuite() {
+    delete gt_;
+    delete arm_;
+    delete scene_;
+    gt_ = nullptr;
+    arm_ = nullptr;
+    scene_ = nullptr;
+  }
+  void SetUp() override {
+    ASSERT_NE(gt_, nullptr);
+    ASSERT_NE(scene_, nullptr);
+  }
+
+  static sim::Scene* scene_;
+  static robot::ArmModel* arm_;
+  static GroundTruth* gt_;
+  static double seconds_;
+};
+
+sim::Scene* ObservableGroundTruthTest::scene_ = nullptr;
+robot::ArmModel* ObservableGroundTruthTest::arm_ = nullptr;
+GroundTruth* ObservableGroundTruthTest::gt_ = nullptr;
+double ObservableGroundTruthTest::seconds_ = 0.0;
+
+TEST_F(ObservableGroundTruthTest, BookkeepingIsConsistent) {
+  const GroundTruth& gt = *gt_;
+  EXPECT_EQ(gt.voxel_size_m, 0.005);
+  EXPECT_EQ(gt.source, "observable:tomato-single-cluster");
+  EXPECT_EQ(gt.fruits.size(), scene_->Fruits().size());
+  EXPECT_GE(gt.fruits.size(), 5u);
+  EXPECT_GT(gt.voxels.size(), 500u);
+  EXPECT_GT(gt.views_reachable, 0u);
+  EXPECT_LT(gt.views_reachable, gt.views_tried);  // the back of the fan is out of reach
+  EXPECT_EQ(gt.views.size(), gt.views_reachable);
+  size_t counted = 0;
+  for (const sim::FruitTruth& f : gt.fruits) {
+    ASSERT_TRUE(gt.voxels_per_fruit.count(f.instance_id)) << f.instance_id;
+    counted += gt.voxels_per_fruit.at(f.instance_id);
+  }
+  EXPECT_EQ(counted, gt.voxels.size());
+  EXPECT_EQ(gt.voxels_per_fruit.size(), gt.fruits.size());
+  EXPECT_GE(gt.ObservableFruits(), gt.fruits.size() / 2);
+}
+
+TEST_F(ObservableGroundTruthTest, EveryVoxelLiesOnItsFruitsSurface) {
+  const double s = gt_->voxel_size_m;
+  for (const auto& [key, id] : gt_->voxels) {
+    const sim::SceneObject* o = scene_->FindInstance(id);
+    ASSERT_NE(o, nullptr) << "voxel of unknown instance " << id;
+    ASSERT_EQ(o->semantic_class, SemanticClass::kFruit);
+    const auto* e = std::get_if<sim::Ellipsoid>(&o->shape);
+    ASSERT_NE(e, nullptr);
+    // The radial projection onto the ellipsoid bounds the distance to the surface from above.
+    const Eigen::Vector3d p = key.Center(s);
+    const Eigen::Vector3d q = e->center_W + (p - e->center_W) / std::sqrt(e->Implicit(p) + 1.0);
+    EXPECT_LE((p - q).norm(), s) << "voxel " << key.x << "," << key.y << "," << key.z;
+  }
+}
+
+TEST_F(ObservableGroundTruthTest, IsASubsetOfTheVoxelisedSurfaces) {
+  const sim::FruitVoxels surface = sim::VoxelizeFruitSurfaces(*scene_, gt_->voxel_size_m);
+  size_t exact = 0;
+  for (const auto& [key, id] : gt_->voxels) {
+    if (surface.voxels.count(key)) {
+      ++exact;
+      continue;
+    }
+    bool near = false;
+    for (int dz = -1; dz <= 1 && !near; ++dz) {
+      for (int dy = -1; dy <= 1 && !near; ++dy) {
+        for (int dx = -1; dx <= 1 && !near; ++dx) {
+          near = surface.voxels.count({key.x + dx, key.y + dy, key.z + dz}) > 0;
+        }
+      }
+    }
+    EXPECT_TRUE(near) << "voxel " << key.x << "," << key.y << "," << key.z;
+  }
+  // Surface points lie in their voxel, so all but float-rounding cases match exactly.
+  EXPECT_GE(static_cast<double>(exact), 0.99 * static_cast<double>(gt_->voxels.size()));
+  // Observable is a strict subset: the fruit backs facing the plant are never seen.
+  EXPECT_LT(gt_->voxels.size(), surface.voxels.size());
+  std::printf(
+      "[ observable GT ] %zu of %zu surface voxels observable (%.1f %%)\n", gt_->voxels.size(),
+      surface.voxels.size(),
+      100.0 * static_cast<double>(gt_->voxels.size()) / static_cast<double>(surface.voxels.size()));
+}
+
+TEST_F(ObservableGroundTruthTest, EqualsTheFruitVoxelsOfItsViewsRenderedWhole) {
+  // ObservableGroundTruth renders only the windows around the fruits' images; rendering every
+  // reachable view whole must give the same voxels (up to float ties at silhouettes).
+  const GroundTruthOptions options;
+  const CameraIntrinsics K = ObservationIntrinsics(EpisodeCamera(), options);
+  const sim::RgbdRenderer renderer(*scene_);
+  std::unordered_set<VoxelKey, VoxelKeyHash> whole;
+  for (const ObservationView& view : gt_->views) {
+    const sim::RenderedFrame f = renderer.Render(K, view.X_WC);
+    for (int v = 0; v < K.height; ++v) {
+      for (int u = 0; u < K.width; ++u) {
+        const float d = f.rgbd.depth_m.at(u, v);
+        if (f.class_ids.at(u, v) != static_cast<uint8_t>(SemanticClass::kFruit) || !(d > 0.0f)) {
+          continue;
+        }
+        const Eigen::Vector3d p_W =
+            view.X_WC * Eigen::Vector3d((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
+        if ((p_W - view.X_WC.translation()).norm() > options.max_range_m) continue;
+        whole.insert(VoxelKey::FromPoint(p_W, gt_->voxel_size_m));
+      }
+    }
+  }
+  size_t common = 0;
+  for (const auto& [key, id] : gt_->voxels) common += whole.count(key);
+  const size_t differing = whole.size() + gt_->voxels.size() - 2 * common;
+  EXPECT_LE(static_cast<double>(differing), 1e-3 * static_cast<double>(whole.size()))
+      << whole.size() << " voxels rendered whole, " << gt_->voxels.size() << " in the GT, "
+      << common << " common";
+}
+
+TEST_F(ObservableGroundTruthTest, IsDeterministicForAnyThreadCount) {
+  GroundTruthOptions one_thread;
+  one_thread.num_threads = 1;
+  const Result<GroundTruth> again = ObservableGroundTruth(
+      *scene_, *arm_, StartJoints(*scene_, *arm_), EpisodeCamera(), one_thread);
+  ASSERT_TRUE(again.ok());
+  EXPECT_TRUE(again->voxels == gt_->voxels);
+  EXPECT_EQ(again->SortedKeys(), gt_->SortedKeys());
+  EXPECT_TRUE(again->voxels_per_fruit == gt_->voxels_per_fruit);
+  EXPECT_EQ(again->views_tried, gt_->views_tried);
+  EXPECT_EQ(again->views_reachable, gt_->views_reachable);
+}
+
+TEST_F(ObservableGroundTruthTest, MapOfOneOfItsViewsHasPrecisionOne) {
+  // Render one reachable observation view at full size and integrate its fruit masks.
+  GroundTruthOptions options;
+  const CameraIntrinsics K = ObservationIntrinsics(EpisodeCamera(), options);
+  EXPECT_EQ(K.width, 320);
+  EXPECT_EQ(K.height, 240);
+  EXPECT_DOUBLE_EQ(K.fx, 262.5);
+  EXPECT_DOUBLE_EQ(K.cx, 159.5);
+  const sim::RgbdRenderer renderer(*scene_);
+  mapping::MapOptions map_options;
+  map_options.grid.voxel_size_m = gt_->voxel_size_m;
+  const mapping::Integrator integrator;
+  size_t checked = 0;
+  for (size_t i = 0; i < gt_->views.size() && checked < 3; i += gt_->views.size() / 3 + 1) {
+    mapping::SemanticMap map(map_options);
+    const sim::RenderedFrame frame = renderer.Render(K, gt_->views[i].X_WC);
+    const Segmentation seg =
+        Segmentation::FromLabelImages(frame.instance_ids, frame.class_ids, 0.9f);
+    ASSERT_TRUE(integrator.Integrate(frame.rgbd, &seg, map).ok());
+    const MapMetrics m = EvaluateMap(map, *gt_);
+    if (m.predicted_voxels == 0) continue;
+    ++checked;
+    EXPECT_EQ(m.exact.fp, 0u) << "view " << i;
+    EXPECT_DOUBLE_EQ(m.exact.precision, 1.0) << "view " << i;
+    EXPECT_GT(m.exact.recall, 0.0);
+    EXPECT_LT(m.exact.recall, 1.0);  // one view sees only part of what all views see
+  }
+  EXPECT_GE(checked, 1u);
+}
+
+TEST_F(ObservableGroundTruthTest, ObservationViewsFaceTheBaseAndLookAtTheirFruit) {
+  GroundTruthOptions options;
+  const std::vector<ObservationView> views = ObservationViews(gt_->fruits, options);
+  EXPECT_EQ(views.size(), gt_->views_tried);
+  EXPECT_LE(views.size(), gt_->fruits.size() * 3 * 4 * 9);
+  for (const ObservationView& v : views) {
+    const sim::FruitTruth* fruit = nullptr;
+    for (const sim::FruitTruth& f : gt_->fruits) {
+      if (f.instance_id == v.fruit_id) fruit = &f;
+    }
+    ASSERT_NE(fruit, nullptr);
+    const Eigen::Vector3d eye = v.X_WC.translation();
+    EXPECT_NEAR((eye - fruit->center_W).norm(), v.radius_m, 1e-9);
+    EXPECT_GT(eye.z(), 0.0);
+    // The optical axis points at the fruit centre.
+    const Eigen::Vector3d axis = v.X_WC.rotation().col(2);
+    EXPECT_NEAR(axis.dot((fruit->center_W - eye).normalized()), 1.0, 1e-9);
+    // The camera is on the base's side: within 85 deg of the fruit-to-base direction.
+    const Eigen::Vector2d to_base = -fruit->center_W.head<2>().normalized();
+    const Eigen::Vector2d to_eye = (eye - fruit->center_W).head<2>().normalized();
+    EXPECT_GE(to_base.dot(to_eye), std::cos(85.0 * M_PI / 180.0) - 1e-9);
+  }
+}
+
+TEST(GroundTruthOptionsTest, ValidateNamesEveryBadField) {
+  GroundTruthOptions o;
+  EXPECT_TRUE(o.Validate().ok());
+  o.voxel_size_m = 0.5;
+  o.radii_m = {0.3, -1.0};
+  o.azimuths = 0;
+  o.elevations_deg = {90.0};
+  o.image_width = 0;
+  o.max_range_m = 0.0;
+  o.num_threads = -2;
+  const Status s = o.Validate();
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.message(), HasSubstr("voxel_size_m (0.5)"));
+  EXPECT_THAT(s.message(), HasSubstr("radii_m[1] (-1)"));
+  EXPECT_THAT(s.message(), HasSubstr("azimuths (0)"));
+  EXPECT_THAT(s.message(), HasSubstr("elevations_deg[0] (90)"));
+  EXPECT_THAT(s.message(), HasSubstr("image_width (0)"));
+  EXPECT_THAT(s.message(), HasSubstr("max_range_m (0)"));
+  EXPECT_THAT(s.message(), HasSubstr("num_threads (-2)"));
+}
+
+TEST(GroundTruthOptionsTest, ObservableGroundTruthRejectsBadInputs) {
+  Result<sim::Scene> scene = sim::MakeScenario("tomato-single-cluster", 1);
+  ASSERT_TRUE(scene.ok());
+  Result<robot::ArmModel> arm = robot::LoadDefaultArm();
+  ASSERT_TRUE(arm.ok());
+  GroundTruthOptions bad;
+  bad.azimuths = -1;
+  Result<GroundTruth> r =
+      ObservableGroundTruth(*scene, *arm, arm->home_joints(), EpisodeCamera(), bad);
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(r.status().message(), HasSubstr("azimuths (-1)"));
+  r = ObservableGroundTruth(*scene, *arm, Eigen::VectorXd::Zero(2), EpisodeCamera(), {});
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(r.status().message(), HasSubstr("start joints (0, 0) must be 6 finite values"));
+  CameraIntrinsics K = EpisodeCamera();
+  K.fx = -1.0;
+  r = ObservableGroundTruth(*scene, *arm, arm->home_joints(), K, {});
+  EXPECT_THAT(r.status().message(), HasSubstr("fx (-1)"));
+}
+
+TEST(GroundTruthOptionsTest, SingleFruitSceneWithFewViews) {
+  // One sphere in front of the arm, a small fan: every GT voxel on the sphere's near side.
+  sim::Scene scene;
+  scene.name = "one-sphere";
+  sim::SceneObject o;
+  o.name = "fruit";
+  o.semantic_class = SemanticClass::kFruit;
+  sim::Ellipsoid e;
+  e.center_W = Eigen::Vector3d(0.55, 0.0, 0.55);
+  e.radii = Eigen::Vector3d::Constant(0.035);
+  o.shape = e;
+  const uint16_t id = scene.Add(o);
+  scene.UpdatePlantBounds();
+  Result<robot::ArmModel> arm = robot::LoadDefaultArm();
+  ASSERT_TRUE(arm.ok());
+  GroundTruthOptions options;
+  options.radii_m = {0.3};
+  options.elevations_deg = {0.0};
+  options.azimuths = 1;
+  const Result<GroundTruth> gt =
+      ObservableGroundTruth(scene, *arm, arm->home_joints(), EpisodeCamera(), options);
+  ASSERT_TRUE(gt.ok()) << gt.status().ToString();
+  EXPECT_EQ(gt->views_tried, 1u);
+  ASSERT_EQ(gt->views_reachable, 1u);
+  ASSERT_GT(gt->voxels.size(), 50u);
+  for (const auto& [key, fruit] : gt->voxels) {
+    EXPECT_EQ(fruit, id);
+    EXPECT_LT(key.Center(gt->voxel_size_m).x(), e.center_W.x() + gt->voxel_size_m);
+  }
+  EXPECT_EQ(gt->voxels_per_fruit.at(id), gt->voxels.size());
+  EXPECT_EQ(gt->ObservableFruits(), 1u);
+}
+
+class GroundTruthFileTest : public avp::test::TempDirTest {};
+
+TEST_F(GroundTruthFileTest, OctomapRoundTrip) {
+  Result<sim::Scene> scene = sim::MakeScenario("tomato-single-cluster", 2);
+  ASSERT_TRUE(scene.ok());
+  const double s = 0.005;
+  const sim::FruitVoxels surface = sim::VoxelizeFruitSurfaces(*scene, s);
+  mapping::GridOptions grid_options;
+  grid_options.voxel_size_m = s;
+  mapping::OccupancyGrid grid(grid_options);
+  for (const VoxelKey& k : surface.SortedKeys()) grid.SetLogOdds(k, grid.clamp_max_log_odds());
+  grid.SetLogOdds({0, 0, 0}, grid.clamp_min_log_odds());  // free: not part of the GT
+  const std::filesystem::path bt = dir_ / "gt.bt";
+  ASSERT_TRUE(mapping::ExportOctomapBinary(grid, bt).ok());
+
+  const Result<GroundTruth> with_scene = GroundTruthFromOctomapFile(bt, &*scene);
+  ASSERT_TRUE(with_scene.ok()) << with_scene.status().ToString();
+  EXPECT_EQ(with_scene->source, "file:" + bt.string());
+  EXPECT_DOUBLE_EQ(with_scene->voxel_size_m, s);
+  EXPECT_EQ(with_scene->SortedKeys(), surface.SortedKeys());
+  EXPECT_EQ(with_scene->fruits.size(), scene->Fruits().size());
+  EXPECT_EQ(with_scene->views_tried, 0u);
+  size_t same_fruit = 0;
+  for (const auto& [key, id] : surface.voxels) same_fruit += with_scene->voxels.at(key) == id;
+  EXPECT_GE(static_cast<double>(same_fruit), 0.97 * static_cast<double>(surface.voxels.size()));
+  size_t counted = 0;
+  for (const auto& [id, n] : with_scene->voxels_per_fruit) counted += n;
+  EXPECT_EQ(counted, surface.voxels.size());
+
+  const Result<GroundTruth> bare = GroundTruthFromOctomapFile(bt, nullptr);
+  ASSERT_TRUE(bare.ok());
+  EXPECT_EQ(bare->voxels.size(), surface.voxels.size());
+  EXPECT_TRUE(bare->fruits.empty());
+  EXPECT_TRUE(bare->voxels_per_fruit.empty());
+  for (const auto& [key, id] : bare->voxels) ASSERT_EQ(id, 0);
+
+  const Result<GroundTruth> missing = GroundTruthFromOctomapFile(dir_ / "missing.bt", nullptr);
+  EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
+  EXPECT_THAT(missing.status().message(), HasSubstr("missing.bt"));
+}
+
+}  // namespace
+}  // namespace avp::eval

@@ -1,0 +1,154 @@
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include <avp/core/box.h>
+#include <avp/core/camera.h>
+#include <avp/core/semantic_class.h>
+#include <avp/core/status.h>
+#include <avp/core/transform.h>
+#include <avp/mapping/integrator.h>
+#include <avp/mapping/semantic_map.h>
+#include <avp/pipeline/rgbd_source.h>
+#include <avp/planning/view_planner.h>
+#include <avp/robot/arm.h>
+#include <avp/segmentation/segmenter.h>
+
+namespace avp::pipeline {
+
+/// Wall time of each stage of one step, milliseconds.
+struct StageTimes {
+  double capture_ms = 0.0;
+  double segment_ms = 0.0;
+  double integrate_ms = 0.0;
+  double metrics_ms = 0.0;
+  double plan_ms = 0.0;
+  double move_ms = 0.0;
+  double total_ms = 0.0;
+};
+
+/// Everything that happened in one step of the loop: one fused view (sense, segment, integrate),
+/// its metrics, and the choice of and move to the next view (absent after the last view).
+struct StepRecord {
+  /// 0-based index of the fused view; the episode's "N views" are N fused observations (the start
+  /// view plus N - 1 moves; no move is made after the last one).
+  int view = 0;
+  int views_total = 0;
+  /// Where the view was taken.
+  RigidTransform X_WC;
+  Eigen::VectorXd q;
+
+  Status capture_status;
+  Status segment_status;  ///< a segmenter error: the frame is fused without semantics
+  Status integrate_status;
+  size_t masks = 0;  ///< instances the segmenter returned
+  mapping::IntegrationStats integration;
+
+  /// The map after this view, and its change from the previous view.
+  size_t known_voxels = 0;
+  size_t occupied_voxels = 0;
+  size_t target_voxels = 0;  ///< occupied voxels labelled with the target class
+  size_t instances = 0;      ///< map instances of the target class
+  int64_t known_delta = 0;
+  int64_t target_delta = 0;
+
+  /// Metrics from the episode's metrics hook (name, value), in the hook's order.
+  std::vector<std::pair<std::string, double>> metrics;
+
+  /// Planning of the next view (planned == false after the last view or when the loop stopped).
+  bool planned = false;
+  Status plan_status;
+  size_t candidates_generated = 0;
+  size_t candidates_reachable = 0;
+  /// The best candidates as ranked (up to EpisodeOptions::record_top_candidates).
+  std::vector<planning::ViewCandidate> top_candidates;
+  /// Rank (0 = best) of the candidate the arm moved to; -1 when none.
+  int chosen_rank = -1;
+  planning::ViewCandidate chosen;
+  /// Moves refused before one succeeded (unreachable ranked candidates).
+  int refused_moves = 0;
+  Status move_status;
+  double joint_path_length = 0.0;
+
+  StageTimes times;
+
+  /// The metric named `name`, or NaN.
+  double Metric(std::string_view name) const;
+};
+
+struct EpisodeOptions {
+  /// Fused views (observations), start view included. >= 1.
+  int views = 8;
+  std::string prompt = "tomato";
+  float score_threshold = 0.0f;
+  SemanticClass target_class = SemanticClass::kFruit;
+  /// The plant's region of interest (planning); required.
+  Box3 roi;
+  mapping::IntegratorOptions integrator;
+  /// Candidates kept in each StepRecord.
+  int record_top_candidates = 5;
+  /// Seeds the planner's and the arm's random choices (forked per view).
+  uint64_t seed = 0;
+  Status Validate() const;
+};
+
+/// How the episode ended.
+enum class EpisodeEnd : uint8_t {
+  kBudgetReached,     ///< all `views` fused
+  kPlannerStopped,    ///< the planner's stopping rule fired
+  kNoValidCandidate,  ///< the planner had no candidate
+  kNoReachableMove,   ///< every ranked candidate was refused by the arm
+  kObserverAborted,   ///< not used yet
+};
+std::string_view ToString(EpisodeEnd end);
+
+struct EpisodeResult {
+  EpisodeEnd end = EpisodeEnd::kBudgetReached;
+  /// Why it ended (the planner's or the arm's message when it ended early).
+  std::string end_reason;
+  std::vector<StepRecord> steps;
+  double total_ms = 0.0;
+  int views_fused() const { return static_cast<int>(steps.size()); }
+};
+
+/// Receives every step as soon as it is complete (before the next one starts), so a long run
+/// writes its results step by step.
+class EpisodeObserver {
+ public:
+  virtual ~EpisodeObserver() = default;
+  virtual void OnStep(const StepRecord& step, const mapping::SemanticMap& map) = 0;
+  virtual void OnEnd(const EpisodeResult& /*result*/, const mapping::SemanticMap& /*map*/) {}
+};
+
+/// Computes a step's metrics from the map after the view was fused (e.g. eval's F1 against
+/// ground truth). May be empty.
+using MetricsHook =
+    std::function<std::vector<std::pair<std::string, double>>(const mapping::SemanticMap&)>;
+
+/// The components of one episode (non-owning).
+struct EpisodeComponents {
+  RgbdSource* source = nullptr;
+  segmentation::Segmenter* segmenter = nullptr;
+  robot::Arm* arm = nullptr;
+  planning::ViewPlanner* planner = nullptr;
+  mapping::SemanticMap* map = nullptr;
+};
+
+/// The active-vision loop: for each view, capture at the arm's current pose, segment, integrate,
+/// compute metrics and notify the observers; then, unless it was the last view, plan the next
+/// view and move there. Failures are outcomes: a capture or segmenter error is recorded and the
+/// loop goes on (a segmenter error fuses the depth without semantics; a capture error fuses
+/// nothing); an unreachable ranked candidate is skipped for the next one; no valid candidate,
+/// every candidate refused, or the planner's stopping rule end the episode with that reason.
+/// InvalidArgument for missing components or invalid options.
+Result<EpisodeResult> RunEpisode(const EpisodeComponents& components, const EpisodeOptions& options,
+                                 const MetricsHook& metrics = {},
+                                 const std::vector<EpisodeObserver*>& observers = {});
+
+}  // namespace avp::pipeline

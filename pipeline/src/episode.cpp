@@ -1,0 +1,269 @@
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include <fmt/format.h>
+
+#include <avp/pipeline/episode.h>
+
+namespace avp::pipeline {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+size_t CountTargetVoxels(const mapping::OccupancyGrid& grid, SemanticClass target) {
+  size_t n = 0;
+  grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& cell) {
+    if (cell.cls() == target && grid.State(k) == mapping::VoxelState::kOccupied) ++n;
+  });
+  return n;
+}
+
+size_t CountTargetInstances(const mapping::SemanticMap& map, SemanticClass target) {
+  size_t n = 0;
+  for (const mapping::InstanceInfo& info : map.Instances()) {
+    if (info.semantic_class == target) ++n;
+  }
+  return n;
+}
+
+}  // namespace
+
+double StepRecord::Metric(std::string_view name) const {
+  for (const auto& [key, value] : metrics) {
+    if (key == name) return value;
+  }
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
+Status EpisodeOptions::Validate() const {
+  std::vector<std::string> errors;
+  if (views < 1 || views > 1000)
+    errors.push_back(fmt::format("views ({}) must be in [1, 1000]", views));
+  if (prompt.find_first_not_of(" ,\t") == std::string::npos) {
+    errors.push_back(fmt::format("prompt ('{}') names no class", prompt));
+  }
+  if (!std::isfinite(score_threshold) || score_threshold < 0.0f || score_threshold > 1.0f) {
+    errors.push_back(fmt::format("score threshold ({}) must be in [0, 1]", score_threshold));
+  }
+  if (target_class == SemanticClass::kBackground) errors.push_back("target class is background");
+  if (roi.IsEmpty() || !roi.min().allFinite() || !roi.max().allFinite()) {
+    errors.push_back(fmt::format("ROI ({}) must be finite and non-empty", roi.ToString()));
+  }
+  if (record_top_candidates < 0) {
+    errors.push_back(fmt::format("record_top_candidates ({}) must be >= 0", record_top_candidates));
+  }
+  if (Status s = integrator.Validate(); !s.ok()) errors.push_back(s.ToString());
+  if (errors.empty()) return Status::Ok();
+  std::string joined;
+  for (const std::string& e : errors) joined += (joined.empty() ? "" : "; ") + e;
+  return InvalidArgumentError("invalid episode options: " + joined);
+}
+
+std::string_view ToString(EpisodeEnd end) {
+  switch (end) {
+    case EpisodeEnd::kBudgetReached:
+      return "budget-reached";
+    case EpisodeEnd::kPlannerStopped:
+      return "planner-stopped";
+    case EpisodeEnd::kNoValidCandidate:
+      return "no-valid-candidate";
+    case EpisodeEnd::kNoReachableMove:
+      return "no-reachable-move";
+    case EpisodeEnd::kObserverAborted:
+      return "observer-aborted";
+  }
+  return "unknown";
+}
+
+Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOptions& options,
+                                 const MetricsHook& metrics,
+                                 const std::vector<EpisodeObserver*>& observers) {
+  if (c.source == nullptr || c.segmenter == nullptr || c.arm == nullptr || c.planner == nullptr ||
+      c.map == nullptr) {
+    return InvalidArgumentError(fmt::format("RunEpisode: missing component(s):{}{}{}{}{}",
+                                            c.source ? "" : " source",
+                                            c.segmenter ? "" : " segmenter", c.arm ? "" : " arm",
+                                            c.planner ? "" : " planner", c.map ? "" : " map"));
+  }
+  AVP_RETURN_IF_ERROR(options.Validate());
+  const mapping::Integrator integrator(options.integrator);
+  mapping::SemanticMap& map = *c.map;
+  robot::Arm& arm = *c.arm;
+  const Rng root(options.seed);
+  const Rng planner_root = root.Fork("planner");
+  const Rng arm_root = root.Fork("arm");
+
+  EpisodeResult result;
+  const auto t_episode = Clock::now();
+  const Eigen::VectorXd q_start = arm.CurrentJoints();
+  const RigidTransform X_WC_start = arm.CurrentCameraPose();
+  std::vector<RigidTransform> fused;
+  size_t prev_known = map.grid().CountKnownVoxels();
+  size_t prev_target = CountTargetVoxels(map.grid(), options.target_class);
+
+  for (int view = 0; view < options.views; ++view) {
+    const auto t_step = Clock::now();
+    StepRecord step;
+    step.view = view;
+    step.views_total = options.views;
+    step.q = arm.CurrentJoints();
+    step.X_WC = arm.CurrentCameraPose();
+    const int64_t stamp_ns = static_cast<int64_t>(view) * 1'000'000'000;
+
+    // Sense.
+    auto t0 = Clock::now();
+    Result<Observation> obs = c.source->Capture(step.X_WC, stamp_ns);
+    step.times.capture_ms = MsSince(t0);
+    if (!obs.ok()) {
+      step.capture_status = obs.status();
+    } else {
+      // Segment.
+      t0 = Clock::now();
+      segmentation::SegmentationRequest request;
+      request.frame = &obs->frame;
+      request.prompt = options.prompt;
+      request.score_threshold = options.score_threshold;
+      request.labels = obs->labels ? &*obs->labels : nullptr;
+      request.frame_index = static_cast<uint64_t>(view);
+      Result<Segmentation> seg = InternalError("segmenter not called");
+      try {
+        seg = c.segmenter->Segment(request);
+      } catch (const std::exception& e) {
+        seg = InternalError(fmt::format("segmenter '{}' threw: {}", c.segmenter->name(), e.what()));
+      }
+      if (seg.ok()) {
+        if (Status v = seg->ValidateFor(obs->frame.depth_m.width(), obs->frame.depth_m.height());
+            !v.ok()) {
+          seg = InternalError(fmt::format("segmenter '{}' returned an invalid segmentation: {}",
+                                          c.segmenter->name(), v.ToString()));
+        }
+      }
+      step.times.segment_ms = MsSince(t0);
+      if (seg.ok()) {
+        step.masks = seg->instances.size();
+      } else {
+        step.segment_status = seg.status();
+      }
+      // Integrate (depth only when segmentation failed).
+      t0 = Clock::now();
+      Result<mapping::IntegrationStats> stats =
+          integrator.Integrate(obs->frame, seg.ok() ? &*seg : nullptr, map);
+      step.times.integrate_ms = MsSince(t0);
+      if (stats.ok()) {
+        step.integration = *stats;
+      } else {
+        step.integrate_status = stats.status();
+      }
+    }
+    fused.push_back(step.X_WC);
+    step.known_voxels = map.grid().CountKnownVoxels();
+    step.occupied_voxels = map.grid().CountOccupiedVoxels();
+    step.target_voxels = CountTargetVoxels(map.grid(), options.target_class);
+    step.instances = CountTargetInstances(map, options.target_class);
+    step.known_delta = static_cast<int64_t>(step.known_voxels) - static_cast<int64_t>(prev_known);
+    step.target_delta =
+        static_cast<int64_t>(step.target_voxels) - static_cast<int64_t>(prev_target);
+    prev_known = step.known_voxels;
+    prev_target = step.target_voxels;
+    if (metrics) {
+      t0 = Clock::now();
+      step.metrics = metrics(map);
+      step.times.metrics_ms = MsSince(t0);
+    }
+
+    // Plan and move, unless this was the last view.
+    bool stop = false;
+    if (view + 1 < options.views) {
+      planning::PlanningRequest req;
+      req.map = &map;
+      req.arm = &arm.model();
+      req.q_current = step.q;
+      req.X_WC_current = step.X_WC;
+      req.q_start = q_start;
+      req.X_WC_start = X_WC_start;
+      req.K = c.source->intrinsics();
+      req.roi = options.roi;
+      req.view_index = view + 1;
+      req.views_total = options.views;
+      req.fused_views = fused;
+      req.target_class = options.target_class;
+      t0 = Clock::now();
+      Rng planner_rng = planner_root.Fork(static_cast<uint64_t>(view + 1));
+      planning::PlanResult plan;
+      try {
+        plan = c.planner->Plan(req, planner_rng);
+      } catch (const std::exception& e) {
+        plan.status =
+            InternalError(fmt::format("planner '{}' threw: {}", c.planner->name(), e.what()));
+      }
+      step.times.plan_ms = MsSince(t0);
+      step.planned = true;
+      step.plan_status = plan.status;
+      step.candidates_generated = plan.generated;
+      step.candidates_reachable = plan.reachable;
+      for (size_t i = 0;
+           i < plan.ranked.size() && static_cast<int>(i) < options.record_top_candidates; ++i) {
+        step.top_candidates.push_back(plan.ranked[i]);
+      }
+      if (plan.stop) {
+        result.end = EpisodeEnd::kPlannerStopped;
+        result.end_reason = plan.stop_reason;
+        stop = true;
+      } else if (!plan.status.ok() || plan.ranked.empty()) {
+        result.end = EpisodeEnd::kNoValidCandidate;
+        result.end_reason =
+            plan.status.ok() ? "the planner returned no candidate" : plan.status.ToString();
+        stop = true;
+      } else {
+        // Move: the best candidate the arm accepts.
+        t0 = Clock::now();
+        Rng arm_rng = arm_root.Fork(static_cast<uint64_t>(view + 1));
+        std::string refusals;
+        for (size_t i = 0; i < plan.ranked.size(); ++i) {
+          const planning::ViewCandidate& cand = plan.ranked[i];
+          robot::MoveResult move = cand.q.size() == arm.model().num_joints()
+                                       ? arm.MoveToJoints(cand.q)
+                                       : arm.MoveToCameraPose(cand.X_WC, arm_rng);
+          if (move.ok()) {
+            step.chosen_rank = static_cast<int>(i);
+            step.chosen = cand;
+            step.move_status = Status::Ok();
+            step.joint_path_length = move.joint_path_length;
+            break;
+          }
+          ++step.refused_moves;
+          if (refusals.size() < 400)
+            refusals += (refusals.empty() ? "" : "; ") + move.status.ToString();
+          step.move_status = move.status;
+        }
+        step.times.move_ms = MsSince(t0);
+        if (step.chosen_rank < 0) {
+          result.end = EpisodeEnd::kNoReachableMove;
+          result.end_reason = fmt::format("the arm refused all {} ranked candidates: {}",
+                                          plan.ranked.size(), refusals);
+          stop = true;
+        }
+      }
+    }
+    step.times.total_ms = MsSince(t_step);
+    result.steps.push_back(step);
+    for (EpisodeObserver* o : observers) {
+      if (o != nullptr) o->OnStep(result.steps.back(), map);
+    }
+    if (stop) break;
+  }
+  result.total_ms = MsSince(t_episode);
+  for (EpisodeObserver* o : observers) {
+    if (o != nullptr) o->OnEnd(result, map);
+  }
+  return result;
+}
+
+}  // namespace avp::pipeline

@@ -1,0 +1,288 @@
+// The active-vision loop with fake components: what "N views" counts, step records, observers,
+// and failures as outcomes (segmenter and capture errors, refused moves, no candidate, stop rule).
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include <avp/core/camera.h>
+#include <avp/pipeline/episode.h>
+#include <avp/robot/arm.h>
+#include <avp/robot/arm_model.h>
+
+namespace avp::pipeline {
+namespace {
+
+CameraIntrinsics SmallCamera() {
+  return CameraIntrinsics::FromHorizontalFov(64, 48, 60.0, 0.1, 3.0);
+}
+
+/// A flat wall 1 m in front of the camera; fails on the frames listed in `fail_frames`.
+class WallSource final : public RgbdSource {
+ public:
+  std::vector<int> fail_frames;
+  int captured = 0;
+  Result<Observation> Capture(const RigidTransform& X_WC, int64_t stamp_ns) override {
+    const int index = captured++;
+    for (int f : fail_frames) {
+      if (f == index) return IoError("camera timeout on frame " + std::to_string(index));
+    }
+    Observation obs;
+    obs.frame.K = SmallCamera();
+    obs.frame.X_WC = X_WC;
+    obs.frame.stamp_ns = stamp_ns;
+    obs.frame.rgb = ImageRgb8(64, 48, 100);
+    obs.frame.depth_m = DepthImage(64, 48, 1.0f);
+    return obs;
+  }
+  CameraIntrinsics intrinsics() const override { return SmallCamera(); }
+};
+
+/// One mask over the left half of the image; fails (or throws) on listed frames.
+class HalfSegmenter final : public segmentation::Segmenter {
+ public:
+  std::vector<uint64_t> fail_frames;
+  bool throw_instead = false;
+  std::vector<uint64_t> seen;
+  std::string_view name() const override { return "half"; }
+  Result<Segmentation> Segment(const segmentation::SegmentationRequest& r) override {
+    seen.push_back(r.frame_index);
+    for (uint64_t f : fail_frames) {
+      if (f == r.frame_index) {
+        if (throw_instead) throw std::runtime_error("model crashed");
+        return InternalError("inference server unavailable");
+      }
+    }
+    Segmentation s;
+    s.width = r.frame->depth_m.width();
+    s.height = r.frame->depth_m.height();
+    InstanceMask m;
+    m.mask = MaskImage(s.width, s.height, 0);
+    for (int v = 0; v < s.height; ++v) {
+      for (int u = 0; u < s.width / 2; ++u) m.mask.at(u, v) = 1;
+    }
+    m.confidence = 0.8f;
+    s.instances.push_back(m);
+    return s;
+  }
+};
+
+/// Scripted candidates: for view k, the joint vectors of `script[k]` (possibly out of limits).
+class ScriptedPlanner final : public planning::ViewPlanner {
+ public:
+  std::vector<std::vector<Eigen::VectorXd>> script;
+  int stop_at_view = -1;
+  std::vector<int> asked;
+  std::vector<size_t> fused_seen;
+  std::string_view name() const override { return "scripted"; }
+  planning::PlanResult Plan(const planning::PlanningRequest& r, Rng&) override {
+    asked.push_back(r.view_index);
+    fused_seen.push_back(r.fused_views.size());
+    planning::PlanResult out;
+    if (r.view_index == stop_at_view) {
+      out.stop = true;
+      out.stop_reason = "gain below threshold";
+      return out;
+    }
+    const size_t k = static_cast<size_t>(r.view_index - 1);
+    if (k >= script.size() || script[k].empty()) {
+      out.status = NotFoundError("no valid candidate: 0 generated");
+      return out;
+    }
+    for (const Eigen::VectorXd& q : script[k]) {
+      planning::ViewCandidate c;
+      c.q = q;
+      c.reachable = true;
+      c.X_WC = r.arm->CameraPose(r.arm->ClampToLimits(q));
+      out.ranked.push_back(c);
+    }
+    out.generated = out.reachable = out.ranked.size();
+    return out;
+  }
+};
+
+class Recorder final : public EpisodeObserver {
+ public:
+  std::vector<int> views;
+  bool ended = false;
+  void OnStep(const StepRecord& s, const mapping::SemanticMap&) override {
+    EXPECT_FALSE(ended);
+    views.push_back(s.view);
+  }
+  void OnEnd(const EpisodeResult&, const mapping::SemanticMap&) override { ended = true; }
+};
+
+class EpisodeTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    auto model = robot::LoadDefaultArm();
+    ASSERT_TRUE(model.ok()) << model.status().ToString();
+    model_ = std::make_unique<robot::ArmModel>(*model);
+    arm_ = std::make_unique<robot::SimArm>(*model_);
+    options_.views = 4;
+    options_.roi = Box3(Eigen::Vector3d(0.3, -0.5, 0.0), Eigen::Vector3d(1.5, 0.5, 1.5));
+  }
+  Eigen::VectorXd Home(double dq1) const {
+    Eigen::VectorXd q = model_->home_joints();
+    q[0] += dq1;
+    return q;
+  }
+  Eigen::VectorXd OutOfLimits() const {
+    Eigen::VectorXd q = model_->home_joints();
+    q[1] = model_->upper_limits()[1] + 0.5;
+    return q;
+  }
+  Result<EpisodeResult> Run(const std::vector<EpisodeObserver*>& observers = {}) {
+    EpisodeComponents c{&source_, &segmenter_, arm_.get(), &planner_, &map_};
+    return RunEpisode(
+        c, options_,
+        [](const mapping::SemanticMap& m) {
+          return std::vector<std::pair<std::string, double>>{
+              {"known", static_cast<double>(m.grid().CountKnownVoxels())}};
+        },
+        observers);
+  }
+  std::unique_ptr<robot::ArmModel> model_;
+  std::unique_ptr<robot::SimArm> arm_;
+  WallSource source_;
+  HalfSegmenter segmenter_;
+  ScriptedPlanner planner_;
+  mapping::SemanticMap map_;
+  EpisodeOptions options_;
+};
+
+TEST_F(EpisodeTest, NViewsAreNFusedObservationsAndNMinusOneMoves) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  Recorder rec;
+  auto r = Run({&rec});
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->end, EpisodeEnd::kBudgetReached);
+  ASSERT_EQ(r->views_fused(), 4);
+  EXPECT_EQ(source_.captured, 4);
+  EXPECT_EQ(planner_.asked, (std::vector<int>{1, 2, 3}));  // no plan after the last view
+  EXPECT_EQ(planner_.fused_seen, (std::vector<size_t>{1, 2, 3}));
+  EXPECT_EQ(arm_->num_moves(), 3);
+  EXPECT_EQ(rec.views, (std::vector<int>{0, 1, 2, 3}));
+  EXPECT_TRUE(rec.ended);
+  EXPECT_EQ(segmenter_.seen, (std::vector<uint64_t>{0, 1, 2, 3}));
+  for (int i = 0; i < 4; ++i) {
+    const StepRecord& s = r->steps[static_cast<size_t>(i)];
+    EXPECT_EQ(s.view, i);
+    EXPECT_EQ(s.masks, 1u);
+    EXPECT_GT(s.integration.endpoints, 0u);
+    EXPECT_EQ(s.planned, i < 3);
+    EXPECT_EQ(s.chosen_rank, i < 3 ? 0 : -1);
+    EXPECT_GT(s.known_voxels, 0u);
+    EXPECT_EQ(s.Metric("known"), static_cast<double>(s.known_voxels));
+    EXPECT_TRUE(std::isnan(s.Metric("missing")));
+  }
+  // The views are taken where the arm went: view k + 1 at the pose of its chosen candidate.
+  EXPECT_NEAR((r->steps[1].q - Home(0.1)).norm(), 0.0, 1e-12);
+  EXPECT_NEAR((r->steps[3].q - Home(0.3)).norm(), 0.0, 1e-12);
+  EXPECT_NEAR(r->steps[0].joint_path_length, 0.1, 1e-12);
+}
+
+TEST_F(EpisodeTest, UnreachableChosenViewFallsBackToTheNextBestReachableOne) {
+  planner_.script = {{OutOfLimits(), OutOfLimits(), Home(0.2)}, {Home(0.3)}, {Home(0.4)}};
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kBudgetReached);
+  EXPECT_EQ(r->steps[0].chosen_rank, 2);
+  EXPECT_EQ(r->steps[0].refused_moves, 2);
+  EXPECT_NEAR((r->steps[1].q - Home(0.2)).norm(), 0.0, 1e-12);
+}
+
+TEST_F(EpisodeTest, EveryCandidateRefusedEndsTheEpisodeWithThatReason) {
+  planner_.script = {{Home(0.1)}, {OutOfLimits()}};
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kNoReachableMove);
+  EXPECT_EQ(r->views_fused(), 2);  // the second view was fused; its move failed
+  EXPECT_NE(r->end_reason.find("refused all 1"), std::string::npos) << r->end_reason;
+  EXPECT_FALSE(r->steps[1].move_status.ok());
+}
+
+TEST_F(EpisodeTest, NoValidCandidateStopsWithThePlannersStatus) {
+  planner_.script = {{Home(0.1)}};  // nothing for view 2
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kNoValidCandidate);
+  EXPECT_EQ(r->views_fused(), 2);
+  EXPECT_NE(r->end_reason.find("no valid candidate"), std::string::npos) << r->end_reason;
+  EXPECT_EQ(r->steps[1].plan_status.code(), StatusCode::kNotFound);
+}
+
+TEST_F(EpisodeTest, PlannerStoppingRuleEndsTheEpisode) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  planner_.stop_at_view = 2;
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kPlannerStopped);
+  EXPECT_EQ(r->end_reason, "gain below threshold");
+  EXPECT_EQ(r->views_fused(), 2);
+}
+
+TEST_F(EpisodeTest, SegmenterErrorIsRecordedAndTheLoopGoesOn) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  segmenter_.fail_frames = {1};
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kBudgetReached);
+  EXPECT_EQ(r->views_fused(), 4);
+  EXPECT_EQ(r->steps[1].segment_status.code(), StatusCode::kInternal);
+  EXPECT_EQ(r->steps[1].masks, 0u);
+  // The depth was still fused, without semantics.
+  EXPECT_GT(r->steps[1].integration.endpoints, 0u);
+  EXPECT_EQ(r->steps[1].integration.masked_endpoints, 0u);
+  EXPECT_GT(r->steps[2].integration.masked_endpoints, 0u);
+}
+
+TEST_F(EpisodeTest, ThrowingSegmenterBecomesAStatus) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  segmenter_.fail_frames = {0};
+  segmenter_.throw_instead = true;
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->views_fused(), 4);
+  EXPECT_NE(r->steps[0].segment_status.message().find("model crashed"), std::string::npos);
+}
+
+TEST_F(EpisodeTest, CaptureErrorIsRecordedAndFusesNothing) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  source_.fail_frames = {0};
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->views_fused(), 4);
+  EXPECT_EQ(r->steps[0].capture_status.code(), StatusCode::kIoError);
+  EXPECT_EQ(r->steps[0].known_voxels, 0u);
+  EXPECT_GT(r->steps[1].known_voxels, 0u);
+}
+
+TEST_F(EpisodeTest, MissingComponentsAndBadOptionsAreErrors) {
+  EpisodeComponents c{&source_, nullptr, arm_.get(), &planner_, &map_};
+  auto r = RunEpisode(c, options_);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("segmenter"), std::string::npos);
+  options_.views = 0;
+  auto r2 = Run();
+  ASSERT_FALSE(r2.ok());
+  EXPECT_NE(r2.status().message().find("views (0)"), std::string::npos) << r2.status().ToString();
+  options_.views = 3;
+  options_.roi = Box3();
+  auto r3 = Run();
+  ASSERT_FALSE(r3.ok());
+  EXPECT_NE(r3.status().message().find("ROI"), std::string::npos);
+}
+
+TEST_F(EpisodeTest, SingleViewEpisodePlansNothing) {
+  options_.views = 1;
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->views_fused(), 1);
+  EXPECT_TRUE(planner_.asked.empty());
+  EXPECT_EQ(arm_->num_moves(), 0);
+}
+
+}  // namespace
+}  // namespace avp::pipeline

@@ -1,0 +1,82 @@
+#pragma once
+
+#include <string_view>
+
+#include <avp/planning/candidates.h>
+#include <avp/planning/gain_grid.h>
+#include <avp/planning/view_planner.h>
+
+namespace avp::planning {
+
+/// avp's next-best-view planner (docs/planning.md, "avp-nbv").
+///
+/// Candidates: 3-D shells around the map's fruit instances, frontier clusters and the ROI centre
+/// (GenerateShellCandidates), IK-checked. Gain of a view, summed over rays through every
+/// `ray_stride_px`-th pixel of the true camera model, each walked from the optical centre:
+///   - visibility p_vis = Π (1 − p_j) over the voxels before (exclusive product): free voxels are
+///     transparent, unknown voxels occlude with probability `p_unknown`, an occupied voxel ends
+///     the ray;
+///   - an unknown voxel adds p_vis · w (bits of H(0.5) = 1): w = `w_unknown_near_target` within
+///     the near-target radius of a fruit voxel; elsewhere in the ROI `w_unknown_roi` times a
+///     Gaussian (σ = `roi_axis_sigma_m`) of its horizontal distance from the ROI's vertical
+///     centre axis, a prior for where unseen fruit hangs; 0 outside the ROI;
+///   - the occupied target-class voxel that ends a ray adds p_vis · `w_target_entropy` · H_b(c),
+///     its semantic uncertainty.
+/// Utility U = G / max G − `w_motion` · |Δq| / max |Δq| over the candidate set; views within
+/// 2 cm / 10° of a fused view are never chosen. Stopping rule: when the best gain is below
+/// `min_gain_bits` (0 disables it) the planner asks the loop to stop.
+struct AvpNbvOptions {
+  ShellCandidateOptions candidates;
+  GainGridOptions grid;
+  int ray_stride_px = 20;
+  double max_range_m = 1.0;
+  double p_unknown = 0.5;
+  double w_target_entropy = 1.0;
+  double w_unknown_near_target = 1.0;
+  double w_unknown_roi = 0.2;
+  double roi_axis_sigma_m = 0.15;
+  double w_motion = 0.1;
+  double min_gain_bits = 0.0;
+  /// Threads over candidates (0 = all hardware threads). Results do not depend on it.
+  int num_threads = 0;
+  Status Validate() const;
+};
+
+/// The gain of one ray under `options` (see AvpNbvOptions), walked on `grid`.
+double AvpRayGain(const GainGrid& grid, const Eigen::Vector3d& from, const Eigen::Vector3d& to,
+                  const AvpNbvOptions& options);
+/// The same gain computed the slow way, voxel by voxel from the map (mapping::TraverseRay and
+/// ReadGainVoxel): the reference the fast evaluator is tested against.
+double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3d& from,
+                           const Eigen::Vector3d& to, SemanticClass target, const Box3& roi,
+                           const AvpNbvOptions& options);
+/// Σ AvpRayGain over the rays of a camera at X_WC (RayDirections(K, ray_stride_px), each
+/// max_range_m long).
+double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const CameraIntrinsics& K,
+                   const AvpNbvOptions& options);
+
+class AvpNbvPlanner final : public ViewPlanner {
+ public:
+  /// @throws avp::Error if options.Validate() fails.
+  explicit AvpNbvPlanner(const AvpNbvOptions& options = {});
+  std::string_view name() const override { return "avp-nbv"; }
+  PlanResult Plan(const PlanningRequest& request, Rng& rng) override;
+  const AvpNbvOptions& options() const { return options_; }
+
+ private:
+  AvpNbvOptions options_;
+};
+
+/// Random reachable views from the same candidate generator (a baseline): ranked in a seeded
+/// random order.
+class RandomPlanner final : public ViewPlanner {
+ public:
+  explicit RandomPlanner(const ShellCandidateOptions& options = {}) : options_(options) {}
+  std::string_view name() const override { return "random"; }
+  PlanResult Plan(const PlanningRequest& request, Rng& rng) override;
+
+ private:
+  ShellCandidateOptions options_;
+};
+
+}  // namespace avp::planning

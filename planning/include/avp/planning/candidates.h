@@ -1,0 +1,59 @@
+#pragma once
+
+#include <vector>
+
+#include <avp/core/rng.h>
+#include <avp/planning/gain_grid.h>
+#include <avp/planning/view_planner.h>
+
+namespace avp::planning {
+
+/// 3-D candidate views around targets (avp-nbv's generator; also used by the random and the
+/// literature baselines so they compete on the same candidates).
+struct ShellCandidateOptions {
+  /// Camera distances from the target (metres): radii are drawn uniformly between the smallest
+  /// and the largest.
+  std::vector<double> radii_m = {0.25, 0.50};
+  /// Camera elevations above the target's horizontal plane (degrees): drawn between the smallest
+  /// and the largest (uniform in area).
+  std::vector<double> elevations_deg = {-30.0, 45.0};
+  /// Azimuths are drawn within this half-width of the direction from the target to the robot
+  /// base (degrees), where the arm can look at the plant from.
+  double azimuth_half_range_deg = 70.0;
+  /// At most this many targets: fruit instances (largest first), then frontier clusters, then
+  /// the ROI centre.
+  int max_targets = 12;
+  /// Candidates to generate (spread evenly over the targets) before the reachability check.
+  int max_candidates = 720;
+  /// No candidate whose eye is within this distance of a known occupied voxel.
+  double clearance_m = 0.03;
+  /// IK restarts per candidate after the attempt from the current joints.
+  int ik_restarts = 1;
+  /// Threads for the IK checks (0 = all hardware threads); the result does not depend on it.
+  int num_threads = 0;
+};
+
+/// Where candidates look: target points with a label ("fruit-shell", "frontier", "roi").
+struct ViewTarget {
+  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();
+  std::string source;
+  double weight = 1.0;
+};
+
+/// Targets for the shell generator: the centroids of the map's target-class instances (largest
+/// first), centres of frontier clusters inside the ROI (unknown voxels next to free ones), and
+/// the ROI centre; at most options.max_targets.
+std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const GainGrid& grid,
+                                        const ShellCandidateOptions& options);
+
+/// Candidates on shells around `targets`, looking at them (image up = world +z), each
+/// IK-checked from request.q_current (q, reachable and cost filled). Directions and radii are
+/// drawn from `rng` (deterministic given its state); eyes beyond the arm's reach, below 5 cm,
+/// within clearance_m of a known occupied voxel, or within 2 cm / 10 deg of a fused view are
+/// dropped before IK.
+std::vector<ViewCandidate> GenerateShellCandidates(const PlanningRequest& request,
+                                                   const GainGrid& grid,
+                                                   const std::vector<ViewTarget>& targets,
+                                                   const ShellCandidateOptions& options, Rng& rng);
+
+}  // namespace avp::planning

@@ -1,0 +1,213 @@
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include <fmt/format.h>
+
+#include <avp/core/error.h>
+#include <avp/core/parallel.h>
+#include <avp/planning/avp_nbv_planner.h>
+
+namespace avp::planning {
+
+namespace {
+
+double BinaryEntropyBits(double p) {
+  p = std::clamp(p, 1e-6, 1.0 - 1e-6);
+  return -(p * std::log2(p) + (1.0 - p) * std::log2(1.0 - p));
+}
+
+/// Weight of an unknown voxel of the ROI that is not near a target voxel: w_unknown_roi times a
+/// Gaussian of its horizontal distance from the ROI's vertical centre axis (fruit hangs around
+/// the stem), or flat when roi_axis_sigma_m is 0.
+double RoiWeight(const VoxelKey& k, double voxel_size_m, const Box3& roi, const AvpNbvOptions& o) {
+  if (o.roi_axis_sigma_m <= 0.0) return o.w_unknown_roi;
+  const Eigen::Vector3d c = k.Center(voxel_size_m);
+  const Eigen::Vector2d d = c.head<2>() - roi.center().head<2>();
+  return o.w_unknown_roi *
+         std::exp(-0.5 * d.squaredNorm() / (o.roi_axis_sigma_m * o.roi_axis_sigma_m));
+}
+
+/// One voxel's contribution; returns false when the ray ends there.
+bool Accumulate(const VoxelKey& k, const GainVoxel& v, SemanticClass target, double voxel_size_m,
+                const Box3& roi, const AvpNbvOptions& o, double& p_vis, double& gain) {
+  switch (v.state) {
+    case mapping::VoxelState::kOccupied:
+      if (v.cls == target) gain += p_vis * o.w_target_entropy * BinaryEntropyBits(v.p_target);
+      return false;
+    case mapping::VoxelState::kUnknown: {
+      const double w = v.near_target ? o.w_unknown_near_target
+                                     : (v.in_roi ? RoiWeight(k, voxel_size_m, roi, o) : 0.0);
+      gain += p_vis * w;
+      p_vis *= 1.0 - o.p_unknown;
+      return p_vis > 1e-4;
+    }
+    case mapping::VoxelState::kFree:
+      return true;
+  }
+  return true;
+}
+
+}  // namespace
+
+Status AvpNbvOptions::Validate() const {
+  std::vector<std::string> errors;
+  if (ray_stride_px < 1 || ray_stride_px > 256) {
+    errors.push_back(fmt::format("ray stride ({} px) must be in [1, 256]", ray_stride_px));
+  }
+  if (!(max_range_m > 0.0 && max_range_m <= 10.0)) {
+    errors.push_back(fmt::format("max range ({} m) must be in (0, 10]", max_range_m));
+  }
+  if (!(p_unknown >= 0.0 && p_unknown < 1.0)) {
+    errors.push_back(fmt::format("p_unknown ({}) must be in [0, 1)", p_unknown));
+  }
+  for (const auto& [name, w] : {std::pair{"w_target_entropy", w_target_entropy},
+                                {"w_unknown_near_target", w_unknown_near_target},
+                                {"w_unknown_roi", w_unknown_roi},
+                                {"w_motion", w_motion},
+                                {"roi_axis_sigma_m", roi_axis_sigma_m},
+                                {"min_gain_bits", min_gain_bits}}) {
+    if (!(std::isfinite(w) && w >= 0.0)) {
+      errors.push_back(fmt::format("{} ({}) must be finite and >= 0", name, w));
+    }
+  }
+  if (num_threads < 0) errors.push_back(fmt::format("threads ({}) must be >= 0", num_threads));
+  if (candidates.radii_m.empty() || candidates.elevations_deg.empty() ||
+      candidates.max_candidates < 1 || candidates.max_targets < 1) {
+    errors.push_back("the candidate shells are empty (radii, elevations, max candidates, targets)");
+  }
+  for (double e : candidates.elevations_deg) {
+    if (!(e > -89.0 && e < 89.0))
+      errors.push_back(fmt::format("elevation ({} deg) must be in (-89, 89)", e));
+  }
+  if (!(candidates.azimuth_half_range_deg >= 0.0 && candidates.azimuth_half_range_deg <= 180.0)) {
+    errors.push_back(fmt::format("azimuth half range ({} deg) must be in [0, 180]",
+                                 candidates.azimuth_half_range_deg));
+  }
+  if (!(candidates.clearance_m >= 0.0 && candidates.clearance_m < 0.5)) {
+    errors.push_back(fmt::format("clearance ({} m) must be in [0, 0.5)", candidates.clearance_m));
+  }
+  for (double r : candidates.radii_m) {
+    if (!(r > 0.05 && r < 3.0))
+      errors.push_back(fmt::format("shell radius ({} m) must be in (0.05, 3)", r));
+  }
+  if (errors.empty()) return Status::Ok();
+  std::string joined;
+  for (const std::string& e : errors) joined += (joined.empty() ? "" : "; ") + e;
+  return InvalidArgumentError("invalid avp-nbv options: " + joined);
+}
+
+double AvpRayGain(const GainGrid& grid, const Eigen::Vector3d& from, const Eigen::Vector3d& to,
+                  const AvpNbvOptions& options) {
+  double p_vis = 1.0, gain = 0.0;
+  const SemanticClass target = grid.target();
+  const double s = grid.voxel_size_m();
+  grid.Walk(from, to, [&](const VoxelKey& k, const GainVoxel& v) {
+    return Accumulate(k, v, target, s, grid.roi(), options, p_vis, gain);
+  });
+  return gain;
+}
+
+double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3d& from,
+                           const Eigen::Vector3d& to, SemanticClass target, const Box3& roi,
+                           const AvpNbvOptions& options) {
+  std::vector<VoxelKey> keys;
+  mapping::TraverseRay(from, to, map.voxel_size_m(), [&](const VoxelKey& k) {
+    keys.push_back(k);
+    return true;
+  });
+  if (!keys.empty()) keys.pop_back();  // [from, to): the end voxel is not visited
+  double p_vis = 1.0, gain = 0.0;
+  for (const VoxelKey& k : keys) {
+    const GainVoxel v = ReadGainVoxel(map, k, target, roi, options.grid.near_target_radius_m);
+    if (!Accumulate(k, v, target, map.voxel_size_m(), roi, options, p_vis, gain)) break;
+  }
+  return gain;
+}
+
+double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const CameraIntrinsics& K,
+                   const AvpNbvOptions& options) {
+  const std::vector<Eigen::Vector3d> dirs = RayDirections(K, options.ray_stride_px);
+  const Eigen::Vector3d origin = X_WC.translation();
+  double gain = 0.0;
+  for (const Eigen::Vector3d& d_C : dirs) {
+    gain += AvpRayGain(grid, origin, X_WC * (options.max_range_m * d_C), options);
+  }
+  return gain;
+}
+
+AvpNbvPlanner::AvpNbvPlanner(const AvpNbvOptions& options) : options_(options) {
+  if (const Status s = options.Validate(); !s.ok()) throw Error(s.ToString());
+}
+
+PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
+  PlanResult result;
+  if (Status s = ValidateRequest(request); !s.ok()) {
+    result.status = s;
+    return result;
+  }
+  Result<GainGrid> grid =
+      GainGrid::Build(*request.map, request.target_class, request.roi, options_.grid);
+  if (!grid.ok()) {
+    result.status = grid.status();
+    return result;
+  }
+  const std::vector<ViewTarget> targets = FindViewTargets(request, *grid, options_.candidates);
+  std::vector<ViewCandidate> candidates =
+      GenerateShellCandidates(request, *grid, targets, options_.candidates, rng);
+  const size_t generated = candidates.size();
+
+  // Gains of the reachable candidates, in parallel over candidates (each independent).
+  const std::vector<Eigen::Vector3d> dirs = RayDirections(request.K, options_.ray_stride_px);
+  ParallelFor(candidates.size(), options_.num_threads, [&](size_t i) {
+    ViewCandidate& c = candidates[i];
+    if (!c.reachable) return;
+    const Eigen::Vector3d origin = c.X_WC.translation();
+    double g = 0.0;
+    for (const Eigen::Vector3d& d_C : dirs) {
+      g += AvpRayGain(*grid, origin, c.X_WC * (options_.max_range_m * d_C), options_);
+    }
+    c.gain = g;
+  });
+
+  double max_gain = 0.0, max_cost = 0.0;
+  for (const ViewCandidate& c : candidates) {
+    if (!c.reachable) continue;
+    max_gain = std::max(max_gain, c.gain);
+    max_cost = std::max(max_cost, c.cost);
+  }
+  for (ViewCandidate& c : candidates) {
+    const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
+    const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
+    c.utility = g - options_.w_motion * m;
+  }
+  result = RankCandidates(std::move(candidates), generated, name());
+  if (result.status.ok() && options_.min_gain_bits > 0.0 && max_gain < options_.min_gain_bits) {
+    result.stop = true;
+    result.stop_reason =
+        fmt::format("best expected gain {:.3f} bits is below the stopping threshold {:.3f} bits",
+                    max_gain, options_.min_gain_bits);
+  }
+  return result;
+}
+
+PlanResult RandomPlanner::Plan(const PlanningRequest& request, Rng& rng) {
+  PlanResult result;
+  if (Status s = ValidateRequest(request); !s.ok()) {
+    result.status = s;
+    return result;
+  }
+  Result<GainGrid> grid = GainGrid::Build(*request.map, request.target_class, request.roi);
+  if (!grid.ok()) {
+    result.status = grid.status();
+    return result;
+  }
+  const std::vector<ViewTarget> targets = FindViewTargets(request, *grid, options_);
+  std::vector<ViewCandidate> candidates =
+      GenerateShellCandidates(request, *grid, targets, options_, rng);
+  const size_t generated = candidates.size();
+  for (ViewCandidate& c : candidates) c.utility = rng.Uniform01();
+  return RankCandidates(std::move(candidates), generated, name());
+}
+
+}  // namespace avp::planning

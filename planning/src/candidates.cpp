@@ -1,0 +1,163 @@
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numbers>
+
+#include <avp/core/parallel.h>
+#include <avp/planning/candidates.h>
+
+namespace avp::planning {
+
+namespace {
+
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+/// Frontier voxels (free voxels in the ROI with an unknown 6-neighbour), clustered on a coarse
+/// lattice; returns cluster centres with their voxel counts (near-target voxels count 3x).
+std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const GainGrid& grid,
+                                         int max_clusters) {
+  const double s = grid.voxel_size_m();
+  constexpr double kCell = 0.05;
+  struct Acc {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    double weight = 0.0;
+    size_t n = 0;
+  };
+  std::map<std::tuple<int, int, int>, Acc> cells;
+  const Box3& roi = request.roi;
+  request.map->grid().ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
+    if (log_odds >= request.map->grid().occupied_log_odds()) return;  // free voxels only
+    const Eigen::Vector3d c = k.Center(s);
+    if (!roi.Contains(c)) return;
+    static constexpr int kNeighbours[6][3] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                              {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
+    bool frontier = false, near = false;
+    for (const auto& d : kNeighbours) {
+      const GainVoxel v = grid.At({k.x + d[0], k.y + d[1], k.z + d[2]});
+      if (v.state == mapping::VoxelState::kUnknown) {
+        frontier = true;
+        near = near || v.near_target;
+      }
+    }
+    if (!frontier) return;
+    const auto key = std::make_tuple(static_cast<int>(std::floor(c.x() / kCell)),
+                                     static_cast<int>(std::floor(c.y() / kCell)),
+                                     static_cast<int>(std::floor(c.z() / kCell)));
+    Acc& a = cells[key];
+    a.sum += c;
+    a.weight += near ? 3.0 : 1.0;
+    ++a.n;
+  });
+  std::vector<ViewTarget> out;
+  for (const auto& [key, a] : cells) {
+    if (a.n < 4) continue;
+    out.push_back({a.sum / static_cast<double>(a.n), "frontier", a.weight});
+  }
+  // Heaviest first; the map's ordering of equal weights is deterministic (std::map by cell).
+  std::stable_sort(out.begin(), out.end(),
+                   [](const ViewTarget& a, const ViewTarget& b) { return a.weight > b.weight; });
+  if (static_cast<int>(out.size()) > max_clusters) out.resize(static_cast<size_t>(max_clusters));
+  return out;
+}
+
+}  // namespace
+
+std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const GainGrid& grid,
+                                        const ShellCandidateOptions& options) {
+  std::vector<ViewTarget> targets;
+  const int max_targets = std::max(1, options.max_targets);
+  // Fruit instances, largest first (ties by id: Instances() is in id order).
+  std::vector<mapping::InstanceInfo> instances;
+  for (const mapping::InstanceInfo& info : request.map->Instances()) {
+    if (info.semantic_class == request.target_class && info.voxels >= 5) instances.push_back(info);
+  }
+  std::stable_sort(instances.begin(), instances.end(),
+                   [](const mapping::InstanceInfo& a, const mapping::InstanceInfo& b) {
+                     return a.voxels > b.voxels;
+                   });
+  const int fruit_budget = std::max(0, max_targets - 4);
+  for (const mapping::InstanceInfo& info : instances) {
+    if (static_cast<int>(targets.size()) >= fruit_budget) break;
+    targets.push_back({info.centroid_W, "fruit-shell", static_cast<double>(info.voxels)});
+  }
+  const int frontier_budget = std::max(0, max_targets - 1 - static_cast<int>(targets.size()));
+  for (const ViewTarget& t : FrontierClusters(request, grid, frontier_budget)) {
+    targets.push_back(t);
+  }
+  targets.push_back({request.roi.center(), "roi", 1.0});
+  return targets;
+}
+
+std::vector<ViewCandidate> GenerateShellCandidates(const PlanningRequest& request,
+                                                   const GainGrid& grid,
+                                                   const std::vector<ViewTarget>& targets,
+                                                   const ShellCandidateOptions& options, Rng& rng) {
+  std::vector<ViewCandidate> out;
+  if (targets.empty()) return out;
+  const double s = grid.voxel_size_m();
+  const int per_target = std::max(1, options.max_candidates / static_cast<int>(targets.size()));
+  const double r_min = *std::min_element(options.radii_m.begin(), options.radii_m.end());
+  const double r_max = *std::max_element(options.radii_m.begin(), options.radii_m.end());
+  const double el_min =
+      *std::min_element(options.elevations_deg.begin(), options.elevations_deg.end());
+  const double el_max =
+      *std::max_element(options.elevations_deg.begin(), options.elevations_deg.end());
+  // Cheap necessary condition before IK: the camera within the arm's reach (plus the camera's
+  // offset from the flange) of the base.
+  const double reach = request.arm->max_reach_m() + request.arm->X_FC().translation().norm();
+  const int clearance = static_cast<int>(std::ceil(options.clearance_m / s));
+  for (const ViewTarget& t : targets) {
+    // The fan faces the robot base (the arm's origin), from where the arm can look at the plant.
+    const double base_az = std::atan2(-t.p_W.y(), -t.p_W.x());
+    int made = 0;
+    for (int attempt = 0; attempt < 8 * per_target && made < per_target; ++attempt) {
+      // Uniform over the shell's band: radius, azimuth in the fan, elevation (area-uniform).
+      const double rr = rng.Uniform(r_min, r_max);
+      const double az =
+          base_az +
+          rng.Uniform(-options.azimuth_half_range_deg, options.azimuth_half_range_deg) * kDegToRad;
+      const double el =
+          std::asin(rng.Uniform(std::sin(el_min * kDegToRad), std::sin(el_max * kDegToRad)));
+      const Eigen::Vector3d eye =
+          t.p_W + rr * Eigen::Vector3d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az),
+                                       std::sin(el));
+      if (eye.norm() > reach || eye.z() < 0.05) continue;
+      // No camera in or next to a known obstacle (the map is all the planner knows).
+      const VoxelKey ke = VoxelKey::FromPoint(eye, s);
+      bool blocked = false;
+      for (int dz = -clearance; dz <= clearance && !blocked; ++dz) {
+        for (int dy = -clearance; dy <= clearance && !blocked; ++dy) {
+          for (int dx = -clearance; dx <= clearance && !blocked; ++dx) {
+            blocked =
+                grid.At({ke.x + dx, ke.y + dy, ke.z + dz}).state == mapping::VoxelState::kOccupied;
+          }
+        }
+      }
+      if (blocked) continue;
+      const RigidTransform X_WC = RigidTransform::LookAt(eye, t.p_W);
+      if (IsNearAny(X_WC, request.fused_views)) continue;
+      ViewCandidate c;
+      c.X_WC = X_WC;
+      c.source = t.source;
+      out.push_back(std::move(c));
+      ++made;
+    }
+  }
+  // Reachability: IK from the current joints, in parallel; each candidate draws its restarts from
+  // its own fork of the generator, so the result does not depend on the thread count.
+  const Rng ik_root = rng.Fork("ik");
+  robot::IkOptions ik;
+  ik.max_restarts = std::max(0, options.ik_restarts);
+  ParallelFor(out.size(), options.num_threads, [&](size_t i) {
+    Rng r = ik_root.Fork(static_cast<uint64_t>(i));
+    const robot::IkResult res = request.arm->SolveCameraIk(out[i].X_WC, request.q_current, r, ik);
+    if (res.ok()) {
+      out[i].q = res.q;
+      out[i].reachable = true;
+      out[i].cost = (res.q - request.q_current).norm();
+    }
+  });
+  return out;
+}
+
+}  // namespace avp::planning

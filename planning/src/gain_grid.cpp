@@ -1,0 +1,207 @@
+// GainGrid: a dense 4-byte-per-voxel copy of the semantic map for gain evaluation, and the slow
+// per-voxel read (ReadGainVoxel) it is tested against. See docs/planning.md, "Gain grid".
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include <avp/core/error.h>
+#include <avp/mapping/sensor_model.h>
+#include <avp/planning/gain_grid.h>
+
+namespace avp::planning {
+
+namespace {
+
+/// p clamped into [0, 1] (NaN -> 0) and rounded to the nearest of 0, 1, ..., 255 (halves away
+/// from zero).
+uint32_t ProbabilityByte(double p) {
+  if (!(p > 0.0)) return 0;
+  if (p >= 1.0) return 255;
+  return static_cast<uint32_t>(std::lround(p * 255.0));
+}
+
+float ByteToProbability(uint32_t b) { return static_cast<float>(b) / 255.0f; }
+
+/// The largest squared centre distance, in voxel units, that counts as "within radius_m": exact
+/// integer comparisons, so GainGrid::Build and ReadGainVoxel agree voxel by voxel. The 1e-6
+/// (voxel^2) slack keeps a voxel at exactly the radius inside when the radius is a whole number
+/// of voxels that the division r / s rounds just below (0.04 / 0.005 and the like).
+int64_t NearTargetThreshold(double radius_m, double voxel_size_m) {
+  const double r = radius_m / voxel_size_m;
+  return static_cast<int64_t>(std::floor(r * r + 1e-6));
+}
+
+/// floor(sqrt(t)) for t >= 0, exactly.
+int32_t IntegerSqrt(int64_t t) {
+  auto r = static_cast<int64_t>(std::sqrt(static_cast<double>(t)));
+  while (r * r > t) --r;
+  while ((r + 1) * (r + 1) <= t) ++r;
+  return static_cast<int32_t>(r);
+}
+
+struct Offset {
+  int32_t x, y, z;
+};
+
+/// Integer offsets with x^2 + y^2 + z^2 <= threshold.
+std::vector<Offset> BallOffsets(int64_t threshold) {
+  const int32_t r = IntegerSqrt(threshold);
+  std::vector<Offset> out;
+  for (int32_t z = -r; z <= r; ++z) {
+    for (int32_t y = -r; y <= r; ++y) {
+      for (int32_t x = -r; x <= r; ++x) {
+        if (int64_t{x} * x + int64_t{y} * y + int64_t{z} * z <= threshold) out.push_back({x, y, z});
+      }
+    }
+  }
+  return out;
+}
+
+Status ValidateOptions(const GainGridOptions& options) {
+  if (!std::isfinite(options.near_target_radius_m) || options.near_target_radius_m < 0.0) {
+    return InvalidArgumentError(
+        fmt::format("invalid gain grid options: near_target_radius_m ({}) must be finite and >= 0",
+                    options.near_target_radius_m));
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+float QuantizeProbability(double p) { return ByteToProbability(ProbabilityByte(p)); }
+
+GainVoxel ReadGainVoxel(const mapping::SemanticMap& map, const VoxelKey& k, SemanticClass target,
+                        const Box3& roi, double near_target_radius_m) {
+  AVP_THROW_UNLESS(std::isfinite(near_target_radius_m) && near_target_radius_m >= 0.0,
+                   near_target_radius_m);
+  const mapping::OccupancyGrid& grid = map.grid();
+  const double s = grid.voxel_size_m();
+  GainVoxel v;
+  v.in_roi = roi.Contains(k.Center(s));
+  if (const std::optional<float> lo = grid.LogOdds(k)) {
+    v.state = *lo >= grid.occupied_log_odds() ? mapping::VoxelState::kOccupied
+                                              : mapping::VoxelState::kFree;
+    v.p_occ = QuantizeProbability(mapping::Probability(*lo));
+  }
+  if (const mapping::SemanticCell* c = grid.Semantic(k); c != nullptr && c->has_label()) {
+    v.cls = c->cls();
+    if (v.cls == target) v.p_target = QuantizeProbability(c->confidence);
+  }
+  const int64_t threshold = NearTargetThreshold(near_target_radius_m, s);
+  const int32_t r = IntegerSqrt(threshold);
+  for (int32_t dz = -r; dz <= r && !v.near_target; ++dz) {
+    for (int32_t dy = -r; dy <= r && !v.near_target; ++dy) {
+      for (int32_t dx = -r; dx <= r && !v.near_target; ++dx) {
+        if (int64_t{dx} * dx + int64_t{dy} * dy + int64_t{dz} * dz > threshold) continue;
+        const mapping::SemanticCell* c = grid.Semantic({k.x + dx, k.y + dy, k.z + dz});
+        if (c != nullptr && c->has_label() && c->cls() == target) v.near_target = true;
+      }
+    }
+  }
+  return v;
+}
+
+Result<GainGrid> GainGrid::Build(const mapping::SemanticMap& map, SemanticClass target,
+                                 const Box3& roi, const GainGridOptions& options) {
+  AVP_RETURN_IF_ERROR(ValidateOptions(options));
+  const mapping::OccupancyGrid& grid = map.grid();
+  GainGrid out;
+  out.voxel_size_m_ = grid.voxel_size_m();
+  out.target_ = target;
+  out.roi_ = roi;
+
+  // Key bounds of every known voxel (KnownBounds(), in keys) and every labelled voxel (a label
+  // may sit on a voxel whose occupancy is unknown), so that everything outside reads exactly as
+  // unknown and unlabelled.
+  constexpr int32_t kBig = std::numeric_limits<int32_t>::max();
+  VoxelKey lo{kBig, kBig, kBig};
+  VoxelKey hi{-kBig, -kBig, -kBig};
+  bool any = false;
+  auto extend = [&](const VoxelKey& k) {
+    lo = {std::min(lo.x, k.x), std::min(lo.y, k.y), std::min(lo.z, k.z)};
+    hi = {std::max(hi.x, k.x), std::max(hi.y, k.y), std::max(hi.z, k.z)};
+    any = true;
+  };
+  grid.ForEachBlock([&](const mapping::OccupancyBlock& b) {
+    b.known.ForEachSet([&](int i) { extend(mapping::KeyOf(b.key, i)); });
+  });
+  std::vector<VoxelKey> target_keys;
+  grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& c) {
+    extend(k);
+    if (c.cls() == target) target_keys.push_back(k);
+  });
+  // An empty map gives an empty grid: every key reads as unknown (p_occ 0.5), unlabelled, not
+  // near the target; in_roi still follows `roi`.
+  if (!any) return out;
+
+  const int64_t threshold = NearTargetThreshold(options.near_target_radius_m, out.voxel_size_m_);
+  const int32_t r = IntegerSqrt(threshold);
+  const int64_t nx = int64_t{hi.x} - lo.x + 1 + 2 * int64_t{r};
+  const int64_t ny = int64_t{hi.y} - lo.y + 1 + 2 * int64_t{r};
+  const int64_t nz = int64_t{hi.z} - lo.z + 1 + 2 * int64_t{r};
+  const double bytes = static_cast<double>(nx) * static_cast<double>(ny) * static_cast<double>(nz) *
+                       static_cast<double>(sizeof(uint32_t));
+  if (bytes > static_cast<double>(options.max_bytes)) {
+    return InvalidArgumentError(fmt::format(
+        "gain grid of {} x {} x {} voxels at {} m ({:.1f} MB over the known voxels inflated by "
+        "near_target_radius_m = {} m) exceeds max_bytes ({:.1f} MB): use a coarser map, a "
+        "smaller radius or a larger max_bytes",
+        nx, ny, nz, out.voxel_size_m_, bytes / 1e6, options.near_target_radius_m,
+        static_cast<double>(options.max_bytes) / 1e6));
+  }
+  out.min_ = {lo.x - r, lo.y - r, lo.z - r};
+  out.dims_ = Eigen::Vector3i(static_cast<int>(nx), static_cast<int>(ny), static_cast<int>(nz));
+  out.cells_.assign(static_cast<size_t>(nx * ny * nz), 0u);
+
+  auto index = [&](const VoxelKey& k) {
+    return static_cast<size_t>(
+        (int64_t{k.x} - out.min_.x) +
+        nx * ((int64_t{k.y} - out.min_.y) + ny * (int64_t{k.z} - out.min_.z)));
+  };
+  const float occupied = grid.occupied_log_odds();
+  grid.ForEachBlock([&](const mapping::OccupancyBlock& b) {
+    b.known.ForEachSet([&](int i) {
+      const float log_odds = b.log_odds[static_cast<size_t>(i)];
+      const auto state = static_cast<uint32_t>(log_odds >= occupied ? mapping::VoxelState::kOccupied
+                                                                    : mapping::VoxelState::kFree);
+      out.cells_[index(mapping::KeyOf(b.key, i))] =
+          state | (ProbabilityByte(mapping::Probability(log_odds)) << kOccShift);
+    });
+  });
+  grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& c) {
+    uint32_t& cell = out.cells_[index(k)];
+    cell |= (static_cast<uint32_t>(c.semantic_class) & kClassMask) << kClassShift;
+    if (c.cls() == target) cell |= ProbabilityByte(c.confidence) << kTargetShift;
+  });
+  // Dilation of the target-labelled voxels: time proportional to their number times the ball's
+  // volume; every offset stays inside the grid, which is inflated by the ball's radius.
+  if (!target_keys.empty()) {
+    const std::vector<Offset> ball = BallOffsets(threshold);
+    for (const VoxelKey& k : target_keys) {
+      for (const Offset& d : ball) {
+        out.cells_[index({k.x + d.x, k.y + d.y, k.z + d.z})] |= kNearTargetBit;
+      }
+    }
+  }
+  return out;
+}
+
+std::vector<Eigen::Vector3d> RayDirections(const CameraIntrinsics& K, int stride) {
+  AVP_THROW_UNLESS(stride >= 1, stride);
+  const Status valid = K.Validate();
+  AVP_THROW_UNLESS(valid.ok(), valid.message());
+  std::vector<Eigen::Vector3d> dirs;
+  const int first = stride / 2;
+  for (int v = first; v < K.height; v += stride) {
+    for (int u = first; u < K.width; u += stride) {
+      dirs.push_back(K.RayDirection(Eigen::Vector2d(u, v)).normalized());
+    }
+  }
+  return dirs;
+}
+
+}  // namespace avp::planning

@@ -1,0 +1,108 @@
+// Request validation, candidate ranking and the "near a fused view" test shared by the planners.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include <avp/planning/view_planner.h>
+
+namespace avp::planning {
+
+namespace {
+
+bool IsFinitePose(const RigidTransform& X) {
+  return X.rotation().allFinite() && X.translation().allFinite();
+}
+
+void AppendJointProblems(std::string_view field, const Eigen::VectorXd& q, int expected,
+                         std::vector<std::string>& problems) {
+  if (q.size() != expected) {
+    problems.push_back(fmt::format("{} has {} joints, the arm has {}", field, q.size(), expected));
+  } else if (!q.allFinite()) {
+    problems.push_back(fmt::format("{} has a non-finite entry", field));
+  }
+}
+
+/// Utility for sorting: NaN ranks last.
+double SortKey(double utility) {
+  return std::isnan(utility) ? -std::numeric_limits<double>::infinity() : utility;
+}
+
+}  // namespace
+
+Status ValidateRequest(const PlanningRequest& request) {
+  std::vector<std::string> problems;
+  if (request.map == nullptr) problems.push_back("map must not be null");
+  if (request.arm == nullptr) {
+    problems.push_back("arm must not be null");
+  } else {
+    const int n = request.arm->num_joints();
+    AppendJointProblems("q_current", request.q_current, n, problems);
+    // q_start may be left empty by callers that do not track it.
+    if (request.q_start.size() != 0) AppendJointProblems("q_start", request.q_start, n, problems);
+  }
+  if (!IsFinitePose(request.X_WC_current)) problems.push_back("X_WC_current must be finite");
+  if (!IsFinitePose(request.X_WC_start)) problems.push_back("X_WC_start must be finite");
+  if (const Status k = request.K.Validate(); !k.ok()) problems.push_back("K: " + k.message());
+  if (request.roi.IsEmpty() || !request.roi.min().allFinite() || !request.roi.max().allFinite()) {
+    problems.push_back(
+        fmt::format("roi ({}) must be finite and non-empty", request.roi.ToString()));
+  }
+  if (request.view_index < 1) {
+    problems.push_back(
+        fmt::format("view_index ({}) must be >= 1 (view 0 is the start view)", request.view_index));
+  }
+  if (request.views_total < 1) {
+    problems.push_back(fmt::format("views_total ({}) must be >= 1", request.views_total));
+  }
+  for (size_t i = 0; i < request.fused_views.size(); ++i) {
+    if (!IsFinitePose(request.fused_views[i])) {
+      problems.push_back(fmt::format("fused_views[{}] must be finite", i));
+    }
+  }
+  const int target = static_cast<int>(request.target_class);
+  if (target <= 0 || target >= kNumSemanticClasses) {
+    problems.push_back(
+        fmt::format("target_class ({}) must be a class other than background", target));
+  }
+  if (problems.empty()) return Status::Ok();
+  return InvalidArgumentError(
+      fmt::format("invalid planning request: {}", fmt::join(problems, "; ")));
+}
+
+PlanResult RankCandidates(std::vector<ViewCandidate> candidates, size_t generated,
+                          std::string_view planner_name) {
+  PlanResult result;
+  result.generated = generated;
+  std::vector<size_t> order;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (candidates[i].reachable) order.push_back(i);
+  }
+  result.reachable = order.size();
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    const double ua = SortKey(candidates[a].utility), ub = SortKey(candidates[b].utility);
+    if (ua != ub) return ua > ub;
+    return candidates[a].cost < candidates[b].cost;  // then generation order (stable)
+  });
+  result.ranked.reserve(order.size());
+  for (size_t i : order) result.ranked.push_back(std::move(candidates[i]));
+  if (result.ranked.empty()) {
+    result.status = NotFoundError(
+        fmt::format("{}: no valid candidate: {} generated, {} kept after filtering, 0 reachable",
+                    planner_name, generated, candidates.size()));
+  }
+  return result;
+}
+
+bool IsNearAny(const RigidTransform& X_WC, const std::vector<RigidTransform>& views,
+               double position_tol_m, double angle_tol_rad) {
+  return std::any_of(views.begin(), views.end(), [&](const RigidTransform& v) {
+    return X_WC.IsNearlyEqualTo(v, position_tol_m, angle_tol_rad);
+  });
+}
+
+}  // namespace avp::planning

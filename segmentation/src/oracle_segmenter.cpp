@@ -1,0 +1,341 @@
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <set>
+#include <utility>
+#include <vector>
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <avp/core/error.h>
+#include <avp/core/rng.h>
+#include <avp/segmentation/mask_ops.h>
+#include <avp/segmentation/oracle_segmenter.h>
+
+#include "phrase.h"
+
+namespace avp::segmentation {
+
+namespace {
+
+bool InUnitInterval(double x) { return std::isfinite(x) && x >= 0.0 && x <= 1.0; }
+
+/// Pixel count and class votes of one instance id in the label images.
+struct InstanceStats {
+  std::array<size_t, kNumSemanticClasses> votes{};
+  size_t pixels = 0;
+  /// Majority class; ties go to the lower class id (as Segmentation::FromLabelImages).
+  SemanticClass Majority() const {
+    int best = 0;
+    for (int c = 1; c < kNumSemanticClasses; ++c) {
+      if (votes[c] > votes[best]) best = c;
+    }
+    return static_cast<SemanticClass>(best);
+  }
+};
+
+/// A fruit the model decided to report, before merging.
+struct Detection {
+  uint16_t instance_id = 0;
+  MaskImage mask;
+  float confidence = 0.0f;
+  int boundary_px = 0;       ///< > 0 dilates, < 0 erodes
+  bool merged_away = false;  ///< absorbed into another detection
+  bool merged = false;       ///< took part in a merge this frame
+};
+
+}  // namespace
+
+OracleOptions OracleOptions::Perfect() {
+  OracleOptions o;
+  o.p_max = 1.0;
+  o.v_min = 0.0;
+  o.v_full = 0.0;
+  o.min_pixels = 1;
+  o.confidence_mean_at_0 = 0.95;
+  o.confidence_gain = 0.0;
+  o.confidence_stddev = 0.0;
+  o.max_boundary_px = 0;
+  o.p_false_positive = 0.0;
+  o.p_merge = 0.0;
+  return o;
+}
+
+Status OracleOptions::Validate() const {
+  std::vector<std::string> errors;
+  const auto check = [&](bool ok, std::string message) {
+    if (!ok) errors.push_back(std::move(message));
+  };
+  for (size_t i = 0; i < fruit_words.size(); ++i) {
+    check(internal::IsVocabularyWord(fruit_words[i]),
+          fmt::format("fruit_words[{}] (\"{}\") must be a non-empty lower-case word", i,
+                      fruit_words[i]));
+  }
+  check(InUnitInterval(p_max), fmt::format("p_max ({}) must be in [0, 1]", p_max));
+  check(InUnitInterval(v_min), fmt::format("v_min ({}) must be in [0, 1]", v_min));
+  check(InUnitInterval(v_full) && v_full >= v_min,
+        fmt::format("v_full ({}) must be in [v_min ({}), 1]", v_full, v_min));
+  check(min_pixels >= 1, fmt::format("min_pixels ({}) must be >= 1", min_pixels));
+  check(std::isfinite(confidence_mean_at_0),
+        fmt::format("confidence_mean_at_0 ({}) must be finite", confidence_mean_at_0));
+  check(std::isfinite(confidence_gain),
+        fmt::format("confidence_gain ({}) must be finite", confidence_gain));
+  check(std::isfinite(confidence_stddev) && confidence_stddev >= 0.0,
+        fmt::format("confidence_stddev ({}) must be finite and >= 0", confidence_stddev));
+  check(InUnitInterval(confidence_min),
+        fmt::format("confidence_min ({}) must be in [0, 1]", confidence_min));
+  check(InUnitInterval(confidence_max) && confidence_max >= confidence_min,
+        fmt::format("confidence_max ({}) must be in [confidence_min ({}), 1]", confidence_max,
+                    confidence_min));
+  check(max_boundary_px >= 0 && max_boundary_px <= 16,
+        fmt::format("max_boundary_px ({}) must be in [0, 16]", max_boundary_px));
+  check(InUnitInterval(p_false_positive),
+        fmt::format("p_false_positive ({}) must be in [0, 1]", p_false_positive));
+  check(InUnitInterval(false_positive_confidence_min),
+        fmt::format("false_positive_confidence_min ({}) must be in [0, 1]",
+                    false_positive_confidence_min));
+  check(InUnitInterval(false_positive_confidence_max) &&
+            false_positive_confidence_max >= false_positive_confidence_min,
+        fmt::format("false_positive_confidence_max ({}) must be in "
+                    "[false_positive_confidence_min ({}), 1]",
+                    false_positive_confidence_max, false_positive_confidence_min));
+  check(InUnitInterval(p_merge), fmt::format("p_merge ({}) must be in [0, 1]", p_merge));
+  if (errors.empty()) return Status::Ok();
+  return InvalidArgumentError("invalid oracle options: " +
+                              fmt::format("{}", fmt::join(errors, "; ")));
+}
+
+double OracleOptions::DetectionProbability(double visible_fraction) const {
+  const double v = std::clamp(std::isfinite(visible_fraction) ? visible_fraction : 0.0, 0.0, 1.0);
+  if (v >= v_full) return p_max;
+  if (v <= v_min) return 0.0;
+  const double t = std::clamp((v - v_min) / (v_full - v_min), 0.0, 1.0);
+  return p_max * t * t * (3.0 - 2.0 * t);
+}
+
+double OracleOptions::MeanConfidence(double visible_fraction) const {
+  const double v = std::clamp(std::isfinite(visible_fraction) ? visible_fraction : 0.0, 0.0, 1.0);
+  return confidence_mean_at_0 + confidence_gain * v;
+}
+
+std::optional<double> ExpectedFruitAreaPx(const CameraIntrinsics& K, const RigidTransform& X_WC,
+                                          const GroundTruthFruit& fruit) {
+  const Eigen::Vector3d p_C = X_WC.inverse() * fruit.center_W;
+  const double z = p_C.z();
+  if (!std::isfinite(z) || !(z > fruit.radius_m)) return std::nullopt;
+  const double f = std::sqrt(K.fx * K.fy);
+  const double r_px = f * fruit.radius_m / z;
+  return M_PI * r_px * r_px;
+}
+
+OracleSegmenter::OracleSegmenter(OracleOptions options, uint64_t seed)
+    : options_(std::move(options)), seed_(seed) {
+  const Status status = options_.Validate();
+  AVP_THROW_UNLESS(status.ok(), status.message());
+}
+
+std::optional<SemanticClass> OracleSegmenter::ClassForPhrase(std::string_view phrase) const {
+  const std::vector<std::string> words = internal::PhraseWords(phrase);
+  if (words.empty()) return std::nullopt;
+  for (const std::string& candidate : internal::SingularCandidates(words.back())) {
+    if (std::find(options_.fruit_words.begin(), options_.fruit_words.end(), candidate) !=
+        options_.fruit_words.end()) {
+      return SemanticClass::kFruit;
+    }
+  }
+  return std::nullopt;
+}
+
+Result<Segmentation> OracleSegmenter::Segment(const SegmentationRequest& request) {
+  // ---- Check the request ------------------------------------------------------------------------
+  if (request.frame == nullptr) {
+    return InvalidArgumentError("oracle segmenter: request.frame is null");
+  }
+  const RgbdFrame& frame = *request.frame;
+  AVP_RETURN_IF_ERROR(frame.Validate().WithContext("oracle segmenter"));
+  AVP_ASSIGN_OR_RETURN(const std::vector<std::string> phrases, SplitPrompt(request.prompt));
+  if (!InUnitInterval(request.score_threshold)) {
+    return InvalidArgumentError(fmt::format(
+        "oracle segmenter: score_threshold ({}) must be in [0, 1]", request.score_threshold));
+  }
+  if (request.labels == nullptr) {
+    return FailedPreconditionError(
+        "oracle segmenter needs simulator labels, but request.labels is null (a real camera?)");
+  }
+  const SimulatorLabels& labels = *request.labels;
+  const int w = frame.rgb.width();
+  const int h = frame.rgb.height();
+  if (!labels.instance_ids.SameSizeAs(w, h) || !labels.class_ids.SameSizeAs(w, h)) {
+    return InvalidArgumentError(fmt::format(
+        "oracle segmenter: simulator labels are {}x{} (instance ids) and {}x{} (class ids), but "
+        "the frame is {}x{}",
+        labels.instance_ids.width(), labels.instance_ids.height(), labels.class_ids.width(),
+        labels.class_ids.height(), w, h));
+  }
+  std::map<uint16_t, const GroundTruthFruit*> truth_of;
+  for (const GroundTruthFruit& fruit : labels.fruits) {
+    if (!std::isfinite(fruit.radius_m) || fruit.radius_m <= 0.0) {
+      return InvalidArgumentError(fmt::format(
+          "oracle segmenter: ground-truth fruit {}: radius_m ({}) must be finite and > 0",
+          fruit.instance_id, fruit.radius_m));
+    }
+    if (!fruit.center_W.allFinite()) {
+      return InvalidArgumentError(fmt::format(
+          "oracle segmenter: ground-truth fruit {}: center_W ({}, {}, {}) must be finite",
+          fruit.instance_id, fruit.center_W.x(), fruit.center_W.y(), fruit.center_W.z()));
+    }
+    truth_of.try_emplace(fruit.instance_id, &fruit);  // the first entry of an id wins
+  }
+
+  Segmentation out;
+  out.width = w;
+  out.height = h;
+  const std::string* target_phrase = nullptr;
+  for (const std::string& phrase : phrases) {
+    if (ClassForPhrase(phrase) == SemanticClass::kFruit) {
+      target_phrase = &phrase;
+      break;
+    }
+  }
+  if (target_phrase == nullptr) return out;  // nothing in the prompt names a simulated class
+
+  // ---- Instances in the label images ------------------------------------------------------------
+  std::map<uint16_t, InstanceStats> stats;
+  uint16_t last_id = 0;
+  InstanceStats* last = nullptr;  // neighbouring pixels mostly share an id: skip the map lookup
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const uint16_t id = labels.instance_ids.at(u, v);
+      if (id == 0) continue;
+      if (last == nullptr || id != last_id) {
+        last = &stats[id];
+        last_id = id;
+      }
+      ++last->pixels;
+      const int c = labels.class_ids.at(u, v);
+      if (c < kNumSemanticClasses) ++last->votes[c];
+    }
+  }
+
+  const Rng frame_rng = Rng(seed_).Fork("oracle").Fork(request.frame_index);
+  const OracleOptions& o = options_;
+
+  // ---- Detection and confidence of each fruit ---------------------------------------------------
+  std::vector<Detection> detections;
+  std::vector<int32_t> detection_of(size_t{1} << 16, -1);  // instance id -> index in detections
+  const Rng fruit_rng = frame_rng.Fork("fruit");
+  for (const auto& [id, s] : stats) {
+    if (s.Majority() != SemanticClass::kFruit) continue;
+    double visible_fraction = 1.0;
+    if (const auto it = truth_of.find(id); it != truth_of.end()) {
+      if (const auto area = ExpectedFruitAreaPx(frame.K, frame.X_WC, *it->second)) {
+        visible_fraction = std::clamp(static_cast<double>(s.pixels) / *area, 0.0, 1.0);
+      }
+    }
+    // Always the same draws in the same order, so one part's parameters do not shift another's.
+    Rng rng = fruit_rng.Fork(id);
+    const double u_detect = rng.Uniform01();
+    const double z_confidence = rng.Normal();
+    const int boundary_px = static_cast<int>(rng.UniformInt(-o.max_boundary_px, o.max_boundary_px));
+    const bool detected = s.pixels >= static_cast<size_t>(o.min_pixels) &&
+                          u_detect < o.DetectionProbability(visible_fraction);
+    if (!detected) continue;
+    const double confidence =
+        std::clamp(o.MeanConfidence(visible_fraction) + o.confidence_stddev * z_confidence,
+                   o.confidence_min, o.confidence_max);
+    detection_of[id] = static_cast<int32_t>(detections.size());
+    Detection d;
+    d.instance_id = id;
+    d.mask = MaskImage(w, h, 0);
+    d.confidence = static_cast<float>(confidence);
+    d.boundary_px = boundary_px;
+    detections.push_back(std::move(d));
+  }
+
+  // ---- Exact visible masks, and which detected fruits touch (4-neighbours) ----------------------
+  std::set<std::pair<uint16_t, uint16_t>> touching;
+  const auto note_touch = [&](uint16_t a, uint16_t b) {
+    if (a == b || detection_of[a] < 0 || detection_of[b] < 0) return;
+    touching.insert({std::min(a, b), std::max(a, b)});
+  };
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const uint16_t id = labels.instance_ids.at(u, v);
+      if (id == 0) continue;
+      if (const int32_t slot = detection_of[id]; slot >= 0) detections[slot].mask.at(u, v) = 1;
+      if (u + 1 < w) note_touch(id, labels.instance_ids.at(u + 1, v));
+      if (v + 1 < h) note_touch(id, labels.instance_ids.at(u, v + 1));
+    }
+  }
+
+  // ---- Boundary erosion / dilation --------------------------------------------------------------
+  for (Detection& d : detections) {
+    if (d.boundary_px != 0) d.mask = AdjustBoundary(d.mask, d.boundary_px);
+  }
+
+  // ---- Merged neighbours ------------------------------------------------------------------------
+  const Rng merge_rng = frame_rng.Fork("merge");
+  for (const auto& [a, b] : touching) {
+    Rng rng = merge_rng.Fork((static_cast<uint64_t>(a) << 16) | b);
+    if (!rng.Bernoulli(o.p_merge)) continue;
+    Detection& da = detections[static_cast<size_t>(detection_of[a])];
+    Detection& db = detections[static_cast<size_t>(detection_of[b])];
+    if (da.merged || db.merged) continue;  // each fruit merges at most once per frame
+    for (size_t i = 0; i < da.mask.num_pixels(); ++i) {
+      if (db.mask.data()[i] != 0) da.mask.data()[i] = 1;
+    }
+    da.confidence = std::max(da.confidence, db.confidence);
+    da.merged = db.merged = true;
+    db.merged_away = true;
+  }
+  for (Detection& d : detections) {
+    if (d.merged_away || CountPixels(d.mask) == 0) continue;  // eroded away: a missed detection
+    InstanceMask m;
+    m.mask = std::move(d.mask);
+    m.semantic_class = SemanticClass::kFruit;
+    m.confidence = d.confidence;
+    m.label = *target_phrase;
+    out.instances.push_back(std::move(m));
+  }
+
+  // ---- A false positive on a leaf ---------------------------------------------------------------
+  Rng fp_rng = frame_rng.Fork("false_positive");
+  const bool false_positive = fp_rng.Bernoulli(o.p_false_positive);
+  const double fp_confidence =
+      fp_rng.Uniform(o.false_positive_confidence_min, o.false_positive_confidence_max);
+  if (false_positive) {
+    std::vector<uint16_t> leaves;
+    for (const auto& [id, s] : stats) {
+      const size_t leaf_pixels = s.votes[static_cast<int>(SemanticClass::kLeaf)];
+      if (s.Majority() == SemanticClass::kLeaf && leaf_pixels >= static_cast<size_t>(o.min_pixels))
+        leaves.push_back(id);
+    }
+    if (!leaves.empty()) {
+      const uint16_t leaf = leaves[static_cast<size_t>(
+          fp_rng.UniformInt(0, static_cast<int64_t>(leaves.size()) - 1))];
+      InstanceMask m;
+      m.mask = MaskImage(w, h, 0);
+      for (int v = 0; v < h; ++v) {
+        for (int u = 0; u < w; ++u) {
+          if (labels.instance_ids.at(u, v) == leaf &&
+              labels.class_ids.at(u, v) == static_cast<uint8_t>(SemanticClass::kLeaf)) {
+            m.mask.at(u, v) = 1;
+          }
+        }
+      }
+      m.semantic_class = SemanticClass::kFruit;
+      m.confidence = static_cast<float>(fp_confidence);
+      m.label = *target_phrase;
+      out.instances.push_back(std::move(m));
+    }
+  }
+
+  // ---- Score threshold --------------------------------------------------------------------------
+  std::erase_if(out.instances,
+                [&](const InstanceMask& m) { return m.confidence < request.score_threshold; });
+  return out;
+}
+
+}  // namespace avp::segmentation

@@ -1,0 +1,266 @@
+// The Segmenter contract (segmenter.h), checked against every segmenter MakeSegmenter builds.
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <string>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <avp/segmentation/segmenter.h>
+
+#include "test_frames.h"
+
+namespace avp::segmentation {
+namespace {
+
+using test::TestScene;
+using ::testing::HasSubstr;
+
+// ---- SplitPrompt and MakeSegmenter
+// ---------------------------------------------------------------
+
+TEST(SplitPromptTest, SplitsOnCommasAndTrims) {
+  const auto a = SplitPrompt("tomato, green apple");
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  EXPECT_EQ(*a, (std::vector<std::string>{"tomato", "green apple"}));
+  const auto b = SplitPrompt("  tomato\t");
+  ASSERT_TRUE(b.ok());
+  EXPECT_EQ(*b, (std::vector<std::string>{"tomato"}));
+  const auto c = SplitPrompt(",red,, Green  ,");
+  ASSERT_TRUE(c.ok());
+  EXPECT_EQ(*c, (std::vector<std::string>{"red", "Green"}));
+}
+
+TEST(SplitPromptTest, NothingLeftIsAnErrorNamingThePrompt) {
+  for (const std::string prompt : {"", "   ", " , ,\t,"}) {
+    const auto r = SplitPrompt(prompt);
+    ASSERT_FALSE(r.ok()) << "\"" << prompt << "\"";
+    EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_THAT(r.status().message(), HasSubstr("prompt (\"" + prompt + "\")"));
+  }
+}
+
+TEST(MakeSegmenterTest, BuildsEveryNameAndRejectsUnknownOnes) {
+  for (const std::string& name : SegmenterNames()) {
+    const auto s = MakeSegmenter(name, 1);
+    ASSERT_TRUE(s.ok()) << name << ": " << s.status().ToString();
+    EXPECT_EQ((*s)->name(), name == "oracle-perfect" ? "oracle" : name);
+  }
+  const auto bad = MakeSegmenter("yolo-world", 1);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kNotFound);
+  EXPECT_THAT(bad.status().message(), HasSubstr("\"yolo-world\""));
+  EXPECT_THAT(bad.status().message(), HasSubstr("oracle, oracle-perfect, color"));
+}
+
+// ---- The contract
+// --------------------------------------------------------------------------------
+
+struct ContractCase {
+  std::string name;   ///< MakeSegmenter name
+  bool reads_labels;  ///< needs SimulatorLabels (and checks their size)
+  bool noisy;         ///< results vary with frame_index
+};
+
+std::ostream& operator<<(std::ostream& os, const ContractCase& c) { return os << c.name; }
+
+/// A 96 x 72 frame: a green leaf across the middle, four red fruits (two touching, one partly
+/// behind the leaf) on grey, labels to match.
+TestScene ContractScene() {
+  TestScene s(96, 72, 80.0);
+  s.PaintFruit(20, 20, 8, 1);
+  s.PaintFruit(36, 20, 8, 2);  // touches fruit 1
+  s.PaintFruit(75, 18, 9, 3);
+  s.PaintFruit(30, 52, 9, 4);
+  s.PaintRect(0, 40, 60, 50, 10, SemanticClass::kLeaf, {150, 190, 40});  // covers part of fruit 4
+  s.PaintRect(60, 44, 96, 72, 11, SemanticClass::kLeaf, {170, 200, 20});
+  return s;
+}
+
+class SegmenterContractTest : public ::testing::TestWithParam<ContractCase> {
+ protected:
+  std::unique_ptr<Segmenter> Make(uint64_t seed = 7) const {
+    auto s = MakeSegmenter(GetParam().name, seed);
+    EXPECT_TRUE(s.ok()) << s.status().ToString();
+    return std::move(s).value();
+  }
+  TestScene scene_ = ContractScene();
+};
+
+TEST_P(SegmenterContractTest, OutputValidatesForTheFrameWithConfidencesInUnitRange) {
+  auto seg = Make();
+  size_t total = 0;
+  for (uint64_t i = 0; i < 8; ++i) {
+    const auto r = seg->Segment(scene_.Request("tomato", i));
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    EXPECT_TRUE(r->ValidateFor(96, 72).ok()) << r->ValidateFor(96, 72).ToString();
+    for (const InstanceMask& m : r->instances) {
+      EXPECT_GE(m.confidence, 0.0f);
+      EXPECT_LE(m.confidence, 1.0f);
+      EXPECT_EQ(m.semantic_class, SemanticClass::kFruit);
+      EXPECT_EQ(m.label, "tomato");
+      EXPECT_GT(test::Centroid(m.mask).x(), -1.0) << "empty mask";
+    }
+    total += r->instances.size();
+  }
+  // Four red fruits: every segmenter finds some of them in 8 frames.
+  EXPECT_GE(total, 8u);
+}
+
+TEST_P(SegmenterContractTest, SameSeedAndFrameIndexGiveIdenticalResults) {
+  auto a = Make(11);
+  auto b = Make(11);
+  for (uint64_t i : {0u, 3u, 12u}) {
+    const auto ra = a->Segment(scene_.Request("tomato", i));
+    const auto rb = b->Segment(scene_.Request("tomato", i));
+    ASSERT_TRUE(ra.ok() && rb.ok());
+    EXPECT_TRUE(test::SameSegmentation(*ra, *rb)) << "frame " << i;
+  }
+}
+
+TEST_P(SegmenterContractTest, ResultsDoNotDependOnCallOrder) {
+  auto fresh = Make();
+  auto used = Make();
+  for (uint64_t i = 0; i < 5; ++i) ASSERT_TRUE(used->Segment(scene_.Request("tomato", i)).ok());
+  const auto a = fresh->Segment(scene_.Request("tomato", 5));
+  const auto b = used->Segment(scene_.Request("tomato", 5));
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_TRUE(test::SameSegmentation(*a, *b));
+}
+
+TEST_P(SegmenterContractTest, FrameIndexChangesResultsOnlyForNoisySegmenters) {
+  auto seg = Make();
+  const auto first = seg->Segment(scene_.Request("tomato", 0));
+  ASSERT_TRUE(first.ok());
+  int differing = 0;
+  for (uint64_t i = 1; i < 16; ++i) {
+    const auto r = seg->Segment(scene_.Request("tomato", i));
+    ASSERT_TRUE(r.ok());
+    EXPECT_TRUE(r->ValidateFor(96, 72).ok());
+    differing += test::SameSegmentation(*first, *r) ? 0 : 1;
+  }
+  if (GetParam().noisy) {
+    EXPECT_GE(differing, 10);  // confidences alone differ almost surely
+  } else {
+    EXPECT_EQ(differing, 0);
+  }
+}
+
+TEST_P(SegmenterContractTest, NullFrameIsAnInvalidArgument) {
+  auto seg = Make();
+  SegmentationRequest request = scene_.Request();
+  request.frame = nullptr;
+  const auto r = seg->Segment(request);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(r.status().message(), HasSubstr("frame is null"));
+}
+
+TEST_P(SegmenterContractTest, ImageSizeDifferentFromTheIntrinsicsIsAnErrorNamingTheSizes) {
+  auto seg = Make();
+  RgbdFrame bad = scene_.frame;
+  bad.rgb = ImageRgb8(50, 40, 0);
+  SegmentationRequest request = scene_.Request();
+  request.frame = &bad;
+  const auto r = seg->Segment(request);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(r.status().message(), HasSubstr("50x40"));
+  EXPECT_THAT(r.status().message(), HasSubstr("96x72"));
+}
+
+TEST_P(SegmenterContractTest, LabelSizeDifferentFromTheImageIsAnErrorForLabelReaders) {
+  auto seg = Make();
+  SimulatorLabels small = scene_.labels;
+  small.instance_ids = InstanceImage(48, 36, 0);
+  SegmentationRequest request = scene_.Request();
+  request.labels = &small;
+  const auto r = seg->Segment(request);
+  if (GetParam().reads_labels) {
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_THAT(r.status().message(), HasSubstr("48x36"));
+    EXPECT_THAT(r.status().message(), HasSubstr("96x72"));
+  } else {
+    ASSERT_TRUE(r.ok()) << "segmenters that do not read labels ignore them: "
+                        << r.status().ToString();
+    EXPECT_TRUE(r->ValidateFor(96, 72).ok());
+  }
+}
+
+TEST_P(SegmenterContractTest, MissingLabelsFailOnlyForLabelReaders) {
+  auto seg = Make();
+  SegmentationRequest request = scene_.Request();
+  request.labels = nullptr;
+  const auto r = seg->Segment(request);
+  if (GetParam().reads_labels) {
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.status().code(), StatusCode::kFailedPrecondition);
+    EXPECT_THAT(r.status().message(), HasSubstr("request.labels is null"));
+  } else {
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    EXPECT_FALSE(r->instances.empty());
+  }
+}
+
+TEST_P(SegmenterContractTest, EmptyPromptIsAnInvalidArgument) {
+  auto seg = Make();
+  for (const std::string prompt : {"", " ,  , "}) {
+    const auto r = seg->Segment(scene_.Request(prompt));
+    ASSERT_FALSE(r.ok()) << "\"" << prompt << "\"";
+    EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_THAT(r.status().message(), HasSubstr("prompt"));
+  }
+}
+
+TEST_P(SegmenterContractTest, UnknownPhraseGivesNoInstancesButNoError) {
+  auto seg = Make();
+  const auto r = seg->Segment(scene_.Request("bicycle"));
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_TRUE(r->instances.empty());
+  EXPECT_TRUE(r->ValidateFor(96, 72).ok());
+}
+
+TEST_P(SegmenterContractTest, ScoreThresholdDropsLowerScoresAndIsValidated) {
+  auto seg = Make();
+  size_t kept = 0;
+  size_t all = 0;
+  for (uint64_t i = 0; i < 8; ++i) {
+    SegmentationRequest request = scene_.Request("tomato", i);
+    const auto unfiltered = seg->Segment(request);
+    request.score_threshold = 0.96f;
+    const auto filtered = seg->Segment(request);
+    ASSERT_TRUE(unfiltered.ok() && filtered.ok());
+    for (const InstanceMask& m : filtered->instances) EXPECT_GE(m.confidence, 0.96f);
+    size_t expected = 0;
+    for (const InstanceMask& m : unfiltered->instances) expected += m.confidence >= 0.96f ? 1 : 0;
+    EXPECT_EQ(filtered->instances.size(), expected);
+    kept += filtered->instances.size();
+    all += unfiltered->instances.size();
+  }
+  EXPECT_LT(kept, all);  // every segmenter reports some scores below 0.96 here
+  for (float bad : {-0.1f, 1.5f, std::numeric_limits<float>::quiet_NaN()}) {
+    SegmentationRequest request = scene_.Request();
+    request.score_threshold = bad;
+    const auto r = seg->Segment(request);
+    ASSERT_FALSE(r.ok()) << bad;
+    EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_THAT(r.status().message(), HasSubstr("score_threshold"));
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(AllSegmenters, SegmenterContractTest,
+                         ::testing::Values(ContractCase{"oracle", true, true},
+                                           ContractCase{"oracle-perfect", true, false},
+                                           ContractCase{"color", false, false}),
+                         [](const ::testing::TestParamInfo<ContractCase>& param) {
+                           std::string name = param.param.name;
+                           for (char& c : name) {
+                             if (c == '-') c = '_';
+                           }
+                           return name;
+                         });
+
+}  // namespace
+}  // namespace avp::segmentation

@@ -1,0 +1,147 @@
+// `avp run` and `avp bench` as library calls: the run folder's files and their content, the
+// bench's long-format summary CSV, Markdown and plots, the experiment YAML, and bad input.
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <avp/apps/run_command.h>
+#include <avp/io/json.h>
+#include <avp/test/temp_dir_test.h>
+
+namespace avp::apps {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+std::string ReadAll(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::vector<std::string> Lines(const fs::path& p) {
+  std::vector<std::string> out;
+  std::ifstream in(p);
+  for (std::string line; std::getline(in, line);) out.push_back(line);
+  return out;
+}
+
+class RunCommandTest : public test::TempDirTest {};
+
+TEST_F(RunCommandTest, RunWritesTheRunFolder) {
+  RunOptions o;
+  o.config.scenario = "tomato-single-cluster";
+  o.config.seed = 2;
+  o.config.views = 3;
+  o.config.threads = 2;
+  o.out_dir = dir_ / "run";
+  int steps = 0;
+  o.on_step = [&](const pipeline::StepRecord&) { ++steps; };
+  auto r = RunRun(o);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(steps, 3);
+  for (const char* f :
+       {"record.json", "metrics.csv", "map.ot", "fruit_voxels.ply", "metrics.svg"}) {
+    EXPECT_TRUE(fs::exists(o.out_dir / f)) << f;
+  }
+  const auto lines = Lines(o.out_dir / "metrics.csv");
+  ASSERT_EQ(lines.size(), 4u);  // header + 3 views
+  EXPECT_THAT(lines[0], HasSubstr("view,f1,precision,recall,tp,fp,fn,f1_tol"));
+  EXPECT_THAT(lines[0], HasSubstr("fruits_found"));
+  EXPECT_EQ(lines[1].substr(0, 2), "1,");
+  EXPECT_EQ(lines[3].substr(0, 2), "3,");
+
+  auto record = io::ReadJsonFile(o.out_dir / "record.json");
+  ASSERT_TRUE(record.ok());
+  EXPECT_EQ((*record)["config"]["seed"], 2);
+  EXPECT_EQ((*record)["config"]["planner"], "avp-nbv");
+  EXPECT_EQ((*record)["config"]["scenario"], "tomato-single-cluster");
+  EXPECT_EQ((*record)["views_fused"], 3);
+  EXPECT_EQ((*record)["steps"].size(), 3u);
+  EXPECT_TRUE((*record).contains("git_revision"));
+  EXPECT_TRUE((*record).contains("host"));
+  EXPECT_GT((*record)["ground_truth"]["voxels"].get<int>(), 100);
+  const double f1 = (*record)["final_metrics"]["f1"].get<double>();
+  EXPECT_EQ(f1, r->result.final_metrics.exact.f1);
+  EXPECT_THAT(ReadAll(o.out_dir / "metrics.svg"), HasSubstr("voxel F1 (exact)"));
+}
+
+TEST_F(RunCommandTest, RunRejectsBadInput) {
+  RunOptions o;
+  o.config.scenario = "tomato-nowhere";
+  o.config.views = 2;
+  o.out_dir = dir_ / "bad";
+  auto r = RunRun(o);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("tomato-nowhere"));
+  o.config.scenario = "tomato-single-cluster";
+  o.config.planner = "best";
+  r = RunRun(o);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("unknown planner 'best'"));
+}
+
+TEST_F(RunCommandTest, BenchWritesLongFormatSummaryAndPlots) {
+  BenchOptions o;
+  o.scenarios = {"tomato-single-cluster"};
+  o.planners = {"avp-nbv", "predefined"};
+  o.seeds = {0, 1};
+  o.base.views = 2;
+  o.out_dir = dir_ / "bench";
+  o.progress = false;
+  auto r = RunBench(o);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->episodes, 4u);
+  EXPECT_EQ(r->failed, 0u);
+  const auto lines = Lines(o.out_dir / "summary.csv");
+  ASSERT_GT(lines.size(), 1u);
+  EXPECT_EQ(lines[0], "scenario,planner,segmenter,view,metric,mean,ci95,n");
+  int f1_rows = 0;
+  for (const std::string& l : lines) {
+    if (l.find(",f1,") != std::string::npos) {
+      ++f1_rows;
+      EXPECT_EQ(l.substr(l.rfind(',') + 1), "2") << l;  // two seeds
+      EXPECT_THAT(l, HasSubstr("tomato-single-cluster,"));
+      EXPECT_THAT(l, HasSubstr(",oracle,"));
+    }
+  }
+  EXPECT_EQ(f1_rows, 4);  // 2 planners x 2 views
+  EXPECT_THAT(ReadAll(o.out_dir / "summary.md"), HasSubstr("| avp-nbv | 2 |"));
+  EXPECT_TRUE(fs::exists(o.out_dir / "f1_tomato-single-cluster.svg"));
+  EXPECT_TRUE(fs::exists(o.out_dir / "fruits_tomato-single-cluster.svg"));
+  EXPECT_TRUE(fs::exists(o.out_dir / "runs" / "tomato-single-cluster" / "predefined" / "seed-1" /
+                         "metrics.csv"));
+  ASSERT_EQ(r->cells.size(), 2u);
+  EXPECT_EQ(r->cells[0].runs, 2u);
+}
+
+TEST_F(RunCommandTest, BenchConfigFileAndErrors) {
+  auto paper = LoadBenchConfig(fs::path(AVP_CONFIG_DIR) / "experiments" / "paper.yaml");
+  ASSERT_TRUE(paper.ok()) << paper.status().ToString();
+  EXPECT_EQ(paper->scenarios.size(), 5u);
+  EXPECT_EQ(paper->seeds.size(), 10u);
+  EXPECT_EQ(paper->base.views, 8);
+  EXPECT_TRUE(paper->Validate().ok()) << paper->Validate().ToString();
+
+  const fs::path bad = dir_ / "bad.yaml";
+  std::ofstream(bad) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv]\nseeds: [0]\n"
+                        "colour: red\n";
+  auto r = LoadBenchConfig(bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("colour"));
+
+  BenchOptions o;
+  o.scenarios = {"tomato-nowhere"};
+  o.planners = {"avp-nbv"};
+  o.seeds = {0, 0};
+  EXPECT_THAT(o.Validate().message(), HasSubstr("unknown scenario 'tomato-nowhere'"));
+  EXPECT_THAT(o.Validate().message(), HasSubstr("seeds repeat"));
+}
+
+}  // namespace
+}  // namespace avp::apps
