@@ -28,17 +28,33 @@ double RoiWeight(const VoxelKey& k, double voxel_size_m, const Box3& roi, const 
          std::exp(-0.5 * d.squaredNorm() / (o.roi_axis_sigma_m * o.roi_axis_sigma_m));
 }
 
+/// The surface a ray stands for grows with the square of its range (the rays sample the image
+/// sparsely, the camera sees every voxel of the pixel block): (|c - eye| / ref)^2, or 1 when
+/// range weighting is off.
+double RangeWeight(const VoxelKey& k, double voxel_size_m, const Eigen::Vector3d& eye,
+                   const AvpNbvOptions& o) {
+  if (o.range_weight_ref_m <= 0.0) return 1.0;
+  return (k.Center(voxel_size_m) - eye).squaredNorm() /
+         (o.range_weight_ref_m * o.range_weight_ref_m);
+}
+
 /// One voxel's contribution; returns false when the ray ends there.
 bool Accumulate(const VoxelKey& k, const GainVoxel& v, SemanticClass target, double voxel_size_m,
-                const Box3& roi, const AvpNbvOptions& o, double& p_vis, double& gain) {
+                const Box3& roi, const Eigen::Vector3d& eye, const AvpNbvOptions& o, double& p_vis,
+                double& gain) {
   switch (v.state) {
     case mapping::VoxelState::kOccupied:
-      if (v.cls == target) gain += p_vis * o.w_target_entropy * BinaryEntropyBits(v.p_target);
+      if (v.cls == target) {
+        gain += p_vis * o.w_target_entropy * BinaryEntropyBits(v.p_target) *
+                RangeWeight(k, voxel_size_m, eye, o);
+      }
       return false;
     case mapping::VoxelState::kUnknown: {
-      const double w = v.near_target ? o.w_unknown_near_target
-                                     : (v.in_roi ? RoiWeight(k, voxel_size_m, roi, o) : 0.0);
-      gain += p_vis * w;
+      const double w = v.predicted_target ? o.w_predicted_target
+                       : v.near_target    ? o.w_unknown_near_target
+                       : v.in_roi         ? RoiWeight(k, voxel_size_m, roi, o)
+                                          : 0.0;
+      if (w > 0.0) gain += p_vis * w * RangeWeight(k, voxel_size_m, eye, o);
       p_vis *= 1.0 - o.p_unknown;
       return p_vis > 1e-4;
     }
@@ -63,9 +79,11 @@ Status AvpNbvOptions::Validate() const {
   }
   for (const auto& [name, w] : {std::pair{"w_target_entropy", w_target_entropy},
                                 {"w_unknown_near_target", w_unknown_near_target},
+                                {"w_predicted_target", w_predicted_target},
                                 {"w_unknown_roi", w_unknown_roi},
                                 {"w_motion", w_motion},
                                 {"roi_axis_sigma_m", roi_axis_sigma_m},
+                                {"range_weight_ref_m", range_weight_ref_m},
                                 {"min_gain_bits", min_gain_bits}}) {
     if (!(std::isfinite(w) && w >= 0.0)) {
       errors.push_back(fmt::format("{} ({}) must be finite and >= 0", name, w));
@@ -83,6 +101,10 @@ Status AvpNbvOptions::Validate() const {
   if (!(candidates.azimuth_half_range_deg >= 0.0 && candidates.azimuth_half_range_deg <= 180.0)) {
     errors.push_back(fmt::format("azimuth half range ({} deg) must be in [0, 180]",
                                  candidates.azimuth_half_range_deg));
+  }
+  if (!(candidates.plant_core_radius_m >= 0.0 && candidates.plant_core_radius_m < 2.0)) {
+    errors.push_back(
+        fmt::format("plant core radius ({} m) must be in [0, 2)", candidates.plant_core_radius_m));
   }
   if (!(candidates.clearance_m >= 0.0 && candidates.clearance_m < 0.5)) {
     errors.push_back(fmt::format("clearance ({} m) must be in [0, 0.5)", candidates.clearance_m));
@@ -103,7 +125,7 @@ double AvpRayGain(const GainGrid& grid, const Eigen::Vector3d& from, const Eigen
   const SemanticClass target = grid.target();
   const double s = grid.voxel_size_m();
   grid.Walk(from, to, [&](const VoxelKey& k, const GainVoxel& v) {
-    return Accumulate(k, v, target, s, grid.roi(), options, p_vis, gain);
+    return Accumulate(k, v, target, s, grid.roi(), from, options, p_vis, gain);
   });
   return gain;
 }
@@ -118,9 +140,13 @@ double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3
   });
   if (!keys.empty()) keys.pop_back();  // [from, to): the end voxel is not visited
   double p_vis = 1.0, gain = 0.0;
+  const std::vector<TargetSphere> spheres = options.grid.predict_target_surface
+                                                ? FitTargetSpheres(map, target)
+                                                : std::vector<TargetSphere>{};
   for (const VoxelKey& k : keys) {
-    const GainVoxel v = ReadGainVoxel(map, k, target, roi, options.grid.near_target_radius_m);
-    if (!Accumulate(k, v, target, map.voxel_size_m(), roi, options, p_vis, gain)) break;
+    const GainVoxel v =
+        ReadGainVoxel(map, k, target, roi, options.grid.near_target_radius_m, &spheres);
+    if (!Accumulate(k, v, target, map.voxel_size_m(), roi, from, options, p_vis, gain)) break;
   }
   return gain;
 }

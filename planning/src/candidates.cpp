@@ -134,6 +134,11 @@ std::vector<ViewCandidate> GenerateShellCandidates(const PlanningRequest& reques
         }
       }
       if (blocked) continue;
+      if (options.plant_core_radius_m > 0.0 &&
+          (eye.head<2>() - request.roi.center().head<2>()).norm() < options.plant_core_radius_m &&
+          grid.At(ke).state != mapping::VoxelState::kFree) {
+        continue;
+      }
       const RigidTransform X_WC = RigidTransform::LookAt(eye, t.p_W);
       if (IsNearAny(X_WC, request.fused_views)) continue;
       ViewCandidate c;

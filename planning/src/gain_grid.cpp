@@ -4,8 +4,10 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <vector>
 
+#include <Eigen/Cholesky>
 #include <fmt/format.h>
 
 #include <avp/core/error.h>
@@ -74,8 +76,57 @@ Status ValidateOptions(const GainGridOptions& options) {
 
 float QuantizeProbability(double p) { return ByteToProbability(ProbabilityByte(p)); }
 
+std::vector<TargetSphere> FitTargetSpheres(const mapping::SemanticMap& map, SemanticClass target,
+                                           size_t min_voxels, double min_radius_m,
+                                           double max_radius_m) {
+  const mapping::OccupancyGrid& grid = map.grid();
+  const double s = grid.voxel_size_m();
+  // Per instance: the normal equations of |p|^2 = 2 c . p + (r^2 - |c|^2), solved in a frame
+  // centred on the first voxel for conditioning.
+  struct Acc {
+    Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+    Eigen::Matrix4d AtA = Eigen::Matrix4d::Zero();
+    Eigen::Vector4d Atb = Eigen::Vector4d::Zero();
+    size_t n = 0;
+  };
+  std::map<uint16_t, Acc> acc;
+  grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& c) {
+    if (c.cls() != target || c.instance_id == 0) return;
+    if (grid.State(k) != mapping::VoxelState::kOccupied) return;
+    Acc& a = acc[c.instance_id];
+    if (a.n == 0) a.origin = k.Center(s);
+    const Eigen::Vector3d p = k.Center(s) - a.origin;
+    const Eigen::Vector4d row(2.0 * p.x(), 2.0 * p.y(), 2.0 * p.z(), 1.0);
+    a.AtA += row * row.transpose();
+    a.Atb += row * p.squaredNorm();
+    ++a.n;
+  });
+  std::vector<TargetSphere> out;
+  for (const auto& [id, a] : acc) {
+    if (a.n < min_voxels) continue;
+    const Eigen::Vector4d x = a.AtA.ldlt().solve(a.Atb);
+    if (!x.allFinite()) continue;
+    const double r2 = x[3] + x.head<3>().squaredNorm();
+    if (!(r2 > 0.0)) continue;
+    const double r = std::sqrt(r2);
+    if (r < min_radius_m || r > max_radius_m) continue;
+    out.push_back({id, a.origin + x.head<3>(), r, a.n});
+  }
+  return out;
+}
+
+bool OnTargetSphere(const VoxelKey& k, double voxel_size_m,
+                    const std::vector<TargetSphere>& spheres) {
+  const Eigen::Vector3d c = k.Center(voxel_size_m);
+  for (const TargetSphere& sp : spheres) {
+    if (std::abs((c - sp.center_W).norm() - sp.radius_m) <= 0.6 * voxel_size_m) return true;
+  }
+  return false;
+}
+
 GainVoxel ReadGainVoxel(const mapping::SemanticMap& map, const VoxelKey& k, SemanticClass target,
-                        const Box3& roi, double near_target_radius_m) {
+                        const Box3& roi, double near_target_radius_m,
+                        const std::vector<TargetSphere>* spheres) {
   AVP_THROW_UNLESS(std::isfinite(near_target_radius_m) && near_target_radius_m >= 0.0,
                    near_target_radius_m);
   const mapping::OccupancyGrid& grid = map.grid();
@@ -102,6 +153,7 @@ GainVoxel ReadGainVoxel(const mapping::SemanticMap& map, const VoxelKey& k, Sema
       }
     }
   }
+  if (spheres != nullptr) v.predicted_target = OnTargetSphere(k, s, *spheres);
   return v;
 }
 
@@ -137,6 +189,14 @@ Result<GainGrid> GainGrid::Build(const mapping::SemanticMap& map, SemanticClass 
   // An empty map gives an empty grid: every key reads as unknown (p_occ 0.5), unlabelled, not
   // near the target; in_roi still follows `roi`.
   if (!any) return out;
+  // The predicted fruit surfaces: the box covers them too.
+  const std::vector<TargetSphere> spheres =
+      options.predict_target_surface ? FitTargetSpheres(map, target) : std::vector<TargetSphere>{};
+  const double s = out.voxel_size_m_;
+  for (const TargetSphere& sp : spheres) {
+    extend(VoxelKey::FromPoint(sp.center_W.array() - (sp.radius_m + s), s));
+    extend(VoxelKey::FromPoint(sp.center_W.array() + (sp.radius_m + s), s));
+  }
 
   const int64_t threshold = NearTargetThreshold(options.near_target_radius_m, out.voxel_size_m_);
   const int32_t r = IntegerSqrt(threshold);
@@ -184,6 +244,20 @@ Result<GainGrid> GainGrid::Build(const mapping::SemanticMap& map, SemanticClass 
     for (const VoxelKey& k : target_keys) {
       for (const Offset& d : ball) {
         out.cells_[index({k.x + d.x, k.y + d.y, k.z + d.z})] |= kNearTargetBit;
+      }
+    }
+  }
+  for (const TargetSphere& sp : spheres) {
+    const VoxelKey a = VoxelKey::FromPoint(sp.center_W.array() - (sp.radius_m + s), s);
+    const VoxelKey b = VoxelKey::FromPoint(sp.center_W.array() + (sp.radius_m + s), s);
+    for (int32_t z = a.z; z <= b.z; ++z) {
+      for (int32_t y = a.y; y <= b.y; ++y) {
+        for (int32_t x = a.x; x <= b.x; ++x) {
+          const VoxelKey k{x, y, z};
+          if (std::abs((k.Center(s) - sp.center_W).norm() - sp.radius_m) <= 0.6 * s) {
+            out.cells_[index(k)] |= kPredictedTargetBit;
+          }
+        }
       }
     }
   }

@@ -46,6 +46,8 @@ TEST(AvpRayGainTest, HandComputedRay) {
   SetFree(map, {5, 0, 0});  // behind the fruit: never reached
   const Box3 roi(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
   AvpNbvOptions o;
+  o.range_weight_ref_m = 0.0;  // unweighted first; range weighting is checked below
+  o.w_unknown_near_target = 1.0;
   o.grid.near_target_radius_m = 0.025;  // voxels 2 and 3 are 2 and 1 voxels from the fruit
   auto grid = GainGrid::Build(map, SemanticClass::kFruit, roi, o.grid);
   ASSERT_TRUE(grid.ok()) << grid.status().ToString();
@@ -77,6 +79,16 @@ TEST(AvpRayGainTest, HandComputedRay) {
   auto outside = GainGrid::Build(map, SemanticClass::kFruit, elsewhere, o.grid);
   ASSERT_TRUE(outside.ok());
   EXPECT_NEAR(AvpRayGain(*outside, from, to, o), 0.25 * Hb(c), 1e-9);
+
+  // Range weighting: each contribution times (distance from the eye / ref)^2; the eye is at the
+  // centre of voxel 0, so voxels 2, 3, 4 are 0.02, 0.03, 0.04 m away.
+  o.roi_axis_sigma_m = 0.0;
+  o.range_weight_ref_m = 0.02;
+  EXPECT_NEAR(AvpRayGain(*far, from, to, o),
+              o.w_unknown_roi * (1.0 + 0.5 * 2.25) + 0.25 * Hb(c) * 4.0, 1e-9);
+  EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, roi, o),
+              o.w_unknown_roi * (1.0 + 0.5 * 2.25) + 0.25 * Hb(c) * 4.0, 1e-9);
+  o.range_weight_ref_m = 0.0;
 
   // An occupied non-fruit voxel ends the ray without gain.
   ASSERT_TRUE(map.grid().SetLogOdds({2, 0, 0}, 2.0f));
@@ -120,6 +132,54 @@ TEST(AvpRayGainTest, FastEvaluatorEqualsTheReferenceOnRandomRays) {
     nonzero += fast > 0.0;
   }
   EXPECT_GT(nonzero, 100);
+}
+
+TEST(TargetSphereTest, FitsTheSeenHalfOfAFruitAndPredictsItsHiddenSide) {
+  // The camera-facing half (x < cx) of a sphere of radius 3 cm, as occupied fruit voxels of
+  // instance 7; the hidden half stays unknown.
+  mapping::SemanticMap map = MakeMap(0.005);
+  const Eigen::Vector3d centre(0.6012, 0.0531, 0.7043);
+  const double radius = 0.03;
+  for (int z = 110; z < 170; ++z) {
+    for (int y = -20; y < 40; ++y) {
+      for (int x = 100; x < 140; ++x) {
+        const VoxelKey k{x, y, z};
+        const Eigen::Vector3d c = k.Center(0.005);
+        if (std::abs((c - centre).norm() - radius) > 0.0025 || c.x() > centre.x()) continue;
+        SetFruit(map, k, 0.9f);
+        map.grid().MutableSemantic(k)->instance_id = 7;
+      }
+    }
+  }
+  const std::vector<TargetSphere> spheres = FitTargetSpheres(map, SemanticClass::kFruit);
+  ASSERT_EQ(spheres.size(), 1u);
+  EXPECT_EQ(spheres[0].instance_id, 7);
+  EXPECT_LT((spheres[0].center_W - centre).norm(), 0.003);
+  EXPECT_NEAR(spheres[0].radius_m, radius, 0.003);
+  // The grid marks the predicted surface exactly as the slow per-voxel read does, including the
+  // hidden half behind the seen one.
+  const Box3 roi(Eigen::Vector3d(0, -1, 0), Eigen::Vector3d(2, 1, 2));
+  auto grid = GainGrid::Build(map, SemanticClass::kFruit, roi);
+  ASSERT_TRUE(grid.ok());
+  int predicted_hidden = 0;
+  for (int z = 125; z < 160; ++z) {
+    for (int y = -10; y < 25; ++y) {
+      for (int x = 108; x < 135; ++x) {
+        const VoxelKey k{x, y, z};
+        const GainVoxel fast = grid->At(k);
+        const GainVoxel slow = ReadGainVoxel(map, k, SemanticClass::kFruit, roi, 0.04, &spheres);
+        ASSERT_EQ(fast.predicted_target, slow.predicted_target) << k.x << " " << k.y << " " << k.z;
+        if (fast.predicted_target && fast.state == mapping::VoxelState::kUnknown &&
+            k.Center(0.005).x() > centre.x() + 0.01) {
+          ++predicted_hidden;
+        }
+      }
+    }
+  }
+  EXPECT_GT(predicted_hidden, 150);  // about 190 of the hidden half's shell
+  // Too few voxels, or an implausible radius: no sphere.
+  EXPECT_TRUE(FitTargetSpheres(map, SemanticClass::kFruit, 100000).empty());
+  EXPECT_TRUE(FitTargetSpheres(map, SemanticClass::kFruit, 12, 0.05, 0.08).empty());
 }
 
 /// A map of the plant after its start view (perfect masks), as the loop has it at step 1.

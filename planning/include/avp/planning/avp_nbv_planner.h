@@ -16,12 +16,17 @@ namespace avp::planning {
 ///   - visibility p_vis = Π (1 − p_j) over the voxels before (exclusive product): free voxels are
 ///     transparent, unknown voxels occlude with probability `p_unknown`, an occupied voxel ends
 ///     the ray;
-///   - an unknown voxel adds p_vis · w (bits of H(0.5) = 1): w = `w_unknown_near_target` within
-///     the near-target radius of a fruit voxel; elsewhere in the ROI `w_unknown_roi` times a
-///     Gaussian (σ = `roi_axis_sigma_m`) of its horizontal distance from the ROI's vertical
-///     centre axis, a prior for where unseen fruit hangs; 0 outside the ROI;
+///   - an unknown voxel adds p_vis · w (bits of H(0.5) = 1): w = `w_predicted_target` on the
+///     predicted surface of a detected fruit (a sphere fitted to its voxels: its unseen side),
+///     `w_unknown_near_target` within the near-target radius of a fruit voxel; elsewhere in the ROI
+///     `w_unknown_roi` times a Gaussian (σ = `roi_axis_sigma_m`) of its horizontal distance from
+///     the ROI's vertical centre axis, a prior for where unseen fruit hangs; 0 outside the ROI;
 ///   - the occupied target-class voxel that ends a ray adds p_vis · `w_target_entropy` · H_b(c),
-///     its semantic uncertainty.
+///     its semantic uncertainty;
+///   - each contribution is scaled by (d / `range_weight_ref_m`)², d the voxel's distance from
+///     the camera: a ray stands for a pixel block whose footprint grows with d², so a distant
+///     view that sees a whole truss is worth more than a close one that sees one fruit (0 turns
+///     this off).
 /// Utility U = G / max G − `w_motion` · |Δq| / max |Δq| over the candidate set; views within
 /// 2 cm / 10° of a fused view are never chosen. Stopping rule: when the best gain is below
 /// `min_gain_bits` (0 disables it) the planner asks the loop to stop.
@@ -32,9 +37,11 @@ struct AvpNbvOptions {
   double max_range_m = 1.0;
   double p_unknown = 0.5;
   double w_target_entropy = 1.0;
-  double w_unknown_near_target = 1.0;
+  double w_predicted_target = 1.0;
+  double w_unknown_near_target = 0.3;
   double w_unknown_roi = 0.2;
   double roi_axis_sigma_m = 0.15;
+  double range_weight_ref_m = 0.5;
   double w_motion = 0.1;
   double min_gain_bits = 0.0;
   /// Threads over candidates (0 = all hardware threads). Results do not depend on it.

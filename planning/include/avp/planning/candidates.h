@@ -13,7 +13,7 @@ namespace avp::planning {
 struct ShellCandidateOptions {
   /// Camera distances from the target (metres): radii are drawn uniformly between the smallest
   /// and the largest.
-  std::vector<double> radii_m = {0.25, 0.50};
+  std::vector<double> radii_m = {0.35, 0.55};
   /// Camera elevations above the target's horizontal plane (degrees): drawn between the smallest
   /// and the largest (uniform in area).
   std::vector<double> elevations_deg = {-30.0, 45.0};
@@ -27,6 +27,10 @@ struct ShellCandidateOptions {
   int max_candidates = 720;
   /// No candidate whose eye is within this distance of a known occupied voxel.
   double clearance_m = 0.03;
+  /// Within this horizontal distance of the ROI's vertical centre axis (the plant's core, where
+  /// the foliage is) a camera must sit in known free space: the planner never puts the camera
+  /// into unmapped foliage. 0 turns the rule off.
+  double plant_core_radius_m = 0.25;
   /// IK restarts per candidate after the attempt from the current joints.
   int ik_restarts = 1;
   /// Threads for the IK checks (0 = all hardware threads); the result does not depend on it.
@@ -49,8 +53,8 @@ std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const Ga
 /// Candidates on shells around `targets`, looking at them (image up = world +z), each
 /// IK-checked from request.q_current (q, reachable and cost filled). Directions and radii are
 /// drawn from `rng` (deterministic given its state); eyes beyond the arm's reach, below 5 cm,
-/// within clearance_m of a known occupied voxel, or within 2 cm / 10 deg of a fused view are
-/// dropped before IK.
+/// within clearance_m of a known occupied voxel, in unknown space within plant_core_radius_m of
+/// the ROI's axis, or within 2 cm / 10 deg of a fused view are dropped before IK.
 std::vector<ViewCandidate> GenerateShellCandidates(const PlanningRequest& request,
                                                    const GainGrid& grid,
                                                    const std::vector<ViewTarget>& targets,

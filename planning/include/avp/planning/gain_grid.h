@@ -31,7 +31,30 @@ struct GainVoxel {
   bool near_target = false;
   /// The voxel centre lies in the planning ROI.
   bool in_roi = false;
+  /// The voxel lies on the predicted surface of a target instance (a sphere fitted to its
+  /// voxels, FitTargetSpheres): where the unseen side of a detected fruit is expected.
+  bool predicted_target = false;
 };
+
+/// A sphere fitted to the occupied voxels of one target-class instance.
+struct TargetSphere {
+  uint16_t instance_id = 0;
+  Eigen::Vector3d center_W = Eigen::Vector3d::Zero();
+  double radius_m = 0.0;
+  size_t voxels = 0;
+};
+
+/// Least-squares (algebraic) spheres of the map's target-class instances with at least
+/// `min_voxels` occupied voxels, in instance-id order; fits with a radius outside
+/// [min_radius_m, max_radius_m] are left out (a fragment, or two merged fruits).
+std::vector<TargetSphere> FitTargetSpheres(const mapping::SemanticMap& map, SemanticClass target,
+                                           size_t min_voxels = 12, double min_radius_m = 0.01,
+                                           double max_radius_m = 0.08);
+
+/// True when the centre of voxel `k` lies within half a voxel (0.6 voxel) of a sphere's
+/// surface.
+bool OnTargetSphere(const VoxelKey& k, double voxel_size_m,
+                    const std::vector<TargetSphere>& spheres);
 
 /// p rounded to the nearest multiple of 1/255 (p clamped into [0, 1]).
 float QuantizeProbability(double p);
@@ -39,13 +62,16 @@ float QuantizeProbability(double p);
 /// The GainVoxel of key `k`, read from the map directly (the slow path the reference evaluators
 /// use). `near_target` is computed by scanning the radius around `k` (slow: for tests).
 GainVoxel ReadGainVoxel(const mapping::SemanticMap& map, const VoxelKey& k, SemanticClass target,
-                        const Box3& roi, double near_target_radius_m);
+                        const Box3& roi, double near_target_radius_m,
+                        const std::vector<TargetSphere>* spheres = nullptr);
 
 struct GainGridOptions {
   /// Unknown voxels this close to a target-labelled voxel count as "near the target".
   double near_target_radius_m = 0.04;
   /// Refuse to build grids larger than this.
   size_t max_bytes = size_t{1} << 30;
+  /// Mark the predicted surfaces of the target instances (GainVoxel::predicted_target).
+  bool predict_target_surface = true;
 };
 
 /// A dense copy of the map over the known voxels' bounding box (inflated by the near-target
@@ -75,6 +101,7 @@ class GainGrid {
     v.state = static_cast<mapping::VoxelState>(c & kStateMask);
     v.cls = static_cast<SemanticClass>((c >> kClassShift) & kClassMask);
     v.near_target = (c & kNearTargetBit) != 0;
+    v.predicted_target = (c & kPredictedTargetBit) != 0;
     // Unknown voxels read 0.5 exactly (GainVoxel's default), known ones their quantised p.
     if (v.state != mapping::VoxelState::kUnknown) {
       v.p_occ = static_cast<float>((c >> kOccShift) & 0xff) / 255.0f;
@@ -105,6 +132,7 @@ class GainGrid {
   static constexpr int kClassShift = 2;
   static constexpr uint32_t kClassMask = 0x7;
   static constexpr uint32_t kNearTargetBit = uint32_t{1} << 5;
+  static constexpr uint32_t kPredictedTargetBit = uint32_t{1} << 6;
   static constexpr int kOccShift = 8;
   static constexpr int kTargetShift = 16;
 
@@ -113,7 +141,8 @@ class GainGrid {
   Box3 roi_;
   VoxelKey min_;
   Eigen::Vector3i dims_ = Eigen::Vector3i::Zero();
-  /// Packed per voxel: bits 0-1 state, 2-4 class, 5 near_target; bits 8-15 p_occ * 255; bits
+  /// Packed per voxel: bits 0-1 state, 2-4 class, 5 near_target, 6 predicted_target; bits 8-15
+  /// p_occ * 255; bits
   /// 16-23 p_target * 255. x fastest.
   std::vector<uint32_t> cells_;
 };
