@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 #include <fmt/format.h>
@@ -84,6 +85,8 @@ Status AvpNbvOptions::Validate() const {
                                 {"w_motion", w_motion},
                                 {"roi_axis_sigma_m", roi_axis_sigma_m},
                                 {"range_weight_ref_m", range_weight_ref_m},
+                                {"w_diversity", w_diversity},
+                                {"diversity_m", diversity_m},
                                 {"min_gain_bits", min_gain_bits}}) {
     if (!(std::isfinite(w) && w >= 0.0)) {
       errors.push_back(fmt::format("{} ({}) must be finite and >= 0", name, w));
@@ -205,7 +208,14 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   for (ViewCandidate& c : candidates) {
     const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
     const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
-    c.utility = g - options_.w_motion * m;
+    // Viewpoint diversity: the distance to the nearest fused eye, saturating at diversity_m.
+    double d_min = std::numeric_limits<double>::infinity();
+    for (const RigidTransform& f : request.fused_views) {
+      d_min = std::min(d_min, (f.translation() - c.X_WC.translation()).norm());
+    }
+    const double diversity =
+        options_.diversity_m > 0.0 ? std::min(1.0, d_min / options_.diversity_m) : 0.0;
+    c.utility = g - options_.w_motion * m + options_.w_diversity * diversity;
   }
   result = RankCandidates(std::move(candidates), generated, name());
   if (result.status.ok() && options_.min_gain_bits > 0.0 && max_gain < options_.min_gain_bits) {

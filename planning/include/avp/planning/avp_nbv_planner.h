@@ -27,7 +27,10 @@ namespace avp::planning {
 ///     the camera: a ray stands for a pixel block whose footprint grows with d², so a distant
 ///     view that sees a whole truss is worth more than a close one that sees one fruit (0 turns
 ///     this off).
-/// Utility U = G / max G − `w_motion` · |Δq| / max |Δq| over the candidate set; views within
+/// Utility U = G / max G − `w_motion` · |Δq| / max |Δq| + `w_diversity` · min(1, d / `diversity_m`)
+/// over the candidate set, d the distance from the candidate's eye to the nearest fused one (the
+/// greedy gain alone keeps returning to views like the ones it has, which fared worse than
+/// random views in the paper's scenarios); views within
 /// 2 cm / 10° of a fused view are never chosen. Stopping rule: when the best gain is below
 /// `min_gain_bits` (0 disables it) the planner asks the loop to stop.
 struct AvpNbvOptions {
@@ -43,6 +46,8 @@ struct AvpNbvOptions {
   double roi_axis_sigma_m = 0.15;
   double range_weight_ref_m = 0.5;
   double w_motion = 0.1;
+  double w_diversity = 0.5;
+  double diversity_m = 0.2;
   double min_gain_bits = 0.0;
   /// Threads over candidates (0 = all hardware threads). Results do not depend on it.
   int num_threads = 0;
