@@ -11,6 +11,7 @@
 #include <fmt/ranges.h>
 
 #include <avp/eval/svg_plot.h>
+#include <avp/io/file.h>
 
 namespace avp::eval {
 
@@ -419,36 +420,7 @@ Result<std::string> RenderLinePlotSvg(const LinePlot& plot) {
 
 Status WriteLinePlotSvg(const std::filesystem::path& path, const LinePlot& plot) {
   AVP_ASSIGN_OR_RETURN(const std::string svg, RenderLinePlotSvg(plot));
-  std::error_code ec;
-  if (path.has_parent_path()) {
-    std::filesystem::create_directories(path.parent_path(), ec);
-    if (ec) {
-      return IoError(fmt::format("cannot create folder '{}' for plot: {}",
-                                 path.parent_path().string(), ec.message()));
-    }
-  }
-  std::filesystem::path tmp = path;
-  tmp += ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      return IoError(
-          fmt::format("cannot open '{}' for writing: {}", tmp.string(), std::strerror(errno)));
-    }
-    out.write(svg.data(), static_cast<std::streamsize>(svg.size()));
-    out.close();
-    if (!out) {
-      std::filesystem::remove(tmp, ec);
-      return IoError(fmt::format("writing plot '{}' failed", tmp.string()));
-    }
-  }
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    return IoError(
-        fmt::format("cannot move '{}' to '{}': {}", tmp.string(), path.string(), ec.message()));
-  }
-  return Status::Ok();
+  return io::WriteFileAtomic(path, svg, "plot");
 }
 
 }  // namespace avp::eval

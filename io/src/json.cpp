@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/io/file.h>
 #include <avp/io/json.h>
 
 namespace avp::io {
@@ -134,14 +135,7 @@ Result<RigidTransform> TransformFromJson(const nlohmann::json& j) {
 }
 
 Status WriteJsonFile(const std::filesystem::path& path, const nlohmann::json& j) {
-  std::error_code ec;
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
-  std::ofstream out(path);
-  if (!out) return IoError(fmt::format("cannot open '{}' for writing", path.string()));
-  out << j.dump(2) << '\n';
-  out.flush();
-  if (!out) return IoError(fmt::format("cannot write '{}'", path.string()));
-  return Status::Ok();
+  return WriteFileAtomic(path, j.dump(2) + "\n", "JSON file");
 }
 
 Result<nlohmann::json> ReadJsonFile(const std::filesystem::path& path) {

@@ -15,6 +15,7 @@
 #include <fmt/ranges.h>
 
 #include <avp/core/error.h>
+#include <avp/io/file.h>
 #include <avp/mapping/map_file.h>
 
 namespace avp::mapping {
@@ -550,37 +551,9 @@ Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* 
 Status SaveMap(const SemanticMap& map, const std::filesystem::path& path,
                const MapSaveOptions& options) {
   AVP_ASSIGN_OR_RETURN(const std::vector<uint8_t> bytes, SerializeMap(map, options));
-  std::error_code ec;
-  if (path.has_parent_path()) {
-    std::filesystem::create_directories(path.parent_path(), ec);
-    if (ec) {
-      return IoError(fmt::format("cannot create folder '{}' for map file: {}",
-                                 path.parent_path().string(), ec.message()));
-    }
-  }
-  std::filesystem::path tmp = path;
-  tmp += ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      return IoError(
-          fmt::format("cannot open '{}' for writing: {}", tmp.string(), std::strerror(errno)));
-    }
-    out.write(reinterpret_cast<const char*>(bytes.data()),
-              static_cast<std::streamsize>(bytes.size()));
-    out.close();
-    if (!out) {
-      std::filesystem::remove(tmp, ec);
-      return IoError(fmt::format("writing map file '{}' failed", tmp.string()));
-    }
-  }
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    return IoError(
-        fmt::format("cannot move '{}' to '{}': {}", tmp.string(), path.string(), ec.message()));
-  }
-  return Status::Ok();
+  return io::WriteFileAtomic(
+      path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()),
+      "map file");
 }
 
 Result<SemanticMap> LoadMap(const std::filesystem::path& path, MapFileInfo* info) {
