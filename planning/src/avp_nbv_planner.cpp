@@ -34,9 +34,10 @@ double RoiWeight(const VoxelKey& k, double voxel_size_m, const Box3& roi, const 
 /// range weighting is off.
 double RangeWeight(const VoxelKey& k, double voxel_size_m, const Eigen::Vector3d& eye,
                    const AvpNbvOptions& o) {
+  const double d2 = (k.Center(voxel_size_m) - eye).squaredNorm();
+  if (d2 < o.min_gain_range_m * o.min_gain_range_m) return 0.0;
   if (o.range_weight_ref_m <= 0.0) return 1.0;
-  return (k.Center(voxel_size_m) - eye).squaredNorm() /
-         (o.range_weight_ref_m * o.range_weight_ref_m);
+  return d2 / (o.range_weight_ref_m * o.range_weight_ref_m);
 }
 
 /// One voxel's contribution; returns false when the ray ends there.
@@ -85,6 +86,7 @@ Status AvpNbvOptions::Validate() const {
                                 {"w_motion", w_motion},
                                 {"roi_axis_sigma_m", roi_axis_sigma_m},
                                 {"range_weight_ref_m", range_weight_ref_m},
+                                {"min_gain_range_m", min_gain_range_m},
                                 {"w_diversity", w_diversity},
                                 {"diversity_m", diversity_m},
                                 {"min_gain_bits", min_gain_bits}}) {

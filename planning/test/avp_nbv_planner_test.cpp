@@ -47,6 +47,7 @@ TEST(AvpRayGainTest, HandComputedRay) {
   const Box3 roi(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
   AvpNbvOptions o;
   o.range_weight_ref_m = 0.0;  // unweighted first; range weighting is checked below
+  o.min_gain_range_m = 0.0;
   o.w_unknown_near_target = 1.0;
   o.grid.near_target_radius_m = 0.025;  // voxels 2 and 3 are 2 and 1 voxels from the fruit
   auto grid = GainGrid::Build(map, SemanticClass::kFruit, roi, o.grid);
@@ -89,6 +90,12 @@ TEST(AvpRayGainTest, HandComputedRay) {
   EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, roi, o),
               o.w_unknown_roi * (1.0 + 0.5 * 2.25) + 0.25 * Hb(c) * 4.0, 1e-9);
   o.range_weight_ref_m = 0.0;
+  // Voxels nearer than min_gain_range_m count nothing (voxel 2 at 0.02 m) but still occlude.
+  o.min_gain_range_m = 0.025;
+  EXPECT_NEAR(AvpRayGain(*far, from, to, o), o.w_unknown_roi * 0.5 + 0.25 * Hb(c), 1e-9);
+  EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, roi, o),
+              o.w_unknown_roi * 0.5 + 0.25 * Hb(c), 1e-9);
+  o.min_gain_range_m = 0.0;
 
   // An occupied non-fruit voxel ends the ray without gain.
   ASSERT_TRUE(map.grid().SetLogOdds({2, 0, 0}, 2.0f));
@@ -117,6 +124,7 @@ TEST(AvpRayGainTest, FastEvaluatorEqualsTheReferenceOnRandomRays) {
   const Box3 roi(Eigen::Vector3d(-0.06, -0.08, -0.05), Eigen::Vector3d(0.07, 0.05, 0.08));
   AvpNbvOptions o;
   o.grid.near_target_radius_m = 0.02;
+  o.min_gain_range_m = 0.05;  // the rays are 0.3 m long: most of each counts
   auto grid = GainGrid::Build(map, SemanticClass::kFruit, roi, o.grid);
   ASSERT_TRUE(grid.ok());
   int nonzero = 0;

@@ -26,7 +26,8 @@ namespace avp::planning {
 ///   - each contribution is scaled by (d / `range_weight_ref_m`)², d the voxel's distance from
 ///     the camera: a ray stands for a pixel block whose footprint grows with d², so a distant
 ///     view that sees a whole truss is worth more than a close one that sees one fruit (0 turns
-///     this off).
+///     this off); voxels closer than `min_gain_range_m` to the camera count nothing (the view
+///     would only see them at the edge of the sensor's range).
 /// Utility U = G / max G − `w_motion` · |Δq| / max |Δq| + `w_diversity` · min(1, d / `diversity_m`)
 /// over the candidate set, d the distance from the candidate's eye to the nearest fused one (the
 /// greedy gain alone keeps returning to views like the ones it has, which fared worse than
@@ -45,6 +46,7 @@ struct AvpNbvOptions {
   double w_unknown_roi = 0.2;
   double roi_axis_sigma_m = 0.15;
   double range_weight_ref_m = 0.5;
+  double min_gain_range_m = 0.2;
   double w_motion = 0.1;
   double w_diversity = 0.5;
   double diversity_m = 0.2;
