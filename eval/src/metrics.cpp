@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include <avp/core/entropy.h>
 #include <avp/core/error.h>
 #include <avp/eval/metrics.h>
 
@@ -89,12 +90,6 @@ Status EvalOptions::Validate() const {
   return InvalidArgumentError(fmt::format("invalid eval options: {}", fmt::join(errors, "; ")));
 }
 
-double BinaryEntropyBits(double p) {
-  constexpr double kEps = 1e-6;
-  const double c = std::isnan(p) ? 0.5 : std::clamp(p, kEps, 1.0 - kEps);
-  return -(c * std::log2(c) + (1.0 - c) * std::log2(1.0 - c));
-}
-
 VoxelScores ScoreVoxelSets(const std::vector<VoxelKey>& predicted, const GroundTruth& gt,
                            int tolerance_voxels) {
   AVP_THROW_UNLESS(tolerance_voxels >= 0 && tolerance_voxels <= 8, tolerance_voxels);
@@ -167,7 +162,7 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
   grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& cell) {
     if (cell.cls() != options.target) return;
     ++m.labelled_voxels;
-    m.entropy_sum_bits += BinaryEntropyBits(cell.confidence);
+    m.entropy_sum_bits += ClampedBinaryEntropyBits(cell.confidence);
     if (grid.State(k) == mapping::VoxelState::kOccupied) predicted.push_back(k);
   });
   std::sort(predicted.begin(), predicted.end());

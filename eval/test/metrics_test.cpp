@@ -7,6 +7,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/core/entropy.h>
 #include <avp/core/error.h>
 #include <avp/eval/metrics.h>
 #include <avp/sim/ground_truth.h>
@@ -275,17 +276,17 @@ TEST(MetricsTest, EntropyOfTargetLabelledVoxels) {
   EXPECT_EQ(m.labelled_voxels, 4u);
   EXPECT_EQ(m.predicted_voxels, 3u);
   // 0.9f is not 0.9: compare with the float's entropy.
-  EXPECT_NEAR(m.entropy_sum_bits, 1.0 + BinaryEntropyBits(0.9f) + 2.0 * h_edge, 1e-12);
+  EXPECT_NEAR(m.entropy_sum_bits, 1.0 + ClampedBinaryEntropyBits(0.9f) + 2.0 * h_edge, 1e-12);
   EXPECT_NEAR(m.entropy_mean_bits, m.entropy_sum_bits / 4.0, 1e-15);
-  EXPECT_NEAR(BinaryEntropyBits(0.9), h09, 1e-15);
-  EXPECT_NEAR(BinaryEntropyBits(0.9f), h09, 1e-7);
+  EXPECT_NEAR(ClampedBinaryEntropyBits(0.9), h09, 1e-15);
+  EXPECT_NEAR(ClampedBinaryEntropyBits(0.9f), h09, 1e-7);
   EXPECT_NEAR(h_edge, 2.137e-5, 1e-8);
-  EXPECT_DOUBLE_EQ(BinaryEntropyBits(0.5), 1.0);
-  EXPECT_NEAR(BinaryEntropyBits(0.0), h_edge, 1e-15);
-  EXPECT_NEAR(BinaryEntropyBits(1.0), BinaryEntropyBits(0.0), 1e-15);
-  EXPECT_DOUBLE_EQ(BinaryEntropyBits(std::numeric_limits<double>::quiet_NaN()), 1.0);
-  EXPECT_NEAR(BinaryEntropyBits(0.2), BinaryEntropyBits(0.8), 1e-15);
-  EXPECT_NEAR(BinaryEntropyBits(0.2), 0.7219280948873623, 1e-15);
+  EXPECT_DOUBLE_EQ(ClampedBinaryEntropyBits(0.5), 1.0);
+  EXPECT_NEAR(ClampedBinaryEntropyBits(0.0), h_edge, 1e-15);
+  EXPECT_NEAR(ClampedBinaryEntropyBits(1.0), ClampedBinaryEntropyBits(0.0), 1e-15);
+  EXPECT_DOUBLE_EQ(ClampedBinaryEntropyBits(std::numeric_limits<double>::quiet_NaN()), 1.0);
+  EXPECT_NEAR(ClampedBinaryEntropyBits(0.2), ClampedBinaryEntropyBits(0.8), 1e-15);
+  EXPECT_NEAR(ClampedBinaryEntropyBits(0.2), 0.7219280948873623, 1e-15);
   const MapMetrics empty = EvaluateMap(EmptyMap(), gt);
   EXPECT_EQ(empty.entropy_sum_bits, 0.0);
   EXPECT_EQ(empty.entropy_mean_bits, 0.0);

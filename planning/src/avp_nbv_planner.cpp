@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/core/entropy.h>
 #include <avp/core/error.h>
 #include <avp/core/parallel.h>
 #include <avp/planning/avp_nbv_planner.h>
@@ -12,11 +13,6 @@
 namespace avp::planning {
 
 namespace {
-
-double BinaryEntropyBits(double p) {
-  p = std::clamp(p, 1e-6, 1.0 - 1e-6);
-  return -(p * std::log2(p) + (1.0 - p) * std::log2(1.0 - p));
-}
 
 /// Weight of an unknown voxel of the ROI that is not near a target voxel: w_unknown_roi times a
 /// Gaussian of its horizontal distance from the ROI's vertical centre axis (fruit hangs around
@@ -47,7 +43,7 @@ bool Accumulate(const VoxelKey& k, const GainVoxel& v, SemanticClass target, dou
   switch (v.state) {
     case mapping::VoxelState::kOccupied:
       if (v.cls == target) {
-        gain += p_vis * o.w_target_entropy * BinaryEntropyBits(v.p_target) *
+        gain += p_vis * o.w_target_entropy * ClampedBinaryEntropyBits(v.p_target) *
                 RangeWeight(k, voxel_size_m, eye, o);
       }
       return false;

@@ -161,12 +161,6 @@ double ViewGainWith(IslerUtility utility, const RigidTransform& X_WC,
 
 }  // namespace
 
-double BinaryEntropyBits(double p) {
-  if (std::isnan(p)) return p;
-  if (p <= 0.0 || p >= 1.0) return 0.0;
-  return -p * std::log2(p) - (1.0 - p) * std::log2(1.0 - p);
-}
-
 std::string_view ToString(IslerUtility utility) {
   switch (utility) {
     case IslerUtility::kAverageEntropy:

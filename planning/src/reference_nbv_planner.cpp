@@ -11,6 +11,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/core/entropy.h>
 #include <avp/core/error.h>
 #include <avp/core/parallel.h>
 #include <avp/planning/isler_utilities.h>

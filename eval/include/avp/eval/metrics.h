@@ -108,8 +108,4 @@ struct SphereFit {
 /// @pre points is not empty (throws avp::Error otherwise).
 SphereFit FitSphere(const std::vector<Eigen::Vector3d>& points);
 
-/// Binary entropy in bits of probability p, with p clamped to [1e-6, 1 - 1e-6] (NaN counts as
-/// 0.5).
-double BinaryEntropyBits(double p);
-
 }  // namespace avp::eval

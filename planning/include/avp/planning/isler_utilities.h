@@ -11,6 +11,7 @@
 
 #include <avp/core/box.h>
 #include <avp/core/camera.h>
+#include <avp/core/entropy.h>
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/core/voxel_key.h>
@@ -20,10 +21,6 @@
 #include <avp/planning/view_planner.h>
 
 namespace avp::planning {
-
-/// H_b(p) = -p log2 p - (1 - p) log2 (1 - p) in bits; 0 at p = 0 and p = 1 (the limit), and for
-/// p outside [0, 1] (clamped); NaN for NaN.
-double BinaryEntropyBits(double p);
 
 /// The volumetric information gain utilities of Isler et al., ICRA 2016 (nbv-literature.md §1.1).
 enum class IslerUtility {
