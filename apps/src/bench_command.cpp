@@ -110,9 +110,10 @@ Status BenchOptions::Validate() const {
       errors.push_back(fmt::format("unknown scenario '{}' (known: {})", s, Join(names)));
     }
   }
-  const auto& planner_names = eval::PlannerNames();
+  std::vector<std::string> planner_names = eval::PlannerNames();
+  for (const std::string& n : eval::DiagnosticPlannerNames()) planner_names.push_back(n);
   for (const std::string& p : planners) {
-    if (std::find(planner_names.begin(), planner_names.end(), p) == planner_names.end()) {
+    if (!eval::IsKnownPlanner(p)) {
       errors.push_back(fmt::format("unknown planner '{}' (known: {})", p, Join(planner_names)));
     }
   }

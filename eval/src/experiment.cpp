@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include <avp/eval/experiment.h>
+#include <avp/eval/oracle_planner.h>
 #include <avp/planning/avp_nbv_planner.h>
 #include <avp/planning/isler_utilities.h>
 #include <avp/planning/predefined_planner.h>
@@ -37,6 +38,18 @@ const std::vector<std::string>& PlannerNames() {
 
 const std::vector<std::string>& SegmenterNames() { return segmentation::SegmenterNames(); }
 
+const std::vector<std::string>& DiagnosticPlannerNames() {
+  static const std::vector<std::string> kNames = {"oracle-nbv"};
+  return kNames;
+}
+
+bool IsKnownPlanner(std::string_view name) {
+  const auto& a = PlannerNames();
+  const auto& b = DiagnosticPlannerNames();
+  return std::find(a.begin(), a.end(), name) != a.end() ||
+         std::find(b.begin(), b.end(), name) != b.end();
+}
+
 Status RunConfig::Validate() const {
   std::vector<std::string> errors;
   if (!scenario.empty() && !scene_file.empty()) {
@@ -55,14 +68,16 @@ Status RunConfig::Validate() const {
     errors.push_back(fmt::format("ROI margin ({} m) must be in [0, 1]", roi_margin_m));
   }
   if (threads < 0) errors.push_back(fmt::format("threads ({}) must be >= 0", threads));
-  const auto& planners = PlannerNames();
-  if (std::find(planners.begin(), planners.end(), planner) == planners.end()) {
-    errors.push_back(fmt::format("unknown planner '{}' (known: {})", planner, JoinNames(planners)));
+  if (!IsKnownPlanner(planner)) {
+    std::vector<std::string> known = PlannerNames();
+    for (const std::string& n : DiagnosticPlannerNames()) known.push_back(n);
+    errors.push_back(fmt::format("unknown planner '{}' (known: {})", planner, JoinNames(known)));
   }
-  const auto& segmenters = SegmenterNames();
-  if (std::find(segmenters.begin(), segmenters.end(), segmenter) == segmenters.end()) {
+  if (!segmentation::IsKnownSegmenter(segmenter)) {
+    std::vector<std::string> known = SegmenterNames();
+    for (const std::string& n : segmentation::RegisteredSegmenterNames()) known.push_back(n);
     errors.push_back(
-        fmt::format("unknown segmenter '{}' (known: {})", segmenter, JoinNames(segmenters)));
+        fmt::format("unknown segmenter '{}' (known: {})", segmenter, JoinNames(known)));
   }
   if (Status s = K.Validate(); !s.ok()) errors.push_back(s.ToString());
   if (errors.empty()) return Status::Ok();
@@ -94,6 +109,11 @@ Result<std::unique_ptr<planning::ViewPlanner>> MakePlanner(const RunConfig& conf
     o.num_threads = config.threads;
     return std::unique_ptr<planning::ViewPlanner>(
         std::make_unique<planning::ReferenceNbvPlanner>(o));
+  }
+  if (name == "oracle-nbv") {
+    return FailedPreconditionError(
+        "planner 'oracle-nbv' needs the true scene and its ground truth: it is built by "
+        "RunEpisodeOnScene");
   }
   if (name.rfind("isler-", 0) == 0) {
     const auto utility = planning::IslerUtilityFromString(name.substr(6));
@@ -181,7 +201,15 @@ Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const sim::Scene& s
   }
   AVP_RETURN_IF_ERROR(arm_model.CheckJoints(q0));
   robot::SimArm arm(arm_model, q0);
-  AVP_ASSIGN_OR_RETURN(std::unique_ptr<planning::ViewPlanner> planner, MakePlanner(config));
+  std::unique_ptr<planning::ViewPlanner> planner;
+  if (config.planner == "oracle-nbv") {
+    OracleNbvOptions o;
+    o.num_threads = config.threads;
+    o.candidates.num_threads = config.threads;
+    planner = std::make_unique<OracleNbvPlanner>(scene, gt, o);
+  } else {
+    AVP_ASSIGN_OR_RETURN(planner, MakePlanner(config));
+  }
   AVP_ASSIGN_OR_RETURN(std::unique_ptr<segmentation::Segmenter> segmenter, MakeSegmenter(config));
   sim::DepthNoiseConfig noise;
   noise.enabled = config.depth_noise;

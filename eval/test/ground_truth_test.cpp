@@ -12,6 +12,7 @@
 #include <avp/core/segmentation.h>
 #include <avp/eval/ground_truth.h>
 #include <avp/eval/metrics.h>
+#include <avp/eval/oracle_planner.h>
 #include <avp/mapping/integrator.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/mapping/semantic_map.h>
@@ -225,6 +226,31 @@ TEST_F(ObservableGroundTruthTest, MapOfOneOfItsViewsHasPrecisionOne) {
     EXPECT_LT(m.exact.recall, 1.0);  // one view sees only part of what all views see
   }
   EXPECT_GE(checked, 1u);
+}
+
+// oracle-nbv's true gain: GT voxels a view would see that the map does not hold as fruit yet.
+TEST_F(ObservableGroundTruthTest, OracleTrueGainCountsUnmappedGroundTruthSeenByTheView) {
+  const OracleNbvPlanner oracle(*scene_, *gt_);
+  mapping::MapOptions map_options;
+  map_options.grid.voxel_size_m = gt_->voxel_size_m;
+  mapping::SemanticMap map(map_options);
+  const CameraIntrinsics K = EpisodeCamera();
+  const RigidTransform X = gt_->views.front().X_WC;
+  const size_t before = oracle.TrueGain(map, SemanticClass::kFruit, K, X);
+  EXPECT_GT(before, 50u);
+  // Turned around, the camera sees no fruit.
+  const RigidTransform away(
+      X.rotation() * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitY()).toRotationMatrix(),
+      X.translation());
+  EXPECT_EQ(oracle.TrueGain(map, SemanticClass::kFruit, K, away), 0u);
+  // Once the view's fruit is mapped, the same view has (almost) nothing new left to show: what
+  // remains is the 4x finer oracle render seeing voxels the mapped frame's pixels missed.
+  const sim::RgbdRenderer renderer(*scene_);
+  const sim::RenderedFrame frame = renderer.Render(K, X);
+  const Segmentation seg = Segmentation::FromLabelImages(frame.instance_ids, frame.class_ids, 0.9f);
+  ASSERT_TRUE(mapping::Integrator().Integrate(frame.rgbd, &seg, map).ok());
+  const size_t after = oracle.TrueGain(map, SemanticClass::kFruit, K, X);
+  EXPECT_LT(after, before / 10) << "before " << before;
 }
 
 TEST_F(ObservableGroundTruthTest, ObservationViewsFaceTheBaseAndLookAtTheirFruit) {

@@ -399,8 +399,8 @@ TEST_F(IntegratorSceneTest, BadFramesAndSegmentationsAreRejectedAndTheMapIsUntou
   Segmentation wrong_mask;
   wrong_mask.width = kWidth;
   wrong_mask.height = kHeight;
-  wrong_mask.instances.push_back(
-      {MaskImage(kWidth, kHeight - 1, 1), SemanticClass::kFruit, 0.9f, "fruit"});
+  wrong_mask.instances.push_back({MaskImage(kWidth, kHeight - 1, 1), SemanticClass::kFruit, 0.9f,
+                                  "fruit", std::nullopt, -1.0f});
   r = integrator.Integrate(f.rgbd, &wrong_mask, map);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("112x83"));

@@ -19,10 +19,19 @@ namespace {
 /// the stem), or flat when roi_axis_sigma_m is 0.
 double RoiWeight(const VoxelKey& k, double voxel_size_m, const Box3& roi, const AvpNbvOptions& o) {
   if (o.roi_axis_sigma_m <= 0.0) return o.w_unknown_roi;
-  const Eigen::Vector3d c = k.Center(voxel_size_m);
-  const Eigen::Vector2d d = c.head<2>() - roi.center().head<2>();
-  return o.w_unknown_roi *
-         std::exp(-0.5 * d.squaredNorm() / (o.roi_axis_sigma_m * o.roi_axis_sigma_m));
+  const double d = PlantCoreDistance(k.Center(voxel_size_m), roi);
+  return o.w_unknown_roi * std::exp(-0.5 * d * d / (o.roi_axis_sigma_m * o.roi_axis_sigma_m));
+}
+
+/// Occlusion probability of an unknown voxel of the ROI: p_unknown near the plant's axis, falling
+/// as a Gaussian (sigma = unknown_occlusion_sigma_m) of the horizontal distance from it, since the
+/// ROI box is mostly air away from the stem (flat when the sigma is 0).
+double UnknownOcclusion(const VoxelKey& k, double voxel_size_m, const Box3& roi,
+                        const AvpNbvOptions& o) {
+  if (o.unknown_occlusion_sigma_m <= 0.0) return o.p_unknown;
+  const double d = PlantCoreDistance(k.Center(voxel_size_m), roi);
+  return o.p_unknown *
+         std::exp(-0.5 * d * d / (o.unknown_occlusion_sigma_m * o.unknown_occlusion_sigma_m));
 }
 
 /// The surface a ray stands for grows with the square of its range (the rays sample the image
@@ -53,7 +62,8 @@ bool Accumulate(const VoxelKey& k, const GainVoxel& v, SemanticClass target, dou
                        : v.in_roi         ? RoiWeight(k, voxel_size_m, roi, o)
                                           : 0.0;
       if (w > 0.0) gain += p_vis * w * RangeWeight(k, voxel_size_m, eye, o);
-      p_vis *= 1.0 - o.p_unknown;
+      p_vis *=
+          1.0 - (v.in_roi ? UnknownOcclusion(k, voxel_size_m, roi, o) : o.p_unknown_outside_roi);
       return p_vis > 1e-4;
     }
     case mapping::VoxelState::kFree:
@@ -75,12 +85,17 @@ Status AvpNbvOptions::Validate() const {
   if (!(p_unknown >= 0.0 && p_unknown < 1.0)) {
     errors.push_back(fmt::format("p_unknown ({}) must be in [0, 1)", p_unknown));
   }
+  if (!(p_unknown_outside_roi >= 0.0 && p_unknown_outside_roi < 1.0)) {
+    errors.push_back(
+        fmt::format("p_unknown_outside_roi ({}) must be in [0, 1)", p_unknown_outside_roi));
+  }
   for (const auto& [name, w] : {std::pair{"w_target_entropy", w_target_entropy},
                                 {"w_unknown_near_target", w_unknown_near_target},
                                 {"w_predicted_target", w_predicted_target},
                                 {"w_unknown_roi", w_unknown_roi},
                                 {"w_motion", w_motion},
                                 {"roi_axis_sigma_m", roi_axis_sigma_m},
+                                {"unknown_occlusion_sigma_m", unknown_occlusion_sigma_m},
                                 {"range_weight_ref_m", range_weight_ref_m},
                                 {"min_gain_range_m", min_gain_range_m},
                                 {"w_diversity", w_diversity},

@@ -135,7 +135,7 @@ std::vector<ViewCandidate> GenerateShellCandidates(const PlanningRequest& reques
       }
       if (blocked) continue;
       if (options.plant_core_radius_m > 0.0 &&
-          (eye.head<2>() - request.roi.center().head<2>()).norm() < options.plant_core_radius_m &&
+          PlantCoreDistance(eye, request.roi) < options.plant_core_radius_m &&
           grid.At(ke).state != mapping::VoxelState::kFree) {
         continue;
       }

@@ -105,4 +105,18 @@ bool IsNearAny(const RigidTransform& X_WC, const std::vector<RigidTransform>& vi
   });
 }
 
+double PlantCoreDistance(const Eigen::Vector3d& p, const Box3& roi) {
+  const Eigen::Vector3d c = roi.center();
+  const double hx = 0.5 * (roi.max().x() - roi.min().x());
+  const double hy = 0.5 * (roi.max().y() - roi.min().y());
+  double dx = std::abs(p.x() - c.x());
+  double dy = std::abs(p.y() - c.y());
+  if (hx >= hy) {
+    dx = std::max(0.0, dx - (hx - hy));
+  } else {
+    dy = std::max(0.0, dy - (hy - hx));
+  }
+  return std::hypot(dx, dy);
+}
+
 }  // namespace avp::planning

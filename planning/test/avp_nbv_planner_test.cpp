@@ -48,6 +48,7 @@ TEST(AvpRayGainTest, HandComputedRay) {
   AvpNbvOptions o;
   o.range_weight_ref_m = 0.0;  // unweighted first; range weighting is checked below
   o.min_gain_range_m = 0.0;
+  o.unknown_occlusion_sigma_m = 0.0;  // flat p_unknown first; its fall-off is checked below
   o.w_unknown_near_target = 1.0;
   o.grid.near_target_radius_m = 0.025;  // voxels 2 and 3 are 2 and 1 voxels from the fruit
   auto grid = GainGrid::Build(map, SemanticClass::kFruit, roi, o.grid);
@@ -79,7 +80,26 @@ TEST(AvpRayGainTest, HandComputedRay) {
   const Box3 elsewhere(Eigen::Vector3d(5, 5, 5), Eigen::Vector3d(6, 6, 6));
   auto outside = GainGrid::Build(map, SemanticClass::kFruit, elsewhere, o.grid);
   ASSERT_TRUE(outside.ok());
+  // Outside the ROI unknown space is air: it occludes with p_unknown_outside_roi (0 by default).
+  EXPECT_NEAR(AvpRayGain(*outside, from, to, o), Hb(c), 1e-9);
+  o.p_unknown_outside_roi = 0.5;
   EXPECT_NEAR(AvpRayGain(*outside, from, to, o), 0.25 * Hb(c), 1e-9);
+  EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, elsewhere, o), 0.25 * Hb(c),
+              1e-9);
+  o.p_unknown_outside_roi = 0.0;
+
+  // Inside the ROI, an unknown voxel occludes with p_unknown times a Gaussian of its distance
+  // from the plant's core (here the ROI's vertical axis through the origin).
+  o.roi_axis_sigma_m = 0.0;
+  o.unknown_occlusion_sigma_m = 0.03;
+  const auto occ = [&](double x) {
+    return o.p_unknown * std::exp(-0.5 * (x * x + 0.005 * 0.005) / (0.03 * 0.03));
+  };
+  const double vis_fruit = (1.0 - occ(0.025)) * (1.0 - occ(0.035));
+  const double want_occ = o.w_unknown_roi * (1.0 + (1.0 - occ(0.025))) + vis_fruit * Hb(c);
+  EXPECT_NEAR(AvpRayGain(*far, from, to, o), want_occ, 1e-9);
+  EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, roi, o), want_occ, 1e-9);
+  o.unknown_occlusion_sigma_m = 0.0;
 
   // Range weighting: each contribution times (distance from the eye / ref)^2; the eye is at the
   // centre of voxel 0, so voxels 2, 3, 4 are 0.02, 0.03, 0.04 m away.
@@ -102,6 +122,20 @@ TEST(AvpRayGainTest, HandComputedRay) {
   auto blocked = GainGrid::Build(map, SemanticClass::kFruit, roi, o.grid);
   ASSERT_TRUE(blocked.ok());
   EXPECT_EQ(AvpRayGain(*blocked, from, to, o), 0.0);
+}
+
+TEST(PlantCoreDistanceTest, AxisForSquareRoisMidPlaneForLongOnes) {
+  // A square ROI: the distance from its vertical centre axis.
+  const Box3 square(Eigen::Vector3d(0, -0.5, 0), Eigen::Vector3d(1, 0.5, 1));
+  EXPECT_NEAR(PlantCoreDistance({0.5, 0.0, 0.3}, square), 0.0, 1e-12);
+  EXPECT_NEAR(PlantCoreDistance({0.8, 0.4, 0.9}, square), 0.5, 1e-12);
+  // An espalier 2 m wide in y and 0.4 m deep in x: its core is the mid-plane x = 0.7 over
+  // |y| <= 1 - 0.2, and the distance grows beyond the segment's ends.
+  const Box3 wall(Eigen::Vector3d(0.5, -1, 0), Eigen::Vector3d(0.9, 1, 1));
+  EXPECT_NEAR(PlantCoreDistance({0.7, 0.75, 0.5}, wall), 0.0, 1e-12);
+  EXPECT_NEAR(PlantCoreDistance({0.4, -0.5, 0.5}, wall), 0.3, 1e-12);
+  EXPECT_NEAR(PlantCoreDistance({0.7, 1.1, 0.5}, wall), 0.3, 1e-12);
+  EXPECT_NEAR(PlantCoreDistance({1.0, 1.2, 0.5}, wall), 0.5, 1e-12);
 }
 
 TEST(AvpRayGainTest, FastEvaluatorEqualsTheReferenceOnRandomRays) {

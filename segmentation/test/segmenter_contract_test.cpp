@@ -1,4 +1,5 @@
 // The Segmenter contract (segmenter.h), checked against every segmenter MakeSegmenter builds.
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -52,6 +53,31 @@ TEST(MakeSegmenterTest, BuildsEveryNameAndRejectsUnknownOnes) {
   EXPECT_EQ(bad.status().code(), StatusCode::kNotFound);
   EXPECT_THAT(bad.status().message(), HasSubstr("\"yolo-world\""));
   EXPECT_THAT(bad.status().message(), HasSubstr("oracle, oracle-perfect, color"));
+}
+
+TEST(MakeSegmenterTest, RegisteredNamesAndSchemesAreBuiltByTheirFactories) {
+  std::vector<std::pair<std::string, uint64_t>> calls;
+  auto factory = [&calls](std::string_view spec,
+                          uint64_t seed) -> Result<std::unique_ptr<Segmenter>> {
+    calls.emplace_back(std::string(spec), seed);
+    return MakeSegmenter("color", seed);
+  };
+  RegisterSegmenterFactory("test-named", factory);
+  RegisterSegmenterFactory("test-scheme://", factory);
+  ASSERT_TRUE(MakeSegmenter("test-named", 7).ok());
+  ASSERT_TRUE(MakeSegmenter("test-scheme://host:1234", 9).ok());
+  ASSERT_EQ(calls.size(), 2u);
+  EXPECT_EQ(calls[0], std::make_pair(std::string("test-named"), uint64_t{7}));
+  EXPECT_EQ(calls[1], std::make_pair(std::string("test-scheme://host:1234"), uint64_t{9}));
+  // A name is matched exactly, only schemes by prefix; the error lists both kinds.
+  const auto bad = MakeSegmenter("test-named-not", 1);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_THAT(bad.status().message(), HasSubstr("test-named, test-scheme://..."));
+  EXPECT_TRUE(IsKnownSegmenter("test-scheme://anything"));
+  EXPECT_TRUE(IsKnownSegmenter("oracle"));
+  EXPECT_FALSE(IsKnownSegmenter("test-named-not"));
+  const std::vector<std::string> names = RegisteredSegmenterNames();
+  EXPECT_NE(std::find(names.begin(), names.end(), "test-scheme://"), names.end());
 }
 
 // ---- The contract

@@ -5,6 +5,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <avp/core/camera.h>
@@ -23,6 +24,11 @@ namespace avp::eval {
 /// Names accepted by MakePlanner / MakeSegmenter.
 const std::vector<std::string>& PlannerNames();
 const std::vector<std::string>& SegmenterNames();
+/// Planners that need the true scene (built only by RunEpisodeOnScene): "oracle-nbv", the
+/// ground-truth upper bound on avp-nbv's candidates (eval/oracle_planner.h).
+const std::vector<std::string>& DiagnosticPlannerNames();
+/// In PlannerNames() or DiagnosticPlannerNames().
+bool IsKnownPlanner(std::string_view name);
 
 /// One episode's configuration: everything `avp run` resolves and records.
 struct RunConfig {

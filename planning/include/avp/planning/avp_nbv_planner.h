@@ -14,13 +14,15 @@ namespace avp::planning {
 /// (GenerateShellCandidates), IK-checked. Gain of a view, summed over rays through every
 /// `ray_stride_px`-th pixel of the true camera model, each walked from the optical centre:
 ///   - visibility p_vis = Π (1 − p_j) over the voxels before (exclusive product): free voxels are
-///     transparent, unknown voxels occlude with probability `p_unknown`, an occupied voxel ends
-///     the ray;
+///     transparent, an occupied voxel ends the ray, an unknown voxel of the ROI occludes with
+///     `p_unknown` times a Gaussian (σ = `unknown_occlusion_sigma_m`, 0 = flat) of its horizontal
+///     distance from the plant's core (PlantCoreDistance: foliage is dense there, the rest of the
+///     ROI box is mostly air), one outside the ROI with `p_unknown_outside_roi`;
 ///   - an unknown voxel adds p_vis · w (bits of H(0.5) = 1): w = `w_predicted_target` on the
 ///     predicted surface of a detected fruit (a sphere fitted to its voxels: its unseen side),
 ///     `w_unknown_near_target` within the near-target radius of a fruit voxel; elsewhere in the ROI
 ///     `w_unknown_roi` times a Gaussian (σ = `roi_axis_sigma_m`) of its horizontal distance from
-///     the ROI's vertical centre axis, a prior for where unseen fruit hangs; 0 outside the ROI;
+///     the plant's core, a prior for where unseen fruit hangs; 0 outside the ROI;
 ///   - the occupied target-class voxel that ends a ray adds p_vis · `w_target_entropy` · H_b(c),
 ///     its semantic uncertainty;
 ///   - each contribution is scaled by (d / `range_weight_ref_m`)², d the voxel's distance from
@@ -40,6 +42,8 @@ struct AvpNbvOptions {
   int ray_stride_px = 20;
   double max_range_m = 1.0;
   double p_unknown = 0.5;
+  double p_unknown_outside_roi = 0.0;
+  double unknown_occlusion_sigma_m = 0.07;
   double w_target_entropy = 1.0;
   double w_predicted_target = 1.0;
   double w_unknown_near_target = 0.3;

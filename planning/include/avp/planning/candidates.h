@@ -27,7 +27,7 @@ struct ShellCandidateOptions {
   int max_candidates = 720;
   /// No candidate whose eye is within this distance of a known occupied voxel.
   double clearance_m = 0.03;
-  /// Within this horizontal distance of the ROI's vertical centre axis (the plant's core, where
+  /// Within this horizontal distance of the plant's core (PlantCoreDistance: where
   /// the foliage is) a camera must sit in known free space: the planner never puts the camera
   /// into unmapped foliage. 0 turns the rule off.
   double plant_core_radius_m = 0.25;

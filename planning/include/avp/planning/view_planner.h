@@ -91,6 +91,12 @@ class ViewPlanner {
 /// field otherwise.
 Status ValidateRequest(const PlanningRequest& request);
 
+/// Horizontal distance of `p` from the plant's core: the ROI's medial axis in the horizontal
+/// plane, a vertical segment through the ROI's centre along its longer horizontal side, as long
+/// as that side minus the shorter one. For a square ROI (a tomato plant) it is the vertical axis
+/// through the centre (the stem); for a long, thin one (an espalier) the wall's mid-plane.
+double PlantCoreDistance(const Eigen::Vector3d& p, const Box3& roi);
+
 /// Sorts by utility (descending; ties by lower cost, then generation order), drops unreachable
 /// candidates and fills the status ("no valid candidate: N generated, M reachable, ...").
 PlanResult RankCandidates(std::vector<ViewCandidate> candidates, size_t generated,

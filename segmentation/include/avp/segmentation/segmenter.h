@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -67,9 +68,27 @@ Result<std::vector<std::string>> SplitPrompt(std::string_view prompt);
 /// The names MakeSegmenter accepts, in a stable order: "oracle", "oracle-perfect", "color".
 const std::vector<std::string>& SegmenterNames();
 
-/// A segmenter by name with default options: "oracle" (OracleSegmenter with OracleOptions{}),
-/// "oracle-perfect" (OracleSegmenter with OracleOptions::Perfect()), "color" (ColorSegmenter with
-/// ColorOptions{}; ignores the seed). NotFound naming the unknown name and listing the known ones.
+/// Builds a segmenter from its spec (the name, or for a scheme the whole "remote://host:port").
+using SegmenterFactory =
+    std::function<Result<std::unique_ptr<Segmenter>>(std::string_view spec, uint64_t seed)>;
+
+/// Makes `name` known to MakeSegmenter: modules above this one (the network backends, the remote
+/// client) register themselves so that every command and config accepts them unchanged. A name
+/// ending in "://" is a scheme and matches every spec that starts with it. Registering a name
+/// again replaces its factory. Thread-safe.
+void RegisterSegmenterFactory(std::string name, SegmenterFactory factory);
+
+/// The registered names and schemes (RegisterSegmenterFactory), sorted.
+std::vector<std::string> RegisteredSegmenterNames();
+
+/// True when MakeSegmenter knows `spec`: a built-in name, a registered name, or a spec starting
+/// with a registered scheme. (Whether it then builds, e.g. reaches its server, is another matter.)
+bool IsKnownSegmenter(std::string_view spec);
+
+/// A segmenter by spec: "oracle" (OracleSegmenter with OracleOptions{}), "oracle-perfect"
+/// (OracleSegmenter with OracleOptions::Perfect()), "color" (ColorSegmenter with ColorOptions{};
+/// ignores the seed), or a registered name or scheme. NotFound naming the unknown spec and listing
+/// the known ones.
 Result<std::unique_ptr<Segmenter>> MakeSegmenter(std::string_view name, uint64_t seed);
 
 }  // namespace avp::segmentation
