@@ -1,4 +1,4 @@
-// The `avp` command line. Subcommands: scenes, render, map, run, bench (serve comes later).
+// The `avp` command line. Subcommands: scenes, render, map, run, bench, serve, segment.
 #include <cstdio>
 #include <iostream>
 
@@ -9,8 +9,12 @@
 #include <avp/apps/map_command.h>
 #include <avp/apps/render_command.h>
 #include <avp/apps/run_command.h>
+#include <avp/apps/segment_command.h>
+#include <avp/apps/serve_command.h>
 #include <avp/core/error.h>
+#include <avp/interop/remote_segmenter.h>
 #include <avp/sim/scenario.h>
+#include <avp/zsl/register.h>
 
 namespace {
 
@@ -191,9 +195,41 @@ int BenchAndReport(const avp::apps::BenchOptions& options) {
   return 0;
 }
 
+int ServeSegmentationAndReport(avp::apps::ServeOptions options) {
+  options.log = [](avp::apps::ServeLogLevel level, const std::string& message) {
+    if (level == avp::apps::ServeLogLevel::kWarning) {
+      spdlog::warn("{}", message);
+    } else {
+      spdlog::info("{}", message);
+    }
+  };
+  const avp::Status status = avp::apps::RunServeSegmentation(options);
+  if (!status.ok()) {
+    spdlog::error("serve segmentation failed: {}", status.ToString());
+    return 1;
+  }
+  return 0;
+}
+
+int SegmentAndReport(const avp::apps::SegmentOptions& options) {
+  const auto result = avp::apps::RunSegment(options);
+  if (!result.ok()) {
+    spdlog::error("segment failed: {}", result.status().ToString());
+    return 1;
+  }
+  std::fputs(avp::apps::FormatSegmentSummary(*result).c_str(), stdout);
+  std::printf("wrote %zu files to %s:\n", result->files.size(), options.out_dir.string().c_str());
+  for (const auto& f : result->files) std::printf("  %s\n", f.string().c_str());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Every command and config accepts remote://host:port[/model] as a segmenter.
+  avp::interop::RegisterRemoteSegmenter();
+  // ... and ywes / lsam (models from AVP_ZSL_MODEL_DIR), ywes://DIR, lsam://DIR.
+  avp::zsl::RegisterZslSegmenters();
   CLI::App app{
       "avp: active vision for agricultural robots (simulated RGB-D arm, semantic mapping, "
       "next-best-view planning)"};
@@ -325,8 +361,10 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--seed", run.config.seed, "Seed of the plant, the noise and every choice")
       ->default_val(0);
   run_cmd
-      ->add_option("--planner", run.config.planner,
-                   "View planner: " + Join(avp::eval::PlannerNames()))
+      ->add_option(
+          "--planner", run.config.planner,
+          "View planner: " + Join(avp::eval::PlannerNames()) +
+              "; diagnostic (uses the ground truth): " + Join(avp::eval::DiagnosticPlannerNames()))
       ->default_val(run.config.planner);
   run_cmd
       ->add_option("--segmenter", run.config.segmenter,
@@ -371,10 +409,88 @@ int main(int argc, char** argv) {
   bench_cmd->add_option("--out", bench_out, "Output folder")->default_val(bench_out);
   (void)bench_seed_count;
 
+  // avp serve segmentation
+  auto* serve_cmd = app.add_subcommand("serve", "Network services");
+  serve_cmd->require_subcommand(1);
+  avp::apps::ServeOptions serve;
+  serve.server.host = "0.0.0.0";
+  std::string serve_backends = "oracle";
+  std::string serve_port_file;
+  auto* serve_seg_cmd = serve_cmd->add_subcommand(
+      "segmentation",
+      "The segmentation service: KServe v2 / Open Inference Protocol over gRPC "
+      "(docs/segmentation-service.md); runs until SIGINT / SIGTERM");
+  serve_seg_cmd->add_option("--port", serve.server.port, "TCP port (0 = pick a free one)")
+      ->default_val(serve.server.port);
+  serve_seg_cmd
+      ->add_option("--backend", serve_backends,
+                   "Backends to serve, comma separated, each as a model of its name (" +
+                       Join(avp::segmentation::SegmenterNames()) + ", registered ones)")
+      ->default_val(serve_backends);
+  serve_seg_cmd->add_option("--host", serve.server.host, "Address to listen on")
+      ->default_val(serve.server.host);
+  serve_seg_cmd->add_option("--threads", serve.server.threads, "Worker threads")
+      ->default_val(serve.server.threads);
+  serve_seg_cmd
+      ->add_option("--instances", serve.server.instances_per_model,
+                   "Segmenters per (backend, seed) running at once")
+      ->default_val(serve.server.instances_per_model);
+  serve_seg_cmd
+      ->add_option("--seed", serve.server.default_seed, "Segmenter seed of requests that send none")
+      ->default_val(serve.server.default_seed);
+  serve_seg_cmd->add_option("--port-file", serve_port_file,
+                            "Write the bound port to this file once listening");
+
+  // avp segment
+  avp::apps::SegmentOptions segment;
+  std::string segment_image, segment_models, segment_out = segment.out_dir.string();
+  auto* segment_cmd = app.add_subcommand(
+      "segment",
+      "Segment one image from a text prompt; writes overlay.png and instances.json "
+      "(docs/zero-shot-models.md)");
+  segment_cmd->add_option("--image", segment_image, "JPEG or PNG image")->required();
+  segment_cmd->add_option("--prompt", segment.prompt, "Comma-separated phrases")
+      ->default_val(segment.prompt);
+  segment_cmd
+      ->add_option("--backend", segment.backend,
+                   "Segmenter: ywes, lsam (models from --models or AVP_ZSL_MODEL_DIR), "
+                   "ywes://DIR, lsam://DIR, " +
+                       Join(avp::segmentation::SegmenterNames()) + ", remote://host:port")
+      ->default_val(segment.backend);
+  segment_cmd->add_option("--models", segment_models,
+                          "Model directory of ywes / lsam (default: AVP_ZSL_MODEL_DIR)");
+  segment_cmd->add_option("--threshold", segment.threshold, "Drop instances scoring below this")
+      ->default_val(segment.threshold);
+  segment_cmd->add_option("--seed", segment.seed, "Segmenter seed (noisy segmenters only)")
+      ->default_val(segment.seed);
+  segment_cmd->add_option("--out", segment_out, "Output folder")->default_val(segment_out);
+
   CLI11_PARSE(app, argc, argv);
 
   try {
     if (app.got_subcommand("scenes")) return RunScenes();
+    if (segment_cmd->parsed()) {
+      segment.image = segment_image;
+      segment.models = segment_models;
+      segment.out_dir = segment_out;
+      return SegmentAndReport(segment);
+    }
+    if (serve_seg_cmd->parsed()) {
+      serve.server.backends.clear();
+      size_t start = 0;
+      while (start <= serve_backends.size()) {
+        const size_t comma = serve_backends.find(',', start);
+        std::string item = serve_backends.substr(
+            start, comma == std::string::npos ? std::string::npos : comma - start);
+        item.erase(0, item.find_first_not_of(" \t"));
+        item.erase(item.find_last_not_of(" \t") + 1);
+        if (!item.empty()) serve.server.backends.push_back(item);
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+      }
+      serve.port_file = serve_port_file;
+      return ServeSegmentationAndReport(serve);
+    }
     if (app.got_subcommand("render")) {
       render.scene.scene_file = scene_file;
       render.arm_config = arm_config;

@@ -1,0 +1,118 @@
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include <fmt/format.h>
+#include <pthread.h>
+
+#include <avp/apps/serve_command.h>
+#include <avp/io/file.h>
+
+namespace avp::apps {
+
+namespace {
+
+/// Blocks SIGINT and SIGTERM in this thread (and so in every thread started after) for its
+/// lifetime, restoring the previous mask after.
+class ScopedSignalBlock {
+ public:
+  ScopedSignalBlock() {
+    sigemptyset(&set_);
+    sigaddset(&set_, SIGINT);
+    sigaddset(&set_, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &set_, &previous_);
+  }
+  ~ScopedSignalBlock() {
+    // Drop signals that arrived while blocked, so restoring the mask does not deliver them.
+    timespec zero{0, 0};
+    while (sigtimedwait(&set_, nullptr, &zero) > 0) {
+    }
+    pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
+  }
+  ScopedSignalBlock(const ScopedSignalBlock&) = delete;
+  ScopedSignalBlock& operator=(const ScopedSignalBlock&) = delete;
+
+  /// The signal that arrived within `timeout_ms`, or 0.
+  int Wait(long timeout_ms) const {
+    timespec timeout{timeout_ms / 1000, (timeout_ms % 1000) * 1'000'000};
+    const int signal = sigtimedwait(&set_, nullptr, &timeout);
+    return signal > 0 ? signal : 0;
+  }
+
+ private:
+  sigset_t set_{};
+  sigset_t previous_{};
+};
+
+}  // namespace
+
+Status RunServeSegmentation(const ServeOptions& options) {
+  const auto log = [&](ServeLogLevel level, const std::string& message) {
+    if (options.log) {
+      options.log(level, message);
+    } else {
+      std::printf("%s%s\n", level == ServeLogLevel::kWarning ? "warning: " : "", message.c_str());
+      std::fflush(stdout);
+    }
+  };
+  if (!(options.grace_s >= 0.0 && options.grace_s <= 600.0)) {
+    return InvalidArgumentError(
+        fmt::format("serve: grace_s ({}) must be in [0, 600] seconds", options.grace_s));
+  }
+  // Before any server thread exists, so that every one inherits the mask and the signals reach
+  // the Wait below instead of killing the process.
+  const ScopedSignalBlock signals;
+  AVP_ASSIGN_OR_RETURN(std::unique_ptr<interop::SegmentationServer> server,
+                       interop::SegmentationServer::Start(options.server));
+  log(ServeLogLevel::kInfo,
+      fmt::format("serving segmentation (KServe v2 / Open Inference Protocol, gRPC) on {} with {} "
+                  "worker threads",
+                  server->address(), options.server.threads));
+  int ready = 0;
+  for (const interop::ModelState& m : server->models()) {
+    if (m.ready) {
+      ++ready;
+      log(ServeLogLevel::kInfo, fmt::format("model '{}': READY", m.name));
+    } else {
+      log(ServeLogLevel::kWarning, fmt::format("model '{}': NOT READY: {}", m.name, m.reason));
+    }
+  }
+  if (ready == 0) {
+    log(ServeLogLevel::kWarning, "no model is ready: every request will be refused");
+  }
+  if (!options.port_file.empty()) {
+    const Status written =
+        io::WriteFileAtomic(options.port_file, fmt::format("{}\n", server->port()), "port file");
+    if (!written.ok()) {
+      server->Shutdown(std::chrono::milliseconds(0));
+      return written;
+    }
+  }
+  int signal = 0;
+  while (signal == 0) {
+    if (options.stop != nullptr && options.stop->load()) break;
+    signal = signals.Wait(100);
+  }
+  log(ServeLogLevel::kInfo, fmt::format("{}: shutting down (running calls get {} s)",
+                                        signal == SIGINT    ? "SIGINT"
+                                        : signal == SIGTERM ? "SIGTERM"
+                                                            : "stop requested",
+                                        options.grace_s));
+  server->Shutdown(std::chrono::milliseconds(static_cast<long>(options.grace_s * 1000.0)));
+  if (!options.port_file.empty()) {
+    std::error_code ignored;
+    std::filesystem::remove(options.port_file, ignored);  // no stale port for the next script
+  }
+  const interop::ServerStats stats = server->stats();
+  log(ServeLogLevel::kInfo,
+      fmt::format("stopped after {} answered and {} refused inference requests ({} expired in "
+                  "the queue)",
+                  stats.infer_ok, stats.infer_failed, stats.infer_expired));
+  return Status::Ok();
+}
+
+}  // namespace avp::apps

@@ -1,0 +1,91 @@
+#!/usr/bin/env bash
+# `avp segment` end to end on the ywes stub models (zsl/test/stubs/make_stubs.py): a 1024x768 image
+# of colour (200, 50, 10) with the prompt "a, b" lights the stub detector's planted anchors a_0 and
+# a_1 (the CLIP stub embeds "a" as e_0 and "b" as e_1). instances.json must hold exactly those two
+# instances, with the un-letterboxed boxes and the stub SAM masks derived in zsl/test/ywes_test.cpp:
+#   a: box (211.2, 0)-(313.6, 44.8), mask columns 212..311 x rows 0..43 less the 2 bottom corners
+#   b: box (192, 294.4)-(345.6, 499.2), mask columns 192..343 x rows 296..499 less its 4 corners
+# and overlay.png must exist. A missing model directory must fail with a message naming it.
+#
+# usage: segment_command_test.sh AVP_BINARY STUB_DIR WORK_DIR
+set -euo pipefail
+
+avp="$1"
+stubs="$2"
+work="$3"
+python=/usr/bin/python3
+rm -rf "$work"
+mkdir -p "$work"
+
+fail() {
+  echo "segment_command_test: $*" >&2
+  exit 1
+}
+
+# A binary PPM (OpenCV reads it like any other image).
+"$python" - "$work/image.ppm" <<'EOF'
+import sys
+w, h = 1024, 768
+with open(sys.argv[1], "wb") as f:
+    f.write(b"P6\n%d %d\n255\n" % (w, h))
+    f.write(bytes([200, 50, 10]) * (w * h))
+EOF
+
+"$avp" segment --image "$work/image.ppm" --prompt "a, b" --backend "ywes://$stubs/ywes" \
+  --out "$work/out" >"$work/stdout.txt" 2>"$work/stderr.txt" ||
+  { cat "$work/stdout.txt" "$work/stderr.txt" >&2; fail "avp segment failed"; }
+cat "$work/stdout.txt"
+[ -s "$work/out/overlay.png" ] || fail "no overlay.png"
+grep -q "#0 a  score 0.70" "$work/stdout.txt" || fail "no summary line for instance a"
+grep -q "timings (ms): tokenize" "$work/stdout.txt" || fail "no timings line"
+
+"$python" - "$work/out/instances.json" <<'EOF'
+import json, sys
+
+doc = json.load(open(sys.argv[1]))
+def check(cond, what):
+    if not cond:
+        sys.exit("segment_command_test: " + what + "\n" + json.dumps(doc, indent=1)[:2000])
+
+check(doc["backend"] == "ywes", "backend")
+check(doc["prompt"] == "a, b", "prompt")
+check(doc["image"]["width"] == 1024 and doc["image"]["height"] == 768, "image size")
+stages = [t["stage"] for t in doc["timings"]]
+check(stages == ["tokenize", "text", "letterbox", "detector", "nms", "sam_encoder",
+                 "sam_decoder", "masks"], "stages %s" % stages)
+inst = doc["instances"]
+check(len(inst) == 2, "two instances")
+expected = {
+    "a": ([211.2, 0.0, 313.6, 44.8], 100 * 44 - 2),
+    "b": ([192.0, 294.4, 345.6, 499.2], 152 * 204 - 4),
+}
+for i in inst:
+    box, area = expected[i["label"]]
+    check(all(abs(g - w) < 1e-3 for g, w in zip(i["box"], box)), "box of " + i["label"])
+    check(i["area"] == area, "area of %s: %d, expected %d" % (i["label"], i["area"], area))
+    check(i["class"] == "fruit", "class")
+    check(abs(i["score"] - 0.7) < 1e-3, "score")
+    check(i["mask_score"] == 0.875, "mask_score")
+    rle = i["rle"]
+    check(rle["size"] == [768, 1024], "rle size")
+    check(sum(rle["counts"]) == 1024 * 768, "rle counts sum")
+    check(sum(rle["counts"][1::2]) == area, "rle foreground")
+    check(len(i["polygons"]) == 1 and len(i["polygons"][0]) >= 4, "one polygon")
+    xs = [p[0] for p in i["polygons"][0]]
+    ys = [p[1] for p in i["polygons"][0]]
+    x0 = {"a": 212, "b": 192}[i["label"]]
+    x1 = {"a": 311, "b": 343}[i["label"]]
+    check(min(xs) == x0 and max(xs) == x1, "polygon x extent %s" % [min(xs), max(xs)])
+    y0 = {"a": 0, "b": 296}[i["label"]]
+    y1 = {"a": 43, "b": 499}[i["label"]]
+    check(min(ys) == y0 and max(ys) == y1, "polygon y extent %s" % [min(ys), max(ys)])
+print("segment_command_test: instances.json OK")
+EOF
+
+# --models with a directory that does not exist: an error naming it, exit status 1.
+if "$avp" segment --image "$work/image.ppm" --backend ywes --models "$work/no-models" \
+  --out "$work/out2" >"$work/bad.txt" 2>&1; then
+  fail "a missing model directory succeeded"
+fi
+grep -q "$work/no-models" "$work/bad.txt" || { cat "$work/bad.txt" >&2; fail "error does not name the directory"; }
+echo "segment_command_test: OK"

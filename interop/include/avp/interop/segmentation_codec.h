@@ -1,0 +1,143 @@
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <avp/core/rgbd_frame.h>
+#include <avp/core/segmentation.h>
+#include <avp/core/status.h>
+#include <avp/interop/tensor.h>
+#include <avp/segmentation/segmenter.h>
+
+namespace avp::interop {
+
+/// The segmentation tensor protocol over KServe v2 / Open Inference Protocol (the full table,
+/// with shapes and defaults, is in docs/segmentation-service.md).
+///
+/// Inputs (raw contents little-endian, row-major; H x W is the image size):
+///   rgb           UINT8  [H, W, 3] (or [1, H, W, 3])  RGB8; or instead:
+///   image         BYTES  [1]     an encoded PNG or JPEG (decoded with OpenCV)
+///   depth         FP32   [H, W]  z-depth in metres, 0 = no return (optional: all 0)
+///   intrinsics    FP64   [6]     fx, fy, cx, cy, min_depth_m, max_depth_m (optional)
+///   camera_pose   FP64   [4, 4]  X_WC, homogeneous, row-major (optional: identity)
+///   instance_ids  UINT16 [H, W]  simulator labels (optional, with class_ids)
+///   class_ids     UINT8  [H, W]  SemanticClass per pixel (optional, with instance_ids)
+///   fruits        FP64   [F, 5]  instance_id, centre x, y, z (world, m), radius (m) (optional)
+///   prompt        BYTES  [P]     class phrases; P > 1 phrases are joined with ", "
+/// Request parameters: score_threshold (double), frame_index and seed (uint64, sent as int64
+/// holding the same 64 bits), frame_id (string), stamp_ns (int64).
+///
+/// Outputs (N instances):
+///   masks UINT8 [N, H, W] (nonzero = instance), classes INT32 [N] (SemanticClass),
+///   scores FP32 [N], labels BYTES [N], boxes FP32 [N, 4] (x0, y0, x1, y1; 0 when has_box is
+///   false), has_box BOOL [N], mask_scores FP32 [N] (negative = none).
+/// Response parameter: timings (string), a JSON array [{"stage": "...", "ms": 1.5}, ...].
+namespace names {
+inline constexpr std::string_view kRgb = "rgb";
+inline constexpr std::string_view kImage = "image";
+inline constexpr std::string_view kDepth = "depth";
+inline constexpr std::string_view kIntrinsics = "intrinsics";
+inline constexpr std::string_view kCameraPose = "camera_pose";
+inline constexpr std::string_view kInstanceIds = "instance_ids";
+inline constexpr std::string_view kClassIds = "class_ids";
+inline constexpr std::string_view kFruits = "fruits";
+inline constexpr std::string_view kPrompt = "prompt";
+
+inline constexpr std::string_view kScoreThreshold = "score_threshold";
+inline constexpr std::string_view kFrameIndex = "frame_index";
+inline constexpr std::string_view kSeed = "seed";
+inline constexpr std::string_view kFrameId = "frame_id";
+inline constexpr std::string_view kStampNs = "stamp_ns";
+
+inline constexpr std::string_view kMasks = "masks";
+inline constexpr std::string_view kClasses = "classes";
+inline constexpr std::string_view kScores = "scores";
+inline constexpr std::string_view kLabels = "labels";
+inline constexpr std::string_view kBoxes = "boxes";
+inline constexpr std::string_view kHasBox = "has_box";
+inline constexpr std::string_view kMaskScores = "mask_scores";
+
+inline constexpr std::string_view kTimings = "timings";
+}  // namespace names
+
+/// A tensor of a model's signature as ModelMetadata lists it (-1 = variable dimension).
+struct TensorSpec {
+  std::string name;
+  DataType datatype = DataType::kUint8;
+  std::vector<int64_t> shape;
+  bool optional = false;
+  friend bool operator==(const TensorSpec&, const TensorSpec&) = default;
+};
+
+/// The inputs every segmentation model served by avp accepts, in the order above.
+const std::vector<TensorSpec>& SegmentationInputs();
+/// The outputs it returns, in the order above.
+const std::vector<TensorSpec>& SegmentationOutputs();
+
+/// How the client sends the colour image.
+enum class ImageEncoding : uint8_t {
+  kRaw = 0,   ///< `rgb` UINT8 [H, W, 3]: exact, the largest
+  kPng = 1,   ///< `image` BYTES [1] holding a PNG: exact, smaller
+  kJpeg = 2,  ///< `image` BYTES [1] holding a JPEG: lossy (results differ from in-process ones)
+};
+/// "raw", "png", "jpeg".
+std::string_view ToString(ImageEncoding encoding);
+std::optional<ImageEncoding> ImageEncodingFromString(std::string_view name);
+
+struct RequestEncodeOptions {
+  /// ModelInferRequest.model_name.
+  std::string model_name = "oracle";
+  /// The `seed` parameter (the server's seed of the segmenter); not sent when unset.
+  std::optional<uint64_t> seed;
+  ImageEncoding image = ImageEncoding::kRaw;
+  /// 0 - 100, for ImageEncoding::kJpeg.
+  int jpeg_quality = 95;
+  /// Send the depth image (segmenters of images alone do not need it).
+  bool send_depth = true;
+  /// Send the simulator labels when the request has them.
+  bool send_labels = true;
+};
+
+/// The KServe request for `request` (everything the OracleSegmenter reads crosses exactly, with
+/// raw images). `id` is "<frame_id>@<stamp_ns>". InvalidArgument when request.frame is null or
+/// invalid, the prompt is empty, or the labels do not match the frame's size; IoError when an
+/// image cannot be encoded.
+Result<InferRequest> EncodeSegmentationRequest(const segmentation::SegmentationRequest& request,
+                                               const RequestEncodeOptions& options);
+
+/// A request decoded on the server: it owns the frame and labels that request() points into.
+struct DecodedSegmentationRequest {
+  RgbdFrame frame;
+  std::optional<segmentation::SimulatorLabels> labels;
+  std::string prompt;
+  float score_threshold = 0.0f;
+  uint64_t frame_index = 0;
+  /// The `seed` parameter, when sent.
+  std::optional<uint64_t> seed;
+
+  /// A SegmentationRequest pointing into this object: valid while it lives, unmoved.
+  segmentation::SegmentationRequest request() const;
+};
+
+/// Decodes and checks a request. InvalidArgument naming the tensor or parameter and what was
+/// expected: an unknown input; a wrong datatype or shape; contents that do not match the shape;
+/// neither or both of rgb and image; an image OpenCV cannot decode; an empty prompt; sizes that
+/// differ from the image's; one of instance_ids / class_ids without the other; fruits without
+/// labels; a pose that is not rigid; a bad parameter type or value.
+Result<DecodedSegmentationRequest> DecodeSegmentationRequest(const InferRequest& request);
+
+/// The outputs and parameters for `segmentation` (model name and id are left to the caller).
+/// InvalidArgument when a mask's size differs from width x height.
+Result<InferResponse> EncodeSegmentation(const Segmentation& segmentation);
+
+/// A Segmentation from a response's outputs: `masks` and `scores` are required; `classes`
+/// (default fruit), `labels` (default ""), `boxes` with `has_box` (default none; boxes without
+/// has_box means every instance has one), `mask_scores` (default -1) and the `timings`
+/// parameter are optional. masks may also be BOOL. InvalidArgument naming the output on a wrong
+/// datatype, shape, size or value.
+Result<Segmentation> DecodeSegmentation(const InferResponse& response);
+
+}  // namespace avp::interop

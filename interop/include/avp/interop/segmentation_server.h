@@ -1,0 +1,93 @@
+#pragma once
+
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <avp/core/status.h>
+
+namespace avp::interop {
+
+/// Configuration of a SegmentationServer (`avp serve segmentation` fills it from its flags).
+struct ServerOptions {
+  /// Address to listen on: "0.0.0.0" (every interface), "127.0.0.1", "::", a host name.
+  std::string host = "127.0.0.1";
+  /// TCP port; 0 picks a free one (SegmentationServer::port() reports it).
+  int port = 8001;
+  /// Backends to serve, each as a model of the same name: any spec segmentation::MakeSegmenter
+  /// accepts ("oracle", "oracle-perfect", "color", the registered network backends).
+  std::vector<std::string> backends = {"oracle"};
+  /// Worker threads running Segment(); requests beyond them wait in a queue (deadlines apply).
+  int threads = 4;
+  /// Segmenters built per (backend, seed): Segment() is not promised to be thread-safe, so each
+  /// instance serves one request at a time, and up to this many requests of one (backend, seed)
+  /// run at once. More instances cost memory (a network backend holds its sessions).
+  int instances_per_model = 2;
+  /// (backend, seed) pairs whose segmenters are kept; the least recently used idle one goes.
+  int max_cached_seeds = 8;
+  /// Seed of a request that sends no `seed` parameter, and of the start-up instance.
+  uint64_t default_seed = 0;
+  /// Largest request or response, both ways (gRPC's default 4 MiB is too small for RGB-D).
+  int max_message_bytes = 64 << 20;
+
+  /// Every bad field at once: "invalid server options: port (70000) must be in [0, 65535]; ...".
+  Status Validate() const;
+};
+
+/// Where a served backend stands (zero-shot-models.md §7: READY, MISSING or INVALID(reason)).
+struct ModelState {
+  std::string name;
+  bool ready = false;
+  /// Why the backend could not be built ("" when ready): the status of MakeSegmenter.
+  std::string reason;
+};
+
+/// Counters since start.
+struct ServerStats {
+  uint64_t infer_ok = 0;
+  uint64_t infer_failed = 0;
+  /// Requests whose deadline had passed or whose client had gone before a worker took them.
+  uint64_t infer_expired = 0;
+};
+
+/// The segmentation service: KServe v2 / Open Inference Protocol over gRPC
+/// (docs/segmentation-service.md). Each backend is a model named after it; ModelInfer decodes the
+/// tensors (segmentation_codec.h), runs the backend with the request's `seed` and answers with
+/// the instances. A backend that cannot be built does not stop the server: it is listed as not
+/// ready with its reason, and requests to it are refused with FAILED_PRECONDITION and that
+/// reason. Malformed requests get INVALID_ARGUMENT, unknown models NOT_FOUND, each with a message
+/// naming the tensor or model and what was expected. ServerReady is true while at least one model
+/// is ready. Thread-safe.
+class SegmentationServer {
+ public:
+  /// Builds the backends and starts listening. InvalidArgument for bad options, IoError when the
+  /// address cannot be bound (naming it). Backends that fail to build are not errors (see above).
+  static Result<std::unique_ptr<SegmentationServer>> Start(const ServerOptions& options);
+
+  /// Shuts down (as Shutdown()).
+  ~SegmentationServer();
+  SegmentationServer(const SegmentationServer&) = delete;
+  SegmentationServer& operator=(const SegmentationServer&) = delete;
+
+  /// The bound port (the picked one when options.port was 0).
+  int port() const;
+  /// "host:port" as bound, e.g. "127.0.0.1:43117".
+  std::string address() const;
+  /// The served models in the order of options.backends.
+  std::vector<ModelState> models() const;
+  ServerStats stats() const;
+
+  /// Stops accepting calls, lets running ones finish for up to `grace` (then cancels them), and
+  /// stops the workers. Idempotent; returns at once when already shut down.
+  void Shutdown(std::chrono::milliseconds grace = std::chrono::seconds(5));
+
+ private:
+  struct Impl;
+  explicit SegmentationServer(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace avp::interop

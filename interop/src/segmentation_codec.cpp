@@ -1,0 +1,650 @@
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <exception>
+#include <set>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <avp/core/semantic_class.h>
+#include <avp/core/transform.h>
+#include <avp/interop/segmentation_codec.h>
+
+namespace avp::interop {
+
+namespace {
+
+/// Largest image side accepted from the wire.
+constexpr int64_t kMaxSide = 1 << 15;
+
+std::string JoinNames(const std::vector<TensorSpec>& specs) {
+  std::vector<std::string> names;
+  for (const TensorSpec& s : specs) names.push_back(s.name);
+  return fmt::format("{}", fmt::join(names, ", "));
+}
+
+/// "FP32 [H, W] = [120, 160]" style expectations.
+std::string Expectation(DataType datatype, std::string_view symbolic,
+                        const std::vector<int64_t>& concrete) {
+  if (concrete.empty()) return fmt::format("{} {}", ToString(datatype), symbolic);
+  if (symbolic.empty()) return fmt::format("{} {}", ToString(datatype), ShapeToString(concrete));
+  return fmt::format("{} {} = {}", ToString(datatype), symbolic, ShapeToString(concrete));
+}
+
+/// The tensor has `datatype` and `shape` (-1 = any size in that dimension).
+Status ExpectTensor(const Tensor& t, std::string_view role, DataType datatype,
+                    const std::vector<int64_t>& shape, std::string_view symbolic,
+                    std::string_view meaning = "") {
+  bool shape_ok = t.shape.size() == shape.size();
+  for (size_t i = 0; shape_ok && i < shape.size(); ++i) {
+    shape_ok = shape[i] < 0 || t.shape[i] == shape[i];
+  }
+  if (t.datatype == datatype && shape_ok) return Status::Ok();
+  const bool concrete = std::none_of(shape.begin(), shape.end(), [](int64_t d) { return d < 0; });
+  return InvalidArgumentError(fmt::format(
+      "{} '{}' must be {}{}{}, got {} {}", role, t.name,
+      Expectation(datatype, symbolic, concrete ? shape : std::vector<int64_t>{}),
+      meaning.empty() ? "" : " ", meaning, ToString(t.datatype), ShapeToString(t.shape)));
+}
+
+template <typename T>
+Status CopyImage(const Tensor& t, Image<T, 1>& out, int w, int h) {
+  out = Image<T, 1>(w, h);
+  internal::CopyLittleEndian(out.data().data(), t.data.data(), out.num_pixels(), sizeof(T));
+  return Status::Ok();
+}
+
+Result<ImageRgb8> DecodeImage(const Tensor& t) {
+  AVP_ASSIGN_OR_RETURN(const std::vector<std::string> elements, ReadBytesElements(t));
+  if (elements.size() != 1) {
+    return InvalidArgumentError(
+        fmt::format("input 'image' must be BYTES [1] holding one PNG or JPEG, got {} elements",
+                    elements.size()));
+  }
+  const std::string& bytes = elements.front();
+  cv::Mat bgr;
+  try {
+    if (!bytes.empty()) {
+      const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1,
+                           const_cast<char*>(bytes.data()));
+      bgr = cv::imdecode(buffer, cv::IMREAD_COLOR);
+    }
+  } catch (const std::exception& e) {
+    return InvalidArgumentError(
+        fmt::format("input 'image': the {} bytes are not a PNG or JPEG image OpenCV can decode: {}",
+                    bytes.size(), e.what()));
+  }
+  if (bgr.empty() || bgr.type() != CV_8UC3) {
+    return InvalidArgumentError(fmt::format(
+        "input 'image': the {} bytes are not a PNG or JPEG image OpenCV can decode", bytes.size()));
+  }
+  if (bgr.cols > kMaxSide || bgr.rows > kMaxSide) {
+    return InvalidArgumentError(fmt::format("input 'image' is {}x{}: larger than {} pixels a side",
+                                            bgr.cols, bgr.rows, kMaxSide));
+  }
+  ImageRgb8 rgb(bgr.cols, bgr.rows);
+  for (int v = 0; v < bgr.rows; ++v) {
+    const uint8_t* row = bgr.ptr<uint8_t>(v);
+    for (int u = 0; u < bgr.cols; ++u) {
+      rgb.at(u, v, 0) = row[3 * u + 2];
+      rgb.at(u, v, 1) = row[3 * u + 1];
+      rgb.at(u, v, 2) = row[3 * u + 0];
+    }
+  }
+  return rgb;
+}
+
+Result<std::string> EncodeImage(const ImageRgb8& rgb, ImageEncoding encoding, int jpeg_quality) {
+  cv::Mat bgr(rgb.height(), rgb.width(), CV_8UC3);
+  for (int v = 0; v < rgb.height(); ++v) {
+    uint8_t* row = bgr.ptr<uint8_t>(v);
+    for (int u = 0; u < rgb.width(); ++u) {
+      row[3 * u + 0] = rgb.at(u, v, 2);
+      row[3 * u + 1] = rgb.at(u, v, 1);
+      row[3 * u + 2] = rgb.at(u, v, 0);
+    }
+  }
+  std::vector<uchar> buffer;
+  bool ok = false;
+  try {
+    if (encoding == ImageEncoding::kPng) {
+      ok = cv::imencode(".png", bgr, buffer);
+    } else {
+      ok = cv::imencode(".jpg", bgr, buffer, {cv::IMWRITE_JPEG_QUALITY, jpeg_quality});
+    }
+  } catch (const std::exception& e) {
+    return IoError(fmt::format("cannot encode the {}x{} image as {}: {}", rgb.width(), rgb.height(),
+                               ToString(encoding), e.what()));
+  }
+  if (!ok) {
+    return IoError(fmt::format("cannot encode the {}x{} image as {}", rgb.width(), rgb.height(),
+                               ToString(encoding)));
+  }
+  return std::string(buffer.begin(), buffer.end());
+}
+
+}  // namespace
+
+// ---- metadata -----------------------------------------------------------------------------------
+
+const std::vector<TensorSpec>& SegmentationInputs() {
+  static const std::vector<TensorSpec> kInputs = {
+      {std::string(names::kRgb), DataType::kUint8, {-1, -1, 3}, true},
+      {std::string(names::kImage), DataType::kBytes, {1}, true},
+      {std::string(names::kDepth), DataType::kFp32, {-1, -1}, true},
+      {std::string(names::kIntrinsics), DataType::kFp64, {6}, true},
+      {std::string(names::kCameraPose), DataType::kFp64, {4, 4}, true},
+      {std::string(names::kInstanceIds), DataType::kUint16, {-1, -1}, true},
+      {std::string(names::kClassIds), DataType::kUint8, {-1, -1}, true},
+      {std::string(names::kFruits), DataType::kFp64, {-1, 5}, true},
+      {std::string(names::kPrompt), DataType::kBytes, {-1}, false},
+  };
+  return kInputs;
+}
+
+const std::vector<TensorSpec>& SegmentationOutputs() {
+  static const std::vector<TensorSpec> kOutputs = {
+      {std::string(names::kMasks), DataType::kUint8, {-1, -1, -1}, false},
+      {std::string(names::kClasses), DataType::kInt32, {-1}, false},
+      {std::string(names::kScores), DataType::kFp32, {-1}, false},
+      {std::string(names::kLabels), DataType::kBytes, {-1}, false},
+      {std::string(names::kBoxes), DataType::kFp32, {-1, 4}, false},
+      {std::string(names::kHasBox), DataType::kBool, {-1}, false},
+      {std::string(names::kMaskScores), DataType::kFp32, {-1}, false},
+  };
+  return kOutputs;
+}
+
+std::string_view ToString(ImageEncoding encoding) {
+  switch (encoding) {
+    case ImageEncoding::kRaw:
+      return "raw";
+    case ImageEncoding::kPng:
+      return "png";
+    case ImageEncoding::kJpeg:
+      return "jpeg";
+  }
+  return "unknown";
+}
+
+std::optional<ImageEncoding> ImageEncodingFromString(std::string_view name) {
+  if (name == "raw") return ImageEncoding::kRaw;
+  if (name == "png") return ImageEncoding::kPng;
+  if (name == "jpeg" || name == "jpg") return ImageEncoding::kJpeg;
+  return std::nullopt;
+}
+
+// ---- requests -----------------------------------------------------------------------------------
+
+Result<InferRequest> EncodeSegmentationRequest(const segmentation::SegmentationRequest& request,
+                                               const RequestEncodeOptions& options) {
+  if (request.frame == nullptr) {
+    return InvalidArgumentError("segmentation request: frame is null");
+  }
+  const RgbdFrame& frame = *request.frame;
+  AVP_RETURN_IF_ERROR(frame.Validate().WithContext("segmentation request"));
+  AVP_RETURN_IF_ERROR(
+      segmentation::SplitPrompt(request.prompt).status().WithContext("segmentation request"));
+  if (!std::isfinite(request.score_threshold)) {
+    return InvalidArgumentError(fmt::format(
+        "segmentation request: score_threshold ({}) must be finite", request.score_threshold));
+  }
+  if (options.image == ImageEncoding::kJpeg &&
+      (options.jpeg_quality < 0 || options.jpeg_quality > 100)) {
+    return InvalidArgumentError(
+        fmt::format("JPEG quality ({}) must be in [0, 100]", options.jpeg_quality));
+  }
+  const int w = frame.rgb.width();
+  const int h = frame.rgb.height();
+  const segmentation::SimulatorLabels* labels = options.send_labels ? request.labels : nullptr;
+  if (labels != nullptr &&
+      (!labels->instance_ids.SameSizeAs(w, h) || !labels->class_ids.SameSizeAs(w, h))) {
+    return InvalidArgumentError(fmt::format(
+        "segmentation request: simulator labels are {}x{} (instance ids) and {}x{} (class ids), "
+        "but the frame is {}x{}",
+        labels->instance_ids.width(), labels->instance_ids.height(), labels->class_ids.width(),
+        labels->class_ids.height(), w, h));
+  }
+
+  InferRequest out;
+  out.model_name = options.model_name;
+  out.id = fmt::format("{}@{}", frame.frame_id, frame.stamp_ns);
+  out.parameters[std::string(names::kScoreThreshold)] =
+      static_cast<double>(request.score_threshold);
+  // uint64 values as int64 holding the same bits: every OIP peer knows int64_param.
+  out.parameters[std::string(names::kFrameIndex)] = std::bit_cast<int64_t>(request.frame_index);
+  if (options.seed)
+    out.parameters[std::string(names::kSeed)] = std::bit_cast<int64_t>(*options.seed);
+  out.parameters[std::string(names::kFrameId)] = frame.frame_id;
+  out.parameters[std::string(names::kStampNs)] = frame.stamp_ns;
+
+  if (options.image == ImageEncoding::kRaw) {
+    out.inputs.push_back(MakeTensor<uint8_t>(std::string(names::kRgb), DataType::kUint8, {h, w, 3},
+                                             frame.rgb.data()));
+  } else {
+    AVP_ASSIGN_OR_RETURN(std::string encoded,
+                         EncodeImage(frame.rgb, options.image, options.jpeg_quality));
+    out.inputs.push_back(MakeBytesTensor(std::string(names::kImage), {std::move(encoded)}));
+  }
+  if (options.send_depth) {
+    out.inputs.push_back(MakeTensor<float>(std::string(names::kDepth), DataType::kFp32, {h, w},
+                                           frame.depth_m.data()));
+  }
+  const std::vector<double> k = {frame.K.fx, frame.K.fy,          frame.K.cx,
+                                 frame.K.cy, frame.K.min_depth_m, frame.K.max_depth_m};
+  out.inputs.push_back(MakeTensor<double>(std::string(names::kIntrinsics), DataType::kFp64, {6},
+                                          std::span<const double>(k)));
+  std::vector<double> pose(16);
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) pose[4 * r + c] = frame.X_WC.rotation()(r, c);
+    pose[4 * r + 3] = frame.X_WC.translation()(r);
+  }
+  pose[15] = 1.0;
+  out.inputs.push_back(MakeTensor<double>(std::string(names::kCameraPose), DataType::kFp64, {4, 4},
+                                          std::span<const double>(pose)));
+  if (labels != nullptr) {
+    out.inputs.push_back(MakeTensor<uint16_t>(std::string(names::kInstanceIds), DataType::kUint16,
+                                              {h, w}, labels->instance_ids.data()));
+    out.inputs.push_back(MakeTensor<uint8_t>(std::string(names::kClassIds), DataType::kUint8,
+                                             {h, w}, labels->class_ids.data()));
+    std::vector<double> fruits;
+    fruits.reserve(labels->fruits.size() * 5);
+    for (const segmentation::GroundTruthFruit& f : labels->fruits) {
+      fruits.insert(fruits.end(), {static_cast<double>(f.instance_id), f.center_W.x(),
+                                   f.center_W.y(), f.center_W.z(), f.radius_m});
+    }
+    out.inputs.push_back(MakeTensor<double>(std::string(names::kFruits), DataType::kFp64,
+                                            {static_cast<int64_t>(labels->fruits.size()), 5},
+                                            std::span<const double>(fruits)));
+  }
+  out.inputs.push_back(MakeBytesTensor(std::string(names::kPrompt), {request.prompt}));
+  return out;
+}
+
+segmentation::SegmentationRequest DecodedSegmentationRequest::request() const {
+  segmentation::SegmentationRequest r;
+  r.frame = &frame;
+  r.prompt = prompt;
+  r.score_threshold = score_threshold;
+  r.labels = labels ? &*labels : nullptr;
+  r.frame_index = frame_index;
+  return r;
+}
+
+Result<DecodedSegmentationRequest> DecodeSegmentationRequest(const InferRequest& request) {
+  // ---- Which inputs, each well-formed -----------------------------------------------------------
+  const std::vector<TensorSpec>& specs = SegmentationInputs();
+  std::set<std::string_view> seen;
+  for (const Tensor& t : request.inputs) {
+    const bool known = std::any_of(specs.begin(), specs.end(),
+                                   [&](const TensorSpec& s) { return s.name == t.name; });
+    if (!known) {
+      return InvalidArgumentError(
+          fmt::format("unknown input {}; known inputs: {}", t.Describe(), JoinNames(specs)));
+    }
+    if (!seen.insert(t.name).second) {
+      return InvalidArgumentError(fmt::format("input '{}' is given twice", t.name));
+    }
+    AVP_RETURN_IF_ERROR(CheckTensor(t, "input"));
+  }
+  const Tensor* rgb_t = request.FindInput(names::kRgb);
+  const Tensor* image_t = request.FindInput(names::kImage);
+  const Tensor* depth_t = request.FindInput(names::kDepth);
+  const Tensor* k_t = request.FindInput(names::kIntrinsics);
+  const Tensor* pose_t = request.FindInput(names::kCameraPose);
+  const Tensor* ids_t = request.FindInput(names::kInstanceIds);
+  const Tensor* classes_t = request.FindInput(names::kClassIds);
+  const Tensor* fruits_t = request.FindInput(names::kFruits);
+  const Tensor* prompt_t = request.FindInput(names::kPrompt);
+
+  DecodedSegmentationRequest out;
+  RgbdFrame& frame = out.frame;
+
+  // ---- The colour image -------------------------------------------------------------------------
+  if (rgb_t != nullptr && image_t != nullptr) {
+    return InvalidArgumentError(
+        "inputs 'rgb' and 'image' are both given: send the colour image once, as 'rgb' UINT8 "
+        "[H, W, 3] or as 'image' BYTES [1] (PNG or JPEG)");
+  }
+  if (rgb_t == nullptr && image_t == nullptr) {
+    return InvalidArgumentError(
+        "missing input 'rgb' (UINT8 [H, W, 3]) or 'image' (BYTES [1], a PNG or JPEG)");
+  }
+  if (rgb_t != nullptr) {
+    const bool batched = rgb_t->shape.size() == 4;
+    if (batched) {
+      AVP_RETURN_IF_ERROR(
+          ExpectTensor(*rgb_t, "input", DataType::kUint8, {1, -1, -1, 3}, "[1, H, W, 3]", "RGB8"));
+    } else {
+      AVP_RETURN_IF_ERROR(
+          ExpectTensor(*rgb_t, "input", DataType::kUint8, {-1, -1, 3}, "[H, W, 3]", "RGB8"));
+    }
+    const int64_t h = rgb_t->shape[batched ? 1 : 0];
+    const int64_t w = rgb_t->shape[batched ? 2 : 1];
+    if (h < 1 || w < 1 || h > kMaxSide || w > kMaxSide) {
+      return InvalidArgumentError(
+          fmt::format("input 'rgb' has shape {}: H and W must be in [1, {}]",
+                      ShapeToString(rgb_t->shape), kMaxSide));
+    }
+    frame.rgb = ImageRgb8(static_cast<int>(w), static_cast<int>(h));
+    std::copy(rgb_t->data.begin(), rgb_t->data.end(),
+              reinterpret_cast<char*>(frame.rgb.data().data()));
+  } else {
+    AVP_RETURN_IF_ERROR(
+        ExpectTensor(*image_t, "input", DataType::kBytes, {1}, "[1]", "(a PNG or JPEG)"));
+    AVP_ASSIGN_OR_RETURN(frame.rgb, DecodeImage(*image_t));
+  }
+  const int w = frame.rgb.width();
+  const int h = frame.rgb.height();
+  const std::vector<int64_t> hw = {h, w};
+  const std::string_view kImageSize = "[H, W]";
+
+  // ---- Depth, intrinsics, pose
+  // --------------------------------------------------------------------
+  if (depth_t != nullptr) {
+    AVP_RETURN_IF_ERROR(ExpectTensor(*depth_t, "input", DataType::kFp32, hw, kImageSize,
+                                     "(the colour image's size)"));
+    AVP_RETURN_IF_ERROR(CopyImage(*depth_t, frame.depth_m, w, h));
+  } else {
+    frame.depth_m = DepthImage(w, h, 0.0f);
+  }
+  frame.K.width = w;
+  frame.K.height = h;
+  if (k_t != nullptr) {
+    AVP_RETURN_IF_ERROR(ExpectTensor(*k_t, "input", DataType::kFp64, {6}, "",
+                                     "(fx, fy, cx, cy, min_depth_m, max_depth_m)"));
+    AVP_ASSIGN_OR_RETURN(const std::vector<double> k, ReadValues<double>(*k_t));
+    frame.K.fx = k[0];
+    frame.K.fy = k[1];
+    frame.K.cx = k[2];
+    frame.K.cy = k[3];
+    frame.K.min_depth_m = k[4];
+    frame.K.max_depth_m = k[5];
+  } else {
+    frame.K.fx = frame.K.fy = static_cast<double>(w);
+    frame.K.cx = (w - 1) / 2.0;
+    frame.K.cy = (h - 1) / 2.0;
+  }
+  AVP_RETURN_IF_ERROR(frame.K.Validate().WithContext("input 'intrinsics'"));
+  if (pose_t != nullptr) {
+    AVP_RETURN_IF_ERROR(
+        ExpectTensor(*pose_t, "input", DataType::kFp64, {4, 4}, "", "(X_WC, row-major)"));
+    AVP_ASSIGN_OR_RETURN(const std::vector<double> X, ReadValues<double>(*pose_t));
+    Eigen::Matrix3d R;
+    Eigen::Vector3d p;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) R(r, c) = X[4 * r + c];
+      p(r) = X[4 * r + 3];
+    }
+    if (!R.allFinite() || !p.allFinite() || !IsRotationMatrix(R) || X[12] != 0.0 || X[13] != 0.0 ||
+        X[14] != 0.0 || X[15] != 1.0) {
+      return InvalidArgumentError(fmt::format(
+          "input 'camera_pose' ({}) is not a rigid transform: expected a rotation matrix "
+          "(orthonormal, det +1) with a finite translation and the last row 0, 0, 0, 1",
+          fmt::join(X, ", ")));
+    }
+    frame.X_WC = RigidTransform(R, p);
+  }
+  if (auto id = GetStringParameter(request.parameters, names::kFrameId); !id.ok()) {
+    return id.status();
+  } else if (id->has_value()) {
+    frame.frame_id = **id;
+  }
+  AVP_ASSIGN_OR_RETURN(const std::optional<int64_t> stamp,
+                       GetInt64Parameter(request.parameters, names::kStampNs));
+  if (stamp) frame.stamp_ns = *stamp;
+
+  // ---- Simulator labels
+  // ---------------------------------------------------------------------------
+  if ((ids_t == nullptr) != (classes_t == nullptr)) {
+    return InvalidArgumentError(fmt::format(
+        "input '{}' is given without '{}': simulator labels need both instance_ids UINT16 [H, W] "
+        "and class_ids UINT8 [H, W]",
+        ids_t != nullptr ? names::kInstanceIds : names::kClassIds,
+        ids_t != nullptr ? names::kClassIds : names::kInstanceIds));
+  }
+  if (fruits_t != nullptr && ids_t == nullptr) {
+    return InvalidArgumentError(
+        "input 'fruits' is given without the simulator labels 'instance_ids' and 'class_ids'");
+  }
+  if (ids_t != nullptr) {
+    segmentation::SimulatorLabels labels;
+    AVP_RETURN_IF_ERROR(ExpectTensor(*ids_t, "input", DataType::kUint16, hw, kImageSize,
+                                     "(the colour image's size)"));
+    AVP_RETURN_IF_ERROR(ExpectTensor(*classes_t, "input", DataType::kUint8, hw, kImageSize,
+                                     "(the colour image's size)"));
+    AVP_RETURN_IF_ERROR(CopyImage(*ids_t, labels.instance_ids, w, h));
+    AVP_RETURN_IF_ERROR(CopyImage(*classes_t, labels.class_ids, w, h));
+    if (fruits_t != nullptr) {
+      AVP_RETURN_IF_ERROR(ExpectTensor(*fruits_t, "input", DataType::kFp64, {-1, 5}, "[F, 5]",
+                                       "(instance_id, x, y, z, radius_m)"));
+      AVP_ASSIGN_OR_RETURN(const std::vector<double> f, ReadValues<double>(*fruits_t));
+      for (size_t i = 0; i + 5 <= f.size(); i += 5) {
+        const double id = f[i];
+        if (!(id >= 0.0 && id <= 65535.0 && std::floor(id) == id)) {
+          return InvalidArgumentError(
+              fmt::format("input 'fruits' row {}: instance_id ({}) must be an integer in [0, "
+                          "65535]",
+                          i / 5, id));
+        }
+        segmentation::GroundTruthFruit fruit;
+        fruit.instance_id = static_cast<uint16_t>(id);
+        fruit.center_W = Eigen::Vector3d(f[i + 1], f[i + 2], f[i + 3]);
+        fruit.radius_m = f[i + 4];
+        labels.fruits.push_back(fruit);
+      }
+    }
+    out.labels = std::move(labels);
+  }
+
+  // ---- Prompt and parameters
+  // ----------------------------------------------------------------------
+  if (prompt_t == nullptr) {
+    return InvalidArgumentError(
+        "missing input 'prompt' (BYTES [P]): class phrases such as \"tomato\"");
+  }
+  AVP_RETURN_IF_ERROR(
+      ExpectTensor(*prompt_t, "input", DataType::kBytes, {-1}, "[P]", "(class phrases)"));
+  AVP_ASSIGN_OR_RETURN(const std::vector<std::string> phrases, ReadBytesElements(*prompt_t));
+  out.prompt = phrases.size() == 1 ? phrases.front() : fmt::format("{}", fmt::join(phrases, ", "));
+  if (!segmentation::SplitPrompt(out.prompt).ok()) {
+    return InvalidArgumentError(fmt::format(
+        "input 'prompt' (\"{}\") is empty: expected class phrases such as \"tomato\" or "
+        "\"tomato, apple\"",
+        out.prompt));
+  }
+  AVP_ASSIGN_OR_RETURN(const std::optional<double> threshold,
+                       GetDoubleParameter(request.parameters, names::kScoreThreshold));
+  if (threshold) {
+    if (!(*threshold >= 0.0 && *threshold <= 1.0)) {
+      return InvalidArgumentError(
+          fmt::format("parameter 'score_threshold' ({}) must be in [0, 1]", *threshold));
+    }
+    out.score_threshold = static_cast<float>(*threshold);
+  }
+  AVP_ASSIGN_OR_RETURN(const std::optional<uint64_t> frame_index,
+                       GetUint64Parameter(request.parameters, names::kFrameIndex));
+  out.frame_index = frame_index.value_or(0);
+  AVP_ASSIGN_OR_RETURN(out.seed, GetUint64Parameter(request.parameters, names::kSeed));
+  return out;
+}
+
+// ---- responses ----------------------------------------------------------------------------------
+
+Result<InferResponse> EncodeSegmentation(const Segmentation& segmentation) {
+  const int w = segmentation.width;
+  const int h = segmentation.height;
+  const size_t n = segmentation.instances.size();
+  if (w < 0 || h < 0) {
+    return InvalidArgumentError(fmt::format("segmentation size {}x{} is negative", w, h));
+  }
+  const size_t pixels = static_cast<size_t>(w) * static_cast<size_t>(h);
+  Tensor masks;
+  masks.name = std::string(names::kMasks);
+  masks.datatype = DataType::kUint8;
+  masks.shape = {static_cast<int64_t>(n), h, w};
+  masks.data.resize(n * pixels);
+  std::vector<int32_t> classes(n);
+  std::vector<float> scores(n);
+  std::vector<std::string> labels(n);
+  std::vector<float> boxes(4 * n, 0.0f);
+  std::vector<uint8_t> has_box(n, 0);
+  std::vector<float> mask_scores(n);
+  for (size_t i = 0; i < n; ++i) {
+    const InstanceMask& m = segmentation.instances[i];
+    if (!m.mask.SameSizeAs(w, h)) {
+      return InvalidArgumentError(fmt::format("instance {}: mask is {}x{}, the segmentation {}x{}",
+                                              i, m.mask.width(), m.mask.height(), w, h));
+    }
+    std::copy(m.mask.data().begin(), m.mask.data().end(),
+              reinterpret_cast<uint8_t*>(masks.data.data()) + i * pixels);
+    classes[i] = static_cast<int32_t>(m.semantic_class);
+    scores[i] = m.confidence;
+    labels[i] = m.label;
+    if (m.box) {
+      has_box[i] = 1;
+      boxes[4 * i + 0] = m.box->x0;
+      boxes[4 * i + 1] = m.box->y0;
+      boxes[4 * i + 2] = m.box->x1;
+      boxes[4 * i + 3] = m.box->y1;
+    }
+    mask_scores[i] = m.mask_score;
+  }
+  const int64_t ni = static_cast<int64_t>(n);
+  InferResponse out;
+  out.outputs.push_back(std::move(masks));
+  out.outputs.push_back(MakeTensor<int32_t>(std::string(names::kClasses), DataType::kInt32, {ni},
+                                            std::span<const int32_t>(classes)));
+  out.outputs.push_back(MakeTensor<float>(std::string(names::kScores), DataType::kFp32, {ni},
+                                          std::span<const float>(scores)));
+  out.outputs.push_back(MakeBytesTensor(std::string(names::kLabels), labels));
+  out.outputs.push_back(MakeTensor<float>(std::string(names::kBoxes), DataType::kFp32, {ni, 4},
+                                          std::span<const float>(boxes)));
+  out.outputs.push_back(MakeTensor<uint8_t>(std::string(names::kHasBox), DataType::kBool, {ni},
+                                            std::span<const uint8_t>(has_box)));
+  out.outputs.push_back(MakeTensor<float>(std::string(names::kMaskScores), DataType::kFp32, {ni},
+                                          std::span<const float>(mask_scores)));
+  nlohmann::json timings = nlohmann::json::array();
+  for (const StageTiming& t : segmentation.timings) {
+    timings.push_back({{"stage", t.stage}, {"ms", t.ms}});
+  }
+  out.parameters[std::string(names::kTimings)] = timings.dump();
+  return out;
+}
+
+Result<Segmentation> DecodeSegmentation(const InferResponse& response) {
+  for (const Tensor& t : response.outputs) AVP_RETURN_IF_ERROR(CheckTensor(t, "output"));
+  const Tensor* masks_t = response.FindOutput(names::kMasks);
+  const Tensor* scores_t = response.FindOutput(names::kScores);
+  if (masks_t == nullptr || scores_t == nullptr) {
+    return InvalidArgumentError(fmt::format(
+        "the response lacks output '{}' ({}); a segmentation needs 'masks' UINT8 [N, H, W] and "
+        "'scores' FP32 [N]",
+        masks_t == nullptr ? names::kMasks : names::kScores,
+        masks_t == nullptr ? "UINT8 [N, H, W]" : "FP32 [N]"));
+  }
+  if (masks_t->datatype == DataType::kBool) {
+    AVP_RETURN_IF_ERROR(
+        ExpectTensor(*masks_t, "output", DataType::kBool, {-1, -1, -1}, "[N, H, W]"));
+  } else {
+    AVP_RETURN_IF_ERROR(
+        ExpectTensor(*masks_t, "output", DataType::kUint8, {-1, -1, -1}, "[N, H, W]"));
+  }
+  const int64_t n = masks_t->shape[0];
+  const int64_t h = masks_t->shape[1];
+  const int64_t w = masks_t->shape[2];
+  if (h > kMaxSide || w > kMaxSide) {
+    return InvalidArgumentError(fmt::format("output 'masks' has shape {}: H and W must be <= {}",
+                                            ShapeToString(masks_t->shape), kMaxSide));
+  }
+  const std::string_view per_instance = "(one per instance in 'masks')";
+  AVP_RETURN_IF_ERROR(ExpectTensor(*scores_t, "output", DataType::kFp32, {n}, "[N]", per_instance));
+  AVP_ASSIGN_OR_RETURN(const std::vector<float> scores, ReadValues<float>(*scores_t));
+
+  std::vector<int32_t> classes(static_cast<size_t>(n), static_cast<int32_t>(SemanticClass::kFruit));
+  if (const Tensor* t = response.FindOutput(names::kClasses)) {
+    AVP_RETURN_IF_ERROR(ExpectTensor(*t, "output", DataType::kInt32, {n}, "[N]", per_instance));
+    AVP_ASSIGN_OR_RETURN(classes, ReadValues<int32_t>(*t));
+    for (size_t i = 0; i < classes.size(); ++i) {
+      if (classes[i] < 0 || classes[i] >= kNumSemanticClasses) {
+        return InvalidArgumentError(
+            fmt::format("output 'classes'[{}] ({}) is not a semantic class id (0 - {})", i,
+                        classes[i], kNumSemanticClasses - 1));
+      }
+    }
+  }
+  std::vector<std::string> labels(static_cast<size_t>(n));
+  if (const Tensor* t = response.FindOutput(names::kLabels)) {
+    AVP_RETURN_IF_ERROR(ExpectTensor(*t, "output", DataType::kBytes, {n}, "[N]", per_instance));
+    AVP_ASSIGN_OR_RETURN(labels, ReadBytesElements(*t));
+  }
+  std::vector<float> boxes;
+  std::vector<uint8_t> has_box;
+  if (const Tensor* t = response.FindOutput(names::kBoxes)) {
+    AVP_RETURN_IF_ERROR(
+        ExpectTensor(*t, "output", DataType::kFp32, {n, 4}, "[N, 4]", "(x0, y0, x1, y1)"));
+    AVP_ASSIGN_OR_RETURN(boxes, ReadValues<float>(*t));
+    has_box.assign(static_cast<size_t>(n), 1);
+  }
+  if (const Tensor* t = response.FindOutput(names::kHasBox)) {
+    AVP_RETURN_IF_ERROR(ExpectTensor(*t, "output", DataType::kBool, {n}, "[N]", per_instance));
+    if (boxes.empty() && n > 0) {
+      return InvalidArgumentError("output 'has_box' is given without 'boxes' FP32 [N, 4]");
+    }
+    AVP_ASSIGN_OR_RETURN(has_box, ReadValues<uint8_t>(*t));
+  }
+  std::vector<float> mask_scores(static_cast<size_t>(n), -1.0f);
+  if (const Tensor* t = response.FindOutput(names::kMaskScores)) {
+    AVP_RETURN_IF_ERROR(ExpectTensor(*t, "output", DataType::kFp32, {n}, "[N]", per_instance));
+    AVP_ASSIGN_OR_RETURN(mask_scores, ReadValues<float>(*t));
+  }
+
+  Segmentation out;
+  out.width = static_cast<int>(w);
+  out.height = static_cast<int>(h);
+  const size_t pixels = static_cast<size_t>(w * h);
+  out.instances.resize(static_cast<size_t>(n));
+  for (size_t i = 0; i < out.instances.size(); ++i) {
+    InstanceMask& m = out.instances[i];
+    m.mask = MaskImage(out.width, out.height);
+    const auto* src = reinterpret_cast<const uint8_t*>(masks_t->data.data()) + i * pixels;
+    std::copy(src, src + pixels, m.mask.data().begin());
+    m.semantic_class = static_cast<SemanticClass>(classes[i]);
+    m.confidence = scores[i];
+    m.label = std::move(labels[i]);
+    if (!has_box.empty() && has_box[i] != 0) {
+      m.box = PixelBox{boxes[4 * i], boxes[4 * i + 1], boxes[4 * i + 2], boxes[4 * i + 3]};
+    }
+    m.mask_score = mask_scores[i];
+  }
+  AVP_ASSIGN_OR_RETURN(const std::optional<std::string> timings,
+                       GetStringParameter(response.parameters, names::kTimings));
+  if (timings && !timings->empty()) {
+    const nlohmann::json j = nlohmann::json::parse(*timings, nullptr, /*allow_exceptions=*/false);
+    const auto bad = [&] {
+      return InvalidArgumentError(fmt::format(
+          "parameter 'timings' (\"{}\") must be a JSON array of {{\"stage\": string, \"ms\": "
+          "number}}",
+          *timings));
+    };
+    if (!j.is_array()) return bad();
+    for (const nlohmann::json& e : j) {
+      if (!e.is_object() || !e.contains("stage") || !e.contains("ms") || !e["stage"].is_string() ||
+          !e["ms"].is_number()) {
+        return bad();
+      }
+      out.timings.push_back({e["stage"].get<std::string>(), e["ms"].get<double>()});
+    }
+  }
+  return out;
+}
+
+}  // namespace avp::interop
