@@ -2,6 +2,8 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <utility>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -15,24 +17,80 @@ namespace avp::planning {
 namespace {
 
 /// Weight of an unknown voxel of the ROI that is not near a target voxel: w_unknown_roi times a
-/// Gaussian of its horizontal distance from the ROI's vertical centre axis (fruit hangs around
-/// the stem), or flat when roi_axis_sigma_m is 0.
-double RoiWeight(const VoxelKey& k, double voxel_size_m, const Box3& roi, const AvpNbvOptions& o) {
+/// Gaussian of its horizontal distance from the plant's core (fruit hangs around the stem), or
+/// flat when roi_axis_sigma_m is 0.
+double RoiWeight(const Eigen::Vector3d& c, const Box3& roi, const AvpNbvOptions& o) {
   if (o.roi_axis_sigma_m <= 0.0) return o.w_unknown_roi;
-  const double d = PlantCoreDistance(k.Center(voxel_size_m), roi);
+  const double d = PlantCoreDistance(c, roi);
   return o.w_unknown_roi * std::exp(-0.5 * d * d / (o.roi_axis_sigma_m * o.roi_axis_sigma_m));
 }
 
-/// Occlusion probability of an unknown voxel of the ROI: p_unknown near the plant's axis, falling
+/// Occlusion probability of an unknown voxel of the ROI: p_unknown near the plant's core, falling
 /// as a Gaussian (sigma = unknown_occlusion_sigma_m) of the horizontal distance from it, since the
 /// ROI box is mostly air away from the stem (flat when the sigma is 0).
-double UnknownOcclusion(const VoxelKey& k, double voxel_size_m, const Box3& roi,
-                        const AvpNbvOptions& o) {
+double UnknownOcclusion(const Eigen::Vector3d& c, const Box3& roi, const AvpNbvOptions& o) {
   if (o.unknown_occlusion_sigma_m <= 0.0) return o.p_unknown;
-  const double d = PlantCoreDistance(k.Center(voxel_size_m), roi);
+  const double d = PlantCoreDistance(c, roi);
   return o.p_unknown *
          std::exp(-0.5 * d * d / (o.unknown_occlusion_sigma_m * o.unknown_occlusion_sigma_m));
 }
+
+/// RoiWeight and UnknownOcclusion of a voxel. Both depend only on the voxel's column (x, y), so
+/// the planner tabulates them once per plan over the ROI's columns (two exponentials per unknown
+/// voxel of every ray were most of a step's time); without a table, or outside it, they are
+/// computed directly. The table holds the very values the direct computation gives.
+class CorePrior {
+ public:
+  /// Direct computation (the per-ray API and the reference evaluator).
+  CorePrior(const Box3& roi, double voxel_size_m, const AvpNbvOptions& o)
+      : roi_(roi), s_(voxel_size_m), o_(o) {}
+  /// With the table over the ROI's columns.
+  static CorePrior Tabulated(const Box3& roi, double voxel_size_m, const AvpNbvOptions& o) {
+    CorePrior p(roi, voxel_size_m, o);
+    if (roi.IsEmpty()) return p;
+    const VoxelKey lo = VoxelKey::FromPoint(roi.min(), voxel_size_m);
+    const VoxelKey hi = VoxelKey::FromPoint(roi.max(), voxel_size_m);
+    p.x0_ = lo.x;
+    p.y0_ = lo.y;
+    p.nx_ = int64_t{hi.x} - lo.x + 1;
+    p.ny_ = int64_t{hi.y} - lo.y + 1;
+    if (p.nx_ <= 0 || p.ny_ <= 0 || p.nx_ * p.ny_ > (int64_t{1} << 24)) {
+      p.nx_ = p.ny_ = 0;
+      return p;
+    }
+    p.table_.resize(static_cast<size_t>(p.nx_ * p.ny_));
+    for (int64_t iy = 0; iy < p.ny_; ++iy) {
+      for (int64_t ix = 0; ix < p.nx_; ++ix) {
+        const VoxelKey k{static_cast<int32_t>(p.x0_ + ix), static_cast<int32_t>(p.y0_ + iy), lo.z};
+        p.table_[static_cast<size_t>(ix + p.nx_ * iy)] = p.Compute(k);
+      }
+    }
+    return p;
+  }
+
+  /// {RoiWeight, UnknownOcclusion} of voxel k.
+  std::pair<double, double> At(const VoxelKey& k) const {
+    const int64_t ix = int64_t{k.x} - x0_;
+    const int64_t iy = int64_t{k.y} - y0_;
+    if (ix >= 0 && iy >= 0 && ix < nx_ && iy < ny_) {
+      return table_[static_cast<size_t>(ix + nx_ * iy)];
+    }
+    return Compute(k);
+  }
+
+ private:
+  std::pair<double, double> Compute(const VoxelKey& k) const {
+    // Only x and y of the centre matter (PlantCoreDistance is horizontal).
+    const Eigen::Vector3d c = k.Center(s_);
+    return {RoiWeight(c, roi_, o_), UnknownOcclusion(c, roi_, o_)};
+  }
+
+  Box3 roi_;
+  double s_;
+  const AvpNbvOptions& o_;
+  int64_t x0_ = 0, y0_ = 0, nx_ = 0, ny_ = 0;
+  std::vector<std::pair<double, double>> table_;
+};
 
 /// The surface a ray stands for grows with the square of its range (the rays sample the image
 /// sparsely, the camera sees every voxel of the pixel block): (|c - eye| / ref)^2, or 1 when
@@ -45,10 +103,36 @@ double RangeWeight(const VoxelKey& k, double voxel_size_m, const Eigen::Vector3d
   return d2 / (o.range_weight_ref_m * o.range_weight_ref_m);
 }
 
+/// Nothing beyond the ROI adds gain (its unknown space is air, and the target lies inside it), so
+/// a ray ends where it leaves the ROI, plus one voxel diagonal so that every voxel whose centre
+/// lies in the ROI is still visited; false when the segment misses the ROI. Rays leave the plant
+/// long before their 1 m: walking the rest through empty space was half of a step's time.
+bool ClipRayToRoi(const Eigen::Vector3d& from, const Eigen::Vector3d& to, const Box3& roi,
+                  double voxel_size_m, Eigen::Vector3d* clipped) {
+  const Eigen::Vector3d d = to - from;
+  double t_near = 0.0, t_far = 1.0;
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0.0) {
+      if (from[a] < roi.min()[a] || from[a] > roi.max()[a]) return false;
+      continue;
+    }
+    double t1 = (roi.min()[a] - from[a]) / d[a];
+    double t2 = (roi.max()[a] - from[a]) / d[a];
+    if (t1 > t2) std::swap(t1, t2);
+    t_near = std::max(t_near, t1);
+    t_far = std::min(t_far, t2);
+  }
+  if (t_near > t_far) return false;
+  const double length = d.norm();
+  const double margin = length > 0.0 ? std::sqrt(3.0) * voxel_size_m / length : 0.0;
+  *clipped = from + std::min(1.0, t_far + margin) * d;
+  return true;
+}
+
 /// One voxel's contribution; returns false when the ray ends there.
 bool Accumulate(const VoxelKey& k, const GainVoxel& v, SemanticClass target, double voxel_size_m,
-                const Box3& roi, const Eigen::Vector3d& eye, const AvpNbvOptions& o, double& p_vis,
-                double& gain) {
+                const CorePrior& prior, const Eigen::Vector3d& eye, const AvpNbvOptions& o,
+                double& p_vis, double& gain) {
   switch (v.state) {
     case mapping::VoxelState::kOccupied:
       if (v.cls == target) {
@@ -57,13 +141,19 @@ bool Accumulate(const VoxelKey& k, const GainVoxel& v, SemanticClass target, dou
       }
       return false;
     case mapping::VoxelState::kUnknown: {
-      const double w = v.predicted_target ? o.w_predicted_target
-                       : v.near_target    ? o.w_unknown_near_target
-                       : v.in_roi         ? RoiWeight(k, voxel_size_m, roi, o)
-                                          : 0.0;
+      double w = 0.0, occlusion = o.p_unknown_outside_roi;
+      if (v.in_roi) {
+        const auto [roi_w, roi_occ] = prior.At(k);
+        w = roi_w;
+        occlusion = roi_occ;
+      }
+      if (v.predicted_target) {
+        w = o.w_predicted_target;
+      } else if (v.near_target) {
+        w = o.w_unknown_near_target;
+      }
       if (w > 0.0) gain += p_vis * w * RangeWeight(k, voxel_size_m, eye, o);
-      p_vis *=
-          1.0 - (v.in_roi ? UnknownOcclusion(k, voxel_size_m, roi, o) : o.p_unknown_outside_roi);
+      p_vis *= 1.0 - occlusion;
       return p_vis > 1e-4;
     }
     case mapping::VoxelState::kFree:
@@ -135,34 +225,48 @@ Status AvpNbvOptions::Validate() const {
   return InvalidArgumentError("invalid avp-nbv options: " + joined);
 }
 
-double AvpRayGain(const GainGrid& grid, const Eigen::Vector3d& from, const Eigen::Vector3d& to,
-                  const AvpNbvOptions& options) {
+namespace {
+
+double RayGain(const GainGrid& grid, const CorePrior& prior, const Eigen::Vector3d& from,
+               const Eigen::Vector3d& to_unclipped, const AvpNbvOptions& options) {
   double p_vis = 1.0, gain = 0.0;
   const SemanticClass target = grid.target();
   const double s = grid.voxel_size_m();
+  Eigen::Vector3d to;
+  if (!ClipRayToRoi(from, to_unclipped, grid.roi(), s, &to)) return 0.0;
   grid.Walk(from, to, [&](const VoxelKey& k, const GainVoxel& v) {
-    return Accumulate(k, v, target, s, grid.roi(), from, options, p_vis, gain);
+    return Accumulate(k, v, target, s, prior, from, options, p_vis, gain);
   });
   return gain;
+}
+
+}  // namespace
+
+double AvpRayGain(const GainGrid& grid, const Eigen::Vector3d& from, const Eigen::Vector3d& to,
+                  const AvpNbvOptions& options) {
+  return RayGain(grid, CorePrior(grid.roi(), grid.voxel_size_m(), options), from, to, options);
 }
 
 double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3d& from,
                            const Eigen::Vector3d& to, SemanticClass target, const Box3& roi,
                            const AvpNbvOptions& options) {
+  Eigen::Vector3d to_roi;
+  if (!ClipRayToRoi(from, to, roi, map.voxel_size_m(), &to_roi)) return 0.0;
   std::vector<VoxelKey> keys;
-  mapping::TraverseRay(from, to, map.voxel_size_m(), [&](const VoxelKey& k) {
+  mapping::TraverseRay(from, to_roi, map.voxel_size_m(), [&](const VoxelKey& k) {
     keys.push_back(k);
     return true;
   });
   if (!keys.empty()) keys.pop_back();  // [from, to): the end voxel is not visited
   double p_vis = 1.0, gain = 0.0;
+  const CorePrior prior(roi, map.voxel_size_m(), options);
   const std::vector<TargetSphere> spheres = options.grid.predict_target_surface
                                                 ? FitTargetSpheres(map, target)
                                                 : std::vector<TargetSphere>{};
   for (const VoxelKey& k : keys) {
     const GainVoxel v =
         ReadGainVoxel(map, k, target, roi, options.grid.near_target_radius_m, &spheres);
-    if (!Accumulate(k, v, target, map.voxel_size_m(), roi, from, options, p_vis, gain)) break;
+    if (!Accumulate(k, v, target, map.voxel_size_m(), prior, from, options, p_vis, gain)) break;
   }
   return gain;
 }
@@ -171,9 +275,10 @@ double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const Camer
                    const AvpNbvOptions& options) {
   const std::vector<Eigen::Vector3d> dirs = RayDirections(K, options.ray_stride_px);
   const Eigen::Vector3d origin = X_WC.translation();
+  const CorePrior prior = CorePrior::Tabulated(grid.roi(), grid.voxel_size_m(), options);
   double gain = 0.0;
   for (const Eigen::Vector3d& d_C : dirs) {
-    gain += AvpRayGain(grid, origin, X_WC * (options.max_range_m * d_C), options);
+    gain += RayGain(grid, prior, origin, X_WC * (options.max_range_m * d_C), options);
   }
   return gain;
 }
@@ -201,13 +306,14 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
 
   // Gains of the reachable candidates, in parallel over candidates (each independent).
   const std::vector<Eigen::Vector3d> dirs = RayDirections(request.K, options_.ray_stride_px);
+  const CorePrior prior = CorePrior::Tabulated(grid->roi(), grid->voxel_size_m(), options_);
   ParallelFor(candidates.size(), options_.num_threads, [&](size_t i) {
     ViewCandidate& c = candidates[i];
     if (!c.reachable) return;
     const Eigen::Vector3d origin = c.X_WC.translation();
     double g = 0.0;
     for (const Eigen::Vector3d& d_C : dirs) {
-      g += AvpRayGain(*grid, origin, c.X_WC * (options_.max_range_m * d_C), options_);
+      g += RayGain(*grid, prior, origin, c.X_WC * (options_.max_range_m * d_C), options_);
     }
     c.gain = g;
   });

@@ -80,11 +80,18 @@ TEST(AvpRayGainTest, HandComputedRay) {
   const Box3 elsewhere(Eigen::Vector3d(5, 5, 5), Eigen::Vector3d(6, 6, 6));
   auto outside = GainGrid::Build(map, SemanticClass::kFruit, elsewhere, o.grid);
   ASSERT_TRUE(outside.ok());
+  // A ray that misses the ROI gains nothing, even from a target voxel (the target lies in it).
+  EXPECT_EQ(AvpRayGain(*outside, from, to, o), 0.0);
+  EXPECT_EQ(AvpRayGainReference(map, from, to, SemanticClass::kFruit, elsewhere, o), 0.0);
   // Outside the ROI unknown space is air: it occludes with p_unknown_outside_roi (0 by default).
-  EXPECT_NEAR(AvpRayGain(*outside, from, to, o), Hb(c), 1e-9);
+  // Here the ROI starts between voxels 3 and 4, so voxels 2 and 3 lie outside it.
+  const Box3 partial(Eigen::Vector3d(0.038, -1, -1), Eigen::Vector3d(1, 1, 1));
+  auto beyond = GainGrid::Build(map, SemanticClass::kFruit, partial, o.grid);
+  ASSERT_TRUE(beyond.ok());
+  EXPECT_NEAR(AvpRayGain(*beyond, from, to, o), Hb(c), 1e-9);
   o.p_unknown_outside_roi = 0.5;
-  EXPECT_NEAR(AvpRayGain(*outside, from, to, o), 0.25 * Hb(c), 1e-9);
-  EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, elsewhere, o), 0.25 * Hb(c),
+  EXPECT_NEAR(AvpRayGain(*beyond, from, to, o), 0.25 * Hb(c), 1e-9);
+  EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, partial, o), 0.25 * Hb(c),
               1e-9);
   o.p_unknown_outside_roi = 0.0;
 
