@@ -33,8 +33,8 @@
 
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
+#include <avp/io/image_codec.h>
 #include <avp/segmentation/segmenter.h>
-#include <avp/zsl/image_io.h>
 #include <avp/zsl/lsam_segmenter.h>
 #include <avp/zsl/ywes_segmenter.h>
 
@@ -203,7 +203,7 @@ bool RegisterAll() {
   if (std::optional<std::string> real = Env("AVP_ZSL_MODEL_DIR")) {
     ImageRgb8 image = SyntheticImage();
     if (std::optional<std::string> path = Env("AVP_ZSL_TEST_IMAGE")) {
-      Result<ImageRgb8> read = ReadImageFile(*path);
+      Result<ImageRgb8> read = io::ReadImageFile(*path);
       if (!read.ok()) {
         std::fprintf(stderr, "bench_zsl: %s\n", read.status().ToString().c_str());
         return false;

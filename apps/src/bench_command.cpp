@@ -110,11 +110,10 @@ Status BenchOptions::Validate() const {
       errors.push_back(fmt::format("unknown scenario '{}' (known: {})", s, Join(names)));
     }
   }
-  std::vector<std::string> planner_names = eval::PlannerNames();
-  for (const std::string& n : eval::DiagnosticPlannerNames()) planner_names.push_back(n);
   for (const std::string& p : planners) {
     if (!eval::IsKnownPlanner(p)) {
-      errors.push_back(fmt::format("unknown planner '{}' (known: {})", p, Join(planner_names)));
+      errors.push_back(
+          fmt::format("unknown planner '{}' (known: {})", p, Join(eval::KnownPlannerNames())));
     }
   }
   std::set<uint64_t> unique(seeds.begin(), seeds.end());

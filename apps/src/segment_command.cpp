@@ -11,8 +11,8 @@
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/io/file.h>
+#include <avp/io/image_codec.h>
 #include <avp/segmentation/segmenter.h>
-#include <avp/zsl/image_io.h>
 #include <avp/zsl/mask_codec.h>
 #include <avp/zsl/overlay.h>
 
@@ -57,7 +57,7 @@ Result<std::string> SegmenterSpecFor(const SegmentOptions& options) {
 Result<SegmentResult> RunSegment(const SegmentOptions& options) {
   AVP_RETURN_IF_ERROR(options.Validate());
   AVP_ASSIGN_OR_RETURN(const std::string spec, SegmenterSpecFor(options));
-  AVP_ASSIGN_OR_RETURN(ImageRgb8 image, zsl::ReadImageFile(options.image));
+  AVP_ASSIGN_OR_RETURN(ImageRgb8 image, io::ReadImageFile(options.image));
   AVP_ASSIGN_OR_RETURN(std::unique_ptr<segmentation::Segmenter> segmenter,
                        segmentation::MakeSegmenter(spec, options.seed));
 
@@ -94,7 +94,7 @@ Result<SegmentResult> RunSegment(const SegmentOptions& options) {
                                ec.message()));
   }
   AVP_RETURN_IF_ERROR(
-      zsl::WritePngFile(zsl::DrawSegmentationOverlay(frame.rgb, result.segmentation), overlay));
+      io::WritePngFile(zsl::DrawSegmentationOverlay(frame.rgb, result.segmentation), overlay));
   result.files.push_back(overlay);
   AVP_RETURN_IF_ERROR(io::WriteFileAtomic(json, SegmentationJson(result, options), "instances"));
   result.files.push_back(json);

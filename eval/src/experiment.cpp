@@ -43,11 +43,15 @@ const std::vector<std::string>& DiagnosticPlannerNames() {
   return kNames;
 }
 
+std::vector<std::string> KnownPlannerNames() {
+  std::vector<std::string> known = PlannerNames();
+  for (const std::string& n : DiagnosticPlannerNames()) known.push_back(n);
+  return known;
+}
+
 bool IsKnownPlanner(std::string_view name) {
-  const auto& a = PlannerNames();
-  const auto& b = DiagnosticPlannerNames();
-  return std::find(a.begin(), a.end(), name) != a.end() ||
-         std::find(b.begin(), b.end(), name) != b.end();
+  const std::vector<std::string> known = KnownPlannerNames();
+  return std::find(known.begin(), known.end(), name) != known.end();
 }
 
 Status RunConfig::Validate() const {
@@ -69,15 +73,12 @@ Status RunConfig::Validate() const {
   }
   if (threads < 0) errors.push_back(fmt::format("threads ({}) must be >= 0", threads));
   if (!IsKnownPlanner(planner)) {
-    std::vector<std::string> known = PlannerNames();
-    for (const std::string& n : DiagnosticPlannerNames()) known.push_back(n);
-    errors.push_back(fmt::format("unknown planner '{}' (known: {})", planner, JoinNames(known)));
+    errors.push_back(
+        fmt::format("unknown planner '{}' (known: {})", planner, JoinNames(KnownPlannerNames())));
   }
   if (!segmentation::IsKnownSegmenter(segmenter)) {
-    std::vector<std::string> known = SegmenterNames();
-    for (const std::string& n : segmentation::RegisteredSegmenterNames()) known.push_back(n);
-    errors.push_back(
-        fmt::format("unknown segmenter '{}' (known: {})", segmenter, JoinNames(known)));
+    errors.push_back(fmt::format("unknown segmenter '{}' (known: {})", segmenter,
+                                 JoinNames(segmentation::KnownSegmenterSpecs())));
   }
   if (Status s = K.Validate(); !s.ok()) errors.push_back(s.ToString());
   if (errors.empty()) return Status::Ok();

@@ -28,7 +28,7 @@ size_t OracleNbvPlanner::TrueGain(const mapping::SemanticMap& map, SemanticClass
     for (int u = 0; u < Ks.width; ++u) {
       const float z = f.rgbd.depth_m.at(u, v);
       if (!(z > 0.0f)) continue;
-      const Eigen::Vector3d p_C((u - Ks.cx) / Ks.fx * z, (v - Ks.cy) / Ks.fy * z, z);
+      const Eigen::Vector3d p_C = Ks.BackProject(Eigen::Vector2d(u, v), z);
       const VoxelKey k = VoxelKey::FromPoint(X_WC * p_C, s);
       if (gt_.voxels.count(k) == 0) continue;
       const mapping::SemanticCell* cell = map.Semantic(k);

@@ -1,8 +1,8 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <exception>
 #include <set>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -10,13 +10,11 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include <avp/core/semantic_class.h>
 #include <avp/core/transform.h>
 #include <avp/interop/segmentation_codec.h>
+#include <avp/io/image_codec.h>
 
 namespace avp::interop {
 
@@ -70,65 +68,27 @@ Result<ImageRgb8> DecodeImage(const Tensor& t) {
                     elements.size()));
   }
   const std::string& bytes = elements.front();
-  cv::Mat bgr;
-  try {
-    if (!bytes.empty()) {
-      const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1,
-                           const_cast<char*>(bytes.data()));
-      bgr = cv::imdecode(buffer, cv::IMREAD_COLOR);
-    }
-  } catch (const std::exception& e) {
-    return InvalidArgumentError(
-        fmt::format("input 'image': the {} bytes are not a PNG or JPEG image OpenCV can decode: {}",
-                    bytes.size(), e.what()));
-  }
-  if (bgr.empty() || bgr.type() != CV_8UC3) {
+  Result<ImageRgb8> rgb = io::DecodeImage(
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()));
+  if (!rgb.ok()) {
     return InvalidArgumentError(fmt::format(
         "input 'image': the {} bytes are not a PNG or JPEG image OpenCV can decode", bytes.size()));
   }
-  if (bgr.cols > kMaxSide || bgr.rows > kMaxSide) {
+  if (rgb->width() > kMaxSide || rgb->height() > kMaxSide) {
     return InvalidArgumentError(fmt::format("input 'image' is {}x{}: larger than {} pixels a side",
-                                            bgr.cols, bgr.rows, kMaxSide));
+                                            rgb->width(), rgb->height(), kMaxSide));
   }
-  ImageRgb8 rgb(bgr.cols, bgr.rows);
-  for (int v = 0; v < bgr.rows; ++v) {
-    const uint8_t* row = bgr.ptr<uint8_t>(v);
-    for (int u = 0; u < bgr.cols; ++u) {
-      rgb.at(u, v, 0) = row[3 * u + 2];
-      rgb.at(u, v, 1) = row[3 * u + 1];
-      rgb.at(u, v, 2) = row[3 * u + 0];
-    }
-  }
-  return rgb;
+  return std::move(*rgb);
 }
 
 Result<std::string> EncodeImage(const ImageRgb8& rgb, ImageEncoding encoding, int jpeg_quality) {
-  cv::Mat bgr(rgb.height(), rgb.width(), CV_8UC3);
-  for (int v = 0; v < rgb.height(); ++v) {
-    uint8_t* row = bgr.ptr<uint8_t>(v);
-    for (int u = 0; u < rgb.width(); ++u) {
-      row[3 * u + 0] = rgb.at(u, v, 2);
-      row[3 * u + 1] = rgb.at(u, v, 1);
-      row[3 * u + 2] = rgb.at(u, v, 0);
-    }
-  }
-  std::vector<uchar> buffer;
-  bool ok = false;
-  try {
-    if (encoding == ImageEncoding::kPng) {
-      ok = cv::imencode(".png", bgr, buffer);
-    } else {
-      ok = cv::imencode(".jpg", bgr, buffer, {cv::IMWRITE_JPEG_QUALITY, jpeg_quality});
-    }
-  } catch (const std::exception& e) {
+  Result<std::vector<uint8_t>> bytes =
+      encoding == ImageEncoding::kPng ? io::EncodePng(rgb) : io::EncodeJpeg(rgb, jpeg_quality);
+  if (!bytes.ok()) {
     return IoError(fmt::format("cannot encode the {}x{} image as {}: {}", rgb.width(), rgb.height(),
-                               ToString(encoding), e.what()));
+                               ToString(encoding), bytes.status().message()));
   }
-  if (!ok) {
-    return IoError(fmt::format("cannot encode the {}x{} image as {}", rgb.width(), rgb.height(),
-                               ToString(encoding)));
-  }
-  return std::string(buffer.begin(), buffer.end());
+  return std::string(bytes->begin(), bytes->end());
 }
 
 }  // namespace

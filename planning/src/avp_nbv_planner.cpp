@@ -19,18 +19,16 @@ namespace {
 /// Weight of an unknown voxel of the ROI that is not near a target voxel: w_unknown_roi times a
 /// Gaussian of its horizontal distance from the plant's core (fruit hangs around the stem), or
 /// flat when roi_axis_sigma_m is 0.
-double RoiWeight(const Eigen::Vector3d& c, const Box3& roi, const AvpNbvOptions& o) {
+double RoiWeight(double d, const AvpNbvOptions& o) {
   if (o.roi_axis_sigma_m <= 0.0) return o.w_unknown_roi;
-  const double d = PlantCoreDistance(c, roi);
   return o.w_unknown_roi * std::exp(-0.5 * d * d / (o.roi_axis_sigma_m * o.roi_axis_sigma_m));
 }
 
 /// Occlusion probability of an unknown voxel of the ROI: p_unknown near the plant's core, falling
 /// as a Gaussian (sigma = unknown_occlusion_sigma_m) of the horizontal distance from it, since the
 /// ROI box is mostly air away from the stem (flat when the sigma is 0).
-double UnknownOcclusion(const Eigen::Vector3d& c, const Box3& roi, const AvpNbvOptions& o) {
+double UnknownOcclusion(double d, const AvpNbvOptions& o) {
   if (o.unknown_occlusion_sigma_m <= 0.0) return o.p_unknown;
-  const double d = PlantCoreDistance(c, roi);
   return o.p_unknown *
          std::exp(-0.5 * d * d / (o.unknown_occlusion_sigma_m * o.unknown_occlusion_sigma_m));
 }
@@ -81,8 +79,8 @@ class CorePrior {
  private:
   std::pair<double, double> Compute(const VoxelKey& k) const {
     // Only x and y of the centre matter (PlantCoreDistance is horizontal).
-    const Eigen::Vector3d c = k.Center(s_);
-    return {RoiWeight(c, roi_, o_), UnknownOcclusion(c, roi_, o_)};
+    const double d = PlantCoreDistance(k.Center(s_), roi_);
+    return {RoiWeight(d, o_), UnknownOcclusion(d, o_)};
   }
 
   Box3 roi_;

@@ -80,16 +80,20 @@ Result<std::unique_ptr<Segmenter>> MakeSegmenter(std::string_view name, uint64_t
   }
   if (name == "color") return std::unique_ptr<Segmenter>(std::make_unique<ColorSegmenter>());
   if (SegmenterFactory factory = FindFactory(name)) return factory(name, seed);
-  std::vector<std::string> known = SegmenterNames();
-  for (std::string& n : RegisteredSegmenterNames()) known.push_back(IsScheme(n) ? n + "..." : n);
-  return NotFoundError(
-      fmt::format("unknown segmenter \"{}\"; known: {}", name, fmt::join(known, ", ")));
+  return NotFoundError(fmt::format("unknown segmenter \"{}\"; known: {}", name,
+                                   fmt::join(KnownSegmenterSpecs(), ", ")));
 }
 
 bool IsKnownSegmenter(std::string_view spec) {
   const auto& builtin = SegmenterNames();
   if (std::find(builtin.begin(), builtin.end(), spec) != builtin.end()) return true;
   return static_cast<bool>(FindFactory(spec));
+}
+
+std::vector<std::string> KnownSegmenterSpecs() {
+  std::vector<std::string> known = SegmenterNames();
+  for (std::string& n : RegisteredSegmenterNames()) known.push_back(IsScheme(n) ? n + "..." : n);
+  return known;
 }
 
 void RegisterSegmenterFactory(std::string name, SegmenterFactory factory) {

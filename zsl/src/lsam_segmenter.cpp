@@ -114,16 +114,9 @@ LsamSegmenter::~LsamSegmenter() = default;
 Result<std::unique_ptr<LsamSegmenter>> LsamSegmenter::Create(const std::filesystem::path& model_dir,
                                                              const LsamOptions& options) {
   AVP_RETURN_IF_ERROR(options.Validate());
-  BackendLoadOptions load;
-  load.session = options.session;
-  load.verify_sha256 = options.verify_sha256;
-  load.warm_up = options.warm_up;
-  LoadedBackend backend = LoadBackend(kBackendLsam, model_dir, load);
-  if (!backend.ready()) {
-    return Status(backend.status.code(),
-                  fmt::format("lsam: model directory '{}' is {}: {}", model_dir.string(),
-                              ToString(backend.state), backend.reason));
-  }
+  AVP_ASSIGN_OR_RETURN(LoadedBackend backend,
+                       internal::LoadReadyBackend(kBackendLsam, model_dir, options.session,
+                                                  options.verify_sha256, options.warm_up));
   LoadedModel grounding = Take(backend, kRoleGrounding);
   const ModelEntry& g = grounding.entry;
   std::vector<std::string> bad;

@@ -76,6 +76,23 @@ std::vector<float> DetectorTensor(const ImageRgb8& rgb, const Letterbox& lb, con
 
 namespace internal {
 
+Result<LoadedBackend> LoadReadyBackend(std::string_view backend,
+                                       const std::filesystem::path& model_dir,
+                                       const SessionOptions& session, bool verify_sha256,
+                                       bool warm_up) {
+  BackendLoadOptions load;
+  load.session = session;
+  load.verify_sha256 = verify_sha256;
+  load.warm_up = warm_up;
+  LoadedBackend loaded = LoadBackend(backend, model_dir, load);
+  if (!loaded.ready()) {
+    return Status(loaded.status.code(),
+                  fmt::format("{}: model directory '{}' is {}: {}", backend, model_dir.string(),
+                              ToString(loaded.state), loaded.reason));
+  }
+  return loaded;
+}
+
 Status ValidateRequest(std::string_view backend, const segmentation::SegmentationRequest& request) {
   if (request.frame == nullptr) {
     return InvalidArgumentError(fmt::format("{}: request.frame is null", backend));
@@ -335,16 +352,9 @@ YwesSegmenter::~YwesSegmenter() = default;
 Result<std::unique_ptr<YwesSegmenter>> YwesSegmenter::Create(const std::filesystem::path& model_dir,
                                                              const YwesOptions& options) {
   AVP_RETURN_IF_ERROR(options.Validate());
-  BackendLoadOptions load;
-  load.session = options.session;
-  load.verify_sha256 = options.verify_sha256;
-  load.warm_up = options.warm_up;
-  LoadedBackend backend = LoadBackend(kBackendYwes, model_dir, load);
-  if (!backend.ready()) {
-    return Status(backend.status.code(),
-                  fmt::format("ywes: model directory '{}' is {}: {}", model_dir.string(),
-                              ToString(backend.state), backend.reason));
-  }
+  AVP_ASSIGN_OR_RETURN(LoadedBackend backend,
+                       internal::LoadReadyBackend(kBackendYwes, model_dir, options.session,
+                                                  options.verify_sha256, options.warm_up));
 
   LoadedModel detector = Take(backend, kRoleDetector);
   const ModelEntry& det = detector.entry;

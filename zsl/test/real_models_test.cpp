@@ -15,7 +15,7 @@
 
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
-#include <avp/zsl/image_io.h>
+#include <avp/io/image_codec.h>
 #include <avp/zsl/lsam_segmenter.h>
 #include <avp/zsl/manifest.h>
 #include <avp/zsl/ywes_segmenter.h>
@@ -74,7 +74,7 @@ RealSetup LoadRealSetup(const char* backend) {
         "(AVP_ZSL_TEST_PROMPT, default \"tomato\")";
     return s;
   }
-  Result<ImageRgb8> rgb = ReadImageFile(*image);
+  Result<ImageRgb8> rgb = io::ReadImageFile(*image);
   if (!rgb.ok()) {
     s.skip = rgb.status().ToString();
     return s;

@@ -27,7 +27,9 @@ const std::vector<std::string>& SegmenterNames();
 /// Planners that need the true scene (built only by RunEpisodeOnScene): "oracle-nbv", the
 /// ground-truth upper bound on avp-nbv's candidates (eval/oracle_planner.h).
 const std::vector<std::string>& DiagnosticPlannerNames();
-/// In PlannerNames() or DiagnosticPlannerNames().
+/// PlannerNames(), then DiagnosticPlannerNames().
+std::vector<std::string> KnownPlannerNames();
+/// In KnownPlannerNames().
 bool IsKnownPlanner(std::string_view name);
 
 /// One episode's configuration: everything `avp run` resolves and records.

@@ -85,6 +85,10 @@ std::vector<std::string> RegisteredSegmenterNames();
 /// with a registered scheme. (Whether it then builds, e.g. reaches its server, is another matter.)
 bool IsKnownSegmenter(std::string_view spec);
 
+/// What error messages list as known: SegmenterNames(), then the registered names, schemes
+/// written as "remote://...".
+std::vector<std::string> KnownSegmenterSpecs();
+
 /// A segmenter by spec: "oracle" (OracleSegmenter with OracleOptions{}), "oracle-perfect"
 /// (OracleSegmenter with OracleOptions::Perfect()), "color" (ColorSegmenter with ColorOptions{};
 /// ignores the seed), or a registered name or scheme. NotFound naming the unknown spec and listing

@@ -12,6 +12,7 @@
 #include <avp/core/segmentation.h>
 #include <avp/core/status.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/zsl/manifest.h>
 #include <avp/zsl/ort_runtime.h>
 
 namespace avp::zsl {
@@ -189,6 +190,13 @@ namespace internal {
 /// The request checks every zsl backend makes, as statuses starting with "<backend>: ": frame not
 /// null, image not empty, RgbdFrame::Validate, score_threshold in [0, 1].
 Status ValidateRequest(std::string_view backend, const segmentation::SegmentationRequest& request);
+
+/// LoadBackend(backend, model_dir, {session, verify_sha256, warm_up}) when it ends READY; else its
+/// status, with the message "<backend>: model directory '<dir>' is <STATE>: <reason>".
+Result<LoadedBackend> LoadReadyBackend(std::string_view backend,
+                                       const std::filesystem::path& model_dir,
+                                       const SessionOptions& session, bool verify_sha256,
+                                       bool warm_up);
 
 /// A detector box (source pixels) waiting for its mask.
 struct BoxCandidate {

@@ -12,9 +12,9 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include <avp/zsl/image_io.h>
+#include <avp/io/image_codec.h>
 
-namespace avp::zsl {
+namespace avp::io {
 
 namespace {
 
@@ -68,10 +68,14 @@ Result<ImageRgb8> DecodeImage(std::span<const uint8_t> encoded) {
   return std::move(*rgb);
 }
 
-Result<std::vector<uint8_t>> EncodePng(const ImageRgb8& image) {
+namespace {
+
+// `ext` ".png" or ".jpg"; `name` for the messages ("PNG", "JPEG").
+Result<std::vector<uint8_t>> Encode(const ImageRgb8& image, const char* ext, const char* name,
+                                    const std::vector<int>& params) {
   if (image.empty()) {
-    return InvalidArgumentError(fmt::format("cannot encode an empty image ({} x {}) as PNG",
-                                            image.width(), image.height()));
+    return InvalidArgumentError(fmt::format("cannot encode an empty image ({} x {}) as {}",
+                                            image.width(), image.height(), name));
   }
   const cv::Mat rgb(image.height(), image.width(), CV_8UC3,
                     const_cast<uint8_t*>(image.data().data()));
@@ -80,16 +84,29 @@ Result<std::vector<uint8_t>> EncodePng(const ImageRgb8& image) {
   std::vector<uint8_t> bytes;
   bool ok = false;
   try {
-    ok = cv::imencode(".png", bgr, bytes);
+    ok = cv::imencode(ext, bgr, bytes, params);
   } catch (const cv::Exception& e) {
-    return InternalError(fmt::format("PNG encoding of a {} x {} image failed: {}", image.width(),
-                                     image.height(), e.what()));
+    return InternalError(fmt::format("{} encoding of a {} x {} image failed: {}", name,
+                                     image.width(), image.height(), e.what()));
   }
   if (!ok) {
     return InternalError(
-        fmt::format("PNG encoding of a {} x {} image failed", image.width(), image.height()));
+        fmt::format("{} encoding of a {} x {} image failed", name, image.width(), image.height()));
   }
   return bytes;
+}
+
+}  // namespace
+
+Result<std::vector<uint8_t>> EncodePng(const ImageRgb8& image) {
+  return Encode(image, ".png", "PNG", {});
+}
+
+Result<std::vector<uint8_t>> EncodeJpeg(const ImageRgb8& image, int quality) {
+  if (quality < 0 || quality > 100) {
+    return InvalidArgumentError(fmt::format("JPEG quality ({}) must be in [0, 100]", quality));
+  }
+  return Encode(image, ".jpg", "JPEG", {cv::IMWRITE_JPEG_QUALITY, quality});
 }
 
 Status WritePngFile(const ImageRgb8& image, const std::filesystem::path& path) {
@@ -103,4 +120,4 @@ Status WritePngFile(const ImageRgb8& image, const std::filesystem::path& path) {
   return Status::Ok();
 }
 
-}  // namespace avp::zsl
+}  // namespace avp::io

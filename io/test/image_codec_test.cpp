@@ -8,10 +8,10 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include <avp/io/image_codec.h>
 #include <avp/test/temp_dir_test.h>
-#include <avp/zsl/image_io.h>
 
-namespace avp::zsl {
+namespace avp::io {
 namespace {
 
 using ::testing::HasSubstr;
@@ -140,4 +140,4 @@ TEST_F(ImageIoTest, EncodeAndWriteErrors) {
 }
 
 }  // namespace
-}  // namespace avp::zsl
+}  // namespace avp::io
