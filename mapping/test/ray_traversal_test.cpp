@@ -8,6 +8,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -521,6 +522,49 @@ TEST(RayTraversalTest, RandomSegmentsMatchExactReference) {
     }
   }
   EXPECT_EQ(checked, 3 * 8 * 600);
+}
+
+TEST(RayTraversalTest, ForEachKeyBeforeEndVisitsTheKeysOfStep) {
+  // The register walk against Step() on every kind of segment (ties, faces, exhausted axes),
+  // lattice and real coordinates, including early stops.
+  Rng rng(31);
+  const Kind kinds[] = {Kind::kGeneral, Kind::kAxisAligned, Kind::kPlanar, Kind::kDiagonal,
+                        Kind::kOnFaces, Kind::kTiny,        Kind::kZero,   Kind::kSameVoxel};
+  int64_t total = 0;
+  for (const double s : kVoxelSizes) {
+    for (int i = 0; i < 4000; ++i) {
+      Eigen::Vector3d a, b;
+      if (i % 9 == 8) {
+        a = Eigen::Vector3d(rng.Uniform(-0.3, 0.3), rng.Uniform(-0.3, 0.3), rng.Uniform(-0.3, 0.3));
+        b = a +
+            Eigen::Vector3d(rng.Uniform(-1, 1), rng.Uniform(-1, 1), rng.Uniform(-1, 1)) * 40 * s;
+      } else {
+        std::tie(a, b) = RandomSegment(kinds[i % 8], s, rng);
+      }
+      RayWalker stepped(a, b, s);
+      const RayWalker w(a, b, s);
+      ASSERT_EQ(stepped.ok(), w.ok());
+      std::vector<VoxelKey> expected;
+      while (stepped.remaining() > 0) {
+        expected.push_back(stepped.key());
+        stepped.Step();
+      }
+      std::vector<VoxelKey> keys;
+      const int64_t calls = w.ForEachKeyBeforeEnd([&](const VoxelKey& k) {
+        keys.push_back(k);
+        return true;
+      });
+      ASSERT_EQ(keys, expected) << "#" << i;
+      ASSERT_EQ(calls, static_cast<int64_t>(expected.size()));
+      EXPECT_EQ(w.key(), RayWalker(a, b, s).key());  // the walker did not move
+      total += calls;
+      if (expected.size() > 2) {
+        int n = 0;
+        EXPECT_EQ(w.ForEachKeyBeforeEnd([&](const VoxelKey&) { return ++n < 2; }), 2);
+      }
+    }
+  }
+  EXPECT_GT(total, 100000);
 }
 
 TEST(RayTraversalTest, RandomRealCoordinateSegmentsMatchExactReference) {

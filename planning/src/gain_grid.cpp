@@ -1,14 +1,17 @@
-// GainGrid: a dense 4-byte-per-voxel copy of the semantic map for gain evaluation, and the slow
+// GainGrid: a bricked 4-byte-per-voxel copy of the semantic map for gain evaluation, and the slow
 // per-voxel read (ReadGainVoxel) it is tested against. See docs/planning.md, "Gain grid".
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <limits>
 #include <map>
+#include <new>
 #include <vector>
 
 #include <Eigen/Cholesky>
 #include <fmt/format.h>
+#include <sys/mman.h>
 
 #include <avp/core/error.h>
 #include <avp/mapping/sensor_model.h>
@@ -69,10 +72,35 @@ Status ValidateOptions(const GainGridOptions& options) {
         fmt::format("invalid gain grid options: near_target_radius_m ({}) must be finite and >= 0",
                     options.near_target_radius_m));
   }
+  if (options.brick_shift < 0 || options.brick_shift > 4) {
+    return InvalidArgumentError(fmt::format(
+        "invalid gain grid options: brick_shift ({}) must be in [0, 4]", options.brick_shift));
+  }
   return Status::Ok();
 }
 
 }  // namespace
+
+namespace {
+constexpr size_t kHugePage = size_t{2} << 20;
+}  // namespace
+
+void* AllocateHugePageBlock(size_t bytes) {
+  if (bytes < kHugePage) {
+    void* p = std::malloc(bytes == 0 ? 1 : bytes);
+    if (p == nullptr) throw std::bad_alloc();
+    return p;
+  }
+  const size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+  void* p = std::aligned_alloc(kHugePage, rounded);
+  if (p == nullptr) throw std::bad_alloc();
+#ifdef MADV_HUGEPAGE
+  madvise(p, rounded, MADV_HUGEPAGE);  // advice only: failure leaves 4 kB pages
+#endif
+  return p;
+}
+
+void FreeHugePageBlock(void* p, size_t /*bytes*/) { std::free(p); }
 
 float QuantizeProbability(double p) { return ByteToProbability(ProbabilityByte(p)); }
 
@@ -215,13 +243,29 @@ Result<GainGrid> GainGrid::Build(const mapping::SemanticMap& map, SemanticClass 
   }
   out.min_ = {lo.x - r, lo.y - r, lo.z - r};
   out.dims_ = Eigen::Vector3i(static_cast<int>(nx), static_cast<int>(ny), static_cast<int>(nz));
-  out.cells_.assign(static_cast<size_t>(nx * ny * nz), 0u);
+  out.brick_shift_ = options.brick_shift;
+  const int64_t edge = int64_t{1} << out.brick_shift_;
+  const int64_t bx = (nx + edge - 1) / edge, by = (ny + edge - 1) / edge,
+                bz = (nz + edge - 1) / edge;
+  out.bdims_ = Eigen::Vector3i(static_cast<int>(bx), static_cast<int>(by), static_cast<int>(bz));
+  out.cells_.assign(static_cast<size_t>(bx * by * bz * edge * edge * edge), 0u);
 
-  auto index = [&](const VoxelKey& k) {
-    return static_cast<size_t>(
-        (int64_t{k.x} - out.min_.x) +
-        nx * ((int64_t{k.y} - out.min_.y) + ny * (int64_t{k.z} - out.min_.z)));
-  };
+  auto index = [&](const VoxelKey& k) { return static_cast<size_t>(out.IndexOf(k)); };
+  // The per-axis tables: IndexOf's terms, and the ROI test of Box3::Contains(Center) per axis
+  // (the same double arithmetic, so in_roi is exactly that of At).
+  const int64_t mask = edge - 1;
+  const int shift = out.brick_shift_;
+  const int64_t brick_stride[3] = {int64_t{1}, bx, bx * by};
+  for (int a = 0; a < 3; ++a) {
+    out.axis_[a].resize(static_cast<size_t>(out.dims_[a]));
+    const int32_t lo_key = a == 0 ? out.min_.x : a == 1 ? out.min_.y : out.min_.z;
+    for (int64_t u = 0; u < out.dims_[a]; ++u) {
+      const double c = (static_cast<int32_t>(lo_key + u) + 0.5) * s;
+      const bool inside = c >= roi.min()[a] && c <= roi.max()[a];
+      out.axis_[a][static_cast<size_t>(u)] = (((u >> shift) * brick_stride[a]) << (3 * shift)) +
+                                             ((u & mask) << (a * shift)) + (inside ? 0 : kNotInRoi);
+    }
+  }
   const float occupied = grid.occupied_log_odds();
   grid.ForEachBlock([&](const mapping::OccupancyBlock& b) {
     b.known.ForEachSet([&](int i) {
@@ -261,7 +305,23 @@ Result<GainGrid> GainGrid::Build(const mapping::SemanticMap& map, SemanticClass 
       }
     }
   }
+  // All-free bricks (padding cells are unknown: a brick with padding is never all-free).
+  if (options.skip_free_bricks && out.brick_shift_ > 0) {
+    const size_t per_brick = size_t{1} << (3 * out.brick_shift_);
+    const size_t bricks = out.cells_.size() / per_brick;
+    out.free_brick_.assign(bricks, 0);
+    const auto free = static_cast<uint32_t>(mapping::VoxelState::kFree);
+    for (size_t b = 0; b < bricks; ++b) {
+      const uint32_t* c = &out.cells_[b * per_brick];
+      out.free_brick_[b] =
+          std::all_of(c, c + per_brick, [&](uint32_t v) { return (v & kStateMask) == free; });
+    }
+  }
   return out;
+}
+
+size_t GainGrid::free_bricks() const {
+  return static_cast<size_t>(std::count(free_brick_.begin(), free_brick_.end(), uint8_t{1}));
 }
 
 std::vector<Eigen::Vector3d> RayDirections(const CameraIntrinsics& K, int stride) {

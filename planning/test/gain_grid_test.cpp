@@ -1,8 +1,10 @@
 // GainGrid: At() against the slow ReadGainVoxel on random maps (inside and outside the grid's box),
-// Walk() against TraverseRay, the near-target ball at its boundary, quantisation, the size guard,
+// every brick size against the default, Walk() against TraverseRay, WalkSkippingFree() against
+// Walk(), the near-target ball at its boundary, quantisation, the size guard,
 // empty maps, and RayDirections.
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <string>
 #include <vector>
 
@@ -324,6 +326,196 @@ TEST(GainGridTest, WalkVisitsTraverseRayKeysWithoutTheEndVoxel) {
   EXPECT_EQ(grid->Walk(Eigen::Vector3d(0.001, 0.001, 0.001), Eigen::Vector3d(0.002, 0.003, 0.004),
                        [](const VoxelKey&, const GainVoxel&) { return true; }),
             0);
+}
+
+TEST(GainGridTest, EveryBrickSizeReadsTheSame) {
+  // The default 8^3 bricks are checked against ReadGainVoxel above; the other layouts (dense,
+  // 2^3, 4^3, 16^3) must read the same on every key of the box and a margin around it, with
+  // dims that are no multiple of the brick edge and negative keys.
+  const mapping::SemanticMap map = RandomMap(6, 0.005);
+  const Box3 roi(Eigen::Vector3d(-0.03, -0.04, -0.02), Eigen::Vector3d(0.06, 0.05, 0.07));
+  const auto ref = GainGrid::Build(map, SemanticClass::kFruit, roi);
+  ASSERT_TRUE(ref.ok());
+  EXPECT_EQ(ref->brick_edge(), 8);
+  EXPECT_LT(ref->min_key().x, 0);
+  EXPECT_NE(ref->dims().x() % 8, 0);
+  EXPECT_NE(ref->dims().y() % 8, 0);
+  for (int shift : {0, 1, 2, 4}) {
+    GainGridOptions options;
+    options.brick_shift = shift;
+    const auto grid = GainGrid::Build(map, SemanticClass::kFruit, roi, options);
+    ASSERT_TRUE(grid.ok()) << shift;
+    EXPECT_EQ(grid->brick_edge(), 1 << shift);
+    EXPECT_EQ(grid->dims(), ref->dims());
+    EXPECT_EQ(grid->min_key(), ref->min_key());
+    const VoxelKey lo = ref->min_key();
+    const Eigen::Vector3i n = ref->dims();
+    for (int32_t z = lo.z - 3; z < lo.z + n.z() + 3; ++z) {
+      for (int32_t y = lo.y - 3; y < lo.y + n.y() + 3; ++y) {
+        for (int32_t x = lo.x - 3; x < lo.x + n.x() + 3; ++x) {
+          ASSERT_TRUE(Same(grid->At({x, y, z}), ref->At({x, y, z})))
+              << shift << ": " << x << " " << y << " " << z;
+        }
+      }
+    }
+    EXPECT_LE(grid->free_bricks(), grid->bricks());
+    if (shift == 0) {
+      EXPECT_EQ(grid->free_bricks(), 0u);  // no flags in the dense layout
+    }
+  }
+  GainGridOptions bad;
+  bad.brick_shift = 5;
+  EXPECT_FALSE(GainGrid::Build(map, SemanticClass::kFruit, roi, bad).ok());
+  bad.brick_shift = -1;
+  EXPECT_FALSE(GainGrid::Build(map, SemanticClass::kFruit, roi, bad).ok());
+}
+
+/// Mostly free space over 75 x 70 x 66 voxels (0.375 x 0.35 x 0.33 m, negative keys included):
+/// three occupied fruit-labelled balls, an unknown slab, unknown holes and scattered occupied
+/// voxels, so that some bricks are all free and others not.
+mapping::SemanticMap SparseMap(uint64_t seed) {
+  mapping::SemanticMap map = MakeMap(0.005);
+  mapping::OccupancyGrid& grid = map.grid();
+  Rng rng(seed);
+  struct Ball {
+    Eigen::Vector3d c;
+    double r;
+  };
+  std::vector<Ball> balls;
+  for (int i = 0; i < 3; ++i) {
+    balls.push_back(
+        {Eigen::Vector3d(rng.Uniform(-20, 40), rng.Uniform(-25, 30), rng.Uniform(-10, 40)),
+         rng.Uniform(3.0, 7.0)});
+  }
+  for (int32_t z = -13; z < 53; ++z) {
+    for (int32_t y = -31; y < 39; ++y) {
+      for (int32_t x = -27; x < 48; ++x) {
+        const VoxelKey k{x, y, z};
+        const Eigen::Vector3d p(x, y, z);
+        bool ball = false;
+        for (const Ball& b : balls) ball = ball || (p - b.c).norm() <= b.r;
+        if (ball) {
+          EXPECT_TRUE(grid.SetLogOdds(k, static_cast<float>(rng.Uniform(0.5, 3.0))));
+          mapping::SemanticCell* c = grid.MutableSemantic(k);
+          c->semantic_class = static_cast<uint8_t>(SemanticClass::kFruit);
+          c->confidence = static_cast<float>(rng.Uniform01());
+        } else if ((z >= 20 && z < 23) || rng.Bernoulli(0.0002)) {
+          continue;  // unknown
+        } else if (rng.Bernoulli(0.0001)) {
+          EXPECT_TRUE(grid.SetLogOdds(k, 1.0f));
+        } else {
+          EXPECT_TRUE(grid.SetLogOdds(k, static_cast<float>(rng.Uniform(-2.0, -0.1))));
+        }
+      }
+    }
+  }
+  return map;
+}
+
+TEST(GainGridTest, WalkSkippingFreeVisitsEveryNonFreeVoxelOfWalkInOrder) {
+  const mapping::SemanticMap map = SparseMap(7);
+  const Box3 roi(Eigen::Vector3d(-0.1, -0.12, -0.05), Eigen::Vector3d(0.2, 0.15, 0.2));
+  for (int shift : {3, 2, 4}) {
+    GainGridOptions options;
+    options.brick_shift = shift;
+    options.skip_free_bricks = true;
+    const auto grid = GainGrid::Build(map, SemanticClass::kFruit, roi, options);
+    ASSERT_TRUE(grid.ok());
+    // The box's 8-voxel unknown margin and the slab leave few whole free bricks of 16^3.
+    ASSERT_GT(grid->free_bricks(), shift == 4 ? 3 : grid->bricks() / 10) << shift;
+    ASSERT_LT(grid->free_bricks(), grid->bricks()) << shift;
+    Rng rng(8 + static_cast<uint64_t>(shift));
+    int64_t walked = 0, skipped = 0, stops = 0;
+    for (int i = 0; i < 3000; ++i) {
+      // End points inside, around and far outside the grid's box (-0.135 .. 0.265 m).
+      auto point = [&]() -> Eigen::Vector3d {
+        const double m = i % 3 == 0 ? 0.6 : 0.2;
+        return Eigen::Vector3d(rng.Uniform(-m, m), rng.Uniform(-m, m), rng.Uniform(-m, m)) +
+               Eigen::Vector3d(0.05, 0.02, 0.1);
+      };
+      const Eigen::Vector3d from = point();
+      Eigen::Vector3d to = point();
+      if (i % 10 == 0)
+        to = (VoxelKey::FromPoint(to, 0.005).Center(0.005).array() + 0.0025).matrix();
+      struct Visit {
+        VoxelKey k;
+        GainVoxel v;
+      };
+      std::vector<Visit> all, fast;
+      const int64_t n_all = grid->Walk(from, to, [&](const VoxelKey& k, const GainVoxel& v) {
+        all.push_back({k, v});
+        return true;
+      });
+      const int64_t n_fast =
+          grid->WalkSkippingFree(from, to, [&](const VoxelKey& k, const GainVoxel& v) {
+            fast.push_back({k, v});
+            EXPECT_TRUE(Same(v, grid->At(k)));
+            return true;
+          });
+      ASSERT_EQ(n_fast, n_all) << "ray " << i;
+      // `fast` is `all` without some free voxels: a subsequence, every omission free.
+      size_t j = 0;
+      for (const Visit& a : all) {
+        if (j < fast.size() && fast[j].k == a.k) {
+          ASSERT_TRUE(Same(fast[j].v, a.v));
+          ++j;
+        } else {
+          ASSERT_EQ(a.v.state, VoxelState::kFree) << "ray " << i << ": skipped a non-free voxel";
+          ++skipped;
+        }
+      }
+      ASSERT_EQ(j, fast.size()) << "ray " << i << ": visits not in Walk's order";
+      walked += n_all;
+      // Stopping at the m-th non-free voxel: both stop there and return the same count.
+      std::vector<size_t> non_free;
+      for (size_t a = 0; a < all.size(); ++a) {
+        if (all[a].v.state != VoxelState::kFree) non_free.push_back(a);
+      }
+      if (!non_free.empty()) {
+        const size_t m =
+            static_cast<size_t>(rng.UniformInt(0, static_cast<int64_t>(non_free.size()) - 1));
+        auto stopper = [&](size_t* seen) {
+          return [&, seen](const VoxelKey&, const GainVoxel& v) {
+            return v.state == VoxelState::kFree || (*seen)++ < m;
+          };
+        };
+        size_t seen_all = 0, seen_fast = 0;
+        const int64_t s_all = grid->Walk(from, to, stopper(&seen_all));
+        const int64_t s_fast = grid->WalkSkippingFree(from, to, stopper(&seen_fast));
+        ASSERT_EQ(s_all, static_cast<int64_t>(non_free[m]) + 1) << "ray " << i;
+        ASSERT_EQ(s_fast, s_all) << "ray " << i;
+        ASSERT_EQ(seen_fast, m + 1);
+        ++stops;
+      }
+    }
+    EXPECT_GT(walked, 200000) << shift;
+    EXPECT_GT(skipped, shift == 4 ? walked / 100 : walked / 5) << shift;
+    std::printf("brick edge %d: %.1f %% of %lld walked voxels skipped\n", 1 << shift,
+                100.0 * static_cast<double>(skipped) / static_cast<double>(walked),
+                static_cast<long long>(walked));
+    EXPECT_GT(stops, 1000) << shift;
+  }
+  // Without flags (dense, or skipping off) it is Walk.
+  for (const auto& [shift, skip] : {std::pair{0, true}, {3, false}}) {
+    GainGridOptions options;
+    options.brick_shift = shift;
+    options.skip_free_bricks = skip;
+    const auto grid = GainGrid::Build(map, SemanticClass::kFruit, roi, options);
+    ASSERT_TRUE(grid.ok());
+    EXPECT_EQ(grid->free_bricks(), 0u);
+    const Eigen::Vector3d from(-0.3, 0.01, 0.02), to(0.4, 0.05, 0.11);
+    std::vector<VoxelKey> a, b;
+    grid->Walk(from, to, [&](const VoxelKey& k, const GainVoxel&) {
+      a.push_back(k);
+      return true;
+    });
+    grid->WalkSkippingFree(from, to, [&](const VoxelKey& k, const GainVoxel&) {
+      b.push_back(k);
+      return true;
+    });
+    EXPECT_EQ(a, b);
+    EXPECT_GT(a.size(), 100u);
+  }
 }
 
 TEST(GainGridTest, RayDirectionsCoverThePixelGrid) {

@@ -90,11 +90,63 @@ class RayWalker {
   /// kMaxLengthVoxels; such a walker visits nothing.
   bool ok() const { return ok_; }
   VoxelKey key() const { return {key_[0], key_[1], key_[2]}; }
+  /// One coordinate of key() (0: x, 1: y, 2: z).
+  int32_t key_axis(int axis) const { return key_[axis]; }
   /// Steps left until the end point's voxel; 0 when the current voxel is the last.
   int64_t remaining() const { return remaining_; }
   /// Axis of the last step (0, 1, 2), -1 before the first.
   int last_axis() const { return last_axis_; }
   int step(int axis) const { return step_[axis]; }
+
+  /// Calls fn(const VoxelKey&) -> bool for the current voxel and each next one up to, not
+  /// including, the end point's voxel (remaining() calls), in order, until fn returns false:
+  /// exactly the keys of key() and Step(), with the walker's state copied into locals (registers)
+  /// and a branchless axis choice, as PlanningSnapshot::CastRayGuarded (Step keeps its state in
+  /// arrays indexed by the axis, and reads of key() after it stall on store forwarding). The
+  /// walker itself does not move. Returns the calls made.
+  template <typename Fn>
+  int64_t ForEachKeyBeforeEnd(Fn&& fn) const {
+    int64_t left = remaining_;
+    int32_t kx = key_[0], ky = key_[1], kz = key_[2];
+    const int32_t sx = step_[0], sy = step_[1], sz = step_[2];
+    int64_t rx = axis_remaining_[0], ry = axis_remaining_[1], rz = axis_remaining_[2];
+    int64_t pxy = p_[0][1], pxz = p_[0][2], pyx = p_[1][0], pyz = p_[1][2], pzx = p_[2][0],
+            pzy = p_[2][1];
+    const int64_t ixy = inc_[0][1], ixz = inc_[0][2], iyx = inc_[1][0], iyz = inc_[1][2],
+                  izx = inc_[2][0], izy = inc_[2][1];
+    int64_t calls = 0;
+    while (left > 0) {
+      ++calls;
+      if (!fn(VoxelKey{kx, ky, kz})) break;
+      --left;
+      // Step()'s choice: axis = xy ? (xz ? x : z) : (yz ? y : z).
+      const bool xy = pxy <= pyx, xz = pxz <= pzx, yz = pyz <= pzy;
+      const bool x_first = xy & xz;
+      const bool y_first = !xy & yz;
+      const int64_t mx = -static_cast<int64_t>(x_first), my = -static_cast<int64_t>(y_first),
+                    mz = ~(mx | my);
+      kx += sx & static_cast<int32_t>(mx);
+      ky += sy & static_cast<int32_t>(my);
+      kz += sz & static_cast<int32_t>(mz);
+      rx += mx;  // -1 on the stepped axis
+      ry += my;
+      rz += mz;
+      pxy += ixy & mx;
+      pxz += ixz & mx;
+      pyx += iyx & my;
+      pyz += iyz & my;
+      pzx += izx & mz;
+      pzy += izy & mz;
+      // An exhausted axis is never chosen again (it is never stepped after, so kNever stays).
+      pxy = rx == 0 ? kNever : pxy;
+      pxz = rx == 0 ? kNever : pxz;
+      pyx = ry == 0 ? kNever : pyx;
+      pyz = ry == 0 ? kNever : pyz;
+      pzx = rz == 0 ? kNever : pzx;
+      pzy = rz == 0 ? kNever : pzy;
+    }
+    return calls;
+  }
 
   /// Moves to the next voxel and returns the axis it stepped along. @pre remaining() > 0.
   int Step() {
