@@ -200,6 +200,43 @@ BENCHMARK(BM_AvpNbvPlan)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
+// The same step with every candidate scored with every fine ray (coarse_ray_stride_px = 0), the
+// pass that coarse to fine replaces; same_choice = 1 when both choose the same view.
+void BM_AvpNbvPlanEveryRay(benchmark::State& state) {
+  const Fixture& f = GetFixture();
+  AvpNbvOptions options;
+  options.num_threads = static_cast<int>(state.range(0));
+  options.candidates.num_threads = options.num_threads;
+  AvpNbvOptions every = options;
+  every.coarse_ray_stride_px = 0;
+  AvpNbvPlanner planner(every);
+  PlanResult result;
+  for (auto _ : state) {
+    Rng rng = f.rng;
+    result = planner.Plan(f.request, rng);
+    benchmark::DoNotOptimize(result.ranked.data());
+  }
+  if (!result.status.ok()) {
+    state.SkipWithError(result.status.ToString().c_str());
+    return;
+  }
+  Rng rng = f.rng;
+  const PlanResult c2f = AvpNbvPlanner(options).Plan(f.request, rng);
+  state.counters["threads"] = static_cast<double>(options.num_threads);
+  state.counters["reachable"] = static_cast<double>(result.reachable);
+  state.counters["same_choice"] = c2f.status.ok() && c2f.ranked.front().X_WC.translation() ==
+                                                         result.ranked.front().X_WC.translation()
+                                      ? 1.0
+                                      : 0.0;
+}
+BENCHMARK(BM_AvpNbvPlanEveryRay)
+    ->ArgName("threads")
+    ->Arg(1)
+    ->Arg(2)
+    ->Iterations(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
 void BM_AvpNbvGains(benchmark::State& state) {
   const Fixture& f = GetFixture();
   const int layout = static_cast<int>(state.range(0));
@@ -207,9 +244,11 @@ void BM_AvpNbvGains(benchmark::State& state) {
   if (layout == 0) options = DenseOptions(options);
   options.grid.skip_free_bricks = layout == 2;
   // The reachable candidates of the step (default options: the candidates do not depend on the
-  // grid's layout).
+  // grid's layout), every one scored with every ray (no coarse pass) to compare the gains.
   Rng rng = f.rng;
-  const PlanResult plan = AvpNbvPlanner().Plan(f.request, rng);
+  AvpNbvOptions every;
+  every.coarse_ray_stride_px = 0;
+  const PlanResult plan = AvpNbvPlanner(every).Plan(f.request, rng);
   Result<GainGrid> grid =
       GainGrid::Build(*f.request.map, f.request.target_class, f.request.roi, options.grid);
   if (!grid.ok() || !plan.status.ok()) {

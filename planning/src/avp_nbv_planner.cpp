@@ -219,6 +219,13 @@ Status AvpNbvOptions::Validate() const {
       errors.push_back(fmt::format("{} ({}) must be finite and >= 0", name, w));
     }
   }
+  if (coarse_ray_stride_px != 0 &&
+      (coarse_ray_stride_px < ray_stride_px || coarse_ray_stride_px > 256)) {
+    errors.push_back(
+        fmt::format("coarse ray stride ({} px) must be 0 (off) or in [ray stride ({} px), 256]",
+                    coarse_ray_stride_px, ray_stride_px));
+  }
+  if (refine_top < 1) errors.push_back(fmt::format("refine_top ({}) must be >= 1", refine_top));
   if (num_threads < 0) errors.push_back(fmt::format("threads ({}) must be >= 0", num_threads));
   if (candidates.radii_m.empty() || candidates.elevations_deg.empty() ||
       candidates.max_candidates < 1 || candidates.max_targets < 1) {
@@ -339,38 +346,71 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   const size_t generated = candidates.size();
 
   // Gains of the reachable candidates, in parallel over candidates (each independent).
-  const std::vector<Eigen::Vector3d> dirs = RayDirections(request.K, options_.ray_stride_px);
+  const std::vector<Eigen::Vector3d> fine = RayDirections(request.K, options_.ray_stride_px);
   const CorePrior prior = CorePrior::Tabulated(grid->roi(), grid->voxel_size_m(), options_);
   const GainParams params(options_);
-  ParallelFor(candidates.size(), options_.num_threads, [&](size_t i) {
-    ViewCandidate& c = candidates[i];
-    if (!c.reachable) return;
+  auto view_gain = [&](const ViewCandidate& c, const std::vector<Eigen::Vector3d>& dirs) {
     const Eigen::Vector3d origin = c.X_WC.translation();
     double g = 0.0;
     for (const Eigen::Vector3d& d_C : dirs) {
       g += RayGain(*grid, prior, origin, c.X_WC * (options_.max_range_m * d_C), params);
     }
-    c.gain = g;
-  });
-
-  double max_gain = 0.0, max_cost = 0.0;
-  for (const ViewCandidate& c : candidates) {
-    if (!c.reachable) continue;
-    max_gain = std::max(max_gain, c.gain);
-    max_cost = std::max(max_cost, c.cost);
+    return g;
+  };
+  std::vector<size_t> reachable;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (candidates[i].reachable) reachable.push_back(i);
   }
-  for (ViewCandidate& c : candidates) {
-    const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
-    const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
-    // Viewpoint diversity: the distance to the nearest fused eye, saturating at diversity_m.
-    double d_min = std::numeric_limits<double>::infinity();
-    for (const RigidTransform& f : request.fused_views) {
-      d_min = std::min(d_min, (f.translation() - c.X_WC.translation()).norm());
+  // Utilities from the gains; returns the largest gain.
+  auto score = [&]() {
+    double max_gain = 0.0, max_cost = 0.0;
+    for (size_t i : reachable) {
+      max_gain = std::max(max_gain, candidates[i].gain);
+      max_cost = std::max(max_cost, candidates[i].cost);
     }
-    const double diversity =
-        options_.diversity_m > 0.0 ? std::min(1.0, d_min / options_.diversity_m) : 0.0;
-    c.utility = g - options_.w_motion * m + options_.w_diversity * diversity;
+    for (ViewCandidate& c : candidates) {
+      const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
+      const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
+      // Viewpoint diversity: the distance to the nearest fused eye, saturating at diversity_m.
+      double d_min = std::numeric_limits<double>::infinity();
+      for (const RigidTransform& f : request.fused_views) {
+        d_min = std::min(d_min, (f.translation() - c.X_WC.translation()).norm());
+      }
+      const double diversity =
+          options_.diversity_m > 0.0 ? std::min(1.0, d_min / options_.diversity_m) : 0.0;
+      c.utility = g - options_.w_motion * m + options_.w_diversity * diversity;
+    }
+    return max_gain;
+  };
+  const bool coarse_to_fine = options_.coarse_ray_stride_px > options_.ray_stride_px &&
+                              reachable.size() > static_cast<size_t>(options_.refine_top);
+  if (coarse_to_fine) {
+    // Every candidate with the coarse rays (their gain scaled to the fine ray count), then the
+    // refine_top best by that utility again with the fine rays.
+    const std::vector<Eigen::Vector3d> coarse =
+        RayDirections(request.K, options_.coarse_ray_stride_px);
+    const double scale = static_cast<double>(fine.size()) / static_cast<double>(coarse.size());
+    ParallelFor(reachable.size(), options_.num_threads, [&](size_t j) {
+      ViewCandidate& c = candidates[reachable[j]];
+      c.gain = scale * view_gain(c, coarse);
+    });
+    score();
+    std::vector<size_t> order = reachable;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+      return candidates[a].utility > candidates[b].utility;
+    });
+    order.resize(static_cast<size_t>(options_.refine_top));
+    ParallelFor(order.size(), options_.num_threads, [&](size_t j) {
+      ViewCandidate& c = candidates[order[j]];
+      c.gain = view_gain(c, fine);
+    });
+  } else {
+    ParallelFor(reachable.size(), options_.num_threads, [&](size_t j) {
+      ViewCandidate& c = candidates[reachable[j]];
+      c.gain = view_gain(c, fine);
+    });
   }
+  const double max_gain = score();
   result = RankCandidates(std::move(candidates), generated, name());
   if (result.status.ok() && options_.min_gain_bits > 0.0 && max_gain < options_.min_gain_bits) {
     result.stop = true;

@@ -2,7 +2,9 @@
 // random rays, and the planner on a rendered plant (deterministic, reachable, never a fused view,
 // enough candidates, stopping rule).
 #include <cmath>
+#include <map>
 #include <memory>
+#include <tuple>
 #include <utility>
 
 #include <gtest/gtest.h>
@@ -47,6 +49,7 @@ TEST(AvpRayGainTest, HandComputedRay) {
   SetFree(map, {5, 0, 0});  // behind the fruit: never reached
   const Box3 roi(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
   AvpNbvOptions o;
+  o.p_unknown = 0.5;           // so that the visibilities below are powers of 1/2
   o.range_weight_ref_m = 0.0;  // unweighted first; range weighting is checked below
   o.min_gain_range_m = 0.0;
   o.unknown_occlusion_sigma_m = 0.0;  // flat p_unknown first; its fall-off is checked below
@@ -347,6 +350,49 @@ TEST_F(AvpNbvPlannerTest, GridLayoutAndFreeBrickSkippingDoNotChangeTheResult) {
   }
 }
 
+TEST_F(AvpNbvPlannerTest, CoarseToFineRefinesTheBestCandidatesWithTheFineRays) {
+  // Every candidate scored with every fine ray (coarse off) against the default coarse-to-fine
+  // pass: the same candidates; exactly refine_top of them carry their fine gain, the chosen one
+  // among them; the others the coarse estimate.
+  AvpNbvOptions full;
+  full.coarse_ray_stride_px = 0;
+  const AvpNbvOptions c2f;
+  ASSERT_GT(c2f.coarse_ray_stride_px, c2f.ray_stride_px);
+  Rng a(7), b(7);
+  const PlanResult rf = AvpNbvPlanner(full).Plan(Request(), a);
+  const PlanResult rc = AvpNbvPlanner(c2f).Plan(Request(), b);
+  ASSERT_TRUE(rf.status.ok() && rc.status.ok());
+  ASSERT_GT(rc.ranked.size(), static_cast<size_t>(c2f.refine_top));
+  ASSERT_EQ(rf.ranked.size(), rc.ranked.size());
+  auto key = [](const ViewCandidate& v) {
+    const Eigen::Vector3d t = v.X_WC.translation();
+    return std::tuple(t.x(), t.y(), t.z());
+  };
+  std::map<std::tuple<double, double, double>, double> fine;
+  for (const ViewCandidate& v : rf.ranked) fine[key(v)] = v.gain;
+  int refined = 0;
+  for (const ViewCandidate& v : rc.ranked) {
+    ASSERT_EQ(fine.count(key(v)), 1u);
+    refined += v.gain == fine[key(v)] ? 1 : 0;
+  }
+  EXPECT_EQ(refined, c2f.refine_top);
+  EXPECT_EQ(rc.ranked.front().gain, fine[key(rc.ranked.front())]);
+  // The coarse estimates are close to the fine gains (same scene, a quarter of the rays): the
+  // view ranked first by the full pass is within the coarse pass's top refine_top.
+  bool best_refined = false;
+  for (int i = 0; i < c2f.refine_top; ++i) {
+    best_refined = best_refined || key(rc.ranked[static_cast<size_t>(i)]) == key(rf.ranked.front());
+  }
+  EXPECT_TRUE(best_refined);
+  // With at least as many refinements as reachable candidates it is the full pass.
+  AvpNbvOptions all = c2f;
+  all.refine_top = static_cast<int>(rc.ranked.size());
+  Rng d(7);
+  const PlanResult ra = AvpNbvPlanner(all).Plan(Request(), d);
+  ASSERT_EQ(ra.ranked.size(), rf.ranked.size());
+  for (size_t i = 0; i < ra.ranked.size(); ++i) ASSERT_EQ(ra.ranked[i].gain, rf.ranked[i].gain);
+}
+
 TEST_F(AvpNbvPlannerTest, StoppingRuleFiresBelowTheGainThreshold) {
   AvpNbvOptions o;
   o.min_gain_bits = 1e9;
@@ -367,6 +413,12 @@ TEST_F(AvpNbvPlannerTest, BadRequestsAndOptionsAreErrors) {
   o = AvpNbvOptions{};
   o.p_unknown = 1.0;
   EXPECT_NE(o.Validate().message().find("p_unknown (1)"), std::string::npos);
+  o = AvpNbvOptions{};
+  o.coarse_ray_stride_px = 10;
+  EXPECT_NE(o.Validate().message().find("coarse ray stride (10 px)"), std::string::npos);
+  o = AvpNbvOptions{};
+  o.refine_top = 0;
+  EXPECT_NE(o.Validate().message().find("refine_top (0)"), std::string::npos);
 }
 
 }  // namespace

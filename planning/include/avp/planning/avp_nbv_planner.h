@@ -17,7 +17,8 @@ namespace avp::planning {
 ///     transparent, an occupied voxel ends the ray, an unknown voxel of the ROI occludes with
 ///     `p_unknown` times a Gaussian (σ = `unknown_occlusion_sigma_m`, 0 = flat) of its horizontal
 ///     distance from the plant's core (PlantCoreDistance: foliage is dense there, the rest of the
-///     ROI box is mostly air), one outside the ROI with `p_unknown_outside_roi`;
+///     ROI box is mostly air; 0.05 per 5 mm voxel by default: even the core is mostly air), one
+///     outside the ROI with `p_unknown_outside_roi`;
 ///   - an unknown voxel adds p_vis · w (bits of H(0.5) = 1): w = `w_predicted_target` on the
 ///     predicted surface of a detected fruit (a sphere fitted to its voxels: its unseen side),
 ///     `w_unknown_near_target` within the near-target radius of a fruit voxel; elsewhere in the ROI
@@ -25,11 +26,11 @@ namespace avp::planning {
 ///     the plant's core, a prior for where unseen fruit hangs; 0 outside the ROI;
 ///   - the occupied target-class voxel that ends a ray adds p_vis · `w_target_entropy` · H_b(c),
 ///     its semantic uncertainty;
-///   - each contribution is scaled by (d / `range_weight_ref_m`)², d the voxel's distance from
-///     the camera: a ray stands for a pixel block whose footprint grows with d², so a distant
-///     view that sees a whole truss is worth more than a close one that sees one fruit (0 turns
-///     this off); voxels closer than `min_gain_range_m` to the camera count nothing (the view
-///     would only see them at the edge of the sensor's range).
+///   - with `range_weight_ref_m` > 0 (0, off, by default: it favoured distant views of the canopy's
+///     front over close ones under it, docs/planning.md), each contribution is scaled by
+///     (d / `range_weight_ref_m`)², d the voxel's distance from the camera, for the footprint of
+///     the pixel block a ray stands for; voxels closer than `min_gain_range_m` to the camera count
+///     nothing (the view would only see them at the edge of the sensor's range).
 /// Utility U = G / max G − `w_motion` · |Δq| / max |Δq| + `w_diversity` · min(1, d / `diversity_m`)
 /// over the candidate set, d the distance from the candidate's eye to the nearest fused one (the
 /// greedy gain alone keeps returning to views like the ones it has, which fared worse than
@@ -40,8 +41,15 @@ struct AvpNbvOptions {
   ShellCandidateOptions candidates;
   GainGridOptions grid;
   int ray_stride_px = 20;
+  /// Coarse to fine: every reachable candidate is first scored with the rays of every
+  /// `coarse_ray_stride_px`-th pixel (their sum scaled to the fine ray count), and the
+  /// `refine_top` best by that utility again with the `ray_stride_px` rays; the others keep the
+  /// coarse estimate. 0 (or a stride not above ray_stride_px, or at most refine_top reachable
+  /// candidates) scores every candidate with the fine rays.
+  int coarse_ray_stride_px = 40;
+  int refine_top = 32;
   double max_range_m = 1.0;
-  double p_unknown = 0.5;
+  double p_unknown = 0.05;
   double p_unknown_outside_roi = 0.0;
   double unknown_occlusion_sigma_m = 0.07;
   double w_target_entropy = 1.0;
@@ -49,7 +57,7 @@ struct AvpNbvOptions {
   double w_unknown_near_target = 0.3;
   double w_unknown_roi = 0.2;
   double roi_axis_sigma_m = 0.15;
-  double range_weight_ref_m = 0.5;
+  double range_weight_ref_m = 0.0;
   double min_gain_range_m = 0.2;
   double w_motion = 0.1;
   double w_diversity = 0.5;
