@@ -1,7 +1,9 @@
 // `avp run` and `avp bench` as library calls: the run folder's files and their content, the
 // bench's long-format summary CSV, Markdown and plots, the experiment YAML, and bad input.
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include <gmock/gmock.h>
@@ -84,6 +86,66 @@ TEST_F(RunCommandTest, RunRejectsBadInput) {
   r = RunRun(o);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("unknown planner 'best'"));
+}
+
+TEST_F(RunCommandTest, PlannerOptionsReachThePlannerAndTheRecord) {
+  std::map<std::string, std::string> parsed;
+  ASSERT_TRUE(ParsePlannerOptions(
+                  {"p_unknown=0.1", "candidates.max_candidates=40", "p_unknown=0.2"}, parsed)
+                  .ok());
+  EXPECT_EQ(parsed, (std::map<std::string, std::string>{{"candidates.max_candidates", "40"},
+                                                        {"p_unknown", "0.2"}}));
+  std::map<std::string, std::string> ignored;
+  EXPECT_THAT(ParsePlannerOptions({"p_unknown"}, ignored).message(),
+              HasSubstr("'p_unknown' must be KEY=VALUE"));
+  EXPECT_THAT(ParsePlannerOptions({"=0.1"}, ignored).message(), HasSubstr("'=0.1'"));
+
+  RunOptions o;
+  o.config.scenario = "tomato-single-cluster";
+  o.config.views = 2;
+  o.config.planner_options = parsed;
+  o.out_dir = dir_ / "opts";
+  auto r = RunRun(o);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  auto record = io::ReadJsonFile(o.out_dir / "record.json");
+  ASSERT_TRUE(record.ok());
+  EXPECT_EQ((*record)["config"]["planner_options"]["p_unknown"], "0.2");
+  // The planner generated at most the 40 candidates asked for (720 by default).
+  const std::vector<std::string> lines = Lines(o.out_dir / "metrics.csv");
+  ASSERT_GE(lines.size(), 2u);
+  std::vector<std::string> header, row;
+  for (auto [line, out] : {std::pair{&lines[0], &header}, {&lines[1], &row}}) {
+    std::stringstream ss(*line);
+    for (std::string cell; std::getline(ss, cell, ',');) out->push_back(cell);
+  }
+  const auto col = std::find(header.begin(), header.end(), "candidates") - header.begin();
+  ASSERT_LT(static_cast<size_t>(col), row.size());
+  EXPECT_GT(std::stoi(row[static_cast<size_t>(col)]), 0);
+  EXPECT_LE(std::stoi(row[static_cast<size_t>(col)]), 40);
+
+  o.config.planner_options = {{"p_unknown", "1.5"}};
+  r = RunRun(o);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("p_unknown (1.5) must be in [0, 1)"));
+  o.config.planner_options = {{"w_motoin", "0.1"}};
+  EXPECT_THAT(RunRun(o).status().message(), HasSubstr("unknown avp-nbv option 'w_motoin'"));
+  o.config.planner_options = {{"p_unknown", "0.1"}};
+  o.config.planner = "predefined";
+  EXPECT_THAT(RunRun(o).status().message(), HasSubstr("apply to avp-nbv only, not 'predefined'"));
+
+  // In an experiment file, under avp_nbv_options; only with avp-nbv among the planners.
+  const fs::path yaml = dir_ / "opts.yaml";
+  std::ofstream(yaml) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv, predefined]\n"
+                         "seeds: [0]\navp_nbv_options: {p_unknown: 0.1, refine_top: 16}\n";
+  auto bench = LoadBenchConfig(yaml);
+  ASSERT_TRUE(bench.ok()) << bench.status().ToString();
+  EXPECT_EQ(bench->base.planner_options.at("refine_top"), "16");
+  EXPECT_TRUE(bench->Validate().ok()) << bench->Validate().ToString();
+  bench->planners = {"predefined"};
+  EXPECT_THAT(bench->Validate().message(), HasSubstr("avp-nbv is not among the planners"));
+  bench->planners = {"avp-nbv"};
+  bench->base.planner_options["refine_top"] = "0";
+  EXPECT_THAT(bench->Validate().message(), HasSubstr("refine_top (0) must be >= 1"));
 }
 
 TEST_F(RunCommandTest, BenchWritesLongFormatSummaryAndPlots) {

@@ -120,9 +120,13 @@ Status BenchOptions::Validate() const {
   if (unique.size() != seeds.size()) errors.push_back("seeds repeat");
   if (jobs < 0) errors.push_back(fmt::format("jobs ({}) must be >= 0", jobs));
   if (out_dir.empty()) errors.push_back("the output folder (--out) is empty");
+  const bool has_avp_nbv = std::find(planners.begin(), planners.end(), "avp-nbv") != planners.end();
+  if (!base.planner_options.empty() && !has_avp_nbv) {
+    errors.push_back("avp-nbv options are given but avp-nbv is not among the planners");
+  }
   if (errors.empty()) {
     eval::RunConfig probe = base;
-    probe.planner = planners.front();
+    probe.planner = base.planner_options.empty() ? planners.front() : "avp-nbv";
     probe.scenario = scenarios.front();
     probe.scene_file.clear();
     return probe.Validate();
@@ -136,7 +140,7 @@ Result<BenchOptions> LoadBenchConfig(const fs::path& yaml) {
   AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(
       root,
       {"description", "scenarios", "planners", "seeds", "views", "segmenter", "prompt",
-       "voxel_size_m", "policy", "carving", "depth_noise", "max_range_m"},
+       "voxel_size_m", "policy", "carving", "depth_noise", "max_range_m", "avp_nbv_options"},
       ctx));
   BenchOptions o;
   auto strings = [&](const char* key, std::vector<std::string>& out) -> Status {
@@ -161,6 +165,15 @@ Result<BenchOptions> LoadBenchConfig(const fs::path& yaml) {
     } else {
       return InvalidArgumentError(
           fmt::format("{}: 'seeds' must be a list or {{first, count}}", ctx));
+    }
+    if (const YAML::Node opts = root["avp_nbv_options"]) {
+      if (!opts.IsMap()) {
+        return InvalidArgumentError(
+            fmt::format("{}: 'avp_nbv_options' must be a map of option: value", ctx));
+      }
+      for (const auto& kv : opts) {
+        o.base.planner_options[kv.first.as<std::string>()] = kv.second.as<std::string>();
+      }
     }
     if (root["views"]) o.base.views = root["views"].as<int>();
     if (root["segmenter"]) o.base.segmenter = root["segmenter"].as<std::string>();
@@ -247,6 +260,7 @@ Result<BenchSummary> RunBench(const BenchOptions& options) {
       c.scenario = j.scenario;
       c.seed = j.seed;
       c.planner = j.planner;
+      if (c.planner != "avp-nbv") c.planner_options.clear();  // they are avp-nbv's
       const fs::path dir = options.out_dir / "runs" / SafeName(j.scenario) / SafeName(j.planner) /
                            fmt::format("seed-{}", j.seed);
       std::error_code e;
@@ -271,6 +285,7 @@ Result<BenchSummary> RunBench(const BenchOptions& options) {
                            {"seed", j.seed},
                            {"segmenter", c.segmenter},
                            {"views", c.views},
+                           {"planner_options", c.planner_options},
                            {"end", j.end},
                            {"end_reason", r->episode.end_reason},
                            {"episode_seconds", j.episode_s},
@@ -359,6 +374,13 @@ Result<BenchSummary> RunBench(const BenchOptions& options) {
       "t). `found` = fruits found / all fruits of the scene (docs/evaluation.md).\n",
       options.scenarios.size(), options.planners.size(), options.seeds.size(), views,
       base.segmenter, base.voxel_size_m * 1e3, SourceRevision(), SecondsSince(t0));
+  if (!base.planner_options.empty()) {
+    std::string opts;
+    for (const auto& [k, v] : base.planner_options) {
+      opts += fmt::format("{}`{} = {}`", opts.empty() ? "" : ", ", k, v);
+    }
+    md += fmt::format("\navp-nbv options over its defaults: {}.\n", opts);
+  }
   for (const std::string& s : options.scenarios) {
     md += fmt::format(
         "\n## {}\n\n| planner | n | F1 (exact) view {} | F1 (±1 voxel) | fruits found | found "
@@ -371,19 +393,21 @@ Result<BenchSummary> RunBench(const BenchOptions& options) {
       const eval::Summary found = stat(key, "fruits_found", views - 1);
       const eval::Summary total = stat(key, "fruits_total", views - 1);
       const eval::Summary frac = stat(key, "fruits_found_fraction", views - 1);
+      // As in summary.csv: no interval (one seed) reads 0.
+      auto ci = [](double c) { return std::isfinite(c) ? c : 0.0; };
       md += fmt::format(
           "| {} | {} | {:.3f} ± {:.3f} | {:.3f} ± {:.3f} | {:.1f} / {:.1f} | {:.3f} ± {:.3f} | "
           "{:.0f} | {:.2f} | {} |\n",
-          p, f1.n, f1.mean, f1.ci95, f1t.mean, f1t.ci95, found.mean, total.mean, frac.mean,
-          frac.ci95, mean_of(plan_ms[key]), mean_of(episode_s[key]), failed[key]);
+          p, f1.n, f1.mean, ci(f1.ci95), f1t.mean, ci(f1t.ci95), found.mean, total.mean, frac.mean,
+          ci(frac.ci95), mean_of(plan_ms[key]), mean_of(episode_s[key]), failed[key]);
       BenchCell cell;
       cell.scenario = s;
       cell.planner = p;
       cell.runs = f1.n;
       cell.final_f1_mean = f1.mean;
-      cell.final_f1_ci95 = f1.ci95;
+      cell.final_f1_ci95 = ci(f1.ci95);
       cell.final_found_mean = frac.mean;
-      cell.final_found_ci95 = frac.ci95;
+      cell.final_found_ci95 = ci(frac.ci95);
       cell.fruits_total_mean = total.mean;
       cell.plan_ms_mean = mean_of(plan_ms[key]);
       cell.episode_s_mean = mean_of(episode_s[key]);

@@ -386,6 +386,10 @@ int main(int argc, char** argv) {
       ->add_option("--threads", run.config.threads,
                    "Threads (0 = all; results do not depend on it)")
       ->default_val(0);
+  std::vector<std::string> run_planner_options;
+  run_cmd->add_option("--planner-option", run_planner_options,
+                      "avp-nbv option KEY=VALUE over its defaults (repeatable; e.g. p_unknown=0.1; "
+                      "keys in docs/planning.md)");
   run_cmd->add_option("--out", run.out_dir, "Run folder")->default_val(run.out_dir.string());
 
   // avp bench
@@ -406,6 +410,10 @@ int main(int argc, char** argv) {
   bench_cmd->add_option("--segmenter", bench.base.segmenter, "Segmenter")->default_val("oracle");
   bench_cmd->add_option("--jobs", bench.jobs, "Episodes at once (0 = hardware threads)")
       ->default_val(0);
+  std::vector<std::string> bench_planner_options;
+  bench_cmd->add_option("--planner-option", bench_planner_options,
+                        "avp-nbv option KEY=VALUE for its episodes (repeatable; overrides the "
+                        "config's avp_nbv_options)");
   bench_cmd->add_option("--out", bench_out, "Output folder")->default_val(bench_out);
   (void)bench_seed_count;
 
@@ -515,6 +523,12 @@ int main(int argc, char** argv) {
       if (run.config.scenario.empty() && run.config.scene_file.empty()) {
         run.config.scenario = std::string(avp::sim::DefaultScenarioName());
       }
+      if (const avp::Status s =
+              avp::apps::ParsePlannerOptions(run_planner_options, run.config.planner_options);
+          !s.ok()) {
+        spdlog::error("run: {}", s.message());
+        return 1;
+      }
       return RunAndReport(run);
     }
     if (bench_cmd->parsed()) {
@@ -547,6 +561,12 @@ int main(int argc, char** argv) {
         }
         return out;
       };
+      if (const avp::Status s =
+              avp::apps::ParsePlannerOptions(bench_planner_options, bench.base.planner_options);
+          !s.ok()) {
+        spdlog::error("bench: {}", s.message());
+        return 1;
+      }
       if (!bench_scenarios.empty()) bench.scenarios = split(bench_scenarios);
       if (!bench_planners.empty()) bench.planners = split(bench_planners);
       if (bench.scenarios.empty()) {

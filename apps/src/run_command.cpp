@@ -58,7 +58,8 @@ json ToJson(const eval::RunConfig& c) {
               {"camera", io::ToJson(c.K)},
               {"roi_margin_m", c.roi_margin_m},
               {"threads", c.threads},
-              {"gt_file", c.gt_file.string()}};
+              {"gt_file", c.gt_file.string()},
+              {"planner_options", c.planner_options}};
 }
 
 json StepJson(const pipeline::StepRecord& s) {
@@ -123,6 +124,19 @@ std::string HostDescription() {
   ::uname(&u);
   return fmt::format("{} ({} {} {}, {} hardware threads)", host, u.sysname, u.release, u.machine,
                      std::thread::hardware_concurrency());
+}
+
+Status ParsePlannerOptions(const std::vector<std::string>& items,
+                           std::map<std::string, std::string>& out) {
+  for (const std::string& item : items) {
+    const size_t eq = item.find('=');
+    if (eq == std::string::npos || eq == 0) {
+      return InvalidArgumentError(
+          fmt::format("planner option '{}' must be KEY=VALUE (e.g. p_unknown=0.1)", item));
+    }
+    out[item.substr(0, eq)] = item.substr(eq + 1);
+  }
+  return Status::Ok();
 }
 
 Result<RunSummary> RunRun(const RunOptions& options) {

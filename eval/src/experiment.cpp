@@ -54,6 +54,17 @@ bool IsKnownPlanner(std::string_view name) {
   return std::find(known.begin(), known.end(), name) != known.end();
 }
 
+Result<planning::AvpNbvOptions> AvpNbvOptionsFor(const RunConfig& config) {
+  planning::AvpNbvOptions o;
+  o.num_threads = config.threads;
+  o.candidates.num_threads = config.threads;
+  for (const auto& [key, value] : config.planner_options) {
+    AVP_RETURN_IF_ERROR(planning::SetAvpNbvOption(o, key, value));
+  }
+  AVP_RETURN_IF_ERROR(o.Validate());
+  return o;
+}
+
 Status RunConfig::Validate() const {
   std::vector<std::string> errors;
   if (!scenario.empty() && !scene_file.empty()) {
@@ -81,6 +92,15 @@ Status RunConfig::Validate() const {
                                  JoinNames(segmentation::KnownSegmenterSpecs())));
   }
   if (Status s = K.Validate(); !s.ok()) errors.push_back(s.ToString());
+  if (!planner_options.empty()) {
+    if (planner != "avp-nbv") {
+      errors.push_back(fmt::format("planner options ({} = {}, ...) apply to avp-nbv only, not '{}'",
+                                   planner_options.begin()->first, planner_options.begin()->second,
+                                   planner));
+    } else if (Result<planning::AvpNbvOptions> o = AvpNbvOptionsFor(*this); !o.ok()) {
+      errors.push_back(o.status().message());
+    }
+  }
   if (errors.empty()) return Status::Ok();
   return InvalidArgumentError("invalid run configuration: " + JoinNames(errors));
 }
@@ -88,9 +108,7 @@ Status RunConfig::Validate() const {
 Result<std::unique_ptr<planning::ViewPlanner>> MakePlanner(const RunConfig& config) {
   const std::string& name = config.planner;
   if (name == "avp-nbv") {
-    planning::AvpNbvOptions o;
-    o.num_threads = config.threads;
-    o.candidates.num_threads = config.threads;
+    AVP_ASSIGN_OR_RETURN(const planning::AvpNbvOptions o, AvpNbvOptionsFor(config));
     return std::unique_ptr<planning::ViewPlanner>(std::make_unique<planning::AvpNbvPlanner>(o));
   }
   if (name == "random") {

@@ -1,7 +1,13 @@
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstdlib>
+#include <functional>
 #include <limits>
+#include <map>
 #include <numeric>
+#include <optional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -258,6 +264,90 @@ Status AvpNbvOptions::Validate() const {
 
 namespace {
 
+/// The settable fields of AvpNbvOptions by name (SetAvpNbvOption).
+struct OptionField {
+  enum class Kind { kReal, kCount, kFlag, kRange } kind;
+  double AvpNbvOptions::*real = nullptr;
+  int AvpNbvOptions::*count = nullptr;
+  double ShellCandidateOptions::*shell_real = nullptr;
+  int ShellCandidateOptions::*shell_count = nullptr;
+  std::vector<double> ShellCandidateOptions::*shell_range = nullptr;
+  double GainGridOptions::*grid_real = nullptr;
+  bool GainGridOptions::*grid_flag = nullptr;
+};
+
+const std::map<std::string, OptionField, std::less<>>& OptionFields() {
+  using K = OptionField::Kind;
+  static const auto* fields = [] {
+    auto* m = new std::map<std::string, OptionField, std::less<>>;
+    auto real = [&](const char* n, double AvpNbvOptions::*f) { (*m)[n] = {K::kReal, f}; };
+    auto count = [&](const char* n, int AvpNbvOptions::*f) { (*m)[n] = {K::kCount, nullptr, f}; };
+    real("max_range_m", &AvpNbvOptions::max_range_m);
+    real("p_unknown", &AvpNbvOptions::p_unknown);
+    real("p_unknown_outside_roi", &AvpNbvOptions::p_unknown_outside_roi);
+    real("unknown_occlusion_sigma_m", &AvpNbvOptions::unknown_occlusion_sigma_m);
+    real("w_target_entropy", &AvpNbvOptions::w_target_entropy);
+    real("w_predicted_target", &AvpNbvOptions::w_predicted_target);
+    real("w_unknown_near_target", &AvpNbvOptions::w_unknown_near_target);
+    real("w_unknown_roi", &AvpNbvOptions::w_unknown_roi);
+    real("roi_axis_sigma_m", &AvpNbvOptions::roi_axis_sigma_m);
+    real("range_weight_ref_m", &AvpNbvOptions::range_weight_ref_m);
+    real("min_gain_range_m", &AvpNbvOptions::min_gain_range_m);
+    real("w_motion", &AvpNbvOptions::w_motion);
+    real("w_diversity", &AvpNbvOptions::w_diversity);
+    real("diversity_m", &AvpNbvOptions::diversity_m);
+    real("min_gain_bits", &AvpNbvOptions::min_gain_bits);
+    count("ray_stride_px", &AvpNbvOptions::ray_stride_px);
+    count("coarse_ray_stride_px", &AvpNbvOptions::coarse_ray_stride_px);
+    count("refine_top", &AvpNbvOptions::refine_top);
+    OptionField f{};
+    f.kind = K::kReal;
+    for (const auto& [n, p] :
+         {std::pair{"azimuth_half_range_deg", &ShellCandidateOptions::azimuth_half_range_deg},
+          {"clearance_m", &ShellCandidateOptions::clearance_m},
+          {"plant_core_radius_m", &ShellCandidateOptions::plant_core_radius_m}}) {
+      f.shell_real = p;
+      (*m)[std::string("candidates.") + n] = f;
+    }
+    f = {};
+    f.kind = K::kCount;
+    for (const auto& [n, p] : {std::pair{"max_targets", &ShellCandidateOptions::max_targets},
+                               {"max_candidates", &ShellCandidateOptions::max_candidates},
+                               {"ik_restarts", &ShellCandidateOptions::ik_restarts}}) {
+      f.shell_count = p;
+      (*m)[std::string("candidates.") + n] = f;
+    }
+    f = {};
+    f.kind = K::kRange;
+    for (const auto& [n, p] : {std::pair{"radii_m", &ShellCandidateOptions::radii_m},
+                               {"elevations_deg", &ShellCandidateOptions::elevations_deg}}) {
+      f.shell_range = p;
+      (*m)[std::string("candidates.") + n] = f;
+    }
+    f = {};
+    f.kind = K::kReal;
+    f.grid_real = &GainGridOptions::near_target_radius_m;
+    (*m)["grid.near_target_radius_m"] = f;
+    f = {};
+    f.kind = K::kFlag;
+    f.grid_flag = &GainGridOptions::predict_target_surface;
+    (*m)["grid.predict_target_surface"] = f;
+    return m;
+  }();
+  return *fields;
+}
+
+/// The whole of `text` as a finite double.
+std::optional<double> ParseReal(std::string_view text) {
+  const std::string t(text);
+  if (t.empty()) return std::nullopt;
+  char* end = nullptr;
+  errno = 0;
+  const double v = std::strtod(t.c_str(), &end);
+  if (end != t.c_str() + t.size() || errno == ERANGE || !std::isfinite(v)) return std::nullopt;
+  return v;
+}
+
 double RayGain(const GainGrid& grid, const CorePrior& core_prior, const Eigen::Vector3d& eye,
                const Eigen::Vector3d& to_unclipped, const GainParams& params) {
   double p_vis = 1.0, gain = 0.0;
@@ -322,6 +412,59 @@ double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const Camer
     gain += RayGain(grid, prior, origin, X_WC * (options.max_range_m * d_C), params);
   }
   return gain;
+}
+
+Status SetAvpNbvOption(AvpNbvOptions& options, std::string_view key, std::string_view value) {
+  using K = OptionField::Kind;
+  const auto& fields = OptionFields();
+  const auto it = fields.find(key);
+  if (it == fields.end()) {
+    std::string known;
+    for (const std::string& k : AvpNbvOptionKeys()) known += (known.empty() ? "" : ", ") + k;
+    return InvalidArgumentError(fmt::format("unknown avp-nbv option '{}' (known: {})", key, known));
+  }
+  const OptionField& f = it->second;
+  auto bad = [&](const char* what) {
+    return InvalidArgumentError(fmt::format("avp-nbv option {}: '{}' is not {}", key, value, what));
+  };
+  switch (f.kind) {
+    case K::kReal: {
+      const std::optional<double> v = ParseReal(value);
+      if (!v) return bad("a finite number");
+      if (f.real != nullptr) options.*f.real = *v;
+      if (f.shell_real != nullptr) options.candidates.*f.shell_real = *v;
+      if (f.grid_real != nullptr) options.grid.*f.grid_real = *v;
+      return Status::Ok();
+    }
+    case K::kCount: {
+      const std::optional<double> v = ParseReal(value);
+      if (!v || *v != std::floor(*v) || std::abs(*v) > 1e9) return bad("a whole number");
+      if (f.count != nullptr) options.*f.count = static_cast<int>(*v);
+      if (f.shell_count != nullptr) options.candidates.*f.shell_count = static_cast<int>(*v);
+      return Status::Ok();
+    }
+    case K::kFlag: {
+      if (value != "true" && value != "false") return bad("true or false");
+      options.grid.*f.grid_flag = value == "true";
+      return Status::Ok();
+    }
+    case K::kRange: {
+      const size_t comma = value.find(',');
+      if (comma == std::string_view::npos) return bad("MIN,MAX");
+      const std::optional<double> lo = ParseReal(value.substr(0, comma));
+      const std::optional<double> hi = ParseReal(value.substr(comma + 1));
+      if (!lo || !hi || *lo > *hi) return bad("MIN,MAX with finite MIN <= MAX");
+      options.candidates.*f.shell_range = {*lo, *hi};
+      return Status::Ok();
+    }
+  }
+  return bad("valid");
+}
+
+std::vector<std::string> AvpNbvOptionKeys() {
+  std::vector<std::string> keys;
+  for (const auto& [k, f] : OptionFields()) keys.push_back(k);
+  return keys;
 }
 
 AvpNbvPlanner::AvpNbvPlanner(const AvpNbvOptions& options) : options_(options) {

@@ -1,12 +1,14 @@
 // avp-nbv: the ray gain on a hand-computed ray, the fast evaluator against the slow reference on
 // random rays, and the planner on a rendered plant (deterministic, reachable, never a fused view,
 // enough candidates, stopping rule).
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <memory>
 #include <tuple>
 #include <utility>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <avp/core/rng.h>
@@ -391,6 +393,52 @@ TEST_F(AvpNbvPlannerTest, CoarseToFineRefinesTheBestCandidatesWithTheFineRays) {
   const PlanResult ra = AvpNbvPlanner(all).Plan(Request(), d);
   ASSERT_EQ(ra.ranked.size(), rf.ranked.size());
   for (size_t i = 0; i < ra.ranked.size(); ++i) ASSERT_EQ(ra.ranked[i].gain, rf.ranked[i].gain);
+}
+
+TEST(AvpNbvOptionTest, SetsFieldsByNameAndNamesBadKeysAndValues) {
+  AvpNbvOptions o;
+  EXPECT_TRUE(SetAvpNbvOption(o, "p_unknown", "0.25").ok());
+  EXPECT_EQ(o.p_unknown, 0.25);
+  EXPECT_TRUE(SetAvpNbvOption(o, "refine_top", "12").ok());
+  EXPECT_EQ(o.refine_top, 12);
+  EXPECT_TRUE(SetAvpNbvOption(o, "candidates.radii_m", "0.3,0.5").ok());
+  EXPECT_EQ(o.candidates.radii_m, (std::vector<double>{0.3, 0.5}));
+  EXPECT_TRUE(SetAvpNbvOption(o, "candidates.max_targets", "20").ok());
+  EXPECT_EQ(o.candidates.max_targets, 20);
+  EXPECT_TRUE(SetAvpNbvOption(o, "grid.predict_target_surface", "false").ok());
+  EXPECT_FALSE(o.grid.predict_target_surface);
+  EXPECT_TRUE(SetAvpNbvOption(o, "grid.near_target_radius_m", "0.03").ok());
+  EXPECT_EQ(o.grid.near_target_radius_m, 0.03);
+  EXPECT_TRUE(o.Validate().ok()) << o.Validate().ToString();
+
+  const Status unknown = SetAvpNbvOption(o, "p_unknwn", "0.1");
+  EXPECT_NE(unknown.message().find("unknown avp-nbv option 'p_unknwn'"), std::string::npos);
+  EXPECT_NE(unknown.message().find("p_unknown_outside_roi"), std::string::npos);
+  for (const auto& [key, value, what] : {std::tuple{"w_motion", "fast", "a finite number"},
+                                         {"w_motion", "nan", "a finite number"},
+                                         {"w_motion", "0.1x", "a finite number"},
+                                         {"w_motion", "", "a finite number"},
+                                         {"refine_top", "2.5", "a whole number"},
+                                         {"grid.predict_target_surface", "1", "true or false"},
+                                         {"candidates.radii_m", "0.3", "MIN,MAX"},
+                                         {"candidates.radii_m", "0.5,0.3", "MIN <= MAX"}}) {
+    const Status s = SetAvpNbvOption(o, key, value);
+    EXPECT_NE(s.message().find(fmt::format("{}: '{}' is not", key, value)), std::string::npos)
+        << s.message();
+    EXPECT_NE(s.message().find(what), std::string::npos) << s.message();
+  }
+  // A failed set leaves the field as it was.
+  EXPECT_EQ(o.candidates.radii_m, (std::vector<double>{0.3, 0.5}));
+  // Every listed key is settable.
+  const std::vector<std::string> keys = AvpNbvOptionKeys();
+  EXPECT_GE(keys.size(), 25u);
+  EXPECT_TRUE(std::is_sorted(keys.begin(), keys.end()));
+  for (const std::string& k : keys) {
+    AvpNbvOptions x;
+    const bool ok = SetAvpNbvOption(x, k, "1").ok() || SetAvpNbvOption(x, k, "true").ok() ||
+                    SetAvpNbvOption(x, k, "1,2").ok();
+    EXPECT_TRUE(ok) << k;
+  }
 }
 
 TEST_F(AvpNbvPlannerTest, StoppingRuleFiresBelowTheGainThreshold) {

@@ -2,6 +2,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,12 @@ struct RunSummary {
 };
 
 Result<RunSummary> RunRun(const RunOptions& options);
+
+/// "KEY=VALUE" items (--planner-option) into `out` (later ones win); InvalidArgument naming an
+/// item without '=' or with an empty key. The keys and values are checked by
+/// eval::RunConfig::Validate (planning::SetAvpNbvOption).
+Status ParsePlannerOptions(const std::vector<std::string>& items,
+                           std::map<std::string, std::string>& out);
 
 // ---- avp bench ----------------------------------------------------------------------------------
 

@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -15,6 +16,7 @@
 #include <avp/mapping/integrator.h>
 #include <avp/mapping/semantics.h>
 #include <avp/pipeline/episode.h>
+#include <avp/planning/avp_nbv_planner.h>
 #include <avp/planning/view_planner.h>
 #include <avp/segmentation/segmenter.h>
 #include <avp/sim/scene.h>
@@ -57,14 +59,22 @@ struct RunConfig {
   int threads = 0;
   /// Ground truth from an OctoMap .bt instead of the observable fruit surface.
   std::filesystem::path gt_file;
+  /// avp-nbv's options by name (planning::SetAvpNbvOption: "p_unknown" -> "0.1", ...), over its
+  /// defaults; only for planner "avp-nbv".
+  std::map<std::string, std::string> planner_options;
   Status Validate() const;
 };
 
 /// Planner by name ("avp-nbv", "predefined", "predefined-wide", "predefined-generic",
-/// "reference-nbv", "random", "isler-ae", ...). NotFound naming the known names.
+/// "reference-nbv", "random", "isler-ae", ...). NotFound naming the known names;
+/// InvalidArgument for a bad planner option.
 Result<std::unique_ptr<planning::ViewPlanner>> MakePlanner(const RunConfig& config);
 /// Segmenter by name ("oracle", "oracle-perfect", "color"), seeded from config.seed.
 Result<std::unique_ptr<segmentation::Segmenter>> MakeSegmenter(const RunConfig& config);
+
+/// avp-nbv's options for `config`: the defaults, config.threads, then config.planner_options
+/// (planning::SetAvpNbvOption), validated.
+Result<planning::AvpNbvOptions> AvpNbvOptionsFor(const RunConfig& config);
 
 /// The (name, value) metrics of a map, in a fixed order (the columns of metrics.csv).
 std::vector<std::pair<std::string, double>> MetricsRow(const MapMetrics& m);

@@ -1,6 +1,8 @@
 #pragma once
 
+#include <string>
 #include <string_view>
+#include <vector>
 
 #include <avp/planning/candidates.h>
 #include <avp/planning/gain_grid.h>
@@ -67,6 +69,17 @@ struct AvpNbvOptions {
   int num_threads = 0;
   Status Validate() const;
 };
+
+/// Sets one field of `options` by name, from text: every scalar field of AvpNbvOptions by its
+/// name ("p_unknown", "w_diversity", "ray_stride_px", ...), the candidate shells' as
+/// "candidates.<field>" ("candidates.max_targets", ...; the two-value ranges
+/// "candidates.radii_m" and "candidates.elevations_deg" as "MIN,MAX"), and
+/// "grid.near_target_radius_m". InvalidArgument naming the key and the known keys, or the value
+/// and what it must be (a number; a whole number for counts; true/false for flags). The
+/// ranges are not checked here: call Validate() on the result.
+Status SetAvpNbvOption(AvpNbvOptions& options, std::string_view key, std::string_view value);
+/// The keys SetAvpNbvOption accepts, sorted.
+std::vector<std::string> AvpNbvOptionKeys();
 
 /// The gain of one ray under `options` (see AvpNbvOptions), walked on `grid`.
 double AvpRayGain(const GainGrid& grid, const Eigen::Vector3d& from, const Eigen::Vector3d& to,
