@@ -504,24 +504,29 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   for (size_t i = 0; i < candidates.size(); ++i) {
     if (candidates[i].reachable) reachable.push_back(i);
   }
-  // Utilities from the gains; returns the largest gain.
-  auto score = [&]() {
-    double max_gain = 0.0, max_cost = 0.0;
-    for (size_t i : reachable) {
-      max_gain = std::max(max_gain, candidates[i].gain);
-      max_cost = std::max(max_cost, candidates[i].cost);
-    }
-    for (ViewCandidate& c : candidates) {
-      const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
-      const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
-      // Viewpoint diversity: the distance to the nearest fused eye, saturating at diversity_m.
+  // Viewpoint diversity: the distance to the nearest fused eye, saturating at diversity_m. It
+  // does not depend on the gains, so the coarse and the final scoring share it.
+  std::vector<double> diversity(candidates.size(), 0.0);
+  if (options_.diversity_m > 0.0) {
+    for (size_t i = 0; i < candidates.size(); ++i) {
       double d_min = std::numeric_limits<double>::infinity();
       for (const RigidTransform& f : request.fused_views) {
-        d_min = std::min(d_min, (f.translation() - c.X_WC.translation()).norm());
+        d_min = std::min(d_min, (f.translation() - candidates[i].X_WC.translation()).norm());
       }
-      const double diversity =
-          options_.diversity_m > 0.0 ? std::min(1.0, d_min / options_.diversity_m) : 0.0;
-      c.utility = g - options_.w_motion * m + options_.w_diversity * diversity;
+      diversity[i] = std::min(1.0, d_min / options_.diversity_m);
+    }
+  }
+  double max_cost = 0.0;
+  for (size_t i : reachable) max_cost = std::max(max_cost, candidates[i].cost);
+  // Utilities from the gains; returns the largest gain.
+  auto score = [&]() {
+    double max_gain = 0.0;
+    for (size_t i : reachable) max_gain = std::max(max_gain, candidates[i].gain);
+    for (size_t i = 0; i < candidates.size(); ++i) {
+      ViewCandidate& c = candidates[i];
+      const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
+      const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
+      c.utility = g - options_.w_motion * m + options_.w_diversity * diversity[i];
     }
     return max_gain;
   };
