@@ -59,6 +59,32 @@ TEST(EpisodeEndToEndTest, PredefinedRunsTheSameLoop) {
   EXPECT_GE(r->episode.steps.back().Metric("f1"), r->episode.steps.front().Metric("f1"));
 }
 
+TEST(EpisodeEndToEndTest, OracleDetectKnowsTheTruthAndIsDeterministic) {
+  // The diagnostic bound on fruits found: built only with the scene and its ground truth.
+  EXPECT_TRUE(eval::IsKnownPlanner("oracle-detect"));
+  eval::RunConfig c = Config("oracle-detect");
+  c.views = 3;
+  const auto made = eval::MakePlanner(c);
+  ASSERT_FALSE(made.ok());
+  EXPECT_NE(made.status().message().find("planner 'oracle-detect' needs the true scene"),
+            std::string::npos);
+  auto scene = sim::MakeScenario(c.scenario, c.seed);
+  ASSERT_TRUE(scene.ok());
+  auto gt = eval::GroundTruthFor(c, *scene);
+  ASSERT_TRUE(gt.ok());
+  auto r = eval::RunEpisodeOnScene(c, *scene, *gt);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->episode.views_fused(), 3) << r->episode.end_reason;
+  EXPECT_GT(r->final_metrics.fruits.found,
+            static_cast<size_t>(r->episode.steps.front().Metric("fruits_found")));
+  auto again = eval::RunEpisodeOnScene(c, *scene, *gt);
+  ASSERT_TRUE(again.ok());
+  for (size_t i = 0; i < r->episode.steps.size(); ++i) {
+    EXPECT_EQ(again->episode.steps[i].metrics, r->episode.steps[i].metrics) << i;
+    EXPECT_EQ(again->episode.steps[i].X_WC.translation(), r->episode.steps[i].X_WC.translation());
+  }
+}
+
 TEST(EpisodeEndToEndTest, BadConfigurationsAreErrors) {
   eval::RunConfig c = Config("no-such-planner");
   EXPECT_NE(c.Validate().message().find("unknown planner 'no-such-planner'"), std::string::npos);

@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -413,6 +414,29 @@ Result<BenchSummary> RunBench(const BenchOptions& options) {
       cell.episode_s_mean = mean_of(episode_s[key]);
       cell.failed = failed[key];
       summary.cells.push_back(cell);
+    }
+    // How hidden the fruits are: the bound that no planner and segmenter pair can beat by much.
+    {
+      double fruits = 0.0;
+      std::array<double, eval::kVisibleFractionLevels.size()> visible{};
+      for (const Group& g : groups) {
+        if (g.scenario != s) continue;
+        fruits += static_cast<double>(g.gt->fruits.size());
+        for (size_t l = 0; l < visible.size(); ++l) {
+          visible[l] +=
+              static_cast<double>(g.gt->FruitsVisibleAtLeast(eval::kVisibleFractionLevels[l]));
+        }
+      }
+      if (fruits > 0.0) {
+        md +=
+            "\nFruits by their best visible fraction from a reachable observation view (all "
+            "seeds):";
+        for (size_t l = 0; l < visible.size(); ++l) {
+          md += fmt::format("{}≥ {:.0f} %: {:.1f} %", l == 0 ? " " : ", ",
+                            100.0 * eval::kVisibleFractionLevels[l], 100.0 * visible[l] / fruits);
+        }
+        md += ".\n";
+      }
     }
     md += "\nF1 (exact) per fused view:\n\n| planner |";
     for (int v = 1; v <= views; ++v) md += fmt::format(" {} |", v);

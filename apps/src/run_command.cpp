@@ -215,6 +215,18 @@ Result<RunSummary> RunRun(const RunOptions& options) {
   for (const auto& [k, v] : eval::MetricsRow(result.final_metrics)) {
     final_metrics[k] = std::isfinite(v) ? json(v) : json(nullptr);
   }
+  // How hidden each fruit is from the best view the arm can take
+  // (GroundTruth::best_visible_fraction).
+  json best_visible = json::array();
+  for (const sim::FruitTruth& f : gt.fruits) {
+    const auto it = gt.best_visible_fraction.find(f.instance_id);
+    if (it == gt.best_visible_fraction.end()) continue;
+    best_visible.push_back({{"fruit", f.instance_id}, {"best_visible_fraction", it->second}});
+  }
+  json visible_at_least = json::object();
+  for (const double v : eval::kVisibleFractionLevels) {
+    visible_at_least[fmt::format("{:.2f}", v)] = gt.FruitsVisibleAtLeast(v);
+  }
   const json record{
       {"avp", "avp run"},
       {"config", ToJson(config)},
@@ -226,6 +238,8 @@ Result<RunSummary> RunRun(const RunOptions& options) {
         {"observable_fruits", gt.ObservableFruits()},
         {"views_tried", gt.views_tried},
         {"views_reachable", gt.views_reachable},
+        {"fruits_visible_at_least", visible_at_least},
+        {"fruits", best_visible},
         {"seconds", gt_s}}},
       {"git_revision", SourceRevision()},
       {"host", HostDescription()},

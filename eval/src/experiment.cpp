@@ -15,6 +15,7 @@
 #include <avp/planning/reference_nbv_planner.h>
 #include <avp/robot/arm.h>
 #include <avp/robot/arm_model.h>
+#include <avp/segmentation/oracle_segmenter.h>
 
 namespace avp::eval {
 
@@ -39,7 +40,7 @@ const std::vector<std::string>& PlannerNames() {
 const std::vector<std::string>& SegmenterNames() { return segmentation::SegmenterNames(); }
 
 const std::vector<std::string>& DiagnosticPlannerNames() {
-  static const std::vector<std::string> kNames = {"oracle-nbv"};
+  static const std::vector<std::string> kNames = {"oracle-nbv", "oracle-detect"};
   return kNames;
 }
 
@@ -129,10 +130,11 @@ Result<std::unique_ptr<planning::ViewPlanner>> MakePlanner(const RunConfig& conf
     return std::unique_ptr<planning::ViewPlanner>(
         std::make_unique<planning::ReferenceNbvPlanner>(o));
   }
-  if (name == "oracle-nbv") {
+  if (name == "oracle-nbv" || name == "oracle-detect") {
     return FailedPreconditionError(
-        "planner 'oracle-nbv' needs the true scene and its ground truth: it is built by "
-        "RunEpisodeOnScene");
+        fmt::format("planner '{}' needs the true scene and its ground truth: it is built by "
+                    "RunEpisodeOnScene",
+                    name));
   }
   if (name.rfind("isler-", 0) == 0) {
     const auto utility = planning::IslerUtilityFromString(name.substr(6));
@@ -221,10 +223,21 @@ Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const sim::Scene& s
   AVP_RETURN_IF_ERROR(arm_model.CheckJoints(q0));
   robot::SimArm arm(arm_model, q0);
   std::unique_ptr<planning::ViewPlanner> planner;
-  if (config.planner == "oracle-nbv") {
+  if (config.planner == "oracle-nbv" || config.planner == "oracle-detect") {
     OracleNbvOptions o;
     o.num_threads = config.threads;
     o.candidates.num_threads = config.threads;
+    if (config.planner == "oracle-detect") {
+      o.objective = OracleNbvOptions::Objective::kDetections;
+      o.observation_view_candidates = true;
+      // The detector it expects: the oracle segmenter's model (perfect for oracle-perfect; the
+      // default noise model for any other segmenter, whose misses it cannot know).
+      o.detector = config.segmenter == "oracle-perfect" ? segmentation::OracleOptions::Perfect()
+                                                        : segmentation::OracleOptions{};
+      const EvalOptions eval_defaults;
+      o.found_min_voxels = eval_defaults.found_min_voxels;
+      o.found_min_fraction = eval_defaults.found_min_fraction;
+    }
     planner = std::make_unique<OracleNbvPlanner>(scene, gt, o);
   } else {
     AVP_ASSIGN_OR_RETURN(planner, MakePlanner(config));

@@ -3,7 +3,9 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <thread>
+#include <unordered_map>
 #include <utility>
 #include <variant>
 
@@ -15,6 +17,7 @@
 #include <avp/core/semantic_class.h>
 #include <avp/eval/ground_truth.h>
 #include <avp/mapping/octomap_io.h>
+#include <avp/segmentation/oracle_segmenter.h>
 #include <avp/sim/rgbd_renderer.h>
 
 namespace avp::eval {
@@ -135,6 +138,36 @@ void CollectFruitVoxels(const sim::RenderedFrame& frame, double voxel_size_m, do
   }
 }
 
+/// Counts the fruit pixels of a window `rect` of a view (fruit class, valid depth, within
+/// `max_range_m`) per instance id, each view pixel once: `seen_by` (the view's width x height,
+/// row-major) marks the pixels already counted, and ClearRect resets it for the next view.
+void CountFruitPixels(const sim::RenderedFrame& frame, const PixelRect& rect, int view_width,
+                      double max_range_m, std::vector<uint8_t>& seen_by,
+                      std::unordered_map<uint16_t, size_t>& pixels) {
+  const CameraIntrinsics& K = frame.rgbd.K;
+  const auto fruit = static_cast<uint8_t>(SemanticClass::kFruit);
+  for (int v = 0; v < K.height; ++v) {
+    for (int u = 0; u < K.width; ++u) {
+      if (frame.class_ids.at(u, v) != fruit) continue;
+      const float d = frame.rgbd.depth_m.at(u, v);
+      if (!std::isfinite(d) || d <= 0.0f) continue;
+      const Eigen::Vector3d p_C((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
+      if (p_C.norm() > max_range_m) continue;
+      uint8_t& mark = seen_by[static_cast<size_t>(v + rect.v0) * view_width + (u + rect.u0)];
+      if (mark != 0) continue;
+      mark = 1;
+      ++pixels[frame.instance_ids.at(u, v)];
+    }
+  }
+}
+
+void ClearRect(const PixelRect& rect, int view_width, std::vector<uint8_t>& seen_by) {
+  for (int v = rect.v0; v <= rect.v1; ++v) {
+    std::fill_n(seen_by.begin() + static_cast<std::ptrdiff_t>(v) * view_width + rect.u0,
+                rect.u1 - rect.u0 + 1, uint8_t{0});
+  }
+}
+
 /// Sorts, keeps the smaller id of duplicate keys and builds the map in key order (so that its
 /// iteration order is a function of its content).
 void BuildVoxelMap(std::vector<KeyAndId>& pairs, GroundTruth& gt) {
@@ -210,6 +243,12 @@ std::vector<VoxelKey> GroundTruth::SortedKeys() const {
 size_t GroundTruth::ObservableFruits() const {
   size_t n = 0;
   for (const auto& [id, count] : voxels_per_fruit) n += count > 0 ? 1 : 0;
+  return n;
+}
+
+size_t GroundTruth::FruitsVisibleAtLeast(double fraction) const {
+  size_t n = 0;
+  for (const auto& [id, v] : best_visible_fraction) n += v >= fraction ? 1 : 0;
   return n;
 }
 
@@ -298,10 +337,20 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
 
   const int threads = ResolveThreads(options.num_threads, views.size());
   std::vector<std::vector<KeyAndId>> found(static_cast<size_t>(threads));
+  // Per worker, each fruit's largest visible fraction so far (merged with max: thread-count free).
+  std::vector<std::unordered_map<uint16_t, double>> best(static_cast<size_t>(threads));
+  std::unordered_map<uint16_t, segmentation::GroundTruthFruit> truth;
+  for (const sim::FruitTruth& f : gt.fruits) {
+    truth[f.instance_id] = {f.instance_id, f.center_W, f.mean_radius_m()};
+  }
   std::vector<uint8_t> reachable(views.size(), 0);  // written by the view's worker only
   std::atomic<size_t> next{0};
   const auto work = [&](size_t worker) {
     std::vector<KeyAndId>& out = found[worker];
+    std::unordered_map<uint16_t, double>& best_of = best[worker];
+    // Fruit pixels of the current view (windows may overlap: each pixel counts once).
+    std::vector<uint8_t> seen_by(static_cast<size_t>(K_view.width) * K_view.height, 0);
+    std::unordered_map<uint16_t, size_t> pixels;
     while (true) {
       const size_t i = next.fetch_add(1, std::memory_order_relaxed);
       if (i >= views.size()) return;
@@ -318,9 +367,21 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
       }
       MergeRects(rects);
       const size_t before = out.size();
+      pixels.clear();
       for (const PixelRect& rect : rects) {
         const sim::RenderedFrame frame = renderer.Render(Window(K_view, rect), view.X_WC);
         CollectFruitVoxels(frame, options.voxel_size_m, options.max_range_m, out);
+        CountFruitPixels(frame, rect, K_view.width, options.max_range_m, seen_by, pixels);
+      }
+      for (const PixelRect& rect : rects) ClearRect(rect, K_view.width, seen_by);
+      for (const auto& [id, n] : pixels) {
+        const auto t = truth.find(id);
+        if (t == truth.end()) continue;
+        const std::optional<double> area =
+            segmentation::ExpectedFruitAreaPx(K_view, view.X_WC, t->second);
+        const double v = area ? std::clamp(static_cast<double>(n) / *area, 0.0, 1.0) : 1.0;
+        double& b = best_of[id];
+        b = std::max(b, v);
       }
       // Keep the per-worker list small: drop the duplicates this view added to itself.
       std::sort(out.begin() + static_cast<std::ptrdiff_t>(before), out.end());
@@ -339,6 +400,13 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
 
   std::vector<KeyAndId> pairs;
   for (const std::vector<KeyAndId>& f : found) pairs.insert(pairs.end(), f.begin(), f.end());
+  for (const sim::FruitTruth& f : gt.fruits) gt.best_visible_fraction[f.instance_id] = 0.0;
+  for (const auto& worker_best : best) {
+    for (const auto& [id, v] : worker_best) {
+      double& b = gt.best_visible_fraction[id];
+      b = std::max(b, v);
+    }
+  }
   for (size_t i = 0; i < views.size(); ++i) {
     if (reachable[i] != 0) gt.views.push_back(views[i]);
   }

@@ -1,4 +1,6 @@
 #include <algorithm>
+#include <cmath>
+#include <unordered_map>
 #include <unordered_set>
 
 #include <avp/core/parallel.h>
@@ -7,6 +9,16 @@
 #include <avp/planning/gain_grid.h>
 
 namespace avp::eval {
+
+namespace {
+
+bool IsTarget(const mapping::SemanticMap& map, const VoxelKey& k, SemanticClass target) {
+  if (map.State(k) != mapping::VoxelState::kOccupied) return false;
+  const mapping::SemanticCell* cell = map.Semantic(k);
+  return cell != nullptr && cell->cls() == target;
+}
+
+}  // namespace
 
 OracleNbvPlanner::OracleNbvPlanner(const sim::Scene& scene, const GroundTruth& gt,
                                    const OracleNbvOptions& options)
@@ -18,28 +30,91 @@ OracleNbvPlanner::OracleNbvPlanner(const sim::Scene& scene, const GroundTruth& g
 
 OracleNbvPlanner::~OracleNbvPlanner() = default;
 
-size_t OracleNbvPlanner::TrueGain(const mapping::SemanticMap& map, SemanticClass target,
-                                  const CameraIntrinsics& K, const RigidTransform& X_WC) const {
-  const CameraIntrinsics Ks = K.Scaled(options_.render_scale);
-  const sim::RenderedFrame f = renderer_->Render(Ks, X_WC);
+std::unordered_set<VoxelKey, VoxelKeyHash> OracleNbvPlanner::NewVoxels(
+    const mapping::SemanticMap& map, SemanticClass target, const CameraIntrinsics& Ks,
+    const RigidTransform& X_WC, sim::RenderedFrame* frame) const {
+  *frame = renderer_->Render(Ks, X_WC);
   const double s = map.voxel_size_m();
   std::unordered_set<VoxelKey, VoxelKeyHash> seen;
   for (int v = 0; v < Ks.height; ++v) {
     for (int u = 0; u < Ks.width; ++u) {
-      const float z = f.rgbd.depth_m.at(u, v);
+      const float z = frame->rgbd.depth_m.at(u, v);
       if (!(z > 0.0f)) continue;
       const Eigen::Vector3d p_C = Ks.BackProject(Eigen::Vector2d(u, v), z);
       const VoxelKey k = VoxelKey::FromPoint(X_WC * p_C, s);
-      if (gt_.voxels.count(k) == 0) continue;
-      const mapping::SemanticCell* cell = map.Semantic(k);
-      if (map.State(k) == mapping::VoxelState::kOccupied && cell != nullptr &&
-          cell->cls() == target) {
-        continue;
-      }
+      if (gt_.voxels.count(k) == 0 || IsTarget(map, k, target)) continue;
       seen.insert(k);
     }
   }
-  return seen.size();
+  return seen;
+}
+
+size_t OracleNbvPlanner::TrueGain(const mapping::SemanticMap& map, SemanticClass target,
+                                  const CameraIntrinsics& K, const RigidTransform& X_WC) const {
+  sim::RenderedFrame frame;
+  return NewVoxels(map, target, K.Scaled(options_.render_scale), X_WC, &frame).size();
+}
+
+std::unordered_set<uint16_t> OracleNbvPlanner::FoundFruits(const mapping::SemanticMap& map,
+                                                           SemanticClass target) const {
+  std::unordered_map<uint16_t, size_t> recalled;
+  for (const auto& [k, id] : gt_.voxels) {
+    bool hit = false;
+    for (int dz = -1; dz <= 1 && !hit; ++dz) {
+      for (int dy = -1; dy <= 1 && !hit; ++dy) {
+        for (int dx = -1; dx <= 1 && !hit; ++dx) {
+          hit = IsTarget(map, {k.x + dx, k.y + dy, k.z + dz}, target);
+        }
+      }
+    }
+    if (hit) ++recalled[id];
+  }
+  std::unordered_set<uint16_t> found;
+  for (const auto& [id, hits] : recalled) {
+    const auto it = gt_.voxels_per_fruit.find(id);
+    const size_t observable = it == gt_.voxels_per_fruit.end() ? 0 : it->second;
+    const double needed = std::max(static_cast<double>(options_.found_min_voxels),
+                                   options_.found_min_fraction * static_cast<double>(observable));
+    if (static_cast<double>(hits) >= needed) found.insert(id);
+  }
+  return found;
+}
+
+double OracleNbvPlanner::ExpectedDetectionGain(const mapping::SemanticMap& map,
+                                               SemanticClass target, const CameraIntrinsics& K,
+                                               const RigidTransform& X_WC,
+                                               const std::unordered_set<uint16_t>& found) const {
+  const CameraIntrinsics Ks = K.Scaled(options_.render_scale);
+  sim::RenderedFrame frame;
+  const std::unordered_set<VoxelKey, VoxelKeyHash> fresh = NewVoxels(map, target, Ks, X_WC, &frame);
+  std::unordered_map<uint16_t, size_t> new_of;
+  for (const VoxelKey& k : fresh) ++new_of[gt_.voxels.at(k)];
+  std::unordered_map<uint16_t, size_t> pixels;
+  for (int v = 0; v < Ks.height; ++v) {
+    for (int u = 0; u < Ks.width; ++u) {
+      if (frame.rgbd.depth_m.at(u, v) > 0.0f) ++pixels[frame.instance_ids.at(u, v)];
+    }
+  }
+  // Pixels at full resolution: the render has render_scale^2 of them.
+  const double to_full =
+      static_cast<double>(K.width) * K.height / (static_cast<double>(Ks.width) * Ks.height);
+  double gain = 0.0;
+  for (const sim::FruitTruth& fruit : gt_.fruits) {
+    const auto px = pixels.find(fruit.instance_id);
+    if (px == pixels.end()) continue;
+    const double full_px = to_full * static_cast<double>(px->second);
+    if (full_px < static_cast<double>(options_.detector.min_pixels)) continue;
+    const std::optional<double> area = segmentation::ExpectedFruitAreaPx(
+        K, X_WC, {fruit.instance_id, fruit.center_W, fruit.mean_radius_m()});
+    const double v = area ? std::clamp(full_px / *area, 0.0, 1.0) : 1.0;
+    const double p = options_.detector.DetectionProbability(v);
+    const auto n = new_of.find(fruit.instance_id);
+    const double new_voxels = n == new_of.end() ? 0.0 : static_cast<double>(n->second);
+    const double bonus =
+        new_voxels > 0.0 && found.count(fruit.instance_id) == 0 ? kFruitValue : 0.0;
+    gain += p * (new_voxels + bonus);
+  }
+  return gain;
 }
 
 planning::PlanResult OracleNbvPlanner::Plan(const planning::PlanningRequest& request, Rng& rng) {
@@ -57,11 +132,41 @@ planning::PlanResult OracleNbvPlanner::Plan(const planning::PlanningRequest& req
   const auto targets = planning::FindViewTargets(request, *grid, options_.candidates);
   std::vector<planning::ViewCandidate> candidates =
       planning::GenerateShellCandidates(request, *grid, targets, options_.candidates, rng);
+  if (options_.observation_view_candidates) {
+    const size_t first = candidates.size();
+    for (const ObservationView& view : gt_.views) {
+      if (planning::IsNearAny(view.X_WC, request.fused_views)) continue;
+      planning::ViewCandidate c;
+      c.X_WC = view.X_WC;
+      c.source = "observation-view";
+      candidates.push_back(std::move(c));
+    }
+    // The ground truth found these reachable from the start joints with IkOptions' default
+    // restarts; the same restarts here. Each view draws from its own fork, so the result does not
+    // depend on the thread count.
+    const Rng ik_root = rng.Fork("observation-view-ik");
+    const robot::IkOptions ik;
+    ParallelFor(candidates.size() - first, options_.num_threads, [&](size_t j) {
+      planning::ViewCandidate& c = candidates[first + j];
+      Rng r = ik_root.Fork(static_cast<uint64_t>(j));
+      const robot::IkResult res = request.arm->SolveCameraIk(c.X_WC, request.q_current, r, ik);
+      if (!res.ok()) return;
+      c.q = res.q;
+      c.reachable = true;
+      c.cost = (res.q - request.q_current).norm();
+    });
+  }
   const size_t generated = candidates.size();
+  const bool detections = options_.objective == OracleNbvOptions::Objective::kDetections;
+  const std::unordered_set<uint16_t> found =
+      detections ? FoundFruits(*request.map, request.target_class) : std::unordered_set<uint16_t>{};
   ParallelFor(candidates.size(), options_.num_threads, [&](size_t i) {
     planning::ViewCandidate& c = candidates[i];
     if (!c.reachable) return;
-    c.gain = static_cast<double>(TrueGain(*request.map, request.target_class, request.K, c.X_WC));
+    c.gain =
+        detections
+            ? ExpectedDetectionGain(*request.map, request.target_class, request.K, c.X_WC, found)
+            : static_cast<double>(TrueGain(*request.map, request.target_class, request.K, c.X_WC));
   });
   double max_gain = 0.0, max_cost = 0.0;
   for (const auto& c : candidates) {

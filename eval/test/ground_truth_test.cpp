@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <unordered_set>
 
 #include <gmock/gmock.h>
@@ -112,6 +113,26 @@ TEST_F(ObservableGroundTruthTest, BookkeepingIsConsistent) {
   EXPECT_GE(gt.ObservableFruits(), gt.fruits.size() / 2);
 }
 
+TEST_F(ObservableGroundTruthTest, BestVisibleFractionsAgreeWithTheVoxels) {
+  // A fruit with observable voxels was seen by some view (fraction > 0) and one without was not;
+  // the single cluster at typical leaf density has fruits in plain view.
+  const GroundTruth& gt = *gt_;
+  for (const sim::FruitTruth& f : gt.fruits) {
+    const double v = gt.best_visible_fraction.at(f.instance_id);
+    EXPECT_GE(v, 0.0);
+    EXPECT_LE(v, 1.0);
+    EXPECT_EQ(v > 0.0, gt.voxels_per_fruit.at(f.instance_id) > 0) << "fruit " << f.instance_id;
+  }
+  EXPECT_EQ(gt.FruitsVisibleAtLeast(0.0), gt.fruits.size());
+  EXPECT_GE(gt.FruitsVisibleAtLeast(0.5), 1u);
+  size_t previous = gt.fruits.size();
+  for (const double level : kVisibleFractionLevels) {
+    EXPECT_LE(gt.FruitsVisibleAtLeast(level), previous) << level;
+    previous = gt.FruitsVisibleAtLeast(level);
+  }
+  EXPECT_EQ(gt.FruitsVisibleAtLeast(1.5), 0u);
+}
+
 TEST_F(ObservableGroundTruthTest, EveryVoxelLiesOnItsFruitsSurface) {
   const double s = gt_->voxel_size_m;
   for (const auto& [key, id] : gt_->voxels) {
@@ -157,13 +178,16 @@ TEST_F(ObservableGroundTruthTest, IsASubsetOfTheVoxelisedSurfaces) {
 
 TEST_F(ObservableGroundTruthTest, EqualsTheFruitVoxelsOfItsViewsRenderedWhole) {
   // ObservableGroundTruth renders only the windows around the fruits' images; rendering every
-  // reachable view whole must give the same voxels (up to float ties at silhouettes).
+  // reachable view whole must give the same voxels (up to float ties at silhouettes) and the same
+  // best visible fraction of every fruit.
   const GroundTruthOptions options;
   const CameraIntrinsics K = ObservationIntrinsics(EpisodeCamera(), options);
   const sim::RgbdRenderer renderer(*scene_);
   std::unordered_set<VoxelKey, VoxelKeyHash> whole;
+  std::map<uint16_t, double> best;  // the largest visible fraction per fruit, from whole renders
   for (const ObservationView& view : gt_->views) {
     const sim::RenderedFrame f = renderer.Render(K, view.X_WC);
+    std::map<uint16_t, size_t> pixels;
     for (int v = 0; v < K.height; ++v) {
       for (int u = 0; u < K.width; ++u) {
         const float d = f.rgbd.depth_m.at(u, v);
@@ -174,8 +198,23 @@ TEST_F(ObservableGroundTruthTest, EqualsTheFruitVoxelsOfItsViewsRenderedWhole) {
             view.X_WC * Eigen::Vector3d((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
         if ((p_W - view.X_WC.translation()).norm() > options.max_range_m) continue;
         whole.insert(VoxelKey::FromPoint(p_W, gt_->voxel_size_m));
+        ++pixels[f.instance_ids.at(u, v)];
       }
     }
+    for (const sim::FruitTruth& fruit : gt_->fruits) {
+      const auto n = pixels.find(fruit.instance_id);
+      if (n == pixels.end()) continue;
+      // pi (f r / z)^2 by hand (ExpectedFruitAreaPx's formula).
+      const double z = (view.X_WC.inverse() * fruit.center_W).z();
+      const double r_px = std::sqrt(K.fx * K.fy) * fruit.mean_radius_m() / z;
+      const double fraction = std::min(1.0, static_cast<double>(n->second) / (M_PI * r_px * r_px));
+      best[fruit.instance_id] = std::max(best[fruit.instance_id], fraction);
+    }
+  }
+  ASSERT_EQ(gt_->best_visible_fraction.size(), gt_->fruits.size());
+  for (const sim::FruitTruth& fruit : gt_->fruits) {
+    EXPECT_NEAR(gt_->best_visible_fraction.at(fruit.instance_id), best[fruit.instance_id], 0.01)
+        << "fruit " << fruit.instance_id;
   }
   size_t common = 0;
   for (const auto& [key, id] : gt_->voxels) common += whole.count(key);
@@ -194,6 +233,7 @@ TEST_F(ObservableGroundTruthTest, IsDeterministicForAnyThreadCount) {
   EXPECT_TRUE(again->voxels == gt_->voxels);
   EXPECT_EQ(again->SortedKeys(), gt_->SortedKeys());
   EXPECT_TRUE(again->voxels_per_fruit == gt_->voxels_per_fruit);
+  EXPECT_TRUE(again->best_visible_fraction == gt_->best_visible_fraction);
   EXPECT_EQ(again->views_tried, gt_->views_tried);
   EXPECT_EQ(again->views_reachable, gt_->views_reachable);
 }
@@ -250,6 +290,56 @@ TEST_F(ObservableGroundTruthTest, OracleTrueGainCountsUnmappedGroundTruthSeenByT
   const Segmentation seg = Segmentation::FromLabelImages(frame.instance_ids, frame.class_ids, 0.9f);
   ASSERT_TRUE(mapping::Integrator().Integrate(frame.rgbd, &seg, map).ok());
   const size_t after = oracle.TrueGain(map, SemanticClass::kFruit, K, X);
+  EXPECT_LT(after, before / 10) << "before " << before;
+}
+
+TEST_F(ObservableGroundTruthTest, OracleDetectGainExpectsTheFruitsTheDetectorWouldFind) {
+  // The detector sees every visible fruit with probability p_max (a step at v = 0).
+  OracleNbvOptions certain;
+  certain.objective = OracleNbvOptions::Objective::kDetections;
+  certain.detector.v_min = 0.0;
+  certain.detector.v_full = 0.0;
+  certain.detector.p_max = 1.0;
+  certain.detector.min_pixels = 1;
+  OracleNbvOptions half = certain;
+  half.detector.p_max = 0.5;
+  const OracleNbvOptions noisy = [] {
+    OracleNbvOptions o;
+    o.objective = OracleNbvOptions::Objective::kDetections;
+    return o;  // the oracle segmenter's default model
+  }();
+  const OracleNbvPlanner oracle(*scene_, *gt_, certain);
+  const OracleNbvPlanner oracle_half(*scene_, *gt_, half);
+  const OracleNbvPlanner oracle_noisy(*scene_, *gt_, noisy);
+  EXPECT_EQ(oracle.name(), "oracle-detect");
+  EXPECT_EQ(OracleNbvPlanner(*scene_, *gt_).name(), "oracle-nbv");
+
+  mapping::MapOptions map_options;
+  map_options.grid.voxel_size_m = gt_->voxel_size_m;
+  mapping::SemanticMap map(map_options);
+  const CameraIntrinsics K = EpisodeCamera();
+  const RigidTransform X = gt_->views.front().X_WC;
+  const std::unordered_set<uint16_t> none = oracle.FoundFruits(map, SemanticClass::kFruit);
+  EXPECT_TRUE(none.empty());
+  // Each fruit in view is worth kFruitValue plus its new voxels: at least its own fruit.
+  const double before = oracle.ExpectedDetectionGain(map, SemanticClass::kFruit, K, X, none);
+  EXPECT_GT(before, kFruitValue + 50.0);
+  EXPECT_DOUBLE_EQ(oracle_half.ExpectedDetectionGain(map, SemanticClass::kFruit, K, X, none),
+                   0.5 * before);
+  EXPECT_LE(oracle_noisy.ExpectedDetectionGain(map, SemanticClass::kFruit, K, X, none), before);
+  const RigidTransform away(
+      X.rotation() * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitY()).toRotationMatrix(),
+      X.translation());
+  EXPECT_EQ(oracle.ExpectedDetectionGain(map, SemanticClass::kFruit, K, away, none), 0.0);
+
+  // Once the view is mapped, its fruits are found and no longer worth kFruitValue.
+  const sim::RgbdRenderer renderer(*scene_);
+  const sim::RenderedFrame frame = renderer.Render(K, X);
+  const Segmentation seg = Segmentation::FromLabelImages(frame.instance_ids, frame.class_ids, 0.9f);
+  ASSERT_TRUE(mapping::Integrator().Integrate(frame.rgbd, &seg, map).ok());
+  const std::unordered_set<uint16_t> found = oracle.FoundFruits(map, SemanticClass::kFruit);
+  EXPECT_TRUE(found.count(gt_->views.front().fruit_id) == 1);
+  const double after = oracle.ExpectedDetectionGain(map, SemanticClass::kFruit, K, X, found);
   EXPECT_LT(after, before / 10) << "before " << before;
 }
 
@@ -349,6 +439,29 @@ TEST(GroundTruthOptionsTest, SingleFruitSceneWithFewViews) {
   }
   EXPECT_EQ(gt->voxels_per_fruit.at(id), gt->voxels.size());
   EXPECT_EQ(gt->ObservableFruits(), 1u);
+  // In plain view: its whole disc (the silhouette of a sphere is a little larger than
+  // pi (f r / z)^2, so the fraction clamps at 1).
+  EXPECT_GT(gt->best_visible_fraction.at(id), 0.97);
+
+  // A leaf between the camera (at (0.25, 0, 0.55), looking +x) and the fruit, whose top edge is
+  // level with the camera and the fruit's centre, hides the fruit's lower half.
+  sim::SceneObject leaf;
+  leaf.name = "leaf";
+  leaf.semantic_class = SemanticClass::kLeaf;
+  sim::TriangleMesh quad;
+  quad.vertices = {
+      {0.40f, -0.1f, 0.40f}, {0.40f, 0.1f, 0.40f}, {0.40f, 0.1f, 0.55f}, {0.40f, -0.1f, 0.55f}};
+  quad.triangles = {{0, 1, 2}, {0, 2, 3}};
+  leaf.shape = quad;
+  scene.Add(leaf);
+  scene.UpdatePlantBounds();
+  const Result<GroundTruth> half =
+      ObservableGroundTruth(scene, *arm, arm->home_joints(), EpisodeCamera(), options);
+  ASSERT_TRUE(half.ok()) << half.status().ToString();
+  ASSERT_EQ(half->views_reachable, 1u);
+  EXPECT_NEAR(half->best_visible_fraction.at(id), 0.5, 0.05);
+  EXPECT_EQ(half->FruitsVisibleAtLeast(0.25), 1u);
+  EXPECT_EQ(half->FruitsVisibleAtLeast(0.75), 0u);
 }
 
 class GroundTruthFileTest : public avp::test::TempDirTest {};

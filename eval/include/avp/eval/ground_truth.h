@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -49,6 +50,11 @@ struct GroundTruthOptions {
   Status Validate() const;
 };
 
+/// The visible-fraction levels at which `avp run` (record.json) and `avp bench` (summary.md)
+/// count fruits by GroundTruth::FruitsVisibleAtLeast: below 0.05 the oracle segmenter never
+/// detects a fruit (its v_min), at 0.25 it does with p 0.40, from 0.5 with p 0.97 (v_full).
+inline constexpr std::array<double, 3> kVisibleFractionLevels = {0.05, 0.25, 0.50};
+
 /// One candidate observation view of ObservableGroundTruth.
 struct ObservationView {
   uint16_t fruit_id = 0;  ///< the fruit it looks at
@@ -68,6 +74,13 @@ struct GroundTruth {
   std::vector<sim::FruitTruth> fruits;
   /// Observable voxels per fruit of `fruits` (0 = never observable).
   std::unordered_map<uint16_t, size_t> voxels_per_fruit;
+  /// Per fruit of `fruits`, the largest visible fraction over the reachable observation views:
+  /// its visible pixels (fruit class, valid depth within max_range_m) over the area it would cover
+  /// unoccluded, pi (f r / z)^2 (segmentation::ExpectedFruitAreaPx, as the oracle segmenter
+  /// measures it), clamped to [0, 1]; 0 when no view sees it. How hidden a fruit is from the best
+  /// view the arm can take: a detector that needs some fraction of a fruit in view (the oracle
+  /// segmenter's v_min) cannot find a fruit below it. Empty for files.
+  std::unordered_map<uint16_t, double> best_visible_fraction;
   /// Observation views generated and those the arm reaches (0 for files).
   size_t views_tried = 0;
   size_t views_reachable = 0;
@@ -80,6 +93,8 @@ struct GroundTruth {
   std::vector<VoxelKey> SortedKeys() const;
   /// Fruits with at least one observable voxel.
   size_t ObservableFruits() const;
+  /// Fruits whose best_visible_fraction is at least `fraction`.
+  size_t FruitsVisibleAtLeast(double fraction) const;
 };
 
 /// Every candidate view of every fruit, in order fruit (id) -> radius -> elevation -> azimuth;

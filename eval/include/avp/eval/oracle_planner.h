@@ -2,22 +2,44 @@
 
 #include <memory>
 #include <string_view>
+#include <unordered_set>
 
 #include <avp/eval/ground_truth.h>
 #include <avp/planning/candidates.h>
 #include <avp/planning/view_planner.h>
+#include <avp/segmentation/oracle_segmenter.h>
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/scene.h>
 
 namespace avp::eval {
 
-/// "oracle-nbv": a planner that knows the truth, as an upper bound for the greedy planners on the
-/// same candidate set (avp-nbv's 3-D shells). Each reachable candidate is rendered in the true
-/// scene, and its gain is the number of ground-truth fruit-surface voxels it would see that the
-/// map does not yet hold as occupied fruit. No robot has this: it shows how much of a scenario's
-/// F1 a planner could reach by choosing better among the same views (docs/planning.md).
+/// The diagnostic planners that know the truth, as upper bounds for the greedy planners. Each
+/// reachable candidate is rendered in the true scene and scored with what it would really add:
+///
+/// - "oracle-nbv" (Objective::kVoxels, avp-nbv's shell candidates): the number of ground-truth
+///   fruit-surface voxels the view would see that the map does not yet hold as occupied fruit. It
+///   shows how much F1 a planner could reach by choosing better among the same views.
+/// - "oracle-detect" (Objective::kDetections, the shells plus the ground truth's reachable
+///   observation views, which are aimed at every fruit, hidden or not): the *expected* result of
+///   the view under the oracle segmenter's detection model. Each fruit the view shows counts with
+///   its detection probability p_det(v) at its visible fraction v (segmentation::OracleOptions),
+///   worth kFruitValue voxels while it is not yet found (EvalOptions' rule) plus its new voxels.
+///   It bounds fruits found: what the best greedy choice reaches when it knows where every fruit
+///   is and how likely the detector is to see it.
+///
+/// No robot has this knowledge (docs/planning.md, docs/experiments.md).
 struct OracleNbvOptions {
+  enum class Objective { kVoxels, kDetections };
+  Objective objective = Objective::kVoxels;
   planning::ShellCandidateOptions candidates;
+  /// Also every reachable observation view of the ground truth (GroundTruth::views) not near a
+  /// fused view, IK-checked from the current joints.
+  bool observation_view_candidates = false;
+  /// The detector model of kDetections: p_det(v) and min_pixels (the segmenter's options).
+  segmentation::OracleOptions detector;
+  /// The "found" rule of kDetections, as EvalOptions::found_min_voxels / found_min_fraction.
+  size_t found_min_voxels = 3;
+  double found_min_fraction = 0.10;
   /// The candidates are rendered at this fraction of the camera's resolution (field of view
   /// kept): 0.25 renders 160 x 120 for a 640 x 480 camera.
   double render_scale = 0.25;
@@ -26,13 +48,20 @@ struct OracleNbvOptions {
   int num_threads = 0;
 };
 
+/// kDetections: a fruit not yet found is worth this many voxels (more than any fruit has), so
+/// the expected number of newly found fruits ranks views first and new voxels break ties.
+inline constexpr double kFruitValue = 1000.0;
+
 class OracleNbvPlanner final : public planning::ViewPlanner {
  public:
   /// `scene` and `gt` must outlive the planner.
   OracleNbvPlanner(const sim::Scene& scene, const GroundTruth& gt,
                    const OracleNbvOptions& options = {});
   ~OracleNbvPlanner() override;
-  std::string_view name() const override { return "oracle-nbv"; }
+  std::string_view name() const override {
+    return options_.objective == OracleNbvOptions::Objective::kVoxels ? "oracle-nbv"
+                                                                      : "oracle-detect";
+  }
   planning::PlanResult Plan(const planning::PlanningRequest& request, Rng& rng) override;
 
   /// The true gain of a camera at X_WC given `map`: ground-truth voxels it sees (rendered at
@@ -40,7 +69,28 @@ class OracleNbvPlanner final : public planning::ViewPlanner {
   size_t TrueGain(const mapping::SemanticMap& map, SemanticClass target, const CameraIntrinsics& K,
                   const RigidTransform& X_WC) const;
 
+  /// kDetections' gain of a camera at X_WC: sum over the fruits it shows (at least
+  /// detector.min_pixels at full resolution) of p_det(v) x (new voxels + kFruitValue if the fruit
+  /// is not found in `map` and the view shows new voxels of it); `found` is FoundFruits(map).
+  double ExpectedDetectionGain(const mapping::SemanticMap& map, SemanticClass target,
+                               const CameraIntrinsics& K, const RigidTransform& X_WC,
+                               const std::unordered_set<uint16_t>& found) const;
+
+  /// The fruits `map` has found by EvalOptions' rule: at least max(found_min_voxels,
+  /// found_min_fraction x observable) ground-truth voxels with an occupied `target` voxel within
+  /// one voxel (26-neighbourhood).
+  std::unordered_set<uint16_t> FoundFruits(const mapping::SemanticMap& map,
+                                           SemanticClass target) const;
+
  private:
+  /// Ground-truth voxels the view sees that `map` does not hold as occupied `target`, and the
+  /// rendered frame.
+  std::unordered_set<VoxelKey, VoxelKeyHash> NewVoxels(const mapping::SemanticMap& map,
+                                                       SemanticClass target,
+                                                       const CameraIntrinsics& Ks,
+                                                       const RigidTransform& X_WC,
+                                                       sim::RenderedFrame* frame) const;
+
   const GroundTruth& gt_;
   OracleNbvOptions options_;
   std::unique_ptr<sim::RgbdRenderer> renderer_;
