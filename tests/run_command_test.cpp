@@ -68,6 +68,18 @@ TEST_F(RunCommandTest, RunWritesTheRunFolder) {
   EXPECT_TRUE((*record).contains("git_revision"));
   EXPECT_TRUE((*record).contains("host"));
   EXPECT_GT((*record)["ground_truth"]["voxels"].get<int>(), 100);
+  // Each fruit with its best visible fraction, and the counts at the levels (non-increasing).
+  const auto& gt_json = (*record)["ground_truth"];
+  ASSERT_EQ(gt_json["fruits"].size(), (*record)["scene"]["fruits"].get<size_t>());
+  for (const auto& f : gt_json["fruits"]) {
+    EXPECT_GE(f["best_visible_fraction"].get<double>(), 0.0);
+    EXPECT_LE(f["best_visible_fraction"].get<double>(), 1.0);
+  }
+  const auto& at_least = gt_json["fruits_visible_at_least"];
+  ASSERT_EQ(at_least.size(), 3u);
+  EXPECT_GE(at_least["0.05"].get<int>(), at_least["0.25"].get<int>());
+  EXPECT_GE(at_least["0.25"].get<int>(), at_least["0.50"].get<int>());
+  EXPECT_GE(at_least["0.50"].get<int>(), 1);
   const double f1 = (*record)["final_metrics"]["f1"].get<double>();
   EXPECT_EQ(f1, r->result.final_metrics.exact.f1);
   EXPECT_THAT(ReadAll(o.out_dir / "metrics.svg"), HasSubstr("voxel F1 (exact)"));
@@ -174,6 +186,9 @@ TEST_F(RunCommandTest, BenchWritesLongFormatSummaryAndPlots) {
   }
   EXPECT_EQ(f1_rows, 4);  // 2 planners x 2 views
   EXPECT_THAT(ReadAll(o.out_dir / "summary.md"), HasSubstr("| avp-nbv | 2 |"));
+  EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
+              HasSubstr("Fruits by their best visible fraction from a reachable observation view "
+                        "(all seeds): ≥ 5 %: "));
   EXPECT_TRUE(fs::exists(o.out_dir / "f1_tomato-single-cluster.svg"));
   EXPECT_TRUE(fs::exists(o.out_dir / "fruits_tomato-single-cluster.svg"));
   EXPECT_TRUE(fs::exists(o.out_dir / "runs" / "tomato-single-cluster" / "predefined" / "seed-1" /
@@ -189,6 +204,12 @@ TEST_F(RunCommandTest, BenchConfigFileAndErrors) {
   EXPECT_EQ(paper->seeds.size(), 10u);
   EXPECT_EQ(paper->base.views, 8);
   EXPECT_TRUE(paper->Validate().ok()) << paper->Validate().ToString();
+  auto bounds =
+      LoadBenchConfig(fs::path(AVP_CONFIG_DIR) / "experiments" / "full-occlusion-bounds.yaml");
+  ASSERT_TRUE(bounds.ok()) << bounds.status().ToString();
+  EXPECT_EQ(bounds->planners, (std::vector<std::string>{"avp-nbv", "oracle-nbv", "oracle-detect"}));
+  EXPECT_EQ(bounds->seeds.size(), 10u);
+  EXPECT_TRUE(bounds->Validate().ok()) << bounds->Validate().ToString();
 
   const fs::path bad = dir_ / "bad.yaml";
   std::ofstream(bad) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv]\nseeds: [0]\n"
