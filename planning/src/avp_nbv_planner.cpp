@@ -32,11 +32,15 @@ double RoiWeight(double d, const AvpNbvOptions& o) {
 
 /// Occlusion probability of an unknown voxel of the ROI: p_unknown near the plant's core, falling
 /// as a Gaussian (sigma = unknown_occlusion_sigma_m) of the horizontal distance from it, since the
-/// ROI box is mostly air away from the stem (flat when the sigma is 0).
-double UnknownOcclusion(double d, const AvpNbvOptions& o) {
-  if (o.unknown_occlusion_sigma_m <= 0.0) return o.p_unknown;
-  return o.p_unknown *
-         std::exp(-0.5 * d * d / (o.unknown_occlusion_sigma_m * o.unknown_occlusion_sigma_m));
+/// ROI box is mostly air away from the stem (flat when the sigma is 0); per voxel of the map's edge
+/// (OcclusionPerVoxel).
+double UnknownOcclusion(double d, double voxel_size_m, const AvpNbvOptions& o) {
+  const double p =
+      o.unknown_occlusion_sigma_m <= 0.0
+          ? o.p_unknown
+          : o.p_unknown * std::exp(-0.5 * d * d /
+                                   (o.unknown_occlusion_sigma_m * o.unknown_occlusion_sigma_m));
+  return OcclusionPerVoxel(p, voxel_size_m, o.occlusion_voxel_size_m);
 }
 
 /// RoiWeight and UnknownOcclusion of a voxel. Both depend only on the voxel's column (x, y), so
@@ -94,7 +98,7 @@ class CorePrior {
   std::pair<double, double> Compute(const VoxelKey& k) const {
     // Only x and y of the centre matter (PlantCoreDistance is horizontal).
     const double d = PlantCoreDistance(k.Center(s_), roi_);
-    return {RoiWeight(d, o_), UnknownOcclusion(d, o_)};
+    return {RoiWeight(d, o_), UnknownOcclusion(d, s_, o_)};
   }
 
   Box3 roi_;
@@ -107,11 +111,12 @@ class CorePrior {
 /// The options a ray's voxels read, by value (a ray keeps a copy in registers, see
 /// CorePrior::View).
 struct GainParams {
-  explicit GainParams(const AvpNbvOptions& o)
+  GainParams(const AvpNbvOptions& o, double voxel_size_m)
       : w_target_entropy(o.w_target_entropy),
         w_unknown_near_target(o.w_unknown_near_target),
         w_predicted_target(o.w_predicted_target),
-        p_unknown_outside_roi(o.p_unknown_outside_roi),
+        p_unknown_outside_roi(
+            OcclusionPerVoxel(o.p_unknown_outside_roi, voxel_size_m, o.occlusion_voxel_size_m)),
         min_range2(o.min_gain_range_m * o.min_gain_range_m),
         range_ref(o.range_weight_ref_m),
         range_ref2(o.range_weight_ref_m * o.range_weight_ref_m) {}
@@ -218,6 +223,7 @@ Status AvpNbvOptions::Validate() const {
                                 {"unknown_occlusion_sigma_m", unknown_occlusion_sigma_m},
                                 {"range_weight_ref_m", range_weight_ref_m},
                                 {"min_gain_range_m", min_gain_range_m},
+                                {"occlusion_voxel_size_m", occlusion_voxel_size_m},
                                 {"w_diversity", w_diversity},
                                 {"diversity_m", diversity_m},
                                 {"min_gain_bits", min_gain_bits}}) {
@@ -285,6 +291,7 @@ const std::map<std::string, OptionField, std::less<>>& OptionFields() {
     real("max_range_m", &AvpNbvOptions::max_range_m);
     real("p_unknown", &AvpNbvOptions::p_unknown);
     real("p_unknown_outside_roi", &AvpNbvOptions::p_unknown_outside_roi);
+    real("occlusion_voxel_size_m", &AvpNbvOptions::occlusion_voxel_size_m);
     real("unknown_occlusion_sigma_m", &AvpNbvOptions::unknown_occlusion_sigma_m);
     real("w_target_entropy", &AvpNbvOptions::w_target_entropy);
     real("w_predicted_target", &AvpNbvOptions::w_predicted_target);
@@ -369,10 +376,15 @@ double RayGain(const GainGrid& grid, const CorePrior& core_prior, const Eigen::V
 
 }  // namespace
 
+double OcclusionPerVoxel(double p, double voxel_size_m, double reference_m) {
+  if (!(reference_m > 0.0) || voxel_size_m == reference_m) return p;
+  return 1.0 - std::pow(1.0 - p, voxel_size_m / reference_m);
+}
+
 double AvpRayGain(const GainGrid& grid, const Eigen::Vector3d& from, const Eigen::Vector3d& to,
                   const AvpNbvOptions& options) {
   return RayGain(grid, CorePrior(grid.roi(), grid.voxel_size_m(), options), from, to,
-                 GainParams(options));
+                 GainParams(options, grid.voxel_size_m()));
 }
 
 double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3d& from,
@@ -389,7 +401,7 @@ double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3
   double p_vis = 1.0, gain = 0.0;
   const CorePrior core_prior(roi, map.voxel_size_m(), options);
   const CorePrior::View prior = core_prior.view();
-  const GainParams params(options);
+  const GainParams params(options, map.voxel_size_m());
   const std::vector<TargetSphere> spheres = options.grid.predict_target_surface
                                                 ? FitTargetSpheres(map, target)
                                                 : std::vector<TargetSphere>{};
@@ -406,7 +418,7 @@ double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const Camer
   const std::vector<Eigen::Vector3d> dirs = RayDirections(K, options.ray_stride_px);
   const Eigen::Vector3d origin = X_WC.translation();
   const CorePrior prior = CorePrior::Tabulated(grid.roi(), grid.voxel_size_m(), options);
-  const GainParams params(options);
+  const GainParams params(options, grid.voxel_size_m());
   double gain = 0.0;
   for (const Eigen::Vector3d& d_C : dirs) {
     gain += RayGain(grid, prior, origin, X_WC * (options.max_range_m * d_C), params);
@@ -491,7 +503,7 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   // Gains of the reachable candidates, in parallel over candidates (each independent).
   const std::vector<Eigen::Vector3d> fine = RayDirections(request.K, options_.ray_stride_px);
   const CorePrior prior = CorePrior::Tabulated(grid->roi(), grid->voxel_size_m(), options_);
-  const GainParams params(options_);
+  const GainParams params(options_, grid->voxel_size_m());
   auto view_gain = [&](const ViewCandidate& c, const std::vector<Eigen::Vector3d>& dirs) {
     const Eigen::Vector3d origin = c.X_WC.translation();
     double g = 0.0;

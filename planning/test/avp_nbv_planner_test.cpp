@@ -51,8 +51,9 @@ TEST(AvpRayGainTest, HandComputedRay) {
   SetFree(map, {5, 0, 0});  // behind the fruit: never reached
   const Box3 roi(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
   AvpNbvOptions o;
-  o.p_unknown = 0.5;           // so that the visibilities below are powers of 1/2
-  o.range_weight_ref_m = 0.0;  // unweighted first; range weighting is checked below
+  o.p_unknown = 0.5;               // so that the visibilities below are powers of 1/2
+  o.occlusion_voxel_size_m = 0.0;  // per voxel of this 1 cm map, as given; rescaling is below
+  o.range_weight_ref_m = 0.0;      // unweighted first; range weighting is checked below
   o.min_gain_range_m = 0.0;
   o.unknown_occlusion_sigma_m = 0.0;  // flat p_unknown first; its fall-off is checked below
   o.w_unknown_near_target = 1.0;
@@ -66,6 +67,13 @@ TEST(AvpRayGainTest, HandComputedRay) {
   const double want = 1.0 + 0.5 + 0.25 * Hb(c);
   EXPECT_NEAR(AvpRayGain(*grid, from, to, o), want, 1e-9);
   EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, roi, o), want, 1e-9);
+  // Given per 5 mm voxel, 0.5 becomes 1 - 0.5^2 = 0.75 per voxel of this 1 cm map: a centimetre of
+  // unknown space lets through what two 5 mm voxels would.
+  o.occlusion_voxel_size_m = 0.005;
+  EXPECT_NEAR(AvpRayGain(*grid, from, to, o), 1.0 + 0.25 + 0.0625 * Hb(c), 1e-9);
+  EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, roi, o),
+              1.0 + 0.25 + 0.0625 * Hb(c), 1e-9);
+  o.occlusion_voxel_size_m = 0.0;
 
   // Unknown voxels outside the near radius count w_unknown_roi; outside the ROI nothing.
   o.grid.near_target_radius_m = 0.005;
@@ -135,6 +143,17 @@ TEST(AvpRayGainTest, HandComputedRay) {
   auto blocked = GainGrid::Build(map, SemanticClass::kFruit, roi, o.grid);
   ASSERT_TRUE(blocked.ok());
   EXPECT_EQ(AvpRayGain(*blocked, from, to, o), 0.0);
+}
+
+TEST(OcclusionPerVoxelTest, KeepsTheTransmittancePerMetre) {
+  EXPECT_EQ(OcclusionPerVoxel(0.05, 0.005, 0.005), 0.05);  // exactly, at the reference size
+  EXPECT_EQ(OcclusionPerVoxel(0.05, 0.01, 0.0), 0.05);     // 0: as given
+  EXPECT_NEAR(OcclusionPerVoxel(0.5, 0.01, 0.005), 0.75, 1e-15);
+  EXPECT_NEAR(OcclusionPerVoxel(0.75, 0.005, 0.01), 0.5, 1e-15);
+  // 10 cm of unknown space: 20 voxels of 5 mm or 5 of 2 cm let through the same fraction.
+  const double at_5mm = std::pow(1.0 - 0.05, 20);
+  EXPECT_NEAR(std::pow(1.0 - OcclusionPerVoxel(0.05, 0.02, 0.005), 5), at_5mm, 1e-12);
+  EXPECT_EQ(OcclusionPerVoxel(0.0, 0.02, 0.005), 0.0);
 }
 
 TEST(PlantCoreDistanceTest, AxisForSquareRoisMidPlaneForLongOnes) {
@@ -401,6 +420,12 @@ TEST(AvpNbvOptionTest, SetsFieldsByNameAndNamesBadKeysAndValues) {
   EXPECT_EQ(o.p_unknown, 0.25);
   EXPECT_TRUE(SetAvpNbvOption(o, "refine_top", "12").ok());
   EXPECT_EQ(o.refine_top, 12);
+  EXPECT_TRUE(SetAvpNbvOption(o, "occlusion_voxel_size_m", "-0.01").ok());  // parsed; not valid
+  EXPECT_NE(o.Validate().message().find("occlusion_voxel_size_m (-0.01) must be finite and >= 0"),
+            std::string::npos)
+      << o.Validate().message();
+  EXPECT_TRUE(SetAvpNbvOption(o, "occlusion_voxel_size_m", "0.01").ok());
+  EXPECT_TRUE(o.Validate().ok());
   EXPECT_TRUE(SetAvpNbvOption(o, "candidates.radii_m", "0.3,0.5").ok());
   EXPECT_EQ(o.candidates.radii_m, (std::vector<double>{0.3, 0.5}));
   EXPECT_TRUE(SetAvpNbvOption(o, "candidates.max_targets", "20").ok());

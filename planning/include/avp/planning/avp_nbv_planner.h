@@ -20,7 +20,8 @@ namespace avp::planning {
 ///     `p_unknown` times a Gaussian (σ = `unknown_occlusion_sigma_m`, 0 = flat) of its horizontal
 ///     distance from the plant's core (PlantCoreDistance: foliage is dense there, the rest of the
 ///     ROI box is mostly air; 0.05 per 5 mm voxel by default: even the core is mostly air), one
-///     outside the ROI with `p_unknown_outside_roi`;
+///     outside the ROI with `p_unknown_outside_roi`; both per voxel of `occlusion_voxel_size_m`,
+///     rescaled to the map's voxel size (OcclusionPerVoxel);
 ///   - an unknown voxel adds p_vis · w (bits of H(0.5) = 1): w = `w_predicted_target` on the
 ///     predicted surface of a detected fruit (a sphere fitted to its voxels: its unseen side),
 ///     `w_unknown_near_target` within the near-target radius of a fruit voxel; elsewhere in the ROI
@@ -53,6 +54,12 @@ struct AvpNbvOptions {
   double max_range_m = 1.0;
   double p_unknown = 0.05;
   double p_unknown_outside_roi = 0.0;
+  /// p_unknown and p_unknown_outside_roi are occlusion probabilities per voxel of this edge
+  /// (metres). On a map of voxel edge s, an unknown voxel occludes with
+  /// OcclusionPerVoxel(p, s, occlusion_voxel_size_m) = 1 − (1 − p)^(s / occlusion_voxel_size_m),
+  /// so that the transmittance per metre of unobserved space does not depend on the voxel size.
+  /// 0: per voxel of whatever size the map has, as given.
+  double occlusion_voxel_size_m = 0.005;
   double unknown_occlusion_sigma_m = 0.07;
   double w_target_entropy = 1.0;
   double w_predicted_target = 1.0;
@@ -80,6 +87,11 @@ struct AvpNbvOptions {
 Status SetAvpNbvOption(AvpNbvOptions& options, std::string_view key, std::string_view value);
 /// The keys SetAvpNbvOption accepts, sorted.
 std::vector<std::string> AvpNbvOptionKeys();
+
+/// The occlusion probability of one voxel of edge `voxel_size_m` for a probability `p` given per
+/// voxel of edge `reference_m`: 1 − (1 − p)^(voxel_size_m / reference_m), the same transmittance
+/// per metre; `p` itself when reference_m is 0 or equals voxel_size_m.
+double OcclusionPerVoxel(double p, double voxel_size_m, double reference_m);
 
 /// The gain of one ray under `options` (see AvpNbvOptions), walked on `grid`.
 double AvpRayGain(const GainGrid& grid, const Eigen::Vector3d& from, const Eigen::Vector3d& to,
