@@ -415,12 +415,13 @@ Result<BenchSummary> RunBench(const BenchOptions& options) {
       cell.failed = failed[key];
       summary.cells.push_back(cell);
     }
-    // How hidden the fruits are: the bound that no planner and segmenter pair can beat by much.
+    // How hidden the fruits are (docs/evaluation.md): a fruit that no reachable view shows much of
+    // is hard to find for any planner. Only for observable ground truths (a file has no views).
     {
       double fruits = 0.0;
       std::array<double, eval::kVisibleFractionLevels.size()> visible{};
       for (const Group& g : groups) {
-        if (g.scenario != s) continue;
+        if (g.scenario != s || g.gt->best_visible_fraction.empty()) continue;
         fruits += static_cast<double>(g.gt->fruits.size());
         for (size_t l = 0; l < visible.size(); ++l) {
           visible[l] +=
