@@ -85,6 +85,43 @@ TEST(EpisodeEndToEndTest, OracleDetectKnowsTheTruthAndIsDeterministic) {
   }
 }
 
+TEST(EpisodeEndToEndTest, OracleRegretMeasuresEachPlanWithoutChangingTheEpisode) {
+  eval::RunConfig c = Config("avp-nbv");
+  c.views = 3;
+  auto scene = sim::MakeScenario(c.scenario, c.seed);
+  ASSERT_TRUE(scene.ok());
+  auto gt = eval::GroundTruthFor(c, *scene);
+  ASSERT_TRUE(gt.ok());
+  auto plain = eval::RunEpisodeOnScene(c, *scene, *gt);
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  EXPECT_TRUE(plain->regret.empty());
+  c.oracle_regret = true;
+  auto probed = eval::RunEpisodeOnScene(c, *scene, *gt);
+  ASSERT_TRUE(probed.ok()) << probed.status().ToString();
+  ASSERT_EQ(probed->episode.steps.size(), plain->episode.steps.size());
+  size_t plans = 0;
+  for (size_t i = 0; i < plain->episode.steps.size(); ++i) {
+    EXPECT_EQ(probed->episode.steps[i].metrics, plain->episode.steps[i].metrics) << i;
+    EXPECT_EQ(probed->episode.steps[i].X_WC.translation(),
+              plain->episode.steps[i].X_WC.translation());
+    if (plain->episode.steps[i].planned) ++plans;
+  }
+  ASSERT_EQ(probed->regret.size(), plans);
+  ASSERT_GE(plans, 2u);
+  for (size_t i = 0; i < probed->regret.size(); ++i) {
+    const eval::StepRegret& r = probed->regret[i];
+    EXPECT_EQ(r.step, static_cast<int>(i));
+    EXPECT_EQ(r.candidates, probed->episode.steps[i].candidates_reachable);
+    EXPECT_GT(r.best_true_gain, 0.0);  // fruit is left to see after one or two views
+    EXPECT_LE(r.chosen_true_gain, r.best_true_gain);
+    EXPECT_NEAR(r.regret, 1.0 - r.chosen_true_gain / r.best_true_gain, 1e-12);
+    EXPECT_GE(r.chosen_true_rank, 1u);
+    EXPECT_LE(r.chosen_true_rank, r.candidates);
+    EXPECT_GE(r.rank_correlation, -1.0);
+    EXPECT_LE(r.rank_correlation, 1.0);
+  }
+}
+
 TEST(EpisodeEndToEndTest, BadConfigurationsAreErrors) {
   eval::RunConfig c = Config("no-such-planner");
   EXPECT_NE(c.Validate().message().find("unknown planner 'no-such-planner'"), std::string::npos);

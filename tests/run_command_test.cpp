@@ -68,6 +68,8 @@ TEST_F(RunCommandTest, RunWritesTheRunFolder) {
   EXPECT_TRUE((*record).contains("git_revision"));
   EXPECT_TRUE((*record).contains("host"));
   EXPECT_GT((*record)["ground_truth"]["voxels"].get<int>(), 100);
+  EXPECT_EQ((*record)["config"]["oracle_regret"], false);
+  EXPECT_TRUE((*record)["oracle_regret"].empty());  // measured only with --oracle-regret
   // Each fruit with its best visible fraction, and the counts at the levels (non-increasing).
   const auto& gt_json = (*record)["ground_truth"];
   ASSERT_EQ(gt_json["fruits"].size(), (*record)["scene"]["fruits"].get<size_t>());

@@ -170,6 +170,15 @@ int RunAndReport(const avp::apps::RunOptions& options) {
       std::string(avp::pipeline::ToString(r.episode.end)).c_str(),
       r.episode.end_reason.empty() ? "" : ": ", r.episode.end_reason.c_str(), result->seconds,
       r.final_metrics.exact.f1, r.final_metrics.fruits.found, r.final_metrics.fruits.total);
+  if (!r.regret.empty()) {
+    std::printf(
+        "oracle regret per plan step (1 - true gain of the choice / best true gain; true "
+        "rank of the choice; rank correlation of the gain with the true gain):\n");
+    for (const avp::eval::StepRegret& g : r.regret) {
+      std::printf("  step %d: regret %.2f, rank %zu of %zu, correlation %.2f\n", g.step + 1,
+                  g.regret, g.chosen_true_rank, g.candidates, g.rank_correlation);
+    }
+  }
   std::printf("wrote %zu files to %s:\n", result->files.size(), options.out_dir.string().c_str());
   for (const auto& f : result->files) std::printf("  %s\n", f.string().c_str());
   return 0;
@@ -390,6 +399,9 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--planner-option", run_planner_options,
                       "avp-nbv option KEY=VALUE over its defaults (repeatable; e.g. p_unknown=0.1; "
                       "keys in docs/planning.md)");
+  run_cmd->add_flag("--oracle-regret", run.config.oracle_regret,
+                    "Measure each plan step's regret with the truth (record.json oracle_regret; "
+                    "the plan times include it)");
   run_cmd->add_option("--out", run.out_dir, "Run folder")->default_val(run.out_dir.string());
 
   // avp bench

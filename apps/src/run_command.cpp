@@ -59,7 +59,8 @@ json ToJson(const eval::RunConfig& c) {
               {"roi_margin_m", c.roi_margin_m},
               {"threads", c.threads},
               {"gt_file", c.gt_file.string()},
-              {"planner_options", c.planner_options}};
+              {"planner_options", c.planner_options},
+              {"oracle_regret", c.oracle_regret}};
 }
 
 json StepJson(const pipeline::StepRecord& s) {
@@ -223,6 +224,17 @@ Result<RunSummary> RunRun(const RunOptions& options) {
     if (it == gt.best_visible_fraction.end()) continue;
     best_visible.push_back({{"fruit", f.instance_id}, {"best_visible_fraction", it->second}});
   }
+  json regret = json::array();  // empty without --oracle-regret
+  for (const eval::StepRegret& g : result.regret) {
+    auto finite = [](double v) { return std::isfinite(v) ? json(v) : json(nullptr); };
+    regret.push_back({{"step", g.step},
+                      {"candidates", g.candidates},
+                      {"chosen_true_gain", g.chosen_true_gain},
+                      {"best_true_gain", g.best_true_gain},
+                      {"regret", g.regret},
+                      {"chosen_true_rank", g.chosen_true_rank},
+                      {"rank_correlation", finite(g.rank_correlation)}});
+  }
   json visible_at_least = json::object();
   for (const double v : eval::kVisibleFractionLevels) {
     visible_at_least[fmt::format("{:.2f}", v)] = gt.FruitsVisibleAtLeast(v);
@@ -248,6 +260,7 @@ Result<RunSummary> RunRun(const RunOptions& options) {
       {"views_fused", result.episode.views_fused()},
       {"episode_seconds", result.episode.total_ms / 1e3},
       {"final_metrics", final_metrics},
+      {"oracle_regret", regret},
       {"steps", steps}};
   const fs::path record_path = options.out_dir / "record.json";
   AVP_RETURN_IF_ERROR(io::WriteJsonFile(record_path, record));

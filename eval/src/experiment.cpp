@@ -268,7 +268,18 @@ Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const sim::Scene& s
     last = EvaluateMap(m, gt, eval_options);
     return MetricsRow(last);
   };
-  pipeline::EpisodeComponents components{&source, segmenter.get(), &arm, planner.get(), map.get()};
+  // The regret probe sees the planner's own results (an oracle planner's included).
+  std::unique_ptr<OracleNbvPlanner> probe_oracle;
+  std::unique_ptr<RegretProbe> probe;
+  planning::ViewPlanner* used = planner.get();
+  if (config.oracle_regret) {
+    OracleNbvOptions o;
+    o.num_threads = config.threads;
+    probe_oracle = std::make_unique<OracleNbvPlanner>(scene, gt, o);
+    probe = std::make_unique<RegretProbe>(*planner, *probe_oracle, config.threads);
+    used = probe.get();
+  }
+  pipeline::EpisodeComponents components{&source, segmenter.get(), &arm, used, map.get()};
   AVP_ASSIGN_OR_RETURN(pipeline::EpisodeResult episode,
                        pipeline::RunEpisode(components, eo, hook, observers));
   RunResult result;
@@ -276,6 +287,7 @@ Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const sim::Scene& s
   result.final_metrics = last;
   result.gt_voxels = gt.voxels.size();
   result.gt_fruits = gt.fruits.size();
+  if (probe != nullptr) result.regret = probe->steps();
   if (map_out != nullptr) *map_out = std::move(map);
   return result;
 }

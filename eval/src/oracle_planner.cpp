@@ -5,6 +5,7 @@
 
 #include <avp/core/parallel.h>
 #include <avp/eval/oracle_planner.h>
+#include <avp/eval/statistics.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/planning/gain_grid.h>
 
@@ -179,6 +180,30 @@ planning::PlanResult OracleNbvPlanner::Plan(const planning::PlanningRequest& req
                 options_.w_motion * (max_cost > 0.0 ? c.cost / max_cost : 0.0);
   }
   return planning::RankCandidates(std::move(candidates), generated, name());
+}
+
+planning::PlanResult RegretProbe::Plan(const planning::PlanningRequest& request, Rng& rng) {
+  planning::PlanResult result = inner_.Plan(request, rng);
+  const int call = calls_++;
+  if (!result.status.ok() || result.ranked.empty()) return result;
+  std::vector<double> truth(result.ranked.size(), 0.0), predicted(result.ranked.size(), 0.0);
+  ParallelFor(result.ranked.size(), num_threads_, [&](size_t i) {
+    truth[i] = static_cast<double>(
+        oracle_.TrueGain(*request.map, request.target_class, request.K, result.ranked[i].X_WC));
+  });
+  for (size_t i = 0; i < result.ranked.size(); ++i) predicted[i] = result.ranked[i].gain;
+  StepRegret r;
+  r.step = call;
+  r.candidates = result.ranked.size();
+  r.chosen_true_gain = truth.front();
+  r.best_true_gain = *std::max_element(truth.begin(), truth.end());
+  r.regret = r.best_true_gain > 0.0 ? 1.0 - r.chosen_true_gain / r.best_true_gain : 0.0;
+  r.chosen_true_rank =
+      1 + static_cast<size_t>(std::count_if(truth.begin(), truth.end(),
+                                            [&](double t) { return t > r.chosen_true_gain; }));
+  r.rank_correlation = SpearmanRankCorrelation(predicted, truth);
+  steps_.push_back(r);
+  return result;
 }
 
 }  // namespace avp::eval

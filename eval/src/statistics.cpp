@@ -1,5 +1,8 @@
+#include <algorithm>
 #include <array>
 #include <cmath>
+#include <numeric>
+#include <vector>
 
 #include <avp/eval/statistics.h>
 
@@ -14,7 +17,39 @@ constexpr std::array<double, 30> kT975 = {
     2.109816,  2.100922, 2.093024, 2.085963, 2.079614, 2.073873, 2.068658, 2.063899,
     2.059539,  2.055529, 2.051831, 2.048407, 2.045230, 2.042272};
 
+/// Ranks 1..n of `v`, ties sharing their mean rank.
+std::vector<double> Ranks(std::span<const double> v) {
+  std::vector<size_t> order(v.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::stable_sort(order.begin(), order.end(), [&](size_t i, size_t j) { return v[i] < v[j]; });
+  std::vector<double> rank(v.size());
+  for (size_t i = 0; i < order.size();) {
+    size_t j = i;
+    while (j + 1 < order.size() && v[order[j + 1]] == v[order[i]]) ++j;
+    const double mean_rank = 0.5 * static_cast<double>(i + j) + 1.0;
+    for (size_t k = i; k <= j; ++k) rank[order[k]] = mean_rank;
+    i = j + 1;
+  }
+  return rank;
+}
+
 }  // namespace
+
+double SpearmanRankCorrelation(std::span<const double> a, std::span<const double> b) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  if (a.size() != b.size() || a.size() < 2) return nan;
+  const std::vector<double> ra = Ranks(a), rb = Ranks(b);
+  const double n = static_cast<double>(a.size());
+  const double mean = 0.5 * (n + 1.0);
+  double sab = 0.0, saa = 0.0, sbb = 0.0;
+  for (size_t i = 0; i < ra.size(); ++i) {
+    sab += (ra[i] - mean) * (rb[i] - mean);
+    saa += (ra[i] - mean) * (ra[i] - mean);
+    sbb += (rb[i] - mean) * (rb[i] - mean);
+  }
+  if (saa == 0.0 || sbb == 0.0) return nan;
+  return sab / std::sqrt(saa * sbb);
+}
 
 double StudentT975(size_t dof) {
   if (dof == 0) return std::numeric_limits<double>::quiet_NaN();

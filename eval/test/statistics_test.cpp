@@ -89,4 +89,20 @@ TEST(StatisticsTest, EdgeCases) {
 }
 
 }  // namespace
+TEST(SpearmanTest, RanksWithTiesAndDegenerateSamples) {
+  const std::vector<double> a = {1.0, 2.0, 3.0, 4.0, 5.0};
+  EXPECT_DOUBLE_EQ(SpearmanRankCorrelation(a, std::vector<double>{10, 20, 30, 40, 50}), 1.0);
+  EXPECT_DOUBLE_EQ(SpearmanRankCorrelation(a, std::vector<double>{5, 4, 3, 2, 1}), -1.0);
+  // Monotone but not linear: ranks only.
+  EXPECT_DOUBLE_EQ(SpearmanRankCorrelation(a, std::vector<double>{1, 4, 9, 16, 1000}), 1.0);
+  // By hand: b's ranks 2, 1, 4, 3, 5 against 1..5: 1 - 6 * 4 / (5 * 24) = 0.8.
+  EXPECT_NEAR(SpearmanRankCorrelation(a, std::vector<double>{2, 1, 4, 3, 5}), 0.8, 1e-12);
+  // Ties share the mean rank: b = 1, 1, 2 ranks 1.5, 1.5, 3; Pearson with 1, 2, 3 is sqrt(3)/2.
+  EXPECT_NEAR(SpearmanRankCorrelation(std::vector<double>{1, 2, 3}, std::vector<double>{1, 1, 2}),
+              std::sqrt(3.0) / 2.0, 1e-12);
+  EXPECT_TRUE(std::isnan(SpearmanRankCorrelation(a, std::vector<double>{7, 7, 7, 7, 7})));
+  EXPECT_TRUE(std::isnan(SpearmanRankCorrelation(a, std::vector<double>{1, 2})));
+  EXPECT_TRUE(std::isnan(SpearmanRankCorrelation(std::vector<double>{1}, std::vector<double>{1})));
+}
+
 }  // namespace avp::eval

@@ -13,6 +13,7 @@
 #include <avp/core/status.h>
 #include <avp/eval/ground_truth.h>
 #include <avp/eval/metrics.h>
+#include <avp/eval/oracle_planner.h>
 #include <avp/mapping/integrator.h>
 #include <avp/mapping/semantics.h>
 #include <avp/pipeline/episode.h>
@@ -62,6 +63,9 @@ struct RunConfig {
   /// avp-nbv's options by name (planning::SetAvpNbvOption: "p_unknown" -> "0.1", ...), over its
   /// defaults; only for planner "avp-nbv".
   std::map<std::string, std::string> planner_options;
+  /// Measure the planner's regret at every step with the truth (RegretProbe; RunResult::regret):
+  /// the episode does not change, its plan times include the probe's rendering.
+  bool oracle_regret = false;
   Status Validate() const;
 };
 
@@ -87,6 +91,8 @@ struct RunResult {
   size_t gt_voxels = 0;
   size_t gt_fruits = 0;
   double gt_ms = 0.0;
+  /// Per plan step, with RunConfig::oracle_regret (empty otherwise).
+  std::vector<StepRegret> regret;
 };
 
 /// Runs one episode of `config` on `scene` against `gt` (compute it once per scene with

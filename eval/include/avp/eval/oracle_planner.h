@@ -1,8 +1,10 @@
 #pragma once
 
+#include <limits>
 #include <memory>
 #include <string_view>
 #include <unordered_set>
+#include <vector>
 
 #include <avp/eval/ground_truth.h>
 #include <avp/planning/candidates.h>
@@ -94,6 +96,47 @@ class OracleNbvPlanner final : public planning::ViewPlanner {
   const GroundTruth& gt_;
   OracleNbvOptions options_;
   std::unique_ptr<sim::RgbdRenderer> renderer_;
+};
+
+/// How well a planner ranked its candidates at one plan step, measured with the truth
+/// (RegretProbe).
+struct StepRegret {
+  int step = 0;           ///< plan call, from 0
+  size_t candidates = 0;  ///< the ranked (reachable) candidates scored
+  /// OracleNbvPlanner::TrueGain (new ground-truth fruit voxels) of the chosen candidate (ranked
+  /// first) and the largest over the candidates.
+  double chosen_true_gain = 0.0;
+  double best_true_gain = 0.0;
+  /// 1 − chosen / best: the share of the best candidate's new voxels the choice forgoes (0 when
+  /// the best sees nothing new).
+  double regret = 0.0;
+  /// 1 + the candidates with a larger true gain than the chosen one (1: it was the truly best).
+  size_t chosen_true_rank = 1;
+  /// Spearman correlation of the planner's gain with the true gain over the candidates; NaN when
+  /// undefined (fewer than 2 candidates, or either gain constant).
+  double rank_correlation = std::numeric_limits<double>::quiet_NaN();
+};
+
+/// Wraps a planner and, after each of its plans, renders every ranked candidate in the true scene
+/// (OracleNbvPlanner::TrueGain) to measure the regret of its choice and how its gain ranks the
+/// candidates (`avp run --oracle-regret`). It returns the wrapped planner's result unchanged, so
+/// the episode is the same as without it; only the plan times include the probe's rendering.
+class RegretProbe final : public planning::ViewPlanner {
+ public:
+  /// `inner` and `oracle` must outlive the probe.
+  RegretProbe(planning::ViewPlanner& inner, const OracleNbvPlanner& oracle, int num_threads = 0)
+      : inner_(inner), oracle_(oracle), num_threads_(num_threads) {}
+  std::string_view name() const override { return inner_.name(); }
+  planning::PlanResult Plan(const planning::PlanningRequest& request, Rng& rng) override;
+  /// One entry per plan call that returned candidates, in order.
+  const std::vector<StepRegret>& steps() const { return steps_; }
+
+ private:
+  planning::ViewPlanner& inner_;
+  const OracleNbvPlanner& oracle_;
+  int num_threads_ = 0;
+  int calls_ = 0;
+  std::vector<StepRegret> steps_;
 };
 
 }  // namespace avp::eval

@@ -27,4 +27,9 @@ Summary Summarize(std::span<const double> values);
 /// table), 1.96 (the normal quantile) beyond; NaN for dof = 0.
 double StudentT975(size_t dof);
 
+/// Spearman's rank correlation of two samples of equal length: Pearson's correlation of their
+/// ranks, ties sharing their mean rank. NaN when the lengths differ, n < 2, or either sample is
+/// constant (no ranking to compare).
+double SpearmanRankCorrelation(std::span<const double> a, std::span<const double> b);
+
 }  // namespace avp::eval
