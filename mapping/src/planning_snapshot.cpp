@@ -210,28 +210,17 @@ done:
 }
 
 PlanningSnapshot::RayCounts PlanningSnapshot::CastRayGuarded(const RayWalker& w) const {
+  // RayWalker's decisions exactly, exhausted axes included: its own register walk
+  // (ForEachKeyBeforeEnd, the keys of Step()), with the position relative to the box as unsigned
+  // so that one compare per axis tests 0 <= rel < dim.
   RayCounts c;
-  int64_t left = w.remaining();
-
-  // RayWalker's decisions exactly, exhausted axes included, with its state in scalars (registers)
-  // and a branchless axis choice:
-  // p_ij = N_i * A_j, axis i steps first iff p_ij <= p_ji against both others (lower axis on
-  // ties); an exhausted axis gets kNever so it is never chosen again.
-  constexpr int64_t kNever = RayWalker::kNever;
-  int64_t pxy = w.p_[0][1], pxz = w.p_[0][2], pyx = w.p_[1][0], pyz = w.p_[1][2], pzx = w.p_[2][0],
-          pzy = w.p_[2][1];
-  const int64_t ixy = w.inc_[0][1], ixz = w.inc_[0][2], iyx = w.inc_[1][0], iyz = w.inc_[1][2],
-                izx = w.inc_[2][0], izy = w.inc_[2][1];
-  int64_t rx = w.axis_remaining_[0], ry = w.axis_remaining_[1], rz = w.axis_remaining_[2];
-  // Position relative to the box, as unsigned so one compare per axis tests 0 <= rel < dim.
-  int64_t relx = int64_t{w.key_[0]} - min_.x, rely = int64_t{w.key_[1]} - min_.y,
-          relz = int64_t{w.key_[2]} - min_.z;
-  const int64_t sx = w.step_[0], sy = w.step_[1], sz = w.step_[2];
   const uint64_t dx = static_cast<uint64_t>(dims_.x()), dy = static_cast<uint64_t>(dims_.y()),
                  dz = static_cast<uint64_t>(dims_.z());
   const uint8_t* cells = cells_.data();
   uint32_t unknown = 0, free = 0, visited = 0;
-  while (true) {
+  w.ForEachKeyBeforeEnd([&](const VoxelKey& k) {
+    const int64_t relx = int64_t{k.x} - min_.x, rely = int64_t{k.y} - min_.y,
+                  relz = int64_t{k.z} - min_.z;
     const bool inside = static_cast<uint64_t>(relx) < dx && static_cast<uint64_t>(rely) < dy &&
                         static_cast<uint64_t>(relz) < dz;
     const uint8_t cell = inside ? cells[Index(relx, rely, relz)] : uint8_t{0};
@@ -240,35 +229,12 @@ PlanningSnapshot::RayCounts PlanningSnapshot::CastRayGuarded(const RayWalker& w)
     if (state == static_cast<uint32_t>(VoxelState::kOccupied)) {
       c.hit = true;
       c.hit_class = static_cast<uint8_t>(cell >> kClassShift);
-      break;
+      return false;
     }
     free += state;  // kFree == 1, kUnknown == 0
     unknown += 1u - state;
-    if (--left == 0) break;
-    const bool x_first = (pxy <= pyx) & (pxz <= pzx);
-    const bool y_first = !x_first & (pyz <= pzy);
-    const bool z_first = !x_first & !y_first;
-    const int64_t mx = -static_cast<int64_t>(x_first), my = -static_cast<int64_t>(y_first),
-                  mz = -static_cast<int64_t>(z_first);
-    relx += sx & mx;
-    rely += sy & my;
-    relz += sz & mz;
-    rx += mx;  // -1 on the stepped axis
-    ry += my;
-    rz += mz;
-    pxy += ixy & mx;
-    pxz += ixz & mx;
-    pyx += iyx & my;
-    pyz += iyz & my;
-    pzx += izx & mz;
-    pzy += izy & mz;
-    pxy = rx == 0 ? kNever : pxy;
-    pxz = rx == 0 ? kNever : pxz;
-    pyx = ry == 0 ? kNever : pyx;
-    pyz = ry == 0 ? kNever : pyz;
-    pzx = rz == 0 ? kNever : pzx;
-    pzy = rz == 0 ? kNever : pzy;
-  }
+    return true;
+  });
   c.unknown = unknown;
   c.free = free;
   c.visited = visited;

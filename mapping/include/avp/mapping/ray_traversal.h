@@ -101,9 +101,9 @@ class RayWalker {
   /// Calls fn(const VoxelKey&) -> bool for the current voxel and each next one up to, not
   /// including, the end point's voxel (remaining() calls), in order, until fn returns false:
   /// exactly the keys of key() and Step(), with the walker's state copied into locals (registers)
-  /// and a branchless axis choice, as PlanningSnapshot::CastRayGuarded (Step keeps its state in
-  /// arrays indexed by the axis, and reads of key() after it stall on store forwarding). The
-  /// walker itself does not move. Returns the calls made.
+  /// and a branchless axis choice (PlanningSnapshot::CastRayGuarded walks with it; Step keeps its
+  /// state in arrays indexed by the axis, and reads of key() after it stall on store forwarding).
+  /// The walker itself does not move. Returns the calls made.
   template <typename Fn>
   int64_t ForEachKeyBeforeEnd(Fn&& fn) const {
     int64_t left = remaining_;
