@@ -152,11 +152,27 @@ double Ms(std::chrono::steady_clock::duration d) {
   return std::chrono::duration<double, std::milli>(d).count();
 }
 
-void BM_AvpNbvPlan(benchmark::State& state) {
-  const Fixture& f = GetFixture();
+/// avp-nbv's defaults with the benchmark's thread count (its argument) for the gains and the IK.
+AvpNbvOptions ThreadedOptions(const benchmark::State& state) {
   AvpNbvOptions options;
   options.num_threads = static_cast<int>(state.range(0));
   options.candidates.num_threads = options.num_threads;
+  return options;
+}
+
+/// The plan-step benchmarks' runs: 1 and 2 threads, 2 iterations each, wall time in ms.
+void PlanStepRuns(benchmark::internal::Benchmark* b) {
+  b->ArgName("threads")
+      ->Arg(1)
+      ->Arg(2)
+      ->Iterations(2)
+      ->Unit(benchmark::kMillisecond)
+      ->UseRealTime();
+}
+
+void BM_AvpNbvPlan(benchmark::State& state) {
+  const Fixture& f = GetFixture();
+  const AvpNbvOptions options = ThreadedOptions(state);
   AvpNbvPlanner planner(options);
   AvpNbvPlanner dense(DenseOptions(options));
   PlanResult result, reference;
@@ -192,21 +208,13 @@ void BM_AvpNbvPlan(benchmark::State& state) {
       benchmark::Counter(dense_ms * 1e-3, benchmark::Counter::kIsIterationInvariantRate);
   state.counters["identical"] = identical ? 1.0 : 0.0;
 }
-BENCHMARK(BM_AvpNbvPlan)
-    ->ArgName("threads")
-    ->Arg(1)
-    ->Arg(2)
-    ->Iterations(2)
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
+BENCHMARK(BM_AvpNbvPlan)->Apply(PlanStepRuns);
 
 // The same step with every candidate scored with every fine ray (coarse_ray_stride_px = 0), the
 // pass that coarse to fine replaces; same_choice = 1 when both choose the same view.
 void BM_AvpNbvPlanEveryRay(benchmark::State& state) {
   const Fixture& f = GetFixture();
-  AvpNbvOptions options;
-  options.num_threads = static_cast<int>(state.range(0));
-  options.candidates.num_threads = options.num_threads;
+  const AvpNbvOptions options = ThreadedOptions(state);
   AvpNbvOptions every = options;
   every.coarse_ray_stride_px = 0;
   AvpNbvPlanner planner(every);
@@ -229,13 +237,7 @@ void BM_AvpNbvPlanEveryRay(benchmark::State& state) {
                                       ? 1.0
                                       : 0.0;
 }
-BENCHMARK(BM_AvpNbvPlanEveryRay)
-    ->ArgName("threads")
-    ->Arg(1)
-    ->Arg(2)
-    ->Iterations(2)
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
+BENCHMARK(BM_AvpNbvPlanEveryRay)->Apply(PlanStepRuns);
 
 void BM_AvpNbvGains(benchmark::State& state) {
   const Fixture& f = GetFixture();

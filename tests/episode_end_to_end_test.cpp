@@ -20,6 +20,15 @@ eval::RunConfig Config(const std::string& planner) {
   return c;
 }
 
+/// The same episode: the same metrics and the same eye at every step.
+void ExpectSameEpisode(const eval::RunResult& a, const eval::RunResult& b) {
+  ASSERT_EQ(a.episode.steps.size(), b.episode.steps.size());
+  for (size_t i = 0; i < a.episode.steps.size(); ++i) {
+    EXPECT_EQ(a.episode.steps[i].metrics, b.episode.steps[i].metrics) << i;
+    EXPECT_EQ(a.episode.steps[i].X_WC.translation(), b.episode.steps[i].X_WC.translation()) << i;
+  }
+}
+
 TEST(EpisodeEndToEndTest, AvpNbvRaisesF1AboveTheFloor) {
   const eval::RunConfig c = Config("avp-nbv");
   auto scene = sim::MakeScenario(c.scenario, c.seed);
@@ -41,10 +50,7 @@ TEST(EpisodeEndToEndTest, AvpNbvRaisesF1AboveTheFloor) {
 
   auto again = eval::RunEpisodeOnScene(c, *scene, *gt);
   ASSERT_TRUE(again.ok());
-  for (size_t i = 0; i < r->episode.steps.size(); ++i) {
-    EXPECT_EQ(again->episode.steps[i].metrics, r->episode.steps[i].metrics) << i;
-    EXPECT_EQ(again->episode.steps[i].X_WC.translation(), r->episode.steps[i].X_WC.translation());
-  }
+  ExpectSameEpisode(*again, *r);
 }
 
 TEST(EpisodeEndToEndTest, PredefinedRunsTheSameLoop) {
@@ -79,10 +85,7 @@ TEST(EpisodeEndToEndTest, OracleDetectKnowsTheTruthAndIsDeterministic) {
             static_cast<size_t>(r->episode.steps.front().Metric("fruits_found")));
   auto again = eval::RunEpisodeOnScene(c, *scene, *gt);
   ASSERT_TRUE(again.ok());
-  for (size_t i = 0; i < r->episode.steps.size(); ++i) {
-    EXPECT_EQ(again->episode.steps[i].metrics, r->episode.steps[i].metrics) << i;
-    EXPECT_EQ(again->episode.steps[i].X_WC.translation(), r->episode.steps[i].X_WC.translation());
-  }
+  ExpectSameEpisode(*again, *r);
 }
 
 TEST(EpisodeEndToEndTest, OracleRegretMeasuresEachPlanWithoutChangingTheEpisode) {
@@ -98,14 +101,9 @@ TEST(EpisodeEndToEndTest, OracleRegretMeasuresEachPlanWithoutChangingTheEpisode)
   c.oracle_regret = true;
   auto probed = eval::RunEpisodeOnScene(c, *scene, *gt);
   ASSERT_TRUE(probed.ok()) << probed.status().ToString();
-  ASSERT_EQ(probed->episode.steps.size(), plain->episode.steps.size());
+  ExpectSameEpisode(*probed, *plain);
   size_t plans = 0;
-  for (size_t i = 0; i < plain->episode.steps.size(); ++i) {
-    EXPECT_EQ(probed->episode.steps[i].metrics, plain->episode.steps[i].metrics) << i;
-    EXPECT_EQ(probed->episode.steps[i].X_WC.translation(),
-              plain->episode.steps[i].X_WC.translation());
-    if (plain->episode.steps[i].planned) ++plans;
-  }
+  for (const pipeline::StepRecord& step : plain->episode.steps) plans += step.planned ? 1 : 0;
   ASSERT_EQ(probed->regret.size(), plans);
   ASSERT_GE(plans, 2u);
   for (size_t i = 0; i < probed->regret.size(); ++i) {

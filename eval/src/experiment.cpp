@@ -234,9 +234,6 @@ Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const sim::Scene& s
       // default noise model for any other segmenter, whose misses it cannot know).
       o.detector = config.segmenter == "oracle-perfect" ? segmentation::OracleOptions::Perfect()
                                                         : segmentation::OracleOptions{};
-      const EvalOptions eval_defaults;
-      o.found_min_voxels = eval_defaults.found_min_voxels;
-      o.found_min_fraction = eval_defaults.found_min_fraction;
     }
     planner = std::make_unique<OracleNbvPlanner>(scene, gt, o);
   } else {

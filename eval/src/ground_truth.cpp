@@ -117,10 +117,15 @@ CameraIntrinsics Window(const CameraIntrinsics& K, const PixelRect& r) {
   return w;
 }
 
-/// Fruit-surface voxels of one rendered view: every fruit pixel with a valid depth whose point is
-/// within `max_range_m` of the camera (the integrator's back-projection, in double).
-void CollectFruitVoxels(const sim::RenderedFrame& frame, double voxel_size_m, double max_range_m,
-                        std::vector<KeyAndId>& out) {
+/// Fruit-surface voxels of one rendered window `rect` of a view: every fruit pixel with a valid
+/// depth whose point is within `max_range_m` of the camera (the integrator's back-projection, in
+/// double). The same pixels are counted per instance id in `pixels`, each view pixel once:
+/// `seen_by` (the view's width x height, row-major) marks those already counted, as windows may
+/// overlap, and ClearRect resets it for the next view.
+void CollectFruitVoxels(const sim::RenderedFrame& frame, const PixelRect& rect, int view_width,
+                        double voxel_size_m, double max_range_m, std::vector<KeyAndId>& out,
+                        std::vector<uint8_t>& seen_by,
+                        std::unordered_map<uint16_t, size_t>& pixels) {
   const CameraIntrinsics& K = frame.rgbd.K;
   const RigidTransform& X_WC = frame.rgbd.X_WC;
   const Eigen::Vector3d origin = X_WC.translation();
@@ -133,30 +138,12 @@ void CollectFruitVoxels(const sim::RenderedFrame& frame, double voxel_size_m, do
       const Eigen::Vector3d p_C((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
       const Eigen::Vector3d p_W = X_WC * p_C;
       if ((p_W - origin).norm() > max_range_m) continue;
-      out.emplace_back(VoxelKey::FromPoint(p_W, voxel_size_m), frame.instance_ids.at(u, v));
-    }
-  }
-}
-
-/// Counts the fruit pixels of a window `rect` of a view (fruit class, valid depth, within
-/// `max_range_m`) per instance id, each view pixel once: `seen_by` (the view's width x height,
-/// row-major) marks the pixels already counted, and ClearRect resets it for the next view.
-void CountFruitPixels(const sim::RenderedFrame& frame, const PixelRect& rect, int view_width,
-                      double max_range_m, std::vector<uint8_t>& seen_by,
-                      std::unordered_map<uint16_t, size_t>& pixels) {
-  const CameraIntrinsics& K = frame.rgbd.K;
-  const auto fruit = static_cast<uint8_t>(SemanticClass::kFruit);
-  for (int v = 0; v < K.height; ++v) {
-    for (int u = 0; u < K.width; ++u) {
-      if (frame.class_ids.at(u, v) != fruit) continue;
-      const float d = frame.rgbd.depth_m.at(u, v);
-      if (!std::isfinite(d) || d <= 0.0f) continue;
-      const Eigen::Vector3d p_C((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
-      if (p_C.norm() > max_range_m) continue;
+      const uint16_t id = frame.instance_ids.at(u, v);
+      out.emplace_back(VoxelKey::FromPoint(p_W, voxel_size_m), id);
       uint8_t& mark = seen_by[static_cast<size_t>(v + rect.v0) * view_width + (u + rect.u0)];
       if (mark != 0) continue;
       mark = 1;
-      ++pixels[frame.instance_ids.at(u, v)];
+      ++pixels[id];
     }
   }
 }
@@ -370,8 +357,8 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
       pixels.clear();
       for (const PixelRect& rect : rects) {
         const sim::RenderedFrame frame = renderer.Render(Window(K_view, rect), view.X_WC);
-        CollectFruitVoxels(frame, options.voxel_size_m, options.max_range_m, out);
-        CountFruitPixels(frame, rect, K_view.width, options.max_range_m, seen_by, pixels);
+        CollectFruitVoxels(frame, rect, K_view.width, options.voxel_size_m, options.max_range_m,
+                           out, seen_by, pixels);
       }
       for (const PixelRect& rect : rects) ClearRect(rect, K_view.width, seen_by);
       for (const auto& [id, n] : pixels) {

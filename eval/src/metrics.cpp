@@ -148,6 +148,36 @@ SphereFit FitSphere(const std::vector<Eigen::Vector3d>& points) {
   return fit;
 }
 
+std::vector<VoxelKey> PredictedVoxels(const mapping::SemanticMap& map, SemanticClass target) {
+  std::vector<VoxelKey> predicted;
+  map.grid().ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& cell) {
+    if (cell.cls() == target && map.grid().State(k) == mapping::VoxelState::kOccupied) {
+      predicted.push_back(k);
+    }
+  });
+  std::sort(predicted.begin(), predicted.end());
+  return predicted;
+}
+
+std::vector<uint16_t> FoundFruitIds(const std::vector<VoxelKey>& predicted, const GroundTruth& gt,
+                                    const EvalOptions& options) {
+  const KeySet pred_set(predicted.begin(), predicted.end());
+  std::map<uint16_t, size_t>
+      recalled;  // GT voxels with a predicted voxel in their 26-neighbourhood
+  for (const auto& [k, id] : gt.voxels) {
+    if (HasNeighbour(pred_set, k, 1)) ++recalled[id];
+  }
+  std::vector<uint16_t> found;  // ascending: std::map's order
+  for (const auto& [id, hits] : recalled) {
+    const auto it = gt.voxels_per_fruit.find(id);
+    const size_t observable = it == gt.voxels_per_fruit.end() ? 0 : it->second;
+    const double needed = std::max(static_cast<double>(options.found_min_voxels),
+                                   options.found_min_fraction * static_cast<double>(observable));
+    if (observable > 0 && hits > 0 && static_cast<double>(hits) >= needed) found.push_back(id);
+  }
+  return found;
+}
+
 MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
                        const EvalOptions& options) {
   const Status valid = options.Validate();
@@ -172,12 +202,8 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
   m.exact = ScoreVoxelSets(predicted, gt, 0);
   m.tolerant = ScoreVoxelSets(predicted, gt, 1);
 
-  // ---- Fruits: recalled GT voxels and matched predicted voxels per fruit.
-  const KeySet pred_set(predicted.begin(), predicted.end());
-  std::map<uint16_t, size_t> recalled;
-  for (const auto& [k, id] : gt.voxels) {
-    if (HasNeighbour(pred_set, k, 1)) ++recalled[id];
-  }
+  // ---- Fruits: found ones (FoundFruitIds) and matched predicted voxels per fruit.
+  const std::vector<uint16_t> found_ids = FoundFruitIds(predicted, gt, options);
   std::map<uint16_t, std::vector<Eigen::Vector3d>> matched;
   for (const VoxelKey& k : predicted) {  // sorted: the fits see their points in a fixed order
     bool found = false;
@@ -194,11 +220,7 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
     const size_t observable = it == gt.voxels_per_fruit.end() ? 0 : it->second;
     if (observable == 0) continue;
     ++f.observable;
-    const auto r = recalled.find(fruit.instance_id);
-    const size_t hits = r == recalled.end() ? 0 : r->second;
-    const double needed = std::max(static_cast<double>(options.found_min_voxels),
-                                   options.found_min_fraction * static_cast<double>(observable));
-    if (hits == 0 || static_cast<double>(hits) < needed) continue;
+    if (!std::binary_search(found_ids.begin(), found_ids.end(), fruit.instance_id)) continue;
     ++f.found;
     const auto pts = matched.find(fruit.instance_id);
     if (pts == matched.end() || pts->second.empty()) continue;

@@ -33,14 +33,15 @@ OracleNbvPlanner::~OracleNbvPlanner() = default;
 
 std::unordered_set<VoxelKey, VoxelKeyHash> OracleNbvPlanner::NewVoxels(
     const mapping::SemanticMap& map, SemanticClass target, const CameraIntrinsics& Ks,
-    const RigidTransform& X_WC, sim::RenderedFrame* frame) const {
-  *frame = renderer_->Render(Ks, X_WC);
+    const RigidTransform& X_WC, std::unordered_map<uint16_t, size_t>* pixels) const {
+  const sim::RenderedFrame frame = renderer_->Render(Ks, X_WC);
   const double s = map.voxel_size_m();
   std::unordered_set<VoxelKey, VoxelKeyHash> seen;
   for (int v = 0; v < Ks.height; ++v) {
     for (int u = 0; u < Ks.width; ++u) {
-      const float z = frame->rgbd.depth_m.at(u, v);
+      const float z = frame.rgbd.depth_m.at(u, v);
       if (!(z > 0.0f)) continue;
+      if (pixels != nullptr) ++(*pixels)[frame.instance_ids.at(u, v)];
       const Eigen::Vector3d p_C = Ks.BackProject(Eigen::Vector2d(u, v), z);
       const VoxelKey k = VoxelKey::FromPoint(X_WC * p_C, s);
       if (gt_.voxels.count(k) == 0 || IsTarget(map, k, target)) continue;
@@ -52,33 +53,15 @@ std::unordered_set<VoxelKey, VoxelKeyHash> OracleNbvPlanner::NewVoxels(
 
 size_t OracleNbvPlanner::TrueGain(const mapping::SemanticMap& map, SemanticClass target,
                                   const CameraIntrinsics& K, const RigidTransform& X_WC) const {
-  sim::RenderedFrame frame;
-  return NewVoxels(map, target, K.Scaled(options_.render_scale), X_WC, &frame).size();
+  return NewVoxels(map, target, K.Scaled(options_.render_scale), X_WC, nullptr).size();
 }
 
 std::unordered_set<uint16_t> OracleNbvPlanner::FoundFruits(const mapping::SemanticMap& map,
                                                            SemanticClass target) const {
-  std::unordered_map<uint16_t, size_t> recalled;
-  for (const auto& [k, id] : gt_.voxels) {
-    bool hit = false;
-    for (int dz = -1; dz <= 1 && !hit; ++dz) {
-      for (int dy = -1; dy <= 1 && !hit; ++dy) {
-        for (int dx = -1; dx <= 1 && !hit; ++dx) {
-          hit = IsTarget(map, {k.x + dx, k.y + dy, k.z + dz}, target);
-        }
-      }
-    }
-    if (hit) ++recalled[id];
-  }
-  std::unordered_set<uint16_t> found;
-  for (const auto& [id, hits] : recalled) {
-    const auto it = gt_.voxels_per_fruit.find(id);
-    const size_t observable = it == gt_.voxels_per_fruit.end() ? 0 : it->second;
-    const double needed = std::max(static_cast<double>(options_.found_min_voxels),
-                                   options_.found_min_fraction * static_cast<double>(observable));
-    if (static_cast<double>(hits) >= needed) found.insert(id);
-  }
-  return found;
+  EvalOptions rule = options_.found_rule;
+  rule.target = target;
+  const std::vector<uint16_t> ids = FoundFruitIds(PredictedVoxels(map, target), gt_, rule);
+  return {ids.begin(), ids.end()};
 }
 
 double OracleNbvPlanner::ExpectedDetectionGain(const mapping::SemanticMap& map,
@@ -86,16 +69,11 @@ double OracleNbvPlanner::ExpectedDetectionGain(const mapping::SemanticMap& map,
                                                const RigidTransform& X_WC,
                                                const std::unordered_set<uint16_t>& found) const {
   const CameraIntrinsics Ks = K.Scaled(options_.render_scale);
-  sim::RenderedFrame frame;
-  const std::unordered_set<VoxelKey, VoxelKeyHash> fresh = NewVoxels(map, target, Ks, X_WC, &frame);
+  std::unordered_map<uint16_t, size_t> pixels;  // per instance id, pixels with a return
+  const std::unordered_set<VoxelKey, VoxelKeyHash> fresh =
+      NewVoxels(map, target, Ks, X_WC, &pixels);
   std::unordered_map<uint16_t, size_t> new_of;
   for (const VoxelKey& k : fresh) ++new_of[gt_.voxels.at(k)];
-  std::unordered_map<uint16_t, size_t> pixels;
-  for (int v = 0; v < Ks.height; ++v) {
-    for (int u = 0; u < Ks.width; ++u) {
-      if (frame.rgbd.depth_m.at(u, v) > 0.0f) ++pixels[frame.instance_ids.at(u, v)];
-    }
-  }
   // Pixels at full resolution: the render has render_scale^2 of them.
   const double to_full =
       static_cast<double>(K.width) * K.height / (static_cast<double>(Ks.width) * Ks.height);

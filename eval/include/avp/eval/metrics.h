@@ -81,6 +81,15 @@ struct MapMetrics {
   size_t roi_known_voxels = 0;
 };
 
+/// The prediction EvaluateMap scores: the occupied voxels labelled `target`, ascending.
+std::vector<VoxelKey> PredictedVoxels(const mapping::SemanticMap& map, SemanticClass target);
+
+/// The ids (ascending) of the GT fruits that `predicted` finds by EvalOptions' rule: at least one
+/// and at least max(found_min_voxels, found_min_fraction x observable) of the fruit's GT voxels
+/// with a predicted voxel in their 26-neighbourhood. FruitScores::found counts them.
+std::vector<uint16_t> FoundFruitIds(const std::vector<VoxelKey>& predicted, const GroundTruth& gt,
+                                    const EvalOptions& options);
+
 /// Scores a map against a ground truth. Predicted voxels: labelled `options.target` and occupied.
 /// @throws avp::Error if the options are invalid or the map's voxel size differs from gt's.
 MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,

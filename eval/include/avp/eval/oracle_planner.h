@@ -3,10 +3,12 @@
 #include <limits>
 #include <memory>
 #include <string_view>
+#include <unordered_map>
 #include <unordered_set>
 #include <vector>
 
 #include <avp/eval/ground_truth.h>
+#include <avp/eval/metrics.h>
 #include <avp/planning/candidates.h>
 #include <avp/planning/view_planner.h>
 #include <avp/segmentation/oracle_segmenter.h>
@@ -39,9 +41,9 @@ struct OracleNbvOptions {
   bool observation_view_candidates = false;
   /// The detector model of kDetections: p_det(v) and min_pixels (the segmenter's options).
   segmentation::OracleOptions detector;
-  /// The "found" rule of kDetections, as EvalOptions::found_min_voxels / found_min_fraction.
-  size_t found_min_voxels = 3;
-  double found_min_fraction = 0.10;
+  /// The "found" rule of kDetections (FoundFruitIds with these options' found_min_voxels and
+  /// found_min_fraction; the target class is the request's).
+  EvalOptions found_rule;
   /// The candidates are rendered at this fraction of the camera's resolution (field of view
   /// kept): 0.25 renders 160 x 120 for a 640 x 480 camera.
   double render_scale = 0.25;
@@ -78,20 +80,16 @@ class OracleNbvPlanner final : public planning::ViewPlanner {
                                const CameraIntrinsics& K, const RigidTransform& X_WC,
                                const std::unordered_set<uint16_t>& found) const;
 
-  /// The fruits `map` has found by EvalOptions' rule: at least max(found_min_voxels,
-  /// found_min_fraction x observable) ground-truth voxels with an occupied `target` voxel within
-  /// one voxel (26-neighbourhood).
+  /// The fruits `map` has found: FoundFruitIds of its PredictedVoxels under found_rule.
   std::unordered_set<uint16_t> FoundFruits(const mapping::SemanticMap& map,
                                            SemanticClass target) const;
 
  private:
-  /// Ground-truth voxels the view sees that `map` does not hold as occupied `target`, and the
-  /// rendered frame.
-  std::unordered_set<VoxelKey, VoxelKeyHash> NewVoxels(const mapping::SemanticMap& map,
-                                                       SemanticClass target,
-                                                       const CameraIntrinsics& Ks,
-                                                       const RigidTransform& X_WC,
-                                                       sim::RenderedFrame* frame) const;
+  /// Ground-truth voxels the view (rendered with Ks) sees that `map` does not hold as occupied
+  /// `target`; with `pixels`, also counts the render's pixels with a return per instance id.
+  std::unordered_set<VoxelKey, VoxelKeyHash> NewVoxels(
+      const mapping::SemanticMap& map, SemanticClass target, const CameraIntrinsics& Ks,
+      const RigidTransform& X_WC, std::unordered_map<uint16_t, size_t>* pixels) const;
 
   const GroundTruth& gt_;
   OracleNbvOptions options_;
