@@ -1,0 +1,100 @@
+#include <map>
+#include <string>
+
+#include <fmt/format.h>
+
+#include <avp/io/options_yaml.h>
+
+namespace avp::io {
+
+namespace {
+
+/// Sets `value` at the dotted `key` below `map`, creating the maps on the way. (A YAML::Node
+/// variable is never re-assigned: yaml-cpp's Node::operator= writes through to the node it refers
+/// to.)
+void Insert(YAML::Node map, std::string_view key, const YAML::Node& value) {
+  const size_t dot = key.find('.');
+  if (dot == std::string_view::npos) {
+    map[std::string(key)] = value;
+    return;
+  }
+  const std::string head(key.substr(0, dot));
+  if (!map[head]) map[head] = YAML::Node(YAML::NodeType::Map);
+  Insert(map[head], key.substr(dot + 1), value);
+}
+
+YAML::Node Scalar(const std::string& value, OptionKind kind) {
+  if (kind == OptionKind::kRealList) {
+    YAML::Node list(YAML::NodeType::Sequence);
+    for (const std::string& item : options_internal::SplitList(value)) list.push_back(item);
+    list.SetStyle(YAML::EmitterStyle::Flow);
+    return list;
+  }
+  return YAML::Node(value);
+}
+
+Status Flatten(const YAML::Node& node, const std::string& prefix, std::string_view context,
+               OptionValues& out) {
+  for (const auto& kv : node) {
+    const std::string key = prefix + kv.first.as<std::string>();
+    const YAML::Node& v = kv.second;
+    if (v.IsMap()) {
+      AVP_RETURN_IF_ERROR(Flatten(v, key + ".", context, out));
+    } else if (v.IsSequence()) {
+      std::vector<std::string> items;
+      for (const YAML::Node& item : v) {
+        if (!item.IsScalar()) {
+          return InvalidArgumentError(
+              fmt::format("{}: '{}' must be a list of numbers or names", context, key));
+        }
+        items.push_back(item.Scalar());
+      }
+      out.emplace_back(key, options_internal::Join(items, ","));
+    } else if (v.IsNull()) {
+      out.emplace_back(key, "");
+    } else {
+      out.emplace_back(key, v.Scalar());
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+YAML::Node OptionsToYaml(const OptionValues& values, const std::vector<OptionInfo>& info) {
+  std::map<std::string, OptionKind> kinds;
+  for (const OptionInfo& i : info) kinds[i.key] = i.kind;
+  YAML::Node root(YAML::NodeType::Map);
+  for (const auto& [key, value] : values) {
+    const auto kind = kinds.find(key);
+    Insert(root, key, Scalar(value, kind == kinds.end() ? OptionKind::kText : kind->second));
+  }
+  return root;
+}
+
+Result<OptionValues> FlattenYaml(const YAML::Node& node, std::string_view context) {
+  OptionValues out;
+  if (!node.IsDefined() || node.IsNull()) return out;
+  if (!node.IsMap()) {
+    return InvalidArgumentError(fmt::format("{}: expected a map of option: value", context));
+  }
+  AVP_RETURN_IF_ERROR(Flatten(node, "", context, out));
+  return out;
+}
+
+Status ReadOptionsYaml(AnyOptions& options, const YAML::Node& node, std::string_view context,
+                       std::string_view component) {
+  AVP_ASSIGN_OR_RETURN(const OptionValues values, FlattenYaml(node, context));
+  for (const auto& [key, value] : values) {
+    if (Status s = options.Set(key, value, component); !s.ok()) return s.WithContext(context);
+  }
+  return Status::Ok();
+}
+
+std::string YamlText(const YAML::Node& node) {
+  YAML::Emitter out;
+  out << node;
+  return std::string(out.c_str()) + "\n";
+}
+
+}  // namespace avp::io
