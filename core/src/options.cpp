@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -115,6 +116,20 @@ Status AnyOptions::Set(std::string_view key, std::string_view value, std::string
 Status AnyOptions::SetAll(const OptionValues& values, std::string_view component) {
   for (const auto& [key, value] : values) AVP_RETURN_IF_ERROR(Set(key, value, component));
   return Status::Ok();
+}
+
+std::string FormatOptionHelp(const std::vector<OptionInfo>& info, std::string_view indent) {
+  size_t width = 0;
+  for (const OptionInfo& i : info)
+    width = std::max(width, i.key.size() + 1 + i.default_value.size());
+  std::string out;
+  for (const OptionInfo& i : info) {
+    std::string bounds = i.unit;
+    if (!i.range.empty()) bounds += (bounds.empty() ? "" : ", ") + i.range;
+    out += fmt::format("{}{:<{}}  {}{}\n", indent, i.key + "=" + i.default_value, width + 1,
+                       bounds.empty() ? "" : "[" + bounds + "]  ", i.doc);
+  }
+  return out;
 }
 
 Result<OptionValues> ParseKeyValues(const std::vector<std::string>& items, std::string_view what) {

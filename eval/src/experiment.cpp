@@ -12,6 +12,7 @@
 #include <avp/planning/avp_nbv_planner.h>
 #include <avp/planning/isler_utilities.h>
 #include <avp/planning/predefined_planner.h>
+#include <avp/planning/random_planner.h>
 #include <avp/planning/reference_nbv_planner.h>
 #include <avp/robot/arm.h>
 #include <avp/robot/arm_model.h>
@@ -60,7 +61,7 @@ Result<planning::AvpNbvOptions> AvpNbvOptionsFor(const RunConfig& config) {
   o.num_threads = config.threads;
   o.candidates.num_threads = config.threads;
   for (const auto& [key, value] : config.planner_options) {
-    AVP_RETURN_IF_ERROR(planning::SetAvpNbvOption(o, key, value));
+    AVP_RETURN_IF_ERROR(planning::AvpNbvOptionTable().Set(o, key, value));
   }
   AVP_RETURN_IF_ERROR(o.Validate());
   return o;

@@ -35,18 +35,27 @@ std::optional<FreeSpaceCarving> FreeSpaceCarvingFromString(std::string_view name
   return std::nullopt;
 }
 
-Status IntegratorOptions::Validate() const {
-  std::vector<std::string> errors;
-  if (!std::isfinite(max_range_m) || max_range_m <= 0.0 || max_range_m > 100.0) {
-    errors.push_back(fmt::format("max_range_m ({}) must be in (0, 100]", max_range_m));
-  }
-  if (num_threads < 0 || num_threads > 256) {
-    errors.push_back(fmt::format("num_threads ({}) must be in [0, 256]", num_threads));
-  }
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError("invalid integrator options: " +
-                              fmt::format("{}", fmt::join(errors, "; ")));
+const OptionTable<IntegratorOptions>& IntegratorOptionTable() {
+  static const auto* table = [] {
+    auto* t = new OptionTable<IntegratorOptions>("integrator option");
+    t->Real("max_range_m", &IntegratorOptions::max_range_m, "m", ValueRange::LeftOpen(0, 100),
+            "returns beyond it carve free space up to it and mark no endpoint");
+    t->Choice("carving", &IntegratorOptions::carving,
+              {{FreeSpaceCarving::kProjective, "projective"},
+               {FreeSpaceCarving::kRayCast, "raycast"},
+               {FreeSpaceCarving::kNone, "none"}},
+              "how free space is carved (docs/mapping.md)");
+    t->AddRule([](const IntegratorOptions& o, std::vector<std::string>& errors) {
+      if (o.num_threads < 0 || o.num_threads > 256) {
+        errors.push_back(fmt::format("num_threads ({}) must be in [0, 256]", o.num_threads));
+      }
+    });
+    return t;
+  }();
+  return *table;
 }
+
+Status IntegratorOptions::Validate() const { return IntegratorOptionTable().Validate(*this); }
 
 std::string IntegrationStats::ToString() const {
   return fmt::format(

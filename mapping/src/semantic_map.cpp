@@ -2,9 +2,16 @@
 
 namespace avp::mapping {
 
-Status MapOptions::Validate() const {
-  if (Status s = grid.Validate(); !s.ok()) return s;
-  return semantics.Validate();
+const OptionTable<MapOptions>& MapOptionTable() {
+  static const auto* table = [] {
+    auto* t = new OptionTable<MapOptions>("map option");
+    t->Nested("grid", &MapOptions::grid, GridOptionTable());
+    t->Nested("semantics", &MapOptions::semantics, SemanticOptionTable());
+    return t;
+  }();
+  return *table;
 }
+
+Status MapOptions::Validate() const { return MapOptionTable().Validate(*this); }
 
 }  // namespace avp::mapping

@@ -110,52 +110,49 @@ std::optional<FusionPolicy> FusionPolicyFromString(std::string_view name) {
   return std::nullopt;
 }
 
-Status SemanticOptions::Validate() const {
-  std::vector<std::string> errors;
-  auto require = [&](bool ok, std::string message) {
-    if (!ok) errors.push_back(std::move(message));
-  };
-  require(policy == FusionPolicy::kReferenceMax || policy == FusionPolicy::kBayesian,
-          fmt::format("policy ({}) must be reference-max (0) or bayesian (1)",
-                      static_cast<int>(policy)));
-  require(std::isfinite(reference_penalty) && reference_penalty > 0.0f && reference_penalty <= 1.0f,
-          fmt::format("reference_penalty ({}) must be in (0, 1]", reference_penalty));
-  require(std::isfinite(class_log_odds_min) && class_log_odds_min >= -kMaxAbsClassLogOdds &&
-              class_log_odds_min < 0.0f,
-          fmt::format("class_log_odds_min ({}) must be in [-{}, 0)", class_log_odds_min,
-                      kMaxAbsClassLogOdds));
-  require(std::isfinite(class_log_odds_max) && class_log_odds_max > 0.0f &&
-              class_log_odds_max <= kMaxAbsClassLogOdds,
-          fmt::format("class_log_odds_max ({}) must be in (0, {}]", class_log_odds_max,
-                      kMaxAbsClassLogOdds));
-  require(std::isfinite(miss_log_odds) && miss_log_odds >= 0.0f &&
-              miss_log_odds <= 2.0f * kMaxAbsClassLogOdds,
-          fmt::format("miss_log_odds ({}) must be in [0, {}]", miss_log_odds,
-                      2.0f * kMaxAbsClassLogOdds));
-  require(std::isfinite(label_threshold) && label_threshold > 0.0f && label_threshold <= 1.0f,
-          fmt::format("label_threshold ({}) must be in (0, 1]", label_threshold));
-  require(std::isfinite(score_epsilon) && score_epsilon > 0.0f && score_epsilon < 0.5f,
-          fmt::format("score_epsilon ({}) must be in (0, 0.5)", score_epsilon));
-  require(std::isfinite(instance_join_fraction) && instance_join_fraction > 0.0f &&
-              instance_join_fraction <= 1.0f,
-          fmt::format("instance_join_fraction ({}) must be in (0, 1]", instance_join_fraction));
-  require(std::isfinite(instance_min_overlap_fraction) && instance_min_overlap_fraction > 0.0f &&
-              instance_min_overlap_fraction <= 1.0f,
-          fmt::format("instance_min_overlap_fraction ({}) must be in (0, 1]",
-                      instance_min_overlap_fraction));
-  require(std::isfinite(instance_merge_fraction) && instance_merge_fraction > 0.0f &&
-              instance_merge_fraction <= 1.0f,
-          fmt::format("instance_merge_fraction ({}) must be in (0, 1]", instance_merge_fraction));
-  require(std::isfinite(instance_merge_max_separation) && instance_merge_max_separation >= 0.0f,
-          fmt::format("instance_merge_max_separation ({}) must be finite and >= 0",
-                      instance_merge_max_separation));
-  require(instance_flip_frames >= 1 && instance_flip_frames <= 3,
-          fmt::format("instance_flip_frames ({}) must be in [1, 3]", instance_flip_frames));
-  require(outlier_min_neighbours >= 0 && outlier_min_neighbours <= 26,
-          fmt::format("outlier_min_neighbours ({}) must be in [0, 26]", outlier_min_neighbours));
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError(fmt::format("invalid semantic options: {}", fmt::join(errors, "; ")));
+const OptionTable<SemanticOptions>& SemanticOptionTable() {
+  static const auto* table = [] {
+    auto* t = new OptionTable<SemanticOptions>("semantic option");
+    const ValueRange fraction = ValueRange::LeftOpen(0, 1);
+    t->Choice(
+        "policy", &SemanticOptions::policy,
+        {{FusionPolicy::kReferenceMax, "reference-max"}, {FusionPolicy::kBayesian, "bayesian"}},
+        "how a voxel's evidence is combined over frames (docs/mapping-semantics.md)");
+    t->Real("reference_penalty", &SemanticOptions::reference_penalty, "", fraction,
+            "reference-max: the conflict and first-observation factor");
+    t->Real("class_log_odds_min", &SemanticOptions::class_log_odds_min, "",
+            ValueRange::HalfOpen(-kMaxAbsClassLogOdds, 0), "bayesian: lower clamp of a class");
+    t->Real("class_log_odds_max", &SemanticOptions::class_log_odds_max, "",
+            ValueRange::LeftOpen(0, kMaxAbsClassLogOdds), "bayesian: upper clamp of a class");
+    t->Real("miss_log_odds", &SemanticOptions::miss_log_odds, "",
+            ValueRange::Closed(0, 2.0 * kMaxAbsClassLogOdds),
+            "bayesian: what an endpoint outside every mask takes from each class");
+    t->Real("label_threshold", &SemanticOptions::label_threshold, "", fraction,
+            "bayesian: posterior at which a voxel takes its best class");
+    t->Real("score_epsilon", &SemanticOptions::score_epsilon, "", ValueRange::Open(0, 0.5),
+            "bayesian: mask scores are clamped to [eps, 1 - eps]");
+    t->Real("instance_join_fraction", &SemanticOptions::instance_join_fraction, "", fraction,
+            "share of a mask's labelled votes that joins it to an instance");
+    t->Real("instance_min_overlap_fraction", &SemanticOptions::instance_min_overlap_fraction, "",
+            fraction, "share of all the mask's voxels an instance must hold to be joined");
+    t->Real("instance_merge_fraction", &SemanticOptions::instance_merge_fraction, "", fraction,
+            "share of each instance one mask must cover to merge them");
+    t->Real("instance_merge_max_separation", &SemanticOptions::instance_merge_max_separation, "",
+            ValueRange::AtLeast(0),
+            "largest centroid distance of a merge, in sums of radii of gyration (0: no merging)");
+    t->Integer("instance_flip_frames", &SemanticOptions::instance_flip_frames, "",
+               ValueRange::Closed(1, 3), "frames of contest before a voxel changes instance");
+    t->Integer("outlier_min_neighbours", &SemanticOptions::outlier_min_neighbours, "",
+               ValueRange::Closed(0, 26),
+               "labelled 26-neighbours a label needs to survive outlier removal (0: off)");
+    t->Flag("remove_outliers_each_frame", &SemanticOptions::remove_outliers_each_frame,
+            "remove outliers after every fused frame");
+    return t;
+  }();
+  return *table;
 }
+
+Status SemanticOptions::Validate() const { return SemanticOptionTable().Validate(*this); }
 
 // ---- Per-cell fusion ----------------------------------------------------------------------------
 

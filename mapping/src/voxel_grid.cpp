@@ -23,22 +23,28 @@ std::string_view ToString(VoxelState state) {
   return "invalid";
 }
 
-Status GridOptions::Validate() const {
-  std::vector<std::string> errors;
-  if (!std::isfinite(voxel_size_m) || voxel_size_m < kMinVoxelSize - 1e-12 ||
-      voxel_size_m > kMaxVoxelSize + 1e-12) {
-    errors.push_back(fmt::format("voxel_size_m ({}) must be in [{}, {}]", voxel_size_m,
-                                 kMinVoxelSize, kMaxVoxelSize));
-  }
-  if (roi.has_value()) {
-    if (roi->IsEmpty() || !roi->min().allFinite() || !roi->max().allFinite()) {
-      errors.push_back(fmt::format("roi ({}) must be a finite, non-empty box", roi->ToString()));
-    }
-  }
-  if (Status s = sensor.Validate(); !s.ok()) errors.push_back(s.message());
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError("invalid map options: " + fmt::format("{}", fmt::join(errors, "; ")));
+ValueRange VoxelSizeRange() {
+  return ValueRange::Closed(GridOptions::kMinVoxelSize, GridOptions::kMaxVoxelSize);
 }
+
+const OptionTable<GridOptions>& GridOptionTable() {
+  static const auto* table = [] {
+    auto* t = new OptionTable<GridOptions>("map grid option");
+    t->Real("voxel_size_m", &GridOptions::voxel_size_m, "m", VoxelSizeRange(), "voxel edge");
+    t->Nested("sensor", &GridOptions::sensor, SensorModelTable());
+    t->AddRule([](const GridOptions& o, std::vector<std::string>& errors) {
+      if (o.roi.has_value() &&
+          (o.roi->IsEmpty() || !o.roi->min().allFinite() || !o.roi->max().allFinite())) {
+        errors.push_back(
+            fmt::format("roi ({}) must be a finite, non-empty box", o.roi->ToString()));
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
+Status GridOptions::Validate() const { return GridOptionTable().Validate(*this); }
 
 OccupancyGrid::OccupancyGrid(const GridOptions& options) : options_(options) {
   const Status s = options.Validate();

@@ -434,7 +434,7 @@ TEST(IntegratorTest, OptionsValidation) {
   EXPECT_TRUE(IntegratorOptions{}.Validate().ok());
   IntegratorOptions o;
   o.max_range_m = 0.0;
-  EXPECT_THAT(o.Validate().message(), HasSubstr("max_range_m (0)"));
+  EXPECT_THAT(o.Validate().message(), HasSubstr("max_range_m (0 m)"));
   o.max_range_m = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THAT(o.Validate().message(), HasSubstr("max_range_m (nan)"));
   o = {};

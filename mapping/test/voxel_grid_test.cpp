@@ -51,13 +51,13 @@ TEST(GridOptionsTest, ErrorsNameTheBadValue) {
   };
   GridOptions o;
   o.voxel_size_m = 0.001;
-  EXPECT_THAT(message(o), HasSubstr("voxel_size_m (0.001)"));
+  EXPECT_THAT(message(o), HasSubstr("voxel_size_m (0.001 m)"));
   o.voxel_size_m = 0.025;
-  EXPECT_THAT(message(o), HasSubstr("voxel_size_m (0.025)"));
+  EXPECT_THAT(message(o), HasSubstr("voxel_size_m (0.025 m)"));
   o.voxel_size_m = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THAT(message(o), HasSubstr("voxel_size_m (nan)"));
   o.voxel_size_m = -0.005;
-  EXPECT_THAT(message(o), HasSubstr("voxel_size_m (-0.005)"));
+  EXPECT_THAT(message(o), HasSubstr("voxel_size_m (-0.005 m)"));
 
   GridOptions bad_sensor;
   bad_sensor.sensor.hit = 0.45;  // below the occupancy threshold
@@ -71,7 +71,7 @@ TEST(GridOptionsTest, ErrorsNameTheBadValue) {
   both.voxel_size_m = 0.03;
   both.sensor.miss = 0.6;
   const std::string m = message(both);
-  EXPECT_THAT(m, HasSubstr("voxel_size_m (0.03)"));
+  EXPECT_THAT(m, HasSubstr("voxel_size_m (0.03 m)"));
   EXPECT_THAT(m, HasSubstr("miss (0.6)"));
 
   GridOptions empty_roi;

@@ -199,161 +199,76 @@ bool ClipRayToRoi(const Eigen::Vector3d& from, const Eigen::Vector3d& to, const 
 
 }  // namespace
 
-Status AvpNbvOptions::Validate() const {
-  std::vector<std::string> errors;
-  if (ray_stride_px < 1 || ray_stride_px > 256) {
-    errors.push_back(fmt::format("ray stride ({} px) must be in [1, 256]", ray_stride_px));
-  }
-  if (!(max_range_m > 0.0 && max_range_m <= 10.0)) {
-    errors.push_back(fmt::format("max range ({} m) must be in (0, 10]", max_range_m));
-  }
-  if (!(p_unknown >= 0.0 && p_unknown < 1.0)) {
-    errors.push_back(fmt::format("p_unknown ({}) must be in [0, 1)", p_unknown));
-  }
-  if (!(p_unknown_outside_roi >= 0.0 && p_unknown_outside_roi < 1.0)) {
-    errors.push_back(
-        fmt::format("p_unknown_outside_roi ({}) must be in [0, 1)", p_unknown_outside_roi));
-  }
-  for (const auto& [name, w] : {std::pair{"w_target_entropy", w_target_entropy},
-                                {"w_unknown_near_target", w_unknown_near_target},
-                                {"w_predicted_target", w_predicted_target},
-                                {"w_unknown_roi", w_unknown_roi},
-                                {"w_motion", w_motion},
-                                {"roi_axis_sigma_m", roi_axis_sigma_m},
-                                {"unknown_occlusion_sigma_m", unknown_occlusion_sigma_m},
-                                {"range_weight_ref_m", range_weight_ref_m},
-                                {"min_gain_range_m", min_gain_range_m},
-                                {"occlusion_voxel_size_m", occlusion_voxel_size_m},
-                                {"w_diversity", w_diversity},
-                                {"diversity_m", diversity_m},
-                                {"min_gain_bits", min_gain_bits}}) {
-    if (!(std::isfinite(w) && w >= 0.0)) {
-      errors.push_back(fmt::format("{} ({}) must be finite and >= 0", name, w));
-    }
-  }
-  if (coarse_ray_stride_px != 0 &&
-      (coarse_ray_stride_px < ray_stride_px || coarse_ray_stride_px > 256)) {
-    errors.push_back(
-        fmt::format("coarse ray stride ({} px) must be 0 (off) or in [ray stride ({} px), 256]",
-                    coarse_ray_stride_px, ray_stride_px));
-  }
-  if (refine_top < 1) errors.push_back(fmt::format("refine_top ({}) must be >= 1", refine_top));
-  if (num_threads < 0) errors.push_back(fmt::format("threads ({}) must be >= 0", num_threads));
-  if (candidates.radii_m.empty() || candidates.elevations_deg.empty() ||
-      candidates.max_candidates < 1 || candidates.max_targets < 1) {
-    errors.push_back("the candidate shells are empty (radii, elevations, max candidates, targets)");
-  }
-  for (double e : candidates.elevations_deg) {
-    if (!(e > -89.0 && e < 89.0))
-      errors.push_back(fmt::format("elevation ({} deg) must be in (-89, 89)", e));
-  }
-  if (!(candidates.azimuth_half_range_deg >= 0.0 && candidates.azimuth_half_range_deg <= 180.0)) {
-    errors.push_back(fmt::format("azimuth half range ({} deg) must be in [0, 180]",
-                                 candidates.azimuth_half_range_deg));
-  }
-  if (!(candidates.plant_core_radius_m >= 0.0 && candidates.plant_core_radius_m < 2.0)) {
-    errors.push_back(
-        fmt::format("plant core radius ({} m) must be in [0, 2)", candidates.plant_core_radius_m));
-  }
-  if (!(candidates.clearance_m >= 0.0 && candidates.clearance_m < 0.5)) {
-    errors.push_back(fmt::format("clearance ({} m) must be in [0, 0.5)", candidates.clearance_m));
-  }
-  for (double r : candidates.radii_m) {
-    if (!(r > 0.05 && r < 3.0))
-      errors.push_back(fmt::format("shell radius ({} m) must be in (0.05, 3)", r));
-  }
-  if (errors.empty()) return Status::Ok();
-  std::string joined;
-  for (const std::string& e : errors) joined += (joined.empty() ? "" : "; ") + e;
-  return InvalidArgumentError("invalid avp-nbv options: " + joined);
+const OptionTable<AvpNbvOptions>& AvpNbvOptionTable() {
+  static const auto* table = [] {
+    using O = AvpNbvOptions;
+    auto* t = new OptionTable<O>("avp-nbv option");
+    const ValueRange weight = ValueRange::AtLeast(0);
+    t->Integer("ray_stride_px", &O::ray_stride_px, "px", ValueRange::Closed(1, 256),
+               "a ray through every stride-th pixel (the fine scoring)");
+    t->Integer("coarse_ray_stride_px", &O::coarse_ray_stride_px, "px", ValueRange::Closed(0, 256),
+               "coarse scoring of every candidate (0: off); at least ray_stride_px");
+    t->Integer("refine_top", &O::refine_top, "", ValueRange::AtLeast(1),
+               "candidates scored again with the fine rays");
+    t->Real("max_range_m", &O::max_range_m, "m", ValueRange::LeftOpen(0, 10), "ray length");
+    t->Real("p_unknown", &O::p_unknown, "", ValueRange::HalfOpen(0, 1),
+            "occlusion of an unknown ROI voxel at the plant's core, per occlusion voxel");
+    t->Real("p_unknown_outside_roi", &O::p_unknown_outside_roi, "", ValueRange::HalfOpen(0, 1),
+            "occlusion of an unknown voxel outside the ROI, per occlusion voxel");
+    t->Real("occlusion_voxel_size_m", &O::occlusion_voxel_size_m, "m", weight,
+            "voxel edge the occlusion probabilities are given for (0: the map's)");
+    t->Real("unknown_occlusion_sigma_m", &O::unknown_occlusion_sigma_m, "m", weight,
+            "fall-off of the occlusion away from the plant's core (0: flat)");
+    t->Real("w_target_entropy", &O::w_target_entropy, "", weight,
+            "weight of a target voxel's semantic entropy");
+    t->Real("w_predicted_target", &O::w_predicted_target, "", weight,
+            "weight of an unknown voxel on a detected fruit's predicted surface");
+    t->Real("w_unknown_near_target", &O::w_unknown_near_target, "", weight,
+            "weight of an unknown voxel near a target voxel");
+    t->Real("w_unknown_roi", &O::w_unknown_roi, "", weight,
+            "weight of any other unknown ROI voxel at the plant's core");
+    t->Real("roi_axis_sigma_m", &O::roi_axis_sigma_m, "m", weight,
+            "fall-off of w_unknown_roi away from the plant's core (0: flat)");
+    t->Real("range_weight_ref_m", &O::range_weight_ref_m, "m", weight,
+            "range weighting (d / ref)^2 of each contribution (0: off)");
+    t->Real("min_gain_range_m", &O::min_gain_range_m, "m", weight,
+            "voxels closer than this to the camera add nothing");
+    t->Real("w_motion", &O::w_motion, "", weight, "weight of the joint-space motion cost");
+    t->Real("w_diversity", &O::w_diversity, "", weight,
+            "weight of the distance to the nearest fused view");
+    t->Real("diversity_m", &O::diversity_m, "m", weight, "distance at which diversity saturates");
+    t->Real("min_gain_bits", &O::min_gain_bits, "bits", weight,
+            "stop when the best expected gain is below this (0: never)");
+    t->Nested("candidates", &O::candidates, ShellCandidateOptionTable());
+    t->Nested("grid", &O::grid, GainGridOptionTable());
+    t->AddRule([](const O& o, std::vector<std::string>& problems) {
+      if (o.coarse_ray_stride_px != 0 && o.coarse_ray_stride_px < o.ray_stride_px) {
+        problems.push_back(
+            fmt::format("coarse_ray_stride_px ({} px) must be 0 (off) or >= ray_stride_px ({} px)",
+                        o.coarse_ray_stride_px, o.ray_stride_px));
+      }
+      if (o.num_threads < 0) {
+        problems.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
+Status AvpNbvOptions::Validate() const { return AvpNbvOptionTable().Validate(*this); }
+
+PlannerEntry AvpNbvPlannerEntry() {
+  return MakePlannerEntry<AvpNbvOptions>(
+      "avp-nbv", "avp's occlusion-aware next-best view (docs/planning.md)", AvpNbvOptionTable(),
+      AvpNbvOptions{}, [](AvpNbvOptions o, const PlannerContext& c) {
+        o.num_threads = c.threads;
+        o.candidates.num_threads = c.threads;
+        return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<AvpNbvPlanner>(o));
+      });
 }
 
 namespace {
-
-/// The settable fields of AvpNbvOptions by name (SetAvpNbvOption).
-struct OptionField {
-  enum class Kind { kReal, kCount, kFlag, kRange } kind;
-  double AvpNbvOptions::*real = nullptr;
-  int AvpNbvOptions::*count = nullptr;
-  double ShellCandidateOptions::*shell_real = nullptr;
-  int ShellCandidateOptions::*shell_count = nullptr;
-  std::vector<double> ShellCandidateOptions::*shell_range = nullptr;
-  double GainGridOptions::*grid_real = nullptr;
-  bool GainGridOptions::*grid_flag = nullptr;
-};
-
-const std::map<std::string, OptionField, std::less<>>& OptionFields() {
-  using K = OptionField::Kind;
-  static const auto* fields = [] {
-    auto* m = new std::map<std::string, OptionField, std::less<>>;
-    auto real = [&](const char* n, double AvpNbvOptions::*f) { (*m)[n] = {K::kReal, f}; };
-    auto count = [&](const char* n, int AvpNbvOptions::*f) { (*m)[n] = {K::kCount, nullptr, f}; };
-    real("max_range_m", &AvpNbvOptions::max_range_m);
-    real("p_unknown", &AvpNbvOptions::p_unknown);
-    real("p_unknown_outside_roi", &AvpNbvOptions::p_unknown_outside_roi);
-    real("occlusion_voxel_size_m", &AvpNbvOptions::occlusion_voxel_size_m);
-    real("unknown_occlusion_sigma_m", &AvpNbvOptions::unknown_occlusion_sigma_m);
-    real("w_target_entropy", &AvpNbvOptions::w_target_entropy);
-    real("w_predicted_target", &AvpNbvOptions::w_predicted_target);
-    real("w_unknown_near_target", &AvpNbvOptions::w_unknown_near_target);
-    real("w_unknown_roi", &AvpNbvOptions::w_unknown_roi);
-    real("roi_axis_sigma_m", &AvpNbvOptions::roi_axis_sigma_m);
-    real("range_weight_ref_m", &AvpNbvOptions::range_weight_ref_m);
-    real("min_gain_range_m", &AvpNbvOptions::min_gain_range_m);
-    real("w_motion", &AvpNbvOptions::w_motion);
-    real("w_diversity", &AvpNbvOptions::w_diversity);
-    real("diversity_m", &AvpNbvOptions::diversity_m);
-    real("min_gain_bits", &AvpNbvOptions::min_gain_bits);
-    count("ray_stride_px", &AvpNbvOptions::ray_stride_px);
-    count("coarse_ray_stride_px", &AvpNbvOptions::coarse_ray_stride_px);
-    count("refine_top", &AvpNbvOptions::refine_top);
-    OptionField f{};
-    f.kind = K::kReal;
-    for (const auto& [n, p] :
-         {std::pair{"azimuth_half_range_deg", &ShellCandidateOptions::azimuth_half_range_deg},
-          {"clearance_m", &ShellCandidateOptions::clearance_m},
-          {"plant_core_radius_m", &ShellCandidateOptions::plant_core_radius_m}}) {
-      f.shell_real = p;
-      (*m)[std::string("candidates.") + n] = f;
-    }
-    f = {};
-    f.kind = K::kCount;
-    for (const auto& [n, p] : {std::pair{"max_targets", &ShellCandidateOptions::max_targets},
-                               {"max_candidates", &ShellCandidateOptions::max_candidates},
-                               {"ik_restarts", &ShellCandidateOptions::ik_restarts}}) {
-      f.shell_count = p;
-      (*m)[std::string("candidates.") + n] = f;
-    }
-    f = {};
-    f.kind = K::kRange;
-    for (const auto& [n, p] : {std::pair{"radii_m", &ShellCandidateOptions::radii_m},
-                               {"elevations_deg", &ShellCandidateOptions::elevations_deg}}) {
-      f.shell_range = p;
-      (*m)[std::string("candidates.") + n] = f;
-    }
-    f = {};
-    f.kind = K::kReal;
-    f.grid_real = &GainGridOptions::near_target_radius_m;
-    (*m)["grid.near_target_radius_m"] = f;
-    f = {};
-    f.kind = K::kFlag;
-    f.grid_flag = &GainGridOptions::predict_target_surface;
-    (*m)["grid.predict_target_surface"] = f;
-    return m;
-  }();
-  return *fields;
-}
-
-/// The whole of `text` as a finite double.
-std::optional<double> ParseReal(std::string_view text) {
-  const std::string t(text);
-  if (t.empty()) return std::nullopt;
-  char* end = nullptr;
-  errno = 0;
-  const double v = std::strtod(t.c_str(), &end);
-  if (end != t.c_str() + t.size() || errno == ERANGE || !std::isfinite(v)) return std::nullopt;
-  return v;
-}
 
 double RayGain(const GainGrid& grid, const CorePrior& core_prior, const Eigen::Vector3d& eye,
                const Eigen::Vector3d& to_unclipped, const GainParams& params) {
@@ -424,59 +339,6 @@ double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const Camer
     gain += RayGain(grid, prior, origin, X_WC * (options.max_range_m * d_C), params);
   }
   return gain;
-}
-
-Status SetAvpNbvOption(AvpNbvOptions& options, std::string_view key, std::string_view value) {
-  using K = OptionField::Kind;
-  const auto& fields = OptionFields();
-  const auto it = fields.find(key);
-  if (it == fields.end()) {
-    std::string known;
-    for (const std::string& k : AvpNbvOptionKeys()) known += (known.empty() ? "" : ", ") + k;
-    return InvalidArgumentError(fmt::format("unknown avp-nbv option '{}' (known: {})", key, known));
-  }
-  const OptionField& f = it->second;
-  auto bad = [&](const char* what) {
-    return InvalidArgumentError(fmt::format("avp-nbv option {}: '{}' is not {}", key, value, what));
-  };
-  switch (f.kind) {
-    case K::kReal: {
-      const std::optional<double> v = ParseReal(value);
-      if (!v) return bad("a finite number");
-      if (f.real != nullptr) options.*f.real = *v;
-      if (f.shell_real != nullptr) options.candidates.*f.shell_real = *v;
-      if (f.grid_real != nullptr) options.grid.*f.grid_real = *v;
-      return Status::Ok();
-    }
-    case K::kCount: {
-      const std::optional<double> v = ParseReal(value);
-      if (!v || *v != std::floor(*v) || std::abs(*v) > 1e9) return bad("a whole number");
-      if (f.count != nullptr) options.*f.count = static_cast<int>(*v);
-      if (f.shell_count != nullptr) options.candidates.*f.shell_count = static_cast<int>(*v);
-      return Status::Ok();
-    }
-    case K::kFlag: {
-      if (value != "true" && value != "false") return bad("true or false");
-      options.grid.*f.grid_flag = value == "true";
-      return Status::Ok();
-    }
-    case K::kRange: {
-      const size_t comma = value.find(',');
-      if (comma == std::string_view::npos) return bad("MIN,MAX");
-      const std::optional<double> lo = ParseReal(value.substr(0, comma));
-      const std::optional<double> hi = ParseReal(value.substr(comma + 1));
-      if (!lo || !hi || *lo > *hi) return bad("MIN,MAX with finite MIN <= MAX");
-      options.candidates.*f.shell_range = {*lo, *hi};
-      return Status::Ok();
-    }
-  }
-  return bad("valid");
-}
-
-std::vector<std::string> AvpNbvOptionKeys() {
-  std::vector<std::string> keys;
-  for (const auto& [k, f] : OptionFields()) keys.push_back(k);
-  return keys;
 }
 
 AvpNbvPlanner::AvpNbvPlanner(const AvpNbvOptions& options) : options_(options) {
@@ -579,25 +441,6 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
                     max_gain, options_.min_gain_bits);
   }
   return result;
-}
-
-PlanResult RandomPlanner::Plan(const PlanningRequest& request, Rng& rng) {
-  PlanResult result;
-  if (Status s = ValidateRequest(request); !s.ok()) {
-    result.status = s;
-    return result;
-  }
-  Result<GainGrid> grid = GainGrid::Build(*request.map, request.target_class, request.roi);
-  if (!grid.ok()) {
-    result.status = grid.status();
-    return result;
-  }
-  const std::vector<ViewTarget> targets = FindViewTargets(request, *grid, options_);
-  std::vector<ViewCandidate> candidates =
-      GenerateShellCandidates(request, *grid, targets, options_, rng);
-  const size_t generated = candidates.size();
-  for (ViewCandidate& c : candidates) c.utility = rng.Uniform01();
-  return RankCandidates(std::move(candidates), generated, name());
 }
 
 }  // namespace avp::planning

@@ -3,6 +3,8 @@
 #include <map>
 #include <numbers>
 
+#include <fmt/format.h>
+
 #include <avp/core/parallel.h>
 #include <avp/planning/candidates.h>
 
@@ -163,6 +165,40 @@ std::vector<ViewCandidate> GenerateShellCandidates(const PlanningRequest& reques
     }
   });
   return out;
+}
+
+const OptionTable<ShellCandidateOptions>& ShellCandidateOptionTable() {
+  static const auto* table = [] {
+    using O = ShellCandidateOptions;
+    auto* t = new OptionTable<O>("candidate shell option");
+    t->RealList("radii_m", &O::radii_m, "m", ValueRange::Open(0.05, 3), 1, 16,
+                "camera distances from the target, drawn between the smallest and the largest");
+    t->RealList("elevations_deg", &O::elevations_deg, "deg", ValueRange::Open(-89, 89), 1, 16,
+                "camera elevations above the target, drawn between the smallest and the largest");
+    t->Real("azimuth_half_range_deg", &O::azimuth_half_range_deg, "deg", ValueRange::Closed(0, 180),
+            "azimuths within this of the direction from the target to the robot base");
+    t->Integer("max_targets", &O::max_targets, "", ValueRange::AtLeast(1),
+               "targets: fruit instances, then frontier clusters, then the ROI centre");
+    t->Integer("max_candidates", &O::max_candidates, "", ValueRange::AtLeast(1),
+               "candidates generated before the reachability check");
+    t->Real("clearance_m", &O::clearance_m, "m", ValueRange::HalfOpen(0, 0.5),
+            "no eye this close to a known occupied voxel");
+    t->Real("plant_core_radius_m", &O::plant_core_radius_m, "m", ValueRange::HalfOpen(0, 2),
+            "within this of the plant's core an eye must be in known free space (0: off)");
+    t->Integer("ik_restarts", &O::ik_restarts, "", ValueRange::AtLeast(0),
+               "IK restarts per candidate after the attempt from the current joints");
+    t->AddRule([](const O& o, std::vector<std::string>& problems) {
+      if (o.num_threads < 0) {
+        problems.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
+Status ShellCandidateOptions::Validate() const {
+  return ShellCandidateOptionTable().Validate(*this);
 }
 
 }  // namespace avp::planning

@@ -338,4 +338,16 @@ std::vector<Eigen::Vector3d> RayDirections(const CameraIntrinsics& K, int stride
   return dirs;
 }
 
+const OptionTable<GainGridOptions>& GainGridOptionTable() {
+  static const auto* table = [] {
+    auto* t = new OptionTable<GainGridOptions>("gain grid option");
+    t->Real("near_target_radius_m", &GainGridOptions::near_target_radius_m, "m",
+            ValueRange::AtLeast(0), "unknown voxels this close to a target voxel are near it");
+    t->Flag("predict_target_surface", &GainGridOptions::predict_target_surface,
+            "mark the predicted surfaces of the target instances (fitted spheres)");
+    return t;
+  }();
+  return *table;
+}
+
 }  // namespace avp::planning

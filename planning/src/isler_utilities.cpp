@@ -292,22 +292,21 @@ std::optional<double> ProximityField::DistanceToOccupied(const VoxelKey& k) cons
 
 // ---- Ray and view evaluation ------------------------------------------------------------------
 
-Status IslerRayOptions::Validate() const {
-  std::vector<std::string> errors;
-  if (!(std::isfinite(max_range_m) && max_range_m > 0.0)) {
-    errors.push_back(fmt::format("max_range_m ({}) must be finite and > 0", max_range_m));
-  }
-  if (ray_stride_px < 1) {
-    errors.push_back(fmt::format("ray_stride_px ({}) must be >= 1", ray_stride_px));
-  }
-  if (!(proximity_max_distance_m >= 0.0 && proximity_max_distance_m <= kMaxProximityDistance)) {
-    errors.push_back(fmt::format("proximity_max_distance_m ({}) must be in [0, {}]",
-                                 proximity_max_distance_m, kMaxProximityDistance));
-  }
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError(
-      fmt::format("invalid Isler ray options: {}", fmt::join(errors, "; ")));
+const OptionTable<IslerRayOptions>& IslerRayOptionTable() {
+  static const auto* table = [] {
+    auto* t = new OptionTable<IslerRayOptions>("Isler ray option");
+    t->Real("max_range_m", &IslerRayOptions::max_range_m, "m", ValueRange::Above(0),
+            "ray length from the optical centre");
+    t->Integer("ray_stride_px", &IslerRayOptions::ray_stride_px, "px", ValueRange::AtLeast(1),
+               "a ray through every stride-th pixel");
+    t->Real("proximity_max_distance_m", &IslerRayOptions::proximity_max_distance_m, "m",
+            ValueRange::Closed(0, kMaxProximityDistance), "proximity count's d_max");
+    return t;
+  }();
+  return *table;
 }
+
+Status IslerRayOptions::Validate() const { return IslerRayOptionTable().Validate(*this); }
 
 IslerRayGain EvaluateIslerRay(IslerUtility utility, const GainGrid& grid,
                               const ProximityField* proximity, const Eigen::Vector3d& from,
@@ -390,19 +389,46 @@ double IslerViewGainReference(IslerUtility utility, const mapping::SemanticMap& 
 
 // ---- IslerPlanner -------------------------------------------------------------------------------
 
-Status IslerPlannerOptions::Validate() const {
-  std::vector<std::string> errors;
-  if (const Status s = rays.Validate(); !s.ok()) errors.push_back(s.message());
-  if (!(std::isfinite(gain_weight) && gain_weight >= 0.0)) {
-    errors.push_back(fmt::format("gain_weight ({}) must be finite and >= 0", gain_weight));
+const OptionTable<IslerPlannerOptions>& IslerPlannerOptionTable() {
+  static const auto* table = [] {
+    using O = IslerPlannerOptions;
+    auto* t = new OptionTable<O>("Isler planner option");
+    t->Nested("candidates", &O::candidates, ShellCandidateOptionTable());
+    t->Nested("grid", &O::grid, GainGridOptionTable());
+    t->Nested("rays", &O::rays, IslerRayOptionTable());
+    t->Real("gain_weight", &O::gain_weight, "", ValueRange::AtLeast(0), "w_ig of U");
+    t->Real("cost_weight", &O::cost_weight, "", ValueRange::AtLeast(0), "w_c of U");
+    t->AddRule([](const O& o, std::vector<std::string>& problems) {
+      if (o.num_threads < 0) {
+        problems.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
+Status IslerPlannerOptions::Validate() const { return IslerPlannerOptionTable().Validate(*this); }
+
+std::vector<PlannerEntry> IslerPlannerEntries() {
+  // In the order of the enum (AllIslerUtilities).
+  const char* const kDescriptions[] = {"average entropy", "occlusion-aware",   "unobserved voxel",
+                                       "rear-side voxel", "rear-side entropy", "proximity count"};
+  std::vector<PlannerEntry> entries;
+  for (const IslerUtility utility : AllIslerUtilities()) {
+    IslerPlannerOptions defaults;
+    defaults.utility = utility;
+    entries.push_back(MakePlannerEntry<IslerPlannerOptions>(
+        "isler-" + std::string(ToString(utility)),
+        fmt::format("Isler et al.'s {} utility on avp-nbv's candidate shells (a baseline)",
+                    kDescriptions[static_cast<size_t>(utility)]),
+        IslerPlannerOptionTable(), defaults, [](IslerPlannerOptions o, const PlannerContext& c) {
+          o.num_threads = c.threads;
+          o.candidates.num_threads = c.threads;
+          return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<IslerPlanner>(o));
+        }));
   }
-  if (!(std::isfinite(cost_weight) && cost_weight >= 0.0)) {
-    errors.push_back(fmt::format("cost_weight ({}) must be finite and >= 0", cost_weight));
-  }
-  if (num_threads < 0) errors.push_back(fmt::format("num_threads ({}) must be >= 0", num_threads));
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError(
-      fmt::format("invalid Isler planner options: {}", fmt::join(errors, "; ")));
+  return entries;
 }
 
 IslerPlanner::IslerPlanner(const IslerPlannerOptions& options)

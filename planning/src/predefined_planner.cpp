@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <fmt/format.h>
@@ -28,37 +29,54 @@ bool SamePose(const RigidTransform& a, const RigidTransform& b) {
 
 }  // namespace
 
-Status PredefinedOptions::Validate() const {
-  std::vector<std::string> errors;
-  if (!(std::isfinite(generic_distance_m) && generic_distance_m > 0.0)) {
-    errors.push_back(
-        fmt::format("generic_distance_m ({}) must be finite and > 0", generic_distance_m));
+const OptionTable<PredefinedOptions>& PredefinedOptionTable() {
+  static const auto* table = [] {
+    using O = PredefinedOptions;
+    auto* t = new OptionTable<O>("predefined planner option");
+    t->Real("generic_distance_m", &O::generic_distance_m, "m", ValueRange::Above(0),
+            "generic: camera plane's distance from the ROI's axis, towards the base");
+    t->Real("generic_lateral_fraction", &O::generic_lateral_fraction, "", ValueRange::AtLeast(0),
+            "generic: left/right offsets as a fraction of the ROI's half-width");
+    t->Real("generic_bottom_fraction", &O::generic_bottom_fraction, "", ValueRange::Closed(0, 1),
+            "generic: lowest camera height as a fraction of the ROI's height");
+    t->Real("generic_top_fraction", &O::generic_top_fraction, "", ValueRange::Closed(0, 1),
+            "generic: highest camera height as a fraction of the ROI's height");
+    t->Integer("generic_waypoints", &O::generic_waypoints, "", ValueRange::AtLeast(0),
+               "generic: waypoints (0: one per view after the start)");
+    t->AddRule([](const O& o, std::vector<std::string>& problems) {
+      const ValueRange unit = ValueRange::Closed(0, 1);
+      if (unit.Contains(o.generic_bottom_fraction) && unit.Contains(o.generic_top_fraction) &&
+          o.generic_bottom_fraction > o.generic_top_fraction) {
+        problems.push_back(
+            fmt::format("generic_bottom_fraction ({}) must be <= generic_top_fraction ({})",
+                        o.generic_bottom_fraction, o.generic_top_fraction));
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
+Status PredefinedOptions::Validate() const { return PredefinedOptionTable().Validate(*this); }
+
+std::vector<PlannerEntry> PredefinedPlannerEntries() {
+  std::vector<PlannerEntry> entries;
+  for (const auto& [set, name, description] :
+       {std::tuple{PredefinedOptions::Set::kNarrow, "predefined",
+                   "the reference's zig-zag of joint waypoints (zig_zag_plane_narrow)"},
+        std::tuple{PredefinedOptions::Set::kWide, "predefined-wide",
+                   "the reference's wide zig-zag (zig_zag_plane_wide)"},
+        std::tuple{PredefinedOptions::Set::kGeneric, "predefined-generic",
+                   "a zig-zag generated from the ROI, for scenes other than the reference's"}}) {
+    PredefinedOptions defaults;
+    defaults.set = set;
+    entries.push_back(MakePlannerEntry<PredefinedOptions>(
+        name, description, PredefinedOptionTable(), defaults,
+        [](const PredefinedOptions& o, const PlannerContext&) {
+          return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<PredefinedPlanner>(o));
+        }));
   }
-  if (!(std::isfinite(generic_lateral_fraction) && generic_lateral_fraction >= 0.0)) {
-    errors.push_back(fmt::format("generic_lateral_fraction ({}) must be finite and >= 0",
-                                 generic_lateral_fraction));
-  }
-  const bool bottom_ok = generic_bottom_fraction >= 0.0 && generic_bottom_fraction <= 1.0;
-  const bool top_ok = generic_top_fraction >= 0.0 && generic_top_fraction <= 1.0;
-  if (!bottom_ok) {
-    errors.push_back(
-        fmt::format("generic_bottom_fraction ({}) must be in [0, 1]", generic_bottom_fraction));
-  }
-  if (!top_ok) {
-    errors.push_back(
-        fmt::format("generic_top_fraction ({}) must be in [0, 1]", generic_top_fraction));
-  }
-  if (bottom_ok && top_ok && generic_bottom_fraction > generic_top_fraction) {
-    errors.push_back(
-        fmt::format("generic_bottom_fraction ({}) must be <= generic_top_fraction ({})",
-                    generic_bottom_fraction, generic_top_fraction));
-  }
-  if (generic_waypoints < 0) {
-    errors.push_back(fmt::format("generic_waypoints ({}) must be >= 0", generic_waypoints));
-  }
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError(
-      fmt::format("invalid predefined planner options: {}", fmt::join(errors, "; ")));
+  return entries;
 }
 
 std::string_view ToString(PredefinedOptions::Set set) {

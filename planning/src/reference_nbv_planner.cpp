@@ -27,44 +27,48 @@ Eigen::Matrix3d AxisRotation(const Eigen::Vector3d& axis, double angle_rad) {
 
 }  // namespace
 
-Status ReferenceNbvOptions::Validate() const {
-  std::vector<std::string> errors;
-  if (grid_size < 1) errors.push_back(fmt::format("grid_size ({}) must be >= 1", grid_size));
-  if (!(std::isfinite(grid_spacing_m) && grid_spacing_m >= 0.0)) {
-    errors.push_back(fmt::format("grid_spacing_m ({}) must be finite and >= 0", grid_spacing_m));
-  }
-  if (!(std::isfinite(jitter_m) && jitter_m >= 0.0)) {
-    errors.push_back(fmt::format("jitter_m ({}) must be finite and >= 0", jitter_m));
-  }
-  if (!(std::isfinite(tilt_deg) && tilt_deg >= 0.0 && tilt_deg < 90.0)) {
-    errors.push_back(fmt::format("tilt_deg ({}) must be in [0, 90)", tilt_deg));
-  }
-  if (!(std::isfinite(max_range_m) && max_range_m > 0.0)) {
-    errors.push_back(fmt::format("max_range_m ({}) must be finite and > 0", max_range_m));
-  }
-  for (const auto& [name, ratio] : {std::pair<const char*, double>{"depth_ratio", depth_ratio},
-                                    {"width_ratio", width_ratio},
-                                    {"height_ratio", height_ratio}}) {
-    if (!(std::isfinite(ratio) && ratio >= 1.0)) {
-      errors.push_back(fmt::format("{} ({}) must be finite and >= 1", name, ratio));
-    }
-  }
-  if (!(confidence_epsilon > 0.0 && confidence_epsilon < 0.5)) {
-    errors.push_back(
-        fmt::format("confidence_epsilon ({}) must be in (0, 0.5)", confidence_epsilon));
-  }
-  if (!(std::isfinite(fused_position_tol_m) && fused_position_tol_m >= 0.0)) {
-    errors.push_back(
-        fmt::format("fused_position_tol_m ({}) must be finite and >= 0", fused_position_tol_m));
-  }
-  if (!(std::isfinite(fused_angle_tol_rad) && fused_angle_tol_rad >= 0.0)) {
-    errors.push_back(
-        fmt::format("fused_angle_tol_rad ({}) must be finite and >= 0", fused_angle_tol_rad));
-  }
-  if (num_threads < 0) errors.push_back(fmt::format("num_threads ({}) must be >= 0", num_threads));
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError(
-      fmt::format("invalid reference-nbv options: {}", fmt::join(errors, "; ")));
+const OptionTable<ReferenceNbvOptions>& ReferenceNbvOptionTable() {
+  static const auto* table = [] {
+    using O = ReferenceNbvOptions;
+    auto* t = new OptionTable<O>("reference-nbv option");
+    const ValueRange non_negative = ValueRange::AtLeast(0);
+    const ValueRange ratio = ValueRange::AtLeast(1);
+    t->Integer("grid_size", &O::grid_size, "", ValueRange::AtLeast(1),
+               "positions per axis of the square_random layout");
+    t->Real("grid_spacing_m", &O::grid_spacing_m, "m", non_negative, "spacing of the positions");
+    t->Real("jitter_m", &O::jitter_m, "m", non_negative, "half-range of the uniform jitter");
+    t->Real("tilt_deg", &O::tilt_deg, "deg", ValueRange::HalfOpen(0, 90),
+            "tilt of the 4 extra orientations");
+    t->Real("max_range_m", &O::max_range_m, "m", ValueRange::Above(0), "ray length");
+    t->Real("depth_ratio", &O::depth_ratio, "", ratio, "full_attention ROI: depth shrink");
+    t->Real("width_ratio", &O::width_ratio, "", ratio, "full_attention ROI: width shrink");
+    t->Real("height_ratio", &O::height_ratio, "", ratio, "full_attention ROI: height shrink");
+    t->Real("confidence_epsilon", &O::confidence_epsilon, "", ValueRange::Open(0, 0.5),
+            "confidences are clamped to [eps, 1 - eps] before the entropy");
+    t->Real("fused_position_tol_m", &O::fused_position_tol_m, "m", non_negative,
+            "candidates this close to a fused view are dropped");
+    t->Real("fused_angle_tol_rad", &O::fused_angle_tol_rad, "rad", non_negative,
+            "... and this close in angle");
+    t->AddRule([](const O& o, std::vector<std::string>& problems) {
+      if (o.num_threads < 0) {
+        problems.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
+Status ReferenceNbvOptions::Validate() const { return ReferenceNbvOptionTable().Validate(*this); }
+
+PlannerEntry ReferenceNbvPlannerEntry() {
+  return MakePlannerEntry<ReferenceNbvOptions>(
+      "reference-nbv", "the paper's planner with its bugs fixed (docs/planning.md)",
+      ReferenceNbvOptionTable(), ReferenceNbvOptions{},
+      [](ReferenceNbvOptions o, const PlannerContext& c) {
+        o.num_threads = c.threads;
+        return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<ReferenceNbvPlanner>(o));
+      });
 }
 
 std::vector<ViewCandidate> ReferenceCandidatePoses(const RigidTransform& X_WC_start,

@@ -305,7 +305,7 @@ TEST(IslerUtilitiesTest, NamesAndOptions) {
   bad.cost_weight = -1.0;
   bad.rays.ray_stride_px = 0;
   EXPECT_THAT(bad.Validate().message(), HasSubstr("cost_weight (-1)"));
-  EXPECT_THAT(bad.Validate().message(), HasSubstr("ray_stride_px (0)"));
+  EXPECT_THAT(bad.Validate().message(), HasSubstr("rays.ray_stride_px (0 px) must be >= 1"));
   EXPECT_THROW(IslerPlanner{bad}, Error);
 }
 

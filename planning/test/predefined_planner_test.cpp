@@ -273,7 +273,7 @@ TEST(PredefinedPlannerTest, RejectsBadRequestsAndOptions) {
   bad.generic_distance_m = -1.0;
   bad.generic_bottom_fraction = 0.8;
   bad.generic_top_fraction = 0.5;
-  EXPECT_THAT(bad.Validate().message(), HasSubstr("generic_distance_m (-1)"));
+  EXPECT_THAT(bad.Validate().message(), HasSubstr("generic_distance_m (-1 m) must be > 0"));
   EXPECT_THAT(bad.Validate().message(), HasSubstr("generic_bottom_fraction (0.8) must be <="));
   EXPECT_THROW(PredefinedPlanner{bad}, Error);
   EXPECT_EQ(PredefinedSetFromString("wide"), Set::kWide);

@@ -257,6 +257,9 @@ class AnyOptions {
   std::unique_ptr<Concept> impl_;
 };
 
+/// One line per field for help texts: "  KEY  VALUE-DEFAULT  [unit, range]  doc".
+std::string FormatOptionHelp(const std::vector<OptionInfo>& info, std::string_view indent = "  ");
+
 /// Splits "KEY=VALUE" items (command-line options) into pairs, in order; InvalidArgument naming
 /// an item without '=' or with an empty key ("<what> 'x' must be KEY=VALUE").
 Result<OptionValues> ParseKeyValues(const std::vector<std::string>& items, std::string_view what);
@@ -305,7 +308,7 @@ OptionTable<T>& OptionTable<T>::AddNumber(std::string key, N T::*field, std::str
     const std::string value = std::is_same_v<N, float> ? FormatFloat(static_cast<float>(o.*field))
                               : std::is_floating_point_v<N> ? FormatReal(v)
                                                             : std::to_string(o.*field);
-    const std::string shown = unit.empty() ? value : value + " " + unit;
+    const std::string shown = unit.empty() || !finite ? value : value + " " + unit;
     problems.push_back(key + " (" + shown + ") must be " +
                        (finite ? range.Requirement() : "finite"));
   };

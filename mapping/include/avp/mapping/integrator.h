@@ -33,11 +33,17 @@ std::optional<FreeSpaceCarving> FreeSpaceCarvingFromString(std::string_view name
 struct IntegratorOptions {
   /// Returns beyond this carve free space up to it and mark no endpoint (OctoMap's maxrange).
   double max_range_m = 1.5;
-  FreeSpaceCarving carving = FreeSpaceCarving::kRayCast;
-  /// Threads for one frame (0 = all hardware threads). Results do not depend on it.
+  /// kProjective: kRayCast's result, much faster on depth images (IntegratePointCloud always
+  /// traces rays).
+  FreeSpaceCarving carving = FreeSpaceCarving::kProjective;
+  /// Threads for one frame (0 = all hardware threads). Results do not depend on it. An execution
+  /// setting, not part of the table: the caller's thread budget.
   int num_threads = 1;
   Status Validate() const;
 };
+
+/// The fields of IntegratorOptions: max_range_m and carving.
+const OptionTable<IntegratorOptions>& IntegratorOptionTable();
 
 struct IntegrationStats {
   size_t pixels = 0;            ///< pixels (or points) examined

@@ -11,6 +11,9 @@ struct MapOptions {
   Status Validate() const;
 };
 
+/// The fields of MapOptions: grid.* and semantics.*.
+const OptionTable<MapOptions>& MapOptionTable();
+
 /// The semantic occupancy map: occupancy + semantic cells (OccupancyGrid) and the fusion state
 /// that writes the semantic cells (SemanticFusion). Integrator fills it; the planner, evaluation
 /// and files read it.

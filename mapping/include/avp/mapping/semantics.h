@@ -90,6 +90,9 @@ struct SemanticOptions {
   Status Validate() const;
 };
 
+/// The fields of SemanticOptions (every one of them).
+const OptionTable<SemanticOptions>& SemanticOptionTable();
+
 /// SemanticCell::flags bits used by SemanticFusion: the ownership-contest counter (frames in
 /// which masks of other instances claimed the voxel since its owner last did).
 inline constexpr uint8_t kSemanticFlagContestMask = 0x03;

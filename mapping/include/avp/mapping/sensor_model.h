@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include <avp/core/options.h>
 #include <avp/core/status.h>
 
 namespace avp::mapping {
@@ -36,5 +37,9 @@ struct SensorModel {
 
   bool operator==(const SensorModel&) const = default;
 };
+
+/// The fields of SensorModel (core/options.h): hit, miss, clamp_min, clamp_max,
+/// occupied_threshold, and the ordering rule between them.
+const OptionTable<SensorModel>& SensorModelTable();
 
 }  // namespace avp::mapping

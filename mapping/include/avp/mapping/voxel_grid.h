@@ -138,6 +138,14 @@ struct GridOptions {
   Status Validate() const;
 };
 
+/// The valid voxel edges, [kMinVoxelSize, kMaxVoxelSize] metres: every option that must match a
+/// map's voxel size (ground truths, planners' caches) checks against this one range.
+ValueRange VoxelSizeRange();
+
+/// The fields of GridOptions: voxel_size_m and sensor.* (the ROI is set by code, not by
+/// configuration, and checked by a rule).
+const OptionTable<GridOptions>& GridOptionTable();
+
 /// Sparse voxel grid of 8^3 blocks allocated on touch, found through an open-addressing hash
 /// table; integer keys on the OctoMap lattice (avp::VoxelKey). Blocks are kept in allocation
 /// order, so iteration (and everything written from it) is deterministic.

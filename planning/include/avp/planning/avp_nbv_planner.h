@@ -6,6 +6,7 @@
 
 #include <avp/planning/candidates.h>
 #include <avp/planning/gain_grid.h>
+#include <avp/planning/planner_registry.h>
 #include <avp/planning/view_planner.h>
 
 namespace avp::planning {
@@ -72,21 +73,20 @@ struct AvpNbvOptions {
   double w_diversity = 0.5;
   double diversity_m = 0.2;
   double min_gain_bits = 0.0;
-  /// Threads over candidates (0 = all hardware threads). Results do not depend on it.
+  /// Threads over candidates (0 = all hardware threads). Results do not depend on it. An
+  /// execution setting (PlannerContext::threads), not part of the table.
   int num_threads = 0;
   Status Validate() const;
 };
 
-/// Sets one field of `options` by name, from text: every scalar field of AvpNbvOptions by its
-/// name ("p_unknown", "w_diversity", "ray_stride_px", ...), the candidate shells' as
-/// "candidates.<field>" ("candidates.max_targets", ...; the two-value ranges
-/// "candidates.radii_m" and "candidates.elevations_deg" as "MIN,MAX"), and
-/// "grid.near_target_radius_m". InvalidArgument naming the key and the known keys, or the value
-/// and what it must be (a number; a whole number for counts; true/false for flags). The
-/// ranges are not checked here: call Validate() on the result.
-Status SetAvpNbvOption(AvpNbvOptions& options, std::string_view key, std::string_view value);
-/// The keys SetAvpNbvOption accepts, sorted.
-std::vector<std::string> AvpNbvOptionKeys();
+/// The fields of AvpNbvOptions by name (docs/planning.md): every scalar field ("p_unknown",
+/// "w_diversity", "ray_stride_px", ...), the candidate shells' as "candidates.<field>"
+/// (ShellCandidateOptionTable) and the gain grid's as "grid.<field>" (GainGridOptionTable);
+/// num_threads is the caller's (PlannerContext::threads).
+const OptionTable<AvpNbvOptions>& AvpNbvOptionTable();
+
+/// avp-nbv's registry entry (RegisterBuiltinPlanners).
+PlannerEntry AvpNbvPlannerEntry();
 
 /// The occlusion probability of one voxel of edge `voxel_size_m` for a probability `p` given per
 /// voxel of edge `reference_m`: 1 − (1 − p)^(voxel_size_m / reference_m), the same transmittance
@@ -116,18 +116,6 @@ class AvpNbvPlanner final : public ViewPlanner {
 
  private:
   AvpNbvOptions options_;
-};
-
-/// Random reachable views from the same candidate generator (a baseline): ranked in a seeded
-/// random order.
-class RandomPlanner final : public ViewPlanner {
- public:
-  explicit RandomPlanner(const ShellCandidateOptions& options = {}) : options_(options) {}
-  std::string_view name() const override { return "random"; }
-  PlanResult Plan(const PlanningRequest& request, Rng& rng) override;
-
- private:
-  ShellCandidateOptions options_;
 };
 
 }  // namespace avp::planning

@@ -7,6 +7,7 @@
 
 #include <avp/core/box.h>
 #include <avp/core/camera.h>
+#include <avp/core/options.h>
 #include <avp/core/semantic_class.h>
 #include <avp/core/status.h>
 #include <avp/core/voxel_key.h>
@@ -113,6 +114,11 @@ struct GainGridOptions {
   /// and the flag test per voxel cost more than the skipping saved (docs/planning.md).
   bool skip_free_bricks = false;
 };
+
+/// The configurable fields of GainGridOptions: near_target_radius_m and predict_target_surface
+/// (max_bytes, brick_shift and skip_free_bricks are the implementation's, results do not depend
+/// on them).
+const OptionTable<GainGridOptions>& GainGridOptionTable();
 
 /// A copy of the map over the known voxels' bounding box (inflated by the near-target radius),
 /// 4 bytes per voxel in bricks of 2^brick_shift voxels a side, for gain evaluation. Voxels

@@ -18,6 +18,7 @@
 #include <avp/mapping/semantic_map.h>
 #include <avp/planning/candidates.h>
 #include <avp/planning/gain_grid.h>
+#include <avp/planning/planner_registry.h>
 #include <avp/planning/view_planner.h>
 
 namespace avp::planning {
@@ -106,6 +107,9 @@ struct IslerRayOptions {
   Status Validate() const;
 };
 
+/// The fields of IslerRayOptions.
+const OptionTable<IslerRayOptions>& IslerRayOptionTable();
+
 /// Fast evaluator: streams GainGrid::Walk. `proximity` is required for kProximityCount (ignored
 /// otherwise). @throws avp::Error if it is missing for PC.
 IslerRayGain EvaluateIslerRay(IslerUtility utility, const GainGrid& grid,
@@ -149,6 +153,14 @@ struct IslerPlannerOptions {
   int num_threads = 1;
   Status Validate() const;
 };
+
+/// The fields of IslerPlannerOptions but `utility` (the planner's name chooses it) and
+/// num_threads: candidates.*, grid.*, rays.*, gain_weight, cost_weight.
+const OptionTable<IslerPlannerOptions>& IslerPlannerOptionTable();
+
+/// "isler-ae", "isler-oa", "isler-uv", "isler-rsv", "isler-rse", "isler-pc"
+/// (RegisterBuiltinPlanners).
+std::vector<PlannerEntry> IslerPlannerEntries();
 
 /// Next-best view by one of the Isler et al. utilities ("isler-ae", "isler-oa", "isler-uv",
 /// "isler-rsv", "isler-rse", "isler-pc"): candidates from the shared shell generator, gain by

@@ -8,6 +8,7 @@
 
 #include <avp/core/box.h>
 #include <avp/core/transform.h>
+#include <avp/planning/planner_registry.h>
 #include <avp/planning/view_planner.h>
 
 namespace avp::planning {
@@ -43,6 +44,13 @@ struct PredefinedOptions {
 };
 
 /// "narrow", "wide", "generic".
+/// The fields of PredefinedOptions but `set`, which the planner's name chooses.
+const OptionTable<PredefinedOptions>& PredefinedOptionTable();
+
+/// "predefined" (the reference's narrow zig-zag), "predefined-wide" and "predefined-generic"
+/// (RegisterBuiltinPlanners).
+std::vector<PlannerEntry> PredefinedPlannerEntries();
+
 std::string_view ToString(PredefinedOptions::Set set);
 /// Inverse of ToString; nullopt for other names.
 std::optional<PredefinedOptions::Set> PredefinedSetFromString(std::string_view name);

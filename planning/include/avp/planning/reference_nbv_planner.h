@@ -12,6 +12,7 @@
 #include <avp/core/transform.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/planning/gain_grid.h>
+#include <avp/planning/planner_registry.h>
 #include <avp/planning/view_planner.h>
 
 namespace avp::planning {
@@ -48,6 +49,12 @@ struct ReferenceNbvOptions {
   /// Names every bad value.
   Status Validate() const;
 };
+
+/// The fields of ReferenceNbvOptions (all but num_threads and the gain grid's).
+const OptionTable<ReferenceNbvOptions>& ReferenceNbvOptionTable();
+
+/// "reference-nbv"'s registry entry (RegisterBuiltinPlanners).
+PlannerEntry ReferenceNbvPlannerEntry();
 
 /// The 5 x grid_size^2 candidate poses (180 with the defaults) around the **start** camera pose,
 /// in generation order: for each height row (base z offset, ascending), for each column (base y

@@ -1,0 +1,86 @@
+#include <algorithm>
+#include <string>
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <avp/core/error.h>
+#include <avp/planning/avp_nbv_planner.h>
+#include <avp/planning/isler_utilities.h>
+#include <avp/planning/planner_registry.h>
+#include <avp/planning/predefined_planner.h>
+#include <avp/planning/random_planner.h>
+#include <avp/planning/reference_nbv_planner.h>
+
+namespace avp::planning {
+
+Status PlannerRegistry::Add(PlannerEntry entry) {
+  if (entry.name.empty()) return InvalidArgumentError("a planner needs a name");
+  if (Find(entry.name) != nullptr) {
+    return InvalidArgumentError(fmt::format("planner '{}' is already registered", entry.name));
+  }
+  if (!entry.make) {
+    return InvalidArgumentError(fmt::format("planner '{}' has no factory", entry.name));
+  }
+  entries_.push_back(std::move(entry));
+  return Status::Ok();
+}
+
+const PlannerEntry* PlannerRegistry::Find(std::string_view name) const {
+  for (const PlannerEntry& e : entries_) {
+    if (e.name == name) return &e;
+  }
+  return nullptr;
+}
+
+Result<const PlannerEntry*> PlannerRegistry::Get(std::string_view name) const {
+  if (const PlannerEntry* e = Find(name)) return e;
+  return NotFoundError(
+      fmt::format("unknown planner '{}' (known: {})", name, fmt::join(Names(), ", ")));
+}
+
+std::vector<std::string> PlannerRegistry::Names() const {
+  std::vector<std::string> names;
+  names.reserve(entries_.size());
+  for (const PlannerEntry& e : entries_) names.push_back(e.name);
+  return names;
+}
+
+Result<AnyOptions> PlannerRegistry::Options(std::string_view name,
+                                            const OptionValues& overrides) const {
+  AVP_ASSIGN_OR_RETURN(const PlannerEntry* entry, Get(name));
+  AnyOptions options = entry->options;
+  AVP_RETURN_IF_ERROR(options.SetAll(overrides, fmt::format("planner '{}'", name)));
+  AVP_RETURN_IF_ERROR(options.Validate());
+  return options;
+}
+
+Result<std::unique_ptr<ViewPlanner>> PlannerRegistry::Make(std::string_view name,
+                                                           const AnyOptions& options,
+                                                           const PlannerContext& context) const {
+  AVP_ASSIGN_OR_RETURN(const PlannerEntry* entry, Get(name));
+  if (entry->needs_ground_truth && context.truth == nullptr) {
+    return FailedPreconditionError(fmt::format(
+        "planner '{}' needs the true scene and its ground truth (a diagnostic bound): it is "
+        "built only where the truth is known",
+        name));
+  }
+  AVP_RETURN_IF_ERROR(options.Validate());
+  return entry->make(options, context);
+}
+
+void RegisterBuiltinPlanners(PlannerRegistry& registry) {
+  std::vector<PlannerEntry> entries;
+  entries.push_back(AvpNbvPlannerEntry());
+  for (PlannerEntry& e : PredefinedPlannerEntries()) entries.push_back(std::move(e));
+  entries.push_back(ReferenceNbvPlannerEntry());
+  entries.push_back(RandomPlannerEntry());
+  for (PlannerEntry& e : IslerPlannerEntries()) entries.push_back(std::move(e));
+  for (PlannerEntry& e : entries) {
+    const std::string name = e.name;
+    const Status s = registry.Add(std::move(e));
+    AVP_THROW_UNLESS(s.ok(), name, s.message());
+  }
+}
+
+}  // namespace avp::planning
