@@ -13,6 +13,8 @@
 #include <avp/sim/mesh_builder.h>
 #include <avp/sim/tomato_plant.h>
 
+#include "occlusion_screen.h"
+
 namespace avp::sim {
 
 namespace {
@@ -185,6 +187,429 @@ Eigen::Vector3f LeafColor(double height_fraction, Rng& rng) {
 
 const Eigen::Vector3f kStemColor(0.16f, 0.30f, 0.07f);
 
+// ---- Stem and stake -----------------------------------------------------------------------------
+
+/// Draws the main stem (height, lean, zig-zag) and adds "<prefix>/stem".
+StemModel AddStem(const TomatoPlantParams& params, const Rng& plant_rng, Scene& scene) {
+  Rng stem_rng = plant_rng.Fork("stem");
+  StemModel stem;
+  stem.base_W = params.stem_base_W;
+  stem.height_m = stem_rng.Uniform(params.height_min_m, params.height_max_m);
+  stem.lean_dir = Horizontal(stem_rng.Uniform(0.0, 2.0 * kPi));
+  stem.lean_m = stem_rng.Uniform(0.0, params.stem_lean_max_m);
+  stem.wobble_dir = Horizontal(stem_rng.Uniform(0.0, 2.0 * kPi));
+  stem.wobble_m = stem_rng.Uniform(0.002, 0.008);
+  stem.wobble_phase = stem_rng.Uniform(0.0, 2.0 * kPi);
+  stem.base_radius_m = params.stem_base_radius_m;
+  stem.top_radius_m = params.stem_top_radius_m;
+  const int n = std::max(8, static_cast<int>(std::ceil(stem.height_m / 0.025)) + 1);
+  std::vector<Eigen::Vector3d> line;
+  std::vector<double> radii;
+  for (int i = 0; i < n; ++i) {
+    const double h = stem.height_m * i / (n - 1);
+    line.push_back(stem.At(h));
+    radii.push_back(stem.RadiusAt(h));
+  }
+  scene.Add(params.name_prefix + "/stem", SemanticClass::kStem,
+            VaryAlbedo(kStemColor, 0.08, stem_rng), MakeTube(line, radii, 12, true));
+  return stem;
+}
+
+/// A vertical stake from base_W, height_m tall.
+struct Stake {
+  Eigen::Vector3d base_W = Eigen::Vector3d::Zero();
+  double height_m = 0.0;
+};
+
+/// Draws the stake's height (90-105 % of the stem's, drawn even without a stake) and adds
+/// "<prefix>/stake" when params.stake.
+Stake AddStake(const TomatoPlantParams& params, const StemModel& stem, const Rng& plant_rng,
+               Scene& scene) {
+  Rng stake_rng = plant_rng.Fork("stake");
+  Stake stake;
+  stake.base_W = params.stem_base_W + params.stake_offset_m;
+  stake.height_m = stem.height_m * stake_rng.Uniform(0.9, 1.05);
+  if (params.stake) {
+    scene.Add(
+        params.name_prefix + "/stake", SemanticClass::kSupport,
+        VaryAlbedo(Eigen::Vector3f(0.33f, 0.22f, 0.11f), 0.1, stake_rng),
+        MakeCylinder(stake.base_W, stake.base_W + stake.height_m * kUp, params.stake_radius_m, 8));
+  }
+  return stake;
+}
+
+// ---- Compound leaves (phyllotaxis) --------------------------------------------------------------
+
+/// Pairs of lateral leaflets of one compound leaf: 2 pairs + 1 (the terminal) main leaflets lie
+/// in [leaflets_min, leaflets_max].
+int DrawLeafletPairs(const TomatoPlantParams& params, Rng& r) {
+  return static_cast<int>(
+      r.UniformInt((params.leaflets_min - 1) / 2, (params.leaflets_max - 1) / 2));
+}
+
+/// The leaf at stem height h pointing at `azimuth`: near the apex leaves are younger (shorter,
+/// steeper, smaller leaflets); low ones keep their tips (and drooping leaflets) off the ground.
+/// `size_scale`: the leaf size factor from the density.
+CompoundLeafSpec StemLeafSpec(const TomatoPlantParams& params, const StemModel& stem,
+                              double size_scale, double h, double azimuth, Rng& r) {
+  const double fh = h / stem.height_m;
+  const Eigen::Vector3d d = Horizontal(azimuth);
+  const Eigen::Vector3d lateral = kUp.cross(d);
+  const double youth = std::clamp((fh - 0.75) / 0.25, 0.0, 1.0);
+  const double length =
+      params.leaf_length_m * size_scale * r.Uniform(0.8, 1.2) * (1.0 - 0.55 * youth);
+  const double elevation = (r.Uniform(30.0, 55.0) + 25.0 * youth) * kPi / 180.0;
+  const Eigen::Vector3d s = stem.At(h);
+  const double droop =
+      std::min(r.Uniform(0.05, 0.35) * (1.0 - youth), (s.z() - stem.base_W.z() - 0.12) / length);
+  const Eigen::Vector3d p0 = s + 0.8 * stem.RadiusAt(h) * d;
+  const Eigen::Vector3d p1 =
+      p0 + 0.3 * length * (std::cos(elevation) * d + std::sin(elevation) * kUp);
+  const Eigen::Vector3d p2 =
+      p0 + 0.7 * length * d + 0.15 * length * kUp + r.Uniform(-0.08, 0.08) * length * lateral;
+  const Eigen::Vector3d p3 = p0 + length * d - droop * length * kUp;
+  CompoundLeafSpec spec;
+  spec.rachis_line = SampleCubicBezier(p0, p1, p2, p3, 14);
+  spec.rachis_base_radius_m = 0.0032 * size_scale;
+  spec.pairs = DrawLeafletPairs(params, r);
+  spec.leaflet_length_m = params.leaflet_length_m * size_scale * (1.0 - 0.4 * youth);
+  spec.intercalary = params.intercalary_leaflets;
+  return spec;
+}
+
+/// Compound leaves every 1 / (12 leaf_density) m (+-20 %) in a 137.5 deg spiral, from
+/// first_leaf_height_m to 4 cm below the top; adds "<prefix>/leaf_NN" (+ "/rachis") and returns
+/// how many.
+int AddStemLeaves(const TomatoPlantParams& params, const StemModel& stem, double size_scale,
+                  const Rng& plant_rng, Scene& scene) {
+  if (params.leaf_density <= 0.0) return 0;
+  const Rng leaves_rng = plant_rng.Fork("leaves");
+  const double leaf_spacing_m = 1.0 / (12.0 * params.leaf_density);
+  Rng layout = leaves_rng.Fork("layout");
+  const double phase = layout.Uniform(0.0, 2.0 * kPi);
+  int k = 0;
+  for (double h = params.first_leaf_height_m + layout.Uniform(0.0, leaf_spacing_m);
+       h < stem.height_m - 0.04; h += leaf_spacing_m * layout.Uniform(0.8, 1.2), ++k) {
+    Rng r = leaves_rng.Fork(static_cast<uint64_t>(k));
+    const double azimuth = phase + k * kGoldenAngleRad + r.Uniform(-0.17, 0.17);
+    CompoundLeaf leaf = BuildCompoundLeaf(StemLeafSpec(params, stem, size_scale, h, azimuth, r), r);
+    const std::string name = fmt::format("{}/leaf_{:02}", params.name_prefix, k);
+    scene.Add(name + "/rachis", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.1, r),
+              std::move(leaf.rachis));
+    scene.Add(name, SemanticClass::kLeaf, LeafColor(h / stem.height_m, r),
+              std::move(leaf.leaflets));
+  }
+  return k;  // one leaf per step
+}
+
+// ---- Trusses and fruits -------------------------------------------------------------------------
+
+/// Where a new fruit may go: above the ground, not deep into a fruit placed so far, clear of the
+/// stem and the stake.
+struct FruitRoom {
+  const TomatoPlantParams& params;
+  const StemModel& stem;
+  Stake stake;
+  std::vector<Ellipsoid> fruits;  ///< placed so far
+
+  bool Fits(const Eigen::Vector3d& c, double r) const {
+    if (c.z() - r < 0.02) return false;      // above the ground
+    for (const Ellipsoid& other : fruits) {  // slight touching is fine, no deep overlap
+      if ((other.center_W - c).norm() < 0.95 * (r + other.radii.maxCoeff())) return false;
+    }
+    const double h = c.z() - stem.base_W.z();
+    const Eigen::Vector3d axis = stem.At(std::clamp(h, 0.0, stem.height_m));
+    if ((c - axis).head<2>().norm() < r + stem.RadiusAt(h) + 0.004) return false;
+    if (params.stake && c.z() < stake.base_W.z() + stake.height_m + r &&
+        (c - stake.base_W).head<2>().norm() < r + params.stake_radius_m + 0.003) {
+      return false;
+    }
+    return true;
+  }
+};
+
+/// A truss's rachis: from the peduncle's end e0 along e (outwards and down), curling sideways
+/// along `lateral`; u is the distance along e, m.
+struct TrussAxis {
+  Eigen::Vector3d e0 = Eigen::Vector3d::Zero();
+  Eigen::Vector3d e = Eigen::Vector3d::Zero();
+  Eigen::Vector3d lateral = Eigen::Vector3d::Zero();
+  double curl = 0.0;
+
+  Eigen::Vector3d At(double u) const { return e0 + u * e + curl * u * u * lateral; }
+};
+
+/// One truss as it grows.
+struct Truss {
+  int index = 0;
+  TrussAxis axis;
+  std::vector<double> fruit_radii;  ///< largest (proximal) first
+  double ripeness = 0.0;            ///< before the per-fruit gradient and jitter
+  TriangleMesh mesh;                ///< peduncle, rachis, pedicels, calyces
+  double last_u = 0.0;              ///< where the last placed fruit hangs
+  int placed = 0;
+};
+
+/// The peduncle from the stem at height h towards `azimuth`: out from the stem, arching slightly
+/// up, then down into the rachis, whose shape it returns.
+TrussAxis AddPeduncle(const StemModel& stem, double h, double azimuth, Rng& r,
+                      TriangleMesh& truss_mesh) {
+  const Eigen::Vector3d d = Horizontal(azimuth);
+  const Eigen::Vector3d lateral = kUp.cross(d);
+  const Eigen::Vector3d s = stem.At(h) + 0.8 * stem.RadiusAt(h) * d;
+  const double peduncle = r.Uniform(0.05, 0.09);
+  const Eigen::Vector3d e0 = s + peduncle * d - 0.02 * kUp;
+  const std::vector<Eigen::Vector3d> peduncle_line = SampleCubicBezier(
+      s, s + 0.35 * peduncle * d + 0.02 * kUp, s + 0.75 * peduncle * d + 0.005 * kUp, e0, 8);
+  truss_mesh.Append(MakeTube(peduncle_line, LinearRadii(0.0035, 0.0025, 8), 6, true));
+  // Rachis: a gently curved line going outwards and down.
+  const double beta = r.Uniform(35.0, 65.0) * kPi / 180.0;
+  TrussAxis axis;
+  axis.e0 = e0;
+  axis.e = std::cos(beta) * d - std::sin(beta) * kUp;
+  axis.lateral = lateral;
+  axis.curl = r.Uniform(-0.8, 0.8);
+  return axis;
+}
+
+/// The radii of a truss's fruits, fruits_per_truss_min..max of them, largest first (proximal
+/// fruits are the largest).
+std::vector<double> DrawFruitRadii(const TomatoPlantParams& params, Rng& r) {
+  const int n =
+      static_cast<int>(r.UniformInt(params.fruits_per_truss_min, params.fruits_per_truss_max));
+  std::vector<double> radii(static_cast<size_t>(n));
+  for (double& radius : radii) {
+    radius = r.Uniform(params.fruit_radius_min_m, params.fruit_radius_max_m);
+  }
+  std::sort(radii.begin(), radii.end(), std::greater<>());
+  return radii;
+}
+
+/// Where a fruit hangs from the rachis: `u` along it, `attach` on it, `center` of the fruit.
+struct FruitSpot {
+  bool fits = false;
+  double u = 0.0;  ///< the last one tried when nothing fits
+  Eigen::Vector3d attach = Eigen::Vector3d::Zero();
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+};
+
+/// Slides a fruit of `radius` along the rachis from u0 in 6 mm steps (40 tries) on `side` until it
+/// fits, then the same on the other side of the rachis.
+FruitSpot FindFruitSpot(const TrussAxis& axis, double u0, double radius, double side,
+                        const FruitRoom& room) {
+  FruitSpot spot;
+  for (int attempt = 0; attempt < 80 && !spot.fits; ++attempt) {
+    const double this_side = attempt < 40 ? side : -side;
+    spot.u = u0 + 0.006 * (attempt % 40);
+    spot.attach = axis.At(spot.u);
+    spot.center = spot.attach + this_side * (0.75 * radius + 0.006) * axis.lateral -
+                  (0.7 * radius + 0.006) * kUp;
+    spot.fits = room.Fits(spot.center, radius);
+  }
+  return spot;
+}
+
+/// A tomato at `spot`: slightly flattened along its axis, which leans towards the attachment.
+struct Tomato {
+  Ellipsoid shape;
+  Eigen::Vector3d axis;
+};
+Tomato ShapeTomato(const TomatoPlantParams& params, const FruitSpot& spot, double radius, Rng& r) {
+  Tomato fruit;
+  fruit.shape.center_W = spot.center;
+  const double polar = std::max(params.fruit_radius_min_m, radius * r.Uniform(0.82, 0.95));
+  fruit.shape.radii = Eigen::Vector3d(radius, radius, polar);
+  fruit.axis = (0.6 * (spot.attach - spot.center).normalized() + 0.4 * kUp).normalized();
+  Eigen::Matrix3d R = RotationWithZAxis(fruit.axis);
+  R = RotationAbout(fruit.axis, r.Uniform(0.0, 2.0 * kPi)) * R;
+  fruit.shape.R_WE = R;
+  return fruit;
+}
+
+/// The albedo of fruit i of n on a truss: lower trusses are riper and within a truss the proximal
+/// fruits ripen first; ripeness is mapped into [ripeness_min, ripeness_max].
+Eigen::Vector3f DrawTomatoAlbedo(const TomatoPlantParams& params, double truss_ripeness, int i,
+                                 int n, Rng& r) {
+  const double ripeness =
+      Clamp01(truss_ripeness + 0.2 * (0.5 - static_cast<double>(i) / std::max(1, n - 1)) +
+              r.Normal(0.0, 0.07));
+  const double mapped =
+      params.ripeness_min + (params.ripeness_max - params.ripeness_min) * ripeness;
+  return VaryAlbedo(TomatoColor(mapped), 0.05, r);
+}
+
+/// The pedicel from the rachis at `attach` to the calyx at the fruit's top, and its five sepals.
+void AddPedicelAndCalyx(const Tomato& fruit, const Eigen::Vector3d& attach, Rng& r,
+                        TriangleMesh& truss_mesh) {
+  const double radius = fruit.shape.radii.x();
+  const double polar = fruit.shape.radii.z();
+  const Eigen::Matrix3d& R = fruit.shape.R_WE;
+  const Eigen::Vector3d& axis = fruit.axis;
+  const Eigen::Vector3d top = fruit.shape.center_W + polar * axis;
+  if ((top - attach).norm() > 0.003) {
+    const Eigen::Vector3d mid = 0.5 * (top + attach) + 0.004 * kUp;
+    const std::vector<Eigen::Vector3d> pedicel = {attach, mid, top};
+    truss_mesh.Append(MakeTube(pedicel, LinearRadii(0.0016, 0.0013, 3), 5, true));
+  }
+  const double sepal_phase = r.Uniform(0.0, 2.0 * kPi);
+  for (int k = 0; k < 5; ++k) {
+    const double theta = sepal_phase + 2.0 * kPi * k / 5.0;
+    const Eigen::Vector3d out = std::cos(theta) * R.col(0) + std::sin(theta) * R.col(1);
+    LeafBladeParams sepal;
+    sepal.length_m = 0.55 * radius * r.Uniform(0.85, 1.15);
+    sepal.width_m = 0.2 * radius;
+    sepal.widest_at = 0.3;
+    sepal.midrib_bend_rad = std::min(1.2, sepal.length_m * polar / (radius * radius));
+    sepal.cup = 0.0;
+    sepal.segments_along = 3;
+    sepal.segments_across = 1;
+    truss_mesh.Append(MakeLeafBlade(sepal),
+                      RigidTransform(RotationWithXAxis(out, axis), top + 0.0015 * axis));
+  }
+}
+
+/// Hangs the truss's fruits along its rachis, alternating sides, each where it first fits (a
+/// fruit with no room is left out); adds "<prefix>/fruit_K_J" and their pedicels and calyces.
+void HangFruits(const TomatoPlantParams& params, Truss& truss, Rng& r, FruitRoom& room,
+                Scene& scene, TomatoPlantInfo& info) {
+  const std::vector<double>& radii = truss.fruit_radii;
+  const int n = static_cast<int>(radii.size());
+  double u = 0.0;
+  for (int i = 0; i < n; ++i) {
+    const double radius = radii[static_cast<size_t>(i)];
+    const double side = (i % 2 == 0 ? 1.0 : -1.0) * (truss.axis.curl >= 0.0 ? 1.0 : -1.0);
+    u = i == 0 ? 0.012 + 0.3 * radius
+               : u + r.Uniform(0.5, 0.7) * (radii[static_cast<size_t>(i - 1)] + radius);
+    const FruitSpot spot = FindFruitSpot(truss.axis, u, radius, side, room);
+    u = spot.u;
+    if (!spot.fits) continue;  // no room on this truss: a smaller truss (see fruits_per_truss)
+    truss.last_u = u;
+    const Tomato fruit = ShapeTomato(params, spot, radius, r);
+    room.fruits.push_back(fruit.shape);
+    const uint16_t id = scene.Add(
+        fmt::format("{}/fruit_{}_{}", params.name_prefix, truss.index, truss.placed),
+        SemanticClass::kFruit, DrawTomatoAlbedo(params, truss.ripeness, i, n, r), fruit.shape);
+    info.fruit_ids.push_back(id);
+    ++truss.placed;
+    AddPedicelAndCalyx(fruit, spot.attach, r, truss.mesh);
+  }
+}
+
+/// The rachis tube, running a little past the last fruit.
+void AddTrussRachis(Truss& truss) {
+  const double rachis_length = std::max(0.02, truss.last_u + 0.012);
+  const int m = std::max(3, static_cast<int>(std::ceil(rachis_length / 0.01)) + 1);
+  std::vector<Eigen::Vector3d> rachis_line;
+  for (int i = 0; i < m; ++i) rachis_line.push_back(truss.axis.At(rachis_length * i / (m - 1)));
+  truss.mesh.Append(MakeTube(rachis_line, LinearRadii(0.0025, 0.0015, m), 6, true));
+}
+
+/// trusses_min..max trusses up the stem, alternating sides (or within the azimuth spread), each
+/// with its fruits; adds "<prefix>/truss_K" and the fruits, and returns the fruits' shapes.
+std::vector<Ellipsoid> AddTrusses(const TomatoPlantParams& params, const Rng& plant_rng,
+                                  FruitRoom room, Scene& scene, TomatoPlantInfo& info) {
+  Rng truss_rng = plant_rng.Fork("trusses");
+  const int num_trusses =
+      static_cast<int>(truss_rng.UniformInt(params.trusses_min, params.trusses_max));
+  const double spread = params.truss_azimuth_spread_deg * kPi / 180.0;
+  const bool full_circle = params.truss_azimuth_spread_deg >= 360.0;
+  double azimuth =
+      full_circle ? truss_rng.Uniform(0.0, 2.0 * kPi) : params.truss_azimuth_deg * kPi / 180.0;
+  for (int t = 0; t < num_trusses; ++t) {
+    Rng r = truss_rng.Fork(static_cast<uint64_t>(t));
+    const double fraction = params.truss_height_min_fraction +
+                            (params.truss_height_max_fraction - params.truss_height_min_fraction) *
+                                (t + r.Uniform(0.15, 0.85)) / num_trusses;
+    const double h = fraction * room.stem.height_m;
+    if (full_circle) {
+      if (t > 0) azimuth += kPi + r.Uniform(-0.9, 0.9);  // trusses alternate sides
+    } else {
+      azimuth = params.truss_azimuth_deg * kPi / 180.0 + r.Uniform(-0.5, 0.5) * spread;
+    }
+    Truss truss;
+    truss.index = t;
+    truss.axis = AddPeduncle(room.stem, h, azimuth, r, truss.mesh);
+    truss.fruit_radii = DrawFruitRadii(params, r);
+    // Lower trusses are riper.
+    truss.ripeness = Clamp01(1.0 - (t + 0.5) / std::max(1, num_trusses) + r.Normal(0.0, 0.12));
+    HangFruits(params, truss, r, room, scene, info);
+    AddTrussRachis(truss);
+    scene.Add(fmt::format("{}/truss_{}", params.name_prefix, t), SemanticClass::kStem,
+              VaryAlbedo(kStemColor, 0.1, r), std::move(truss.mesh));
+    info.fruits_per_truss.push_back(truss.placed);
+  }
+  return std::move(room.fruits);
+}
+
+// ---- Occlusion screen ---------------------------------------------------------------------------
+
+/// The terminal leaflet of a covering leaf: `length_m` long, in frame R (facing the eye, tilted a
+/// little, pointing outwards and down from the stem), its midrib starting at `base_W`.
+struct ScreenLeaflet {
+  double length_m = 0.0;
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d base_W = Eigen::Vector3d::Zero();
+  Eigen::Vector3d outward = Eigen::Vector3d::Zero();  ///< horizontal, away from the stem
+};
+ScreenLeaflet OrientScreenLeaflet(const StemModel& stem, double size_scale,
+                                  const internal::ScreenSpot& spot, Rng& r) {
+  const Eigen::Vector3d& q = spot.centre_W;
+  const Eigen::Vector3d& to_eye = spot.to_eye;
+  ScreenLeaflet leaflet;
+  leaflet.length_m = r.Uniform(0.10, 0.13) * size_scale;
+  const double h_q = std::clamp(q.z() - stem.base_W.z(), 0.0, stem.height_m);
+  Eigen::Vector3d outward = q - stem.At(h_q);
+  outward.z() = 0.0;
+  if (outward.norm() < 1e-3) outward = -to_eye;
+  Eigen::Vector3d direction = outward.normalized() - r.Uniform(0.3, 1.0) * kUp;
+  direction -= direction.dot(to_eye) * to_eye;
+  if (direction.norm() < 1e-6) direction = RotationWithZAxis(to_eye).col(0);
+  Eigen::Matrix3d R = RotationWithXAxis(direction, to_eye);
+  R = RotationAbout(R.col(1), r.Uniform(-0.25, 0.25)) * R;
+  leaflet.R = R;
+  // The blade's middle is ~0.42 of its length along the midrib.
+  leaflet.base_W = q - 0.42 * leaflet.length_m * R.col(0);
+  leaflet.outward = outward;
+  return leaflet;
+}
+
+/// Covering leaf k of the occlusion screen: a compound leaf whose rachis arches out from a stem
+/// node above the spot to its terminal leaflet, which is centred on the spot and faces the eye.
+internal::ScreenLeaf BuildScreenLeaf(const TomatoPlantParams& params, const StemModel& stem,
+                                     double size_scale, int k, const internal::ScreenSpot& spot,
+                                     Rng& r) {
+  const ScreenLeaflet leaflet = OrientScreenLeaflet(stem, size_scale, spot, r);
+  const double h_node = std::clamp(leaflet.base_W.z() - stem.base_W.z() + r.Uniform(0.02, 0.07),
+                                   params.first_leaf_height_m, stem.height_m - 0.03);
+  const Eigen::Vector3d s = stem.At(h_node);
+  Eigen::Vector3d reach = leaflet.base_W - s;
+  Eigen::Vector3d reach_dir = reach;
+  reach_dir.z() = 0.0;
+  if (reach_dir.norm() < 1e-3) reach_dir = leaflet.outward;
+  reach_dir.normalize();
+  const Eigen::Vector3d p0 = s + 0.8 * stem.RadiusAt(h_node) * reach_dir;
+  reach = leaflet.base_W - p0;
+  if (reach.norm() < 0.02) reach += 0.02 * reach_dir;
+  CompoundLeafSpec spec;
+  spec.rachis_line = SampleCubicBezier(p0, p0 + 0.4 * reach + 0.04 * kUp,
+                                       p0 + 0.75 * reach + 0.03 * kUp, p0 + reach, 12);
+  spec.rachis_base_radius_m = 0.003 * size_scale;
+  spec.pairs = DrawLeafletPairs(params, r);
+  spec.leaflet_length_m = params.leaflet_length_m * size_scale;
+  spec.intercalary = params.intercalary_leaflets;
+  spec.terminal_frame = leaflet.R;
+  spec.terminal_length_m = leaflet.length_m;
+  CompoundLeaf leaf = BuildCompoundLeaf(spec, r);
+  internal::ScreenLeaf screen_leaf;
+  screen_leaf.blades_name = fmt::format("{}/screen_leaf_{:02}", params.name_prefix, k);
+  screen_leaf.stem_name = screen_leaf.blades_name + "/rachis";
+  screen_leaf.stem = std::move(leaf.rachis);
+  screen_leaf.stem_albedo = VaryAlbedo(kStemColor, 0.1, r);
+  screen_leaf.blades = std::move(leaf.leaflets);
+  screen_leaf.blades_albedo = LeafColor(h_node / stem.height_m, r);
+  return screen_leaf;
+}
+
 }  // namespace
 
 Eigen::Vector3f TomatoColor(double ripeness) {
@@ -281,306 +706,26 @@ TomatoPlantInfo AddTomatoPlant(const TomatoPlantParams& params, Rng& rng, Scene&
   // One draw from the caller's generator seeds this plant; organs get independent sub-streams,
   // so e.g. changing the leaf density does not move the fruit.
   const Rng plant_rng(rng.NextU64());
-  const std::string& prefix = params.name_prefix;
   TomatoPlantInfo info;
   const size_t first_object = scene.objects.size();
 
-  // ---- Stem -------------------------------------------------------------------------------------
-  Rng stem_rng = plant_rng.Fork("stem");
-  StemModel stem;
-  stem.base_W = params.stem_base_W;
-  stem.height_m = stem_rng.Uniform(params.height_min_m, params.height_max_m);
-  stem.lean_dir = Horizontal(stem_rng.Uniform(0.0, 2.0 * kPi));
-  stem.lean_m = stem_rng.Uniform(0.0, params.stem_lean_max_m);
-  stem.wobble_dir = Horizontal(stem_rng.Uniform(0.0, 2.0 * kPi));
-  stem.wobble_m = stem_rng.Uniform(0.002, 0.008);
-  stem.wobble_phase = stem_rng.Uniform(0.0, 2.0 * kPi);
-  stem.base_radius_m = params.stem_base_radius_m;
-  stem.top_radius_m = params.stem_top_radius_m;
+  const StemModel stem = AddStem(params, plant_rng, scene);
   info.height_m = stem.height_m;
   info.stem_top_W = stem.At(stem.height_m);
-  {
-    const int n = std::max(8, static_cast<int>(std::ceil(stem.height_m / 0.025)) + 1);
-    std::vector<Eigen::Vector3d> line;
-    std::vector<double> radii;
-    for (int i = 0; i < n; ++i) {
-      const double h = stem.height_m * i / (n - 1);
-      line.push_back(stem.At(h));
-      radii.push_back(stem.RadiusAt(h));
-    }
-    scene.Add(prefix + "/stem", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.08, stem_rng),
-              MakeTube(line, radii, 12, true));
-  }
-
-  // ---- Compound leaves (phyllotaxis) ------------------------------------------------------------
-  const Rng leaves_rng = plant_rng.Fork("leaves");
   const double size_scale = std::clamp(std::pow(params.leaf_density, 0.35), 0.6, 1.5);
-  const double leaf_spacing_m =
-      params.leaf_density > 0.0 ? 1.0 / (12.0 * params.leaf_density) : 0.0;
-  const auto leaflet_pairs = [&](Rng& r) {
-    return static_cast<int>(
-        r.UniformInt((params.leaflets_min - 1) / 2, (params.leaflets_max - 1) / 2));
-  };
-  if (leaf_spacing_m > 0.0) {
-    Rng layout = leaves_rng.Fork("layout");
-    const double phase = layout.Uniform(0.0, 2.0 * kPi);
-    int k = 0;
-    for (double h = params.first_leaf_height_m + layout.Uniform(0.0, leaf_spacing_m);
-         h < stem.height_m - 0.04; h += leaf_spacing_m * layout.Uniform(0.8, 1.2), ++k) {
-      Rng r = leaves_rng.Fork(static_cast<uint64_t>(k));
-      const double fh = h / stem.height_m;
-      const double azimuth = phase + k * kGoldenAngleRad + r.Uniform(-0.17, 0.17);
-      const Eigen::Vector3d d = Horizontal(azimuth);
-      const Eigen::Vector3d lateral = kUp.cross(d);
-      // Leaves near the apex are younger: shorter and steeper.
-      const double youth = std::clamp((fh - 0.75) / 0.25, 0.0, 1.0);
-      const double length =
-          params.leaf_length_m * size_scale * r.Uniform(0.8, 1.2) * (1.0 - 0.55 * youth);
-      const double elevation = (r.Uniform(30.0, 55.0) + 25.0 * youth) * kPi / 180.0;
-      const Eigen::Vector3d s = stem.At(h);
-      // Low leaves must keep their tips (and drooping leaflets) off the ground.
-      const double droop = std::min(r.Uniform(0.05, 0.35) * (1.0 - youth),
-                                    (s.z() - stem.base_W.z() - 0.12) / length);
-      const Eigen::Vector3d p0 = s + 0.8 * stem.RadiusAt(h) * d;
-      const Eigen::Vector3d p1 =
-          p0 + 0.3 * length * (std::cos(elevation) * d + std::sin(elevation) * kUp);
-      const Eigen::Vector3d p2 =
-          p0 + 0.7 * length * d + 0.15 * length * kUp + r.Uniform(-0.08, 0.08) * length * lateral;
-      const Eigen::Vector3d p3 = p0 + length * d - droop * length * kUp;
-      CompoundLeafSpec spec;
-      spec.rachis_line = SampleCubicBezier(p0, p1, p2, p3, 14);
-      spec.rachis_base_radius_m = 0.0032 * size_scale;
-      spec.pairs = leaflet_pairs(r);
-      spec.leaflet_length_m = params.leaflet_length_m * size_scale * (1.0 - 0.4 * youth);
-      spec.intercalary = params.intercalary_leaflets;
-      CompoundLeaf leaf = BuildCompoundLeaf(spec, r);
-      const std::string name = fmt::format("{}/leaf_{:02}", prefix, k);
-      scene.Add(name + "/rachis", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.1, r),
-                std::move(leaf.rachis));
-      scene.Add(name, SemanticClass::kLeaf, LeafColor(fh, r), std::move(leaf.leaflets));
-      ++info.num_leaves;
-    }
-  }
+  info.num_leaves = AddStemLeaves(params, stem, size_scale, plant_rng, scene);
+  const Stake stake = AddStake(params, stem, plant_rng, scene);
+  const std::vector<Ellipsoid> fruits =
+      AddTrusses(params, plant_rng, FruitRoom{params, stem, stake, {}}, scene, info);
 
-  // ---- Stake ------------------------------------------------------------------------------------
-  Rng stake_rng = plant_rng.Fork("stake");
-  const Eigen::Vector3d stake_base = params.stem_base_W + params.stake_offset_m;
-  const double stake_top = stem.height_m * stake_rng.Uniform(0.9, 1.05);
-  if (params.stake) {
-    scene.Add(prefix + "/stake", SemanticClass::kSupport,
-              VaryAlbedo(Eigen::Vector3f(0.33f, 0.22f, 0.11f), 0.1, stake_rng),
-              MakeCylinder(stake_base, stake_base + stake_top * kUp, params.stake_radius_m, 8));
-  }
-
-  // ---- Trusses and fruits -----------------------------------------------------------------------
-  Rng truss_rng = plant_rng.Fork("trusses");
-  const int num_trusses =
-      static_cast<int>(truss_rng.UniformInt(params.trusses_min, params.trusses_max));
-  std::vector<Ellipsoid> fruits;
-  const auto fruit_fits = [&](const Eigen::Vector3d& c, double r) {
-    if (c.z() - r < 0.02) return false;      // above the ground
-    for (const Ellipsoid& other : fruits) {  // slight touching is fine, no deep overlap
-      if ((other.center_W - c).norm() < 0.95 * (r + other.radii.maxCoeff())) return false;
-    }
-    const double h = c.z() - stem.base_W.z();
-    const Eigen::Vector3d axis = stem.At(std::clamp(h, 0.0, stem.height_m));
-    if ((c - axis).head<2>().norm() < r + stem.RadiusAt(h) + 0.004) return false;
-    if (params.stake && c.z() < stake_base.z() + stake_top + r &&
-        (c - stake_base).head<2>().norm() < r + params.stake_radius_m + 0.003) {
-      return false;
-    }
-    return true;
-  };
-
-  const double spread = params.truss_azimuth_spread_deg * kPi / 180.0;
-  const bool full_circle = params.truss_azimuth_spread_deg >= 360.0;
-  double azimuth =
-      full_circle ? truss_rng.Uniform(0.0, 2.0 * kPi) : params.truss_azimuth_deg * kPi / 180.0;
-  for (int t = 0; t < num_trusses; ++t) {
-    Rng r = truss_rng.Fork(static_cast<uint64_t>(t));
-    const double fraction = params.truss_height_min_fraction +
-                            (params.truss_height_max_fraction - params.truss_height_min_fraction) *
-                                (t + r.Uniform(0.15, 0.85)) / num_trusses;
-    const double h = fraction * stem.height_m;
-    if (full_circle) {
-      if (t > 0) azimuth += kPi + r.Uniform(-0.9, 0.9);  // trusses alternate sides
-    } else {
-      azimuth = params.truss_azimuth_deg * kPi / 180.0 + r.Uniform(-0.5, 0.5) * spread;
-    }
-    const Eigen::Vector3d d = Horizontal(azimuth);
-    const Eigen::Vector3d lateral = kUp.cross(d);
-    const Eigen::Vector3d s = stem.At(h) + 0.8 * stem.RadiusAt(h) * d;
-
-    TriangleMesh truss_mesh;
-    // Peduncle: out from the stem, arching slightly up, then down into the rachis.
-    const double peduncle = r.Uniform(0.05, 0.09);
-    const Eigen::Vector3d e0 = s + peduncle * d - 0.02 * kUp;
-    const std::vector<Eigen::Vector3d> peduncle_line = SampleCubicBezier(
-        s, s + 0.35 * peduncle * d + 0.02 * kUp, s + 0.75 * peduncle * d + 0.005 * kUp, e0, 8);
-    truss_mesh.Append(MakeTube(peduncle_line, LinearRadii(0.0035, 0.0025, 8), 6, true));
-
-    // Rachis: a gently curved line going outwards and down.
-    const double beta = r.Uniform(35.0, 65.0) * kPi / 180.0;
-    const Eigen::Vector3d e = std::cos(beta) * d - std::sin(beta) * kUp;
-    const double curl = r.Uniform(-0.8, 0.8);
-    const auto rachis_at = [&](double u) { return e0 + u * e + curl * u * u * lateral; };
-
-    const int n =
-        static_cast<int>(r.UniformInt(params.fruits_per_truss_min, params.fruits_per_truss_max));
-    std::vector<double> radii(static_cast<size_t>(n));
-    for (double& radius : radii) {
-      radius = r.Uniform(params.fruit_radius_min_m, params.fruit_radius_max_m);
-    }
-    std::sort(radii.begin(), radii.end(), std::greater<>());  // proximal fruits are the largest
-    // Lower trusses are riper; within a truss the proximal fruits ripen first.
-    const double truss_ripeness =
-        Clamp01(1.0 - (t + 0.5) / std::max(1, num_trusses) + r.Normal(0.0, 0.12));
-
-    double u = 0.0;
-    double last_u = 0.0;
-    int placed = 0;
-    for (int i = 0; i < n; ++i) {
-      const double radius = radii[static_cast<size_t>(i)];
-      const double side = (i % 2 == 0 ? 1.0 : -1.0) * (curl >= 0.0 ? 1.0 : -1.0);
-      u = i == 0 ? 0.012 + 0.3 * radius
-                 : u + r.Uniform(0.5, 0.7) * (radii[static_cast<size_t>(i - 1)] + radius);
-      Eigen::Vector3d attach;
-      Eigen::Vector3d center;
-      bool fits = false;
-      // Slide along the rachis until the fruit fits; then try the other side of the rachis.
-      const double u0 = u;
-      for (int attempt = 0; attempt < 80 && !fits; ++attempt) {
-        const double this_side = attempt < 40 ? side : -side;
-        u = u0 + 0.006 * (attempt % 40);
-        attach = rachis_at(u);
-        center =
-            attach + this_side * (0.75 * radius + 0.006) * lateral - (0.7 * radius + 0.006) * kUp;
-        fits = fruit_fits(center, radius);
-      }
-      if (!fits) continue;  // no room on this truss: a smaller truss (see fruits_per_truss)
-      last_u = u;
-      Ellipsoid fruit;
-      fruit.center_W = center;
-      const double polar = std::max(params.fruit_radius_min_m, radius * r.Uniform(0.82, 0.95));
-      fruit.radii = Eigen::Vector3d(radius, radius, polar);
-      const Eigen::Vector3d axis = (0.6 * (attach - center).normalized() + 0.4 * kUp).normalized();
-      Eigen::Matrix3d R = RotationWithZAxis(axis);
-      R = RotationAbout(axis, r.Uniform(0.0, 2.0 * kPi)) * R;
-      fruit.R_WE = R;
-      fruits.push_back(fruit);
-
-      const double ripeness =
-          Clamp01(truss_ripeness + 0.2 * (0.5 - static_cast<double>(i) / std::max(1, n - 1)) +
-                  r.Normal(0.0, 0.07));
-      const double mapped =
-          params.ripeness_min + (params.ripeness_max - params.ripeness_min) * ripeness;
-      const uint16_t id =
-          scene.Add(fmt::format("{}/fruit_{}_{}", prefix, t, placed), SemanticClass::kFruit,
-                    VaryAlbedo(TomatoColor(mapped), 0.05, r), fruit);
-      info.fruit_ids.push_back(id);
-      ++placed;
-
-      // Pedicel from the rachis to the calyx at the fruit's top, and five sepals.
-      const Eigen::Vector3d top = center + polar * axis;
-      if ((top - attach).norm() > 0.003) {
-        const Eigen::Vector3d mid = 0.5 * (top + attach) + 0.004 * kUp;
-        const std::vector<Eigen::Vector3d> pedicel = {attach, mid, top};
-        truss_mesh.Append(MakeTube(pedicel, LinearRadii(0.0016, 0.0013, 3), 5, true));
-      }
-      const double sepal_phase = r.Uniform(0.0, 2.0 * kPi);
-      for (int k = 0; k < 5; ++k) {
-        const double theta = sepal_phase + 2.0 * kPi * k / 5.0;
-        const Eigen::Vector3d out = std::cos(theta) * R.col(0) + std::sin(theta) * R.col(1);
-        LeafBladeParams sepal;
-        sepal.length_m = 0.55 * radius * r.Uniform(0.85, 1.15);
-        sepal.width_m = 0.2 * radius;
-        sepal.widest_at = 0.3;
-        sepal.midrib_bend_rad = std::min(1.2, sepal.length_m * polar / (radius * radius));
-        sepal.cup = 0.0;
-        sepal.segments_along = 3;
-        sepal.segments_across = 1;
-        truss_mesh.Append(MakeLeafBlade(sepal),
-                          RigidTransform(RotationWithXAxis(out, axis), top + 0.0015 * axis));
-      }
-    }
-    // The rachis tube runs a little past the last fruit.
-    const double rachis_length = std::max(0.02, last_u + 0.012);
-    const int m = std::max(3, static_cast<int>(std::ceil(rachis_length / 0.01)) + 1);
-    std::vector<Eigen::Vector3d> rachis_line;
-    for (int i = 0; i < m; ++i) rachis_line.push_back(rachis_at(rachis_length * i / (m - 1)));
-    truss_mesh.Append(MakeTube(rachis_line, LinearRadii(0.0025, 0.0015, m), 6, true));
-    scene.Add(fmt::format("{}/truss_{}", prefix, t), SemanticClass::kStem,
-              VaryAlbedo(kStemColor, 0.1, r), std::move(truss_mesh));
-    info.fruits_per_truss.push_back(placed);
-  }
-
-  // ---- Occlusion screen -------------------------------------------------------------------------
-  if (params.occlusion.enabled) {
-    FruitVisibility visibility(params.occlusion, fruits);
-    visibility.AddSceneOccluders(scene, first_object);
-    Rng screen_rng = plant_rng.Fork("screen");
-    const Eigen::Vector3d eye = params.occlusion.eye_W;
-    for (int k = 0; k < params.occlusion.max_leaves; ++k) {
-      const auto visible = visibility.FindVisible();
-      if (!visible) break;
-      Rng r = screen_rng.Fork(static_cast<uint64_t>(k));
-      const Eigen::Vector3d p = visible->first;
-      const Eigen::Vector3d to_eye = (eye - p).normalized();
-      // The covering leaf's centre q sits on the line of sight, a few centimetres in front of the
-      // fruit and clear of every fruit.
-      const Eigen::Vector3d q = ScreenLeafCentre(p, eye, fruits, 0.05, 0.012, r);
-      // Blade facing the eye (tilted a little), pointing outwards and down from the stem.
-      const double length = r.Uniform(0.10, 0.13) * size_scale;
-      const double h_q = std::clamp(q.z() - stem.base_W.z(), 0.0, stem.height_m);
-      Eigen::Vector3d outward = q - stem.At(h_q);
-      outward.z() = 0.0;
-      if (outward.norm() < 1e-3) outward = -to_eye;
-      Eigen::Vector3d direction = outward.normalized() - r.Uniform(0.3, 1.0) * kUp;
-      direction -= direction.dot(to_eye) * to_eye;
-      if (direction.norm() < 1e-6) direction = RotationWithZAxis(to_eye).col(0);
-      Eigen::Matrix3d R = RotationWithXAxis(direction, to_eye);
-      R = RotationAbout(R.col(1), r.Uniform(-0.25, 0.25)) * R;
-      // The blade's middle is ~0.42 of its length along the midrib.
-      const Eigen::Vector3d leaflet_base = q - 0.42 * length * R.col(0);
-
-      // Rachis from a stem node above the leaflet, arching out to the leaflet's base.
-      const double h_node = std::clamp(leaflet_base.z() - stem.base_W.z() + r.Uniform(0.02, 0.07),
-                                       params.first_leaf_height_m, stem.height_m - 0.03);
-      const Eigen::Vector3d s = stem.At(h_node);
-      Eigen::Vector3d reach = leaflet_base - s;
-      Eigen::Vector3d reach_dir = reach;
-      reach_dir.z() = 0.0;
-      if (reach_dir.norm() < 1e-3) reach_dir = outward;
-      reach_dir.normalize();
-      const Eigen::Vector3d p0 = s + 0.8 * stem.RadiusAt(h_node) * reach_dir;
-      reach = leaflet_base - p0;
-      if (reach.norm() < 0.02) reach += 0.02 * reach_dir;
-      CompoundLeafSpec spec;
-      spec.rachis_line = SampleCubicBezier(p0, p0 + 0.4 * reach + 0.04 * kUp,
-                                           p0 + 0.75 * reach + 0.03 * kUp, p0 + reach, 12);
-      spec.rachis_base_radius_m = 0.003 * size_scale;
-      spec.pairs = leaflet_pairs(r);
-      spec.leaflet_length_m = params.leaflet_length_m * size_scale;
-      spec.intercalary = params.intercalary_leaflets;
-      spec.terminal_frame = R;
-      spec.terminal_length_m = length;
-      CompoundLeaf leaf = BuildCompoundLeaf(spec, r);
-      visibility.AddOccluder(leaf.rachis);
-      visibility.AddOccluder(leaf.leaflets);
-      const std::string name = fmt::format("{}/screen_leaf_{:02}", prefix, k);
-      scene.Add(name + "/rachis", SemanticClass::kStem, VaryAlbedo(kStemColor, 0.1, r),
-                std::move(leaf.rachis));
-      scene.Add(name, SemanticClass::kLeaf, LeafColor(h_node / stem.height_m, r),
-                std::move(leaf.leaflets));
-      ++info.num_screen_leaves;
-    }
-    info.num_visible_samples = visibility.CountVisible();
-  }
-
-  for (size_t i = first_object; i < scene.objects.size(); ++i) {
-    info.num_triangles += scene.objects[i].num_triangles();
-  }
-  info.num_objects = scene.objects.size() - first_object;
+  const internal::ScreenResult screen = internal::AddOcclusionScreen(
+      params.occlusion, fruits, first_object, plant_rng,
+      {.min_distance_m = 0.05, .clearance_m = 0.012},
+      [&](int k, const internal::ScreenSpot& spot, Rng& r) {
+        return BuildScreenLeaf(params, stem, size_scale, k, spot, r);
+      },
+      scene);
+  internal::RecordScreenAndTotals(screen, scene, first_object, info);
   return info;
 }
 
