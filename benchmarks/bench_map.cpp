@@ -645,6 +645,148 @@ struct NbvRow {
   double visits_per_s() const { return visits / (Median(ms_per_candidate) * 1e-3 * candidates); }
 };
 
+// ---- NBV view evaluation (Benchmark::RunNbv) ----------------------------------------------------
+
+/// Voxels the rays of one candidate met, summed over its rays.
+struct NbvCounts {
+  uint64_t unknown = 0, free = 0, visited = 0, hits = 0;
+  bool operator==(const NbvCounts&) const = default;
+};
+
+/// The rays of n candidates (CandidatePose): through every 8th pixel centre (u, v = 4, 12, ...)
+/// of the VGA camera, ending 1.0 m from the camera centre.
+struct NbvRays {
+  int candidates = 0;
+  size_t per_candidate = 0;
+  std::vector<Eigen::Vector3f> origins;  ///< one per candidate
+  std::vector<Eigen::Vector3f> ends;     ///< per_candidate per candidate, candidate by candidate
+
+  const Eigen::Vector3f& ray_end(int k, size_t r) const {
+    return ends[static_cast<size_t>(k) * per_candidate + r];
+  }
+};
+
+NbvRays CandidateRays(int n) {
+  const Camera eval = Vga();
+  std::vector<Eigen::Vector3d> dirs_C;
+  for (int v = 4; v < eval.K.height; v += 8) {
+    for (int u = 4; u < eval.K.width; u += 8) {
+      dirs_C.push_back(eval.K.RayDirection(Eigen::Vector2d(u, v)).normalized());
+    }
+  }
+  NbvRays rays;
+  rays.candidates = n;
+  rays.per_candidate = dirs_C.size();
+  rays.origins.resize(static_cast<size_t>(n));
+  rays.ends.resize(static_cast<size_t>(n) * rays.per_candidate);
+  for (int k = 0; k < n; ++k) {
+    const RigidTransform X_WC = CandidatePose(k, n);
+    rays.origins[static_cast<size_t>(k)] = X_WC.translation().cast<float>();
+    for (size_t r = 0; r < rays.per_candidate; ++r) {
+      rays.ends[static_cast<size_t>(k) * rays.per_candidate + r] =
+          (X_WC * (1.0 * dirs_C[r])).cast<float>();
+    }
+  }
+  return rays;
+}
+
+/// The counts of `rays` rays, `cast_ray(r)` giving ray r's (OctoRayCounts or
+/// PlanningSnapshot::RayCounts). Inlined into the timed loops.
+template <typename CastRay>
+inline NbvCounts SumRayCounts(size_t rays, CastRay&& cast_ray) {
+  NbvCounts cnt;
+  for (size_t r = 0; r < rays; ++r) {
+    const auto rc = cast_ray(r);
+    cnt.unknown += rc.unknown;
+    cnt.free += rc.free;
+    cnt.visited += rc.visited;
+    cnt.hits += rc.hit ? 1 : 0;
+  }
+  return cnt;
+}
+
+/// Adds the candidates' counts to the row's totals.
+void AddCountTotals(const std::vector<NbvCounts>& counts, NbvRow& row) {
+  for (const NbvCounts& cnt : counts) {
+    row.unknown += cnt.unknown;
+    row.free += cnt.free;
+    row.visits += cnt.visited;
+    row.hits += cnt.hits;
+  }
+}
+
+/// The largest deviation (%) of a candidate's unknown or free count from the reference's.
+double MaxDeviationPct(const std::vector<NbvCounts>& counts,
+                       const std::vector<NbvCounts>& reference) {
+  auto dev = [](uint64_t x, uint64_t ref) {
+    const double d = std::abs(static_cast<double>(x) - static_cast<double>(ref));
+    return d == 0.0 ? 0.0 : 100.0 * d / std::max(1.0, static_cast<double>(ref));
+  };
+  double max_dev = 0.0;
+  for (size_t k = 0; k < counts.size(); ++k) {
+    const NbvCounts& a = counts[k];
+    const NbvCounts& b = reference[k];
+    max_dev = std::max({max_dev, dev(a.unknown, b.unknown), dev(a.free, b.free)});
+  }
+  return max_dev;
+}
+
+/// OctoMap's row (computeRayKeys + search, single-threaded), repeated within `reps`; `counts`
+/// gets each candidate's counts.
+NbvRow OctoMapNbvRow(const MapCase& c, const OctoMapHarness& tree, bool headers,
+                     const NbvRays& rays, RepBudget reps, std::vector<NbvCounts>& counts) {
+  const int n = rays.candidates;
+  NbvRow row;
+  row.library = headers ? "OctoMap 1.9.7 headers, project flags" : "OctoMap 1.9.7 (Debian .so)";
+  row.key = headers ? "octomap-headers" : "octomap";
+  row.c = c;
+  row.candidates = n;
+  row.rays = static_cast<uint64_t>(n) * rays.per_candidate;
+  counts.assign(static_cast<size_t>(n), NbvCounts{});
+  for (int rep = 0; reps.Continue(rep); ++rep) {
+    const double t0 = Now();
+    for (int k = 0; k < n; ++k) {
+      const Eigen::Vector3f& from = rays.origins[static_cast<size_t>(k)];
+      counts[static_cast<size_t>(k)] = SumRayCounts(
+          rays.per_candidate, [&](size_t r) { return tree.CastRay(from, rays.ray_end(k, r)); });
+    }
+    row.ms_per_candidate.push_back(1e3 * (Now() - t0) / n);
+  }
+  AddCountTotals(counts, row);
+  std::printf("   nbv %d cand %s: %.2f ms/candidate\n", n, row.key.c_str(),
+              Median(row.ms_per_candidate));
+  std::fflush(stdout);
+  return row;
+}
+
+/// Each candidate's counts through PlanningSnapshot::CastRay on `threads` threads (candidates
+/// handed out in turn), repeated within `reps`; the time of each repetition per candidate (ms)
+/// goes to `ms_per_candidate`.
+std::vector<NbvCounts> SnapshotNbvCounts(const PlanningSnapshot& snapshot, const NbvRays& rays,
+                                         int threads, RepBudget reps,
+                                         std::vector<double>& ms_per_candidate) {
+  const int n = rays.candidates;
+  std::vector<NbvCounts> counts(static_cast<size_t>(n));
+  for (int rep = 0; reps.Continue(rep); ++rep) {
+    std::atomic<int> next{0};
+    auto worker = [&] {
+      for (int k = next.fetch_add(1); k < n; k = next.fetch_add(1)) {
+        const Eigen::Vector3d from = rays.origins[static_cast<size_t>(k)].cast<double>();
+        counts[static_cast<size_t>(k)] = SumRayCounts(rays.per_candidate, [&](size_t r) {
+          return snapshot.CastRay(from, rays.ray_end(k, r).cast<double>());
+        });
+      }
+    };
+    const double t0 = Now();
+    std::vector<std::thread> pool;
+    for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+    worker();
+    for (std::thread& t : pool) t.join();
+    ms_per_candidate.push_back(1e3 * (Now() - t0) / n);
+  }
+  return counts;
+}
+
 std::string Fixed(double v, int digits) {
   if (!std::isfinite(v)) return "—";
   return fmt::format("{:.{}f}", v, digits);
@@ -950,81 +1092,19 @@ class Benchmark {
   // ---- NBV
   void RunNbv(const MapCase& c, const OctoMapHarness& octo, const OctoMapHarness* octo_headers,
               const OccupancyGrid& grid, int n) {
-    const Camera eval = Vga();
-    // Rays through every 8th pixel centre (u, v = 4, 12, ...), 1.0 m from the camera centre.
-    std::vector<Eigen::Vector3d> dirs_C;
-    for (int v = 4; v < eval.K.height; v += 8) {
-      for (int u = 4; u < eval.K.width; u += 8) {
-        dirs_C.push_back(eval.K.RayDirection(Eigen::Vector2d(u, v)).normalized());
-      }
-    }
-    const size_t rays = dirs_C.size();
-    std::vector<Eigen::Vector3f> origins(static_cast<size_t>(n));
-    std::vector<Eigen::Vector3f> ends(static_cast<size_t>(n) * rays);
-    for (int k = 0; k < n; ++k) {
-      const RigidTransform X_WC = CandidatePose(k, n);
-      origins[static_cast<size_t>(k)] = X_WC.translation().cast<float>();
-      for (size_t r = 0; r < rays; ++r) {
-        ends[static_cast<size_t>(k) * rays + r] = (X_WC * (1.0 * dirs_C[r])).cast<float>();
-      }
-    }
-    struct Counts {
-      uint64_t unknown = 0, free = 0, visited = 0, hits = 0;
-    };
-
-    // OctoMap: computeRayKeys + search, single-threaded.
-    auto run_octomap = [&](const OctoMapHarness& tree, bool headers, std::vector<Counts>& counts) {
-      NbvRow row;
-      row.library = headers ? "OctoMap 1.9.7 headers, project flags" : "OctoMap 1.9.7 (Debian .so)";
-      row.key = headers ? "octomap-headers" : "octomap";
-      row.c = c;
-      row.candidates = n;
-      row.rays = static_cast<uint64_t>(n) * rays;
-      counts.assign(static_cast<size_t>(n), Counts{});
-      RepBudget reps(o_.octomap_reps, o_.rep_budget_s);
-      for (int rep = 0; reps.Continue(rep); ++rep) {
-        const double t0 = Now();
-        for (int k = 0; k < n; ++k) {
-          Counts cnt;
-          for (size_t r = 0; r < rays; ++r) {
-            const OctoRayCounts rc = tree.CastRay(origins[static_cast<size_t>(k)],
-                                                  ends[static_cast<size_t>(k) * rays + r]);
-            cnt.unknown += rc.unknown;
-            cnt.free += rc.free;
-            cnt.visited += rc.visited;
-            cnt.hits += rc.hit ? 1 : 0;
-          }
-          counts[static_cast<size_t>(k)] = cnt;
-        }
-        row.ms_per_candidate.push_back(1e3 * (Now() - t0) / n);
-      }
-      for (const Counts& cnt : counts) {
-        row.unknown += cnt.unknown;
-        row.free += cnt.free;
-        row.visits += cnt.visited;
-        row.hits += cnt.hits;
-      }
-      std::printf("   nbv %d cand %s: %.2f ms/candidate\n", n, row.key.c_str(),
-                  Median(row.ms_per_candidate));
-      std::fflush(stdout);
-      return row;
-    };
-    std::vector<Counts> octo_counts;
-    const NbvRow orow = run_octomap(octo, false, octo_counts);
+    const NbvRays rays = CandidateRays(n);
+    std::vector<NbvCounts> octo_counts;
+    const NbvRow orow = OctoMapNbvRow(c, octo, /*headers=*/false, rays,
+                                      RepBudget(o_.octomap_reps, o_.rep_budget_s), octo_counts);
     nbv_rows_.push_back(orow);
     AddNbvRecords(nbv_rows_.back(), nullptr);
     if (octo_headers != nullptr) {
-      std::vector<Counts> header_counts;
-      nbv_rows_.push_back(run_octomap(*octo_headers, true, header_counts));
-      bool same = true;
-      for (int k = 0; k < n; ++k) {
-        const Counts& a = header_counts[static_cast<size_t>(k)];
-        const Counts& b = octo_counts[static_cast<size_t>(k)];
-        same = same && a.unknown == b.unknown && a.free == b.free && a.visited == b.visited &&
-               a.hits == b.hits;
-      }
-      Gate(fmt::format("nbv {} mm {} cand octomap-headers counts == Debian", c.res_mm(), n), same,
-           "");
+      std::vector<NbvCounts> header_counts;
+      nbv_rows_.push_back(OctoMapNbvRow(c, *octo_headers, /*headers=*/true, rays,
+                                        RepBudget(o_.octomap_reps, o_.rep_budget_s),
+                                        header_counts));
+      Gate(fmt::format("nbv {} mm {} cand octomap-headers counts == Debian", c.res_mm(), n),
+           header_counts == octo_counts, "");
       AddNbvRecords(nbv_rows_.back(), &orow);
     }
 
@@ -1037,7 +1117,7 @@ class Benchmark {
       return;
     }
     const PlanningSnapshot& snapshot = *snap;
-    std::vector<Counts> first_counts;
+    std::vector<NbvCounts> first_counts;
     for (int threads : o_.threads) {
       NbvRow row;
       row.library = "avp PlanningSnapshot::CastRay";
@@ -1048,56 +1128,15 @@ class Benchmark {
       row.rays = orow.rays;
       row.snapshot_build_ms = snapshot_ms;
       row.snapshot_bytes = snapshot.bytes();
-      std::vector<Counts> counts(static_cast<size_t>(n));
-      RepBudget nbv_reps(o_.nbv_reps, o_.rep_budget_s);
-      for (int rep = 0; nbv_reps.Continue(rep); ++rep) {
-        std::atomic<int> next{0};
-        auto worker = [&] {
-          for (int k = next.fetch_add(1); k < n; k = next.fetch_add(1)) {
-            Counts cnt;
-            const Eigen::Vector3d from = origins[static_cast<size_t>(k)].cast<double>();
-            for (size_t r = 0; r < rays; ++r) {
-              const PlanningSnapshot::RayCounts rc =
-                  snapshot.CastRay(from, ends[static_cast<size_t>(k) * rays + r].cast<double>());
-              cnt.unknown += rc.unknown;
-              cnt.free += rc.free;
-              cnt.visited += rc.visited;
-              cnt.hits += rc.hit ? 1 : 0;
-            }
-            counts[static_cast<size_t>(k)] = cnt;
-          }
-        };
-        const double t0 = Now();
-        std::vector<std::thread> pool;
-        for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
-        worker();
-        for (std::thread& t : pool) t.join();
-        row.ms_per_candidate.push_back(1e3 * (Now() - t0) / n);
-      }
-      double max_dev = 0.0;
-      for (int k = 0; k < n; ++k) {
-        const Counts& a = counts[static_cast<size_t>(k)];
-        const Counts& b = octo_counts[static_cast<size_t>(k)];
-        row.unknown += a.unknown;
-        row.free += a.free;
-        row.visits += a.visited;
-        row.hits += a.hits;
-        auto dev = [](uint64_t x, uint64_t ref) {
-          const double d = std::abs(static_cast<double>(x) - static_cast<double>(ref));
-          return d == 0.0 ? 0.0 : 100.0 * d / std::max(1.0, static_cast<double>(ref));
-        };
-        max_dev = std::max({max_dev, dev(a.unknown, b.unknown), dev(a.free, b.free)});
-      }
+      const std::vector<NbvCounts> counts = SnapshotNbvCounts(
+          snapshot, rays, threads, RepBudget(o_.nbv_reps, o_.rep_budget_s), row.ms_per_candidate);
+      AddCountTotals(counts, row);
+      const double max_dev = MaxDeviationPct(counts, octo_counts);
       row.max_dev_pct = max_dev;
       if (first_counts.empty()) {
         first_counts = counts;
       } else {
-        for (int k = 0; k < n && row.identical_to_1thread; ++k) {
-          const Counts& a = counts[static_cast<size_t>(k)];
-          const Counts& b = first_counts[static_cast<size_t>(k)];
-          row.identical_to_1thread = a.unknown == b.unknown && a.free == b.free &&
-                                     a.visited == b.visited && a.hits == b.hits;
-        }
+        row.identical_to_1thread = counts == first_counts;
         Gate(fmt::format("nbv {} mm {} cand {} thr counts == {} thr", c.res_mm(), n, threads,
                          o_.threads.front()),
              row.identical_to_1thread, "");

@@ -132,6 +132,264 @@ std::vector<std::pair<size_t, size_t>> Runs(size_t n, F&& ok) {
   return runs;
 }
 
+// ---- Stages of RenderLinePlotSvg ----------------------------------------------------------------
+
+/// A legend entry: series index, left edge (px) and row. Entries flow left to right under the x
+/// label.
+struct LegendEntry {
+  size_t series;
+  double x;
+  int row;
+};
+
+/// Legend entries of the named series, wrapped into rows between `left` and `right` (px).
+std::vector<LegendEntry> LegendLayout(const LinePlot& plot, double left, double right) {
+  std::vector<LegendEntry> legend;
+  double x = left;
+  int row = 0;
+  for (size_t k = 0; k < plot.series.size(); ++k) {
+    if (plot.series[k].name.empty()) continue;
+    const double w = 34.0 + kCharWidth * static_cast<double>(plot.series[k].name.size()) + 18.0;
+    if (x > left && x + w > right) {
+      x = left;
+      ++row;
+    }
+    legend.push_back({k, x, row});
+    x += w;
+  }
+  return legend;
+}
+
+/// The x axis over every series' x values ([0, 1] when there are none).
+Axis MakeXAxis(const LinePlot& plot) {
+  double x_lo = std::numeric_limits<double>::infinity();
+  double x_hi = -x_lo;
+  for (const LineSeries& s : plot.series) {
+    for (double x : s.x) {
+      x_lo = std::min(x_lo, x);
+      x_hi = std::max(x_hi, x);
+    }
+  }
+  if (x_lo > x_hi) {
+    x_lo = 0.0;
+    x_hi = 1.0;
+  }
+  return MakeAxis(x_lo, x_hi, false, false, plot.integer_x);
+}
+
+/// Where everything goes (px, y down): the plot area, its axes, the mapping of data to pixels and
+/// the legend.
+struct PlotLayout {
+  double W = 0.0;  ///< image width
+  double left = 0.0;
+  double right = 0.0;
+  double top = 0.0;
+  double bottom = 0.0;
+  bool has_right = false;  ///< a series uses the right axis
+  Axis ax;
+  Axis ay;
+  Axis ay2;  ///< right axis (no ticks without has_right)
+  std::vector<LegendEntry> legend;
+
+  double px(double x) const { return left + (x - ax.lo) / (ax.hi - ax.lo) * (right - left); }
+  double py(double y, bool r) const {
+    const Axis& a = r ? ay2 : ay;
+    return bottom - (y - a.lo) / (a.hi - a.lo) * (bottom - top);
+  }
+};
+
+PlotLayout LayoutOf(const LinePlot& plot) {
+  PlotLayout l;
+  l.has_right = std::any_of(plot.series.begin(), plot.series.end(),
+                            [](const LineSeries& s) { return s.right_axis; });
+  l.W = plot.width_px;
+  const double H = plot.height_px;
+  l.left = kMarginLeft;
+  l.right = l.W - (l.has_right ? kMarginRightAxis : kMarginRightPlain);
+  l.legend = LegendLayout(plot, l.left, l.right);
+  const int legend_rows = l.legend.empty() ? 0 : l.legend.back().row + 1;
+  l.top = kMarginTop;
+  l.bottom = std::max(l.top + 60.0, H - kAxisBelow - legend_rows * kLegendRow - 8.0);
+  l.ax = MakeXAxis(plot);
+  l.ay = MakeYAxis(plot, false);
+  if (l.has_right) l.ay2 = MakeYAxis(plot, true);
+  return l;
+}
+
+/// The XML declaration, the <svg> element, the title, the plot-area clip path and the background.
+std::string SvgHeader(const LinePlot& plot, const PlotLayout& a) {
+  std::string svg;
+  svg += fmt::format(
+      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{0}\" height=\"{1}\" "
+      "viewBox=\"0 0 {0} {1}\" font-family=\"Helvetica, Arial, sans-serif\" font-size=\"12\">\n",
+      plot.width_px, plot.height_px);
+  if (!plot.title.empty()) svg += fmt::format("<title>{}</title>\n", EscapeXml(plot.title));
+  svg += fmt::format(
+      "<defs><clipPath id=\"plot-area\"><rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\"/>"
+      "</clipPath></defs>\n",
+      Num(a.left), Num(a.top), Num(a.right - a.left), Num(a.bottom - a.top));
+  svg += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
+  return svg;
+}
+
+/// Grid lines, the frame, tick marks and tick labels.
+void AppendGridAndTicks(const PlotLayout& a, std::string& svg) {
+  svg += "<g class=\"grid\" stroke=\"#e5e5e5\" stroke-width=\"1\">\n";
+  for (double t : a.ax.ticks) {
+    svg += fmt::format("<line x1=\"{0}\" y1=\"{1}\" x2=\"{0}\" y2=\"{2}\"/>\n", Num(a.px(t)),
+                       Num(a.top), Num(a.bottom));
+  }
+  for (double t : a.ay.ticks) {
+    svg += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\"/>\n", Num(a.py(t, false)),
+                       Num(a.left), Num(a.right));
+  }
+  svg += "</g>\n";
+  svg += "<g class=\"axes\" stroke=\"#333333\" stroke-width=\"1\" fill=\"none\">\n";
+  svg += fmt::format("<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\"/>\n", Num(a.left),
+                     Num(a.top), Num(a.right - a.left), Num(a.bottom - a.top));
+  for (double t : a.ax.ticks) {
+    svg += fmt::format("<line x1=\"{0}\" y1=\"{1}\" x2=\"{0}\" y2=\"{2}\"/>\n", Num(a.px(t)),
+                       Num(a.bottom), Num(a.bottom + 5.0));
+  }
+  for (double t : a.ay.ticks) {
+    svg += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\"/>\n", Num(a.py(t, false)),
+                       Num(a.left - 5.0), Num(a.left));
+  }
+  for (double t : a.ay2.ticks) {
+    svg += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\"/>\n", Num(a.py(t, true)),
+                       Num(a.right), Num(a.right + 5.0));
+  }
+  svg += "</g>\n";
+  svg += "<g class=\"tick-labels\" fill=\"#333333\">\n";
+  for (double t : a.ax.ticks) {
+    svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n", Num(a.px(t)),
+                       Num(a.bottom + 19.0), TickLabel(t, a.ax.decimals));
+  }
+  for (double t : a.ay.ticks) {
+    svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{}</text>\n", Num(a.left - 8.0),
+                       Num(a.py(t, false) + 4.0), TickLabel(t, a.ay.decimals));
+  }
+  for (double t : a.ay2.ticks) {
+    svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"start\">{}</text>\n",
+                       Num(a.right + 8.0), Num(a.py(t, true) + 4.0), TickLabel(t, a.ay2.decimals));
+  }
+  svg += "</g>\n";
+}
+
+/// The title and the axis labels that are set (the right one only with a right axis).
+void AppendTitleAndAxisLabels(const LinePlot& plot, const PlotLayout& a, std::string& svg) {
+  if (!plot.title.empty()) {
+    svg += fmt::format(
+        "<text class=\"title\" x=\"{}\" y=\"{}\" text-anchor=\"middle\" font-size=\"15\" "
+        "font-weight=\"bold\">{}</text>\n",
+        Num(0.5 * (a.left + a.right)), Num(a.top - 16.0), EscapeXml(plot.title));
+  }
+  if (!plot.x_label.empty()) {
+    svg +=
+        fmt::format("<text class=\"x-label\" x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n",
+                    Num(0.5 * (a.left + a.right)), Num(a.bottom + 40.0), EscapeXml(plot.x_label));
+  }
+  if (!plot.y_label.empty()) {
+    svg += fmt::format(
+        "<text class=\"y-label\" transform=\"translate({},{}) rotate(-90)\" "
+        "text-anchor=\"middle\">{}</text>\n",
+        Num(18.0), Num(0.5 * (a.top + a.bottom)), EscapeXml(plot.y_label));
+  }
+  if (a.has_right && !plot.y2_label.empty()) {
+    svg += fmt::format(
+        "<text class=\"y2-label\" transform=\"translate({},{}) rotate(90)\" "
+        "text-anchor=\"middle\">{}</text>\n",
+        Num(a.W - 18.0), Num(0.5 * (a.top + a.bottom)), EscapeXml(plot.y2_label));
+  }
+}
+
+/// Each series' colour: its own, or the next palette colour.
+std::vector<std::string> SeriesColors(const LinePlot& plot) {
+  std::vector<std::string> colors;
+  size_t palette = 0;
+  for (const LineSeries& s : plot.series) {
+    colors.push_back(s.color.empty() ? std::string(kPalette[palette++ % kPalette.size()])
+                                     : s.color);
+  }
+  return colors;
+}
+
+/// One polygon per run of finite values and bands: y + band forwards, y - band backwards.
+void AppendSeriesBands(const LinePlot& plot, const PlotLayout& a,
+                       const std::vector<std::string>& colors, std::string& svg) {
+  for (size_t k = 0; k < plot.series.size(); ++k) {
+    const LineSeries& s = plot.series[k];
+    if (s.band.empty()) continue;
+    const auto ok = [&](size_t i) { return std::isfinite(s.y[i]) && std::isfinite(s.band[i]); };
+    for (const auto& [lo, hi] : Runs(s.y.size(), ok)) {
+      std::string points;
+      for (size_t i = lo; i <= hi; ++i) {
+        points +=
+            fmt::format("{},{} ", Num(a.px(s.x[i])), Num(a.py(s.y[i] + s.band[i], s.right_axis)));
+      }
+      for (size_t i = hi + 1; i-- > lo;) {
+        points +=
+            fmt::format("{},{} ", Num(a.px(s.x[i])), Num(a.py(s.y[i] - s.band[i], s.right_axis)));
+      }
+      points.pop_back();
+      svg += fmt::format(
+          "<polygon points=\"{}\" fill=\"{}\" fill-opacity=\"0.18\" stroke=\"none\"/>\n", points,
+          colors[k]);
+    }
+  }
+}
+
+/// One polyline per run of finite values (dashed on the right axis), with markers if asked for.
+void AppendSeriesLines(const LinePlot& plot, const PlotLayout& a,
+                       const std::vector<std::string>& colors, std::string& svg) {
+  for (size_t k = 0; k < plot.series.size(); ++k) {
+    const LineSeries& s = plot.series[k];
+    const std::string dash = s.right_axis ? " stroke-dasharray=\"6 3\"" : "";
+    const auto ok = [&](size_t i) { return std::isfinite(s.y[i]); };
+    for (const auto& [lo, hi] : Runs(s.y.size(), ok)) {
+      std::string points;
+      for (size_t i = lo; i <= hi; ++i) {
+        points += fmt::format("{},{} ", Num(a.px(s.x[i])), Num(a.py(s.y[i], s.right_axis)));
+      }
+      points.pop_back();
+      svg += fmt::format(
+          "<polyline points=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"2\"{}/>\n", points,
+          colors[k], dash);
+      if (!s.markers) continue;
+      for (size_t i = lo; i <= hi; ++i) {
+        svg += fmt::format("<circle cx=\"{}\" cy=\"{}\" r=\"3\" fill=\"{}\"/>\n", Num(a.px(s.x[i])),
+                           Num(a.py(s.y[i], s.right_axis)), colors[k]);
+      }
+    }
+  }
+}
+
+/// The legend under the x label (nothing when no series is named).
+void AppendLegend(const LinePlot& plot, const PlotLayout& a, const std::vector<std::string>& colors,
+                  std::string& svg) {
+  if (a.legend.empty()) return;
+  svg += "<g class=\"legend\">\n";
+  for (const LegendEntry& e : a.legend) {
+    const LineSeries& s = plot.series[e.series];
+    const double y = a.bottom + kAxisBelow + 4.0 + e.row * kLegendRow;
+    if (!s.band.empty()) {
+      svg += fmt::format(
+          "<rect x=\"{}\" y=\"{}\" width=\"26\" height=\"10\" fill=\"{}\" "
+          "fill-opacity=\"0.18\"/>\n",
+          Num(e.x), Num(y - 5.0), colors[e.series]);
+    }
+    svg += fmt::format(
+        "<line x1=\"{0}\" y1=\"{2}\" x2=\"{1}\" y2=\"{2}\" stroke=\"{3}\" "
+        "stroke-width=\"2\"{4}/>\n",
+        Num(e.x), Num(e.x + 26.0), Num(y), colors[e.series],
+        s.right_axis ? " stroke-dasharray=\"6 3\"" : "");
+    svg += fmt::format("<text x=\"{}\" y=\"{}\" fill=\"#333333\">{}{}</text>\n", Num(e.x + 32.0),
+                       Num(y + 4.0), EscapeXml(s.name), s.right_axis ? " (right)" : "");
+  }
+  svg += "</g>\n";
+}
+
 }  // namespace
 
 std::string EscapeXml(std::string_view text) {
@@ -210,210 +468,17 @@ Status LinePlot::Validate() const {
 
 Result<std::string> RenderLinePlotSvg(const LinePlot& plot) {
   AVP_RETURN_IF_ERROR(plot.Validate());
-  const bool has_right = std::any_of(plot.series.begin(), plot.series.end(),
-                                     [](const LineSeries& s) { return s.right_axis; });
-
-  // Legend rows: entries flow left to right under the x label.
-  struct LegendEntry {
-    size_t series;
-    double x;
-    int row;
-  };
-  const double W = plot.width_px;
-  const double H = plot.height_px;
-  const double left = kMarginLeft;
-  const double right = W - (has_right ? kMarginRightAxis : kMarginRightPlain);
-  std::vector<LegendEntry> legend;
-  {
-    double x = left;
-    int row = 0;
-    for (size_t k = 0; k < plot.series.size(); ++k) {
-      if (plot.series[k].name.empty()) continue;
-      const double w = 34.0 + kCharWidth * static_cast<double>(plot.series[k].name.size()) + 18.0;
-      if (x > left && x + w > right) {
-        x = left;
-        ++row;
-      }
-      legend.push_back({k, x, row});
-      x += w;
-    }
-  }
-  const int legend_rows = legend.empty() ? 0 : legend.back().row + 1;
-  const double top = kMarginTop;
-  const double bottom = std::max(top + 60.0, H - kAxisBelow - legend_rows * kLegendRow - 8.0);
-
-  // Axes.
-  double x_lo = std::numeric_limits<double>::infinity();
-  double x_hi = -x_lo;
-  for (const LineSeries& s : plot.series) {
-    for (double x : s.x) {
-      x_lo = std::min(x_lo, x);
-      x_hi = std::max(x_hi, x);
-    }
-  }
-  if (x_lo > x_hi) {
-    x_lo = 0.0;
-    x_hi = 1.0;
-  }
-  const Axis ax = MakeAxis(x_lo, x_hi, false, false, plot.integer_x);
-  const Axis ay = MakeYAxis(plot, false);
-  const Axis ay2 = has_right ? MakeYAxis(plot, true) : Axis{};
-  const auto px = [&](double x) { return left + (x - ax.lo) / (ax.hi - ax.lo) * (right - left); };
-  const auto py = [&](double y, bool r) {
-    const Axis& a = r ? ay2 : ay;
-    return bottom - (y - a.lo) / (a.hi - a.lo) * (bottom - top);
-  };
-
-  std::string svg;
-  svg += fmt::format(
-      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
-      "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{0}\" height=\"{1}\" "
-      "viewBox=\"0 0 {0} {1}\" font-family=\"Helvetica, Arial, sans-serif\" font-size=\"12\">\n",
-      plot.width_px, plot.height_px);
-  if (!plot.title.empty()) svg += fmt::format("<title>{}</title>\n", EscapeXml(plot.title));
-  svg += fmt::format(
-      "<defs><clipPath id=\"plot-area\"><rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\"/>"
-      "</clipPath></defs>\n",
-      Num(left), Num(top), Num(right - left), Num(bottom - top));
-  svg += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
-
-  // Grid and ticks.
-  svg += "<g class=\"grid\" stroke=\"#e5e5e5\" stroke-width=\"1\">\n";
-  for (double t : ax.ticks) {
-    svg += fmt::format("<line x1=\"{0}\" y1=\"{1}\" x2=\"{0}\" y2=\"{2}\"/>\n", Num(px(t)),
-                       Num(top), Num(bottom));
-  }
-  for (double t : ay.ticks) {
-    svg += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\"/>\n", Num(py(t, false)),
-                       Num(left), Num(right));
-  }
-  svg += "</g>\n";
-  svg += "<g class=\"axes\" stroke=\"#333333\" stroke-width=\"1\" fill=\"none\">\n";
-  svg += fmt::format("<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\"/>\n", Num(left), Num(top),
-                     Num(right - left), Num(bottom - top));
-  for (double t : ax.ticks) {
-    svg += fmt::format("<line x1=\"{0}\" y1=\"{1}\" x2=\"{0}\" y2=\"{2}\"/>\n", Num(px(t)),
-                       Num(bottom), Num(bottom + 5.0));
-  }
-  for (double t : ay.ticks) {
-    svg += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\"/>\n", Num(py(t, false)),
-                       Num(left - 5.0), Num(left));
-  }
-  for (double t : ay2.ticks) {
-    svg += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\"/>\n", Num(py(t, true)),
-                       Num(right), Num(right + 5.0));
-  }
-  svg += "</g>\n";
-  svg += "<g class=\"tick-labels\" fill=\"#333333\">\n";
-  for (double t : ax.ticks) {
-    svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n", Num(px(t)),
-                       Num(bottom + 19.0), TickLabel(t, ax.decimals));
-  }
-  for (double t : ay.ticks) {
-    svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{}</text>\n", Num(left - 8.0),
-                       Num(py(t, false) + 4.0), TickLabel(t, ay.decimals));
-  }
-  for (double t : ay2.ticks) {
-    svg += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"start\">{}</text>\n",
-                       Num(right + 8.0), Num(py(t, true) + 4.0), TickLabel(t, ay2.decimals));
-  }
-  svg += "</g>\n";
-
-  // Title and axis labels.
-  if (!plot.title.empty()) {
-    svg += fmt::format(
-        "<text class=\"title\" x=\"{}\" y=\"{}\" text-anchor=\"middle\" font-size=\"15\" "
-        "font-weight=\"bold\">{}</text>\n",
-        Num(0.5 * (left + right)), Num(top - 16.0), EscapeXml(plot.title));
-  }
-  if (!plot.x_label.empty()) {
-    svg +=
-        fmt::format("<text class=\"x-label\" x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n",
-                    Num(0.5 * (left + right)), Num(bottom + 40.0), EscapeXml(plot.x_label));
-  }
-  if (!plot.y_label.empty()) {
-    svg += fmt::format(
-        "<text class=\"y-label\" transform=\"translate({},{}) rotate(-90)\" "
-        "text-anchor=\"middle\">{}</text>\n",
-        Num(18.0), Num(0.5 * (top + bottom)), EscapeXml(plot.y_label));
-  }
-  if (has_right && !plot.y2_label.empty()) {
-    svg += fmt::format(
-        "<text class=\"y2-label\" transform=\"translate({},{}) rotate(90)\" "
-        "text-anchor=\"middle\">{}</text>\n",
-        Num(W - 18.0), Num(0.5 * (top + bottom)), EscapeXml(plot.y2_label));
-  }
-
+  const PlotLayout layout = LayoutOf(plot);
+  const std::vector<std::string> colors = SeriesColors(plot);
+  std::string svg = SvgHeader(plot, layout);
+  AppendGridAndTicks(layout, svg);
+  AppendTitleAndAxisLabels(plot, layout, svg);
   // Series: bands first (under every line), then lines and markers.
-  std::vector<std::string> colors;
-  size_t palette = 0;
-  for (const LineSeries& s : plot.series) {
-    colors.push_back(s.color.empty() ? std::string(kPalette[palette++ % kPalette.size()])
-                                     : s.color);
-  }
   svg += "<g class=\"series\" clip-path=\"url(#plot-area)\">\n";
-  for (size_t k = 0; k < plot.series.size(); ++k) {
-    const LineSeries& s = plot.series[k];
-    if (s.band.empty()) continue;
-    const auto ok = [&](size_t i) { return std::isfinite(s.y[i]) && std::isfinite(s.band[i]); };
-    for (const auto& [a, b] : Runs(s.y.size(), ok)) {
-      std::string points;
-      for (size_t i = a; i <= b; ++i) {
-        points += fmt::format("{},{} ", Num(px(s.x[i])), Num(py(s.y[i] + s.band[i], s.right_axis)));
-      }
-      for (size_t i = b + 1; i-- > a;) {
-        points += fmt::format("{},{} ", Num(px(s.x[i])), Num(py(s.y[i] - s.band[i], s.right_axis)));
-      }
-      points.pop_back();
-      svg += fmt::format(
-          "<polygon points=\"{}\" fill=\"{}\" fill-opacity=\"0.18\" stroke=\"none\"/>\n", points,
-          colors[k]);
-    }
-  }
-  for (size_t k = 0; k < plot.series.size(); ++k) {
-    const LineSeries& s = plot.series[k];
-    const std::string dash = s.right_axis ? " stroke-dasharray=\"6 3\"" : "";
-    const auto ok = [&](size_t i) { return std::isfinite(s.y[i]); };
-    for (const auto& [a, b] : Runs(s.y.size(), ok)) {
-      std::string points;
-      for (size_t i = a; i <= b; ++i) {
-        points += fmt::format("{},{} ", Num(px(s.x[i])), Num(py(s.y[i], s.right_axis)));
-      }
-      points.pop_back();
-      svg += fmt::format(
-          "<polyline points=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"2\"{}/>\n", points,
-          colors[k], dash);
-      if (!s.markers) continue;
-      for (size_t i = a; i <= b; ++i) {
-        svg += fmt::format("<circle cx=\"{}\" cy=\"{}\" r=\"3\" fill=\"{}\"/>\n", Num(px(s.x[i])),
-                           Num(py(s.y[i], s.right_axis)), colors[k]);
-      }
-    }
-  }
+  AppendSeriesBands(plot, layout, colors, svg);
+  AppendSeriesLines(plot, layout, colors, svg);
   svg += "</g>\n";
-
-  // Legend.
-  if (!legend.empty()) {
-    svg += "<g class=\"legend\">\n";
-    for (const LegendEntry& e : legend) {
-      const LineSeries& s = plot.series[e.series];
-      const double y = bottom + kAxisBelow + 4.0 + e.row * kLegendRow;
-      if (!s.band.empty()) {
-        svg += fmt::format(
-            "<rect x=\"{}\" y=\"{}\" width=\"26\" height=\"10\" fill=\"{}\" "
-            "fill-opacity=\"0.18\"/>\n",
-            Num(e.x), Num(y - 5.0), colors[e.series]);
-      }
-      svg += fmt::format(
-          "<line x1=\"{0}\" y1=\"{2}\" x2=\"{1}\" y2=\"{2}\" stroke=\"{3}\" "
-          "stroke-width=\"2\"{4}/>\n",
-          Num(e.x), Num(e.x + 26.0), Num(y), colors[e.series],
-          s.right_axis ? " stroke-dasharray=\"6 3\"" : "");
-      svg += fmt::format("<text x=\"{}\" y=\"{}\" fill=\"#333333\">{}{}</text>\n", Num(e.x + 32.0),
-                         Num(y + 4.0), EscapeXml(s.name), s.right_axis ? " (right)" : "");
-    }
-    svg += "</g>\n";
-  }
+  AppendLegend(plot, layout, colors, svg);
   svg += "</svg>\n";
   return svg;
 }

@@ -91,6 +91,194 @@ Result<std::string> EncodeImage(const ImageRgb8& rgb, ImageEncoding encoding, in
   return std::string(bytes->begin(), bytes->end());
 }
 
+// ---- Stages of DecodeSegmentationRequest --------------------------------------------------------
+
+/// Every input is a known one, given once, and well-formed.
+Status CheckInputsKnownAndDistinct(const InferRequest& request) {
+  const std::vector<TensorSpec>& specs = SegmentationInputs();
+  std::set<std::string_view> seen;
+  for (const Tensor& t : request.inputs) {
+    const bool known = std::any_of(specs.begin(), specs.end(),
+                                   [&](const TensorSpec& s) { return s.name == t.name; });
+    if (!known) {
+      return InvalidArgumentError(
+          fmt::format("unknown input {}; known inputs: {}", t.Describe(), JoinNames(specs)));
+    }
+    if (!seen.insert(t.name).second) {
+      return InvalidArgumentError(fmt::format("input '{}' is given twice", t.name));
+    }
+    AVP_RETURN_IF_ERROR(CheckTensor(t, "input"));
+  }
+  return Status::Ok();
+}
+
+/// The colour image, from exactly one of 'rgb' (raw, optionally batched) and 'image' (encoded).
+Result<ImageRgb8> ColourImageInput(const Tensor* rgb_t, const Tensor* image_t) {
+  if (rgb_t != nullptr && image_t != nullptr) {
+    return InvalidArgumentError(
+        "inputs 'rgb' and 'image' are both given: send the colour image once, as 'rgb' UINT8 "
+        "[H, W, 3] or as 'image' BYTES [1] (PNG or JPEG)");
+  }
+  if (rgb_t == nullptr && image_t == nullptr) {
+    return InvalidArgumentError(
+        "missing input 'rgb' (UINT8 [H, W, 3]) or 'image' (BYTES [1], a PNG or JPEG)");
+  }
+  if (rgb_t == nullptr) {
+    AVP_RETURN_IF_ERROR(
+        ExpectTensor(*image_t, "input", DataType::kBytes, {1}, "[1]", "(a PNG or JPEG)"));
+    return DecodeImage(*image_t);
+  }
+  const bool batched = rgb_t->shape.size() == 4;
+  if (batched) {
+    AVP_RETURN_IF_ERROR(
+        ExpectTensor(*rgb_t, "input", DataType::kUint8, {1, -1, -1, 3}, "[1, H, W, 3]", "RGB8"));
+  } else {
+    AVP_RETURN_IF_ERROR(
+        ExpectTensor(*rgb_t, "input", DataType::kUint8, {-1, -1, 3}, "[H, W, 3]", "RGB8"));
+  }
+  const int64_t h = rgb_t->shape[batched ? 1 : 0];
+  const int64_t w = rgb_t->shape[batched ? 2 : 1];
+  if (h < 1 || w < 1 || h > kMaxSide || w > kMaxSide) {
+    return InvalidArgumentError(fmt::format("input 'rgb' has shape {}: H and W must be in [1, {}]",
+                                            ShapeToString(rgb_t->shape), kMaxSide));
+  }
+  ImageRgb8 rgb(static_cast<int>(w), static_cast<int>(h));
+  std::copy(rgb_t->data.begin(), rgb_t->data.end(), reinterpret_cast<char*>(rgb.data().data()));
+  return rgb;
+}
+
+/// An input of the colour image's size: `datatype` [H, W] = [h, w].
+Status ExpectImageSized(const Tensor& t, DataType datatype, int w, int h) {
+  return ExpectTensor(t, "input", datatype, {h, w}, "[H, W]", "(the colour image's size)");
+}
+
+/// The depth image (metres), zeros when 'depth' is not given.
+Result<DepthImage> DepthInput(const Tensor* depth_t, int w, int h) {
+  if (depth_t == nullptr) return DepthImage(w, h, 0.0f);
+  AVP_RETURN_IF_ERROR(ExpectImageSized(*depth_t, DataType::kFp32, w, h));
+  DepthImage depth_m;
+  AVP_RETURN_IF_ERROR(CopyImage(*depth_t, depth_m, w, h));
+  return depth_m;
+}
+
+/// The intrinsics of a w x h image: from 'intrinsics', or a 90-degree-ish default (fx = fy = w,
+/// centred principal point) when it is not given.
+Result<CameraIntrinsics> IntrinsicsInput(const Tensor* k_t, int w, int h) {
+  CameraIntrinsics K;
+  K.width = w;
+  K.height = h;
+  if (k_t != nullptr) {
+    AVP_RETURN_IF_ERROR(ExpectTensor(*k_t, "input", DataType::kFp64, {6}, "",
+                                     "(fx, fy, cx, cy, min_depth_m, max_depth_m)"));
+    AVP_ASSIGN_OR_RETURN(const std::vector<double> k, ReadValues<double>(*k_t));
+    K.fx = k[0];
+    K.fy = k[1];
+    K.cx = k[2];
+    K.cy = k[3];
+    K.min_depth_m = k[4];
+    K.max_depth_m = k[5];
+  } else {
+    K.fx = K.fy = static_cast<double>(w);
+    K.cx = (w - 1) / 2.0;
+    K.cy = (h - 1) / 2.0;
+  }
+  AVP_RETURN_IF_ERROR(K.Validate().WithContext("input 'intrinsics'"));
+  return K;
+}
+
+/// X_WC from 'camera_pose' (row-major 4 x 4); InvalidArgument unless it is a rigid transform.
+Result<RigidTransform> CameraPoseInput(const Tensor& pose_t) {
+  AVP_RETURN_IF_ERROR(
+      ExpectTensor(pose_t, "input", DataType::kFp64, {4, 4}, "", "(X_WC, row-major)"));
+  AVP_ASSIGN_OR_RETURN(const std::vector<double> X, ReadValues<double>(pose_t));
+  Eigen::Matrix3d R;
+  Eigen::Vector3d p;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) R(r, c) = X[4 * r + c];
+    p(r) = X[4 * r + 3];
+  }
+  if (!R.allFinite() || !p.allFinite() || !IsRotationMatrix(R) || X[12] != 0.0 || X[13] != 0.0 ||
+      X[14] != 0.0 || X[15] != 1.0) {
+    return InvalidArgumentError(
+        fmt::format("input 'camera_pose' ({}) is not a rigid transform: expected a rotation matrix "
+                    "(orthonormal, det +1) with a finite translation and the last row 0, 0, 0, 1",
+                    fmt::join(X, ", ")));
+  }
+  return RigidTransform(R, p);
+}
+
+/// The ground-truth fruits of 'fruits' [F, 5] (instance_id, x, y, z, radius_m).
+Result<std::vector<segmentation::GroundTruthFruit>> GroundTruthFruitsInput(const Tensor& fruits_t) {
+  AVP_RETURN_IF_ERROR(ExpectTensor(fruits_t, "input", DataType::kFp64, {-1, 5}, "[F, 5]",
+                                   "(instance_id, x, y, z, radius_m)"));
+  AVP_ASSIGN_OR_RETURN(const std::vector<double> f, ReadValues<double>(fruits_t));
+  std::vector<segmentation::GroundTruthFruit> fruits;
+  for (size_t i = 0; i + 5 <= f.size(); i += 5) {
+    const double id = f[i];
+    if (!(id >= 0.0 && id <= 65535.0 && std::floor(id) == id)) {
+      return InvalidArgumentError(
+          fmt::format("input 'fruits' row {}: instance_id ({}) must be an integer in [0, "
+                      "65535]",
+                      i / 5, id));
+    }
+    segmentation::GroundTruthFruit fruit;
+    fruit.instance_id = static_cast<uint16_t>(id);
+    fruit.center_W = Eigen::Vector3d(f[i + 1], f[i + 2], f[i + 3]);
+    fruit.radius_m = f[i + 4];
+    fruits.push_back(fruit);
+  }
+  return fruits;
+}
+
+/// The simulator labels, when 'instance_ids' and 'class_ids' are given (both or neither), with
+/// the optional 'fruits'.
+Result<std::optional<segmentation::SimulatorLabels>> SimulatorLabelsInput(const Tensor* ids_t,
+                                                                          const Tensor* classes_t,
+                                                                          const Tensor* fruits_t,
+                                                                          int w, int h) {
+  if ((ids_t == nullptr) != (classes_t == nullptr)) {
+    return InvalidArgumentError(fmt::format(
+        "input '{}' is given without '{}': simulator labels need both instance_ids UINT16 [H, W] "
+        "and class_ids UINT8 [H, W]",
+        ids_t != nullptr ? names::kInstanceIds : names::kClassIds,
+        ids_t != nullptr ? names::kClassIds : names::kInstanceIds));
+  }
+  if (fruits_t != nullptr && ids_t == nullptr) {
+    return InvalidArgumentError(
+        "input 'fruits' is given without the simulator labels 'instance_ids' and 'class_ids'");
+  }
+  if (ids_t == nullptr) return std::optional<segmentation::SimulatorLabels>();
+  segmentation::SimulatorLabels labels;
+  AVP_RETURN_IF_ERROR(ExpectImageSized(*ids_t, DataType::kUint16, w, h));
+  AVP_RETURN_IF_ERROR(ExpectImageSized(*classes_t, DataType::kUint8, w, h));
+  AVP_RETURN_IF_ERROR(CopyImage(*ids_t, labels.instance_ids, w, h));
+  AVP_RETURN_IF_ERROR(CopyImage(*classes_t, labels.class_ids, w, h));
+  if (fruits_t != nullptr) {
+    AVP_ASSIGN_OR_RETURN(labels.fruits, GroundTruthFruitsInput(*fruits_t));
+  }
+  return std::optional<segmentation::SimulatorLabels>(std::move(labels));
+}
+
+/// The prompt: the phrases of 'prompt' joined by ", "; InvalidArgument when it names nothing.
+Result<std::string> PromptInput(const Tensor* prompt_t) {
+  if (prompt_t == nullptr) {
+    return InvalidArgumentError(
+        "missing input 'prompt' (BYTES [P]): class phrases such as \"tomato\"");
+  }
+  AVP_RETURN_IF_ERROR(
+      ExpectTensor(*prompt_t, "input", DataType::kBytes, {-1}, "[P]", "(class phrases)"));
+  AVP_ASSIGN_OR_RETURN(const std::vector<std::string> phrases, ReadBytesElements(*prompt_t));
+  std::string prompt =
+      phrases.size() == 1 ? phrases.front() : fmt::format("{}", fmt::join(phrases, ", "));
+  if (!segmentation::SplitPrompt(prompt).ok()) {
+    return InvalidArgumentError(fmt::format(
+        "input 'prompt' (\"{}\") is empty: expected class phrases such as \"tomato\" or "
+        "\"tomato, apple\"",
+        prompt));
+  }
+  return prompt;
+}
+
 }  // namespace
 
 // ---- metadata -----------------------------------------------------------------------------------
@@ -240,21 +428,7 @@ segmentation::SegmentationRequest DecodedSegmentationRequest::request() const {
 }
 
 Result<DecodedSegmentationRequest> DecodeSegmentationRequest(const InferRequest& request) {
-  // ---- Which inputs, each well-formed -----------------------------------------------------------
-  const std::vector<TensorSpec>& specs = SegmentationInputs();
-  std::set<std::string_view> seen;
-  for (const Tensor& t : request.inputs) {
-    const bool known = std::any_of(specs.begin(), specs.end(),
-                                   [&](const TensorSpec& s) { return s.name == t.name; });
-    if (!known) {
-      return InvalidArgumentError(
-          fmt::format("unknown input {}; known inputs: {}", t.Describe(), JoinNames(specs)));
-    }
-    if (!seen.insert(t.name).second) {
-      return InvalidArgumentError(fmt::format("input '{}' is given twice", t.name));
-    }
-    AVP_RETURN_IF_ERROR(CheckTensor(t, "input"));
-  }
+  AVP_RETURN_IF_ERROR(CheckInputsKnownAndDistinct(request));
   const Tensor* rgb_t = request.FindInput(names::kRgb);
   const Tensor* image_t = request.FindInput(names::kImage);
   const Tensor* depth_t = request.FindInput(names::kDepth);
@@ -267,91 +441,13 @@ Result<DecodedSegmentationRequest> DecodeSegmentationRequest(const InferRequest&
 
   DecodedSegmentationRequest out;
   RgbdFrame& frame = out.frame;
-
-  // ---- The colour image -------------------------------------------------------------------------
-  if (rgb_t != nullptr && image_t != nullptr) {
-    return InvalidArgumentError(
-        "inputs 'rgb' and 'image' are both given: send the colour image once, as 'rgb' UINT8 "
-        "[H, W, 3] or as 'image' BYTES [1] (PNG or JPEG)");
-  }
-  if (rgb_t == nullptr && image_t == nullptr) {
-    return InvalidArgumentError(
-        "missing input 'rgb' (UINT8 [H, W, 3]) or 'image' (BYTES [1], a PNG or JPEG)");
-  }
-  if (rgb_t != nullptr) {
-    const bool batched = rgb_t->shape.size() == 4;
-    if (batched) {
-      AVP_RETURN_IF_ERROR(
-          ExpectTensor(*rgb_t, "input", DataType::kUint8, {1, -1, -1, 3}, "[1, H, W, 3]", "RGB8"));
-    } else {
-      AVP_RETURN_IF_ERROR(
-          ExpectTensor(*rgb_t, "input", DataType::kUint8, {-1, -1, 3}, "[H, W, 3]", "RGB8"));
-    }
-    const int64_t h = rgb_t->shape[batched ? 1 : 0];
-    const int64_t w = rgb_t->shape[batched ? 2 : 1];
-    if (h < 1 || w < 1 || h > kMaxSide || w > kMaxSide) {
-      return InvalidArgumentError(
-          fmt::format("input 'rgb' has shape {}: H and W must be in [1, {}]",
-                      ShapeToString(rgb_t->shape), kMaxSide));
-    }
-    frame.rgb = ImageRgb8(static_cast<int>(w), static_cast<int>(h));
-    std::copy(rgb_t->data.begin(), rgb_t->data.end(),
-              reinterpret_cast<char*>(frame.rgb.data().data()));
-  } else {
-    AVP_RETURN_IF_ERROR(
-        ExpectTensor(*image_t, "input", DataType::kBytes, {1}, "[1]", "(a PNG or JPEG)"));
-    AVP_ASSIGN_OR_RETURN(frame.rgb, DecodeImage(*image_t));
-  }
+  AVP_ASSIGN_OR_RETURN(frame.rgb, ColourImageInput(rgb_t, image_t));
   const int w = frame.rgb.width();
   const int h = frame.rgb.height();
-  const std::vector<int64_t> hw = {h, w};
-  const std::string_view kImageSize = "[H, W]";
-
-  // ---- Depth, intrinsics, pose
-  // --------------------------------------------------------------------
-  if (depth_t != nullptr) {
-    AVP_RETURN_IF_ERROR(ExpectTensor(*depth_t, "input", DataType::kFp32, hw, kImageSize,
-                                     "(the colour image's size)"));
-    AVP_RETURN_IF_ERROR(CopyImage(*depth_t, frame.depth_m, w, h));
-  } else {
-    frame.depth_m = DepthImage(w, h, 0.0f);
-  }
-  frame.K.width = w;
-  frame.K.height = h;
-  if (k_t != nullptr) {
-    AVP_RETURN_IF_ERROR(ExpectTensor(*k_t, "input", DataType::kFp64, {6}, "",
-                                     "(fx, fy, cx, cy, min_depth_m, max_depth_m)"));
-    AVP_ASSIGN_OR_RETURN(const std::vector<double> k, ReadValues<double>(*k_t));
-    frame.K.fx = k[0];
-    frame.K.fy = k[1];
-    frame.K.cx = k[2];
-    frame.K.cy = k[3];
-    frame.K.min_depth_m = k[4];
-    frame.K.max_depth_m = k[5];
-  } else {
-    frame.K.fx = frame.K.fy = static_cast<double>(w);
-    frame.K.cx = (w - 1) / 2.0;
-    frame.K.cy = (h - 1) / 2.0;
-  }
-  AVP_RETURN_IF_ERROR(frame.K.Validate().WithContext("input 'intrinsics'"));
+  AVP_ASSIGN_OR_RETURN(frame.depth_m, DepthInput(depth_t, w, h));
+  AVP_ASSIGN_OR_RETURN(frame.K, IntrinsicsInput(k_t, w, h));
   if (pose_t != nullptr) {
-    AVP_RETURN_IF_ERROR(
-        ExpectTensor(*pose_t, "input", DataType::kFp64, {4, 4}, "", "(X_WC, row-major)"));
-    AVP_ASSIGN_OR_RETURN(const std::vector<double> X, ReadValues<double>(*pose_t));
-    Eigen::Matrix3d R;
-    Eigen::Vector3d p;
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) R(r, c) = X[4 * r + c];
-      p(r) = X[4 * r + 3];
-    }
-    if (!R.allFinite() || !p.allFinite() || !IsRotationMatrix(R) || X[12] != 0.0 || X[13] != 0.0 ||
-        X[14] != 0.0 || X[15] != 1.0) {
-      return InvalidArgumentError(fmt::format(
-          "input 'camera_pose' ({}) is not a rigid transform: expected a rotation matrix "
-          "(orthonormal, det +1) with a finite translation and the last row 0, 0, 0, 1",
-          fmt::join(X, ", ")));
-    }
-    frame.X_WC = RigidTransform(R, p);
+    AVP_ASSIGN_OR_RETURN(frame.X_WC, CameraPoseInput(*pose_t));
   }
   if (auto id = GetStringParameter(request.parameters, names::kFrameId); !id.ok()) {
     return id.status();
@@ -361,66 +457,9 @@ Result<DecodedSegmentationRequest> DecodeSegmentationRequest(const InferRequest&
   AVP_ASSIGN_OR_RETURN(const std::optional<int64_t> stamp,
                        GetInt64Parameter(request.parameters, names::kStampNs));
   if (stamp) frame.stamp_ns = *stamp;
+  AVP_ASSIGN_OR_RETURN(out.labels, SimulatorLabelsInput(ids_t, classes_t, fruits_t, w, h));
 
-  // ---- Simulator labels
-  // ---------------------------------------------------------------------------
-  if ((ids_t == nullptr) != (classes_t == nullptr)) {
-    return InvalidArgumentError(fmt::format(
-        "input '{}' is given without '{}': simulator labels need both instance_ids UINT16 [H, W] "
-        "and class_ids UINT8 [H, W]",
-        ids_t != nullptr ? names::kInstanceIds : names::kClassIds,
-        ids_t != nullptr ? names::kClassIds : names::kInstanceIds));
-  }
-  if (fruits_t != nullptr && ids_t == nullptr) {
-    return InvalidArgumentError(
-        "input 'fruits' is given without the simulator labels 'instance_ids' and 'class_ids'");
-  }
-  if (ids_t != nullptr) {
-    segmentation::SimulatorLabels labels;
-    AVP_RETURN_IF_ERROR(ExpectTensor(*ids_t, "input", DataType::kUint16, hw, kImageSize,
-                                     "(the colour image's size)"));
-    AVP_RETURN_IF_ERROR(ExpectTensor(*classes_t, "input", DataType::kUint8, hw, kImageSize,
-                                     "(the colour image's size)"));
-    AVP_RETURN_IF_ERROR(CopyImage(*ids_t, labels.instance_ids, w, h));
-    AVP_RETURN_IF_ERROR(CopyImage(*classes_t, labels.class_ids, w, h));
-    if (fruits_t != nullptr) {
-      AVP_RETURN_IF_ERROR(ExpectTensor(*fruits_t, "input", DataType::kFp64, {-1, 5}, "[F, 5]",
-                                       "(instance_id, x, y, z, radius_m)"));
-      AVP_ASSIGN_OR_RETURN(const std::vector<double> f, ReadValues<double>(*fruits_t));
-      for (size_t i = 0; i + 5 <= f.size(); i += 5) {
-        const double id = f[i];
-        if (!(id >= 0.0 && id <= 65535.0 && std::floor(id) == id)) {
-          return InvalidArgumentError(
-              fmt::format("input 'fruits' row {}: instance_id ({}) must be an integer in [0, "
-                          "65535]",
-                          i / 5, id));
-        }
-        segmentation::GroundTruthFruit fruit;
-        fruit.instance_id = static_cast<uint16_t>(id);
-        fruit.center_W = Eigen::Vector3d(f[i + 1], f[i + 2], f[i + 3]);
-        fruit.radius_m = f[i + 4];
-        labels.fruits.push_back(fruit);
-      }
-    }
-    out.labels = std::move(labels);
-  }
-
-  // ---- Prompt and parameters
-  // ----------------------------------------------------------------------
-  if (prompt_t == nullptr) {
-    return InvalidArgumentError(
-        "missing input 'prompt' (BYTES [P]): class phrases such as \"tomato\"");
-  }
-  AVP_RETURN_IF_ERROR(
-      ExpectTensor(*prompt_t, "input", DataType::kBytes, {-1}, "[P]", "(class phrases)"));
-  AVP_ASSIGN_OR_RETURN(const std::vector<std::string> phrases, ReadBytesElements(*prompt_t));
-  out.prompt = phrases.size() == 1 ? phrases.front() : fmt::format("{}", fmt::join(phrases, ", "));
-  if (!segmentation::SplitPrompt(out.prompt).ok()) {
-    return InvalidArgumentError(fmt::format(
-        "input 'prompt' (\"{}\") is empty: expected class phrases such as \"tomato\" or "
-        "\"tomato, apple\"",
-        out.prompt));
-  }
+  AVP_ASSIGN_OR_RETURN(out.prompt, PromptInput(prompt_t));
   AVP_ASSIGN_OR_RETURN(const std::optional<double> threshold,
                        GetDoubleParameter(request.parameters, names::kScoreThreshold));
   if (threshold) {

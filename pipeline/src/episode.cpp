@@ -33,6 +33,194 @@ size_t CountTargetInstances(const mapping::SemanticMap& map, SemanticClass targe
   return n;
 }
 
+// ---- Stages of RunEpisode -----------------------------------------------------------------------
+
+/// The segmenter's answer for one observation; a throw or an invalid segmentation becomes an
+/// Internal error naming the segmenter.
+Result<Segmentation> CheckedSegmentation(segmentation::Segmenter& segmenter, const Observation& obs,
+                                         const EpisodeOptions& options, int view) {
+  segmentation::SegmentationRequest request;
+  request.frame = &obs.frame;
+  request.prompt = options.prompt;
+  request.score_threshold = options.score_threshold;
+  request.labels = obs.labels ? &*obs.labels : nullptr;
+  request.frame_index = static_cast<uint64_t>(view);
+  Result<Segmentation> seg = InternalError("segmenter not called");
+  try {
+    seg = segmenter.Segment(request);
+  } catch (const std::exception& e) {
+    seg = InternalError(fmt::format("segmenter '{}' threw: {}", segmenter.name(), e.what()));
+  }
+  if (seg.ok()) {
+    if (Status v = seg->ValidateFor(obs.frame.depth_m.width(), obs.frame.depth_m.height());
+        !v.ok()) {
+      seg = InternalError(fmt::format("segmenter '{}' returned an invalid segmentation: {}",
+                                      segmenter.name(), v.ToString()));
+    }
+  }
+  return seg;
+}
+
+/// Senses at step.X_WC, segments and integrates the view into the map (depth only when
+/// segmentation failed; nothing when the capture failed), recording statuses, counts and times
+/// in `step`.
+void FuseView(const EpisodeComponents& c, const EpisodeOptions& options,
+              const mapping::Integrator& integrator, int view, StepRecord& step) {
+  const int64_t stamp_ns = static_cast<int64_t>(view) * 1'000'000'000;
+  auto t0 = Clock::now();
+  Result<Observation> obs = c.source->Capture(step.X_WC, stamp_ns);
+  step.times.capture_ms = MsSince(t0);
+  if (!obs.ok()) {
+    step.capture_status = obs.status();
+    return;
+  }
+  t0 = Clock::now();
+  Result<Segmentation> seg = CheckedSegmentation(*c.segmenter, *obs, options, view);
+  step.times.segment_ms = MsSince(t0);
+  if (seg.ok()) {
+    step.masks = seg->instances.size();
+  } else {
+    step.segment_status = seg.status();
+  }
+  t0 = Clock::now();
+  Result<mapping::IntegrationStats> stats =
+      integrator.Integrate(obs->frame, seg.ok() ? &*seg : nullptr, *c.map);
+  step.times.integrate_ms = MsSince(t0);
+  if (stats.ok()) {
+    step.integration = *stats;
+  } else {
+    step.integrate_status = stats.status();
+  }
+}
+
+/// Known and target voxels of the map after the previous view.
+struct MapTally {
+  size_t known = 0;
+  size_t target = 0;
+};
+
+/// The map after this view in `step`, and its change from `previous` (then updated to it).
+void RecordMapAfterView(const mapping::SemanticMap& map, SemanticClass target, MapTally& previous,
+                        StepRecord& step) {
+  step.known_voxels = map.grid().CountKnownVoxels();
+  step.occupied_voxels = map.grid().CountOccupiedVoxels();
+  step.target_voxels = CountTargetVoxels(map.grid(), target);
+  step.instances = CountTargetInstances(map, target);
+  step.known_delta = static_cast<int64_t>(step.known_voxels) - static_cast<int64_t>(previous.known);
+  step.target_delta =
+      static_cast<int64_t>(step.target_voxels) - static_cast<int64_t>(previous.target);
+  previous.known = step.known_voxels;
+  previous.target = step.target_voxels;
+}
+
+/// What choosing and reaching the next view needs besides the step: fixed for the episode.
+struct NextViewContext {
+  const EpisodeComponents& c;
+  const EpisodeOptions& options;
+  Rng planner_root;  ///< forked per view
+  Rng arm_root;      ///< forked per view
+  Eigen::VectorXd q_start;
+  RigidTransform X_WC_start;
+};
+
+/// The planning request for the view after `view`, taken at the step's pose.
+planning::PlanningRequest PlanningRequestAfter(const NextViewContext& next, int view,
+                                               const StepRecord& step,
+                                               const std::vector<RigidTransform>& fused) {
+  planning::PlanningRequest req;
+  req.map = next.c.map;
+  req.arm = &next.c.arm->model();
+  req.q_current = step.q;
+  req.X_WC_current = step.X_WC;
+  req.q_start = next.q_start;
+  req.X_WC_start = next.X_WC_start;
+  req.K = next.c.source->intrinsics();
+  req.roi = next.options.roi;
+  req.view_index = view + 1;
+  req.views_total = next.options.views;
+  req.fused_views = fused;
+  req.target_class = next.options.target_class;
+  return req;
+}
+
+/// The planner's answer; a throw becomes an Internal error naming the planner.
+planning::PlanResult PlanOrError(planning::ViewPlanner& planner,
+                                 const planning::PlanningRequest& req, Rng& rng) {
+  planning::PlanResult plan;
+  try {
+    plan = planner.Plan(req, rng);
+  } catch (const std::exception& e) {
+    plan.status = InternalError(fmt::format("planner '{}' threw: {}", planner.name(), e.what()));
+  }
+  return plan;
+}
+
+/// Moves the arm to the best ranked candidate it accepts (joints when the candidate has them,
+/// else its camera pose), recording the choice and the refusals in `step`. Returns the refusals'
+/// messages (the first ~400 characters) for the episode's end reason.
+std::string MoveToBestCandidate(robot::Arm& arm, const std::vector<planning::ViewCandidate>& ranked,
+                                Rng& arm_rng, StepRecord& step) {
+  std::string refusals;
+  for (size_t i = 0; i < ranked.size(); ++i) {
+    const planning::ViewCandidate& cand = ranked[i];
+    robot::MoveResult move = cand.q.size() == arm.model().num_joints()
+                                 ? arm.MoveToJoints(cand.q)
+                                 : arm.MoveToCameraPose(cand.X_WC, arm_rng);
+    if (move.ok()) {
+      step.chosen_rank = static_cast<int>(i);
+      step.chosen = cand;
+      step.move_status = Status::Ok();
+      step.joint_path_length = move.joint_path_length;
+      break;
+    }
+    ++step.refused_moves;
+    if (refusals.size() < 400) refusals += (refusals.empty() ? "" : "; ") + move.status.ToString();
+    step.move_status = move.status;
+  }
+  return refusals;
+}
+
+/// Plans the view after `view` and moves there, recording both in `step`. Returns true, with the
+/// end and its reason in `result`, when the episode ends here (the planner stopped, no valid
+/// candidate, every candidate refused).
+bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidTransform>& fused,
+                 StepRecord& step, EpisodeResult& result) {
+  const planning::PlanningRequest req = PlanningRequestAfter(next, view, step, fused);
+  auto t0 = Clock::now();
+  Rng planner_rng = next.planner_root.Fork(static_cast<uint64_t>(view + 1));
+  const planning::PlanResult plan = PlanOrError(*next.c.planner, req, planner_rng);
+  step.times.plan_ms = MsSince(t0);
+  step.planned = true;
+  step.plan_status = plan.status;
+  step.candidates_generated = plan.generated;
+  step.candidates_reachable = plan.reachable;
+  for (size_t i = 0;
+       i < plan.ranked.size() && static_cast<int>(i) < next.options.record_top_candidates; ++i) {
+    step.top_candidates.push_back(plan.ranked[i]);
+  }
+  if (plan.stop) {
+    result.end = EpisodeEnd::kPlannerStopped;
+    result.end_reason = plan.stop_reason;
+    return true;
+  }
+  if (!plan.status.ok() || plan.ranked.empty()) {
+    result.end = EpisodeEnd::kNoValidCandidate;
+    result.end_reason =
+        plan.status.ok() ? "the planner returned no candidate" : plan.status.ToString();
+    return true;
+  }
+  // Move: the best candidate the arm accepts.
+  t0 = Clock::now();
+  Rng arm_rng = next.arm_root.Fork(static_cast<uint64_t>(view + 1));
+  const std::string refusals = MoveToBestCandidate(*next.c.arm, plan.ranked, arm_rng, step);
+  step.times.move_ms = MsSince(t0);
+  if (step.chosen_rank >= 0) return false;
+  result.end = EpisodeEnd::kNoReachableMove;
+  result.end_reason =
+      fmt::format("the arm refused all {} ranked candidates: {}", plan.ranked.size(), refusals);
+  return true;
+}
+
 }  // namespace
 
 double StepRecord::Metric(std::string_view name) const {
@@ -97,16 +285,18 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
   mapping::SemanticMap& map = *c.map;
   robot::Arm& arm = *c.arm;
   const Rng root(options.seed);
-  const Rng planner_root = root.Fork("planner");
-  const Rng arm_root = root.Fork("arm");
 
   EpisodeResult result;
   const auto t_episode = Clock::now();
-  const Eigen::VectorXd q_start = arm.CurrentJoints();
-  const RigidTransform X_WC_start = arm.CurrentCameraPose();
+  const NextViewContext next{c,
+                             options,
+                             root.Fork("planner"),
+                             root.Fork("arm"),
+                             arm.CurrentJoints(),
+                             arm.CurrentCameraPose()};
   std::vector<RigidTransform> fused;
-  size_t prev_known = map.grid().CountKnownVoxels();
-  size_t prev_target = CountTargetVoxels(map.grid(), options.target_class);
+  MapTally tally{map.grid().CountKnownVoxels(),
+                 CountTargetVoxels(map.grid(), options.target_class)};
 
   for (int view = 0; view < options.views; ++view) {
     const auto t_step = Clock::now();
@@ -115,143 +305,16 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
     step.views_total = options.views;
     step.q = arm.CurrentJoints();
     step.X_WC = arm.CurrentCameraPose();
-    const int64_t stamp_ns = static_cast<int64_t>(view) * 1'000'000'000;
-
-    // Sense.
-    auto t0 = Clock::now();
-    Result<Observation> obs = c.source->Capture(step.X_WC, stamp_ns);
-    step.times.capture_ms = MsSince(t0);
-    if (!obs.ok()) {
-      step.capture_status = obs.status();
-    } else {
-      // Segment.
-      t0 = Clock::now();
-      segmentation::SegmentationRequest request;
-      request.frame = &obs->frame;
-      request.prompt = options.prompt;
-      request.score_threshold = options.score_threshold;
-      request.labels = obs->labels ? &*obs->labels : nullptr;
-      request.frame_index = static_cast<uint64_t>(view);
-      Result<Segmentation> seg = InternalError("segmenter not called");
-      try {
-        seg = c.segmenter->Segment(request);
-      } catch (const std::exception& e) {
-        seg = InternalError(fmt::format("segmenter '{}' threw: {}", c.segmenter->name(), e.what()));
-      }
-      if (seg.ok()) {
-        if (Status v = seg->ValidateFor(obs->frame.depth_m.width(), obs->frame.depth_m.height());
-            !v.ok()) {
-          seg = InternalError(fmt::format("segmenter '{}' returned an invalid segmentation: {}",
-                                          c.segmenter->name(), v.ToString()));
-        }
-      }
-      step.times.segment_ms = MsSince(t0);
-      if (seg.ok()) {
-        step.masks = seg->instances.size();
-      } else {
-        step.segment_status = seg.status();
-      }
-      // Integrate (depth only when segmentation failed).
-      t0 = Clock::now();
-      Result<mapping::IntegrationStats> stats =
-          integrator.Integrate(obs->frame, seg.ok() ? &*seg : nullptr, map);
-      step.times.integrate_ms = MsSince(t0);
-      if (stats.ok()) {
-        step.integration = *stats;
-      } else {
-        step.integrate_status = stats.status();
-      }
-    }
+    FuseView(c, options, integrator, view, step);
     fused.push_back(step.X_WC);
-    step.known_voxels = map.grid().CountKnownVoxels();
-    step.occupied_voxels = map.grid().CountOccupiedVoxels();
-    step.target_voxels = CountTargetVoxels(map.grid(), options.target_class);
-    step.instances = CountTargetInstances(map, options.target_class);
-    step.known_delta = static_cast<int64_t>(step.known_voxels) - static_cast<int64_t>(prev_known);
-    step.target_delta =
-        static_cast<int64_t>(step.target_voxels) - static_cast<int64_t>(prev_target);
-    prev_known = step.known_voxels;
-    prev_target = step.target_voxels;
+    RecordMapAfterView(map, options.target_class, tally, step);
     if (metrics) {
-      t0 = Clock::now();
+      const auto t0 = Clock::now();
       step.metrics = metrics(map);
       step.times.metrics_ms = MsSince(t0);
     }
-
     // Plan and move, unless this was the last view.
-    bool stop = false;
-    if (view + 1 < options.views) {
-      planning::PlanningRequest req;
-      req.map = &map;
-      req.arm = &arm.model();
-      req.q_current = step.q;
-      req.X_WC_current = step.X_WC;
-      req.q_start = q_start;
-      req.X_WC_start = X_WC_start;
-      req.K = c.source->intrinsics();
-      req.roi = options.roi;
-      req.view_index = view + 1;
-      req.views_total = options.views;
-      req.fused_views = fused;
-      req.target_class = options.target_class;
-      t0 = Clock::now();
-      Rng planner_rng = planner_root.Fork(static_cast<uint64_t>(view + 1));
-      planning::PlanResult plan;
-      try {
-        plan = c.planner->Plan(req, planner_rng);
-      } catch (const std::exception& e) {
-        plan.status =
-            InternalError(fmt::format("planner '{}' threw: {}", c.planner->name(), e.what()));
-      }
-      step.times.plan_ms = MsSince(t0);
-      step.planned = true;
-      step.plan_status = plan.status;
-      step.candidates_generated = plan.generated;
-      step.candidates_reachable = plan.reachable;
-      for (size_t i = 0;
-           i < plan.ranked.size() && static_cast<int>(i) < options.record_top_candidates; ++i) {
-        step.top_candidates.push_back(plan.ranked[i]);
-      }
-      if (plan.stop) {
-        result.end = EpisodeEnd::kPlannerStopped;
-        result.end_reason = plan.stop_reason;
-        stop = true;
-      } else if (!plan.status.ok() || plan.ranked.empty()) {
-        result.end = EpisodeEnd::kNoValidCandidate;
-        result.end_reason =
-            plan.status.ok() ? "the planner returned no candidate" : plan.status.ToString();
-        stop = true;
-      } else {
-        // Move: the best candidate the arm accepts.
-        t0 = Clock::now();
-        Rng arm_rng = arm_root.Fork(static_cast<uint64_t>(view + 1));
-        std::string refusals;
-        for (size_t i = 0; i < plan.ranked.size(); ++i) {
-          const planning::ViewCandidate& cand = plan.ranked[i];
-          robot::MoveResult move = cand.q.size() == arm.model().num_joints()
-                                       ? arm.MoveToJoints(cand.q)
-                                       : arm.MoveToCameraPose(cand.X_WC, arm_rng);
-          if (move.ok()) {
-            step.chosen_rank = static_cast<int>(i);
-            step.chosen = cand;
-            step.move_status = Status::Ok();
-            step.joint_path_length = move.joint_path_length;
-            break;
-          }
-          ++step.refused_moves;
-          if (refusals.size() < 400)
-            refusals += (refusals.empty() ? "" : "; ") + move.status.ToString();
-          step.move_status = move.status;
-        }
-        step.times.move_ms = MsSince(t0);
-        if (step.chosen_rank < 0) {
-          result.end = EpisodeEnd::kNoReachableMove;
-          result.end_reason = fmt::format("the arm refused all {} ranked candidates: {}",
-                                          plan.ranked.size(), refusals);
-          stop = true;
-        }
-      }
-    }
+    const bool stop = view + 1 < options.views && PlanAndMove(next, view, fused, step, result);
     step.times.total_ms = MsSince(t_step);
     result.steps.push_back(step);
     for (EpisodeObserver* o : observers) {

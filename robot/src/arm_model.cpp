@@ -193,24 +193,13 @@ struct ArmModel::Impl {
   }
 };
 
-// ---- Construction -------------------------------------------------------------------------------
+// ---- Construction stages (FromUrdfString) -------------------------------------------------------
 
-Result<ArmModel> ArmModel::Create(const ArmConfig& config) {
-  std::ifstream in(config.urdf_path);
-  if (!in) {
-    return NotFoundError(fmt::format("cannot open URDF file '{}'", config.urdf_path.string()));
-  }
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return FromUrdfString(buffer.str(), config);
-}
+namespace {
 
-Result<ArmModel> ArmModel::FromUrdfString(std::string_view urdf_xml, const ArmConfig& config) {
-  AVP_RETURN_IF_ERROR(config.Validate());
-  const std::string where = config.urdf_path.empty()
-                                ? std::string("URDF")
-                                : fmt::format("URDF '{}'", config.urdf_path.string());
-
+/// The URDF parsed by urdfdom; ParseError with urdfdom's messages when it rejects the text.
+Result<urdf::ModelInterfaceSharedPtr> ParsedUrdf(std::string_view urdf_xml,
+                                                 const std::string& where) {
   urdf::ModelInterfaceSharedPtr urdf_model;
   std::vector<std::string> parse_messages;
   {
@@ -232,11 +221,16 @@ Result<ArmModel> ArmModel::FromUrdfString(std::string_view urdf_xml, const ArmCo
                                       ? std::string("(no details)")
                                       : fmt::format("{}", fmt::join(parse_messages, "; "))));
   }
+  return urdf_model;
+}
 
+/// The joints from config.base_link down to config.tip_link, base first (fixed ones included).
+Result<std::vector<urdf::JointConstSharedPtr>> JointsFromBaseToTip(
+    const urdf::ModelInterface& urdf_model, const ArmConfig& config, const std::string& where) {
   std::vector<std::string> link_names;
-  for (const auto& [name, link] : urdf_model->links_) link_names.push_back(name);
+  for (const auto& [name, link] : urdf_model.links_) link_names.push_back(name);
   for (const std::string* link : {&config.base_link, &config.tip_link}) {
-    if (!urdf_model->getLink(*link)) {
+    if (!urdf_model.getLink(*link)) {
       return NotFoundError(fmt::format("{}: unknown link '{}' ({} is '{}'; links: {})", where,
                                        *link, link == &config.base_link ? "base_link" : "tip_link",
                                        *link, JoinNames(link_names)));
@@ -245,7 +239,7 @@ Result<ArmModel> ArmModel::FromUrdfString(std::string_view urdf_xml, const ArmCo
 
   // Walk from the tip up to the base.
   std::vector<urdf::JointConstSharedPtr> path;
-  for (urdf::LinkConstSharedPtr link = urdf_model->getLink(config.tip_link);
+  for (urdf::LinkConstSharedPtr link = urdf_model.getLink(config.tip_link);
        link->name != config.base_link;) {
     if (!link->parent_joint) {
       return InvalidArgumentError(
@@ -253,12 +247,61 @@ Result<ArmModel> ArmModel::FromUrdfString(std::string_view urdf_xml, const ArmCo
                       where, config.tip_link, config.base_link, link->name));
     }
     path.push_back(link->parent_joint);
-    link = urdf_model->getLink(link->parent_joint->parent_link_name);
+    link = urdf_model.getLink(link->parent_joint->parent_link_name);
   }
   std::reverse(path.begin(), path.end());
+  return path;
+}
 
-  auto impl = std::make_shared<Impl>();
-  impl->config = config;
+/// Name, type and URDF limits of a movable (non-fixed) joint; InvalidArgument for a joint a
+/// serial chain cannot use (unsupported type, mimic, zero axis, missing <limit>).
+Result<JointInfo> MovableJointInfo(const urdf::Joint& joint, const std::string& where) {
+  JointInfo info;
+  info.name = joint.name;
+  switch (joint.type) {
+    case urdf::Joint::REVOLUTE:
+      info.type = JointType::kRevolute;
+      break;
+    case urdf::Joint::CONTINUOUS:
+      info.type = JointType::kContinuous;
+      break;
+    case urdf::Joint::PRISMATIC:
+      info.type = JointType::kPrismatic;
+      break;
+    default:
+      return InvalidArgumentError(fmt::format(
+          "{}: joint '{}' has an unsupported type (code {}); serial chains may use revolute, "
+          "continuous, prismatic and fixed joints",
+          where, joint.name, static_cast<int>(joint.type)));
+  }
+  if (joint.mimic) {
+    return InvalidArgumentError(
+        fmt::format("{}: joint '{}' mimics '{}'; mimic joints are not supported", where, joint.name,
+                    joint.mimic->joint_name));
+  }
+  const Eigen::Vector3d axis(joint.axis.x, joint.axis.y, joint.axis.z);
+  if (!(axis.norm() > 1e-9)) {
+    return InvalidArgumentError(fmt::format("{}: joint '{}' has a zero axis", where, joint.name));
+  }
+  if (info.type == JointType::kContinuous) {
+    info.lower = -std::numeric_limits<double>::infinity();
+    info.upper = std::numeric_limits<double>::infinity();
+  } else {
+    if (!joint.limits) {
+      return InvalidArgumentError(
+          fmt::format("{}: {} joint '{}' has no <limit>", where, ToString(info.type), joint.name));
+    }
+    info.lower = joint.limits->lower;
+    info.upper = joint.limits->upper;
+  }
+  if (joint.limits) info.velocity_limit = joint.limits->velocity;
+  return info;
+}
+
+/// impl.joints, X_origin, axis and X_last_tip from the URDF path, fixed joints folded into the
+/// next movable joint's origin (or into the tip).
+Status AppendMovableJoints(const std::vector<urdf::JointConstSharedPtr>& path,
+                           const std::string& where, ArmModel::Impl& impl) {
   Eigen::Isometry3d pending = Eigen::Isometry3d::Identity();
   for (const urdf::JointConstSharedPtr& joint : path) {
     const Eigen::Isometry3d X_parent_joint = ToIsometry(joint->parent_to_joint_origin_transform);
@@ -266,64 +309,29 @@ Result<ArmModel> ArmModel::FromUrdfString(std::string_view urdf_xml, const ArmCo
       pending = pending * X_parent_joint;
       continue;
     }
-    JointInfo info;
-    info.name = joint->name;
-    switch (joint->type) {
-      case urdf::Joint::REVOLUTE:
-        info.type = JointType::kRevolute;
-        break;
-      case urdf::Joint::CONTINUOUS:
-        info.type = JointType::kContinuous;
-        break;
-      case urdf::Joint::PRISMATIC:
-        info.type = JointType::kPrismatic;
-        break;
-      default:
-        return InvalidArgumentError(fmt::format(
-            "{}: joint '{}' has an unsupported type (code {}); serial chains may use revolute, "
-            "continuous, prismatic and fixed joints",
-            where, joint->name, static_cast<int>(joint->type)));
-    }
-    if (joint->mimic) {
-      return InvalidArgumentError(
-          fmt::format("{}: joint '{}' mimics '{}'; mimic joints are not supported", where,
-                      joint->name, joint->mimic->joint_name));
-    }
-    const Eigen::Vector3d axis(joint->axis.x, joint->axis.y, joint->axis.z);
-    if (!(axis.norm() > 1e-9)) {
-      return InvalidArgumentError(
-          fmt::format("{}: joint '{}' has a zero axis", where, joint->name));
-    }
-    if (info.type == JointType::kContinuous) {
-      info.lower = -std::numeric_limits<double>::infinity();
-      info.upper = std::numeric_limits<double>::infinity();
-    } else {
-      if (!joint->limits) {
-        return InvalidArgumentError(fmt::format("{}: {} joint '{}' has no <limit>", where,
-                                                ToString(info.type), joint->name));
-      }
-      info.lower = joint->limits->lower;
-      info.upper = joint->limits->upper;
-    }
-    if (joint->limits) info.velocity_limit = joint->limits->velocity;
-    impl->joints.push_back(info);
-    impl->X_origin.push_back(pending * X_parent_joint);
-    impl->axis.push_back(axis.normalized());
+    AVP_ASSIGN_OR_RETURN(const JointInfo info, MovableJointInfo(*joint, where));
+    impl.joints.push_back(info);
+    impl.X_origin.push_back(pending * X_parent_joint);
+    impl.axis.push_back(Eigen::Vector3d(joint->axis.x, joint->axis.y, joint->axis.z).normalized());
     pending = Eigen::Isometry3d::Identity();
   }
-  impl->X_last_tip = pending;
-  if (impl->joints.empty()) {
+  impl.X_last_tip = pending;
+  if (impl.joints.empty()) {
     return InvalidArgumentError(fmt::format("{}: the chain from '{}' to '{}' has no movable joint",
-                                            where, config.base_link, config.tip_link));
+                                            where, impl.config.base_link, impl.config.tip_link));
   }
+  return Status::Ok();
+}
 
-  // Limit overrides.
+/// Applies config.joint_limit_overrides to `joints` (an overridden continuous joint becomes
+/// revolute); NotFound naming the movable joints for an unknown one.
+Status ApplyJointLimitOverrides(const ArmConfig& config, std::vector<JointInfo>& joints) {
   for (const JointLimitOverride& o : config.joint_limit_overrides) {
-    auto it = std::find_if(impl->joints.begin(), impl->joints.end(),
+    auto it = std::find_if(joints.begin(), joints.end(),
                            [&](const JointInfo& j) { return j.name == o.joint; });
-    if (it == impl->joints.end()) {
+    if (it == joints.end()) {
       std::vector<std::string> names;
-      for (const JointInfo& j : impl->joints) names.push_back(j.name);
+      for (const JointInfo& j : joints) names.push_back(j.name);
       return NotFoundError(fmt::format(
           "joint_limit_overrides: unknown joint '{}' (movable joints from '{}' to '{}': {})",
           o.joint, config.base_link, config.tip_link, fmt::join(names, ", ")));
@@ -332,65 +340,113 @@ Result<ArmModel> ArmModel::FromUrdfString(std::string_view urdf_xml, const ArmCo
     it->lower = o.lower;
     it->upper = o.upper;
   }
+  return Status::Ok();
+}
 
-  const int n = static_cast<int>(impl->joints.size());
-  impl->lower.resize(n);
-  impl->upper.resize(n);
+/// impl.names, lower and upper from impl.joints; InvalidArgument for a lower limit above upper.
+Status FillJointLimits(const std::string& where, ArmModel::Impl& impl) {
+  const int n = static_cast<int>(impl.joints.size());
+  impl.lower.resize(n);
+  impl.upper.resize(n);
   for (int i = 0; i < n; ++i) {
-    const JointInfo& j = impl->joints[static_cast<size_t>(i)];
+    const JointInfo& j = impl.joints[static_cast<size_t>(i)];
     if (j.type != JointType::kContinuous && !(j.lower <= j.upper)) {
       return InvalidArgumentError(fmt::format("{}: joint '{}' has lower limit {} above upper {}",
                                               where, j.name, j.lower, j.upper));
     }
-    impl->names.push_back(j.name);
-    impl->lower[i] = j.lower;
-    impl->upper[i] = j.upper;
+    impl.names.push_back(j.name);
+    impl.lower[i] = j.lower;
+    impl.upper[i] = j.upper;
   }
+  return Status::Ok();
+}
 
-  // Home joints.
+/// The config's home joints, or zeros clamped into the limits when it has none.
+Result<Eigen::VectorXd> HomeJoints(const ArmConfig& config, const ArmModel::Impl& impl) {
+  const int n = static_cast<int>(impl.joints.size());
   if (config.home_joints.empty()) {
-    impl->home = Eigen::VectorXd::Zero(n).cwiseMax(impl->lower).cwiseMin(impl->upper);
-  } else {
-    if (static_cast<int>(config.home_joints.size()) != n) {
-      return InvalidArgumentError(
-          fmt::format("home_joints has {} entries, the chain {} joints ({})",
-                      config.home_joints.size(), n, fmt::join(impl->names, ", ")));
-    }
-    impl->home = Eigen::Map<const Eigen::VectorXd>(config.home_joints.data(), n);
+    return Eigen::VectorXd(Eigen::VectorXd::Zero(n).cwiseMax(impl.lower).cwiseMin(impl.upper));
   }
+  if (static_cast<int>(config.home_joints.size()) != n) {
+    return InvalidArgumentError(fmt::format("home_joints has {} entries, the chain {} joints ({})",
+                                            config.home_joints.size(), n,
+                                            fmt::join(impl.names, ", ")));
+  }
+  return Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(config.home_joints.data(), n));
+}
+
+/// KDL chain: one segment per movable joint; the trailing fixed transform is folded into the
+/// last segment's tip.
+KDL::Chain KdlChain(const ArmModel::Impl& impl) {
+  KDL::Chain chain;
+  const int n = static_cast<int>(impl.joints.size());
+  for (int i = 0; i < n; ++i) {
+    const auto si = static_cast<size_t>(i);
+    const Eigen::Isometry3d& F = impl.X_origin[si];
+    const Eigen::Vector3d axis_parent = F.linear() * impl.axis[si];
+    const KDL::Joint::JointType kdl_type =
+        impl.joints[si].type == JointType::kPrismatic ? KDL::Joint::TransAxis : KDL::Joint::RotAxis;
+    const KDL::Joint kdl_joint(impl.names[si], ToKdl(Eigen::Vector3d(F.translation())),
+                               ToKdl(axis_parent), kdl_type);
+    const Eigen::Isometry3d f_tip = (i == n - 1) ? F * impl.X_last_tip : F;
+    chain.addSegment(KDL::Segment(impl.names[si] + "_segment", kdl_joint, ToKdl(f_tip)));
+  }
+  return chain;
+}
+
+/// Reach bound (metres): the first joint's origin is fixed in the base; everything after it can at
+/// most stretch out in a line.
+double MaxReach(const ArmModel::Impl& impl) {
+  double reach = impl.X_last_tip.translation().norm();
+  const int n = static_cast<int>(impl.joints.size());
+  for (int i = 0; i < n; ++i) {
+    const auto si = static_cast<size_t>(i);
+    if (i > 0) reach += impl.X_origin[si].translation().norm();
+    if (impl.joints[si].type == JointType::kPrismatic) {
+      reach += std::max(std::abs(impl.lower[i]), std::abs(impl.upper[i]));
+    }
+  }
+  return reach;
+}
+
+}  // namespace
+
+// ---- Construction -------------------------------------------------------------------------------
+
+Result<ArmModel> ArmModel::Create(const ArmConfig& config) {
+  std::ifstream in(config.urdf_path);
+  if (!in) {
+    return NotFoundError(fmt::format("cannot open URDF file '{}'", config.urdf_path.string()));
+  }
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return FromUrdfString(buffer.str(), config);
+}
+
+Result<ArmModel> ArmModel::FromUrdfString(std::string_view urdf_xml, const ArmConfig& config) {
+  AVP_RETURN_IF_ERROR(config.Validate());
+  const std::string where = config.urdf_path.empty()
+                                ? std::string("URDF")
+                                : fmt::format("URDF '{}'", config.urdf_path.string());
+  AVP_ASSIGN_OR_RETURN(const urdf::ModelInterfaceSharedPtr urdf_model, ParsedUrdf(urdf_xml, where));
+  AVP_ASSIGN_OR_RETURN(const std::vector<urdf::JointConstSharedPtr> path,
+                       JointsFromBaseToTip(*urdf_model, config, where));
+
+  auto impl = std::make_shared<Impl>();
+  impl->config = config;
+  AVP_RETURN_IF_ERROR(AppendMovableJoints(path, where, *impl));
+  AVP_RETURN_IF_ERROR(ApplyJointLimitOverrides(config, impl->joints));
+  AVP_RETURN_IF_ERROR(FillJointLimits(where, *impl));
+  AVP_ASSIGN_OR_RETURN(impl->home, HomeJoints(config, *impl));
+  const int n = static_cast<int>(impl->joints.size());
   const JointConvention& rc = config.reference_convention;
   if (!rc.IsIdentity() && static_cast<int>(rc.sign.size()) != n) {
     return InvalidArgumentError(
         fmt::format("reference_convention has {} entries, the chain {} joints ({})", rc.sign.size(),
                     n, fmt::join(impl->names, ", ")));
   }
-
-  // KDL chain: one segment per movable joint; the trailing fixed transform is folded into the
-  // last segment's tip.
-  for (int i = 0; i < n; ++i) {
-    const auto si = static_cast<size_t>(i);
-    const Eigen::Isometry3d& F = impl->X_origin[si];
-    const Eigen::Vector3d axis_parent = F.linear() * impl->axis[si];
-    const KDL::Joint::JointType kdl_type = impl->joints[si].type == JointType::kPrismatic
-                                               ? KDL::Joint::TransAxis
-                                               : KDL::Joint::RotAxis;
-    const KDL::Joint kdl_joint(impl->names[si], ToKdl(Eigen::Vector3d(F.translation())),
-                               ToKdl(axis_parent), kdl_type);
-    const Eigen::Isometry3d f_tip = (i == n - 1) ? F * impl->X_last_tip : F;
-    impl->chain.addSegment(KDL::Segment(impl->names[si] + "_segment", kdl_joint, ToKdl(f_tip)));
-  }
-
-  // Reach bound: the first joint's origin is fixed in the base; everything after it can at most
-  // stretch out in a line.
-  double reach = impl->X_last_tip.translation().norm();
-  for (int i = 0; i < n; ++i) {
-    const auto si = static_cast<size_t>(i);
-    if (i > 0) reach += impl->X_origin[si].translation().norm();
-    if (impl->joints[si].type == JointType::kPrismatic) {
-      reach += std::max(std::abs(impl->lower[i]), std::abs(impl->upper[i]));
-    }
-  }
-  impl->max_reach_m = reach;
+  impl->chain = KdlChain(*impl);
+  impl->max_reach_m = MaxReach(*impl);
   impl->ComputeReachBounds();
   impl->X_FC = config.camera_mount.X_FC;
 
