@@ -1,5 +1,7 @@
 // The ONNX Runtime layer: one Ort::Env, EP selection, OrtModel (design: zero-shot-models.md §3,
 // §5).
+#include "ort_runtime.h"
+
 #include <algorithm>
 #include <atomic>
 #include <cctype>
@@ -13,8 +15,6 @@
 #include <fmt/format.h>
 #include <onnxruntime_cxx_api.h>
 #include <onnxruntime_session_options_config_keys.h>
-
-#include <avp/zsl/ort_runtime.h>
 
 namespace avp::zsl {
 
@@ -100,6 +100,13 @@ Status SessionOptions::Validate() const {
   }
   if (errors.empty()) return Status::Ok();
   return InvalidArgumentError(fmt::format("invalid session options: {}", fmt::join(errors, "; ")));
+}
+
+SessionOptions ToSessionOptions(const RuntimeOptions& runtime) {
+  SessionOptions session;
+  session.intra_op_threads = runtime.intra_op_threads;
+  session.device = runtime.device;
+  return session;
 }
 
 std::string_view ToString(ElementType type) {
