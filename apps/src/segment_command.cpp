@@ -12,9 +12,9 @@
 #include <avp/core/rgbd_frame.h>
 #include <avp/io/file.h>
 #include <avp/io/image_codec.h>
+#include <avp/io/mask_codec.h>
+#include <avp/io/overlay.h>
 #include <avp/segmentation/segmenter.h>
-#include <avp/zsl/mask_codec.h>
-#include <avp/zsl/overlay.h>
 
 namespace avp::apps {
 
@@ -94,7 +94,7 @@ Result<SegmentResult> RunSegment(const SegmentOptions& options) {
                                ec.message()));
   }
   AVP_RETURN_IF_ERROR(
-      io::WritePngFile(zsl::DrawSegmentationOverlay(frame.rgb, result.segmentation), overlay));
+      io::WritePngFile(io::DrawSegmentationOverlay(frame.rgb, result.segmentation), overlay));
   result.files.push_back(overlay);
   AVP_RETURN_IF_ERROR(io::WriteFileAtomic(json, SegmentationJson(result, options), "instances"));
   result.files.push_back(json);
@@ -111,7 +111,7 @@ std::string SegmentationJson(const SegmentResult& result, const SegmentOptions& 
   for (size_t i = 0; i < result.segmentation.instances.size(); ++i) {
     const InstanceMask& m = result.segmentation.instances[i];
     json polygons = json::array();
-    for (const auto& polygon : zsl::MaskToPolygons(m.mask)) {
+    for (const auto& polygon : io::MaskToPolygons(m.mask)) {
       json points = json::array();
       for (const auto& p : polygon) points.push_back({p[0], p[1]});
       polygons.push_back(std::move(points));
@@ -124,7 +124,7 @@ std::string SegmentationJson(const SegmentResult& result, const SegmentOptions& 
         {"mask_score", m.mask_score >= 0.0f ? json(m.mask_score) : json(nullptr)},
         {"box", m.box ? json::array({m.box->x0, m.box->y0, m.box->x1, m.box->y1}) : json(nullptr)},
         {"area", Area(m.mask)},
-        {"rle", {{"size", {m.mask.height(), m.mask.width()}}, {"counts", zsl::MaskToRle(m.mask)}}},
+        {"rle", {{"size", {m.mask.height(), m.mask.width()}}, {"counts", io::MaskToRle(m.mask)}}},
         {"polygons", std::move(polygons)}};
     instances.push_back(std::move(item));
   }

@@ -1,4 +1,6 @@
 // OpenAI CLIP's byte-level BPE tokenizer, written from the rules in zero-shot-models.md §4.2.
+#include "clip_tokenizer.h"
+
 #include <algorithm>
 #include <array>
 #include <limits>
@@ -9,7 +11,6 @@
 #include <zlib.h>
 
 #include <avp/core/error.h>
-#include <avp/zsl/clip_tokenizer.h>
 
 #include "unicode_text.h"
 

@@ -1,11 +1,11 @@
 // Built-in model I/O contracts and the check against them (design: zero-shot-models.md §4, §7).
+#include "contracts.h"
+
 #include <algorithm>
 #include <optional>
 #include <utility>
 
 #include <fmt/format.h>
-
-#include <avp/zsl/contracts.h>
 
 namespace avp::zsl {
 

@@ -1,3 +1,5 @@
+#include "detections.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -5,8 +7,6 @@
 #include <vector>
 
 #include <fmt/format.h>
-
-#include <avp/zsl/detections.h>
 
 namespace avp::zsl {
 

@@ -1,3 +1,5 @@
+#include "letterbox.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -7,7 +9,6 @@
 #include <opencv2/imgproc.hpp>
 
 #include <avp/core/error.h>
-#include <avp/zsl/letterbox.h>
 
 namespace avp::zsl {
 

@@ -11,11 +11,13 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include <avp/zsl/detections.h>
 #include <avp/zsl/lsam_segmenter.h>
-#include <avp/zsl/manifest.h>
-#include <avp/zsl/prompt.h>
-#include <avp/zsl/wordpiece_tokenizer.h>
+
+#include "detections.h"
+#include "manifest.h"
+#include "prompt.h"
+#include "shared_stages.h"
+#include "wordpiece_tokenizer.h"
 
 namespace avp::zsl {
 
@@ -81,7 +83,7 @@ Status LsamOptions::Validate() const {
   if (max_detections <= 0) {
     bad.push_back(fmt::format("max_detections ({}) must be > 0", max_detections));
   }
-  const Status session_status = session.Validate();
+  const Status session_status = ToSessionOptions(session).Validate();
   if (!session_status.ok()) bad.push_back(session_status.message());
   if (bad.empty()) return Status::Ok();
   return InvalidArgumentError(fmt::format("invalid lsam options: {}", fmt::join(bad, "; ")));
@@ -114,9 +116,10 @@ LsamSegmenter::~LsamSegmenter() = default;
 Result<std::unique_ptr<LsamSegmenter>> LsamSegmenter::Create(const std::filesystem::path& model_dir,
                                                              const LsamOptions& options) {
   AVP_RETURN_IF_ERROR(options.Validate());
-  AVP_ASSIGN_OR_RETURN(LoadedBackend backend,
-                       internal::LoadReadyBackend(kBackendLsam, model_dir, options.session,
-                                                  options.verify_sha256, options.warm_up));
+  AVP_ASSIGN_OR_RETURN(
+      LoadedBackend backend,
+      internal::LoadReadyBackend(kBackendLsam, model_dir, ToSessionOptions(options.session),
+                                 options.verify_sha256, options.warm_up));
   LoadedModel grounding = Take(backend, kRoleGrounding);
   const ModelEntry& g = grounding.entry;
   std::vector<std::string> bad;

@@ -1,4 +1,6 @@
 // manifest.json parsing, file checks and backend start-up (design: zero-shot-models.md §7).
+#include "manifest.h"
+
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -13,8 +15,6 @@
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
-
-#include <avp/zsl/manifest.h>
 
 namespace avp::zsl {
 

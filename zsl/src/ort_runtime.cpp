@@ -1,5 +1,7 @@
 // The ONNX Runtime layer: one Ort::Env, EP selection, OrtModel (design: zero-shot-models.md §3,
 // §5).
+#include "ort_runtime.h"
+
 #include <algorithm>
 #include <atomic>
 #include <cctype>
@@ -13,8 +15,6 @@
 #include <fmt/format.h>
 #include <onnxruntime_cxx_api.h>
 #include <onnxruntime_session_options_config_keys.h>
-
-#include <avp/zsl/ort_runtime.h>
 
 namespace avp::zsl {
 
@@ -100,6 +100,13 @@ Status SessionOptions::Validate() const {
   }
   if (errors.empty()) return Status::Ok();
   return InvalidArgumentError(fmt::format("invalid session options: {}", fmt::join(errors, "; ")));
+}
+
+SessionOptions ToSessionOptions(const RuntimeOptions& runtime) {
+  SessionOptions session;
+  session.intra_op_threads = runtime.intra_op_threads;
+  session.device = runtime.device;
+  return session;
 }
 
 std::string_view ToString(ElementType type) {
@@ -578,54 +585,67 @@ const std::vector<TensorInfo>& OrtModel::inputs() const { return impl_->io.input
 const std::vector<TensorInfo>& OrtModel::outputs() const { return impl_->io.outputs; }
 Ort::Session& OrtModel::session() const { return *impl_->session; }
 
-Result<std::vector<OutputTensor>> OrtModel::Run(std::span<const InputTensor> inputs,
-                                                std::span<const std::string> output_names) const {
-  const std::string& label = impl_->label;
-  const ModelIo& io = impl_->io;
+// ---- OrtModel::Run's stages ---------------------------------------------------------------------
 
-  // Bind by name: each graph input exactly once, with its type, rank and static dimensions.
-  for (const InputTensor& in : inputs) {
-    const TensorInfo* info = io.FindInput(in.name);
-    if (info == nullptr) {
-      std::vector<std::string> names;
-      for (const TensorInfo& t : io.inputs) names.push_back(t.name);
-      return InvalidArgumentError(fmt::format("{}: the model has no input '{}' (it has '{}')",
-                                              label, in.name, fmt::join(names, "', '")));
-    }
-    const auto same = std::count_if(inputs.begin(), inputs.end(),
-                                    [&](const InputTensor& o) { return o.name == in.name; });
-    if (same > 1) {
-      return InvalidArgumentError(
-          fmt::format("{}: input '{}' is bound {} times", label, in.name, same));
-    }
-    if (in.type != info->type) {
-      return InvalidArgumentError(fmt::format("{}: input '{}' is given as {}; the model takes {}",
-                                              label, in.name, ToString(in.type),
-                                              ToString(info->type)));
-    }
-    bool shape_ok = in.shape.size() == info->shape.size();
-    size_t count = 1;
-    for (size_t d = 0; d < in.shape.size(); ++d) {
-      if (in.shape[d] < 0) shape_ok = false;
-      if (shape_ok && info->shape[d] != kDynamicDim && info->shape[d] != in.shape[d]) {
-        shape_ok = false;
-      }
-      count *= static_cast<size_t>(std::max<int64_t>(in.shape[d], 0));
-    }
-    if (!shape_ok) {
-      return InvalidArgumentError(fmt::format("{}: input '{}' has shape {}; the model takes {}",
-                                              label, in.name, ShapeToString(in.shape),
-                                              ShapeToString(info->shape)));
-    }
-    if (count != in.count) {
-      return InvalidArgumentError(fmt::format("{}: input '{}' has {} values; shape {} needs {}",
-                                              label, in.name, in.count, ShapeToString(in.shape),
-                                              count));
-    }
-    if (in.data == nullptr && in.count > 0) {
-      return InvalidArgumentError(fmt::format("{}: input '{}' has no data", label, in.name));
-    }
+namespace {
+
+/// The names of `tensors` joined by "', '", for "(it has 'a', 'b')".
+std::string JoinedNames(const std::vector<TensorInfo>& tensors) {
+  std::vector<std::string> names;
+  for (const TensorInfo& t : tensors) names.push_back(t.name);
+  return fmt::format("{}", fmt::join(names, "', '"));
+}
+
+/// OK when `in` (one of `inputs`) binds a graph input of `io` exactly once, with the graph's type,
+/// rank and static dimensions, as many values as its shape needs, and data.
+Status CheckInput(const std::string& label, const ModelIo& io, std::span<const InputTensor> inputs,
+                  const InputTensor& in) {
+  const TensorInfo* info = io.FindInput(in.name);
+  if (info == nullptr) {
+    return InvalidArgumentError(fmt::format("{}: the model has no input '{}' (it has '{}')", label,
+                                            in.name, JoinedNames(io.inputs)));
   }
+  const auto same = std::count_if(inputs.begin(), inputs.end(),
+                                  [&](const InputTensor& o) { return o.name == in.name; });
+  if (same > 1) {
+    return InvalidArgumentError(
+        fmt::format("{}: input '{}' is bound {} times", label, in.name, same));
+  }
+  if (in.type != info->type) {
+    return InvalidArgumentError(fmt::format("{}: input '{}' is given as {}; the model takes {}",
+                                            label, in.name, ToString(in.type),
+                                            ToString(info->type)));
+  }
+  bool shape_ok = in.shape.size() == info->shape.size();
+  size_t count = 1;
+  for (size_t d = 0; d < in.shape.size(); ++d) {
+    if (in.shape[d] < 0) shape_ok = false;
+    if (shape_ok && info->shape[d] != kDynamicDim && info->shape[d] != in.shape[d]) {
+      shape_ok = false;
+    }
+    count *= static_cast<size_t>(std::max<int64_t>(in.shape[d], 0));
+  }
+  if (!shape_ok) {
+    return InvalidArgumentError(fmt::format("{}: input '{}' has shape {}; the model takes {}",
+                                            label, in.name, ShapeToString(in.shape),
+                                            ShapeToString(info->shape)));
+  }
+  if (count != in.count) {
+    return InvalidArgumentError(fmt::format("{}: input '{}' has {} values; shape {} needs {}",
+                                            label, in.name, in.count, ShapeToString(in.shape),
+                                            count));
+  }
+  if (in.data == nullptr && in.count > 0) {
+    return InvalidArgumentError(fmt::format("{}: input '{}' has no data", label, in.name));
+  }
+  return Status::Ok();
+}
+
+/// OK when `inputs` bind each graph input of `io` exactly once (CheckInput, in input order), then
+/// no graph input is left unbound.
+Status CheckInputs(const std::string& label, const ModelIo& io,
+                   std::span<const InputTensor> inputs) {
+  for (const InputTensor& in : inputs) AVP_RETURN_IF_ERROR(CheckInput(label, io, inputs, in));
   for (const TensorInfo& t : io.inputs) {
     const bool bound = std::any_of(inputs.begin(), inputs.end(),
                                    [&](const InputTensor& in) { return in.name == t.name; });
@@ -634,39 +654,102 @@ Result<std::vector<OutputTensor>> OrtModel::Run(std::span<const InputTensor> inp
                                               ToString(t.type), ShapeToString(t.shape)));
     }
   }
+  return Status::Ok();
+}
+
+/// The outputs Run fetches: `output_names`, or every graph output (in graph order) when it is
+/// empty. Errors: a name the model has no output of.
+Result<std::vector<std::string>> OutputsToFetch(const std::string& label, const ModelIo& io,
+                                                std::span<const std::string> output_names) {
   std::vector<std::string> wanted(output_names.begin(), output_names.end());
   if (wanted.empty()) {
     for (const TensorInfo& t : io.outputs) wanted.push_back(t.name);
   }
   for (const std::string& name : wanted) {
     if (io.FindOutput(name) == nullptr) {
-      std::vector<std::string> names;
-      for (const TensorInfo& t : io.outputs) names.push_back(t.name);
       return InvalidArgumentError(fmt::format("{}: the model has no output '{}' (it has '{}')",
-                                              label, name, fmt::join(names, "', '")));
+                                              label, name, JoinedNames(io.outputs)));
     }
   }
+  return wanted;
+}
 
+/// ORT tensors over the callers' buffers (no copy), in input order. Errors: an element type Run
+/// does not bind. ORT exceptions propagate.
+Result<std::vector<Ort::Value>> InputValues(const std::string& label, const Ort::MemoryInfo& memory,
+                                            std::span<const InputTensor> inputs) {
+  std::vector<Ort::Value> values;
+  values.reserve(inputs.size());
+  for (const InputTensor& in : inputs) {
+    ONNXTensorElementDataType onnx_type{};
+    size_t bytes = 0;
+    if (!ToOnnx(in.type, onnx_type, bytes)) {
+      return InvalidArgumentError(
+          fmt::format("{}: input '{}' is {}; Run binds float32, int64 "
+                      "and bool inputs",
+                      label, in.name, ToString(in.type)));
+    }
+    // ORT does not write to inputs; its API takes a non-const pointer all the same.
+    values.push_back(Ort::Value::CreateTensor(memory, const_cast<void*>(in.data), in.count * bytes,
+                                              in.shape.data(), in.shape.size(), onnx_type));
+  }
+  return values;
+}
+
+/// `out` = the `n` values of the tensor `value`, whose elements are `T`, converted to `U`.
+template <typename T, typename U>
+void CopyValues(const Ort::Value& value, size_t n, std::vector<U>& out) {
+  const T* p = value.GetTensorData<T>();
+  out.assign(p, p + n);
+}
+
+/// Output `name` (`value`) copied out of ORT: float32 into `f32`; int64, int32 and bool into `i64`
+/// (bool as 0/1). Errors: not a tensor, or another element type. ORT exceptions propagate.
+Result<OutputTensor> CopyOutput(const std::string& label, const std::string& name,
+                                const Ort::Value& value) {
+  OutputTensor out;
+  out.name = name;
+  if (!value.IsTensor()) {
+    return InvalidArgumentError(fmt::format("{}: output '{}' is not a tensor", label, out.name));
+  }
+  const auto info = value.GetTensorTypeAndShapeInfo();
+  out.type = FromOnnx(info.GetElementType());
+  out.shape = info.GetShape();
+  const size_t n = info.GetElementCount();
+  switch (out.type) {
+    case ElementType::kFloat32:
+      CopyValues<float>(value, n, out.f32);
+      break;
+    case ElementType::kInt64:
+      CopyValues<int64_t>(value, n, out.i64);
+      break;
+    case ElementType::kInt32:
+      CopyValues<int32_t>(value, n, out.i64);
+      break;
+    case ElementType::kBool:  // ORT booleans convert to 0 / 1
+      CopyValues<bool>(value, n, out.i64);
+      break;
+    default:
+      return InvalidArgumentError(
+          fmt::format("{}: output '{}' is {}; Run returns float32, int64, int32 and bool outputs",
+                      label, out.name, ToString(out.type)));
+  }
+  return out;
+}
+
+}  // namespace
+
+Result<std::vector<OutputTensor>> OrtModel::Run(std::span<const InputTensor> inputs,
+                                                std::span<const std::string> output_names) const {
+  const std::string& label = impl_->label;
+  AVP_RETURN_IF_ERROR(CheckInputs(label, impl_->io, inputs));
+  AVP_ASSIGN_OR_RETURN(const std::vector<std::string> wanted,
+                       OutputsToFetch(label, impl_->io, output_names));
   try {
     const Ort::MemoryInfo memory = Ort::MemoryInfo::CreateCpu(OrtArenaAllocator, OrtMemTypeDefault);
-    std::vector<Ort::Value> values;
+    AVP_ASSIGN_OR_RETURN(std::vector<Ort::Value> values, InputValues(label, memory, inputs));
     std::vector<const char*> in_names;
-    values.reserve(inputs.size());
-    for (const InputTensor& in : inputs) {
-      ONNXTensorElementDataType onnx_type{};
-      size_t bytes = 0;
-      if (!ToOnnx(in.type, onnx_type, bytes)) {
-        return InvalidArgumentError(
-            fmt::format("{}: input '{}' is {}; Run binds float32, int64 "
-                        "and bool inputs",
-                        label, in.name, ToString(in.type)));
-      }
-      // ORT does not write to inputs; its API takes a non-const pointer all the same.
-      values.push_back(Ort::Value::CreateTensor(memory, const_cast<void*>(in.data),
-                                                in.count * bytes, in.shape.data(), in.shape.size(),
-                                                onnx_type));
-      in_names.push_back(in.name.c_str());
-    }
+    for (const InputTensor& in : inputs) in_names.push_back(in.name.c_str());
     std::vector<const char*> out_names;
     for (const std::string& name : wanted) out_names.push_back(name.c_str());
 
@@ -677,43 +760,7 @@ Result<std::vector<OutputTensor>> OrtModel::Run(std::span<const InputTensor> inp
     std::vector<OutputTensor> outputs;
     outputs.reserve(results.size());
     for (size_t i = 0; i < results.size(); ++i) {
-      OutputTensor out;
-      out.name = wanted[i];
-      if (!results[i].IsTensor()) {
-        return InvalidArgumentError(
-            fmt::format("{}: output '{}' is not a tensor", label, out.name));
-      }
-      const auto info = results[i].GetTensorTypeAndShapeInfo();
-      out.type = FromOnnx(info.GetElementType());
-      out.shape = info.GetShape();
-      const size_t n = info.GetElementCount();
-      switch (out.type) {
-        case ElementType::kFloat32: {
-          const float* p = results[i].GetTensorData<float>();
-          out.f32.assign(p, p + n);
-          break;
-        }
-        case ElementType::kInt64: {
-          const int64_t* p = results[i].GetTensorData<int64_t>();
-          out.i64.assign(p, p + n);
-          break;
-        }
-        case ElementType::kInt32: {
-          const int32_t* p = results[i].GetTensorData<int32_t>();
-          out.i64.assign(p, p + n);
-          break;
-        }
-        case ElementType::kBool: {
-          const bool* p = results[i].GetTensorData<bool>();
-          out.i64.resize(n);
-          for (size_t k = 0; k < n; ++k) out.i64[k] = p[k] ? 1 : 0;
-          break;
-        }
-        default:
-          return InvalidArgumentError(fmt::format(
-              "{}: output '{}' is {}; Run returns float32, int64, int32 and bool outputs", label,
-              out.name, ToString(out.type)));
-      }
+      AVP_ASSIGN_OR_RETURN(OutputTensor out, CopyOutput(label, wanted[i], results[i]));
       outputs.push_back(std::move(out));
     }
     return outputs;

@@ -1,9 +1,9 @@
 // Detector prompt parsing: comma-separated class names, normalised and de-duplicated.
+#include "prompt.h"
+
 #include <unordered_set>
 
 #include <fmt/format.h>
-
-#include <avp/zsl/prompt.h>
 
 namespace avp::zsl {
 namespace {

@@ -8,8 +8,8 @@
 #include <avp/zsl/register.h>
 #ifdef AVP_WITH_ONNX
 #include <avp/zsl/lsam_segmenter.h>
-#include <avp/zsl/ort_runtime.h>
 #include <avp/zsl/ywes_segmenter.h>
+#include <avp/zsl/zsl.h>
 #endif
 
 namespace avp::zsl {

@@ -1,3 +1,5 @@
+#include "sam_geometry.h"
+
 #include <algorithm>
 #include <array>
 #include <cstdint>
@@ -7,7 +9,6 @@
 #include <opencv2/imgproc.hpp>
 
 #include <avp/core/error.h>
-#include <avp/zsl/sam_geometry.h>
 
 namespace avp::zsl {
 

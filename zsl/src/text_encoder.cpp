@@ -1,3 +1,5 @@
+#include "text_encoder.h"
+
 #include <algorithm>
 #include <atomic>
 #include <bit>
@@ -14,11 +16,10 @@
 
 #include <fmt/format.h>
 
-#include <avp/zsl/clip_tokenizer.h>
-#include <avp/zsl/lru_cache.h>
-#include <avp/zsl/manifest.h>
-#include <avp/zsl/prompt.h>
-#include <avp/zsl/text_encoder.h>
+#include "clip_tokenizer.h"
+#include "lru_cache.h"
+#include "manifest.h"
+#include "prompt.h"
 
 namespace avp::zsl {
 

@@ -1,11 +1,11 @@
 // BERT's uncased BasicTokenizer + WordPiece, and Grounding DINO's text inputs (§4.4).
+#include "wordpiece_tokenizer.h"
+
 #include <fstream>
 #include <iterator>
 #include <unordered_map>
 
 #include <fmt/format.h>
-
-#include <avp/zsl/wordpiece_tokenizer.h>
 
 #include "unicode_text.h"
 

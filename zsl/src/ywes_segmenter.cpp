@@ -10,13 +10,15 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
-#include <avp/zsl/detections.h>
-#include <avp/zsl/letterbox.h>
-#include <avp/zsl/manifest.h>
-#include <avp/zsl/prompt.h>
-#include <avp/zsl/sam_geometry.h>
-#include <avp/zsl/text_encoder.h>
 #include <avp/zsl/ywes_segmenter.h>
+
+#include "detections.h"
+#include "letterbox.h"
+#include "manifest.h"
+#include "prompt.h"
+#include "sam_geometry.h"
+#include "shared_stages.h"
+#include "text_encoder.h"
 
 namespace avp::zsl {
 
@@ -304,7 +306,7 @@ Status YwesOptions::Validate() const {
   if (max_detections <= 0) {
     bad.push_back(fmt::format("max_detections ({}) must be > 0", max_detections));
   }
-  const Status session_status = session.Validate();
+  const Status session_status = ToSessionOptions(session).Validate();
   if (!session_status.ok()) bad.push_back(session_status.message());
   if (bad.empty()) return Status::Ok();
   return InvalidArgumentError(fmt::format("invalid ywes options: {}", fmt::join(bad, "; ")));
@@ -352,9 +354,10 @@ YwesSegmenter::~YwesSegmenter() = default;
 Result<std::unique_ptr<YwesSegmenter>> YwesSegmenter::Create(const std::filesystem::path& model_dir,
                                                              const YwesOptions& options) {
   AVP_RETURN_IF_ERROR(options.Validate());
-  AVP_ASSIGN_OR_RETURN(LoadedBackend backend,
-                       internal::LoadReadyBackend(kBackendYwes, model_dir, options.session,
-                                                  options.verify_sha256, options.warm_up));
+  AVP_ASSIGN_OR_RETURN(
+      LoadedBackend backend,
+      internal::LoadReadyBackend(kBackendYwes, model_dir, ToSessionOptions(options.session),
+                                 options.verify_sha256, options.warm_up));
 
   LoadedModel detector = Take(backend, kRoleDetector);
   const ModelEntry& det = detector.entry;

@@ -24,6 +24,8 @@
 //   41 ' ll</w> -> 553  42 ! ! -> 554  43 2 0 -> 555 (never applies: digits are split one by one)
 //   44 e r -> 556  45 v e</w> -> 557  46 ' ve</w> -> 558  47 s t -> 559  48 e m</w> -> 560
 //   49 st em</w> -> 561 "stem</w>"
+#include "clip_tokenizer.h"
+
 #include <algorithm>
 #include <cstdlib>
 #include <fstream>
@@ -38,7 +40,6 @@
 
 #include <avp/core/error.h>
 #include <avp/test/temp_dir_test.h>
-#include <avp/zsl/clip_tokenizer.h>
 
 namespace avp::zsl {
 namespace {

@@ -1,5 +1,7 @@
 // The built-in I/O contracts and CheckContract: synthetic model I/O for each kind of mismatch, then
 // every good stub model (make_stubs.py) against its contract.
+#include "contracts.h"
+
 #include <cctype>
 #include <filesystem>
 #include <ostream>
@@ -9,8 +11,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <avp/zsl/contracts.h>
-#include <avp/zsl/ort_runtime.h>
+#include "ort_runtime.h"
 
 namespace avp::zsl {
 namespace {

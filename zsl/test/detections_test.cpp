@@ -1,3 +1,5 @@
+#include "detections.h"
+
 #include <cmath>
 #include <random>
 #include <vector>
@@ -6,8 +8,6 @@
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/dnn.hpp>
-
-#include <avp/zsl/detections.h>
 
 namespace avp::zsl {
 namespace {

@@ -1,3 +1,5 @@
+#include "letterbox.h"
+
 #include <cstdint>
 #include <random>
 #include <vector>
@@ -5,7 +7,6 @@
 #include <gtest/gtest.h>
 
 #include <avp/core/error.h>
-#include <avp/zsl/letterbox.h>
 
 namespace avp::zsl {
 namespace {

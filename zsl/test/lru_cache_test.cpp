@@ -1,11 +1,11 @@
+#include "lru_cache.h"
+
 #include <atomic>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
-
-#include <avp/zsl/lru_cache.h>
 
 namespace avp::zsl {
 namespace {

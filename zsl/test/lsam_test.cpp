@@ -23,6 +23,9 @@
 #include <avp/zsl/lsam_segmenter.h>
 #include <avp/zsl/register.h>
 
+#include "ort_runtime.h"
+#include "shared_stages.h"
+
 namespace avp::zsl {
 namespace {
 

@@ -1,6 +1,8 @@
 // manifest.json parsing and file checks, and LoadBackend on the stub model directories: the good
 // sets are READY, every wrong-contract set fails at load with a line naming the model, the tensor
 // and the expectation. Real-weight checks read AVP_ZSL_MODEL_DIR and skip when it is unset.
+#include "manifest.h"
+
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -13,7 +15,6 @@
 #include <gtest/gtest.h>
 
 #include <avp/test/temp_dir_test.h>
-#include <avp/zsl/manifest.h>
 
 namespace avp::zsl {
 namespace {

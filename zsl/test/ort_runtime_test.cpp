@@ -1,6 +1,8 @@
 // OrtModel on the stub models of make_stubs.py: every planted function checked exactly, Run's
 // binding errors, and execution-provider selection (cpu never tries CUDA; auto falls back to CPU
 // with the reason logged once; cuda fails naming the library — or, where a CUDA EP loads, runs).
+#include "ort_runtime.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -15,8 +17,6 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-
-#include <avp/zsl/ort_runtime.h>
 
 #if defined(__SANITIZE_ADDRESS__)
 // ONNX Runtime 1.29 leaks 14 bytes once per process when an Ort::Env is created (even one that is

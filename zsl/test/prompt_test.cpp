@@ -1,9 +1,9 @@
+#include "prompt.h"
+
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
-
-#include <avp/zsl/prompt.h>
 
 namespace avp::zsl {
 namespace {

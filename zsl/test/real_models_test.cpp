@@ -17,8 +17,9 @@
 #include <avp/core/rgbd_frame.h>
 #include <avp/io/image_codec.h>
 #include <avp/zsl/lsam_segmenter.h>
-#include <avp/zsl/manifest.h>
 #include <avp/zsl/ywes_segmenter.h>
+
+#include "manifest.h"
 
 namespace avp::zsl {
 namespace {
@@ -84,8 +85,8 @@ RealSetup LoadRealSetup(const char* backend) {
   return s;
 }
 
-SessionOptions SessionFromEnvironment() {
-  SessionOptions o;
+RuntimeOptions SessionFromEnvironment() {
+  RuntimeOptions o;
   Result<Device> device = DeviceFromEnvironment();
   o.device = device.ok() ? *device : Device::kAuto;
   return o;

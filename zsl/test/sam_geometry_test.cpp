@@ -1,3 +1,5 @@
+#include "sam_geometry.h"
+
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -6,7 +8,6 @@
 #include <gtest/gtest.h>
 
 #include <avp/core/error.h>
-#include <avp/zsl/sam_geometry.h>
 
 namespace avp::zsl {
 namespace {

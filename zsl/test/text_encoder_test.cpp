@@ -2,6 +2,8 @@
 // up to the first EOT whose id is below 562 (the fixture's SOT) and whose id mod 16 is c; columns
 // 16..511 are 0; not normalised. So the L2-normalised embedding of a phrase is its normalised
 // histogram of (BPE id mod 16), which these tests compute with ClipTokenizer on the same merges.
+#include "text_encoder.h"
+
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -18,9 +20,9 @@
 #include <nlohmann/json.hpp>
 
 #include <avp/test/temp_dir_test.h>
-#include <avp/zsl/clip_tokenizer.h>
-#include <avp/zsl/manifest.h>
-#include <avp/zsl/text_encoder.h>
+
+#include "clip_tokenizer.h"
+#include "manifest.h"
 
 namespace avp::zsl {
 namespace {

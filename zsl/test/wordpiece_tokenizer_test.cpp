@@ -4,6 +4,8 @@
 //   12 tomato  13 leaf  14 red  15 green  16 pepper  17 ##s  18 stem  19 un  20 ##want  21 ##ed
 //   22 want  23 cafe  24 apfel  25 a  26 ##p  27 ##fel  28 straw  29 ##berry  30 bell  31 ##a
 //   32 日  33 本  34 ß
+#include "wordpiece_tokenizer.h"
+
 #include <algorithm>
 #include <memory>
 #include <string>
@@ -12,7 +14,6 @@
 #include <gtest/gtest.h>
 
 #include <avp/test/temp_dir_test.h>
-#include <avp/zsl/wordpiece_tokenizer.h>
 
 namespace avp::zsl {
 namespace {

@@ -25,12 +25,14 @@
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/segmentation/segmenter.h>
-#include <avp/zsl/letterbox.h>
-#include <avp/zsl/manifest.h>
 #include <avp/zsl/register.h>
-#include <avp/zsl/sam_geometry.h>
-#include <avp/zsl/text_encoder.h>
 #include <avp/zsl/ywes_segmenter.h>
+
+#include "letterbox.h"
+#include "manifest.h"
+#include "sam_geometry.h"
+#include "shared_stages.h"
+#include "text_encoder.h"
 
 namespace avp::zsl {
 namespace {

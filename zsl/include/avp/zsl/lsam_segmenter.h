@@ -10,10 +10,13 @@
 #include <avp/core/segmentation.h>
 #include <avp/core/status.h>
 #include <avp/segmentation/segmenter.h>
-#include <avp/zsl/ort_runtime.h>
-#include <avp/zsl/ywes_segmenter.h>
+#include <avp/zsl/zsl.h>
 
 namespace avp::zsl {
+
+// Internal parts of the backends (zsl/src), named only by the accessors that zsl's own tests use.
+class OrtModel;         // ort_runtime.h
+class SamBoxSegmenter;  // shared_stages.h
 
 /// Settings of an LsamSegmenter, with the reference values (design §1, lang-segment-anything) as
 /// defaults.
@@ -24,7 +27,7 @@ struct LsamOptions {
   float text_threshold = 0.25f;
   /// Boxes kept, best first (the reference keeps all: Grounding DINO has 900 queries).
   int max_detections = 900;
-  SessionOptions session;
+  RuntimeOptions session;
   bool verify_sha256 = false;
   bool warm_up = false;
 

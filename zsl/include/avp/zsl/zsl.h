@@ -1,8 +1,44 @@
 #pragma once
 
+#include <string_view>
+
+#include <avp/core/status.h>
+
 namespace avp::zsl {
 
-/// True when this build has ONNX Runtime (AVP_WITH_ONNX), i.e. the ywes and lsam backends.
+/// True when this build has ONNX Runtime (AVP_WITH_ONNX), i.e. the ywes and lsam backends. The
+/// functions below, like the backends, are defined only in such builds.
 bool BuiltWithOnnxRuntime();
+
+// ---- Devices and sessions, as the backends' options take them ----------------------------------
+
+/// Which execution provider the backends' ONNX Runtime sessions use.
+enum class Device {
+  kAuto,  ///< try CUDA; on failure log the reason once (one stderr line) and run on CPU
+  kCpu,   ///< CPU only; CUDA is never tried
+  kCuda,  ///< CUDA or an error naming the library or reason
+};
+
+/// The environment variable that selects the device: `auto` (default), `cpu` or `cuda`.
+inline constexpr const char* kDeviceEnvVar = "AVP_ZSL_DEVICE";
+
+/// "auto", "cpu", "cuda".
+std::string_view ToString(Device device);
+
+/// Parses "auto", "cpu" or "cuda" (ASCII case-insensitive, surrounding blanks ignored).
+/// Errors: InvalidArgument naming the text, e.g. "device 'gpu' is not one of auto, cpu, cuda".
+Result<Device> ParseDevice(std::string_view text);
+
+/// The device `AVP_ZSL_DEVICE` asks for: kAuto when it is unset or empty. Errors: InvalidArgument
+/// "AVP_ZSL_DEVICE: device 'gpu' is not one of auto, cpu, cuda".
+Result<Device> DeviceFromEnvironment();
+
+/// How a backend runs its ONNX Runtime sessions (design: zero-shot-models.md §5). Inter-op threads
+/// are always 1, and an idle session does not spin.
+struct RuntimeOptions {
+  /// Intra-op threads; 0 = ORT's default (one per physical core). Must be >= 0.
+  int intra_op_threads = 0;
+  Device device = Device::kAuto;
+};
 
 }  // namespace avp::zsl

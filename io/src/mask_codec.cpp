@@ -7,9 +7,9 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include <avp/zsl/mask_codec.h>
+#include <avp/io/mask_codec.h>
 
-namespace avp::zsl {
+namespace avp::io {
 
 std::vector<uint32_t> MaskToRle(const MaskImage& mask) {
   std::vector<uint32_t> counts;
@@ -80,4 +80,4 @@ std::vector<std::vector<std::array<int, 2>>> MaskToPolygons(const MaskImage& mas
   return polygons;
 }
 
-}  // namespace avp::zsl
+}  // namespace avp::io

@@ -1,4 +1,5 @@
 #pragma once
+// Internal to avp_zsl (zsl/src, not installed): used by its sources and unit tests.
 
 #include <cstdint>
 #include <map>
@@ -8,7 +9,8 @@
 #include <vector>
 
 #include <avp/core/status.h>
-#include <avp/zsl/ort_runtime.h>
+
+#include "ort_runtime.h"
 
 namespace avp::zsl {
 

@@ -9,7 +9,7 @@
 #include <avp/core/image.h>
 #include <avp/core/segmentation.h>
 
-namespace avp::zsl {
+namespace avp::io {
 
 /// The key an instance is coloured by: its label, or the name of its semantic class when the
 /// label is empty.
@@ -35,4 +35,4 @@ std::vector<std::array<uint8_t, 3>> OverlayColors(const Segmentation& seg);
 /// @throws avp::Error unless seg and every mask have the image's size.
 ImageRgb8 DrawSegmentationOverlay(const ImageRgb8& image, const Segmentation& seg);
 
-}  // namespace avp::zsl
+}  // namespace avp::io

@@ -13,9 +13,9 @@
 
 #include <avp/core/error.h>
 #include <avp/core/semantic_class.h>
-#include <avp/zsl/overlay.h>
+#include <avp/io/overlay.h>
 
-namespace avp::zsl {
+namespace avp::io {
 
 namespace {
 
@@ -144,4 +144,4 @@ ImageRgb8 DrawSegmentationOverlay(const ImageRgb8& image, const Segmentation& se
   return out;
 }
 
-}  // namespace avp::zsl
+}  // namespace avp::io

@@ -5,9 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <avp/core/error.h>
-#include <avp/zsl/overlay.h>
+#include <avp/io/overlay.h>
 
-namespace avp::zsl {
+namespace avp::io {
 namespace {
 
 constexpr uint8_t kGrey = 40;
@@ -116,4 +116,4 @@ TEST(OverlayTest, RejectsMismatchedSizes) {
 }
 
 }  // namespace
-}  // namespace avp::zsl
+}  // namespace avp::io

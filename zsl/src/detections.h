@@ -1,4 +1,5 @@
 #pragma once
+// Internal to avp_zsl (zsl/src, not installed): used by its sources and unit tests.
 
 #include <cstddef>
 #include <span>
@@ -6,7 +7,8 @@
 
 #include <avp/core/segmentation.h>
 #include <avp/core/status.h>
-#include <avp/zsl/letterbox.h>
+
+#include "letterbox.h"
 
 namespace avp::zsl {
 

@@ -1,4 +1,5 @@
 #pragma once
+// Internal to avp_zsl (zsl/src, not installed): used by its sources and unit tests.
 
 #include <array>
 #include <cstdint>
@@ -10,9 +11,10 @@
 #include <vector>
 
 #include <avp/core/status.h>
-#include <avp/zsl/contracts.h>
-#include <avp/zsl/detections.h>  // ScoreActivation
-#include <avp/zsl/ort_runtime.h>
+
+#include "contracts.h"
+#include "detections.h"  // ScoreActivation
+#include "ort_runtime.h"
 
 namespace avp::zsl {
 

@@ -1,4 +1,5 @@
 #pragma once
+// Internal to avp_zsl (zsl/src, not installed): used by its sources and unit tests.
 
 #include <cstddef>
 #include <cstdint>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include <avp/core/status.h>
+#include <avp/zsl/zsl.h>  // Device, RuntimeOptions
 
 // ONNX Runtime's C++ types, for code that needs the raw session (IoBinding, device tensors).
 // Include <onnxruntime_cxx_api.h> (target onnxruntime::onnxruntime) to use them; this header does
@@ -25,28 +27,7 @@ namespace avp::zsl {
 /// session per model file. No ONNX Runtime exception leaves this layer: every failure is a Status
 /// whose message names the model.
 
-// ---- Devices -----------------------------------------------------------------------------------
-
-/// Which execution provider a session uses.
-enum class Device {
-  kAuto,  ///< try CUDA; on failure log the reason once (one stderr line) and run on CPU
-  kCpu,   ///< CPU only; CUDA is never tried
-  kCuda,  ///< CUDA or an error naming the library or reason
-};
-
-/// The environment variable that selects the device: `auto` (default), `cpu` or `cuda`.
-inline constexpr const char* kDeviceEnvVar = "AVP_ZSL_DEVICE";
-
-/// "auto", "cpu", "cuda".
-std::string_view ToString(Device device);
-
-/// Parses "auto", "cpu" or "cuda" (ASCII case-insensitive, surrounding blanks ignored).
-/// Errors: InvalidArgument naming the text, e.g. "device 'gpu' is not one of auto, cpu, cuda".
-Result<Device> ParseDevice(std::string_view text);
-
-/// The device `AVP_ZSL_DEVICE` asks for: kAuto when it is unset or empty. Errors: InvalidArgument
-/// "AVP_ZSL_DEVICE: device 'gpu' is not one of auto, cpu, cuda".
-Result<Device> DeviceFromEnvironment();
+// ---- Sessions ----------------------------------------------------------------------------------
 
 /// Session settings (design §5). Defaults: ORT's thread count, device auto, no spinning; inter-op
 /// threads are always 1.
@@ -62,6 +43,10 @@ struct SessionOptions {
   /// OK, or InvalidArgument listing every bad field: "intra_op_threads (-1) must be >= 0".
   Status Validate() const;
 };
+
+/// The session settings of the backends' public RuntimeOptions (zsl.h): its device and thread
+/// count; allow_spinning and cuda_device_id keep their defaults.
+SessionOptions ToSessionOptions(const RuntimeOptions& runtime);
 
 /// The names ORT gives its providers, as `OrtModel::provider()` reports them.
 inline constexpr const char* kCpuProvider = "CPUExecutionProvider";

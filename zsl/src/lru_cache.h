@@ -1,4 +1,5 @@
 #pragma once
+// Internal to avp_zsl (zsl/src, not installed): used by its sources and unit tests.
 
 #include <cstddef>
 #include <cstdint>

@@ -8,7 +8,7 @@
 #include <avp/core/segmentation.h>
 #include <avp/core/status.h>
 
-namespace avp::zsl {
+namespace avp::io {
 
 /// COCO-style uncompressed run-length encoding of a binary mask (nonzero = foreground): the
 /// pixels in column-major order (down column 0, then column 1, ...; pycocotools' Fortran order),
@@ -29,4 +29,4 @@ Result<MaskImage> RleToMask(std::span<const uint32_t> counts, int width, int hei
 /// one-vertex polygon; an empty mask gives none.
 std::vector<std::vector<std::array<int, 2>>> MaskToPolygons(const MaskImage& mask);
 
-}  // namespace avp::zsl
+}  // namespace avp::io

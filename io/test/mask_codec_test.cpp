@@ -6,9 +6,9 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <avp/zsl/mask_codec.h>
+#include <avp/io/mask_codec.h>
 
-namespace avp::zsl {
+namespace avp::io {
 namespace {
 
 using Polygon = std::vector<std::array<int, 2>>;
@@ -116,4 +116,4 @@ TEST(MaskToPolygonsTest, ComponentsOrderedByFirstVertexHolesIgnored) {
 }
 
 }  // namespace
-}  // namespace avp::zsl
+}  // namespace avp::io
