@@ -35,13 +35,15 @@
 #include <avp/core/rng.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/pipeline/episode.h>
-#include <avp/pipeline/rgbd_source.h>
 #include <avp/planning/avp_nbv_planner.h>
 #include <avp/planning/gain_grid.h>
 #include <avp/robot/arm.h>
 #include <avp/robot/arm_model.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/segmentation/segmenter_registry.h>
 #include <avp/sim/scenario.h>
+#include <avp/sim/sim_arm.h>
+#include <avp/sim/sim_rgbd_source.h>
 
 #include "bench_report.h"
 
@@ -82,14 +84,14 @@ const Fixture& GetFixture() {
           f->scene.start_joints_rad.data(),
           static_cast<Eigen::Index>(f->scene.start_joints_rad.size()));
     }
-    robot::SimArm sim_arm(*f->arm, q0);
+    sim::SimArm sim_arm(*f->arm, q0);
     Result<std::unique_ptr<segmentation::Segmenter>> segmenter =
-        segmentation::MakeSegmenter("oracle", Rng(kSeed).Fork("segmenter").NextU64());
+        segmentation::BuiltinSegmenters().Make("oracle", Rng(kSeed).Fork("segmenter").NextU64());
     if (!segmenter.ok()) Die(segmenter.status());
     const CameraIntrinsics K = CameraIntrinsics::RealSenseD435();
     sim::DepthNoiseConfig noise;
     noise.enabled = true;
-    pipeline::SimRgbdSource source(f->scene, K, noise, kSeed);
+    sim::SimRgbdSource source(f->scene, K, noise, kSeed);
     mapping::MapOptions map_options;
     map_options.grid.voxel_size_m = 0.005;
     f->map = std::make_unique<mapping::SemanticMap>(map_options);

@@ -19,7 +19,7 @@
 #include <avp/interop/remote_segmenter.h>
 #include <avp/interop/segmentation_codec.h>
 #include <avp/interop/segmentation_server.h>
-#include <avp/segmentation/segmenter.h>
+#include <avp/segmentation/segmenter_registry.h>
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/scenario.h>
 
@@ -28,9 +28,17 @@
 namespace avp::interop {
 namespace {
 
+/// The built-in segmenters the benchmark serves and compares against (never freed: the server
+/// outlives the benchmarks).
+const segmentation::SegmenterRegistry& Segmenters() {
+  static const auto* registry =
+      new segmentation::SegmenterRegistry(segmentation::BuiltinSegmenters());
+  return *registry;
+}
+
 struct Frame {
   RgbdFrame frame;
-  segmentation::SimulatorLabels labels;
+  SimulatorLabels labels;
 };
 
 const Frame& TheFrame() {
@@ -63,6 +71,7 @@ segmentation::SegmentationRequest Request(uint64_t index) {
 SegmentationServer& TheServer() {
   static SegmentationServer* server = [] {
     ServerOptions o;
+    o.segmenters = &Segmenters();
     o.host = "127.0.0.1";
     o.port = 0;
     o.backends = {"oracle", "color"};
@@ -75,7 +84,7 @@ SegmentationServer& TheServer() {
 }
 
 void BM_InProcess(benchmark::State& state, const std::string& backend) {
-  auto seg = segmentation::MakeSegmenter(backend, 7);
+  auto seg = Segmenters().Make(backend, 7);
   if (!seg.ok()) {
     state.SkipWithError(seg.status().ToString().c_str());
     return;

@@ -1,14 +1,18 @@
-// Checks the dependency rules of docs/architecture.md by reading every source file's includes:
-// modules include only modules below them, and only apps/ (and later interop/) may include
-// command-line, middleware or network headers.
+// Checks the dependency rules of docs/architecture.md: by reading every source file's includes
+// (modules include only modules below them, and only apps/ and interop/ may include command-line,
+// middleware or network headers), and by reading the link graph CMake writes
+// (avp_link_graph.txt: what linking each module pulls in), so that, e.g., the loop a real robot
+// runs (avp::pipeline) links no simulator, no Embree and no assimp.
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <regex>
 #include <set>
+#include <sstream>
 #include <string>
 #include <vector>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 namespace {
@@ -17,18 +21,64 @@ namespace fs = std::filesystem;
 
 const fs::path kSourceRoot = fs::path(AVP_CONFIG_DIR).parent_path();
 
+/// Per library target ("avp_pipeline"), everything linking it pulls in.
+using LinkGraph = std::map<std::string, std::set<std::string>>;
+
+/// Parses avp_link_graph.txt: "target: item item ..." per line.
+LinkGraph ReadLinkGraph(const fs::path& file) {
+  LinkGraph graph;
+  std::ifstream in(file);
+  for (std::string line; std::getline(in, line);) {
+    const size_t colon = line.find(':');
+    if (colon == std::string::npos) continue;
+    std::istringstream items(line.substr(colon + 1));
+    std::set<std::string>& closure = graph[line.substr(0, colon)];
+    for (std::string item; items >> item;) closure.insert(item);
+  }
+  return graph;
+}
+
+/// The items of `target`'s closure that contain any of `forbidden` (case-insensitive): e.g.
+/// {"avp_sim", "embree", "assimp"}.
+std::vector<std::string> ForbiddenLinks(const LinkGraph& graph, const std::string& target,
+                                        const std::vector<std::string>& forbidden) {
+  std::vector<std::string> found;
+  const auto it = graph.find(target);
+  if (it == graph.end()) return found;
+  auto lower = [](std::string t) {
+    for (char& c : t) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return t;
+  };
+  for (const std::string& item : it->second) {
+    for (const std::string& f : forbidden) {
+      if (lower(item).find(f) != std::string::npos) found.push_back(item);
+    }
+  }
+  return found;
+}
+
+const LinkGraph& TheLinkGraph() {
+  static const LinkGraph graph = ReadLinkGraph(AVP_LINK_GRAPH_FILE);
+  return graph;
+}
+
 // Which avp modules each module may include.
 const std::map<std::string, std::set<std::string>> kAllowed = {
     {"core", {"core"}},
     {"io", {"core", "io"}},
-    {"sim", {"core", "io", "sim"}},
     {"robot", {"core", "io", "robot"}},
+    // The simulator implements the robot interfaces (sim::SimRgbdSource, sim::SimArm).
+    {"sim", {"core", "io", "robot", "sim"}},
     {"mapping", {"core", "io", "mapping"}},
     {"segmentation", {"core", "io", "segmentation"}},
     {"planning", {"core", "io", "robot", "mapping", "planning"}},
-    {"pipeline", {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "pipeline"}},
-    {"eval",
-     {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "pipeline", "eval"}},
+    // The loop knows no simulator: a real robot runs it.
+    {"pipeline", {"core", "io", "robot", "segmentation", "mapping", "planning", "pipeline"}},
+    {"eval", {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "eval"}},
+    {"report", {"core", "io", "mapping", "pipeline", "eval", "report"}},
+    {"experiment",
+     {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "pipeline", "eval",
+      "report", "experiment"}},
     // Zero-shot segmentation backends (ONNX Runtime) and the segmentation service (gRPC): both
     // implement segmentation's Segmenter and are registered with it by apps/.
     {"zsl", {"core", "io", "segmentation", "zsl"}},
@@ -98,6 +148,62 @@ TEST(ArchitectureTest, CoreModulesIncludeNoMiddlewareOrCommandLineHeaders) {
             << inc.file.string() << ":" << inc.line << " includes <" << inc.header
             << ">: only apps/ and interop/ may include " << prefix << "* headers";
       }
+    }
+  }
+}
+
+TEST(ArchitectureTest, ThePipelineLinksNoSimulator) {
+  const LinkGraph& graph = TheLinkGraph();
+  ASSERT_TRUE(graph.count("avp_pipeline")) << "no link graph at " << AVP_LINK_GRAPH_FILE;
+  EXPECT_THAT(ForbiddenLinks(graph, "avp_pipeline", {"avp_sim", "embree", "assimp"}),
+              ::testing::IsEmpty())
+      << "avp::pipeline runs on a real robot: it may not link the simulator";
+  // The check sees the simulator where it is: the simulator itself, and the experiment runner.
+  EXPECT_THAT(ForbiddenLinks(graph, "avp_sim", {"embree", "assimp"}), ::testing::SizeIs(2));
+  EXPECT_THAT(ForbiddenLinks(graph, "avp_experiment", {"avp_sim"}),
+              ::testing::ElementsAre("avp_sim"));
+}
+
+TEST(ArchitectureTest, ForbiddenLinksFindsASimulatorInTheClosure) {
+  // What the test above would see if pipeline linked sim (CMake writes the closure).
+  std::istringstream text(
+      "avp_pipeline: Eigen3::Eigen avp_core avp_robot avp_sim assimp::assimp embree\n"
+      "avp_robot: avp_core\n");
+  const fs::path file = fs::temp_directory_path() / "avp_link_graph_test.txt";
+  std::ofstream(file) << text.str();
+  const LinkGraph graph = ReadLinkGraph(file);
+  fs::remove(file);
+  EXPECT_THAT(ForbiddenLinks(graph, "avp_pipeline", {"avp_sim", "embree", "assimp"}),
+              ::testing::ElementsAre("assimp::assimp", "avp_sim", "embree"));
+  EXPECT_THAT(ForbiddenLinks(graph, "avp_robot", {"avp_sim"}), ::testing::IsEmpty());
+}
+
+/// The modules `module` may reach through its dependencies (kAllowed, transitively).
+std::set<std::string> TransitivelyAllowed(const std::string& module) {
+  std::set<std::string> reached;
+  std::vector<std::string> work = {module};
+  while (!work.empty()) {
+    const std::string m = work.back();
+    work.pop_back();
+    if (!reached.insert(m).second) continue;
+    const auto it = kAllowed.find(m);
+    if (it != kAllowed.end()) work.insert(work.end(), it->second.begin(), it->second.end());
+  }
+  return reached;
+}
+
+TEST(ArchitectureTest, ModulesLinkOnlyModulesBelowThem) {
+  const LinkGraph& graph = TheLinkGraph();
+  for (const auto& [module, direct] : kAllowed) {
+    const std::set<std::string> allowed = TransitivelyAllowed(module);
+    const auto it = graph.find("avp_" + module);
+    ASSERT_NE(it, graph.end()) << "avp_" << module << " is not in the link graph";
+    for (const std::string& item : it->second) {
+      if (item.rfind("avp_", 0) != 0) continue;
+      const std::string target = item.substr(4);
+      if (kAllowed.count(target) == 0) continue;  // helpers: avp_opencv, avp_interop_proto
+      EXPECT_TRUE(allowed.count(target) > 0) << "avp_" << module << " links " << item << ", but "
+                                             << module << " may not depend on " << target;
     }
   }
 }

@@ -3,25 +3,32 @@
 // planner runs through the same code.
 #include <gtest/gtest.h>
 
-#include <avp/eval/experiment.h>
+#include <avp/experiment/episode_runner.h>
 #include <avp/sim/scenario.h>
 
 namespace avp {
 namespace {
 
-eval::RunConfig Config(const std::string& planner) {
-  eval::RunConfig c;
+using experiment::RunConfig;
+
+const experiment::Registries& Registries() {
+  static const auto* registries = new experiment::Registries(experiment::BuiltinRegistries());
+  return *registries;
+}
+
+RunConfig Config(const std::string& planner) {
+  RunConfig c;
   c.scenario = "tomato-multiple-clusters";
   c.seed = 4;
-  c.planner = planner;
-  c.segmenter = "oracle";
-  c.views = 4;
+  c.planner.name = planner;
+  c.segmenter.name = "oracle";
+  c.episode.views = 4;
   c.threads = 2;
   return c;
 }
 
 /// The same episode: the same metrics and the same eye at every step.
-void ExpectSameEpisode(const eval::RunResult& a, const eval::RunResult& b) {
+void ExpectSameEpisode(const experiment::RunResult& a, const experiment::RunResult& b) {
   ASSERT_EQ(a.episode.steps.size(), b.episode.steps.size());
   for (size_t i = 0; i < a.episode.steps.size(); ++i) {
     EXPECT_EQ(a.episode.steps[i].metrics, b.episode.steps[i].metrics) << i;
@@ -30,13 +37,13 @@ void ExpectSameEpisode(const eval::RunResult& a, const eval::RunResult& b) {
 }
 
 TEST(EpisodeEndToEndTest, AvpNbvRaisesF1AboveTheFloor) {
-  const eval::RunConfig c = Config("avp-nbv");
+  const RunConfig c = Config("avp-nbv");
   auto scene = sim::MakeScenario(c.scenario, c.seed);
   ASSERT_TRUE(scene.ok());
-  auto gt = eval::GroundTruthFor(c, *scene);
+  auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok()) << gt.status().ToString();
   ASSERT_GT(gt->voxels.size(), 500u);
-  auto r = eval::RunEpisodeOnScene(c, *scene, *gt);
+  auto r = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   ASSERT_EQ(r->episode.views_fused(), 4) << r->episode.end_reason;
   const double f1_first = r->episode.steps.front().Metric("f1");
@@ -48,18 +55,18 @@ TEST(EpisodeEndToEndTest, AvpNbvRaisesF1AboveTheFloor) {
   EXPECT_GT(r->final_metrics.fruits.found, 0u);
   EXPECT_EQ(r->final_metrics.exact.f1, f1_last);
 
-  auto again = eval::RunEpisodeOnScene(c, *scene, *gt);
+  auto again = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(again.ok());
   ExpectSameEpisode(*again, *r);
 }
 
 TEST(EpisodeEndToEndTest, PredefinedRunsTheSameLoop) {
-  const eval::RunConfig c = Config("predefined");
+  const RunConfig c = Config("predefined");
   auto scene = sim::MakeScenario(c.scenario, c.seed);
   ASSERT_TRUE(scene.ok());
-  auto gt = eval::GroundTruthFor(c, *scene);
+  auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok());
-  auto r = eval::RunEpisodeOnScene(c, *scene, *gt);
+  auto r = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(r->episode.views_fused(), 4) << r->episode.end_reason;
   EXPECT_GE(r->episode.steps.back().Metric("f1"), r->episode.steps.front().Metric("f1"));
@@ -67,39 +74,41 @@ TEST(EpisodeEndToEndTest, PredefinedRunsTheSameLoop) {
 
 TEST(EpisodeEndToEndTest, OracleDetectKnowsTheTruthAndIsDeterministic) {
   // The diagnostic bound on fruits found: built only with the scene and its ground truth.
-  EXPECT_TRUE(eval::IsKnownPlanner("oracle-detect"));
-  eval::RunConfig c = Config("oracle-detect");
-  c.views = 3;
-  const auto made = eval::MakePlanner(c);
+  const planning::PlannerEntry* entry = Registries().planners.Find("oracle-detect");
+  ASSERT_NE(entry, nullptr);
+  EXPECT_TRUE(entry->needs_ground_truth);
+  RunConfig c = Config("oracle-detect");
+  c.episode.views = 3;
+  const auto made = Registries().planners.Make("oracle-detect", entry->options, {});
   ASSERT_FALSE(made.ok());
   EXPECT_NE(made.status().message().find("planner 'oracle-detect' needs the true scene"),
             std::string::npos);
   auto scene = sim::MakeScenario(c.scenario, c.seed);
   ASSERT_TRUE(scene.ok());
-  auto gt = eval::GroundTruthFor(c, *scene);
+  auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok());
-  auto r = eval::RunEpisodeOnScene(c, *scene, *gt);
+  auto r = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   ASSERT_EQ(r->episode.views_fused(), 3) << r->episode.end_reason;
   EXPECT_GT(r->final_metrics.fruits.found,
             static_cast<size_t>(r->episode.steps.front().Metric("fruits_found")));
-  auto again = eval::RunEpisodeOnScene(c, *scene, *gt);
+  auto again = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(again.ok());
   ExpectSameEpisode(*again, *r);
 }
 
 TEST(EpisodeEndToEndTest, OracleRegretMeasuresEachPlanWithoutChangingTheEpisode) {
-  eval::RunConfig c = Config("avp-nbv");
-  c.views = 3;
+  RunConfig c = Config("avp-nbv");
+  c.episode.views = 3;
   auto scene = sim::MakeScenario(c.scenario, c.seed);
   ASSERT_TRUE(scene.ok());
-  auto gt = eval::GroundTruthFor(c, *scene);
+  auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok());
-  auto plain = eval::RunEpisodeOnScene(c, *scene, *gt);
+  auto plain = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(plain.ok()) << plain.status().ToString();
   EXPECT_TRUE(plain->regret.empty());
   c.oracle_regret = true;
-  auto probed = eval::RunEpisodeOnScene(c, *scene, *gt);
+  auto probed = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(probed.ok()) << probed.status().ToString();
   ExpectSameEpisode(*probed, *plain);
   size_t plans = 0;
@@ -121,14 +130,16 @@ TEST(EpisodeEndToEndTest, OracleRegretMeasuresEachPlanWithoutChangingTheEpisode)
 }
 
 TEST(EpisodeEndToEndTest, BadConfigurationsAreErrors) {
-  eval::RunConfig c = Config("no-such-planner");
-  EXPECT_NE(c.Validate().message().find("unknown planner 'no-such-planner'"), std::string::npos);
+  RunConfig c = Config("no-such-planner");
+  EXPECT_NE(c.Validate(Registries()).message().find("unknown planner 'no-such-planner'"),
+            std::string::npos);
   c = Config("avp-nbv");
-  c.segmenter = "magic";
-  EXPECT_NE(c.Validate().message().find("unknown segmenter 'magic'"), std::string::npos);
+  c.segmenter.name = "magic";
+  EXPECT_NE(c.Validate(Registries()).message().find("unknown segmenter 'magic'"),
+            std::string::npos);
   c = Config("avp-nbv");
-  c.views = 0;
-  EXPECT_NE(c.Validate().message().find("views (0)"), std::string::npos);
+  c.episode.views = 0;
+  EXPECT_NE(c.Validate(Registries()).message().find("episode.views (0)"), std::string::npos);
 }
 
 }  // namespace

@@ -22,12 +22,16 @@ using ::testing::Not;
 
 class MapCommandTest : public test::TempDirTest {
  protected:
+  const sim::ScenarioRegistry scenarios_ = sim::BuiltinScenarios();
   MapBuildOptions SmallBuild() const {
     MapBuildOptions o;
     o.scene.scenario = "tomato-single-cluster";
     o.scene.seed = 1;
     o.views = 3;
-    o.voxel_size_m = 0.008;
+    o.map.grid.voxel_size_m = 0.008;
+    // The reference system's fusion and ray-cast carving (the defaults are bayesian, projective).
+    o.map.semantics.policy = mapping::FusionPolicy::kReferenceMax;
+    o.integrator.carving = mapping::FreeSpaceCarving::kRayCast;
     o.out = dir_ / "maps" / "plant.avpmap";
     return o;
   }
@@ -37,7 +41,7 @@ TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
   MapBuildOptions build = SmallBuild();
   std::vector<MapBuildView> progress;
   build.on_view = [&](const MapBuildView& v) { progress.push_back(v); };
-  const Result<MapBuildSummary> built = RunMapBuild(build);
+  const Result<MapBuildSummary> built = RunMapBuild(build, scenarios_);
   ASSERT_TRUE(built.ok()) << built.status().ToString();
   ASSERT_EQ(progress.size(), 3u);
   for (size_t i = 0; i < progress.size(); ++i) {
@@ -101,7 +105,7 @@ TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
   gt.scene = build.scene;
   gt.voxel_size_m = 0.006;
   gt.out = dir_ / "gt6.bt";
-  const Result<MapGtSummary> gt_summary = RunMapGt(gt);
+  const Result<MapGtSummary> gt_summary = RunMapGt(gt, scenarios_);
   ASSERT_TRUE(gt_summary.ok()) << gt_summary.status().ToString();
   EXPECT_GT(gt_summary->voxels, 100u);
 
@@ -137,7 +141,7 @@ TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
 
   gt.voxel_size_m = 0.008;
   gt.out = dir_ / "gt8.bt";
-  ASSERT_TRUE(RunMapGt(gt).ok());
+  ASSERT_TRUE(RunMapGt(gt, scenarios_).ok());
   cmp.gt = gt.out;
   cmp.tolerance_voxels = 0;
   cmp.json_out.clear();
@@ -151,9 +155,9 @@ TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
 TEST_F(MapCommandTest, BayesianProjectiveSingleViewIsRecorded) {
   MapBuildOptions build = SmallBuild();
   build.views = 1;
-  build.policy = mapping::FusionPolicy::kBayesian;
-  build.carving = mapping::FreeSpaceCarving::kProjective;
-  ASSERT_TRUE(RunMapBuild(build).ok());
+  build.map.semantics.policy = mapping::FusionPolicy::kBayesian;
+  build.integrator.carving = mapping::FreeSpaceCarving::kProjective;
+  ASSERT_TRUE(RunMapBuild(build, scenarios_).ok());
   const Result<MapInfo> info = RunMapInfo(build.out);
   ASSERT_TRUE(info.ok()) << info.status().ToString();
   EXPECT_EQ(info->options.semantics.policy, mapping::FusionPolicy::kBayesian);
@@ -164,19 +168,19 @@ TEST_F(MapCommandTest, BayesianProjectiveSingleViewIsRecorded) {
 TEST_F(MapCommandTest, BadInputsNameTheBadValue) {
   MapBuildOptions build = SmallBuild();
   build.views = 0;
-  auto r = RunMapBuild(build);
+  auto r = RunMapBuild(build, scenarios_);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("views (0)"));
 
   build = SmallBuild();
   build.scene.scenario = "tomato-upside-down";
-  r = RunMapBuild(build);
+  r = RunMapBuild(build, scenarios_);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("tomato-upside-down"));
 
   build = SmallBuild();
-  build.voxel_size_m = 0.5;
-  r = RunMapBuild(build);
+  build.map.grid.voxel_size_m = 0.5;
+  r = RunMapBuild(build, scenarios_);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("0.5"));
 

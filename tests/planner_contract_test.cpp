@@ -1,4 +1,5 @@
-// Contract suite for every ViewPlanner avp ships (eval::PlannerNames()): on the map a real
+// Contract suite for every registered ViewPlanner (experiment::BuiltinRegistries(), the diagnostic
+// planners with the scene's ground truth as their truth): on the map a real
 // episode has after its start view, each planner is deterministic by seed, returns only reachable
 // candidates whose joints put the camera where the candidate says, never re-chooses a fused view,
 // and answers a bad request with a status, not an exception.
@@ -8,7 +9,9 @@
 #include <gtest/gtest.h>
 
 #include <avp/core/segmentation.h>
-#include <avp/eval/experiment.h>
+#include <avp/eval/oracle_planner.h>
+#include <avp/experiment/episode_runner.h>
+#include <avp/experiment/registries.h>
 #include <avp/mapping/integrator.h>
 #include <avp/robot/arm_model.h>
 #include <avp/sim/rgbd_renderer.h>
@@ -24,6 +27,11 @@ struct World {
   Eigen::VectorXd q0;
   RigidTransform X0;
 };
+
+const experiment::Registries& Registries() {
+  static const auto* registries = new experiment::Registries(experiment::BuiltinRegistries());
+  return *registries;
+}
 
 const World& TheWorld() {
   static const World* world = [] {
@@ -62,13 +70,30 @@ planning::PlanningRequest Request(const World& w) {
 
 class PlannerContractTest : public ::testing::TestWithParam<std::string> {
  protected:
+  /// The planner with its registered defaults; a diagnostic one gets the world's truth.
   std::unique_ptr<planning::ViewPlanner> Make() const {
-    eval::RunConfig c;
-    c.planner = GetParam();
-    c.threads = 2;
-    auto p = eval::MakePlanner(c);
+    const planning::PlannerEntry* entry = Registries().planners.Find(GetParam());
+    EXPECT_NE(entry, nullptr);
+    if (entry == nullptr) return nullptr;
+    planning::PlannerContext context{.threads = 2, .truth = nullptr};
+    if (entry->needs_ground_truth) context.truth = &TheTruth();
+    auto p = Registries().planners.Make(GetParam(), entry->options, context);
     EXPECT_TRUE(p.ok()) << p.status().ToString();
     return p.ok() ? std::move(*p) : nullptr;
+  }
+
+  /// The world's scene and its observable ground truth at the map's voxel size.
+  static const eval::PlannerTruth& TheTruth() {
+    static const eval::PlannerTruth* truth = [] {
+      const World& w = TheWorld();
+      experiment::RunConfig c;
+      c.scenario = "tomato-multiple-clusters";
+      c.seed = 1;
+      c.threads = 2;
+      auto* gt = new eval::GroundTruth(experiment::GroundTruthFor(c, *w.scene).value());
+      return new eval::PlannerTruth(*w.scene, *gt, segmentation::OracleOptions{});
+    }();
+    return *truth;
   }
 };
 
@@ -118,7 +143,7 @@ TEST_P(PlannerContractTest, BadRequestIsAStatus) {
 }
 
 INSTANTIATE_TEST_SUITE_P(AllPlanners, PlannerContractTest,
-                         ::testing::ValuesIn(eval::PlannerNames()),
+                         ::testing::ValuesIn(Registries().planners.Names()),
                          [](const ::testing::TestParamInfo<std::string>& param) {
                            std::string n = param.param;
                            for (char& c : n) {

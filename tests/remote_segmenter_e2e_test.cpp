@@ -7,7 +7,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
-#include <avp/eval/experiment.h>
+#include <avp/experiment/episode_runner.h>
 #include <avp/interop/remote_segmenter.h>
 #include <avp/interop/segmentation_server.h>
 #include <avp/sim/scenario.h>
@@ -15,33 +15,43 @@
 namespace avp {
 namespace {
 
+/// The built-ins and the remote:// client (never freed: servers outlive it).
+const experiment::Registries& Registries() {
+  static const auto* registries = [] {
+    auto* r = new experiment::Registries(experiment::BuiltinRegistries());
+    interop::RegisterRemoteSegmenter(r->segmenters);
+    return r;
+  }();
+  return *registries;
+}
+
 TEST(RemoteSegmenterEndToEndTest, RemoteEpisodeEqualsInProcessEpisode) {
-  interop::RegisterRemoteSegmenter();
   interop::ServerOptions so;
+  so.segmenters = &Registries().segmenters;
   so.port = 0;
   so.backends = {"oracle"};
   so.threads = 2;
   auto server = interop::SegmentationServer::Start(so);
   ASSERT_TRUE(server.ok()) << server.status().ToString();
 
-  eval::RunConfig local;
+  experiment::RunConfig local;
   local.scenario = std::string(sim::DefaultScenarioName());
   local.seed = 7;
-  local.planner = "avp-nbv";
-  local.segmenter = "oracle";
-  local.views = 3;
+  local.planner.name = "avp-nbv";
+  local.segmenter.name = "oracle";
+  local.episode.views = 3;
   local.threads = 2;
-  eval::RunConfig remote = local;
-  remote.segmenter = fmt::format("remote://127.0.0.1:{}", (*server)->port());
-  ASSERT_TRUE(remote.Validate().ok()) << remote.Validate().ToString();
+  experiment::RunConfig remote = local;
+  remote.segmenter.name = fmt::format("remote://127.0.0.1:{}", (*server)->port());
+  ASSERT_TRUE(remote.Validate(Registries()).ok()) << remote.Validate(Registries()).ToString();
 
   auto scene = sim::MakeScenario(local.scenario, local.seed);
   ASSERT_TRUE(scene.ok()) << scene.status().ToString();
-  auto gt = eval::GroundTruthFor(local, *scene);
+  auto gt = experiment::GroundTruthFor(local, *scene);
   ASSERT_TRUE(gt.ok()) << gt.status().ToString();
-  auto a = eval::RunEpisodeOnScene(local, *scene, *gt);
+  auto a = experiment::RunEpisodeOnScene(local, Registries(), *scene, *gt);
   ASSERT_TRUE(a.ok()) << a.status().ToString();
-  auto b = eval::RunEpisodeOnScene(remote, *scene, *gt);
+  auto b = experiment::RunEpisodeOnScene(remote, Registries(), *scene, *gt);
   ASSERT_TRUE(b.ok()) << b.status().ToString();
 
   ASSERT_EQ(a->episode.steps.size(), 3u);
@@ -63,27 +73,28 @@ TEST(RemoteSegmenterEndToEndTest, RemoteEpisodeEqualsInProcessEpisode) {
 }
 
 TEST(RemoteSegmenterEndToEndTest, ServerDownIsARecordedStepFailure) {
-  interop::RegisterRemoteSegmenter();
   int port = 0;
   {
     interop::ServerOptions so;
+    so.segmenters = &Registries().segmenters;
+    so.segmenters = &Registries().segmenters;
     so.port = 0;
     auto server = interop::SegmentationServer::Start(so);
     ASSERT_TRUE(server.ok());
     port = (*server)->port();
   }
-  eval::RunConfig c;
+  experiment::RunConfig c;
   c.scenario = std::string(sim::DefaultScenarioName());
   c.seed = 7;
-  c.planner = "predefined";
-  c.segmenter = fmt::format("remote://127.0.0.1:{}/oracle", port);
-  c.views = 2;
+  c.planner.name = "predefined";
+  c.segmenter.name = fmt::format("remote://127.0.0.1:{}/oracle", port);
+  c.episode.views = 2;
   c.threads = 2;
   auto scene = sim::MakeScenario(c.scenario, c.seed);
   ASSERT_TRUE(scene.ok());
-  auto gt = eval::GroundTruthFor(c, *scene);
+  auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok());
-  auto r = eval::RunEpisodeOnScene(c, *scene, *gt);
+  auto r = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   ASSERT_FALSE(r->episode.steps.empty());
   const Status& s = r->episode.steps.front().segment_status;

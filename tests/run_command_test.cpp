@@ -1,5 +1,6 @@
-// `avp run` and `avp bench` as library calls: the run folder's files and their content, the
-// bench's long-format summary CSV, Markdown and plots, the experiment YAML, and bad input.
+// `avp run` and `avp bench` as library calls (experiment::RunToFolder, RunBench): the run folder's
+// files and their content, the bench's long-format summary CSV, Markdown and plots, the experiment
+// YAML, and bad input.
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -9,11 +10,12 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <avp/apps/run_command.h>
+#include <avp/experiment/bench.h>
+#include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
 #include <avp/test/temp_dir_test.h>
 
-namespace avp::apps {
+namespace avp::experiment {
 namespace {
 
 namespace fs = std::filesystem;
@@ -33,18 +35,22 @@ std::vector<std::string> Lines(const fs::path& p) {
   return out;
 }
 
-class RunCommandTest : public test::TempDirTest {};
+class RunCommandTest : public test::TempDirTest {
+ protected:
+  const Registries registries_ = BuiltinRegistries();
+};
 
 TEST_F(RunCommandTest, RunWritesTheRunFolder) {
-  RunOptions o;
-  o.config.scenario = "tomato-single-cluster";
-  o.config.seed = 2;
-  o.config.views = 3;
-  o.config.threads = 2;
+  RunConfig c;
+  c.scenario = "tomato-single-cluster";
+  c.seed = 2;
+  c.episode.views = 3;
+  c.threads = 2;
+  RunFolderOptions o;
   o.out_dir = dir_ / "run";
   int steps = 0;
   o.on_step = [&](const pipeline::StepRecord&) { ++steps; };
-  auto r = RunRun(o);
+  auto r = RunToFolder(c, registries_, o);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(steps, 3);
   for (const char* f :
@@ -61,7 +67,10 @@ TEST_F(RunCommandTest, RunWritesTheRunFolder) {
   auto record = io::ReadJsonFile(o.out_dir / "record.json");
   ASSERT_TRUE(record.ok());
   EXPECT_EQ((*record)["config"]["seed"], 2);
-  EXPECT_EQ((*record)["config"]["planner"], "avp-nbv");
+  EXPECT_EQ((*record)["config"]["planner"]["name"], "avp-nbv");
+  EXPECT_EQ((*record)["config"]["planner"]["options"]["p_unknown"], 0.05);
+  EXPECT_EQ((*record)["config"]["map"]["grid"]["voxel_size_m"], 0.005);
+  EXPECT_EQ((*record)["config"]["episode"]["integrator"]["carving"], "projective");
   EXPECT_EQ((*record)["config"]["scenario"], "tomato-single-cluster");
   EXPECT_EQ((*record)["views_fused"], 3);
   EXPECT_EQ((*record)["steps"].size(), 3u);
@@ -88,42 +97,40 @@ TEST_F(RunCommandTest, RunWritesTheRunFolder) {
 }
 
 TEST_F(RunCommandTest, RunRejectsBadInput) {
-  RunOptions o;
-  o.config.scenario = "tomato-nowhere";
-  o.config.views = 2;
+  RunConfig c;
+  c.scenario = "tomato-nowhere";
+  c.episode.views = 2;
+  RunFolderOptions o;
   o.out_dir = dir_ / "bad";
-  auto r = RunRun(o);
+  auto r = RunToFolder(c, registries_, o);
   ASSERT_FALSE(r.ok());
-  EXPECT_THAT(r.status().message(), HasSubstr("tomato-nowhere"));
-  o.config.scenario = "tomato-single-cluster";
-  o.config.planner = "best";
-  r = RunRun(o);
+  EXPECT_THAT(r.status().message(), HasSubstr("unknown scenario 'tomato-nowhere' (known: "));
+  c.scenario = "tomato-single-cluster";
+  c.planner.name = "best";
+  r = RunToFolder(c, registries_, o);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("unknown planner 'best'"));
 }
 
 TEST_F(RunCommandTest, PlannerOptionsReachThePlannerAndTheRecord) {
-  std::map<std::string, std::string> parsed;
-  ASSERT_TRUE(ParsePlannerOptions(
-                  {"p_unknown=0.1", "candidates.max_candidates=40", "p_unknown=0.2"}, parsed)
-                  .ok());
-  EXPECT_EQ(parsed, (std::map<std::string, std::string>{{"candidates.max_candidates", "40"},
-                                                        {"p_unknown", "0.2"}}));
-  std::map<std::string, std::string> ignored;
-  EXPECT_THAT(ParsePlannerOptions({"p_unknown"}, ignored).message(),
+  const Result<OptionValues> parsed = ParseKeyValues(
+      {"p_unknown=0.1", "candidates.max_candidates=40", "p_unknown=0.2"}, "planner option");
+  ASSERT_TRUE(parsed.ok());
+  EXPECT_THAT(ParseKeyValues({"p_unknown"}, "planner option").status().message(),
               HasSubstr("'p_unknown' must be KEY=VALUE"));
-  EXPECT_THAT(ParsePlannerOptions({"=0.1"}, ignored).message(), HasSubstr("'=0.1'"));
 
-  RunOptions o;
-  o.config.scenario = "tomato-single-cluster";
-  o.config.views = 2;
-  o.config.planner_options = parsed;
+  RunConfig c;
+  c.scenario = "tomato-single-cluster";
+  c.episode.views = 2;
+  c.planner.options = *parsed;  // later ones win
+  RunFolderOptions o;
   o.out_dir = dir_ / "opts";
-  auto r = RunRun(o);
+  auto r = RunToFolder(c, registries_, o);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   auto record = io::ReadJsonFile(o.out_dir / "record.json");
   ASSERT_TRUE(record.ok());
-  EXPECT_EQ((*record)["config"]["planner_options"]["p_unknown"], "0.2");
+  EXPECT_EQ((*record)["config"]["planner"]["options"]["p_unknown"], 0.2);
+  EXPECT_EQ((*record)["config"]["planner"]["options"]["candidates"]["max_candidates"], 40);
   // The planner generated at most the 40 candidates asked for (720 by default).
   const std::vector<std::string> lines = Lines(o.out_dir / "metrics.csv");
   ASSERT_GE(lines.size(), 2u);
@@ -137,40 +144,47 @@ TEST_F(RunCommandTest, PlannerOptionsReachThePlannerAndTheRecord) {
   EXPECT_GT(std::stoi(row[static_cast<size_t>(col)]), 0);
   EXPECT_LE(std::stoi(row[static_cast<size_t>(col)]), 40);
 
-  o.config.planner_options = {{"p_unknown", "1.5"}};
-  r = RunRun(o);
+  c.planner.options = {{"p_unknown", "1.5"}};
+  r = RunToFolder(c, registries_, o);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("p_unknown (1.5) must be in [0, 1)"));
-  o.config.planner_options = {{"w_motoin", "0.1"}};
-  EXPECT_THAT(RunRun(o).status().message(), HasSubstr("unknown avp-nbv option 'w_motoin'"));
-  o.config.planner_options = {{"p_unknown", "0.1"}};
-  o.config.planner = "predefined";
-  EXPECT_THAT(RunRun(o).status().message(), HasSubstr("apply to avp-nbv only, not 'predefined'"));
+  c.planner.options = {{"w_motoin", "0.1"}};
+  EXPECT_THAT(RunToFolder(c, registries_, o).status().message(),
+              HasSubstr("unknown avp-nbv option 'w_motoin'"));
+  c.planner.options = {{"p_unknown", "0.1"}};
+  c.planner.name = "predefined";
+  EXPECT_THAT(RunToFolder(c, registries_, o).status().message(),
+              HasSubstr("unknown predefined planner option 'p_unknown' (known: generic_"));
 
-  // In an experiment file, under avp_nbv_options; only with avp-nbv among the planners.
+  // In an experiment file, under planner_options; only for planners of the bench.
   const fs::path yaml = dir_ / "opts.yaml";
   std::ofstream(yaml) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv, predefined]\n"
-                         "seeds: [0]\navp_nbv_options: {p_unknown: 0.1, refine_top: 16}\n";
+                         "seeds: [0]\nplanner_options: {avp-nbv: {p_unknown: 0.1, refine_top: 16, "
+                         "candidates: {radii_m: [0.3, 0.5]}}}\n";
   auto bench = LoadBenchConfig(yaml);
   ASSERT_TRUE(bench.ok()) << bench.status().ToString();
-  EXPECT_EQ(bench->base.planner_options.at("refine_top"), "16");
-  EXPECT_TRUE(bench->Validate().ok()) << bench->Validate().ToString();
+  EXPECT_EQ(bench->planner_options.at("avp-nbv"),
+            (OptionValues{
+                {"p_unknown", "0.1"}, {"refine_top", "16"}, {"candidates.radii_m", "0.3,0.5"}}));
+  EXPECT_TRUE(bench->Validate(registries_).ok()) << bench->Validate(registries_).ToString();
   bench->planners = {"predefined"};
-  EXPECT_THAT(bench->Validate().message(), HasSubstr("avp-nbv is not among the planners"));
+  EXPECT_THAT(
+      bench->Validate(registries_).message(),
+      HasSubstr("options are given for planner 'avp-nbv', which is not among the planners"));
   bench->planners = {"avp-nbv"};
-  bench->base.planner_options["refine_top"] = "0";
-  EXPECT_THAT(bench->Validate().message(), HasSubstr("refine_top (0) must be >= 1"));
+  bench->planner_options["avp-nbv"].emplace_back("refine_top", "0");
+  EXPECT_THAT(bench->Validate(registries_).message(), HasSubstr("refine_top (0) must be >= 1"));
 }
 
 TEST_F(RunCommandTest, BenchWritesLongFormatSummaryAndPlots) {
-  BenchOptions o;
+  BenchConfig o;
   o.scenarios = {"tomato-single-cluster"};
   o.planners = {"avp-nbv", "predefined"};
   o.seeds = {0, 1};
-  o.base.views = 2;
+  o.base.episode.views = 2;
   o.out_dir = dir_ / "bench";
   o.progress = false;
-  auto r = RunBench(o);
+  auto r = RunBench(o, registries_);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(r->episodes, 4u);
   EXPECT_EQ(r->failed, 0u);
@@ -204,14 +218,16 @@ TEST_F(RunCommandTest, BenchConfigFileAndErrors) {
   ASSERT_TRUE(paper.ok()) << paper.status().ToString();
   EXPECT_EQ(paper->scenarios.size(), 5u);
   EXPECT_EQ(paper->seeds.size(), 10u);
-  EXPECT_EQ(paper->base.views, 8);
-  EXPECT_TRUE(paper->Validate().ok()) << paper->Validate().ToString();
+  EXPECT_EQ(paper->base.episode.views, 8);
+  EXPECT_EQ(paper->base.segmenter.name, "oracle");
+  EXPECT_EQ(paper->base.map.semantics.policy, mapping::FusionPolicy::kBayesian);
+  EXPECT_TRUE(paper->Validate(registries_).ok()) << paper->Validate(registries_).ToString();
   auto bounds =
       LoadBenchConfig(fs::path(AVP_CONFIG_DIR) / "experiments" / "full-occlusion-bounds.yaml");
   ASSERT_TRUE(bounds.ok()) << bounds.status().ToString();
   EXPECT_EQ(bounds->planners, (std::vector<std::string>{"avp-nbv", "oracle-nbv", "oracle-detect"}));
   EXPECT_EQ(bounds->seeds.size(), 10u);
-  EXPECT_TRUE(bounds->Validate().ok()) << bounds->Validate().ToString();
+  EXPECT_TRUE(bounds->Validate(registries_).ok()) << bounds->Validate(registries_).ToString();
 
   const fs::path bad = dir_ / "bad.yaml";
   std::ofstream(bad) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv]\nseeds: [0]\n"
@@ -219,14 +235,19 @@ TEST_F(RunCommandTest, BenchConfigFileAndErrors) {
   auto r = LoadBenchConfig(bad);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("colour"));
+  std::ofstream(bad) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv]\nseeds: [0]\n"
+                        "run: {episode: {viewz: 3}}\n";
+  r = LoadBenchConfig(bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("unknown run configuration key 'episode.viewz'"));
 
-  BenchOptions o;
+  BenchConfig o;
   o.scenarios = {"tomato-nowhere"};
   o.planners = {"avp-nbv"};
   o.seeds = {0, 0};
-  EXPECT_THAT(o.Validate().message(), HasSubstr("unknown scenario 'tomato-nowhere'"));
-  EXPECT_THAT(o.Validate().message(), HasSubstr("seeds repeat"));
+  EXPECT_THAT(o.Validate(registries_).message(), HasSubstr("unknown scenario 'tomato-nowhere'"));
+  EXPECT_THAT(o.Validate(registries_).message(), HasSubstr("seeds repeat"));
 }
 
 }  // namespace
-}  // namespace avp::apps
+}  // namespace avp::experiment

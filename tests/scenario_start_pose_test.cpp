@@ -11,7 +11,8 @@ namespace {
 TEST(ScenarioStartPoseTest, StartJointsReachTheNominalStartCameraPose) {
   const Result<robot::ArmModel> arm = robot::LoadDefaultArm();
   ASSERT_TRUE(arm.ok()) << arm.status().ToString();
-  for (const sim::ScenarioInfo& info : sim::ListScenarios()) {
+  const sim::ScenarioRegistry scenarios = sim::BuiltinScenarios();
+  for (const sim::ScenarioEntry& info : scenarios.entries()) {
     for (uint64_t seed : {0u, 1u}) {
       const sim::Scene scene = sim::MakeScenario(info.name, seed).value();
       ASSERT_EQ(static_cast<int>(scene.start_joints_rad.size()), arm->num_joints()) << info.name;

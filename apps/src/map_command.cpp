@@ -1,12 +1,15 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <numbers>
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
+#include <spdlog/spdlog.h>
 
 #include <avp/apps/map_command.h>
+#include <avp/core/options.h>
 #include <avp/core/rng.h>
 #include <avp/core/segmentation.h>
 #include <avp/io/json.h>
@@ -15,6 +18,8 @@
 #include <avp/sim/ground_truth.h>
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/sensor_noise.h>
+
+#include "cli_common.h"
 
 namespace avp::apps {
 
@@ -103,24 +108,22 @@ std::vector<RigidTransform> ArcViewPoses(const Eigen::Vector3d& target_W,
   return poses;
 }
 
-Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options) {
+Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options,
+                                    const sim::ScenarioRegistry& scenarios) {
   const auto t_start = Clock::now();
   AVP_RETURN_IF_ERROR(ValidateBuildOptions(options));
   AVP_RETURN_IF_ERROR(options.intrinsics.Validate());
-  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(options.scene));
+  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
   if (scene.plant_bounds.IsEmpty()) {
     return InvalidArgumentError(fmt::format("scene '{}' has no plant to map", scene.name));
   }
 
-  mapping::MapOptions map_options;
-  map_options.grid.voxel_size_m = options.voxel_size_m;
+  mapping::MapOptions map_options = options.map;
   if (options.roi_margin_m >= 0.0) {
     map_options.grid.roi = scene.plant_bounds.Inflated(options.roi_margin_m);
   }
-  map_options.semantics.policy = options.policy;
   AVP_RETURN_IF_ERROR(map_options.Validate());
-  mapping::IntegratorOptions integrator_options;
-  integrator_options.carving = options.carving;
+  mapping::IntegratorOptions integrator_options = options.integrator;
   integrator_options.num_threads = options.threads;
   AVP_RETURN_IF_ERROR(integrator_options.Validate());
 
@@ -189,9 +192,10 @@ Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options) {
   save.note = fmt::format(
       "avp map build --scenario {} --seed {} --views {} --voxel-size {} --policy {} --carving {} "
       "--arc-deg {} --radius {:.3f}{}",
-      scene.name, options.scene.seed, options.views, options.voxel_size_m,
-      mapping::ToString(options.policy), mapping::ToString(options.carving), options.arc_deg,
-      summary.radius_m, options.noise ? " --noise" : "");
+      scene.name, options.scene.seed, options.views, options.map.grid.voxel_size_m,
+      mapping::ToString(options.map.semantics.policy),
+      mapping::ToString(options.integrator.carving), options.arc_deg, summary.radius_m,
+      options.noise ? " --noise" : "");
   AVP_RETURN_IF_ERROR(mapping::SaveMap(map, options.out, save));
   std::error_code ec;
   summary.file_bytes = fs::file_size(options.out, ec);
@@ -202,8 +206,8 @@ Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options) {
 // ---- gt
 // ------------------------------------------------------------------------------------------
 
-Result<MapGtSummary> RunMapGt(const MapGtOptions& options) {
-  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(options.scene));
+Result<MapGtSummary> RunMapGt(const MapGtOptions& options, const sim::ScenarioRegistry& scenarios) {
+  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
   mapping::GridOptions grid_options;
   grid_options.voxel_size_m = options.voxel_size_m;
   AVP_RETURN_IF_ERROR(grid_options.Validate());
@@ -443,6 +447,247 @@ nlohmann::json ToJson(const MapCompareSummary& s) {
            "gt_found: GT voxels with a predicted voxel within it; fn = ground_truth - gt_found; "
            "precision = tp / predicted; recall = gt_found / ground_truth"},
           {"results", results}};
+}
+
+// ---- Reports printed by the commands -------------------------------------------------------
+
+namespace {
+
+int MapBuildAndReport(const MapBuildOptions& options, const sim::ScenarioRegistry& scenarios) {
+  MapBuildOptions o = options;
+  o.on_view = [](const MapBuildView& v) {
+    const Eigen::Vector3d eye = v.X_WC.translation();
+    std::printf(
+        "view %d/%d  azimuth %6.1f deg  eye (%.3f, %.3f, %.3f)  %zu endpoints, %zu fruit px in "
+        "%zu masks -> known %zu, occupied %zu, labelled %zu, instances %zu  (render %.0f ms, "
+        "integrate %.0f ms)\n",
+        v.index + 1, v.views, v.azimuth_deg, eye.x(), eye.y(), eye.z(), v.stats.endpoints,
+        v.fruit_pixels, v.masks, v.known_voxels, v.occupied_voxels, v.labelled_voxels, v.instances,
+        v.render_ms, v.integrate_ms);
+    std::fflush(stdout);
+  };
+  const auto result = RunMapBuild(o, scenarios);
+  if (!result.ok()) return Failed("map build", result.status());
+  const auto& s = *result;
+  std::printf(
+      "map of '%s': %zu known, %zu occupied, %zu labelled voxels; %zu fruit voxels in %zu "
+      "instances (%zu fruits in the scene); %.1f s\n",
+      s.scene_name.c_str(), s.known_voxels, s.occupied_voxels, s.labelled_voxels, s.fruit_voxels,
+      s.instances.size(), s.total_fruits, s.seconds);
+  std::printf("wrote %s (%llu bytes)\n", s.out.string().c_str(),
+              static_cast<unsigned long long>(s.file_bytes));
+  return 0;
+}
+
+int MapGtAndReport(const MapGtOptions& options, const sim::ScenarioRegistry& scenarios) {
+  const auto result = RunMapGt(options, scenarios);
+  if (!result.ok()) return Failed("map gt", result.status());
+  std::printf("wrote %s: %zu fruit surface voxels of %zu fruits of '%s' at %g mm (%llu bytes)\n",
+              options.out.string().c_str(), result->voxels, result->fruits,
+              result->scene_name.c_str(), options.voxel_size_m * 1000.0,
+              static_cast<unsigned long long>(result->file_bytes));
+  return 0;
+}
+
+int MapInfoAndReport(const std::string& path) {
+  const auto result = RunMapInfo(path);
+  if (!result.ok()) return Failed("map info", result.status());
+  std::fputs(FormatMapInfo(*result).c_str(), stdout);
+  return 0;
+}
+
+int MapExportAndReport(const MapExportOptions& options) {
+  const auto result = RunMapExport(options);
+  if (!result.ok()) return Failed("map export", result.status());
+  const auto& s = *result;
+  if (s.format == MapExportFormat::kPly) {
+    std::printf("wrote %s: %zu labelled voxels (%llu bytes)\n", s.out.string().c_str(),
+                s.labelled_voxels, static_cast<unsigned long long>(s.file_bytes));
+  } else {
+    std::printf("wrote %s: %zu occupied and %zu free voxels%s (%llu bytes)\n",
+                s.out.string().c_str(), s.occupied_voxels, s.free_voxels,
+                s.format == MapExportFormat::kOt
+                    ? fmt::format(", {} coloured by class", s.labelled_voxels).c_str()
+                    : "",
+                static_cast<unsigned long long>(s.file_bytes));
+  }
+  return 0;
+}
+
+int MapCompareAndReport(const MapCompareOptions& options) {
+  const auto result = RunMapCompare(options);
+  if (!result.ok()) return Failed("map compare", result.status());
+  std::fputs(FormatMapCompare(*result).c_str(), stdout);
+  if (!options.json_out.empty()) std::printf("wrote %s\n", options.json_out.string().c_str());
+  return 0;
+}
+
+// ---- The command line ---------------------------------------------------------------------------
+
+struct MapBuildCli {
+  MapBuildOptions options;
+  std::string out = MapBuildOptions{}.out.string();
+  std::string policy, carving;
+  double voxel_size_m = 0.0;
+  std::vector<std::string> map_options;
+  CLI::Option* voxel_opt = nullptr;
+};
+
+/// The map options of `avp map build`: the library's defaults, the shorthands given, then
+/// --map-option KEY=VALUE.
+Status ResolveBuildOptions(const MapBuildCli& cli, MapBuildOptions& o) {
+  if (cli.voxel_opt->count() > 0) o.map.grid.voxel_size_m = cli.voxel_size_m;
+  if (!cli.policy.empty()) {
+    AVP_RETURN_IF_ERROR(mapping::MapOptionTable().Set(o.map, "semantics.policy", cli.policy));
+  }
+  if (!cli.carving.empty()) {
+    AVP_RETURN_IF_ERROR(mapping::IntegratorOptionTable().Set(o.integrator, "carving", cli.carving));
+  }
+  AVP_ASSIGN_OR_RETURN(const OptionValues values, ParseKeyValues(cli.map_options, "map option"));
+  AVP_RETURN_IF_ERROR(mapping::MapOptionTable().SetAll(o.map, values));
+  o.out = cli.out;
+  return Status::Ok();
+}
+
+void AddMapBuild(CLI::App& map_cmd, CommandContext& context) {
+  auto cli = std::make_shared<MapBuildCli>();
+  MapBuildOptions& b = cli->options;
+  CLI::App* cmd = map_cmd.add_subcommand(
+      "build", "Render views on an arc around a simulated plant, fuse them and save the map");
+  cmd->add_option("--scenario", b.scene.scenario,
+                  "Built-in scenario name (see `avp scenes`); default: " +
+                      std::string(sim::DefaultScenarioName()));
+  cmd->add_option("--seed", b.scene.seed, "Seed of the procedural plant")->default_val(0);
+  cmd->add_option("--views", b.views, "Number of views")->default_val(b.views);
+  cli->voxel_opt = cmd->add_option("--voxel-size", cli->voxel_size_m,
+                                   "Voxel edge in metres (map option grid.voxel_size_m)")
+                       ->default_str(fmt::format("{}", b.map.grid.voxel_size_m));
+  cmd->add_option("--policy", cli->policy, "Semantic fusion (map option semantics.policy)")
+      ->check(CLI::IsMember({"reference-max", "bayesian"}))
+      ->default_str(std::string(mapping::ToString(b.map.semantics.policy)));
+  cmd->add_option("--carving", cli->carving, "Free-space carving")
+      ->check(CLI::IsMember({"raycast", "projective", "none"}))
+      ->default_str(std::string(mapping::ToString(b.integrator.carving)));
+  AddKeyValueOption(*cmd, "--map-option", cli->map_options,
+                    "Map option over the defaults (repeatable): grid.voxel_size_m, "
+                    "grid.sensor.hit, semantics.policy, ... (docs/mapping.md)");
+  cmd->add_option("--arc-deg", b.arc_deg,
+                  "Arc of view azimuths around the plant, centred on the start view "
+                  "(360 = full ring)")
+      ->default_val(b.arc_deg);
+  cmd->add_option("--radius", b.radius_m,
+                  "Horizontal camera distance from the plant centre, m (0 = the start camera's)")
+      ->default_val(b.radius_m);
+  cmd->add_option("--threads", b.threads, "Integrator threads (0 = all)")->default_val(b.threads);
+  cmd->add_flag("--noise", b.noise, "Apply the seeded D435-like depth noise model");
+  cmd->add_option("--out", cli->out, "Output map file (.avpmap)")->default_val(cli->out);
+  cmd->callback([cli, &context] {
+    RunGuarded(context, [&] {
+      MapBuildOptions o = cli->options;
+      if (const Status s = ResolveBuildOptions(*cli, o); !s.ok()) return Failed("map build", s);
+      return MapBuildAndReport(o, context.registries->scenarios);
+    });
+  });
+}
+
+void AddMapGt(CLI::App& map_cmd, CommandContext& context) {
+  auto gt = std::make_shared<MapGtOptions>();
+  auto out = std::make_shared<std::string>(gt->out.string());
+  CLI::App* cmd = map_cmd.add_subcommand(
+      "gt", "Write a scenario's fruit surface voxels as an OctoMap .bt ground truth");
+  cmd->add_option("--scenario", gt->scene.scenario, "Built-in scenario name");
+  cmd->add_option("--seed", gt->scene.seed, "Seed of the procedural plant")->default_val(0);
+  cmd->add_option("--voxel-size", gt->voxel_size_m, "Voxel edge in metres")
+      ->default_val(gt->voxel_size_m);
+  cmd->add_option("--out", *out, "Output .bt file")->default_val(*out);
+  cmd->callback([gt, out, &context] {
+    RunGuarded(context, [&] {
+      MapGtOptions o = *gt;
+      o.out = *out;
+      return MapGtAndReport(o, context.registries->scenarios);
+    });
+  });
+}
+
+void AddMapInfo(CLI::App& map_cmd, CommandContext& context) {
+  auto file = std::make_shared<std::string>();
+  CLI::App* cmd = map_cmd.add_subcommand("info", "Describe a map file");
+  cmd->add_option("file", *file, "Map file (.avpmap)")->required();
+  cmd->callback([file, &context] { RunGuarded(context, [&] { return MapInfoAndReport(*file); }); });
+}
+
+struct MapExportCli {
+  MapExportOptions options;
+  std::string map, out;
+};
+
+void AddMapExport(CLI::App& map_cmd, CommandContext& context) {
+  auto cli = std::make_shared<MapExportCli>();
+  CLI::App* cmd = map_cmd.add_subcommand(
+      "export", "Export a map to OctoMap (.bt occupancy, .ot coloured by class) or PLY");
+  cmd->add_option("file", cli->map, "Map file (.avpmap)")->required();
+  cmd->add_option("--format", cli->options.format, "bt, ot or ply (default: from --out)")
+      ->check(CLI::IsMember({"bt", "ot", "ply"}));
+  cmd->add_option("--out", cli->out, "Output file")->required();
+  cmd->add_flag("--ascii", cli->options.ply_ascii, "PLY: ASCII instead of binary little-endian");
+  cmd->add_flag("--all-labelled", cli->options.ply_all_labelled,
+                "PLY: every labelled voxel, not only occupied ones");
+  cmd->callback([cli, &context] {
+    RunGuarded(context, [&] {
+      MapExportOptions o = cli->options;
+      o.map = cli->map;
+      o.out = cli->out;
+      return MapExportAndReport(o);
+    });
+  });
+}
+
+struct MapCompareCli {
+  MapCompareOptions options;
+  std::string map, gt, json, semantic_class = "fruit";
+};
+
+void AddMapCompare(CLI::App& map_cmd, CommandContext& context) {
+  auto cli = std::make_shared<MapCompareCli>();
+  CLI::App* cmd = map_cmd.add_subcommand(
+      "compare", "Precision / recall / F1 of a map's labelled voxels against a ground-truth .bt");
+  cmd->add_option("file", cli->map, "Map file (.avpmap)")->required();
+  cmd->add_option("--gt", cli->gt, "Ground truth: OctoMap .bt (or .ot) of occupied voxels")
+      ->required();
+  cmd->add_option("--tolerance-voxels", cli->options.tolerance_voxels,
+                  "Also report matches within this many map voxels (0 = exact only)")
+      ->default_val(cli->options.tolerance_voxels);
+  cmd->add_option("--class", cli->semantic_class, "Class of the predicted voxels")
+      ->default_val(cli->semantic_class);
+  cmd->add_option("--json", cli->json, "Also write the result as JSON to this file");
+  cmd->callback([cli, &context] {
+    RunGuarded(context, [&] {
+      const auto cls = SemanticClassFromString(cli->semantic_class);
+      if (!cls) {
+        return Failed("map compare",
+                      InvalidArgumentError(fmt::format("unknown class '{}'", cli->semantic_class)));
+      }
+      MapCompareOptions o = cli->options;
+      o.map = cli->map;
+      o.gt = cli->gt;
+      o.json_out = cli->json;
+      o.semantic_class = *cls;
+      return MapCompareAndReport(o);
+    });
+  });
+}
+
+}  // namespace
+
+void AddMapCommand(CLI::App& app, CommandContext& context) {
+  CLI::App* cmd = app.add_subcommand(
+      "map", "Semantic occupancy maps: build from simulated views, inspect, export, compare");
+  cmd->require_subcommand(1);
+  AddMapBuild(*cmd, context);
+  AddMapGt(*cmd, context);
+  AddMapInfo(*cmd, context);
+  AddMapExport(*cmd, context);
+  AddMapCompare(*cmd, context);
 }
 
 }  // namespace avp::apps

@@ -1,8 +1,10 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <memory>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include <avp/apps/render_command.h>
 #include <avp/core/rng.h>
@@ -13,6 +15,8 @@
 #include <avp/robot/arm_model.h>
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/sensor_noise.h>
+
+#include "cli_common.h"
 
 namespace avp::apps {
 
@@ -41,12 +45,13 @@ Result<robot::ArmModel> LoadArm(const std::filesystem::path& config) {
 
 }  // namespace
 
-Result<RenderSummary> RunRender(const RenderOptions& options) {
+Result<RenderSummary> RunRender(const RenderOptions& options,
+                                const sim::ScenarioRegistry& scenarios) {
   AVP_RETURN_IF_ERROR(options.intrinsics.Validate());
   if (options.joints_deg && options.camera_pose) {
     return InvalidArgumentError("give either --joints or --camera-pose, not both");
   }
-  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(options.scene));
+  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
 
   RenderSummary summary;
   if (options.camera_pose) {
@@ -152,6 +157,74 @@ Result<RenderSummary> RunRender(const RenderOptions& options) {
   AVP_RETURN_IF_ERROR(
       write("fruits.json", io::WriteJsonFile(dir / "fruits.json", {{"fruits", fruits_json}})));
   return summary;
+}
+
+namespace {
+
+int RenderAndReport(const RenderOptions& options, const sim::ScenarioRegistry& scenarios) {
+  const auto result = RunRender(options, scenarios);
+  if (!result.ok()) return Failed("render", result.status());
+  const auto& s = *result;
+  spdlog::info("camera X_WC: {}", s.X_WC.ToString());
+  spdlog::info("rendered {}x{} in {:.1f} ms ({} triangles); valid depth on {} pixels",
+               options.intrinsics.width, options.intrinsics.height, s.render_ms, s.num_triangles,
+               s.valid_depth_pixels);
+  spdlog::info("fruit pixels: {} ({} of {} fruits visible)", s.fruit_pixels, s.visible_fruits,
+               s.total_fruits);
+  std::printf("wrote %zu files to %s:\n", s.files.size(), options.out_dir.string().c_str());
+  for (const auto& f : s.files) std::printf("  %s\n", f.string().c_str());
+  return 0;
+}
+
+struct RenderCli {
+  RenderOptions options;
+  std::vector<double> joints;
+  std::vector<double> pose;
+  std::string out_dir = RenderOptions{}.out_dir.string();
+  std::string scene_file;
+  std::string arm_config;
+  CLI::Option* joints_opt = nullptr;
+  CLI::Option* pose_opt = nullptr;
+};
+
+}  // namespace
+
+void AddRenderCommand(CLI::App& app, CommandContext& context) {
+  auto cli = std::make_shared<RenderCli>();
+  CLI::App* cmd = app.add_subcommand(
+      "render", "Render one simulated RGB-D + label view and write it to a folder");
+  cmd->add_option("--scenario", cli->options.scene.scenario,
+                  "Built-in scenario name (see `avp scenes`); default: " +
+                      std::string(sim::DefaultScenarioName()));
+  cmd->add_option("--scene", cli->scene_file, "YAML scene file (docs/scene-format.md)");
+  cmd->add_option("--seed", cli->options.scene.seed, "Seed of the procedural plant and the noise")
+      ->default_val(0);
+  cli->joints_opt = cmd->add_option("--joints", cli->joints,
+                                    "Arm joint angles in degrees, comma separated, e.g. "
+                                    "--joints=0,-70,60,0,47.5,0 (default: the scene's start)")
+                        ->delimiter(',')
+                        ->allow_extra_args(false);
+  cli->pose_opt = cmd->add_option("--camera-pose", cli->pose,
+                                  "Camera optical frame pose in the robot base frame: "
+                                  "x,y,z (m),roll,pitch,yaw (deg)")
+                      ->delimiter(',')
+                      ->allow_extra_args(false);
+  cli->joints_opt->excludes(cli->pose_opt);
+  cmd->add_option("--arm", cli->arm_config,
+                  "Arm config YAML (default: configs/arms/igus_rebel_d435.yaml)");
+  cmd->add_flag("--noise", cli->options.noise, "Apply the seeded D435-like depth noise model");
+  cmd->add_option("--out", cli->out_dir, "Output folder")->default_val(cli->out_dir);
+  cmd->callback([cli, &context] {
+    RunGuarded(context, [&] {
+      RenderOptions o = cli->options;
+      o.scene.scene_file = cli->scene_file;
+      o.arm_config = cli->arm_config;
+      o.out_dir = cli->out_dir;
+      if (cli->joints_opt->count() > 0) o.joints_deg = cli->joints;
+      if (cli->pose_opt->count() > 0) o.camera_pose = cli->pose;
+      return RenderAndReport(o, context.registries->scenarios);
+    });
+  });
 }
 
 }  // namespace avp::apps

@@ -1,273 +1,210 @@
-#include <algorithm>
-#include <chrono>
+// avp run: one simulated active-vision episode into a run folder (docs/experiments.md).
 #include <cstdio>
-#include <thread>
+#include <memory>
+#include <string>
+#include <vector>
 
 #include <fmt/format.h>
-#include <nlohmann/json.hpp>
-#include <sys/utsname.h>
-#include <unistd.h>
+#include <spdlog/spdlog.h>
 
-#include <avp/apps/run_command.h>
-#include <avp/apps/scene_source.h>
-#include <avp/eval/svg_plot.h>
-#include <avp/io/json.h>
-#include <avp/mapping/octomap_io.h>
-#include <avp/mapping/ply_export.h>
+#include <avp/experiment/run_config.h>
+#include <avp/experiment/run_folder.h>
+#include <avp/io/options_yaml.h>
+#include <avp/sim/scenario.h>
 
-#ifndef AVP_SOURCE_DIR
-#define AVP_SOURCE_DIR ""
-#endif
+#include "cli_common.h"
 
 namespace avp::apps {
 
-namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
-using nlohmann::json;
-
 namespace {
 
-double SecondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
+/// The flags of `avp run`. Shorthand flags apply only when given, over --config; then the
+/// --*-option and --set items, in that order.
+struct RunCli {
+  std::string config_file;
+  bool print_config = false;
+  std::string scenario, scene, planner, segmenter, prompt, policy, carving, gt, out = "out/run";
+  uint64_t seed = 0;
+  int views = 0, threads = 0;
+  double voxel_size_m = 0.0;
+  bool no_noise = false, oracle_regret = false;
+  std::vector<std::string> planner_options, segmenter_options, map_options, set;
+  std::vector<CLI::Option*> shorthands;  ///< each given one is applied (ApplyShorthands)
+};
+
+/// Sets `key` from a shorthand flag when the flag was given.
+Status ApplyIfGiven(const CLI::App& cmd, const char* flag, experiment::RunConfig& config,
+                    std::string_view key, const std::string& value) {
+  if (cmd.get_option(flag)->count() == 0) return Status::Ok();
+  return experiment::SetRunConfigKey(config, key, value);
 }
 
-std::string RunShell(const std::string& command) {
-  std::string out;
-  std::FILE* p = ::popen(command.c_str(), "r");
-  if (p == nullptr) return out;
-  char buf[256];
-  while (std::fgets(buf, sizeof buf, p) != nullptr) out += buf;
-  ::pclose(p);
-  while (!out.empty() && (out.back() == '\n' || out.back() == '\r')) out.pop_back();
-  return out;
+Status ApplyShorthands(const CLI::App& cmd, const RunCli& cli, experiment::RunConfig& c) {
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scenario", c, "scenario", cli.scenario));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scene", c, "scene_file", cli.scene));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--seed", c, "seed", std::to_string(cli.seed)));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--planner", c, "planner.name", cli.planner));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--segmenter", c, "segmenter.name", cli.segmenter));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--views", c, "episode.views", std::to_string(cli.views)));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--prompt", c, "episode.prompt", cli.prompt));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--voxel-size", c, "map.grid.voxel_size_m",
+                                   fmt::format("{}", cli.voxel_size_m)));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--policy", c, "map.semantics.policy", cli.policy));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--carving", c, "episode.integrator.carving", cli.carving));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--gt", c, "ground_truth_file", cli.gt));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--threads", c, "threads", std::to_string(cli.threads)));
+  if (cli.no_noise) c.depth_noise.enabled = false;
+  if (cli.oracle_regret) c.oracle_regret = true;
+  return Status::Ok();
 }
 
-json ToJson(const eval::RunConfig& c) {
-  return json{{"scenario", c.scenario},
-              {"scene_file", c.scene_file.string()},
-              {"seed", c.seed},
-              {"planner", c.planner},
-              {"segmenter", c.segmenter},
-              {"views", c.views},
-              {"prompt", c.prompt},
-              {"voxel_size_m", c.voxel_size_m},
-              {"policy", std::string(mapping::ToString(c.policy))},
-              {"carving", std::string(mapping::ToString(c.carving))},
-              {"max_range_m", c.max_range_m},
-              {"depth_noise", c.depth_noise},
-              {"camera", io::ToJson(c.K)},
-              {"roi_margin_m", c.roi_margin_m},
-              {"threads", c.threads},
-              {"gt_file", c.gt_file.string()},
-              {"planner_options", c.planner_options},
-              {"oracle_regret", c.oracle_regret}};
-}
-
-json StepJson(const pipeline::StepRecord& s) {
-  json metrics = json::object();
-  for (const auto& [k, v] : s.metrics) metrics[k] = std::isfinite(v) ? json(v) : json(nullptr);
-  json j{{"view", s.view + 1},
-         {"X_WC", io::ToJson(s.X_WC)},
-         {"masks", s.masks},
-         {"known_voxels", s.known_voxels},
-         {"target_voxels", s.target_voxels},
-         {"instances", s.instances},
-         {"metrics", metrics},
-         {"times_ms",
-          {{"capture", s.times.capture_ms},
-           {"segment", s.times.segment_ms},
-           {"integrate", s.times.integrate_ms},
-           {"metrics", s.times.metrics_ms},
-           {"plan", s.times.plan_ms},
-           {"move", s.times.move_ms},
-           {"total", s.times.total_ms}}}};
-  if (!s.capture_status.ok()) j["capture_error"] = s.capture_status.ToString();
-  if (!s.segment_status.ok()) j["segment_error"] = s.segment_status.ToString();
-  if (!s.integrate_status.ok()) j["integrate_error"] = s.integrate_status.ToString();
-  if (s.planned) {
-    json cands = json::array();
-    for (const planning::ViewCandidate& c : s.top_candidates) {
-      cands.push_back(
-          {{"utility", c.utility},
-           {"gain", c.gain},
-           {"cost", c.cost},
-           {"source", c.source},
-           {"eye",
-            {c.X_WC.translation().x(), c.X_WC.translation().y(), c.X_WC.translation().z()}}});
-    }
-    j["plan"] = {{"status", s.plan_status.ToString()},
-                 {"generated", s.candidates_generated},
-                 {"reachable", s.candidates_reachable},
-                 {"chosen_rank", s.chosen_rank},
-                 {"refused_moves", s.refused_moves},
-                 {"joint_path_length_rad", s.joint_path_length},
-                 {"top_candidates", cands}};
-  }
-  return j;
-}
-
-}  // namespace
-
-std::string SourceRevision() {
-  const std::string dir = AVP_SOURCE_DIR;
-  if (dir.empty() || !fs::exists(fs::path(dir) / ".git")) return "unknown";
-  const std::string rev = RunShell(fmt::format("git -C '{}' rev-parse HEAD 2>/dev/null", dir));
-  if (rev.empty()) return "unknown";
-  const std::string dirty =
-      RunShell(fmt::format("git -C '{}' status --porcelain --untracked-files=no 2>/dev/null", dir));
-  return dirty.empty() ? rev : rev + "-dirty";
-}
-
-std::string HostDescription() {
-  char host[256] = {0};
-  ::gethostname(host, sizeof host - 1);
-  utsname u{};
-  ::uname(&u);
-  return fmt::format("{} ({} {} {}, {} hardware threads)", host, u.sysname, u.release, u.machine,
-                     std::thread::hardware_concurrency());
-}
-
-Status ParsePlannerOptions(const std::vector<std::string>& items,
-                           std::map<std::string, std::string>& out) {
-  for (const std::string& item : items) {
-    const size_t eq = item.find('=');
-    if (eq == std::string::npos || eq == 0) {
-      return InvalidArgumentError(
-          fmt::format("planner option '{}' must be KEY=VALUE (e.g. p_unknown=0.1)", item));
-    }
-    out[item.substr(0, eq)] = item.substr(eq + 1);
+/// KEY=VALUE items of a --<section>-option flag, each set as "<prefix>KEY".
+Status ApplyKeyValues(const std::vector<std::string>& items, std::string_view what,
+                      std::string_view prefix, experiment::RunConfig& c) {
+  AVP_ASSIGN_OR_RETURN(const OptionValues values, ParseKeyValues(items, what));
+  for (const auto& [key, value] : values) {
+    AVP_RETURN_IF_ERROR(experiment::SetRunConfigKey(c, std::string(prefix) + key, value));
   }
   return Status::Ok();
 }
 
-Result<RunSummary> RunRun(const RunOptions& options) {
-  const auto t0 = Clock::now();
-  const eval::RunConfig& config = options.config;
-  AVP_RETURN_IF_ERROR(config.Validate());
-  if (options.out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
-  std::error_code ec;
-  fs::create_directories(options.out_dir, ec);
-  if (ec) {
-    return IoError(fmt::format("cannot create '{}': {}", options.out_dir.string(), ec.message()));
+/// The configuration of this run: the defaults, --config, the shorthand flags, the --*-option
+/// items, --set; the default scenario when neither a scenario nor a scene file is named.
+Result<experiment::RunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& cli,
+                                            const experiment::Registries& registries) {
+  experiment::RunConfig c;
+  if (!cli.config_file.empty()) {
+    AVP_ASSIGN_OR_RETURN(c, experiment::LoadRunConfig(cli.config_file, registries));
   }
-  AVP_ASSIGN_OR_RETURN(const sim::Scene scene,
-                       LoadScene(SceneSource{config.scenario, config.scene_file, config.seed}));
-  RunSummary summary;
-  summary.scene_name = scene.name;
+  AVP_RETURN_IF_ERROR(ApplyShorthands(cmd, cli, c));
+  AVP_RETURN_IF_ERROR(ApplyKeyValues(cli.planner_options, "planner option", "planner.options.", c));
+  AVP_RETURN_IF_ERROR(
+      ApplyKeyValues(cli.segmenter_options, "segmenter option", "segmenter.options.", c));
+  AVP_RETURN_IF_ERROR(ApplyKeyValues(cli.map_options, "map option", "map.", c));
+  AVP_RETURN_IF_ERROR(ApplyKeyValues(cli.set, "--set item", "", c));
+  if (c.scenario.empty() && c.scene_file.empty()) {
+    c.scenario = std::string(sim::DefaultScenarioName());
+  }
+  return c;
+}
 
-  const auto t_gt = Clock::now();
-  AVP_ASSIGN_OR_RETURN(const eval::GroundTruth gt, eval::GroundTruthFor(config, scene));
-  const double gt_s = SecondsSince(t_gt);
+void PrintStep(const pipeline::StepRecord& s) {
+  const Eigen::Vector3d eye = s.X_WC.translation();
+  std::printf(
+      "view %d/%d  eye (%.3f, %.3f, %.3f)  %zu masks  F1 %.3f (tol %.3f)  fruits %.0f/%.0f  "
+      "[segment %.0f ms, integrate %.0f ms, plan %.0f ms%s]\n",
+      s.view + 1, s.views_total, eye.x(), eye.y(), eye.z(), s.masks, s.Metric("f1"),
+      s.Metric("f1_tol"), s.Metric("fruits_found"), s.Metric("fruits_total"), s.times.segment_ms,
+      s.times.integrate_ms, s.times.plan_ms,
+      s.planned ? fmt::format(", {} of {} candidates reachable", s.candidates_reachable,
+                              s.candidates_generated)
+                      .c_str()
+                : "");
+  std::fflush(stdout);
+}
 
-  const fs::path csv_path = options.out_dir / "metrics.csv";
-  AVP_ASSIGN_OR_RETURN(std::unique_ptr<eval::MetricsCsvWriter> csv,
-                       eval::MetricsCsvWriter::Open(csv_path));
-  struct Progress final : pipeline::EpisodeObserver {
-    const RunOptions* o = nullptr;
-    void OnStep(const pipeline::StepRecord& s, const mapping::SemanticMap&) override {
-      if (o->on_step) o->on_step(s);
+void PrintSummary(const experiment::RunConfig& config, const experiment::RunSummary& summary,
+                  const std::filesystem::path& out_dir) {
+  const experiment::RunResult& r = summary.result;
+  std::printf(
+      "%s with %s / %s, seed %llu: %d views (%s%s%s) in %.1f s; final F1 %.3f, fruits found "
+      "%zu/%zu\n",
+      summary.scene_name.c_str(), config.planner.name.c_str(), config.segmenter.name.c_str(),
+      static_cast<unsigned long long>(config.seed), r.episode.views_fused(),
+      std::string(pipeline::ToString(r.episode.end)).c_str(),
+      r.episode.end_reason.empty() ? "" : ": ", r.episode.end_reason.c_str(), summary.seconds,
+      r.final_metrics.exact.f1, r.final_metrics.fruits.found, r.final_metrics.fruits.total);
+  if (!r.regret.empty()) {
+    std::printf(
+        "oracle regret per plan step (1 - true gain of the choice / best true gain; true "
+        "rank of the choice; rank correlation of the gain with the true gain):\n");
+    for (const eval::StepRegret& g : r.regret) {
+      std::printf("  step %d: regret %.2f, rank %zu of %zu, correlation %.2f\n", g.step + 1,
+                  g.regret, g.chosen_true_rank, g.candidates, g.rank_correlation);
     }
-  } progress;
-  progress.o = &options;
-  std::unique_ptr<mapping::SemanticMap> map;
-  AVP_ASSIGN_OR_RETURN(eval::RunResult result,
-                       eval::RunEpisodeOnScene(config, scene, gt, {csv.get(), &progress}, &map));
-  csv.reset();
-  result.gt_ms = gt_s * 1e3;
-  summary.files.push_back(csv_path);
+  }
+  std::printf("wrote %zu files to %s:\n", summary.files.size(), out_dir.string().c_str());
+  for (const auto& f : summary.files) std::printf("  %s\n", f.string().c_str());
+}
 
-  const fs::path ot = options.out_dir / "map.ot";
-  AVP_RETURN_IF_ERROR(mapping::ExportOctomapColor(*map, ot).status());
-  summary.files.push_back(ot);
-  const fs::path ply = options.out_dir / "fruit_voxels.ply";
-  AVP_RETURN_IF_ERROR(mapping::ExportSemanticPly(map->grid(), ply).status());
-  summary.files.push_back(ply);
+int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& registries) {
+  if (cli.planner == "help" || cli.segmenter == "help") {
+    std::fputs(cli.planner == "help"
+                   ? DescribeComponents("planners", registries.planners.entries()).c_str()
+                   : DescribeComponents("segmenters", registries.segmenters.entries()).c_str(),
+               stdout);
+    return 0;
+  }
+  const Result<experiment::RunConfig> config = ResolveConfig(cmd, cli, registries);
+  if (!config.ok()) return Failed("run", config.status());
+  if (cli.print_config) {
+    const Result<YAML::Node> yaml = experiment::RunConfigToYaml(*config, registries);
+    if (!yaml.ok()) return Failed("run", yaml.status());
+    std::fputs(io::YamlText(*yaml).c_str(), stdout);
+    return 0;
+  }
+  experiment::RunFolderOptions options;
+  options.out_dir = cli.out;
+  options.on_step = PrintStep;
+  const Result<experiment::RunSummary> summary =
+      experiment::RunToFolder(*config, registries, options);
+  if (!summary.ok()) return Failed("run", summary.status());
+  PrintSummary(*config, *summary, options.out_dir);
+  return 0;
+}
 
-  // F1 and fruits found per view.
-  eval::LinePlot plot;
-  plot.title = fmt::format("{} — {} / {} (seed {})", scene.name, config.planner, config.segmenter,
-                           config.seed);
-  plot.x_label = "fused views";
-  plot.y_label = "F1 / fraction of fruits found";
-  plot.y_min = 0.0;
-  plot.y_max = 1.0;
-  eval::LineSeries f1;
-  f1.name = "voxel F1 (exact)";
-  eval::LineSeries f1_tol;
-  f1_tol.name = "voxel F1 (±1 voxel)";
-  eval::LineSeries found;
-  found.name = "fruits found (fraction)";
-  for (const pipeline::StepRecord& s : result.episode.steps) {
-    f1.x.push_back(s.view + 1);
-    f1.y.push_back(s.Metric("f1"));
-    f1_tol.x.push_back(s.view + 1);
-    f1_tol.y.push_back(s.Metric("f1_tol"));
-    found.x.push_back(s.view + 1);
-    found.y.push_back(s.Metric("fruits_found_fraction"));
-  }
-  plot.series = {f1, f1_tol, found};
-  const fs::path svg = options.out_dir / "metrics.svg";
-  AVP_RETURN_IF_ERROR(eval::WriteLinePlotSvg(svg, plot));
-  summary.files.push_back(svg);
+void AddRunOptions(CLI::App& cmd, RunCli& cli) {
+  const experiment::RunConfig d;
+  cmd.add_option("--config", cli.config_file,
+                 "Run configuration YAML (as --print-config writes it); flags apply over it");
+  cmd.add_flag("--print-config", cli.print_config,
+               "Print the effective configuration as YAML (--config reads it back) and exit");
+  cmd.add_option("--scenario", cli.scenario, "Built-in scenario (see avp scenes)");
+  cmd.add_option("--scene", cli.scene, "YAML scene file instead of a scenario");
+  cmd.add_option("--seed", cli.seed, "Seed of the plant, the noise and every choice")
+      ->default_str("0");
+  cmd.add_option("--planner", cli.planner, "View planner; `--planner help` lists them")
+      ->default_str(d.planner.name);
+  cmd.add_option("--segmenter", cli.segmenter, "Segmenter; `--segmenter help` lists them")
+      ->default_str(d.segmenter.name);
+  cmd.add_option("--views", cli.views, "Fused views, start view included")
+      ->default_str(std::to_string(d.episode.views));
+  cmd.add_option("--prompt", cli.prompt, "Text prompt")->default_str(d.episode.prompt);
+  cmd.add_option("--voxel-size", cli.voxel_size_m, "Voxel edge in metres")
+      ->default_str(fmt::format("{}", d.map.grid.voxel_size_m));
+  cmd.add_option("--policy", cli.policy, "Semantic fusion: bayesian or reference-max")
+      ->default_str(std::string(mapping::ToString(d.map.semantics.policy)));
+  cmd.add_option("--carving", cli.carving, "Free space: projective, raycast or none")
+      ->default_str(std::string(mapping::ToString(d.episode.integrator.carving)));
+  cmd.add_flag("--no-noise", cli.no_noise, "Noise-free depth");
+  cmd.add_option("--gt", cli.gt,
+                 "Ground truth from an OctoMap .bt instead of the observable fruit surface");
+  cmd.add_option("--threads", cli.threads, "Threads (0 = all; results do not depend on it)")
+      ->default_str("0");
+  AddKeyValueOption(cmd, "--planner-option", cli.planner_options,
+                    "Planner option over its defaults (repeatable; `--planner help` lists them)");
+  AddKeyValueOption(cmd, "--segmenter-option", cli.segmenter_options,
+                    "Segmenter option over its defaults (repeatable)");
+  AddKeyValueOption(cmd, "--map-option", cli.map_options,
+                    "Map option (repeatable): grid.voxel_size_m, semantics.policy, ...");
+  AddKeyValueOption(cmd, "--set", cli.set,
+                    "Any key of the configuration, as --print-config names it (repeatable)");
+  cmd.add_flag("--oracle-regret", cli.oracle_regret,
+               "Measure each plan step's regret with the truth (record.json oracle_regret; "
+               "the plan times include it)");
+  cmd.add_option("--out", cli.out, "Run folder")->default_str(cli.out);
+}
 
-  json steps = json::array();
-  for (const pipeline::StepRecord& s : result.episode.steps) steps.push_back(StepJson(s));
-  json final_metrics = json::object();
-  for (const auto& [k, v] : eval::MetricsRow(result.final_metrics)) {
-    final_metrics[k] = std::isfinite(v) ? json(v) : json(nullptr);
-  }
-  // How hidden each fruit is from the best view the arm can take
-  // (GroundTruth::best_visible_fraction).
-  json best_visible = json::array();
-  for (const sim::FruitTruth& f : gt.fruits) {
-    const auto it = gt.best_visible_fraction.find(f.instance_id);
-    if (it == gt.best_visible_fraction.end()) continue;
-    best_visible.push_back({{"fruit", f.instance_id}, {"best_visible_fraction", it->second}});
-  }
-  json regret = json::array();  // empty without --oracle-regret
-  for (const eval::StepRegret& g : result.regret) {
-    auto finite = [](double v) { return std::isfinite(v) ? json(v) : json(nullptr); };
-    regret.push_back({{"step", g.step},
-                      {"candidates", g.candidates},
-                      {"chosen_true_gain", g.chosen_true_gain},
-                      {"best_true_gain", g.best_true_gain},
-                      {"regret", g.regret},
-                      {"chosen_true_rank", g.chosen_true_rank},
-                      {"rank_correlation", finite(g.rank_correlation)}});
-  }
-  json visible_at_least = json::object();
-  for (const double v : eval::kVisibleFractionLevels) {
-    visible_at_least[fmt::format("{:.2f}", v)] = gt.FruitsVisibleAtLeast(v);
-  }
-  const json record{
-      {"avp", "avp run"},
-      {"config", ToJson(config)},
-      {"scene",
-       {{"name", scene.name}, {"description", scene.description}, {"fruits", gt.fruits.size()}}},
-      {"ground_truth",
-       {{"source", gt.source},
-        {"voxels", gt.voxels.size()},
-        {"observable_fruits", gt.ObservableFruits()},
-        {"views_tried", gt.views_tried},
-        {"views_reachable", gt.views_reachable},
-        {"fruits_visible_at_least", visible_at_least},
-        {"fruits", best_visible},
-        {"seconds", gt_s}}},
-      {"git_revision", SourceRevision()},
-      {"host", HostDescription()},
-      {"end", std::string(pipeline::ToString(result.episode.end))},
-      {"end_reason", result.episode.end_reason},
-      {"views_fused", result.episode.views_fused()},
-      {"episode_seconds", result.episode.total_ms / 1e3},
-      {"final_metrics", final_metrics},
-      {"oracle_regret", regret},
-      {"steps", steps}};
-  const fs::path record_path = options.out_dir / "record.json";
-  AVP_RETURN_IF_ERROR(io::WriteJsonFile(record_path, record));
-  summary.files.insert(summary.files.begin(), record_path);
-  summary.result = std::move(result);
-  summary.seconds = SecondsSince(t0);
-  return summary;
+}  // namespace
+
+void AddRunCommand(CLI::App& app, CommandContext& context) {
+  auto cli = std::make_shared<RunCli>();
+  CLI::App* cmd = app.add_subcommand(
+      "run", "One simulated active-vision episode into a run folder (docs/experiments.md)");
+  AddRunOptions(*cmd, *cli);
+  cmd->callback([cli, cmd, &context] {
+    RunGuarded(context, [&] { return Run(*cmd, *cli, *context.registries); });
+  });
 }
 
 }  // namespace avp::apps

@@ -6,6 +6,7 @@
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
 
 #include <avp/apps/segment_command.h>
 #include <avp/core/camera.h>
@@ -15,6 +16,8 @@
 #include <avp/io/mask_codec.h>
 #include <avp/io/overlay.h>
 #include <avp/segmentation/segmenter.h>
+
+#include "cli_common.h"
 
 namespace avp::apps {
 
@@ -54,12 +57,15 @@ Result<std::string> SegmenterSpecFor(const SegmentOptions& options) {
   return options.backend + "://" + options.models.string();
 }
 
-Result<SegmentResult> RunSegment(const SegmentOptions& options) {
+Result<SegmentResult> RunSegment(const SegmentOptions& options,
+                                 const segmentation::SegmenterRegistry& segmenters) {
   AVP_RETURN_IF_ERROR(options.Validate());
   AVP_ASSIGN_OR_RETURN(const std::string spec, SegmenterSpecFor(options));
   AVP_ASSIGN_OR_RETURN(ImageRgb8 image, io::ReadImageFile(options.image));
+  AVP_ASSIGN_OR_RETURN(const AnyOptions segmenter_options,
+                       segmenters.Options(spec, options.segmenter_options));
   AVP_ASSIGN_OR_RETURN(std::unique_ptr<segmentation::Segmenter> segmenter,
-                       segmentation::MakeSegmenter(spec, options.seed));
+                       segmenters.Make(spec, segmenter_options, {.seed = options.seed}));
 
   RgbdFrame frame;
   frame.K = CameraIntrinsics::FromHorizontalFov(image.width(), image.height(), 60.0);
@@ -165,6 +171,63 @@ std::string FormatSegmentSummary(const SegmentResult& result) {
   out += fmt::format("  timings (ms): {}{}total {:.1f}\n", stages, stages.empty() ? "" : "; ",
                      result.total_ms);
   return out;
+}
+
+namespace {
+
+int SegmentAndReport(const SegmentOptions& options,
+                     const segmentation::SegmenterRegistry& segmenters) {
+  const auto result = RunSegment(options, segmenters);
+  if (!result.ok()) return Failed("segment", result.status());
+  std::fputs(FormatSegmentSummary(*result).c_str(), stdout);
+  std::printf("wrote %zu files to %s:\n", result->files.size(), options.out_dir.string().c_str());
+  for (const auto& f : result->files) std::printf("  %s\n", f.string().c_str());
+  return 0;
+}
+
+struct SegmentCli {
+  SegmentOptions options;
+  std::string image, models, out = SegmentOptions{}.out_dir.string();
+  std::vector<std::string> segmenter_options;
+};
+
+}  // namespace
+
+void AddSegmentCommand(CLI::App& app, CommandContext& context) {
+  auto cli = std::make_shared<SegmentCli>();
+  SegmentOptions& s = cli->options;
+  CLI::App* cmd = app.add_subcommand(
+      "segment",
+      "Segment one image from a text prompt; writes overlay.png and instances.json "
+      "(docs/zero-shot-models.md)");
+  cmd->add_option("--image", cli->image, "JPEG or PNG image")->required();
+  cmd->add_option("--prompt", s.prompt, "Comma-separated phrases")->default_val(s.prompt);
+  cmd->add_option("--backend", s.backend,
+                  "Segmenter: ywes, lsam (models from --models or AVP_ZSL_MODEL_DIR), "
+                  "ywes://DIR, lsam://DIR, any other registered one (`avp run --segmenter "
+                  "help`), remote://host:port")
+      ->default_val(s.backend);
+  cmd->add_option("--models", cli->models,
+                  "Model directory of ywes / lsam (default: AVP_ZSL_MODEL_DIR)");
+  AddKeyValueOption(*cmd, "--segmenter-option", cli->segmenter_options,
+                    "Segmenter option over its defaults (repeatable)");
+  cmd->add_option("--threshold", s.threshold, "Drop instances scoring below this")
+      ->default_val(s.threshold);
+  cmd->add_option("--seed", s.seed, "Segmenter seed (noisy segmenters only)")->default_val(s.seed);
+  cmd->add_option("--out", cli->out, "Output folder")->default_val(cli->out);
+  cmd->callback([cli, &context] {
+    RunGuarded(context, [&] {
+      SegmentOptions o = cli->options;
+      o.image = cli->image;
+      o.models = cli->models;
+      o.out_dir = cli->out;
+      const Result<OptionValues> values =
+          ParseKeyValues(cli->segmenter_options, "segmenter option");
+      if (!values.ok()) return Failed("segment", values.status());
+      o.segmenter_options = *values;
+      return SegmentAndReport(o, context.registries->segmenters);
+    });
+  });
 }
 
 }  // namespace avp::apps

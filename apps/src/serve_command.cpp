@@ -8,9 +8,12 @@
 
 #include <fmt/format.h>
 #include <pthread.h>
+#include <spdlog/spdlog.h>
 
 #include <avp/apps/serve_command.h>
 #include <avp/io/file.h>
+
+#include "cli_common.h"
 
 namespace avp::apps {
 
@@ -113,6 +116,65 @@ Status RunServeSegmentation(const ServeOptions& options) {
                   "the queue)",
                   stats.infer_ok, stats.infer_failed, stats.infer_expired));
   return Status::Ok();
+}
+
+namespace {
+
+int ServeSegmentationAndReport(ServeOptions options) {
+  options.log = [](ServeLogLevel level, const std::string& message) {
+    if (level == ServeLogLevel::kWarning) {
+      spdlog::warn("{}", message);
+    } else {
+      spdlog::info("{}", message);
+    }
+  };
+  const Status status = RunServeSegmentation(options);
+  if (!status.ok()) return Failed("serve segmentation", status);
+  return 0;
+}
+
+struct ServeCli {
+  ServeOptions options;
+  std::string backends = "oracle";
+  std::string port_file;
+};
+
+}  // namespace
+
+void AddServeCommand(CLI::App& app, CommandContext& context) {
+  CLI::App* serve_cmd = app.add_subcommand("serve", "Network services");
+  serve_cmd->require_subcommand(1);
+  auto cli = std::make_shared<ServeCli>();
+  interop::ServerOptions& server = cli->options.server;
+  server.host = "0.0.0.0";
+  CLI::App* cmd = serve_cmd->add_subcommand(
+      "segmentation",
+      "The segmentation service: KServe v2 / Open Inference Protocol over gRPC "
+      "(docs/segmentation-service.md); runs until SIGINT / SIGTERM");
+  cmd->add_option("--port", server.port, "TCP port (0 = pick a free one)")
+      ->default_val(server.port);
+  cmd->add_option("--backend", cli->backends,
+                  "Backends to serve, comma separated, each as a model of its name (any "
+                  "registered segmenter: `avp run --segmenter help`)")
+      ->default_val(cli->backends);
+  cmd->add_option("--host", server.host, "Address to listen on")->default_val(server.host);
+  cmd->add_option("--threads", server.threads, "Worker threads")->default_val(server.threads);
+  cmd->add_option("--instances", server.instances_per_model,
+                  "Segmenters per (backend, seed) running at once")
+      ->default_val(server.instances_per_model);
+  cmd->add_option("--seed", server.default_seed, "Segmenter seed of requests that send none")
+      ->default_val(server.default_seed);
+  cmd->add_option("--port-file", cli->port_file,
+                  "Write the bound port to this file once listening");
+  cmd->callback([cli, &context] {
+    RunGuarded(context, [&] {
+      ServeOptions o = cli->options;
+      o.server.segmenters = &context.registries->segmenters;
+      o.server.backends = SplitCommaList(cli->backends);
+      o.port_file = cli->port_file;
+      return ServeSegmentationAndReport(std::move(o));
+    });
+  });
 }
 
 }  // namespace avp::apps

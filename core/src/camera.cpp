@@ -35,26 +35,31 @@ CameraIntrinsics CameraIntrinsics::RealSenseD435() {
   return K;
 }
 
-Status CameraIntrinsics::Validate() const {
-  std::vector<std::string> errors;
-  auto require = [&](bool ok, std::string message) {
-    if (!ok) errors.push_back(std::move(message));
-  };
-  require(width > 0, fmt::format("width ({}) must be > 0", width));
-  require(height > 0, fmt::format("height ({}) must be > 0", height));
-  require(std::isfinite(fx) && fx > 0, fmt::format("fx ({}) must be finite and > 0", fx));
-  require(std::isfinite(fy) && fy > 0, fmt::format("fy ({}) must be finite and > 0", fy));
-  require(std::isfinite(cx), fmt::format("cx ({}) must be finite", cx));
-  require(std::isfinite(cy), fmt::format("cy ({}) must be finite", cy));
-  require(std::isfinite(min_depth_m) && min_depth_m >= 0,
-          fmt::format("min_depth_m ({}) must be finite and >= 0", min_depth_m));
-  require(std::isfinite(max_depth_m) && max_depth_m > min_depth_m,
-          fmt::format("max_depth_m ({}) must be finite and > min_depth_m ({})", max_depth_m,
-                      min_depth_m));
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError("invalid camera intrinsics: " +
-                              fmt::format("{}", fmt::join(errors, "; ")));
+const OptionTable<CameraIntrinsics>& CameraIntrinsicsTable() {
+  static const auto* table = [] {
+    using K = CameraIntrinsics;
+    auto* t = new OptionTable<K>("camera intrinsic");
+    t->Integer("width", &K::width, "", ValueRange::Above(0), "image width");
+    t->Integer("height", &K::height, "", ValueRange::Above(0), "image height");
+    t->Real("fx", &K::fx, "", ValueRange::Above(0), "focal length along x");
+    t->Real("fy", &K::fy, "", ValueRange::Above(0), "focal length along y");
+    t->Real("cx", &K::cx, "", ValueRange::Any(), "principal point x (pixel centres)");
+    t->Real("cy", &K::cy, "", ValueRange::Any(), "principal point y");
+    t->Real("min_depth_m", &K::min_depth_m, "m", ValueRange::AtLeast(0), "nearest valid depth");
+    t->Real("max_depth_m", &K::max_depth_m, "m", ValueRange::Any(),
+            "farthest valid depth (> min_depth_m)");
+    t->AddRule([](const K& k, std::vector<std::string>& errors) {
+      if (!(std::isfinite(k.max_depth_m) && k.max_depth_m > k.min_depth_m)) {
+        errors.push_back(fmt::format("max_depth_m ({}) must be finite and > min_depth_m ({})",
+                                     k.max_depth_m, k.min_depth_m));
+      }
+    });
+    return t;
+  }();
+  return *table;
 }
+
+Status CameraIntrinsics::Validate() const { return CameraIntrinsicsTable().Validate(*this); }
 
 double CameraIntrinsics::fov_x_deg() const {
   return 2.0 * std::atan(0.5 * width / fx) * 180.0 / EIGEN_PI;

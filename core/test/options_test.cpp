@@ -158,7 +158,7 @@ TEST(OptionTableTest, ValidateNamesEveryBadField) {
   e.inner.radii_m = {0.01};
   EXPECT_EQ(ExampleTable().Validate(e).message(),
             "invalid example options: inner.radii_m has 1 values, must have 2 values; "
-            "inner.radii_m (0.01 m) must be in (0.05, 3)");
+            "inner.radii_m[0] (0.01 m) must be in (0.05, 3)");
 }
 
 TEST(AnyOptionsTest, HoldsAnyTableAndChecksItsType) {

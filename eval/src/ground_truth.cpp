@@ -178,46 +178,40 @@ int ResolveThreads(int requested, size_t work) {
 
 }  // namespace
 
-Status GroundTruthOptions::Validate() const {
-  std::vector<std::string> errors;
-  if (!(std::isfinite(voxel_size_m) && voxel_size_m >= 0.002 && voxel_size_m <= 0.020)) {
-    errors.push_back(fmt::format("voxel_size_m ({}) must be in [0.002, 0.02]", voxel_size_m));
-  }
-  if (radii_m.empty()) errors.push_back("radii_m is empty");
-  for (size_t i = 0; i < radii_m.size(); ++i) {
-    if (!(std::isfinite(radii_m[i]) && radii_m[i] > 0.0 && radii_m[i] <= 3.0)) {
-      errors.push_back(fmt::format("radii_m[{}] ({}) must be in (0, 3]", i, radii_m[i]));
-    }
-  }
-  if (azimuths < 1 || azimuths > 360) {
-    errors.push_back(fmt::format("azimuths ({}) must be in [1, 360]", azimuths));
-  }
-  if (elevations_deg.empty()) errors.push_back("elevations_deg is empty");
-  for (size_t i = 0; i < elevations_deg.size(); ++i) {
-    if (!(std::isfinite(elevations_deg[i]) && std::abs(elevations_deg[i]) < 89.0)) {
-      errors.push_back(
-          fmt::format("elevations_deg[{}] ({}) must be in (-89, 89)", i, elevations_deg[i]));
-    }
-  }
-  if (!(std::isfinite(azimuth_half_range_deg) && azimuth_half_range_deg >= 0.0 &&
-        azimuth_half_range_deg <= 180.0)) {
-    errors.push_back(
-        fmt::format("azimuth_half_range_deg ({}) must be in [0, 180]", azimuth_half_range_deg));
-  }
-  if (image_width < 1 || image_width > 8192) {
-    errors.push_back(fmt::format("image_width ({}) must be in [1, 8192]", image_width));
-  }
-  if (image_height < 1 || image_height > 8192) {
-    errors.push_back(fmt::format("image_height ({}) must be in [1, 8192]", image_height));
-  }
-  if (!(std::isfinite(max_range_m) && max_range_m > 0.0 && max_range_m <= 100.0)) {
-    errors.push_back(fmt::format("max_range_m ({}) must be in (0, 100]", max_range_m));
-  }
-  if (num_threads < 0) errors.push_back(fmt::format("num_threads ({}) must be >= 0", num_threads));
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError(
-      fmt::format("invalid ground-truth options: {}", fmt::join(errors, "; ")));
+const OptionTable<GroundTruthOptions>& GroundTruthOptionTable() {
+  static const auto* table = [] {
+    using G = GroundTruthOptions;
+    auto* t = new OptionTable<G>("ground-truth option");
+    t->RealList("radii_m", &G::radii_m, "m", ValueRange::LeftOpen(0, 3), 1, 16,
+                "distances of the observation views from each fruit");
+    t->Integer("azimuths", &G::azimuths, "", ValueRange::Closed(1, 360),
+               "azimuths per radius and elevation");
+    t->RealList("elevations_deg", &G::elevations_deg, "deg", ValueRange::Open(-89, 89), 1, 16,
+                "elevations above the fruit's horizontal plane");
+    t->Real("azimuth_half_range_deg", &G::azimuth_half_range_deg, "deg", ValueRange::Closed(0, 180),
+            "half-width of the fan facing the robot base");
+    t->Integer("image_width", &G::image_width, "px", ValueRange::Closed(1, 8192),
+               "render width of the observation views");
+    t->Integer("image_height", &G::image_height, "px", ValueRange::Closed(1, 8192),
+               "render height of the observation views");
+    t->AddRule([](const G& o, std::vector<std::string>& errors) {
+      if (!(std::isfinite(o.voxel_size_m) && mapping::VoxelSizeRange().Contains(o.voxel_size_m))) {
+        errors.push_back(fmt::format("voxel_size_m ({} m) must be {}", o.voxel_size_m,
+                                     mapping::VoxelSizeRange().Requirement()));
+      }
+      if (!(std::isfinite(o.max_range_m) && o.max_range_m > 0.0 && o.max_range_m <= 100.0)) {
+        errors.push_back(fmt::format("max_range_m ({}) must be in (0, 100]", o.max_range_m));
+      }
+      if (o.num_threads < 0) {
+        errors.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
+      }
+    });
+    return t;
+  }();
+  return *table;
 }
+
+Status GroundTruthOptions::Validate() const { return GroundTruthOptionTable().Validate(*this); }
 
 std::vector<VoxelKey> GroundTruth::SortedKeys() const {
   std::vector<VoxelKey> keys;
@@ -326,7 +320,7 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
   std::vector<std::vector<KeyAndId>> found(static_cast<size_t>(threads));
   // Per worker, each fruit's largest visible fraction so far (merged with max: thread-count free).
   std::vector<std::unordered_map<uint16_t, double>> best(static_cast<size_t>(threads));
-  std::unordered_map<uint16_t, segmentation::GroundTruthFruit> truth;
+  std::unordered_map<uint16_t, GroundTruthFruit> truth;
   for (const sim::FruitTruth& f : gt.fruits) {
     truth[f.instance_id] = {f.instance_id, f.center_W, f.mean_radius_m()};
   }

@@ -1,8 +1,10 @@
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 #include <unordered_map>
 #include <unordered_set>
 
+#include <avp/core/error.h>
 #include <avp/core/parallel.h>
 #include <avp/eval/oracle_planner.h>
 #include <avp/eval/statistics.h>
@@ -182,6 +184,52 @@ planning::PlanResult RegretProbe::Plan(const planning::PlanningRequest& request,
   r.rank_correlation = SpearmanRankCorrelation(predicted, truth);
   steps_.push_back(r);
   return result;
+}
+
+const OptionTable<OracleNbvOptions>& OracleNbvOptionTable() {
+  static const auto* table = [] {
+    using O = OracleNbvOptions;
+    auto* t = new OptionTable<O>("oracle planner option");
+    t->Nested("candidates", &O::candidates, planning::ShellCandidateOptionTable());
+    t->Real("render_scale", &O::render_scale, "", ValueRange::LeftOpen(0, 1),
+            "candidates are rendered at this fraction of the camera's resolution");
+    t->Real("w_motion", &O::w_motion, "", ValueRange::AtLeast(0), "weight of the motion cost");
+    return t;
+  }();
+  return *table;
+}
+
+void RegisterOraclePlanners(planning::PlannerRegistry& registry) {
+  OracleNbvOptions detect;
+  detect.objective = OracleNbvOptions::Objective::kDetections;
+  detect.observation_view_candidates = true;
+  for (const auto& [name, description, defaults] :
+       {std::tuple{"oracle-nbv",
+                   "diagnostic upper bound: avp-nbv's candidates scored with the true new fruit "
+                   "voxels (uses the ground truth)",
+                   OracleNbvOptions{}},
+        std::tuple{"oracle-detect",
+                   "diagnostic bound on fruits found: views scored by the expected detections "
+                   "(uses the ground truth)",
+                   detect}}) {
+    planning::PlannerEntry e = planning::MakePlannerEntry<OracleNbvOptions>(
+        name, description, OracleNbvOptionTable(), defaults,
+        [](OracleNbvOptions o,
+           const planning::PlannerContext& c) -> Result<std::unique_ptr<planning::ViewPlanner>> {
+          const auto* truth = dynamic_cast<const PlannerTruth*>(c.truth);
+          if (truth == nullptr) {
+            return FailedPreconditionError("the oracle planners need eval::PlannerTruth");
+          }
+          o.num_threads = c.threads;
+          o.candidates.num_threads = c.threads;
+          if (o.objective == OracleNbvOptions::Objective::kDetections) o.detector = truth->detector;
+          return std::unique_ptr<planning::ViewPlanner>(
+              std::make_unique<OracleNbvPlanner>(truth->scene, truth->gt, o));
+        });
+    e.needs_ground_truth = true;
+    const Status s = registry.Add(std::move(e));
+    AVP_THROW_UNLESS(s.ok(), name, s.message());
+  }
 }
 
 }  // namespace avp::eval

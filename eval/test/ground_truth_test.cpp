@@ -379,11 +379,11 @@ TEST(GroundTruthOptionsTest, ValidateNamesEveryBadField) {
   o.num_threads = -2;
   const Status s = o.Validate();
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
-  EXPECT_THAT(s.message(), HasSubstr("voxel_size_m (0.5)"));
-  EXPECT_THAT(s.message(), HasSubstr("radii_m[1] (-1)"));
+  EXPECT_THAT(s.message(), HasSubstr("voxel_size_m (0.5 m)"));
+  EXPECT_THAT(s.message(), HasSubstr("radii_m[1] (-1 m)"));
   EXPECT_THAT(s.message(), HasSubstr("azimuths (0)"));
-  EXPECT_THAT(s.message(), HasSubstr("elevations_deg[0] (90)"));
-  EXPECT_THAT(s.message(), HasSubstr("image_width (0)"));
+  EXPECT_THAT(s.message(), HasSubstr("elevations_deg[0] (90 deg)"));
+  EXPECT_THAT(s.message(), HasSubstr("image_width (0 px)"));
   EXPECT_THAT(s.message(), HasSubstr("max_range_m (0)"));
   EXPECT_THAT(s.message(), HasSubstr("num_threads (-2)"));
 }

@@ -336,15 +336,21 @@ Result<ServerMetadata> RemoteSegmenter::GetServerMetadata() {
   return out;
 }
 
-void RegisterRemoteSegmenter() {
-  segmentation::RegisterSegmenterFactory(
-      std::string(kScheme),
-      [](std::string_view spec, uint64_t seed) -> Result<std::unique_ptr<segmentation::Segmenter>> {
-        AVP_ASSIGN_OR_RETURN(RemoteOptions options, ParseRemoteSpec(spec));
-        options.seed = seed;
-        return std::unique_ptr<segmentation::Segmenter>(
-            std::make_unique<RemoteSegmenter>(std::move(options)));
-      });
+void RegisterRemoteSegmenter(segmentation::SegmenterRegistry& registry) {
+  segmentation::SegmenterEntry e;
+  e.name = std::string(kScheme);
+  e.description =
+      "a segmentation server over KServe v2 / Open Inference Protocol gRPC: "
+      "remote://HOST[:PORT][/MODEL][?deadline_s=..&image=..] (docs/segmentation-service.md)";
+  e.make = [](std::string_view spec, const AnyOptions&, const segmentation::SegmenterContext& c)
+      -> Result<std::unique_ptr<segmentation::Segmenter>> {
+    AVP_ASSIGN_OR_RETURN(RemoteOptions options, ParseRemoteSpec(spec));
+    options.seed = c.seed;
+    return std::unique_ptr<segmentation::Segmenter>(
+        std::make_unique<RemoteSegmenter>(std::move(options)));
+  };
+  const Status s = registry.Add(std::move(e));
+  AVP_THROW_UNLESS(s.ok(), s.message());
 }
 
 }  // namespace avp::interop

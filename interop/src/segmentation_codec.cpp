@@ -208,11 +208,11 @@ Result<RigidTransform> CameraPoseInput(const Tensor& pose_t) {
 }
 
 /// The ground-truth fruits of 'fruits' [F, 5] (instance_id, x, y, z, radius_m).
-Result<std::vector<segmentation::GroundTruthFruit>> GroundTruthFruitsInput(const Tensor& fruits_t) {
+Result<std::vector<GroundTruthFruit>> GroundTruthFruitsInput(const Tensor& fruits_t) {
   AVP_RETURN_IF_ERROR(ExpectTensor(fruits_t, "input", DataType::kFp64, {-1, 5}, "[F, 5]",
                                    "(instance_id, x, y, z, radius_m)"));
   AVP_ASSIGN_OR_RETURN(const std::vector<double> f, ReadValues<double>(fruits_t));
-  std::vector<segmentation::GroundTruthFruit> fruits;
+  std::vector<GroundTruthFruit> fruits;
   for (size_t i = 0; i + 5 <= f.size(); i += 5) {
     const double id = f[i];
     if (!(id >= 0.0 && id <= 65535.0 && std::floor(id) == id)) {
@@ -221,7 +221,7 @@ Result<std::vector<segmentation::GroundTruthFruit>> GroundTruthFruitsInput(const
                       "65535]",
                       i / 5, id));
     }
-    segmentation::GroundTruthFruit fruit;
+    GroundTruthFruit fruit;
     fruit.instance_id = static_cast<uint16_t>(id);
     fruit.center_W = Eigen::Vector3d(f[i + 1], f[i + 2], f[i + 3]);
     fruit.radius_m = f[i + 4];
@@ -232,10 +232,9 @@ Result<std::vector<segmentation::GroundTruthFruit>> GroundTruthFruitsInput(const
 
 /// The simulator labels, when 'instance_ids' and 'class_ids' are given (both or neither), with
 /// the optional 'fruits'.
-Result<std::optional<segmentation::SimulatorLabels>> SimulatorLabelsInput(const Tensor* ids_t,
-                                                                          const Tensor* classes_t,
-                                                                          const Tensor* fruits_t,
-                                                                          int w, int h) {
+Result<std::optional<SimulatorLabels>> SimulatorLabelsInput(const Tensor* ids_t,
+                                                            const Tensor* classes_t,
+                                                            const Tensor* fruits_t, int w, int h) {
   if ((ids_t == nullptr) != (classes_t == nullptr)) {
     return InvalidArgumentError(fmt::format(
         "input '{}' is given without '{}': simulator labels need both instance_ids UINT16 [H, W] "
@@ -247,8 +246,8 @@ Result<std::optional<segmentation::SimulatorLabels>> SimulatorLabelsInput(const 
     return InvalidArgumentError(
         "input 'fruits' is given without the simulator labels 'instance_ids' and 'class_ids'");
   }
-  if (ids_t == nullptr) return std::optional<segmentation::SimulatorLabels>();
-  segmentation::SimulatorLabels labels;
+  if (ids_t == nullptr) return std::optional<SimulatorLabels>();
+  SimulatorLabels labels;
   AVP_RETURN_IF_ERROR(ExpectImageSized(*ids_t, DataType::kUint16, w, h));
   AVP_RETURN_IF_ERROR(ExpectImageSized(*classes_t, DataType::kUint8, w, h));
   AVP_RETURN_IF_ERROR(CopyImage(*ids_t, labels.instance_ids, w, h));
@@ -256,7 +255,7 @@ Result<std::optional<segmentation::SimulatorLabels>> SimulatorLabelsInput(const 
   if (fruits_t != nullptr) {
     AVP_ASSIGN_OR_RETURN(labels.fruits, GroundTruthFruitsInput(*fruits_t));
   }
-  return std::optional<segmentation::SimulatorLabels>(std::move(labels));
+  return std::optional<SimulatorLabels>(std::move(labels));
 }
 
 /// The prompt: the phrases of 'prompt' joined by ", "; InvalidArgument when it names nothing.
@@ -352,7 +351,7 @@ Result<InferRequest> EncodeSegmentationRequest(const segmentation::SegmentationR
   }
   const int w = frame.rgb.width();
   const int h = frame.rgb.height();
-  const segmentation::SimulatorLabels* labels = options.send_labels ? request.labels : nullptr;
+  const SimulatorLabels* labels = options.send_labels ? request.labels : nullptr;
   if (labels != nullptr &&
       (!labels->instance_ids.SameSizeAs(w, h) || !labels->class_ids.SameSizeAs(w, h))) {
     return InvalidArgumentError(fmt::format(
@@ -405,7 +404,7 @@ Result<InferRequest> EncodeSegmentationRequest(const segmentation::SegmentationR
                                              {h, w}, labels->class_ids.data()));
     std::vector<double> fruits;
     fruits.reserve(labels->fruits.size() * 5);
-    for (const segmentation::GroundTruthFruit& f : labels->fruits) {
+    for (const GroundTruthFruit& f : labels->fruits) {
       fruits.insert(fruits.end(), {static_cast<double>(f.instance_id), f.center_W.x(),
                                    f.center_W.y(), f.center_W.z(), f.radius_m});
     }

@@ -48,8 +48,12 @@ std::string MetadataValue(std::string_view s) {
 /// a time, the least recently used idle seeds dropped beyond `max_seeds`.
 class SegmenterCache {
  public:
-  SegmenterCache(std::string backend, int instances, int max_seeds)
-      : backend_(std::move(backend)), instances_(instances), max_seeds_(max_seeds) {}
+  SegmenterCache(const segmentation::SegmenterRegistry& registry, std::string backend,
+                 int instances, int max_seeds)
+      : registry_(registry),
+        backend_(std::move(backend)),
+        instances_(instances),
+        max_seeds_(max_seeds) {}
 
   /// Adds an already built segmenter (the start-up instance).
   void Adopt(uint64_t seed, std::unique_ptr<segmentation::Segmenter> segmenter) {
@@ -82,7 +86,7 @@ class SegmenterCache {
         Result<std::unique_ptr<segmentation::Segmenter>> built =
             InternalError("segmenter not built");
         try {
-          built = segmentation::MakeSegmenter(backend_, seed);
+          built = registry_.Make(backend_, seed);
         } catch (const std::exception& ex) {
           built = InternalError(fmt::format("building it threw: {}", ex.what()));
         }
@@ -138,6 +142,7 @@ class SegmenterCache {
     }
   }
 
+  const segmentation::SegmenterRegistry& registry_;
   const std::string backend_;
   const int instances_;
   const int max_seeds_;
@@ -209,6 +214,7 @@ class WorkQueue {
 
 Status ServerOptions::Validate() const {
   std::vector<std::string> errors;
+  if (segmenters == nullptr) errors.push_back("segmenters must be set (the program's registry)");
   if (host.empty()) errors.push_back("host must not be empty");
   if (port < 0 || port > 65535)
     errors.push_back(fmt::format("port ({}) must be in [0, 65535]", port));
@@ -469,14 +475,14 @@ Result<std::unique_ptr<SegmentationServer>> SegmentationServer::Start(
     m.state.name = backend;
     Result<std::unique_ptr<segmentation::Segmenter>> s = InternalError("not built");
     try {
-      s = segmentation::MakeSegmenter(backend, options.default_seed);
+      s = options.segmenters->Make(backend, options.default_seed);
     } catch (const std::exception& e) {
       s = InternalError(fmt::format("building it threw: {}", e.what()));
     }
     if (s.ok()) {
       m.state.ready = true;
-      m.cache = std::make_unique<SegmenterCache>(backend, options.instances_per_model,
-                                                 options.max_cached_seeds);
+      m.cache = std::make_unique<SegmenterCache>(
+          *options.segmenters, backend, options.instances_per_model, options.max_cached_seeds);
       m.cache->Adopt(options.default_seed, std::move(*s));
     } else {
       m.state.reason = s.status().ToString();

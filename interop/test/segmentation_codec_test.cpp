@@ -386,7 +386,7 @@ TEST_F(CodecTest, EncodeRejectsBadRequests) {
             "segmentation request: frame is null");
   r = scene_.Request(0, "  ");
   EXPECT_THAT(EncodeSegmentationRequest(r, {}).status().message(), HasSubstr("has no phrase"));
-  segmentation::SimulatorLabels small;
+  SimulatorLabels small;
   small.instance_ids = InstanceImage(2, 2);
   small.class_ids = ClassImage(2, 2);
   r = scene_.Request();

@@ -17,7 +17,7 @@
 #include <avp/interop/remote_segmenter.h>
 #include <avp/interop/segmentation_codec.h>
 #include <avp/interop/segmentation_server.h>
-#include <avp/segmentation/segmenter.h>
+#include <avp/segmentation/segmenter_registry.h>
 
 #include "grpc_predict_v2.grpc.pb.h"
 #include "proto_convert.h"
@@ -68,21 +68,34 @@ class ThrowingSegmenter final : public segmentation::Segmenter {
   }
 };
 
-void RegisterTestBackends() {
-  segmentation::RegisterSegmenterFactory("test-slow", [](std::string_view, uint64_t) {
-    return Result<std::unique_ptr<segmentation::Segmenter>>(std::make_unique<SlowSegmenter>());
-  });
-  segmentation::RegisterSegmenterFactory("test-throws", [](std::string_view, uint64_t) {
-    return Result<std::unique_ptr<segmentation::Segmenter>>(std::make_unique<ThrowingSegmenter>());
-  });
+template <typename S>
+segmentation::SegmenterEntry TestEntry(const char* name) {
+  segmentation::SegmenterEntry e;
+  e.name = name;
+  e.description = "a test backend";
+  e.make = [](std::string_view, const AnyOptions&, const segmentation::SegmenterContext&) {
+    return Result<std::unique_ptr<segmentation::Segmenter>>(std::make_unique<S>());
+  };
+  return e;
+}
+
+/// The built-ins, two test backends and the remote:// client (never freed: servers outlive it).
+const segmentation::SegmenterRegistry& TestSegmenters() {
+  static const auto* registry = [] {
+    auto* r = new segmentation::SegmenterRegistry(segmentation::BuiltinSegmenters());
+    EXPECT_TRUE(r->Add(TestEntry<SlowSegmenter>("test-slow")).ok());
+    EXPECT_TRUE(r->Add(TestEntry<ThrowingSegmenter>("test-throws")).ok());
+    RegisterRemoteSegmenter(*r);
+    return r;
+  }();
+  return *registry;
 }
 
 class ServiceTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    RegisterTestBackends();
-    RegisterRemoteSegmenter();
     ServerOptions o;
+    o.segmenters = &TestSegmenters();
     o.port = 0;
     o.threads = 4;
     o.instances_per_model = 2;
@@ -155,7 +168,7 @@ TEST_F(ServiceTest, HealthAndReadiness) {
   EXPECT_TRUE(models[0].ready);
   EXPECT_EQ(models[0].reason, "");
   EXPECT_FALSE(models[2].ready);
-  EXPECT_THAT(models[2].reason, HasSubstr("unknown segmenter \"no-such-backend\""));
+  EXPECT_THAT(models[2].reason, HasSubstr("unknown segmenter 'no-such-backend'"));
 
   RemoteSegmenter client(Client());
   EXPECT_TRUE(*client.ServerLive());
@@ -168,7 +181,7 @@ TEST_F(ServiceTest, HealthAndReadiness) {
   ready = broken.GetModelReadiness();
   ASSERT_TRUE(ready.ok()) << ready.status().ToString();
   EXPECT_FALSE(ready->ready);
-  EXPECT_THAT(ready->reason, HasSubstr("unknown segmenter \"no-such-backend\""));
+  EXPECT_THAT(ready->reason, HasSubstr("unknown segmenter 'no-such-backend'"));
 
   RemoteSegmenter unknown(Client("nope"));
   ready = unknown.GetModelReadiness();
@@ -201,7 +214,7 @@ TEST_F(ServiceTest, Metadata) {
 
 TEST_F(ServiceTest, RemoteResultsEqualInProcessOnesForEachSeed) {
   for (const uint64_t seed : {uint64_t{0}, uint64_t{5}, ~uint64_t{0}}) {
-    auto local = segmentation::MakeSegmenter("oracle", seed);
+    auto local = TestSegmenters().Make("oracle", seed);
     ASSERT_TRUE(local.ok());
     RemoteOptions o = Client();
     o.seed = seed;
@@ -216,7 +229,7 @@ TEST_F(ServiceTest, RemoteResultsEqualInProcessOnesForEachSeed) {
     }
   }
   // The colour backend, and the image as a PNG.
-  auto color = segmentation::MakeSegmenter("color", 0);
+  auto color = TestSegmenters().Make("color", 0);
   RemoteOptions o = Client("color");
   o.image = ImageEncoding::kPng;
   RemoteSegmenter remote(o);
@@ -227,15 +240,15 @@ TEST_F(ServiceTest, RemoteResultsEqualInProcessOnesForEachSeed) {
 }
 
 TEST_F(ServiceTest, RemoteSchemeIsAFactory) {
-  auto made = segmentation::MakeSegmenter(fmt::format("remote://127.0.0.1:{}", server_->port()), 9);
+  auto made = TestSegmenters().Make(fmt::format("remote://127.0.0.1:{}", server_->port()), 9);
   ASSERT_TRUE(made.ok()) << made.status().ToString();
   EXPECT_EQ((*made)->name(), fmt::format("remote://127.0.0.1:{}/oracle", server_->port()));
-  auto local = segmentation::MakeSegmenter("oracle", 9);
+  auto local = TestSegmenters().Make("oracle", 9);
   const auto got = (*made)->Segment(frame_->Request(1));
   ASSERT_TRUE(got.ok()) << got.status().ToString();
   ExpectSameSegmentation(*got, *(*local)->Segment(frame_->Request(1)));
 
-  auto bad = segmentation::MakeSegmenter("remote://127.0.0.1:99999", 0);
+  auto bad = TestSegmenters().Make("remote://127.0.0.1:99999", 0);
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
   EXPECT_THAT(bad.status().message(), HasSubstr("port (99999) must be in [1, 65535]"));
@@ -347,7 +360,7 @@ TEST_F(ServiceTest, MalformedRequestsAreRefusedAndTheServerGoesOn) {
        grpc::StatusCode::NOT_FOUND, "unknown model 'sam9000'; this server serves: oracle"},
       {"model not ready", [](InferRequest& r) { r.model_name = "no-such-backend"; },
        grpc::StatusCode::FAILED_PRECONDITION,
-       "model 'no-such-backend' is not ready: NotFound: unknown segmenter \"no-such-backend\""},
+       "model 'no-such-backend' is not ready: NotFound: unknown segmenter 'no-such-backend'"},
       {"missing rgb",
        [](InferRequest& r) {
          std::erase_if(r.inputs, [](const Tensor& t) { return t.name == "rgb"; });
@@ -419,7 +432,7 @@ TEST_F(ServiceTest, ConcurrentClientsGetTheInProcessResults) {
   constexpr int kClients = 8;
   constexpr int kRequests = 50;
   constexpr uint64_t kSeed = 21;
-  auto local = segmentation::MakeSegmenter("oracle", kSeed);
+  auto local = TestSegmenters().Make("oracle", kSeed);
   std::vector<Segmentation> expected;
   for (int i = 0; i < kRequests; ++i) {
     expected.push_back(*(*local)->Segment(frame_->Request(static_cast<uint64_t>(i))));
@@ -457,6 +470,7 @@ TEST(ServerLifecycleTest, ServerDownIsAClearIoError) {
   int port = 0;
   {
     ServerOptions o;
+    o.segmenters = &TestSegmenters();
     o.port = 0;
     auto server = SegmentationServer::Start(o);
     ASSERT_TRUE(server.ok()) << server.status().ToString();
@@ -482,6 +496,7 @@ TEST(ServerLifecycleTest, ServerDownIsAClearIoError) {
 
 TEST(ServerLifecycleTest, BadOptionsAndBusyPorts) {
   ServerOptions bad;
+  bad.segmenters = &TestSegmenters();
   bad.port = 70000;
   bad.threads = 0;
   bad.backends = {"oracle", "oracle"};
@@ -492,6 +507,8 @@ TEST(ServerLifecycleTest, BadOptionsAndBusyPorts) {
             "(\"oracle\") is listed twice; threads (0) must be in [1, 256]");
 
   ServerOptions o;
+
+  o.segmenters = &TestSegmenters();
   o.port = 0;
   auto first = SegmentationServer::Start(o);
   ASSERT_TRUE(first.ok());

@@ -20,7 +20,7 @@ namespace avp::interop::test {
 /// The default scenario's start view at a quarter of the D435's resolution (160 x 120).
 struct TestFrame {
   RgbdFrame frame;
-  segmentation::SimulatorLabels labels;
+  SimulatorLabels labels;
 
   explicit TestFrame(uint64_t scene_seed = 3, double scale = 0.25) {
     Result<sim::Scene> scene = sim::MakeScenario(sim::DefaultScenarioName(), scene_seed);

@@ -1,4 +1,6 @@
+#include <algorithm>
 #include <map>
+#include <optional>
 #include <string>
 
 #include <fmt/format.h>
@@ -24,7 +26,7 @@ void Insert(YAML::Node map, std::string_view key, const YAML::Node& value) {
 }
 
 YAML::Node Scalar(const std::string& value, OptionKind kind) {
-  if (kind == OptionKind::kRealList) {
+  if (kind == OptionKind::kRealList || kind == OptionKind::kTextList) {
     YAML::Node list(YAML::NodeType::Sequence);
     for (const std::string& item : options_internal::SplitList(value)) list.push_back(item);
     list.SetStyle(YAML::EmitterStyle::Flow);
@@ -68,6 +70,57 @@ YAML::Node OptionsToYaml(const OptionValues& values, const std::vector<OptionInf
   for (const auto& [key, value] : values) {
     const auto kind = kinds.find(key);
     Insert(root, key, Scalar(value, kind == kinds.end() ? OptionKind::kText : kind->second));
+  }
+  return root;
+}
+
+namespace {
+
+nlohmann::json JsonValue(const std::string& value, OptionKind kind) {
+  switch (kind) {
+    case OptionKind::kReal:
+    case OptionKind::kInteger: {
+      const std::optional<double> v = options_internal::ParseReal(value);
+      if (!v) return value;
+      if (kind == OptionKind::kInteger) {
+        if (value.front() == '-') return std::stoll(value);
+        return std::stoull(value);
+      }
+      return *v;
+    }
+    case OptionKind::kFlag:
+      return value == "true";
+    case OptionKind::kRealList: {
+      nlohmann::json list = nlohmann::json::array();
+      for (const std::string& item : options_internal::SplitList(value)) {
+        list.push_back(options_internal::ParseReal(item).value_or(0.0));
+      }
+      return list;
+    }
+    case OptionKind::kTextList: {
+      nlohmann::json list = nlohmann::json::array();
+      for (const std::string& item : options_internal::SplitList(value)) list.push_back(item);
+      return list;
+    }
+    case OptionKind::kText:
+    case OptionKind::kChoice:
+      break;
+  }
+  return value;
+}
+
+}  // namespace
+
+nlohmann::json OptionsToJson(const OptionValues& values, const std::vector<OptionInfo>& info) {
+  std::map<std::string, OptionKind> kinds;
+  for (const OptionInfo& i : info) kinds[i.key] = i.kind;
+  nlohmann::json root = nlohmann::json::object();
+  for (const auto& [key, value] : values) {
+    const auto kind = kinds.find(key);
+    std::string path = "/" + key;
+    std::replace(path.begin(), path.end(), '.', '/');
+    root[nlohmann::json::json_pointer(path)] =
+        JsonValue(value, kind == kinds.end() ? OptionKind::kText : kind->second);
   }
   return root;
 }

@@ -37,7 +37,8 @@ size_t CountTargetInstances(const mapping::SemanticMap& map, SemanticClass targe
 
 /// The segmenter's answer for one observation; a throw or an invalid segmentation becomes an
 /// Internal error naming the segmenter.
-Result<Segmentation> CheckedSegmentation(segmentation::Segmenter& segmenter, const Observation& obs,
+Result<Segmentation> CheckedSegmentation(segmentation::Segmenter& segmenter,
+                                         const robot::Observation& obs,
                                          const EpisodeOptions& options, int view) {
   segmentation::SegmentationRequest request;
   request.frame = &obs.frame;
@@ -68,7 +69,7 @@ void FuseView(const EpisodeComponents& c, const EpisodeOptions& options,
               const mapping::Integrator& integrator, int view, StepRecord& step) {
   const int64_t stamp_ns = static_cast<int64_t>(view) * 1'000'000'000;
   auto t0 = Clock::now();
-  Result<Observation> obs = c.source->Capture(step.X_WC, stamp_ns);
+  Result<robot::Observation> obs = c.source->Capture(step.X_WC, stamp_ns);
   step.times.capture_ms = MsSince(t0);
   if (!obs.ok()) {
     step.capture_status = obs.status();
@@ -230,24 +231,34 @@ double StepRecord::Metric(std::string_view name) const {
   return std::numeric_limits<double>::quiet_NaN();
 }
 
+const OptionTable<EpisodeOptions>& EpisodeOptionTable() {
+  static const auto* table = [] {
+    using E = EpisodeOptions;
+    auto* t = new OptionTable<E>("episode option");
+    t->Integer("views", &E::views, "", ValueRange::Closed(1, 1000),
+               "fused views, the start view included");
+    t->Text("prompt", &E::prompt, "comma-separated phrases naming what to find");
+    t->Real("score_threshold", &E::score_threshold, "", ValueRange::Closed(0, 1),
+            "instances scoring below this are dropped");
+    t->Integer("record_top_candidates", &E::record_top_candidates, "", ValueRange::AtLeast(0),
+               "ranked candidates kept in each step's record");
+    t->Nested("integrator", &E::integrator, mapping::IntegratorOptionTable());
+    t->AddRule([](const E& o, std::vector<std::string>& errors) {
+      if (o.prompt.find_first_not_of(" ,\t") == std::string::npos) {
+        errors.push_back(fmt::format("prompt ('{}') names no class", o.prompt));
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
 Status EpisodeOptions::Validate() const {
-  std::vector<std::string> errors;
-  if (views < 1 || views > 1000)
-    errors.push_back(fmt::format("views ({}) must be in [1, 1000]", views));
-  if (prompt.find_first_not_of(" ,\t") == std::string::npos) {
-    errors.push_back(fmt::format("prompt ('{}') names no class", prompt));
-  }
-  if (!std::isfinite(score_threshold) || score_threshold < 0.0f || score_threshold > 1.0f) {
-    errors.push_back(fmt::format("score threshold ({}) must be in [0, 1]", score_threshold));
-  }
+  std::vector<std::string> errors = EpisodeOptionTable().Problems(*this);
   if (target_class == SemanticClass::kBackground) errors.push_back("target class is background");
   if (roi.IsEmpty() || !roi.min().allFinite() || !roi.max().allFinite()) {
     errors.push_back(fmt::format("ROI ({}) must be finite and non-empty", roi.ToString()));
   }
-  if (record_top_candidates < 0) {
-    errors.push_back(fmt::format("record_top_candidates ({}) must be >= 0", record_top_candidates));
-  }
-  if (Status s = integrator.Validate(); !s.ok()) errors.push_back(s.ToString());
   if (errors.empty()) return Status::Ok();
   std::string joined;
   for (const std::string& e : errors) joined += (joined.empty() ? "" : "; ") + e;

@@ -10,6 +10,7 @@
 #include <avp/pipeline/episode.h>
 #include <avp/robot/arm.h>
 #include <avp/robot/arm_model.h>
+#include <avp/sim/sim_arm.h>
 
 namespace avp::pipeline {
 namespace {
@@ -19,16 +20,16 @@ CameraIntrinsics SmallCamera() {
 }
 
 /// A flat wall 1 m in front of the camera; fails on the frames listed in `fail_frames`.
-class WallSource final : public RgbdSource {
+class WallSource final : public robot::RgbdSource {
  public:
   std::vector<int> fail_frames;
   int captured = 0;
-  Result<Observation> Capture(const RigidTransform& X_WC, int64_t stamp_ns) override {
+  Result<robot::Observation> Capture(const RigidTransform& X_WC, int64_t stamp_ns) override {
     const int index = captured++;
     for (int f : fail_frames) {
       if (f == index) return IoError("camera timeout on frame " + std::to_string(index));
     }
-    Observation obs;
+    robot::Observation obs;
     obs.frame.K = SmallCamera();
     obs.frame.X_WC = X_WC;
     obs.frame.stamp_ns = stamp_ns;
@@ -119,7 +120,7 @@ class EpisodeTest : public ::testing::Test {
     auto model = robot::LoadDefaultArm();
     ASSERT_TRUE(model.ok()) << model.status().ToString();
     model_ = std::make_unique<robot::ArmModel>(*model);
-    arm_ = std::make_unique<robot::SimArm>(*model_);
+    arm_ = std::make_unique<sim::SimArm>(*model_);
     options_.views = 4;
     options_.roi = Box3(Eigen::Vector3d(0.3, -0.5, 0.0), Eigen::Vector3d(1.5, 0.5, 1.5));
   }
@@ -144,7 +145,7 @@ class EpisodeTest : public ::testing::Test {
         observers);
   }
   std::unique_ptr<robot::ArmModel> model_;
-  std::unique_ptr<robot::SimArm> arm_;
+  std::unique_ptr<sim::SimArm> arm_;
   WallSource source_;
   HalfSegmenter segmenter_;
   ScriptedPlanner planner_;

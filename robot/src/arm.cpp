@@ -32,20 +32,4 @@ MoveResult Arm::MoveToCameraPose(const RigidTransform& X_WC, Rng& rng) {
   return MoveToJoints(ik.q);
 }
 
-SimArm::SimArm(ArmModel model) : SimArm(model, model.home_joints()) {}
-
-SimArm::SimArm(ArmModel model, const Eigen::VectorXd& q_initial) : Arm(std::move(model)) {
-  const Status s = this->model().CheckJoints(q_initial);
-  AVP_THROW_UNLESS(s.ok(), s.message());
-  q_ = q_initial;
-}
-
-MoveResult SimArm::DoMoveToJoints(const Eigen::VectorXd& q) {
-  MoveResult result;
-  result.joint_path_length = (q - q_).norm();
-  q_ = q;
-  result.q = q_;
-  return result;
-}
-
 }  // namespace avp::robot

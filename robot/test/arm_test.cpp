@@ -6,12 +6,14 @@
 
 #include <avp/core/rng.h>
 #include <avp/robot/arm.h>
+#include <avp/sim/sim_arm.h>
 
 #include "test_util.h"
 
 namespace avp::robot {
 namespace {
 
+using sim::SimArm;
 using testing::DefaultArm;
 using testing::Deg;
 

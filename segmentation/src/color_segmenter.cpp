@@ -64,39 +64,56 @@ std::optional<ColorFilter> ColorFilterFromString(std::string_view name) {
   return std::nullopt;
 }
 
-Status ColorOptions::Validate() const {
-  std::vector<std::string> errors;
-  const auto check = [&](bool ok, std::string message) {
-    if (!ok) errors.push_back(std::move(message));
-  };
-  const auto check_hues = [&](const std::vector<HueRange>& hues, std::string_view name) {
-    check(!hues.empty(), fmt::format("{} must not be empty", name));
-    for (size_t i = 0; i < hues.size(); ++i) {
-      const HueRange& r = hues[i];
-      check(r.min_hue >= 0 && r.min_hue <= r.max_hue && r.max_hue <= 179,
-            fmt::format("{}[{}] ({}-{}) must satisfy 0 <= min_hue <= max_hue <= 179", name, i,
-                        r.min_hue, r.max_hue));
-    }
-  };
-  check_hues(red_hues, "red_hues");
-  check_hues(green_hues, "green_hues");
-  check(min_saturation >= 0 && min_saturation <= 255,
-        fmt::format("min_saturation ({}) must be in [0, 255]", min_saturation));
-  check(min_value >= 0 && min_value <= 255,
-        fmt::format("min_value ({}) must be in [0, 255]", min_value));
-  check(min_area_px >= 1, fmt::format("min_area_px ({}) must be >= 1", min_area_px));
-  check(std::isfinite(confidence) && confidence >= 0.0f && confidence <= 1.0f,
-        fmt::format("confidence ({}) must be in [0, 1]", confidence));
-  for (const auto& [word, filter] : fruit_colors) {
-    check(internal::IsVocabularyWord(word),
-          fmt::format("fruit_colors key \"{}\" must be a non-empty lower-case word", word));
-    check(ToString(filter) != "invalid",
-          fmt::format("fruit_colors[\"{}\"] ({}) is not a colour filter", word,
-                      static_cast<int>(filter)));
-  }
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError("invalid color options: " +
-                              fmt::format("{}", fmt::join(errors, "; ")));
+const OptionTable<ColorOptions>& ColorOptionTable() {
+  static const auto* table = [] {
+    auto* t = new OptionTable<ColorOptions>("color option");
+    t->Integer("min_saturation", &ColorOptions::min_saturation, "", ValueRange::Closed(0, 255),
+               "HSV saturation a pixel needs");
+    t->Integer("min_value", &ColorOptions::min_value, "", ValueRange::Closed(0, 255),
+               "HSV value a pixel needs");
+    t->Integer("min_area_px", &ColorOptions::min_area_px, "px", ValueRange::AtLeast(1),
+               "smallest blob kept");
+    t->Real("confidence", &ColorOptions::confidence, "", ValueRange::Closed(0, 1),
+            "score of every instance");
+    t->AddRule([](const ColorOptions& o, std::vector<std::string>& errors) {
+      const auto check_hues = [&](const std::vector<HueRange>& hues, std::string_view name) {
+        if (hues.empty()) errors.push_back(fmt::format("{} must not be empty", name));
+        for (size_t i = 0; i < hues.size(); ++i) {
+          const HueRange& r = hues[i];
+          if (!(r.min_hue >= 0 && r.min_hue <= r.max_hue && r.max_hue <= 179)) {
+            errors.push_back(
+                fmt::format("{}[{}] ({}-{}) must satisfy 0 <= min_hue <= max_hue <= 179", name, i,
+                            r.min_hue, r.max_hue));
+          }
+        }
+      };
+      check_hues(o.red_hues, "red_hues");
+      check_hues(o.green_hues, "green_hues");
+      for (const auto& [word, filter] : o.fruit_colors) {
+        if (!internal::IsVocabularyWord(word)) {
+          errors.push_back(
+              fmt::format("fruit_colors key \"{}\" must be a non-empty lower-case word", word));
+        }
+        if (ToString(filter) == "invalid") {
+          errors.push_back(fmt::format("fruit_colors[\"{}\"] ({}) is not a colour filter", word,
+                                       static_cast<int>(filter)));
+        }
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
+Status ColorOptions::Validate() const { return ColorOptionTable().Validate(*this); }
+
+SegmenterEntry ColorSegmenterEntry() {
+  return MakeSegmenterEntry<ColorOptions>(
+      "color", "the reference's HSV colour filter (red or green by prompt word)",
+      ColorOptionTable(), ColorOptions{},
+      [](std::string_view, const ColorOptions& o, const SegmenterContext&) {
+        return Result<std::unique_ptr<Segmenter>>(std::make_unique<ColorSegmenter>(o));
+      });
 }
 
 ColorSegmenter::ColorSegmenter(ColorOptions options) : options_(std::move(options)) {

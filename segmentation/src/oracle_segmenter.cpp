@@ -262,48 +262,80 @@ OracleOptions OracleOptions::Perfect() {
   return o;
 }
 
-Status OracleOptions::Validate() const {
-  std::vector<std::string> errors;
-  const auto check = [&](bool ok, std::string message) {
-    if (!ok) errors.push_back(std::move(message));
-  };
-  for (size_t i = 0; i < fruit_words.size(); ++i) {
-    check(internal::IsVocabularyWord(fruit_words[i]),
-          fmt::format("fruit_words[{}] (\"{}\") must be a non-empty lower-case word", i,
-                      fruit_words[i]));
-  }
-  check(InUnitInterval(p_max), fmt::format("p_max ({}) must be in [0, 1]", p_max));
-  check(InUnitInterval(v_min), fmt::format("v_min ({}) must be in [0, 1]", v_min));
-  check(InUnitInterval(v_full) && v_full >= v_min,
-        fmt::format("v_full ({}) must be in [v_min ({}), 1]", v_full, v_min));
-  check(min_pixels >= 1, fmt::format("min_pixels ({}) must be >= 1", min_pixels));
-  check(std::isfinite(confidence_mean_at_0),
-        fmt::format("confidence_mean_at_0 ({}) must be finite", confidence_mean_at_0));
-  check(std::isfinite(confidence_gain),
-        fmt::format("confidence_gain ({}) must be finite", confidence_gain));
-  check(std::isfinite(confidence_stddev) && confidence_stddev >= 0.0,
-        fmt::format("confidence_stddev ({}) must be finite and >= 0", confidence_stddev));
-  check(InUnitInterval(confidence_min),
-        fmt::format("confidence_min ({}) must be in [0, 1]", confidence_min));
-  check(InUnitInterval(confidence_max) && confidence_max >= confidence_min,
-        fmt::format("confidence_max ({}) must be in [confidence_min ({}), 1]", confidence_max,
-                    confidence_min));
-  check(max_boundary_px >= 0 && max_boundary_px <= 16,
-        fmt::format("max_boundary_px ({}) must be in [0, 16]", max_boundary_px));
-  check(InUnitInterval(p_false_positive),
-        fmt::format("p_false_positive ({}) must be in [0, 1]", p_false_positive));
-  check(InUnitInterval(false_positive_confidence_min),
-        fmt::format("false_positive_confidence_min ({}) must be in [0, 1]",
-                    false_positive_confidence_min));
-  check(InUnitInterval(false_positive_confidence_max) &&
-            false_positive_confidence_max >= false_positive_confidence_min,
-        fmt::format("false_positive_confidence_max ({}) must be in "
-                    "[false_positive_confidence_min ({}), 1]",
-                    false_positive_confidence_max, false_positive_confidence_min));
-  check(InUnitInterval(p_merge), fmt::format("p_merge ({}) must be in [0, 1]", p_merge));
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError("invalid oracle options: " +
-                              fmt::format("{}", fmt::join(errors, "; ")));
+const OptionTable<OracleOptions>& OracleOptionTable() {
+  static const auto* table = [] {
+    using O = OracleOptions;
+    auto* t = new OptionTable<O>("oracle option");
+    const ValueRange unit = ValueRange::Closed(0, 1);
+    t->TextList("fruit_words", &O::fruit_words, "prompt words that name the fruit class");
+    t->Real("p_max", &O::p_max, "", unit, "detection probability of a fully visible fruit");
+    t->Real("v_min", &O::v_min, "", unit, "visible fraction below which a fruit is never found");
+    t->Real("v_full", &O::v_full, "", unit, "visible fraction from which p_max applies");
+    t->Integer("min_pixels", &O::min_pixels, "px", ValueRange::AtLeast(1),
+               "visible pixels a fruit needs to be detected");
+    t->Real("confidence_mean_at_0", &O::confidence_mean_at_0, "", ValueRange::Any(),
+            "mean score of a fruit seen at visible fraction 0");
+    t->Real("confidence_gain", &O::confidence_gain, "", ValueRange::Any(),
+            "the mean score rises by this from visible fraction 0 to 1");
+    t->Real("confidence_stddev", &O::confidence_stddev, "", ValueRange::AtLeast(0),
+            "spread of the score (0: the mean exactly)");
+    t->Real("confidence_min", &O::confidence_min, "", unit, "lower clamp of the score");
+    t->Real("confidence_max", &O::confidence_max, "", unit, "upper clamp of the score");
+    t->Integer("max_boundary_px", &O::max_boundary_px, "px", ValueRange::Closed(0, 16),
+               "masks grow or shrink by up to this many pixels");
+    t->Real("p_false_positive", &O::p_false_positive, "", unit,
+            "probability of a false fruit on a leaf per frame");
+    t->Real("false_positive_confidence_min", &O::false_positive_confidence_min, "", unit,
+            "lowest score of a false positive");
+    t->Real("false_positive_confidence_max", &O::false_positive_confidence_max, "", unit,
+            "highest score of a false positive");
+    t->Real("p_merge", &O::p_merge, "", unit, "probability that two touching fruits merge");
+    t->AddRule([unit](const O& o, std::vector<std::string>& errors) {
+      for (size_t i = 0; i < o.fruit_words.size(); ++i) {
+        if (!internal::IsVocabularyWord(o.fruit_words[i])) {
+          errors.push_back(fmt::format(
+              "fruit_words[{}] (\"{}\") must be a non-empty lower-case word", i, o.fruit_words[i]));
+        }
+      }
+      const auto ordered = [&](double lo, double hi, const char* lo_name, const char* hi_name) {
+        if (unit.Contains(lo) && unit.Contains(hi) && hi < lo) {
+          errors.push_back(fmt::format("{} ({}) must be >= {} ({})", hi_name, hi, lo_name, lo));
+        }
+      };
+      ordered(o.v_min, o.v_full, "v_min", "v_full");
+      ordered(o.confidence_min, o.confidence_max, "confidence_min", "confidence_max");
+      ordered(o.false_positive_confidence_min, o.false_positive_confidence_max,
+              "false_positive_confidence_min", "false_positive_confidence_max");
+    });
+    return t;
+  }();
+  return *table;
+}
+
+Status OracleOptions::Validate() const { return OracleOptionTable().Validate(*this); }
+
+namespace {
+
+SegmenterEntry OracleEntry(std::string name, std::string description, OracleOptions defaults) {
+  return MakeSegmenterEntry<OracleOptions>(
+      std::move(name), std::move(description), OracleOptionTable(), std::move(defaults),
+      [](std::string_view, const OracleOptions& o, const SegmenterContext& c) {
+        return Result<std::unique_ptr<Segmenter>>(std::make_unique<OracleSegmenter>(o, c.seed));
+      });
+}
+
+}  // namespace
+
+SegmenterEntry OracleSegmenterEntry() {
+  return OracleEntry("oracle",
+                     "the simulator's labels through a seeded zero-shot-like error model "
+                     "(docs/segmentation.md)",
+                     OracleOptions{});
+}
+
+SegmenterEntry OraclePerfectSegmenterEntry() {
+  return OracleEntry("oracle-perfect", "the simulator's labels, every visible fruit, no noise",
+                     OracleOptions::Perfect());
 }
 
 double OracleOptions::DetectionProbability(double visible_fraction) const {

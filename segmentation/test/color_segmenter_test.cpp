@@ -188,7 +188,7 @@ TEST(ColorSegmenterTest, ValidateNamesBadValues) {
   EXPECT_THAT(s.message(), HasSubstr("red_hues[1] (170-190)"));
   EXPECT_THAT(s.message(), HasSubstr("green_hues must not be empty"));
   EXPECT_THAT(s.message(), HasSubstr("min_saturation (300)"));
-  EXPECT_THAT(s.message(), HasSubstr("min_area_px (0)"));
+  EXPECT_THAT(s.message(), HasSubstr("min_area_px (0 px) must be >= 1"));
   EXPECT_THAT(s.message(), HasSubstr("confidence (1.5)"));
   EXPECT_THROW(ColorSegmenter{o}, Error);
   EXPECT_TRUE(ColorOptions{}.Validate().ok());

@@ -78,10 +78,10 @@ TEST(OracleOptionsTest, ValidateNamesEveryBadField) {
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_THAT(s.message(), HasSubstr("p_max (1.5) must be in [0, 1]"));
-  EXPECT_THAT(s.message(), HasSubstr("v_full (0.5) must be in [v_min (0.6), 1]"));
-  EXPECT_THAT(s.message(), HasSubstr("min_pixels (0)"));
+  EXPECT_THAT(s.message(), HasSubstr("v_full (0.5) must be >= v_min (0.6)"));
+  EXPECT_THAT(s.message(), HasSubstr("min_pixels (0 px)"));
   EXPECT_THAT(s.message(), HasSubstr("confidence_stddev (-1)"));
-  EXPECT_THAT(s.message(), HasSubstr("max_boundary_px (40)"));
+  EXPECT_THAT(s.message(), HasSubstr("max_boundary_px (40 px)"));
   EXPECT_THAT(s.message(), HasSubstr("p_merge (nan)"));
   EXPECT_THAT(s.message(), HasSubstr("\"Tomato\""));
   EXPECT_THROW(OracleSegmenter(o, 1), Error);

@@ -1,4 +1,4 @@
-// The Segmenter contract (segmenter.h), checked against every segmenter MakeSegmenter builds.
+// The Segmenter contract (segmenter.h), checked against every segmenter the registry builds.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -8,7 +8,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <avp/segmentation/segmenter.h>
+#include <avp/segmentation/oracle_segmenter.h>
+#include <avp/segmentation/segmenter_registry.h>
 
 #include "test_frames.h"
 
@@ -18,7 +19,7 @@ namespace {
 using test::TestScene;
 using ::testing::HasSubstr;
 
-// ---- SplitPrompt and MakeSegmenter
+// ---- SplitPrompt and the registry
 // ---------------------------------------------------------------
 
 TEST(SplitPromptTest, SplitsOnCommasAndTrims) {
@@ -42,42 +43,77 @@ TEST(SplitPromptTest, NothingLeftIsAnErrorNamingThePrompt) {
   }
 }
 
-TEST(MakeSegmenterTest, BuildsEveryNameAndRejectsUnknownOnes) {
-  for (const std::string& name : SegmenterNames()) {
-    const auto s = MakeSegmenter(name, 1);
-    ASSERT_TRUE(s.ok()) << name << ": " << s.status().ToString();
-    EXPECT_EQ((*s)->name(), name == "oracle-perfect" ? "oracle" : name);
+TEST(SegmenterRegistryTest, BuildsEveryBuiltinAndRejectsUnknownNames) {
+  const SegmenterRegistry registry = BuiltinSegmenters();
+  EXPECT_EQ(registry.Names(), (std::vector<std::string>{"oracle", "oracle-perfect", "color"}));
+  for (const SegmenterEntry& e : registry.entries()) {
+    EXPECT_FALSE(e.description.empty()) << e.name;
+    EXPECT_TRUE(e.options.has_fields()) << e.name;
+    const auto s = registry.Make(e.name, 1);
+    ASSERT_TRUE(s.ok()) << e.name << ": " << s.status().ToString();
+    EXPECT_EQ((*s)->name(), e.name == "oracle-perfect" ? "oracle" : e.name);
   }
-  const auto bad = MakeSegmenter("yolo-world", 1);
+  const auto bad = registry.Make("yolo-world", 1);
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.status().code(), StatusCode::kNotFound);
-  EXPECT_THAT(bad.status().message(), HasSubstr("\"yolo-world\""));
-  EXPECT_THAT(bad.status().message(), HasSubstr("oracle, oracle-perfect, color"));
+  EXPECT_THAT(bad.status().message(),
+              HasSubstr("unknown segmenter 'yolo-world' (known: oracle, oracle-perfect, color)"));
+  SegmenterRegistry again = BuiltinSegmenters();
+  EXPECT_THROW(RegisterBuiltinSegmenters(again), Error);
 }
 
-TEST(MakeSegmenterTest, RegisteredNamesAndSchemesAreBuiltByTheirFactories) {
+TEST(SegmenterRegistryTest, OptionsStartFromTheEntrysDefaults) {
+  const SegmenterRegistry registry = BuiltinSegmenters();
+  // oracle-perfect is the oracle with OracleOptions::Perfect() as its defaults.
+  EXPECT_EQ(registry.Options("oracle-perfect")->As<OracleOptions>().p_false_positive, 0.0);
+  EXPECT_EQ(registry.Options("oracle")->As<OracleOptions>().p_false_positive,
+            OracleOptions{}.p_false_positive);
+  const auto o = registry.Options("oracle", {{"p_merge", "0"}, {"fruit_words", "tomato,apple"}});
+  ASSERT_TRUE(o.ok()) << o.status().ToString();
+  EXPECT_EQ(o->As<OracleOptions>().p_merge, 0.0);
+  EXPECT_EQ(o->As<OracleOptions>().fruit_words, (std::vector<std::string>{"tomato", "apple"}));
+  EXPECT_THAT(registry.Options("oracle", {{"v_full", "0.01"}}).status().message(),
+              HasSubstr("v_full (0.01) must be >= v_min (0.05)"));
+  EXPECT_THAT(registry.Options("color", {{"p_merge", "0"}}).status().message(),
+              HasSubstr("unknown color option 'p_merge' (known: min_saturation"));
+  const auto seg = registry.Make("oracle", *o, {.seed = 3});
+  ASSERT_TRUE(seg.ok());
+}
+
+TEST(SegmenterRegistryTest, RegisteredNamesAndSchemesAreBuiltByTheirFactories) {
   std::vector<std::pair<std::string, uint64_t>> calls;
-  auto factory = [&calls](std::string_view spec,
-                          uint64_t seed) -> Result<std::unique_ptr<Segmenter>> {
-    calls.emplace_back(std::string(spec), seed);
-    return MakeSegmenter("color", seed);
+  SegmenterRegistry registry = BuiltinSegmenters();
+  auto add = [&](const char* name) {
+    SegmenterEntry e;
+    e.name = name;
+    e.description = "test";
+    e.make = [&calls, &registry](std::string_view spec, const AnyOptions&,
+                                 const SegmenterContext& c) -> Result<std::unique_ptr<Segmenter>> {
+      calls.emplace_back(std::string(spec), c.seed);
+      return registry.Make("color", c.seed);
+    };
+    ASSERT_TRUE(registry.Add(std::move(e)).ok());
   };
-  RegisterSegmenterFactory("test-named", factory);
-  RegisterSegmenterFactory("test-scheme://", factory);
-  ASSERT_TRUE(MakeSegmenter("test-named", 7).ok());
-  ASSERT_TRUE(MakeSegmenter("test-scheme://host:1234", 9).ok());
+  add("test-named");
+  add("test-scheme://");
+  ASSERT_TRUE(registry.Make("test-named", 7).ok());
+  ASSERT_TRUE(registry.Make("test-scheme://host:1234", 9).ok());
   ASSERT_EQ(calls.size(), 2u);
   EXPECT_EQ(calls[0], std::make_pair(std::string("test-named"), uint64_t{7}));
   EXPECT_EQ(calls[1], std::make_pair(std::string("test-scheme://host:1234"), uint64_t{9}));
   // A name is matched exactly, only schemes by prefix; the error lists both kinds.
-  const auto bad = MakeSegmenter("test-named-not", 1);
+  const auto bad = registry.Make("test-named-not", 1);
   ASSERT_FALSE(bad.ok());
   EXPECT_THAT(bad.status().message(), HasSubstr("test-named, test-scheme://..."));
-  EXPECT_TRUE(IsKnownSegmenter("test-scheme://anything"));
-  EXPECT_TRUE(IsKnownSegmenter("oracle"));
-  EXPECT_FALSE(IsKnownSegmenter("test-named-not"));
-  const std::vector<std::string> names = RegisteredSegmenterNames();
-  EXPECT_NE(std::find(names.begin(), names.end(), "test-scheme://"), names.end());
+  EXPECT_NE(registry.Find("test-scheme://anything"), nullptr);
+  EXPECT_NE(registry.Find("oracle"), nullptr);
+  EXPECT_EQ(registry.Find("test-named-not"), nullptr);
+  SegmenterEntry duplicate;
+  duplicate.name = "oracle";
+  EXPECT_THAT(registry.Add(duplicate).message(), HasSubstr("already registered"));
+  // A component without options refuses any.
+  EXPECT_THAT(registry.Options("test-named", {{"x", "1"}}).status().message(),
+              HasSubstr("segmenter 'test-named' has no options (given: x = 1)"));
 }
 
 // ---- The contract
@@ -107,7 +143,7 @@ TestScene ContractScene() {
 class SegmenterContractTest : public ::testing::TestWithParam<ContractCase> {
  protected:
   std::unique_ptr<Segmenter> Make(uint64_t seed = 7) const {
-    auto s = MakeSegmenter(GetParam().name, seed);
+    auto s = BuiltinSegmenters().Make(GetParam().name, seed);
     EXPECT_TRUE(s.ok()) << s.status().ToString();
     return std::move(s).value();
   }

@@ -12,6 +12,7 @@
 #include <avp/sim/espalier.h>
 #include <avp/sim/mesh_builder.h>
 #include <avp/sim/scenario.h>
+#include <avp/sim/scene_file.h>
 #include <avp/sim/tomato_plant.h>
 
 namespace avp::sim {
@@ -123,98 +124,146 @@ Scene BuildEspalier(const EspalierParams& params, const char* kind, uint64_t see
   return scene;
 }
 
-struct ScenarioEntry {
-  ScenarioInfo info;
-  std::function<Scene(uint64_t)> build;
-};
+/// A builder whose scene gets the ground plane and its plant bounds.
+std::function<Result<Scene>(uint64_t)> Finished(std::function<Scene(uint64_t)> build) {
+  return [build = std::move(build)](uint64_t seed) -> Result<Scene> {
+    Scene scene = build(seed);
+    FinishScene(scene);
+    return scene;
+  };
+}
 
-const std::vector<ScenarioEntry>& Entries() {
-  static const std::vector<ScenarioEntry> entries = {
-      {{"tomato-multiple-clusters",
-        "tomato plant with 4-6 trusses of 3-7 fruits at typical leaf density, seen from the "
-        "reference start (default)"},
-       [](uint64_t seed) {
+std::vector<ScenarioEntry> BuiltinEntries() {
+  std::vector<ScenarioEntry> entries = {
+      {"tomato-multiple-clusters",
+       "tomato plant with 4-6 trusses of 3-7 fruits at typical leaf density, seen from the "
+       "reference start (default)",
+       Finished([](uint64_t seed) {
          Scene s = BuildTomato(MultipleClustersTomato(), "tomato-multiple-clusters", seed);
          SetStart(s, 0.0);
          return s;
-       }},
-      {{"tomato-full-occlusion",
-        "tomato plant whose 3-5 trusses hang behind the stem, hidden from the start view by a "
-        "dense leaf layer"},
-       [](uint64_t seed) {
+       })},
+      {"tomato-full-occlusion",
+       "tomato plant whose 3-5 trusses hang behind the stem, hidden from the start view by a "
+       "dense leaf layer",
+       Finished([](uint64_t seed) {
          Scene s = BuildTomato(FullOcclusionTomato(), "tomato-full-occlusion", seed);
          SetStart(s, 0.0);
          return s;
-       }},
-      {{"tomato-single-cluster", "sparse tomato plant with a single upper truss of 5-8 fruits"},
-       [](uint64_t seed) {
+       })},
+      {"tomato-single-cluster", "sparse tomato plant with a single upper truss of 5-8 fruits",
+       Finished([](uint64_t seed) {
          Scene s = BuildTomato(SingleClusterTomato(), "tomato-single-cluster", seed);
          SetStart(s, 0.0);
          return s;
-       }},
-      {{"tomato-unoriented-start",
-        "the multiple-clusters plant moved 0.4 m to +y with the arm yawed 20 deg away: no fruit "
-        "in the start view"},
-       [](uint64_t seed) {
+       })},
+      {"tomato-unoriented-start",
+       "the multiple-clusters plant moved 0.4 m to +y with the arm yawed 20 deg away: no fruit "
+       "in the start view",
+       Finished([](uint64_t seed) {
          TomatoPlantParams params = MultipleClustersTomato();
          params.stem_base_W.y() += kTomatoUnorientedShiftY;
          Scene s = BuildTomato(params, "tomato-multiple-clusters", seed);
          SetStart(s, kTomatoUnorientedYawDeg);
          return s;
-       }},
-      {{"espalier-multiple-fruits",
-        "apple espalier, 1.5 m wide on 3-4 cordon tiers, 14-24 apples on both sides"},
-       [](uint64_t seed) {
+       })},
+      {"espalier-multiple-fruits",
+       "apple espalier, 1.5 m wide on 3-4 cordon tiers, 14-24 apples on both sides",
+       Finished([](uint64_t seed) {
          Scene s = BuildEspalier(MultipleFruitsEspalier(), "espalier-multiple-fruits", seed);
          SetStart(s, 0.0);
          return s;
-       }},
-      {{"espalier-full-occlusion",
-        "apple espalier with 12-20 apples behind the cordons, hidden from the start view by "
-        "dense leaves"},
-       [](uint64_t seed) {
+       })},
+      {"espalier-full-occlusion",
+       "apple espalier with 12-20 apples behind the cordons, hidden from the start view by "
+       "dense leaves",
+       Finished([](uint64_t seed) {
          Scene s = BuildEspalier(FullOcclusionEspalier(), "espalier-full-occlusion", seed);
          SetStart(s, 0.0);
          return s;
-       }},
-      {{"espalier-unoriented-start",
-        "the multiple-fruits espalier with the arm yawed 65 deg away (towards -y) at the start"},
-       [](uint64_t seed) {
+       })},
+      {"espalier-unoriented-start",
+       "the multiple-fruits espalier with the arm yawed 65 deg away (towards -y) at the start",
+       Finished([](uint64_t seed) {
          Scene s = BuildEspalier(MultipleFruitsEspalier(), "espalier-multiple-fruits", seed);
          SetStart(s, kEspalierUnorientedYawDeg);
          return s;
-       }},
+       })},
   };
   return entries;
 }
 
 }  // namespace
 
-const std::vector<ScenarioInfo>& ListScenarios() {
-  static const std::vector<ScenarioInfo> infos = [] {
-    std::vector<ScenarioInfo> out;
-    for (const ScenarioEntry& e : Entries()) out.push_back(e.info);
-    return out;
-  }();
-  return infos;
+Status ScenarioRegistry::Add(ScenarioEntry entry) {
+  if (entry.name.empty()) return InvalidArgumentError("a scenario needs a name");
+  if (Find(entry.name) != nullptr) {
+    return InvalidArgumentError(fmt::format("scenario '{}' is already registered", entry.name));
+  }
+  if (!entry.build) {
+    return InvalidArgumentError(fmt::format("scenario '{}' has no builder", entry.name));
+  }
+  entries_.push_back(std::move(entry));
+  return Status::Ok();
+}
+
+const ScenarioEntry* ScenarioRegistry::Find(std::string_view name) const {
+  for (const ScenarioEntry& e : entries_) {
+    if (e.name == name) return &e;
+  }
+  return nullptr;
+}
+
+std::vector<std::string> ScenarioRegistry::Names() const {
+  std::vector<std::string> names;
+  for (const ScenarioEntry& e : entries_) names.push_back(e.name);
+  return names;
+}
+
+Result<Scene> ScenarioRegistry::Make(std::string_view name, uint64_t seed) const {
+  const ScenarioEntry* e = Find(name);
+  if (e == nullptr) {
+    return NotFoundError(
+        fmt::format("unknown scenario '{}' (known: {})", name, fmt::join(Names(), ", ")));
+  }
+  AVP_ASSIGN_OR_RETURN(Scene scene, e->build(seed));
+  scene.name = e->name;
+  scene.description = e->description;
+  scene.seed = seed;
+  return scene;
+}
+
+void RegisterBuiltinScenarios(ScenarioRegistry& registry) {
+  for (ScenarioEntry& e : BuiltinEntries()) {
+    const std::string name = e.name;
+    const Status s = registry.Add(std::move(e));
+    AVP_THROW_UNLESS(s.ok(), name, s.message());
+  }
+}
+
+ScenarioRegistry BuiltinScenarios() {
+  ScenarioRegistry registry;
+  RegisterBuiltinScenarios(registry);
+  return registry;
 }
 
 std::string_view DefaultScenarioName() { return "tomato-multiple-clusters"; }
 
 Result<Scene> MakeScenario(std::string_view name, uint64_t seed) {
-  for (const ScenarioEntry& e : Entries()) {
-    if (e.info.name != name) continue;
-    Scene scene = e.build(seed);
-    FinishScene(scene);
-    scene.name = e.info.name;
-    scene.description = e.info.description;
-    scene.seed = seed;
-    return scene;
+  static const ScenarioRegistry* builtins = new ScenarioRegistry(BuiltinScenarios());
+  return builtins->Make(name, seed);
+}
+
+Result<Scene> LoadScene(const SceneSource& source, const ScenarioRegistry& scenarios) {
+  if (!source.scenario.empty() && !source.scene_file.empty()) {
+    return InvalidArgumentError(
+        fmt::format("give either a scenario ('{}') or a scene file ('{}'), not both",
+                    source.scenario, source.scene_file.string()));
   }
-  std::vector<std::string> known;
-  for (const ScenarioEntry& e : Entries()) known.push_back(e.info.name);
-  return NotFoundError(
-      fmt::format("unknown scenario '{}' (known: {})", name, fmt::join(known, ", ")));
+  if (!source.scene_file.empty()) return LoadSceneFile(source.scene_file);
+  const std::string name =
+      source.scenario.empty() ? std::string(DefaultScenarioName()) : source.scenario;
+  return scenarios.Make(name, source.seed);
 }
 
 std::vector<double> ReferenceStartJointsRad(double yaw_q1_deg) {

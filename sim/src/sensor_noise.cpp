@@ -22,28 +22,29 @@
 
 namespace avp::sim {
 
-Status DepthNoiseConfig::Validate() const {
-  std::vector<std::string> errors;
-  auto require = [&](bool ok, std::string message) {
-    if (!ok) errors.push_back(std::move(message));
-  };
-  require(std::isfinite(baseline_m) && baseline_m > 0.0,
-          fmt::format("baseline_m ({}) must be finite and > 0", baseline_m));
-  require(std::isfinite(disparity_sigma_px) && disparity_sigma_px >= 0.0,
-          fmt::format("disparity_sigma_px ({}) must be finite and >= 0", disparity_sigma_px));
-  require(std::isfinite(edge_jump_m) && edge_jump_m > 0.0,
-          fmt::format("edge_jump_m ({}) must be finite and > 0", edge_jump_m));
-  require(edge_dropout_probability >= 0.0 && edge_dropout_probability <= 1.0,
-          fmt::format("edge_dropout_probability ({}) must be in [0, 1]", edge_dropout_probability));
-  require(
-      invalid_pixel_probability >= 0.0 && invalid_pixel_probability <= 1.0,
-      fmt::format("invalid_pixel_probability ({}) must be in [0, 1]", invalid_pixel_probability));
-  require(std::isfinite(quantization_m) && quantization_m >= 0.0,
-          fmt::format("quantization_m ({}) must be finite and >= 0", quantization_m));
-  if (errors.empty()) return Status::Ok();
-  return InvalidArgumentError(
-      fmt::format("invalid depth noise config: {}", fmt::join(errors, "; ")));
+const OptionTable<DepthNoiseConfig>& DepthNoiseTable() {
+  static const auto* table = [] {
+    using N = DepthNoiseConfig;
+    auto* t = new OptionTable<N>("depth noise option");
+    const ValueRange probability = ValueRange::Closed(0, 1);
+    t->Flag("enabled", &N::enabled, "apply the noise model");
+    t->Real("baseline_m", &N::baseline_m, "m", ValueRange::Above(0), "stereo baseline");
+    t->Real("disparity_sigma_px", &N::disparity_sigma_px, "px", ValueRange::AtLeast(0),
+            "disparity noise (axial sigma = z^2 sigma / (f b))");
+    t->Real("edge_jump_m", &N::edge_jump_m, "m", ValueRange::Above(0),
+            "a 4-neighbour depth jump above this makes an edge pixel");
+    t->Real("edge_dropout_probability", &N::edge_dropout_probability, "", probability,
+            "an edge pixel is dropped with this probability");
+    t->Real("invalid_pixel_probability", &N::invalid_pixel_probability, "", probability,
+            "independent random holes");
+    t->Real("quantization_m", &N::quantization_m, "m", ValueRange::AtLeast(0),
+            "quantisation step of the reported depth (0: none)");
+    return t;
+  }();
+  return *table;
 }
+
+Status DepthNoiseConfig::Validate() const { return DepthNoiseTable().Validate(*this); }
 
 void ApplyDepthNoise(const DepthNoiseConfig& config, RenderedFrame& frame, Rng& rng) {
   if (!config.enabled) return;

@@ -498,7 +498,7 @@ TEST(RgbdRendererTest, BadIntrinsicsThrowNamingTheBadValue) {
   CameraIntrinsics K = SmallCamera();
   K.fx = -1.0;
   EXPECT_THAT([&] { (void)renderer.Render(K, RigidTransform::Identity()); },
-              ::testing::ThrowsMessage<Error>(HasSubstr("fx (-1) must be finite and > 0")));
+              ::testing::ThrowsMessage<Error>(HasSubstr("fx (-1) must be > 0")));
   K = SmallCamera();
   K.width = 0;
   K.max_depth_m = 0.05;  // below min_depth

@@ -60,7 +60,8 @@ RigidTransform BackView(const Scene& scene) {
 }
 
 TEST(ScenarioTest, ListIsStableAndStartsWithTheDefault) {
-  const std::vector<ScenarioInfo>& list = ListScenarios();
+  const ScenarioRegistry registry = BuiltinScenarios();
+  const std::vector<ScenarioEntry>& list = registry.entries();
   const std::vector<std::string> expected = {"tomato-multiple-clusters", "tomato-full-occlusion",
                                              "tomato-single-cluster",    "tomato-unoriented-start",
                                              "espalier-multiple-fruits", "espalier-full-occlusion",
@@ -73,6 +74,40 @@ TEST(ScenarioTest, ListIsStableAndStartsWithTheDefault) {
     EXPECT_LT(list[i].description.size(), 120u) << list[i].name;
   }
   EXPECT_EQ(DefaultScenarioName(), list.front().name);
+  ScenarioRegistry again = BuiltinScenarios();
+  EXPECT_THROW(RegisterBuiltinScenarios(again), Error);
+}
+
+TEST(ScenarioTest, RegisteredScenariosAreBuiltWithTheirNameAndSeed) {
+  ScenarioRegistry registry;
+  ScenarioEntry e;
+  e.name = "one-sphere";
+  e.description = "a lone fruit";
+  e.build = [](uint64_t seed) -> Result<Scene> {
+    Scene scene;
+    SceneObject fruit;
+    fruit.name = "fruit";
+    fruit.semantic_class = SemanticClass::kFruit;
+    Ellipsoid sphere;
+    sphere.center_W = Eigen::Vector3d(0.6, 0.0, 0.5);
+    sphere.radii = Eigen::Vector3d::Constant(0.03 + 0.001 * static_cast<double>(seed % 3));
+    fruit.shape = sphere;
+    scene.Add(std::move(fruit));
+    scene.UpdatePlantBounds();
+    return scene;
+  };
+  ASSERT_TRUE(registry.Add(e).ok());
+  EXPECT_THAT(registry.Add(e).message(), HasSubstr("'one-sphere' is already registered"));
+  const Result<Scene> scene = registry.Make("one-sphere", 4);
+  ASSERT_TRUE(scene.ok()) << scene.status().ToString();
+  EXPECT_EQ(scene->name, "one-sphere");
+  EXPECT_EQ(scene->description, "a lone fruit");
+  EXPECT_EQ(scene->seed, 4u);
+  EXPECT_EQ(scene->Fruits().size(), 1u);
+  EXPECT_EQ(registry.Make("tomato-full-occlusion", 0).status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(LoadScene({"one-sphere", "", 2}, registry)->seed, 2u);
+  EXPECT_THAT(LoadScene({"one-sphere", "x.yaml", 2}, registry).status().message(),
+              HasSubstr("not both"));
 }
 
 TEST(ScenarioTest, UnknownNameIsNotFoundAndListsTheKnownOnes) {
@@ -80,8 +115,8 @@ TEST(ScenarioTest, UnknownNameIsNotFoundAndListsTheKnownOnes) {
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), StatusCode::kNotFound);
   EXPECT_THAT(r.status().message(), HasSubstr("'tomato-full-oclusion'"));
-  for (const ScenarioInfo& info : ListScenarios()) {
-    EXPECT_THAT(r.status().message(), HasSubstr(info.name));
+  for (const std::string& name : BuiltinScenarios().Names()) {
+    EXPECT_THAT(r.status().message(), HasSubstr(name));
   }
   EXPECT_EQ(MakeScenario("", 0).status().code(), StatusCode::kNotFound);
 }
@@ -116,7 +151,8 @@ TEST(ScenarioTest, JointOneYawRotatesTheCameraAboutTheBase) {
 }
 
 TEST(ScenarioTest, EveryScenarioBuildsValidScenesForSeveralSeeds) {
-  for (const ScenarioInfo& info : ListScenarios()) {
+  const ScenarioRegistry scenarios = BuiltinScenarios();
+  for (const ScenarioEntry& info : scenarios.entries()) {
     for (const uint64_t seed : {0u, 1u, 17u}) {
       SCOPED_TRACE(info.name + " seed " + std::to_string(seed));
       const Scene s = Make(info.name, seed);
@@ -151,7 +187,8 @@ TEST(ScenarioTest, EveryScenarioBuildsValidScenesForSeveralSeeds) {
 }
 
 TEST(ScenarioTest, SameSeedSameSceneDifferentSeedDifferentPlant) {
-  for (const ScenarioInfo& info : ListScenarios()) {
+  const ScenarioRegistry scenarios = BuiltinScenarios();
+  for (const ScenarioEntry& info : scenarios.entries()) {
     SCOPED_TRACE(info.name);
     const Scene a = Make(info.name, 5);
     EXPECT_TRUE(SameScene(a, Make(info.name, 5)));

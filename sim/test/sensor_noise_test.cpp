@@ -247,19 +247,19 @@ TEST(SensorNoiseTest, ValidateReportsEveryBadField) {
   bad.quantization_m = std::numeric_limits<double>::infinity();
   const Status s = bad.Validate();
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
-  EXPECT_THAT(s.message(),
-              ::testing::AllOf(HasSubstr("invalid depth noise config"),
-                               HasSubstr("baseline_m (-0.05) must be finite and > 0"),
-                               HasSubstr("disparity_sigma_px (nan)"), HasSubstr("edge_jump_m (0)"),
-                               HasSubstr("edge_dropout_probability (1.5) must be in [0, 1]"),
-                               HasSubstr("invalid_pixel_probability (-0.1)"),
-                               HasSubstr("quantization_m (inf)")));
+  EXPECT_THAT(
+      s.message(),
+      ::testing::AllOf(
+          HasSubstr("invalid depth noise options"), HasSubstr("baseline_m (-0.05 m) must be > 0"),
+          HasSubstr("disparity_sigma_px (nan)"), HasSubstr("edge_jump_m (0 m)"),
+          HasSubstr("edge_dropout_probability (1.5) must be in [0, 1]"),
+          HasSubstr("invalid_pixel_probability (-0.1)"), HasSubstr("quantization_m (inf)")));
   // Applying an invalid, enabled config throws the same message.
   bad.enabled = true;
   RenderedFrame f = RenderWall(0.5);
   Rng rng(1);
   EXPECT_THAT([&] { ApplyDepthNoise(bad, f, rng); },
-              ::testing::ThrowsMessage<Error>(HasSubstr("baseline_m (-0.05)")));
+              ::testing::ThrowsMessage<Error>(HasSubstr("baseline_m (-0.05 m)")));
 }
 
 }  // namespace

@@ -4,7 +4,8 @@
 
 #include <fmt/format.h>
 
-#include <avp/segmentation/segmenter.h>
+#include <avp/core/error.h>
+#include <avp/segmentation/segmenter_registry.h>
 #include <avp/zsl/register.h>
 #ifdef AVP_WITH_ONNX
 #include <avp/zsl/lsam_segmenter.h>
@@ -73,15 +74,25 @@ Result<std::filesystem::path> ModelDirForSpec(std::string_view backend, std::str
   return std::filesystem::path(env);
 }
 
-void RegisterZslSegmenters() {
+void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry) {
   for (const char* backend : {"ywes", "lsam"}) {
     const std::string name = backend;
-    auto factory = [name](std::string_view spec,
-                          uint64_t /*seed*/) -> Result<std::unique_ptr<Segmenter>> {
-      return MakeZslSegmenter(name, spec);
-    };
-    segmentation::RegisterSegmenterFactory(name, factory);
-    segmentation::RegisterSegmenterFactory(name + "://", factory);
+    const std::string what =
+        name == "ywes" ? "YOLO-World + EfficientViT-SAM" : "Grounding DINO + SAM";
+    for (const std::string& entry_name : {name, name + "://"}) {
+      segmentation::SegmenterEntry e;
+      e.name = entry_name;
+      e.description =
+          entry_name == name
+              ? fmt::format("{} through ONNX Runtime, models from {}", what, kModelDirVariable)
+              : fmt::format("{} with the models of DIR: {}DIR", what, entry_name);
+      e.make = [name](std::string_view spec, const AnyOptions&,
+                      const segmentation::SegmenterContext&) {
+        return MakeZslSegmenter(name, spec);
+      };
+      const Status s = registry.Add(std::move(e));
+      AVP_THROW_UNLESS(s.ok(), entry_name, s.message());
+    }
   }
 }
 

@@ -20,6 +20,7 @@
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/segmentation/segmenter_registry.h>
 #include <avp/zsl/lsam_segmenter.h>
 #include <avp/zsl/register.h>
 
@@ -307,9 +308,10 @@ TEST(LsamTest, ConcurrentCallsGiveIdenticalResults) {
 }
 
 TEST(LsamTest, TheRegisteredSchemeBuildsIt) {
-  RegisterZslSegmenters();
+  segmentation::SegmenterRegistry registry;
+  RegisterZslSegmenters(registry);
   setenv("AVP_ZSL_DEVICE", "cpu", 1);
-  auto made = segmentation::MakeSegmenter("lsam://" + (kStubs / "lsam").string(), 0);
+  auto made = registry.Make("lsam://" + (kStubs / "lsam").string(), 0);
   ASSERT_TRUE(made.ok()) << made.status().ToString();
   EXPECT_EQ((*made)->name(), "lsam");
   const RgbdFrame frame = GreyFrame(320, 240);

@@ -25,6 +25,7 @@
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/segmentation/segmenter_registry.h>
 #include <avp/zsl/register.h>
 #include <avp/zsl/ywes_segmenter.h>
 
@@ -780,11 +781,12 @@ TEST(SamBoxSegmenterTest, ABoxOnMultiplesOf4GivesTheRectangleLessItsFourCorners)
 // ---- registration and the Segmenter contract ---------------------------------------------------
 
 TEST(YwesRegistrationTest, SchemesAndTheEnvironmentNameTheModelDirectory) {
-  RegisterZslSegmenters();
-  EXPECT_TRUE(segmentation::IsKnownSegmenter("ywes"));
-  EXPECT_TRUE(segmentation::IsKnownSegmenter("lsam"));
-  EXPECT_TRUE(segmentation::IsKnownSegmenter("ywes:///opt/models"));
-  EXPECT_TRUE(segmentation::IsKnownSegmenter("lsam://models"));
+  segmentation::SegmenterRegistry registry;
+  RegisterZslSegmenters(registry);
+  EXPECT_TRUE(nullptr != registry.Find("ywes"));
+  EXPECT_TRUE(nullptr != registry.Find("lsam"));
+  EXPECT_TRUE(nullptr != registry.Find("ywes:///opt/models"));
+  EXPECT_TRUE(nullptr != registry.Find("lsam://models"));
 
   Result<fs::path> dir = ModelDirForSpec("ywes", "ywes:///opt/models");
   ASSERT_TRUE(dir.ok());
@@ -796,7 +798,7 @@ TEST(YwesRegistrationTest, SchemesAndTheEnvironmentNameTheModelDirectory) {
   const char* saved = std::getenv("AVP_ZSL_MODEL_DIR");
   const std::string saved_value = saved != nullptr ? saved : "";
   unsetenv("AVP_ZSL_MODEL_DIR");
-  auto missing = segmentation::MakeSegmenter("ywes", 0);
+  auto missing = registry.Make("ywes", 0);
   ASSERT_FALSE(missing.ok());
   EXPECT_EQ(missing.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_THAT(missing.status().message(),
@@ -805,7 +807,7 @@ TEST(YwesRegistrationTest, SchemesAndTheEnvironmentNameTheModelDirectory) {
   EXPECT_THAT(missing.status().message(), HasSubstr("docs/zero-shot-models.md"));
   setenv("AVP_ZSL_MODEL_DIR", (kStubs / "ywes").c_str(), 1);
   setenv("AVP_ZSL_DEVICE", "cpu", 1);
-  auto from_env = segmentation::MakeSegmenter("ywes", 0);
+  auto from_env = registry.Make("ywes", 0);
   EXPECT_TRUE(from_env.ok()) << from_env.status().ToString();
   if (saved != nullptr) {
     setenv("AVP_ZSL_MODEL_DIR", saved_value.c_str(), 1);
@@ -813,16 +815,17 @@ TEST(YwesRegistrationTest, SchemesAndTheEnvironmentNameTheModelDirectory) {
     unsetenv("AVP_ZSL_MODEL_DIR");
   }
 
-  auto nowhere = segmentation::MakeSegmenter("ywes://" + (kStubs / "nope").string(), 0);
+  auto nowhere = registry.Make("ywes://" + (kStubs / "nope").string(), 0);
   ASSERT_FALSE(nowhere.ok());
   EXPECT_EQ(nowhere.status().code(), StatusCode::kNotFound);
   EXPECT_THAT(nowhere.status().message(), HasSubstr((kStubs / "nope").string()));
 }
 
 TEST(YwesRegistrationTest, TheRegisteredSegmenterMeetsTheSegmenterContract) {
-  RegisterZslSegmenters();
+  segmentation::SegmenterRegistry registry;
+  RegisterZslSegmenters(registry);
   setenv("AVP_ZSL_DEVICE", "cpu", 1);
-  auto made = segmentation::MakeSegmenter("ywes://" + (kStubs / "ywes").string(), 7);
+  auto made = registry.Make("ywes://" + (kStubs / "ywes").string(), 7);
   ASSERT_TRUE(made.ok()) << made.status().ToString();
   segmentation::Segmenter& s = **made;
   EXPECT_EQ(s.name(), "ywes");

@@ -11,7 +11,6 @@
 
 #include <nlohmann/json.hpp>
 
-#include <avp/apps/scene_source.h>
 #include <avp/core/box.h>
 #include <avp/core/camera.h>
 #include <avp/core/semantic_class.h>
@@ -21,6 +20,7 @@
 #include <avp/mapping/map_file.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/mapping/semantics.h>
+#include <avp/sim/scenario.h>
 
 namespace avp::apps {
 
@@ -48,11 +48,12 @@ struct MapBuildView {
 /// `avp map build`: renders views of a simulated plant on an arc around it, segments them with the
 /// simulator's ground truth, fuses them into a semantic map and saves it (.avpmap).
 struct MapBuildOptions {
-  SceneSource scene;
+  sim::SceneSource scene;
   int views = 6;
-  double voxel_size_m = 0.005;
-  mapping::FusionPolicy policy = mapping::FusionPolicy::kReferenceMax;
-  mapping::FreeSpaceCarving carving = mapping::FreeSpaceCarving::kRayCast;
+  /// The map (voxel size, sensor model, semantic fusion) and the integrator (carving, range):
+  /// the library's defaults, as `avp run` uses them; the ROI is set from roi_margin_m.
+  mapping::MapOptions map;
+  mapping::IntegratorOptions integrator;
   /// Threads of the integrator (0 = all hardware threads); the map does not depend on it.
   int threads = 0;
   /// Confidence given to every ground-truth mask (the segmenter's calibrated score).
@@ -97,7 +98,8 @@ std::vector<RigidTransform> ArcViewPoses(const Eigen::Vector3d& target_W,
                                          std::vector<double>* azimuths_deg = nullptr);
 
 /// Errors name the bad value (unknown scenario, views < 1, voxel size out of range ...).
-Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options);
+Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options,
+                                    const sim::ScenarioRegistry& scenarios);
 
 // ---- avp map gt
 // -----------------------------------------------------------------------------------
@@ -105,7 +107,8 @@ Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options);
 /// `avp map gt`: the scene's fruit surfaces voxelised (sim::VoxelizeFruitSurfaces) and written as
 /// an OctoMap .bt of occupied voxels: the same kind of ground truth as the reference system's.
 struct MapGtOptions {
-  SceneSource scene;
+  sim::SceneSource scene;
+  /// 6 mm: the resolution of the reference system's ground-truth octrees (reference-system.md).
   double voxel_size_m = 0.006;
   std::filesystem::path out = "out/gt.bt";
 };
@@ -115,7 +118,7 @@ struct MapGtSummary {
   size_t voxels = 0;
   uint64_t file_bytes = 0;
 };
-Result<MapGtSummary> RunMapGt(const MapGtOptions& options);
+Result<MapGtSummary> RunMapGt(const MapGtOptions& options, const sim::ScenarioRegistry& scenarios);
 
 // ---- avp map info
 // ---------------------------------------------------------------------------------

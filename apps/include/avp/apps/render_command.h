@@ -5,16 +5,16 @@
 #include <string>
 #include <vector>
 
-#include <avp/apps/scene_source.h>
 #include <avp/core/camera.h>
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
+#include <avp/sim/scenario.h>
 
 namespace avp::apps {
 
 /// `avp render`: one simulated RGB-D + labels view written to a folder.
 struct RenderOptions {
-  SceneSource scene;
+  sim::SceneSource scene;
   /// Arm joints in degrees (URDF convention); the camera pose is FK + mount.
   std::optional<std::vector<double>> joints_deg;
   /// Camera optical frame pose x, y, z (m), roll, pitch, yaw (deg) in the world (robot base) frame.
@@ -42,6 +42,7 @@ struct RenderSummary {
 /// Renders and writes rgb.png, depth.png (uint16 mm), instance.png (uint16), class.png (uint8),
 /// labels_preview.png, camera.json and fruits.json. Errors name the bad value (unknown scenario,
 /// wrong joint count, unreachable or out-of-limit joints, unwritable folder ...).
-Result<RenderSummary> RunRender(const RenderOptions& options);
+Result<RenderSummary> RunRender(const RenderOptions& options,
+                                const sim::ScenarioRegistry& scenarios);
 
 }  // namespace avp::apps

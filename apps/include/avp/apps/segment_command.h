@@ -5,8 +5,10 @@
 #include <string>
 #include <vector>
 
+#include <avp/core/options.h>
 #include <avp/core/segmentation.h>
 #include <avp/core/status.h>
+#include <avp/segmentation/segmenter_registry.h>
 
 namespace avp::apps {
 
@@ -16,7 +18,7 @@ struct SegmentOptions {
   std::filesystem::path image;
   /// Comma-separated phrases, e.g. "tomato, green apple".
   std::string prompt = "tomato";
-  /// A segmenter spec MakeSegmenter accepts: "ywes", "lsam" (their models from AVP_ZSL_MODEL_DIR
+  /// A segmenter spec the registry knows: "ywes", "lsam" (their models from AVP_ZSL_MODEL_DIR
   /// or `models`), "ywes://DIR", "color", "oracle", "remote://host:port", ...
   std::string backend = "ywes";
   /// The model directory of "ywes" / "lsam" (turns the spec into "<backend>://<models>");
@@ -28,6 +30,8 @@ struct SegmentOptions {
   std::filesystem::path out_dir = "out/segment";
   /// The segmenter's seed (only noisy segmenters use it).
   uint64_t seed = 0;
+  /// Options of the segmenter over its registered defaults (--segmenter-option).
+  OptionValues segmenter_options;
 
   /// OK, or InvalidArgument listing every bad field.
   Status Validate() const;
@@ -54,7 +58,8 @@ Result<std::string> SegmenterSpecFor(const SegmentOptions& options);
 /// and writes out_dir/overlay.png (zsl::DrawSegmentationOverlay) and out_dir/instances.json
 /// (SegmentationJson). Errors name the bad value: unreadable image, unknown or unusable backend
 /// (the segmenter's own error, e.g. a missing model directory), bad prompt, unwritable folder.
-Result<SegmentResult> RunSegment(const SegmentOptions& options);
+Result<SegmentResult> RunSegment(const SegmentOptions& options,
+                                 const segmentation::SegmenterRegistry& segmenters);
 
 /// instances.json: {"backend", "spec", "prompt", "threshold", "image": {"path", "width",
 /// "height"}, "total_ms", "timings": [{"stage", "ms"}], "instances": [{"index", "label",

@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 
+#include <avp/core/options.h>
 #include <avp/core/status.h>
 
 namespace avp {
@@ -58,5 +59,8 @@ struct CameraIntrinsics {
 };
 
 std::string ToString(const CameraIntrinsics& K);
+
+/// The fields of CameraIntrinsics (configs name a camera by them: camera.fx, ...).
+const OptionTable<CameraIntrinsics>& CameraIntrinsicsTable();
 
 }  // namespace avp

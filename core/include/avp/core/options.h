@@ -51,7 +51,7 @@ struct ValueRange {
 };
 
 /// What a field holds, for help texts and YAML (lists are written as sequences).
-enum class OptionKind { kReal, kInteger, kFlag, kText, kChoice, kRealList };
+enum class OptionKind { kReal, kInteger, kFlag, kText, kChoice, kRealList, kTextList };
 
 /// One field as help texts and docs show it.
 struct OptionInfo {
@@ -125,6 +125,8 @@ class OptionTable {
   OptionTable& Flag(std::string key, bool T::*field, std::string doc);
   OptionTable& Text(std::string key, std::string T::*field, std::string doc);
   OptionTable& Path(std::string key, std::filesystem::path T::*field, std::string doc);
+  /// A list of words ("tomato,apple"); entries may not contain commas.
+  OptionTable& TextList(std::string key, std::vector<std::string> T::*field, std::string doc);
   /// An enum by name: `names` lists every accepted value and its name.
   template <typename E>
   OptionTable& Choice(std::string key, E T::*field, std::vector<std::pair<E, std::string>> names,
@@ -225,6 +227,11 @@ class AnyOptions {
   /// The value. @throws avp::Error when T is not the held type (a bug in a factory).
   template <typename T>
   const T& As() const;
+  /// True when the held value is a T.
+  template <typename T>
+  bool Holds() const {
+    return impl_ != nullptr && impl_->type() == typeid(T);
+  }
 
  private:
   struct Concept {
@@ -355,6 +362,19 @@ OptionTable<T>& OptionTable<T>::Path(std::string key, std::filesystem::path T::*
 }
 
 template <typename T>
+OptionTable<T>& OptionTable<T>::TextList(std::string key, std::vector<std::string> T::*field,
+                                         std::string doc) {
+  Field f;
+  f.info = {std::move(key), OptionKind::kTextList, "", "", std::move(doc), {}, {}};
+  f.get = [field](const T& o) { return options_internal::Join(o.*field, ","); };
+  f.set = [field](T& o, std::string_view text) -> std::string {
+    o.*field = options_internal::SplitList(text);
+    return {};
+  };
+  return Add(std::move(f));
+}
+
+template <typename T>
 template <typename E>
 OptionTable<T>& OptionTable<T>::Choice(std::string key, E T::*field,
                                        std::vector<std::pair<E, std::string>> names,
@@ -429,10 +449,12 @@ OptionTable<T>& OptionTable<T>::RealList(std::string key, std::vector<double> T:
       problems.push_back(key + " has " + std::to_string(values.size()) + " values, must have " +
                          size);
     }
-    for (double v : values) {
+    for (size_t i = 0; i < values.size(); ++i) {
+      const double v = values[i];
       if (std::isfinite(v) && each.Contains(v)) continue;
-      problems.push_back(key + " (" + FormatReal(v) + (unit.empty() ? "" : " " + unit) +
-                         ") must be " + (std::isfinite(v) ? each.Requirement() : "finite"));
+      problems.push_back(key + "[" + std::to_string(i) + "] (" + FormatReal(v) +
+                         (unit.empty() || !std::isfinite(v) ? "" : " " + unit) + ") must be " +
+                         (std::isfinite(v) ? each.Requirement() : "finite"));
     }
   };
   return Add(std::move(f));

@@ -14,6 +14,8 @@
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/core/voxel_key.h>
+#include <avp/mapping/integrator.h>
+#include <avp/mapping/voxel_grid.h>
 #include <avp/robot/arm_model.h>
 #include <avp/sim/scene.h>
 
@@ -21,8 +23,9 @@ namespace avp::eval {
 
 /// How the observable ground truth is computed (docs/evaluation.md).
 struct GroundTruthOptions {
-  /// Voxel edge of the ground truth; must equal the evaluated map's (2 - 20 mm).
-  double voxel_size_m = 0.005;
+  /// Voxel edge of the ground truth; must equal the evaluated map's (mapping::VoxelSizeRange).
+  /// A run sets it from its map; the default is the map's.
+  double voxel_size_m = mapping::GridOptions{}.voxel_size_m;
   /// Observation views: for each fruit, camera positions on spheres of these radii (metres)
   /// around its centre, over a fan of azimuths and elevations facing the robot base (the world
   /// origin), looking at the fruit; kept only when the arm reaches them (ArmModel::SolveCameraIk
@@ -39,8 +42,9 @@ struct GroundTruthOptions {
   int image_width = 320;
   int image_height = 240;
   /// Returns farther from the camera than this (Euclidean) are ignored, as the integrator's
-  /// max_range_m ignores them (mapping::IntegratorOptions, default 1.5 m).
-  double max_range_m = 1.5;
+  /// max_range_m ignores them. A run sets it from its integrator; the default is the
+  /// integrator's.
+  double max_range_m = mapping::IntegratorOptions{}.max_range_m;
   /// Seed of the IK restarts (each view draws from its own stream of it).
   uint64_t seed = 0;
   /// Worker threads (0 = all hardware threads). The result does not depend on it.
@@ -49,6 +53,11 @@ struct GroundTruthOptions {
   /// OK, or InvalidArgument naming every bad field and its value.
   Status Validate() const;
 };
+
+/// The fields of GroundTruthOptions that describe the observation views (radii_m, azimuths,
+/// elevations_deg, azimuth_half_range_deg, image_width, image_height); voxel_size_m, max_range_m,
+/// seed and num_threads come from the run and are checked by a rule.
+const OptionTable<GroundTruthOptions>& GroundTruthOptionTable();
 
 /// The visible-fraction levels at which `avp run` (record.json) and `avp bench` (summary.md)
 /// count fruits by GroundTruth::FruitsVisibleAtLeast: below 0.05 the oracle segmenter never

@@ -10,6 +10,7 @@
 #include <avp/eval/ground_truth.h>
 #include <avp/eval/metrics.h>
 #include <avp/planning/candidates.h>
+#include <avp/planning/planner_registry.h>
 #include <avp/planning/view_planner.h>
 #include <avp/segmentation/oracle_segmenter.h>
 #include <avp/sim/rgbd_renderer.h>
@@ -51,6 +52,27 @@ struct OracleNbvOptions {
   double w_motion = 0.1;
   int num_threads = 0;
 };
+
+/// The configurable fields of OracleNbvOptions: candidates.*, render_scale and w_motion (the
+/// objective and the observation-view candidates come with the planner's name, the detector
+/// model with the run's segmenter: PlannerTruth::detector).
+const OptionTable<OracleNbvOptions>& OracleNbvOptionTable();
+
+/// What the oracle planners know (planning::PlannerContext::truth): the true scene, its ground
+/// truth, and the detector model of the run's segmenter (the oracle segmenter's options; the
+/// default noise model for any other segmenter, whose misses it cannot know). The scene and the
+/// ground truth must outlive the planners built with it.
+struct PlannerTruth final : planning::PlannerTruth {
+  PlannerTruth(const sim::Scene& s, const GroundTruth& g, segmentation::OracleOptions d)
+      : scene(s), gt(g), detector(std::move(d)) {}
+  const sim::Scene& scene;
+  const GroundTruth& gt;
+  segmentation::OracleOptions detector;
+};
+
+/// Registers the diagnostic planners that need the ground truth (needs_ground_truth = true):
+/// "oracle-nbv" and "oracle-detect". @throws avp::Error if a name is already taken.
+void RegisterOraclePlanners(planning::PlannerRegistry& registry);
 
 /// kDetections: a fruit not yet found is worth this many voxels (more than any fruit has), so
 /// the expected number of newly found fruits ranks views first and new voxels break ties.

@@ -11,6 +11,7 @@
 #include <avp/core/status.h>
 #include <avp/interop/segmentation_codec.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/segmentation/segmenter_registry.h>
 
 namespace avp::interop {
 
@@ -108,9 +109,10 @@ class RemoteSegmenter final : public segmentation::Segmenter {
   std::unique_ptr<Impl> impl_;
 };
 
-/// Registers the "remote://" scheme with segmentation::RegisterSegmenterFactory, so that every
-/// command and config accepts "remote://host:port[/model]". The factory parses the spec and sends
-/// the run's segmenter seed as the `seed` parameter. Idempotent.
-void RegisterRemoteSegmenter();
+/// Registers the "remote://" scheme with `registry`, so that every command and config accepts
+/// "remote://host:port[/model]". The factory parses the spec (its settings are in the spec's
+/// query, ParseRemoteSpec) and sends the run's segmenter seed as the `seed` parameter.
+/// @throws avp::Error if the scheme is already registered.
+void RegisterRemoteSegmenter(segmentation::SegmenterRegistry& registry);
 
 }  // namespace avp::interop

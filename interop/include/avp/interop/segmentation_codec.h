@@ -111,7 +111,7 @@ Result<InferRequest> EncodeSegmentationRequest(const segmentation::SegmentationR
 /// A request decoded on the server: it owns the frame and labels that request() points into.
 struct DecodedSegmentationRequest {
   RgbdFrame frame;
-  std::optional<segmentation::SimulatorLabels> labels;
+  std::optional<SimulatorLabels> labels;
   std::string prompt;
   float score_threshold = 0.0f;
   uint64_t frame_index = 0;

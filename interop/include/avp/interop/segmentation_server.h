@@ -8,6 +8,7 @@
 #include <vector>
 
 #include <avp/core/status.h>
+#include <avp/segmentation/segmenter_registry.h>
 
 namespace avp::interop {
 
@@ -17,8 +18,11 @@ struct ServerOptions {
   std::string host = "127.0.0.1";
   /// TCP port; 0 picks a free one (SegmentationServer::port() reports it).
   int port = 8001;
-  /// Backends to serve, each as a model of the same name: any spec segmentation::MakeSegmenter
-  /// accepts ("oracle", "oracle-perfect", "color", the registered network backends).
+  /// Where the backends come from (required; must outlive the server): the program's
+  /// segmenters.
+  const segmentation::SegmenterRegistry* segmenters = nullptr;
+  /// Backends to serve, each as a model of the same name: any spec `segmenters` knows ("oracle",
+  /// "oracle-perfect", "color", the registered network backends).
   std::vector<std::string> backends = {"oracle"};
   /// Worker threads running Segment(); requests beyond them wait in a queue (deadlines apply).
   int threads = 4;
@@ -41,7 +45,7 @@ struct ServerOptions {
 struct ModelState {
   std::string name;
   bool ready = false;
-  /// Why the backend could not be built ("" when ready): the status of MakeSegmenter.
+  /// Why the backend could not be built ("" when ready): the status of building it.
   std::string reason;
 };
 

@@ -7,6 +7,7 @@
 #include <string_view>
 #include <vector>
 
+#include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
 
 #include <avp/core/options.h>
@@ -17,6 +18,10 @@ namespace avp::io {
 /// The values as a nested YAML map, in table order; `info` (the same table's OptionTable::Info)
 /// tells which values are lists. Reals, integers and flags are plain scalars.
 YAML::Node OptionsToYaml(const OptionValues& values, const std::vector<OptionInfo>& info);
+
+/// The same values as nested JSON (run records): reals and integers as numbers, flags as
+/// booleans, lists as arrays, the rest as strings.
+nlohmann::json OptionsToJson(const OptionValues& values, const std::vector<OptionInfo>& info);
 
 /// A YAML map flattened into dotted KEY=VALUE text pairs in document order: nested maps give
 /// "a.b" keys, sequences of scalars become "x,y,z", null becomes "". InvalidArgument naming

@@ -15,9 +15,9 @@
 #include <avp/core/transform.h>
 #include <avp/mapping/integrator.h>
 #include <avp/mapping/semantic_map.h>
-#include <avp/pipeline/rgbd_source.h>
 #include <avp/planning/view_planner.h>
 #include <avp/robot/arm.h>
+#include <avp/robot/rgbd_source.h>
 #include <avp/segmentation/segmenter.h>
 
 namespace avp::pipeline {
@@ -95,8 +95,15 @@ struct EpisodeOptions {
   int record_top_candidates = 5;
   /// Seeds the planner's and the arm's random choices (forked per view).
   uint64_t seed = 0;
+  /// The table's ranges, a prompt that names something, a target class other than background
+  /// and a finite, non-empty ROI.
   Status Validate() const;
 };
+
+/// The configurable fields of EpisodeOptions: views, prompt, score_threshold,
+/// record_top_candidates and integrator.* (the ROI, the target class and the seed come from the
+/// scene, the prompt and the run).
+const OptionTable<EpisodeOptions>& EpisodeOptionTable();
 
 /// How the episode ended.
 enum class EpisodeEnd : uint8_t {
@@ -133,7 +140,7 @@ using MetricsHook =
 
 /// The components of one episode (non-owning).
 struct EpisodeComponents {
-  RgbdSource* source = nullptr;
+  robot::RgbdSource* source = nullptr;
   segmentation::Segmenter* segmenter = nullptr;
   robot::Arm* arm = nullptr;
   planning::ViewPlanner* planner = nullptr;

@@ -30,8 +30,8 @@ struct MoveResult {
 /// are non-virtual; implementations override the protected Do* methods (NVI), which are only
 /// called with validated, in-limit requests.
 ///
-/// Implementations: SimArm (teleports; tests and simulation). A real arm (ROS 2 / MoveIt) lives in
-/// interop/.
+/// Implementations: sim::SimArm (teleports; tests and simulation). A real arm (ROS 2 / MoveIt)
+/// lives in interop/.
 class Arm {
  public:
   virtual ~Arm() = default;
@@ -73,24 +73,6 @@ class Arm {
   int num_moves_ = 0;
   double total_joint_path_length_ = 0.0;
   int num_refused_moves_ = 0;
-};
-
-/// A kinematic arm that teleports: a move to any in-limit target succeeds at once, and its path
-/// length is the straight joint-space distance.
-class SimArm final : public Arm {
- public:
-  /// Starts at model.home_joints().
-  explicit SimArm(ArmModel model);
-  /// Starts at `q_initial`. @throws avp::Error if it is not valid for the model (the message
-  /// names the bad joint and value).
-  SimArm(ArmModel model, const Eigen::VectorXd& q_initial);
-
- protected:
-  Eigen::VectorXd DoCurrentJoints() const override { return q_; }
-  MoveResult DoMoveToJoints(const Eigen::VectorXd& q) override;
-
- private:
-  Eigen::VectorXd q_;
 };
 
 }  // namespace avp::robot

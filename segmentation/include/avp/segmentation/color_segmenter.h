@@ -9,6 +9,7 @@
 
 #include <avp/core/status.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/segmentation/segmenter_registry.h>
 
 namespace avp::segmentation {
 
@@ -81,6 +82,13 @@ struct ColorOptions {
 ///
 /// Errors: InvalidArgument for a null or invalid frame, an empty prompt or a score threshold
 /// outside [0, 1].
+/// The scalar fields of ColorOptions: min_saturation, min_value, min_area_px, confidence (the hue
+/// ranges and the word -> colour map are set in code; a rule checks them).
+const OptionTable<ColorOptions>& ColorOptionTable();
+
+/// "color": the reference's HSV colour filter.
+SegmenterEntry ColorSegmenterEntry();
+
 class ColorSegmenter : public Segmenter {
  public:
   /// @throws avp::Error if options.Validate() fails (the message names the bad fields).

@@ -11,6 +11,7 @@
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/segmentation/segmenter_registry.h>
 
 namespace avp::segmentation {
 
@@ -98,6 +99,13 @@ std::optional<double> ExpectedFruitAreaPx(const CameraIntrinsics& K, const Rigid
 /// Errors: InvalidArgument for a null or invalid frame, an empty prompt, a score threshold outside
 /// [0, 1], label images whose size differs from the frame (naming both sizes) or a ground-truth
 /// fruit with a bad radius or centre; FailedPrecondition when request.labels is null.
+/// The fields of OracleOptions (every one of them), with the rules between them.
+const OptionTable<OracleOptions>& OracleOptionTable();
+
+/// "oracle" (OracleOptions{}) and "oracle-perfect" (OracleOptions::Perfect() as its defaults).
+SegmenterEntry OracleSegmenterEntry();
+SegmenterEntry OraclePerfectSegmenterEntry();
+
 class OracleSegmenter : public Segmenter {
  public:
   /// @throws avp::Error if options.Validate() fails (the message names the bad fields).

@@ -1,7 +1,6 @@
 #pragma once
 
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -12,24 +11,10 @@
 #include <avp/core/image.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/core/segmentation.h>
+#include <avp/core/simulator_labels.h>
 #include <avp/core/status.h>
 
 namespace avp::segmentation {
-
-/// One ground-truth fruit as a simulator knows it (for segmenters that imitate a detector).
-struct GroundTruthFruit {
-  uint16_t instance_id = 0;
-  Eigen::Vector3d center_W = Eigen::Vector3d::Zero();
-  double radius_m = 0.0;
-};
-
-/// What a simulator knows about a frame: its label images and fruits. Only simulation segmenters
-/// (oracle) read it; real segmenters ignore it.
-struct SimulatorLabels {
-  InstanceImage instance_ids;  ///< object instance id per pixel, 0 = background
-  ClassImage class_ids;        ///< SemanticClass per pixel, 0 = background
-  std::vector<GroundTruthFruit> fruits;
-};
 
 /// One segmentation request: an RGB-D frame and a text prompt.
 struct SegmentationRequest {
@@ -49,7 +34,8 @@ struct SegmentationRequest {
 
 /// Turns an image and a prompt into instance masks. Implementations: OracleSegmenter (simulator
 /// labels through a zero-shot-like error model), ColorSegmenter (HSV thresholds); the network
-/// backends come with their own module. Expected failures (bad input, missing labels) are
+/// backends come with their own module. Programs pick them by name from a SegmenterRegistry
+/// (segmenter_registry.h). Expected failures (bad input, missing labels) are
 /// statuses naming the bad value, never exceptions.
 class Segmenter {
  public:
@@ -64,35 +50,5 @@ class Segmenter {
 /// Splits a prompt on commas into trimmed, non-empty phrases ("tomato, green apple" -> {"tomato",
 /// "green apple"}). InvalidArgument when nothing is left.
 Result<std::vector<std::string>> SplitPrompt(std::string_view prompt);
-
-/// The names MakeSegmenter accepts, in a stable order: "oracle", "oracle-perfect", "color".
-const std::vector<std::string>& SegmenterNames();
-
-/// Builds a segmenter from its spec (the name, or for a scheme the whole "remote://host:port").
-using SegmenterFactory =
-    std::function<Result<std::unique_ptr<Segmenter>>(std::string_view spec, uint64_t seed)>;
-
-/// Makes `name` known to MakeSegmenter: modules above this one (the network backends, the remote
-/// client) register themselves so that every command and config accepts them unchanged. A name
-/// ending in "://" is a scheme and matches every spec that starts with it. Registering a name
-/// again replaces its factory. Thread-safe.
-void RegisterSegmenterFactory(std::string name, SegmenterFactory factory);
-
-/// The registered names and schemes (RegisterSegmenterFactory), sorted.
-std::vector<std::string> RegisteredSegmenterNames();
-
-/// True when MakeSegmenter knows `spec`: a built-in name, a registered name, or a spec starting
-/// with a registered scheme. (Whether it then builds, e.g. reaches its server, is another matter.)
-bool IsKnownSegmenter(std::string_view spec);
-
-/// What error messages list as known: SegmenterNames(), then the registered names, schemes
-/// written as "remote://...".
-std::vector<std::string> KnownSegmenterSpecs();
-
-/// A segmenter by spec: "oracle" (OracleSegmenter with OracleOptions{}), "oracle-perfect"
-/// (OracleSegmenter with OracleOptions::Perfect()), "color" (ColorSegmenter with ColorOptions{};
-/// ignores the seed), or a registered name or scheme. NotFound naming the unknown spec and listing
-/// the known ones.
-Result<std::unique_ptr<Segmenter>> MakeSegmenter(std::string_view name, uint64_t seed);
 
 }  // namespace avp::segmentation

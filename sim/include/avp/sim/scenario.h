@@ -1,6 +1,8 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -11,21 +13,55 @@
 
 namespace avp::sim {
 
-/// A named, seeded scene generator mirroring one of the paper's experiments.
-struct ScenarioInfo {
+/// A named, seeded scene generator (a user picks it with --scenario NAME): the paper's
+/// experiments, or any a program registers.
+struct ScenarioEntry {
   std::string name;         ///< e.g. "tomato-full-occlusion"
   std::string description;  ///< one line, shown by `avp scenes`
+  /// The scene for `seed` (deterministic: the same seed, the same scene on any machine). Make()
+  /// sets its name, description and seed and finishes it (triangle counts, plant bounds).
+  std::function<Result<Scene>(uint64_t seed)> build;
 };
 
-/// Every built-in scenario, in a stable order. The first is the default.
-const std::vector<ScenarioInfo>& ListScenarios();
+/// The scenarios a program knows, in registration order. Built once at start-up, read-only
+/// afterwards: const methods may run on several threads at once.
+class ScenarioRegistry {
+ public:
+  /// InvalidArgument when the name is empty or taken, or the entry has no builder.
+  Status Add(ScenarioEntry entry);
+  const ScenarioEntry* Find(std::string_view name) const;
+  std::vector<std::string> Names() const;
+  const std::vector<ScenarioEntry>& entries() const { return entries_; }
+  /// The scene of `name` for `seed`. Errors: NotFound naming the unknown scenario and listing
+  /// the known ones; the builder's errors.
+  Result<Scene> Make(std::string_view name, uint64_t seed) const;
+
+ private:
+  std::vector<ScenarioEntry> entries_;
+};
+
+/// Registers the built-in scenarios (the paper's four tomato experiments and three espaliers).
+/// @throws avp::Error if a name is already taken.
+void RegisterBuiltinScenarios(ScenarioRegistry& registry);
+/// A registry with RegisterBuiltinScenarios only.
+ScenarioRegistry BuiltinScenarios();
+
 /// The scenario used when none is named ("tomato-multiple-clusters").
 std::string_view DefaultScenarioName();
 
-/// Builds the scenario's scene for `seed`: the same (name, seed) gives an identical scene on any
-/// machine, and different seeds give different plants of the same kind.
-/// Errors: NotFound naming the unknown scenario and listing the known ones.
+/// A built-in scenario's scene: BuiltinScenarios().Make(name, seed).
 Result<Scene> MakeScenario(std::string_view name, uint64_t seed);
+
+/// Where a command's scene comes from: a registered scenario (seeded) or a YAML scene file.
+struct SceneSource {
+  std::string scenario;              ///< empty: use scene_file, or the default scenario
+  std::filesystem::path scene_file;  ///< a YAML scene (docs/scene-format.md)
+  uint64_t seed = 0;
+};
+
+/// Builds the scene of `source` from `scenarios` or the file; errors name the bad scenario or
+/// file. Giving both is an error.
+Result<Scene> LoadScene(const SceneSource& source, const ScenarioRegistry& scenarios);
 
 // ---- Arm start configuration shared by the scenarios (and scene files) --------------------------
 

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <avp/core/options.h>
 #include <avp/core/rng.h>
 #include <avp/core/status.h>
 #include <avp/sim/rgbd_renderer.h>
@@ -23,6 +24,9 @@ struct DepthNoiseConfig {
 
   Status Validate() const;
 };
+
+/// The fields of DepthNoiseConfig.
+const OptionTable<DepthNoiseConfig>& DepthNoiseTable();
 
 /// Applies the model in place to `frame.rgbd.depth_m` (dropped pixels become 0; their labels are
 /// kept, since labels are ground truth). Deterministic in `rng`.

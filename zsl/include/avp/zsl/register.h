@@ -4,11 +4,12 @@
 #include <string_view>
 
 #include <avp/core/status.h>
+#include <avp/segmentation/segmenter_registry.h>
 
 namespace avp::zsl {
 
-/// Makes the zero-shot backends known to segmentation::MakeSegmenter (and so to every command and
-/// config that takes a segmenter spec):
+/// Registers the zero-shot backends with `registry` (and so with every command and config that
+/// takes a segmenter spec):
 ///   "ywes", "lsam"                 the model directory from AVP_ZSL_MODEL_DIR;
 ///   "ywes://DIR", "lsam://DIR"     the model directory DIR ("ywes:///abs/models",
 ///                                  "ywes://relative/models").
@@ -20,9 +21,10 @@ namespace avp::zsl {
 /// AVP_ZSL_MODEL_DIR is unset, saying what to set and what the folder must hold
 /// (docs/zero-shot-models.md); the Create errors of the backends (NotFound for a missing
 /// directory or model, InvalidArgument for a wrong contract, ...); in a build without ONNX
-/// Runtime (AVP_WITH_ONNX off), FailedPrecondition saying so. Call once at start-up (again is
-/// harmless: it re-registers the same factories). Thread-safe.
-void RegisterZslSegmenters();
+/// Runtime (AVP_WITH_ONNX off), FailedPrecondition saying so. They have no options table: their
+/// settings come from the manifest (docs/zero-shot-models.md). @throws avp::Error if a name is
+/// already taken.
+void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry);
 
 /// The model directory a "ywes"/"lsam" spec names: DIR for "<backend>://DIR", else
 /// AVP_ZSL_MODEL_DIR. Errors: FailedPrecondition (no directory, as above), InvalidArgument

@@ -11,10 +11,10 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <avp/eval/svg_plot.h>
+#include <avp/report/svg_plot.h>
 #include <avp/test/temp_dir_test.h>
 
-namespace avp::eval {
+namespace avp::report {
 namespace {
 
 namespace fs = std::filesystem;
@@ -247,4 +247,4 @@ TEST_F(SvgPlotFileTest, WriteFailsOnUnwritablePath) {
 }
 
 }  // namespace
-}  // namespace avp::eval
+}  // namespace avp::report

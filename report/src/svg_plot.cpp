@@ -10,10 +10,10 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
-#include <avp/eval/svg_plot.h>
 #include <avp/io/file.h>
+#include <avp/report/svg_plot.h>
 
-namespace avp::eval {
+namespace avp::report {
 
 namespace {
 
@@ -488,4 +488,4 @@ Status WriteLinePlotSvg(const std::filesystem::path& path, const LinePlot& plot)
   return io::WriteFileAtomic(path, svg, "plot");
 }
 
-}  // namespace avp::eval
+}  // namespace avp::report

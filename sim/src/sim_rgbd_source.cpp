@@ -1,10 +1,10 @@
 #include <avp/core/error.h>
-#include <avp/pipeline/rgbd_source.h>
+#include <avp/sim/sim_rgbd_source.h>
 
-namespace avp::pipeline {
+namespace avp::sim {
 
-SimRgbdSource::SimRgbdSource(const sim::Scene& scene, const CameraIntrinsics& K,
-                             const sim::DepthNoiseConfig& noise, uint64_t seed)
+SimRgbdSource::SimRgbdSource(const Scene& scene, const CameraIntrinsics& K,
+                             const DepthNoiseConfig& noise, uint64_t seed)
     : scene_(&scene),
       renderer_(scene),
       K_(K),
@@ -13,24 +13,24 @@ SimRgbdSource::SimRgbdSource(const sim::Scene& scene, const CameraIntrinsics& K,
   if (const Status k_status = K.Validate(); !k_status.ok()) {
     throw Error("SimRgbdSource: " + k_status.ToString());
   }
-  for (const sim::FruitTruth& f : scene.Fruits()) {
+  for (const FruitTruth& f : scene.Fruits()) {
     fruits_.push_back({f.instance_id, f.center_W, f.mean_radius_m()});
   }
 }
 
-Result<Observation> SimRgbdSource::Capture(const RigidTransform& X_WC, int64_t stamp_ns) {
+Result<robot::Observation> SimRgbdSource::Capture(const RigidTransform& X_WC, int64_t stamp_ns) {
   if (!X_WC.translation().allFinite() || !X_WC.rotation().allFinite()) {
     return InvalidArgumentError("SimRgbdSource: camera pose " + X_WC.ToString() + " is not finite");
   }
-  sim::RenderedFrame rendered = renderer_.Render(K_, X_WC, stamp_ns);
+  RenderedFrame rendered = renderer_.Render(K_, X_WC, stamp_ns);
   if (noise_.enabled) {
     Rng rng = noise_rng_.Fork(static_cast<uint64_t>(frames_));
-    sim::ApplyDepthNoise(noise_, rendered, rng);
+    ApplyDepthNoise(noise_, rendered, rng);
   }
   ++frames_;
-  Observation obs;
+  robot::Observation obs;
   obs.frame = std::move(rendered.rgbd);
-  segmentation::SimulatorLabels labels;
+  SimulatorLabels labels;
   labels.instance_ids = std::move(rendered.instance_ids);
   labels.class_ids = std::move(rendered.class_ids);
   labels.fruits = fruits_;
@@ -38,4 +38,4 @@ Result<Observation> SimRgbdSource::Capture(const RigidTransform& X_WC, int64_t s
   return obs;
 }
 
-}  // namespace avp::pipeline
+}  // namespace avp::sim

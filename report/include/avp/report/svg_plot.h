@@ -8,7 +8,7 @@
 
 #include <avp/core/status.h>
 
-namespace avp::eval {
+namespace avp::report {
 
 /// One line of a LinePlot.
 struct LineSeries {
@@ -62,4 +62,4 @@ Status WriteLinePlotSvg(const std::filesystem::path& path, const LinePlot& plot)
 /// `text` with &, <, >, " and ' replaced by XML entities.
 std::string EscapeXml(std::string_view text);
 
-}  // namespace avp::eval
+}  // namespace avp::report

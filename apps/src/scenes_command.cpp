@@ -1,0 +1,36 @@
+// avp scenes: the registered scenarios, one line each.
+#include <algorithm>
+#include <cstdio>
+
+#include <avp/sim/scenario.h>
+
+#include "cli_common.h"
+
+namespace avp::apps {
+
+namespace {
+
+int ListScenes(const sim::ScenarioRegistry& scenarios) {
+  size_t width = 0;
+  for (const sim::ScenarioEntry& s : scenarios.entries()) width = std::max(width, s.name.size());
+  std::printf("Built-in scenarios (default: %s):\n",
+              std::string(sim::DefaultScenarioName()).c_str());
+  for (const sim::ScenarioEntry& s : scenarios.entries()) {
+    std::printf("  %-*s  %s\n", static_cast<int>(width), s.name.c_str(), s.description.c_str());
+  }
+  std::printf(
+      "Any seed gives a different plant of the same kind: avp render --scenario NAME --seed N\n");
+  return 0;
+}
+
+}  // namespace
+
+void AddScenesCommand(CLI::App& app, CommandContext& context) {
+  CLI::App* cmd =
+      app.add_subcommand("scenes", "List the built-in scenarios with one-line descriptions");
+  cmd->callback([&context] {
+    RunGuarded(context, [&] { return ListScenes(context.registries->scenarios); });
+  });
+}
+
+}  // namespace avp::apps

@@ -1,0 +1,48 @@
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include <avp/core/status.h>
+#include <avp/eval/ground_truth.h>
+#include <avp/eval/metrics.h>
+#include <avp/eval/oracle_planner.h>
+#include <avp/experiment/registries.h>
+#include <avp/experiment/run_config.h>
+#include <avp/mapping/semantic_map.h>
+#include <avp/pipeline/episode.h>
+#include <avp/sim/scene.h>
+
+namespace avp::experiment {
+
+/// The scene of `config`: its registered scenario (the default one when none is named) or its
+/// scene file, seeded with config.seed.
+Result<sim::Scene> LoadScene(const RunConfig& config, const Registries& registries);
+
+/// The ground truth for `config` on `scene`: the observable fruit surface (from the arm's
+/// reachable views, config.ground_truth at the map's voxel size and the integrator's range), or
+/// config.ground_truth_file.
+Result<eval::GroundTruth> GroundTruthFor(const RunConfig& config, const sim::Scene& scene);
+
+/// Everything one episode produced.
+struct RunResult {
+  pipeline::EpisodeResult episode;
+  /// Final metrics (the last step's).
+  eval::MapMetrics final_metrics;
+  size_t gt_voxels = 0;
+  size_t gt_fruits = 0;
+  double gt_ms = 0.0;
+  /// Per plan step, with RunConfig::oracle_regret (empty otherwise).
+  std::vector<eval::StepRegret> regret;
+};
+
+/// Runs one episode of `config` on `scene` against `gt` (compute it once per scene with
+/// GroundTruthFor and share it between planners and seeds): the simulated camera and arm
+/// (sim::SimRgbdSource, sim::SimArm), the registered planner and segmenter with their options.
+/// `map_out`, when given, receives the final map. Observers see every step as it completes.
+Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const Registries& registries,
+                                    const sim::Scene& scene, const eval::GroundTruth& gt,
+                                    const std::vector<pipeline::EpisodeObserver*>& observers = {},
+                                    std::unique_ptr<mapping::SemanticMap>* map_out = nullptr);
+
+}  // namespace avp::experiment

@@ -1,0 +1,94 @@
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <string_view>
+
+#include <yaml-cpp/yaml.h>
+
+#include <avp/core/camera.h>
+#include <avp/core/options.h>
+#include <avp/core/status.h>
+#include <avp/eval/ground_truth.h>
+#include <avp/experiment/registries.h>
+#include <avp/mapping/semantic_map.h>
+#include <avp/pipeline/episode.h>
+#include <avp/sim/sensor_noise.h>
+
+namespace avp::experiment {
+
+/// A registered component picked by name, with KEY=VALUE settings over its registered defaults
+/// (checked against its options table when the configuration is validated).
+struct ComponentChoice {
+  std::string name;
+  OptionValues options;
+};
+
+/// One episode's whole configuration (docs/experiments.md, "Configuration"): it nests the
+/// modules' own option structs, each with its field table, and writes each default once, where
+/// the module declares it. `avp run --print-config` prints it as YAML that `--config` reads back.
+struct RunConfig {
+  /// A registered scenario (empty: the default one) or a YAML scene file (then scenario is empty).
+  std::string scenario;
+  std::filesystem::path scene_file;
+  /// Seed of the plant, the noise and every choice (forked per subsystem).
+  uint64_t seed = 0;
+  /// Threads inside the planner, the integrator and the ground truth (0 = all). Results do not
+  /// depend on it.
+  int threads = 0;
+  /// The planning ROI is the scene's plant bounds inflated by this.
+  double roi_margin_m = 0.05;
+  /// Ground truth from an OctoMap .bt instead of the observable fruit surface.
+  std::filesystem::path ground_truth_file;
+  /// Measure each plan step's regret with the truth (eval::RegretProbe): the episode does not
+  /// change, its plan times include the probe's rendering.
+  bool oracle_regret = false;
+  /// The camera (its intrinsics and depth range).
+  CameraIntrinsics camera = CameraIntrinsics::RealSenseD435();
+  /// The simulated camera's depth noise (on by default in episodes).
+  sim::DepthNoiseConfig depth_noise{.enabled = true};
+  /// The semantic occupancy map.
+  mapping::MapOptions map;
+  /// The loop: views, prompt, score threshold, integrator.
+  pipeline::EpisodeOptions episode;
+  /// How the observable ground truth is computed (its voxel size and range are the map's and the
+  /// integrator's).
+  eval::GroundTruthOptions ground_truth;
+  ComponentChoice planner{"avp-nbv", {}};
+  ComponentChoice segmenter{"oracle", {}};
+
+  /// Every problem at once, each naming the key and its value: the tables' ranges, an unknown
+  /// scenario, planner or segmenter (with the known ones), options a component does not have or
+  /// values out of their range. InvalidArgument "invalid run configuration: ...".
+  Status Validate(const Registries& registries) const;
+};
+
+/// The fields of RunConfig that do not depend on the registries: everything but `planner` and
+/// `segmenter` (camera.*, depth_noise.*, map.*, episode.*, ground_truth.*, ...).
+const OptionTable<RunConfig>& RunConfigTable();
+
+/// Sets one key of the configuration tree from text, as a YAML file or `--set KEY=VALUE` names
+/// it: a key of RunConfigTable ("map.grid.voxel_size_m"), "planner" or "planner.name",
+/// "planner.options.KEY", and the same for "segmenter". Component options are checked by
+/// Validate, not here. InvalidArgument naming an unknown key (and the known top-level ones).
+Status SetRunConfigKey(RunConfig& config, std::string_view key, std::string_view value);
+
+/// The effective configuration as YAML: every field of RunConfigTable, and the planner's and
+/// segmenter's names with every one of their options (registered defaults, then the
+/// overrides). Errors: those of Validate for the components.
+Result<YAML::Node> RunConfigToYaml(const RunConfig& config, const Registries& registries);
+
+/// Applies a YAML tree (RunConfigToYaml's shape, any subset of it) over `config`: every key it
+/// names is set (SetRunConfigKey), in document order. Errors name `context` and the key.
+Status ReadRunConfigYaml(const YAML::Node& node, std::string_view context, RunConfig& config);
+
+/// Reads a run configuration file over the defaults (RunConfig{}), then validates it.
+Result<RunConfig> LoadRunConfig(const std::filesystem::path& yaml, const Registries& registries);
+
+/// The planner's and the segmenter's options, resolved (registered defaults + overrides,
+/// validated).
+Result<AnyOptions> PlannerOptions(const RunConfig& config, const Registries& registries);
+Result<AnyOptions> SegmenterOptions(const RunConfig& config, const Registries& registries);
+
+}  // namespace avp::experiment

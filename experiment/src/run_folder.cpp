@@ -1,0 +1,136 @@
+#include <chrono>
+
+#include <fmt/format.h>
+
+#include <avp/experiment/run_folder.h>
+#include <avp/io/json.h>
+#include <avp/io/options_yaml.h>
+#include <avp/mapping/octomap_io.h>
+#include <avp/mapping/ply_export.h>
+#include <avp/report/metrics_csv.h>
+#include <avp/report/provenance.h>
+#include <avp/report/run_report.h>
+#include <avp/report/svg_plot.h>
+
+namespace avp::experiment {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+using nlohmann::json;
+
+namespace {
+
+double SecondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+json ComponentJson(const std::string& name, const AnyOptions& options) {
+  return {{"name", name}, {"options", io::OptionsToJson(options.Values(), options.Info())}};
+}
+
+/// Calls the progress callback after every step.
+class ProgressObserver final : public pipeline::EpisodeObserver {
+ public:
+  explicit ProgressObserver(const RunFolderOptions& options) : options_(options) {}
+  void OnStep(const pipeline::StepRecord& s, const mapping::SemanticMap&) override {
+    if (options_.on_step) options_.on_step(s);
+  }
+
+ private:
+  const RunFolderOptions& options_;
+};
+
+/// map.ot, fruit_voxels.ply and metrics.svg of a finished episode.
+Status WriteMapAndPlot(const RunConfig& config, const sim::Scene& scene, const RunResult& result,
+                       const mapping::SemanticMap& map, const fs::path& dir,
+                       std::vector<fs::path>& files) {
+  const fs::path ot = dir / "map.ot";
+  AVP_RETURN_IF_ERROR(mapping::ExportOctomapColor(map, ot).status());
+  files.push_back(ot);
+  const fs::path ply = dir / "fruit_voxels.ply";
+  AVP_RETURN_IF_ERROR(mapping::ExportSemanticPly(map.grid(), ply).status());
+  files.push_back(ply);
+  const fs::path svg = dir / "metrics.svg";
+  AVP_RETURN_IF_ERROR(report::WriteLinePlotSvg(
+      svg, report::EpisodeMetricsPlot(
+               fmt::format("{} — {} / {} (seed {})", scene.name, config.planner.name,
+                           config.segmenter.name, config.seed),
+               result.episode.steps)));
+  files.push_back(svg);
+  return Status::Ok();
+}
+
+Result<json> RecordJson(const RunConfig& config, const Registries& registries,
+                        const sim::Scene& scene, const eval::GroundTruth& gt, double gt_s,
+                        const RunResult& result) {
+  AVP_ASSIGN_OR_RETURN(json config_json, RunConfigJson(config, registries));
+  json steps = json::array();
+  for (const pipeline::StepRecord& s : result.episode.steps) steps.push_back(report::StepJson(s));
+  return json{
+      {"avp", "avp run"},
+      {"config", std::move(config_json)},
+      {"scene",
+       {{"name", scene.name}, {"description", scene.description}, {"fruits", gt.fruits.size()}}},
+      {"ground_truth", report::GroundTruthJson(gt, gt_s)},
+      {"git_revision", report::SourceRevision()},
+      {"host", report::HostDescription()},
+      {"end", std::string(pipeline::ToString(result.episode.end))},
+      {"end_reason", result.episode.end_reason},
+      {"views_fused", result.episode.views_fused()},
+      {"episode_seconds", result.episode.total_ms / 1e3},
+      {"final_metrics", report::MetricsJson(result.final_metrics)},
+      {"oracle_regret", report::RegretJson(result.regret)},
+      {"steps", steps}};
+}
+
+}  // namespace
+
+Result<json> RunConfigJson(const RunConfig& config, const Registries& registries) {
+  AVP_ASSIGN_OR_RETURN(const AnyOptions planner, PlannerOptions(config, registries));
+  AVP_ASSIGN_OR_RETURN(const AnyOptions segmenter, SegmenterOptions(config, registries));
+  json out = io::OptionsToJson(RunConfigTable().Values(config), RunConfigTable().Info(config));
+  out["planner"] = ComponentJson(config.planner.name, planner);
+  out["segmenter"] = ComponentJson(config.segmenter.name, segmenter);
+  return out;
+}
+
+Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& registries,
+                               const RunFolderOptions& options) {
+  const auto t0 = Clock::now();
+  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  if (options.out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
+  std::error_code ec;
+  fs::create_directories(options.out_dir, ec);
+  if (ec) {
+    return IoError(fmt::format("cannot create '{}': {}", options.out_dir.string(), ec.message()));
+  }
+  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(config, registries));
+  RunSummary summary;
+  summary.scene_name = scene.name;
+
+  const auto t_gt = Clock::now();
+  AVP_ASSIGN_OR_RETURN(const eval::GroundTruth gt, GroundTruthFor(config, scene));
+  const double gt_s = SecondsSince(t_gt);
+
+  const fs::path csv_path = options.out_dir / "metrics.csv";
+  AVP_ASSIGN_OR_RETURN(std::unique_ptr<report::MetricsCsvWriter> csv,
+                       report::MetricsCsvWriter::Open(csv_path));
+  ProgressObserver progress(options);
+  std::unique_ptr<mapping::SemanticMap> map;
+  AVP_ASSIGN_OR_RETURN(RunResult result, RunEpisodeOnScene(config, registries, scene, gt,
+                                                           {csv.get(), &progress}, &map));
+  csv.reset();
+  result.gt_ms = gt_s * 1e3;
+  summary.files.push_back(csv_path);
+  AVP_RETURN_IF_ERROR(WriteMapAndPlot(config, scene, result, *map, options.out_dir, summary.files));
+
+  AVP_ASSIGN_OR_RETURN(const json record, RecordJson(config, registries, scene, gt, gt_s, result));
+  const fs::path record_path = options.out_dir / "record.json";
+  AVP_RETURN_IF_ERROR(io::WriteJsonFile(record_path, record));
+  summary.files.insert(summary.files.begin(), record_path);
+  summary.result = std::move(result);
+  summary.seconds = SecondsSince(t0);
+  return summary;
+}
+
+}  // namespace avp::experiment

@@ -1,0 +1,83 @@
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <avp/core/options.h>
+#include <avp/core/status.h>
+#include <avp/eval/ground_truth.h>
+
+namespace avp::report {
+
+/// One episode of a bench as its summary needs it.
+struct BenchEpisode {
+  std::string scenario, planner;
+  uint64_t seed = 0;
+  /// Not OK: the episode failed (counted, left out of the statistics).
+  Status status;
+  /// Per fused view: the metrics (name, value) in MetricsRow's order.
+  std::vector<std::vector<std::pair<std::string, double>>> metrics;
+  std::vector<double> plan_ms;
+  double episode_s = 0.0;
+};
+
+/// How hidden a scenario's fruits are, over its seeds (eval::GroundTruth::best_visible_fraction):
+/// fruits in all, and those whose best visible fraction reaches each of
+/// eval::kVisibleFractionLevels. Empty (0 fruits) for ground truths read from files.
+struct FruitVisibility {
+  double fruits = 0.0;
+  std::array<double, eval::kVisibleFractionLevels.size()> visible{};
+  /// Adds one ground truth's fruits.
+  void Add(const eval::GroundTruth& gt);
+};
+
+/// What the summary says about the bench besides its episodes.
+struct BenchDescription {
+  std::vector<std::string> scenarios, planners;
+  size_t seeds = 0;
+  int views = 0;
+  std::string segmenter;
+  double voxel_size_m = 0.0;
+  std::string revision;
+  /// Per planner, its options over the registered defaults (none: not listed).
+  std::map<std::string, OptionValues> planner_options;
+  std::map<std::string, FruitVisibility> visibility;  ///< by scenario
+};
+
+/// The final view of one (scenario, planner): mean and 95 % CI over seeds.
+struct BenchCell {
+  std::string scenario, planner;
+  size_t runs = 0;
+  double final_f1_mean = 0.0, final_f1_ci95 = 0.0;
+  double final_found_mean = 0.0, final_found_ci95 = 0.0;
+  double fruits_total_mean = 0.0;
+  double plan_ms_mean = 0.0, episode_s_mean = 0.0;
+  size_t failed = 0;
+};
+
+struct BenchTables {
+  std::vector<BenchCell> cells;
+  /// summary.md, summary.csv, then the plots.
+  std::vector<std::filesystem::path> files;
+  size_t failed = 0;
+};
+
+/// Writes the bench's summary into `out_dir` (docs/experiments.md): summary.csv (long format:
+/// scenario, planner, segmenter, view, metric, mean, ci95, n; an episode that ended early keeps
+/// its last metrics for the remaining views), summary.md (the final view per planner, how hidden
+/// the fruits are, F1 per view), and per scenario f1_<s>.svg and fruits_<s>.svg (mean +- 95 % CI
+/// per planner, the paper's Fig. 3). `seconds` is the bench's wall time so far.
+Result<BenchTables> WriteBenchSummary(const std::filesystem::path& out_dir,
+                                      const BenchDescription& bench,
+                                      const std::vector<BenchEpisode>& episodes, double seconds);
+
+/// `s` with every character other than letters, digits, '-', '_' and '.' replaced by '_' (file
+/// and folder names from scenario and planner names).
+std::string SafeFileName(std::string s);
+
+}  // namespace avp::report

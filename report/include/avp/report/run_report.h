@@ -1,0 +1,35 @@
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <avp/eval/ground_truth.h>
+#include <avp/eval/metrics.h>
+#include <avp/eval/oracle_planner.h>
+#include <avp/pipeline/episode.h>
+#include <avp/report/svg_plot.h>
+
+namespace avp::report {
+
+/// One step of record.json: the view, its pose, masks, map counts, metrics, stage times, and the
+/// plan (status, candidates, the best ones) when the step planned.
+nlohmann::json StepJson(const pipeline::StepRecord& step);
+
+/// The metrics of MetricsRow as a JSON object (non-finite values as null).
+nlohmann::json MetricsJson(const eval::MapMetrics& metrics);
+
+/// record.json's ground-truth block: source, voxels, observable fruits, the views tried and
+/// reachable, fruits by best visible fraction (counts at each kVisibleFractionLevels and per
+/// fruit), and how long it took.
+nlohmann::json GroundTruthJson(const eval::GroundTruth& gt, double seconds);
+
+/// record.json's oracle_regret: one entry per plan step (empty without --oracle-regret).
+nlohmann::json RegretJson(const std::vector<eval::StepRegret>& regret);
+
+/// metrics.svg of a run: F1 (exact and one-voxel tolerance) and the fraction of fruits found per
+/// fused view.
+LinePlot EpisodeMetricsPlot(std::string title, const std::vector<pipeline::StepRecord>& steps);
+
+}  // namespace avp::report

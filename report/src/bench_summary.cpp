@@ -1,0 +1,265 @@
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <tuple>
+
+#include <fmt/format.h>
+
+#include <avp/eval/statistics.h>
+#include <avp/io/file.h>
+#include <avp/report/bench_summary.h>
+#include <avp/report/svg_plot.h>
+
+namespace avp::report {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Key {
+  std::string scenario, planner;
+  bool operator<(const Key& o) const {
+    return std::tie(scenario, planner) < std::tie(o.scenario, o.planner);
+  }
+};
+
+/// Every successful episode's metrics per (scenario, planner), metric and view.
+struct Aggregates {
+  /// values[key][metric][view] -> samples over seeds
+  std::map<Key, std::map<std::string, std::vector<std::vector<double>>>> values;
+  std::map<Key, std::vector<double>> plan_ms, episode_s;
+  std::map<Key, size_t> failed;
+  size_t failed_total = 0;
+  std::vector<std::string> metric_order;
+
+  eval::Summary Stat(const Key& key, const std::string& metric, int view) const {
+    auto it = values.find(key);
+    if (it == values.end()) return eval::Summary{};
+    auto m = it->second.find(metric);
+    if (m == it->second.end()) return eval::Summary{};
+    return eval::Summarize(m->second[static_cast<size_t>(view)]);
+  }
+};
+
+/// printf's "%.9g" (summary.csv's number format).
+std::string FormatG9(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.9g", v);
+  return buf;
+}
+
+double MeanOf(const std::vector<double>& xs) {
+  double s = 0.0;
+  for (double x : xs) s += x;
+  return xs.empty() ? 0.0 : s / static_cast<double>(xs.size());
+}
+
+/// No interval (one seed) reads 0, as in summary.csv.
+double Ci(double c) { return std::isfinite(c) ? c : 0.0; }
+
+/// An episode that ended early keeps its last map, so its last metrics carry on to the remaining
+/// views.
+Aggregates Aggregate(const std::vector<BenchEpisode>& episodes, int views) {
+  Aggregates a;
+  for (const BenchEpisode& j : episodes) {
+    const Key key{j.scenario, j.planner};
+    if (!j.status.ok() || j.metrics.empty()) {
+      ++a.failed[key];
+      ++a.failed_total;
+      continue;
+    }
+    if (a.metric_order.empty()) {
+      for (const auto& [name, v] : j.metrics.front()) a.metric_order.push_back(name);
+    }
+    for (int v = 0; v < views; ++v) {
+      const auto& row = j.metrics[std::min<size_t>(static_cast<size_t>(v), j.metrics.size() - 1)];
+      for (const auto& [name, value] : row) {
+        auto& per_view = a.values[key][name];
+        per_view.resize(static_cast<size_t>(views));
+        if (std::isfinite(value)) per_view[static_cast<size_t>(v)].push_back(value);
+      }
+    }
+    a.plan_ms[key].insert(a.plan_ms[key].end(), j.plan_ms.begin(), j.plan_ms.end());
+    a.episode_s[key].push_back(j.episode_s);
+  }
+  return a;
+}
+
+std::string SummaryCsv(const Aggregates& a, const BenchDescription& bench) {
+  std::string csv = "scenario,planner,segmenter,view,metric,mean,ci95,n\n";
+  for (const auto& [key, metrics] : a.values) {
+    for (const std::string& name : a.metric_order) {
+      auto it = metrics.find(name);
+      if (it == metrics.end()) continue;
+      for (int v = 0; v < bench.views; ++v) {
+        const eval::Summary s = eval::Summarize(it->second[static_cast<size_t>(v)]);
+        csv += fmt::format("{},{},{},{},{},{},{},{}\n", key.scenario, key.planner, bench.segmenter,
+                           v + 1, name, FormatG9(s.mean), FormatG9(Ci(s.ci95)), s.n);
+      }
+    }
+  }
+  return csv;
+}
+
+std::string MarkdownHeader(const BenchDescription& bench, double seconds) {
+  std::string md = fmt::format(
+      "# avp bench\n\n{} scenario(s) x {} planner(s) x {} seed(s), {} fused views, segmenter "
+      "`{}`, {} mm voxels; revision `{}`; {:.0f} s.\n\nMean ± 95 % CI over seeds (Student's "
+      "t). `found` = fruits found / all fruits of the scene (docs/evaluation.md).\n",
+      bench.scenarios.size(), bench.planners.size(), bench.seeds, bench.views, bench.segmenter,
+      bench.voxel_size_m * 1e3, bench.revision, seconds);
+  for (const auto& [planner, options] : bench.planner_options) {
+    if (options.empty()) continue;
+    std::string text;
+    for (const auto& [k, v] : options) {
+      text += fmt::format("{}`{} = {}`", text.empty() ? "" : ", ", k, v);
+    }
+    md += fmt::format("\n{} options over its defaults: {}.\n", planner, text);
+  }
+  return md;
+}
+
+/// The final view's table of one scenario; appends its cells.
+std::string FinalViewTable(const Aggregates& a, const BenchDescription& bench,
+                           const std::string& scenario, std::vector<BenchCell>& cells) {
+  const int last = bench.views - 1;
+  std::string md = fmt::format(
+      "\n## {}\n\n| planner | n | F1 (exact) view {} | F1 (±1 voxel) | fruits found | found "
+      "fraction | plan ms/step | episode s | failed |\n|---|---|---|---|---|---|---|---|---|\n",
+      scenario, bench.views);
+  for (const std::string& p : bench.planners) {
+    const Key key{scenario, p};
+    const eval::Summary f1 = a.Stat(key, "f1", last);
+    const eval::Summary f1t = a.Stat(key, "f1_tol", last);
+    const eval::Summary found = a.Stat(key, "fruits_found", last);
+    const eval::Summary total = a.Stat(key, "fruits_total", last);
+    const eval::Summary frac = a.Stat(key, "fruits_found_fraction", last);
+    const auto plan = a.plan_ms.find(key);
+    const auto episode = a.episode_s.find(key);
+    const auto failed = a.failed.find(key);
+    BenchCell cell;
+    cell.scenario = scenario;
+    cell.planner = p;
+    cell.runs = f1.n;
+    cell.final_f1_mean = f1.mean;
+    cell.final_f1_ci95 = Ci(f1.ci95);
+    cell.final_found_mean = frac.mean;
+    cell.final_found_ci95 = Ci(frac.ci95);
+    cell.fruits_total_mean = total.mean;
+    cell.plan_ms_mean = plan == a.plan_ms.end() ? 0.0 : MeanOf(plan->second);
+    cell.episode_s_mean = episode == a.episode_s.end() ? 0.0 : MeanOf(episode->second);
+    cell.failed = failed == a.failed.end() ? 0 : failed->second;
+    md += fmt::format(
+        "| {} | {} | {:.3f} ± {:.3f} | {:.3f} ± {:.3f} | {:.1f} / {:.1f} | {:.3f} ± {:.3f} | "
+        "{:.0f} | {:.2f} | {} |\n",
+        p, f1.n, f1.mean, Ci(f1.ci95), f1t.mean, Ci(f1t.ci95), found.mean, total.mean, frac.mean,
+        Ci(frac.ci95), cell.plan_ms_mean, cell.episode_s_mean, cell.failed);
+    cells.push_back(cell);
+  }
+  return md;
+}
+
+/// How hidden the fruits are (docs/evaluation.md): a fruit that no reachable view shows much of is
+/// hard to find for any planner. Only for observable ground truths (a file has no views).
+std::string VisibilityLine(const BenchDescription& bench, const std::string& scenario) {
+  const auto it = bench.visibility.find(scenario);
+  if (it == bench.visibility.end() || !(it->second.fruits > 0.0)) return "";
+  const FruitVisibility& v = it->second;
+  std::string md =
+      "\nFruits by their best visible fraction from a reachable observation view (all seeds):";
+  for (size_t l = 0; l < v.visible.size(); ++l) {
+    md += fmt::format("{}≥ {:.0f} %: {:.1f} %", l == 0 ? " " : ", ",
+                      100.0 * eval::kVisibleFractionLevels[l], 100.0 * v.visible[l] / v.fruits);
+  }
+  return md + ".\n";
+}
+
+std::string F1PerViewTable(const Aggregates& a, const BenchDescription& bench,
+                           const std::string& scenario) {
+  std::string md = "\nF1 (exact) per fused view:\n\n| planner |";
+  for (int v = 1; v <= bench.views; ++v) md += fmt::format(" {} |", v);
+  md += "\n|---|";
+  for (int v = 1; v <= bench.views; ++v) md += "---|";
+  md += "\n";
+  for (const std::string& p : bench.planners) {
+    md += "| " + p + " |";
+    for (int v = 0; v < bench.views; ++v) {
+      md += fmt::format(" {:.3f} |", a.Stat({scenario, p}, "f1", v).mean);
+    }
+    md += "\n";
+  }
+  return md;
+}
+
+/// Plots in the style of the paper's Fig. 3: one series per planner, +-95 % CI band.
+Status WriteScenarioPlots(const fs::path& out_dir, const Aggregates& a,
+                          const BenchDescription& bench, const std::string& scenario,
+                          std::vector<fs::path>& files) {
+  for (const auto& [metric, label, file] :
+       {std::tuple{"f1", "voxel F1 (exact)", "f1"},
+        std::tuple{"fruits_found_fraction", "fraction of fruits found", "fruits"}}) {
+    LinePlot plot;
+    plot.title = fmt::format("{}: {} ({} seeds, mean ± 95 % CI)", scenario, label, bench.seeds);
+    plot.x_label = "fused views";
+    plot.y_label = label;
+    plot.y_min = 0.0;
+    plot.y_max = 1.0;
+    for (const std::string& p : bench.planners) {
+      LineSeries series;
+      series.name = p;
+      for (int v = 0; v < bench.views; ++v) {
+        const eval::Summary st = a.Stat({scenario, p}, metric, v);
+        series.x.push_back(v + 1);
+        series.y.push_back(st.mean);
+        series.band.push_back(Ci(st.ci95));
+      }
+      plot.series.push_back(series);
+    }
+    const fs::path svg = out_dir / fmt::format("{}_{}.svg", file, SafeFileName(scenario));
+    AVP_RETURN_IF_ERROR(WriteLinePlotSvg(svg, plot));
+    files.push_back(svg);
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+void FruitVisibility::Add(const eval::GroundTruth& gt) {
+  if (gt.best_visible_fraction.empty()) return;
+  fruits += static_cast<double>(gt.fruits.size());
+  for (size_t l = 0; l < visible.size(); ++l) {
+    visible[l] += static_cast<double>(gt.FruitsVisibleAtLeast(eval::kVisibleFractionLevels[l]));
+  }
+}
+
+std::string SafeFileName(std::string s) {
+  for (char& c : s) {
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.')) c = '_';
+  }
+  return s;
+}
+
+Result<BenchTables> WriteBenchSummary(const fs::path& out_dir, const BenchDescription& bench,
+                                      const std::vector<BenchEpisode>& episodes, double seconds) {
+  const Aggregates a = Aggregate(episodes, bench.views);
+  BenchTables tables;
+  tables.failed = a.failed_total;
+  const fs::path csv_path = out_dir / "summary.csv";
+  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(csv_path, SummaryCsv(a, bench)));
+  std::vector<fs::path> plots;
+  std::string md = MarkdownHeader(bench, seconds);
+  for (const std::string& s : bench.scenarios) {
+    md += FinalViewTable(a, bench, s, tables.cells);
+    md += VisibilityLine(bench, s);
+    md += F1PerViewTable(a, bench, s);
+    AVP_RETURN_IF_ERROR(WriteScenarioPlots(out_dir, a, bench, s, plots));
+  }
+  const fs::path md_path = out_dir / "summary.md";
+  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(md_path, md));
+  tables.files = {md_path, csv_path};
+  tables.files.insert(tables.files.end(), plots.begin(), plots.end());
+  return tables;
+}
+
+}  // namespace avp::report

@@ -1,0 +1,91 @@
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+
+#include <fmt/format.h>
+
+#include <avp/report/metrics_csv.h>
+
+namespace avp::report {
+
+std::vector<std::pair<std::string, double>> MetricsRow(const eval::MapMetrics& m) {
+  auto d = [](size_t v) { return static_cast<double>(v); };
+  return {
+      {"f1", m.exact.f1},
+      {"precision", m.exact.precision},
+      {"recall", m.exact.recall},
+      {"tp", d(m.exact.tp)},
+      {"fp", d(m.exact.fp)},
+      {"fn", d(m.exact.fn)},
+      {"f1_tol", m.tolerant.f1},
+      {"precision_tol", m.tolerant.precision},
+      {"recall_tol", m.tolerant.recall},
+      {"tp_tol", d(m.tolerant.tp)},
+      {"fp_tol", d(m.tolerant.fp)},
+      {"fn_tol", d(m.tolerant.fn)},
+      {"fruits_found", d(m.fruits.found)},
+      {"fruits_total", d(m.fruits.total)},
+      {"fruits_observable", d(m.fruits.observable)},
+      {"fruits_found_fraction", m.fruits.found_fraction},
+      {"center_error_m", m.fruits.mean_center_error_m},
+      {"radius_error_m", m.fruits.mean_radius_error_m},
+      {"map_instances", d(m.fruits.map_instances)},
+      {"entropy_sum_bits", m.entropy_sum_bits},
+      {"entropy_mean_bits", m.entropy_mean_bits},
+      {"predicted_voxels", d(m.predicted_voxels)},
+      {"roi_coverage", m.roi_coverage},
+  };
+}
+
+// ---- metrics.csv
+
+Result<std::unique_ptr<MetricsCsvWriter>> MetricsCsvWriter::Open(
+    const std::filesystem::path& path) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) {
+    return IoError(fmt::format("cannot write '{}': {}", path.string(), std::strerror(errno)));
+  }
+  return std::unique_ptr<MetricsCsvWriter>(new MetricsCsvWriter(f, path));
+}
+
+MetricsCsvWriter::~MetricsCsvWriter() {
+  if (file_ != nullptr) std::fclose(file_);
+}
+
+void MetricsCsvWriter::OnStep(const pipeline::StepRecord& s, const mapping::SemanticMap&) {
+  if (file_ == nullptr) return;
+  if (!header_written_) {
+    std::fprintf(file_, "view");
+    for (const auto& [name, value] : s.metrics) std::fprintf(file_, ",%s", name.c_str());
+    std::fprintf(file_,
+                 ",known_voxels,occupied_voxels,target_voxels,instances,masks,capture_ms,"
+                 "segment_ms,integrate_ms,metrics_ms,plan_ms,move_ms,step_ms,candidates,"
+                 "reachable,chosen_rank,chosen_utility,chosen_gain,joint_path_length,eye_x,"
+                 "eye_y,eye_z,status\n");
+    header_written_ = true;
+  }
+  std::fprintf(file_, "%d", s.view + 1);
+  for (const auto& [name, value] : s.metrics) std::fprintf(file_, ",%.9g", value);
+  const Eigen::Vector3d eye = s.X_WC.translation();
+  std::string status = "ok";
+  if (!s.capture_status.ok())
+    status = "capture-error";
+  else if (!s.segment_status.ok())
+    status = "segment-error";
+  else if (!s.integrate_status.ok())
+    status = "integrate-error";
+  else if (s.planned && s.chosen_rank < 0)
+    status = "no-move";
+  std::fprintf(file_,
+               ",%zu,%zu,%zu,%zu,%zu,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%zu,%zu,%d,%.6g,%.6g,"
+               "%.6g,%.4f,%.4f,%.4f,%s\n",
+               s.known_voxels, s.occupied_voxels, s.target_voxels, s.instances, s.masks,
+               s.times.capture_ms, s.times.segment_ms, s.times.integrate_ms, s.times.metrics_ms,
+               s.times.plan_ms, s.times.move_ms, s.times.total_ms, s.candidates_generated,
+               s.candidates_reachable, s.chosen_rank, s.chosen_rank >= 0 ? s.chosen.utility : 0.0,
+               s.chosen_rank >= 0 ? s.chosen.gain : 0.0, s.joint_path_length, eye.x(), eye.y(),
+               eye.z(), status.c_str());
+  std::fflush(file_);
+}
+
+}  // namespace avp::report

@@ -1,0 +1,130 @@
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include <avp/io/json.h>
+#include <avp/report/metrics_csv.h>
+#include <avp/report/run_report.h>
+
+namespace avp::report {
+
+using nlohmann::json;
+
+namespace {
+
+json Finite(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+}  // namespace
+
+json StepJson(const pipeline::StepRecord& s) {
+  json metrics = json::object();
+  for (const auto& [k, v] : s.metrics) metrics[k] = std::isfinite(v) ? json(v) : json(nullptr);
+  json j{{"view", s.view + 1},
+         {"X_WC", io::ToJson(s.X_WC)},
+         {"masks", s.masks},
+         {"known_voxels", s.known_voxels},
+         {"target_voxels", s.target_voxels},
+         {"instances", s.instances},
+         {"metrics", metrics},
+         {"times_ms",
+          {{"capture", s.times.capture_ms},
+           {"segment", s.times.segment_ms},
+           {"integrate", s.times.integrate_ms},
+           {"metrics", s.times.metrics_ms},
+           {"plan", s.times.plan_ms},
+           {"move", s.times.move_ms},
+           {"total", s.times.total_ms}}}};
+  if (!s.capture_status.ok()) j["capture_error"] = s.capture_status.ToString();
+  if (!s.segment_status.ok()) j["segment_error"] = s.segment_status.ToString();
+  if (!s.integrate_status.ok()) j["integrate_error"] = s.integrate_status.ToString();
+  if (s.planned) {
+    json cands = json::array();
+    for (const planning::ViewCandidate& c : s.top_candidates) {
+      cands.push_back(
+          {{"utility", c.utility},
+           {"gain", c.gain},
+           {"cost", c.cost},
+           {"source", c.source},
+           {"eye",
+            {c.X_WC.translation().x(), c.X_WC.translation().y(), c.X_WC.translation().z()}}});
+    }
+    j["plan"] = {{"status", s.plan_status.ToString()},
+                 {"generated", s.candidates_generated},
+                 {"reachable", s.candidates_reachable},
+                 {"chosen_rank", s.chosen_rank},
+                 {"refused_moves", s.refused_moves},
+                 {"joint_path_length_rad", s.joint_path_length},
+                 {"top_candidates", cands}};
+  }
+  return j;
+}
+
+json MetricsJson(const eval::MapMetrics& metrics) {
+  json out = json::object();
+  for (const auto& [k, v] : MetricsRow(metrics)) out[k] = Finite(v);
+  return out;
+}
+
+json GroundTruthJson(const eval::GroundTruth& gt, double seconds) {
+  // How hidden each fruit is from the best view the arm can take
+  // (GroundTruth::best_visible_fraction).
+  json best_visible = json::array();
+  for (const sim::FruitTruth& f : gt.fruits) {
+    const auto it = gt.best_visible_fraction.find(f.instance_id);
+    if (it == gt.best_visible_fraction.end()) continue;
+    best_visible.push_back({{"fruit", f.instance_id}, {"best_visible_fraction", it->second}});
+  }
+  json visible_at_least = json::object();
+  for (const double v : eval::kVisibleFractionLevels) {
+    visible_at_least[fmt::format("{:.2f}", v)] = gt.FruitsVisibleAtLeast(v);
+  }
+  return {{"source", gt.source},
+          {"voxels", gt.voxels.size()},
+          {"observable_fruits", gt.ObservableFruits()},
+          {"views_tried", gt.views_tried},
+          {"views_reachable", gt.views_reachable},
+          {"fruits_visible_at_least", visible_at_least},
+          {"fruits", best_visible},
+          {"seconds", seconds}};
+}
+
+json RegretJson(const std::vector<eval::StepRegret>& regret) {
+  json out = json::array();
+  for (const eval::StepRegret& g : regret) {
+    out.push_back({{"step", g.step},
+                   {"candidates", g.candidates},
+                   {"chosen_true_gain", g.chosen_true_gain},
+                   {"best_true_gain", g.best_true_gain},
+                   {"regret", g.regret},
+                   {"chosen_true_rank", g.chosen_true_rank},
+                   {"rank_correlation", Finite(g.rank_correlation)}});
+  }
+  return out;
+}
+
+LinePlot EpisodeMetricsPlot(std::string title, const std::vector<pipeline::StepRecord>& steps) {
+  LinePlot plot;
+  plot.title = std::move(title);
+  plot.x_label = "fused views";
+  plot.y_label = "F1 / fraction of fruits found";
+  plot.y_min = 0.0;
+  plot.y_max = 1.0;
+  LineSeries f1;
+  f1.name = "voxel F1 (exact)";
+  LineSeries f1_tol;
+  f1_tol.name = "voxel F1 (±1 voxel)";
+  LineSeries found;
+  found.name = "fruits found (fraction)";
+  for (const pipeline::StepRecord& s : steps) {
+    f1.x.push_back(s.view + 1);
+    f1.y.push_back(s.Metric("f1"));
+    f1_tol.x.push_back(s.view + 1);
+    f1_tol.y.push_back(s.Metric("f1_tol"));
+    found.x.push_back(s.view + 1);
+    found.y.push_back(s.Metric("fruits_found_fraction"));
+  }
+  plot.series = {f1, f1_tol, found};
+  return plot;
+}
+
+}  // namespace avp::report

@@ -1,0 +1,94 @@
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <avp/core/options.h>
+#include <avp/core/status.h>
+#include <avp/segmentation/segmenter.h>
+
+namespace avp::segmentation {
+
+/// What a segmenter's factory gets besides its spec and options.
+struct SegmenterContext {
+  /// Seeds the segmenter's randomness (the run's segmenter stream); deterministic segmenters
+  /// ignore it.
+  uint64_t seed = 0;
+};
+
+/// One segmenter a user can pick by name (`--segmenter NAME`, `avp segment --backend NAME`,
+/// `avp serve segmentation --backend NAME`). A name ending in "://" is a scheme: it matches every
+/// spec that starts with it ("remote://host:port/model", "ywes:///opt/models"), and the factory
+/// reads the rest of the spec.
+struct SegmenterEntry {
+  std::string name;
+  /// One line for `--segmenter help`.
+  std::string description;
+  /// The options type with its defaults (no fields: none).
+  AnyOptions options;
+  /// Builds the segmenter for `spec` (the name, or the whole scheme spec) with options of
+  /// `options`' type (already validated).
+  std::function<Result<std::unique_ptr<Segmenter>>(std::string_view spec, const AnyOptions&,
+                                                   const SegmenterContext&)>
+      make;
+  bool is_scheme() const;
+};
+
+/// An entry for a segmenter with options of type Options.
+template <typename Options>
+SegmenterEntry MakeSegmenterEntry(std::string name, std::string description,
+                                  const OptionTable<Options>& table, Options defaults,
+                                  std::function<Result<std::unique_ptr<Segmenter>>(
+                                      std::string_view, const Options&, const SegmenterContext&)>
+                                      make) {
+  SegmenterEntry e;
+  e.name = std::move(name);
+  e.description = std::move(description);
+  e.options = AnyOptions(table, std::move(defaults));
+  e.make = [make = std::move(make)](std::string_view spec, const AnyOptions& o,
+                                    const SegmenterContext& c) {
+    return make(spec, o.As<Options>(), c);
+  };
+  return e;
+}
+
+/// The segmenters a program knows, in registration order. Built once at start-up
+/// (RegisterBuiltinSegmenters, then the network backends and the remote client register theirs),
+/// read-only afterwards: const methods may run on several threads at once.
+class SegmenterRegistry {
+ public:
+  /// InvalidArgument when the name is empty or taken, or the entry has no factory.
+  Status Add(SegmenterEntry entry);
+  /// The entry whose name is `spec`, or whose scheme `spec` starts with; nullptr otherwise.
+  const SegmenterEntry* Find(std::string_view spec) const;
+  /// The entry, or NotFound "unknown segmenter 'x' (known: oracle, ..., remote://...)".
+  Result<const SegmenterEntry*> Get(std::string_view spec) const;
+  /// The names as messages list them: schemes written "remote://...".
+  std::vector<std::string> Names() const;
+  const std::vector<SegmenterEntry>& entries() const { return entries_; }
+
+  /// The defaults of `spec`'s entry, then `overrides` applied and validated.
+  Result<AnyOptions> Options(std::string_view spec, const OptionValues& overrides = {}) const;
+  /// Builds `spec` with `options` (of its entry's type; validated here).
+  Result<std::unique_ptr<Segmenter>> Make(std::string_view spec, const AnyOptions& options,
+                                          const SegmenterContext& context) const;
+  /// Builds `spec` with its entry's default options.
+  Result<std::unique_ptr<Segmenter>> Make(std::string_view spec, uint64_t seed) const;
+
+ private:
+  std::vector<SegmenterEntry> entries_;
+};
+
+/// Registers this module's segmenters, in this order: "oracle" (OracleSegmenter with
+/// OracleOptions{}), "oracle-perfect" (OracleOptions::Perfect()), "color" (ColorSegmenter).
+/// @throws avp::Error if a name is already taken.
+void RegisterBuiltinSegmenters(SegmenterRegistry& registry);
+
+/// A registry with RegisterBuiltinSegmenters only (tests, tools).
+SegmenterRegistry BuiltinSegmenters();
+
+}  // namespace avp::segmentation
