@@ -46,13 +46,13 @@
 #include <avp/core/transform.h>
 #include <avp/core/voxel_key.h>
 #include <avp/mapping/integrator.h>
-#include <avp/mapping/planning_snapshot.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/mapping/voxel_grid.h>
 #include <avp/sim/rgbd_renderer.h>
 
 #include "bench_report.h"
 #include "octomap_harness.h"
+#include "planning_snapshot.h"
 #include "synthetic_plant.h"
 
 #ifndef AVP_BENCH_CXX_FLAGS

@@ -223,15 +223,7 @@ void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, O
   for (size_t n : updates) stats.free_updates += n;
 }
 
-/// Free space by projection, with ray casting's result. A ray through pixel p (direction D_p from
-/// the optical centre o, parameter t = camera z) carves voxel V iff it passes through V before its
-/// end point and the end point is not in V (OctoMap's computeRayKeys excludes the end voxel). This
-/// visits voxels instead of rays: for each voxel of the frustum it looks for one pixel whose ray
-/// carves it, first the pixel under the voxel centre (which settles almost every free voxel),
-/// then, unless a max-depth pyramid proves no ray in the voxel's footprint gets that far, every
-/// pixel of the footprint. Voxels within kNearRadius voxels of the optical centre, whose
-/// footprint is unbounded, are carved by walking the rays themselves. The result equals ray
-/// casting up to floating-point ties at voxel edges (see bench_map).
+/// The ray through one pixel, for projective carving (CarveProjective).
 struct PixelRay {
   Eigen::Vector3d
       inv_dir_W;       ///< 1 / (R_WC (x, y, 1)) per axis: t is the depth along the optical axis
@@ -257,75 +249,102 @@ bool RayCarvesVoxel(const PixelRay& r, const Eigen::Vector3d& o, const Eigen::Ve
   return tmin < tmax && tmin < static_cast<double>(r.t_end);
 }
 
-void CarveProjective(const RgbdFrame& frame, const std::vector<RayEnd>& rays, OccupancyGrid& grid,
-                     int threads, IntegrationStats& stats) {
-  const CameraIntrinsics& K = frame.K;
-  const DepthImage& depth = frame.depth_m;
-  const int w = K.width, h = K.height;
-  const double s = grid.voxel_size_m();
-  const float miss = grid.miss_log_odds();
+/// A frame's camera geometry, shared by the projective carving stages.
+struct ProjectiveCamera {
+  const CameraIntrinsics& K;
+  const RigidTransform& X_WC;
+  int w = 0, h = 0;  ///< image size (pixels)
+  double s = 0.0;    ///< voxel edge (m)
+  Eigen::Matrix3d R_CW;
+  Eigen::Matrix3d R_WC;
+  Eigen::Vector3d t_CW;
+  Eigen::Vector3d o;  ///< optical centre, world frame
+  /// Half extent along the optical axis of a cube of edge 1 (m per m of edge).
+  double z_half_per_edge = 0.0;
+};
+
+ProjectiveCamera MakeProjectiveCamera(const RgbdFrame& frame, double voxel_size_m) {
   const RigidTransform X_CW = frame.X_WC.inverse();
   const Eigen::Matrix3d& R_CW = X_CW.rotation();
-  const Eigen::Matrix3d& R_WC = frame.X_WC.rotation();
-  const Eigen::Vector3d& t_CW = X_CW.translation();
-  const Eigen::Vector3d o = frame.X_WC.translation();
+  return {frame.K,
+          frame.X_WC,
+          frame.K.width,
+          frame.K.height,
+          voxel_size_m,
+          R_CW,
+          frame.X_WC.rotation(),
+          X_CW.translation(),
+          frame.X_WC.translation(),
+          0.5 * (std::abs(R_CW(2, 0)) + std::abs(R_CW(2, 1)) + std::abs(R_CW(2, 2)))};
+}
 
-  // Per-pixel rays (same end points as the ray-cast path).
-  std::vector<PixelRay> px(static_cast<size_t>(w) * h);
+/// The per-pixel rays of a frame (row-major, w x h) and the largest end parameter.
+struct PixelRays {
+  std::vector<PixelRay> px;
+  double far_t = 0.0;  ///< max t_end over the pixels (m along the optical axis)
+};
+
+/// Per-pixel rays with the same end points as the ray-cast path (`rays`: one per valid pixel, in
+/// row-major order).
+PixelRays BuildPixelRays(const ProjectiveCamera& cam, const DepthImage& depth,
+                         const std::vector<RayEnd>& rays) {
+  const CameraIntrinsics& K = cam.K;
+  PixelRays out;
+  out.px.resize(static_cast<size_t>(cam.w) * cam.h);
   size_t ray_index = 0;
-  double far_t = 0.0;
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
+  for (int v = 0; v < cam.h; ++v) {
+    for (int u = 0; u < cam.w; ++u) {
       const float d = depth.at(u, v);
       if (!std::isfinite(d) || d <= 0.0f) continue;
-      PixelRay& r = px[static_cast<size_t>(v) * w + u];
+      PixelRay& r = out.px[static_cast<size_t>(v) * cam.w + u];
       const Eigen::Vector3d dir_C((u - K.cx) / K.fx, (v - K.cy) / K.fy, 1.0);
-      r.inv_dir_W = (R_WC * dir_C).cwiseInverse();
+      r.inv_dir_W = (cam.R_WC * dir_C).cwiseInverse();
       const RayEnd& e = rays[ray_index++];
-      r.end_key = VoxelKey::FromPoint(e.end, s);
-      r.t_end = static_cast<float>((R_CW * e.end + t_CW).z());
+      r.end_key = VoxelKey::FromPoint(e.end, cam.s);
+      r.t_end = static_cast<float>((cam.R_CW * e.end + cam.t_CW).z());
       if (!(r.t_end > 0.0f)) r.t_end = 0.0f;
-      far_t = std::max(far_t, static_cast<double>(r.t_end));
+      out.far_t = std::max(out.far_t, static_cast<double>(r.t_end));
     }
   }
-  if (far_t <= 0.0) return;
+  return out;
+}
 
-  std::vector<float> t_end(px.size());
-  for (size_t i = 0; i < px.size(); ++i) t_end[i] = px[i].t_end;
-  // The 8 corners of a voxel relative to its centre, in the camera frame.
-  std::array<Eigen::Vector3d, 8> corner_offsets;
-  for (int c = 0; c < 8; ++c) {
-    corner_offsets[static_cast<size_t>(c)] =
-        R_CW *
-        (Eigen::Vector3d((c & 1) ? 0.5 : -0.5, (c & 2) ? 0.5 : -0.5, (c & 4) ? 0.5 : -0.5) * s);
-  }
-  // Max pyramid of t_end: level l holds the max over 2^l x 2^l pixel tiles.
-  std::vector<std::vector<float>> pyr;
-  std::vector<std::pair<int, int>> pyr_size;
-  {
-    pyr.push_back(t_end);
-    pyr_size.emplace_back(w, h);
-    while (pyr_size.back().first > 1 || pyr_size.back().second > 1) {
-      const auto [pw, ph] = pyr_size.back();
+/// Max pyramid of the pixels' t_end: level l holds the max over 2^l x 2^l pixel tiles (level 0 is
+/// t_end itself).
+class MaxDepthPyramid {
+ public:
+  MaxDepthPyramid(const std::vector<PixelRay>& px, int w, int h) {
+    std::vector<float> t_end(px.size());
+    for (size_t i = 0; i < px.size(); ++i) t_end[i] = px[i].t_end;
+    levels_.push_back(std::move(t_end));
+    sizes_.emplace_back(w, h);
+    while (sizes_.back().first > 1 || sizes_.back().second > 1) {
+      const auto [pw, ph] = sizes_.back();
       const int nw = (pw + 1) / 2, nh = (ph + 1) / 2;
       std::vector<float> next(static_cast<size_t>(nw) * nh, 0.0f);
-      const std::vector<float>& prev = pyr.back();
+      const std::vector<float>& prev = levels_.back();
       for (int y = 0; y < ph; ++y) {
         for (int x = 0; x < pw; ++x) {
           float& m = next[static_cast<size_t>(y / 2) * nw + x / 2];
           m = std::max(m, prev[static_cast<size_t>(y) * pw + x]);
         }
       }
-      pyr.push_back(std::move(next));
-      pyr_size.emplace_back(nw, nh);
+      levels_.push_back(std::move(next));
+      sizes_.emplace_back(nw, nh);
     }
   }
-  // Max of t_end over the pixel rectangle [u0, u1] x [v0, v1] (clipped, non-empty), conservative.
-  const auto max_t_over = [&](int u0, int v0, int u1, int v1) {
+
+  /// t_end of pixel row y (w values).
+  const float* Row(int y) const {
+    return levels_[0].data() + static_cast<size_t>(y) * sizes_[0].first;
+  }
+
+  /// Max of t_end over the pixel rectangle [u0, u1] x [v0, v1] (clipped, non-empty), conservative.
+  float MaxOver(int u0, int v0, int u1, int v1) const {
     int level = 0;
     while ((u1 >> level) - (u0 >> level) > 1 || (v1 >> level) - (v0 >> level) > 1) ++level;
-    const auto [pw, ph] = pyr_size[static_cast<size_t>(level)];
-    const std::vector<float>& p = pyr[static_cast<size_t>(level)];
+    const auto [pw, ph] = sizes_[static_cast<size_t>(level)];
+    const std::vector<float>& p = levels_[static_cast<size_t>(level)];
     float m = 0.0f;
     for (int y = v0 >> level; y <= std::min(v1 >> level, ph - 1); ++y) {
       for (int x = u0 >> level; x <= std::min(u1 >> level, pw - 1); ++x) {
@@ -333,164 +352,239 @@ void CarveProjective(const RgbdFrame& frame, const std::vector<RayEnd>& rays, Oc
       }
     }
     return m;
-  };
+  }
 
-  // 1. Near the optical centre: walk the rays (only while inside the near sphere).
-  const VoxelKey ok = VoxelKey::FromPoint(o, s);
-  const int nr = static_cast<int>(kNearRadius) + 2;
-  const int nd = 2 * nr + 1;
-  const double near_r2 = (kNearRadius * s) * (kNearRadius * s);
-  const auto is_near = [&](const VoxelKey& k) { return (k.Center(s) - o).squaredNorm() < near_r2; };
-  const auto near_index = [&](const VoxelKey& k) {
-    return static_cast<size_t>((k.x - ok.x + nr) +
-                               nd * ((k.y - ok.y + nr) + nd * (k.z - ok.z + nr)));
-  };
+ private:
+  std::vector<std::vector<float>> levels_;
+  std::vector<std::pair<int, int>> sizes_;  ///< (width, height) per level
+};
+
+/// The 8 corners of a voxel of edge s relative to its centre, in the camera frame.
+std::array<Eigen::Vector3d, 8> VoxelCornerOffsets(const Eigen::Matrix3d& R_CW, double s) {
+  std::array<Eigen::Vector3d, 8> corner_offsets;
+  for (int c = 0; c < 8; ++c) {
+    corner_offsets[static_cast<size_t>(c)] =
+        R_CW *
+        (Eigen::Vector3d((c & 1) ? 0.5 : -0.5, (c & 2) ? 0.5 : -0.5, (c & 4) ? 0.5 : -0.5) * s);
+  }
+  return corner_offsets;
+}
+
+/// The voxels within kNearRadius voxels of the optical centre that some ray carves, in a dense
+/// cube of nd^3 flags around the centre's voxel.
+struct NearCarving {
+  VoxelKey centre;  ///< voxel of the optical centre
+  int nr = 0;       ///< half edge of the cube (voxels)
+  int nd = 0;       ///< edge of the cube (voxels)
+  double r2 = 0.0;  ///< squared radius of the near sphere (m^2)
+  std::vector<uint8_t> carved;
+
+  size_t Index(const VoxelKey& k) const {
+    return static_cast<size_t>((k.x - centre.x + nr) +
+                               nd * ((k.y - centre.y + nr) + nd * (k.z - centre.z + nr)));
+  }
+};
+
+/// Near the optical centre, where a voxel's footprint is unbounded: walks the rays (only while
+/// inside the near sphere).
+NearCarving CarveNearOpticalCentre(const std::vector<RayEnd>& rays, const Eigen::Vector3d& o,
+                                   double s, int threads) {
+  NearCarving near;
+  near.centre = VoxelKey::FromPoint(o, s);
+  near.nr = static_cast<int>(kNearRadius) + 2;
+  near.nd = 2 * near.nr + 1;
+  near.r2 = (kNearRadius * s) * (kNearRadius * s);
+  const auto is_near = [&](const VoxelKey& k) { return (k.Center(s) - o).squaredNorm() < near.r2; };
   std::vector<std::vector<uint8_t>> near_parts(static_cast<size_t>(threads));
   RunParallel(threads, [&](int th) {
     std::vector<uint8_t>& part = near_parts[static_cast<size_t>(th)];
-    part.assign(static_cast<size_t>(nd) * nd * nd, 0);
+    part.assign(static_cast<size_t>(near.nd) * near.nd * near.nd, 0);
     for (size_t i = static_cast<size_t>(th); i < rays.size(); i += static_cast<size_t>(threads)) {
       RayWalker walker(o, rays[i].end, s);
       if (!walker.ok()) continue;
       while (walker.remaining() > 0) {
         const VoxelKey k = walker.key();
         if (!is_near(k)) break;
-        part[near_index(k)] = 1;
+        part[near.Index(k)] = 1;
         walker.Step();
       }
     }
   });
-  std::vector<uint8_t> near_carved = std::move(near_parts[0]);
+  near.carved = std::move(near_parts[0]);
   for (size_t t = 1; t < near_parts.size(); ++t) {
-    for (size_t i = 0; i < near_carved.size(); ++i) near_carved[i] |= near_parts[t][i];
+    for (size_t i = 0; i < near.carved.size(); ++i) near.carved[i] |= near_parts[t][i];
   }
-  // 2. Candidate blocks: in the AABB of the frustum up to far_t, not entirely behind the camera.
+  return near;
+}
+
+/// The blocks of the axis-aligned box of the frustum up to far_t (the optical centre included).
+std::pair<BlockKey, BlockKey> FrustumBlockRange(const ProjectiveCamera& cam, double far_t) {
+  const CameraIntrinsics& K = cam.K;
   Box3 aabb;
-  aabb.Extend(o);
-  const double us[2] = {-0.5, w - 0.5};
-  const double vs[2] = {-0.5, h - 0.5};
+  aabb.Extend(cam.o);
+  const double us[2] = {-0.5, cam.w - 0.5};
+  const double vs[2] = {-0.5, cam.h - 0.5};
   for (double u : us) {
     for (double v : vs) {
-      aabb.Extend(frame.X_WC *
-                  (Eigen::Vector3d((u - K.cx) / K.fx, (v - K.cy) / K.fy, 1.0) * far_t));
+      aabb.Extend(cam.X_WC * (Eigen::Vector3d((u - K.cx) / K.fx, (v - K.cy) / K.fy, 1.0) * far_t));
     }
   }
-  const BlockKey blo = BlockOf(VoxelKey::FromPoint(aabb.min(), s));
-  const BlockKey bhi = BlockOf(VoxelKey::FromPoint(aabb.max(), s));
-  // Half extent along the optical axis of a cube of edge e, and its bounding-sphere radius.
-  const double z_half_per_edge =
-      0.5 * (std::abs(R_CW(2, 0)) + std::abs(R_CW(2, 1)) + std::abs(R_CW(2, 2)));
+  return {BlockOf(VoxelKey::FromPoint(aabb.min(), cam.s)),
+          BlockOf(VoxelKey::FromPoint(aabb.max(), cam.s))};
+}
+
+/// Whether a block (centre c_C in the camera frame, half depth extent zh) may hold a carved voxel:
+/// not entirely behind the camera or beyond far_t, and, when wholly in front of the image plane,
+/// its projection (the box of its 8 projected corners) inside the image and not entirely behind
+/// every return in it.
+bool BlockMayBeCarved(const ProjectiveCamera& cam, const MaxDepthPyramid& pyramid,
+                      const std::array<Eigen::Vector3d, 8>& corner_offsets, double far_t,
+                      const Eigen::Vector3d& c_C, double zh) {
+  const CameraIntrinsics& K = cam.K;
+  if (c_C.z() + zh <= 0.0 || c_C.z() - zh >= far_t) return false;
+  if (!(c_C.z() - zh > 1e-6)) return true;
+  const double zn = c_C.z() - zh;
+  double umin = std::numeric_limits<double>::infinity(), umax = -umin;
+  double vmin = umin, vmax = -umin;
+  for (const Eigen::Vector3d& off : corner_offsets) {
+    const Eigen::Vector3d q = c_C + off * kBlockEdge;
+    const double cu = K.fx * q.x() / q.z(), cv = K.fy * q.y() / q.z();
+    umin = std::min(umin, cu);
+    umax = std::max(umax, cu);
+    vmin = std::min(vmin, cv);
+    vmax = std::max(vmax, cv);
+  }
+  const int u0 = static_cast<int>(std::floor(umin + K.cx));
+  const int u1 = static_cast<int>(std::ceil(umax + K.cx));
+  const int v0 = static_cast<int>(std::floor(vmin + K.cy));
+  const int v1 = static_cast<int>(std::ceil(vmax + K.cy));
+  if (u1 < 0 || v1 < 0 || u0 >= cam.w || v0 >= cam.h) return false;
+  return pyramid.MaxOver(std::max(u0, 0), std::max(v0, 0), std::min(u1, cam.w - 1),
+                         std::min(v1, cam.h - 1)) > zn;
+}
+
+/// Candidate blocks: in the box of the frustum up to far_t and BlockMayBeCarved, in z, y, x order.
+std::vector<BlockKey> CandidateBlocks(const ProjectiveCamera& cam, const MaxDepthPyramid& pyramid,
+                                      const std::array<Eigen::Vector3d, 8>& corner_offsets,
+                                      double far_t) {
+  const auto [blo, bhi] = FrustumBlockRange(cam, far_t);
   std::vector<BlockKey> candidates;
-  const double be = kBlockEdge * s;
+  const double be = kBlockEdge * cam.s;
   for (int32_t bz = blo.z; bz <= bhi.z; ++bz) {
     for (int32_t by = blo.y; by <= bhi.y; ++by) {
       for (int32_t bx = blo.x; bx <= bhi.x; ++bx) {
         const Eigen::Vector3d c_W =
             (Eigen::Vector3d(bx, by, bz) + Eigen::Vector3d::Constant(0.5)) * be;
-        const Eigen::Vector3d c_C = R_CW * c_W + t_CW;
-        const double zh = z_half_per_edge * be;
-        if (c_C.z() + zh <= 0.0 || c_C.z() - zh >= far_t) continue;
-        if (c_C.z() - zh > 1e-6) {
-          // Box of the 8 projected corners; reject when outside the image or entirely behind
-          // every return in it.
-          const double zn = c_C.z() - zh;
-          double umin = std::numeric_limits<double>::infinity(), umax = -umin;
-          double vmin = umin, vmax = -umin;
-          for (const Eigen::Vector3d& off : corner_offsets) {
-            const Eigen::Vector3d q = c_C + off * kBlockEdge;
-            const double cu = K.fx * q.x() / q.z(), cv = K.fy * q.y() / q.z();
-            umin = std::min(umin, cu);
-            umax = std::max(umax, cu);
-            vmin = std::min(vmin, cv);
-            vmax = std::max(vmax, cv);
-          }
-          const int u0 = static_cast<int>(std::floor(umin + K.cx));
-          const int u1 = static_cast<int>(std::ceil(umax + K.cx));
-          const int v0 = static_cast<int>(std::floor(vmin + K.cy));
-          const int v1 = static_cast<int>(std::ceil(vmax + K.cy));
-          if (u1 < 0 || v1 < 0 || u0 >= w || v0 >= h) continue;
-          if (max_t_over(std::max(u0, 0), std::max(v0, 0), std::min(u1, w - 1),
-                         std::min(v1, h - 1)) <= zn) {
-            continue;
-          }
+        const Eigen::Vector3d c_C = cam.R_CW * c_W + cam.t_CW;
+        const double zh = cam.z_half_per_edge * be;
+        if (BlockMayBeCarved(cam, pyramid, corner_offsets, far_t, c_C, zh)) {
+          candidates.push_back({bx, by, bz});
         }
-        candidates.push_back({bx, by, bz});
       }
     }
   }
+  return candidates;
+}
 
-  // 3. Per candidate block, the voxels some ray carves (parallel, no map access).
+/// Everything the per-voxel carve test reads (no map access).
+struct VoxelCarveInputs {
+  const ProjectiveCamera& cam;
+  const std::vector<PixelRay>& px;
+  const MaxDepthPyramid& pyramid;
+  const std::array<Eigen::Vector3d, 8>& corner_offsets;
+  const NearCarving& near;
+  double far_t = 0.0;
+  double zh_voxel = 0.0;  ///< half depth extent of a voxel (m)
+};
+
+/// Whether a ray through a pixel whose centre may lie in the voxel's projection (the box of its 8
+/// projected corners; c_C: voxel centre in the camera frame, zn: its nearest depth) carves it.
+bool FootprintCarvesVoxel(const VoxelCarveInputs& in, const VoxelKey& k, const Eigen::Vector3d& c_C,
+                          double zn, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+  const CameraIntrinsics& K = in.cam.K;
+  const int w = in.cam.w, h = in.cam.h;
+  double umin = std::numeric_limits<double>::infinity(), umax = -umin;
+  double vmin = umin, vmax = -umin;
+  for (const Eigen::Vector3d& off : in.corner_offsets) {
+    const Eigen::Vector3d q = c_C + off;
+    const double iz = 1.0 / q.z();
+    const double cu = K.fx * q.x() * iz, cv = K.fy * q.y() * iz;
+    umin = std::min(umin, cu);
+    umax = std::max(umax, cu);
+    vmin = std::min(vmin, cv);
+    vmax = std::max(vmax, cv);
+  }
+  const int u0 = std::max(0, static_cast<int>(std::floor(umin + K.cx)));
+  const int u1 = std::min(w - 1, static_cast<int>(std::ceil(umax + K.cx)));
+  const int v0 = std::max(0, static_cast<int>(std::floor(vmin + K.cy)));
+  const int v1 = std::min(h - 1, static_cast<int>(std::ceil(vmax + K.cy)));
+  if (u0 > u1 || v0 > v1) return false;
+  if (in.pyramid.MaxOver(u0, v0, u1, v1) <= zn) return false;
+  for (int y = v0; y <= v1; ++y) {
+    const float* row = in.pyramid.Row(y);
+    for (int x = u0; x <= u1; ++x) {
+      if (row[x] <= zn) continue;
+      if (RayCarvesVoxel(in.px[static_cast<size_t>(y) * w + x], in.cam.o, lo, hi, k)) return true;
+    }
+  }
+  return false;
+}
+
+/// Whether some ray carves voxel k: near the optical centre the walked rays decide; elsewhere
+/// first the pixel under the voxel centre, then (FootprintCarvesVoxel) every pixel of its
+/// projection.
+[[gnu::always_inline]] inline bool VoxelIsCarved(const VoxelCarveInputs& in, const VoxelKey& k) {
+  const ProjectiveCamera& cam = in.cam;
+  const CameraIntrinsics& K = cam.K;
+  const double s = cam.s;
+  const Eigen::Vector3d c_W = k.Center(s);
+  if ((c_W - cam.o).squaredNorm() < in.near.r2) return in.near.carved[in.near.Index(k)] != 0;
+  const Eigen::Vector3d c_C = cam.R_CW * c_W + cam.t_CW;
+  const double zn = c_C.z() - in.zh_voxel;
+  // Outside the near sphere, a voxel reaching behind the image plane is outside any field of view
+  // below 150 degrees (checked in Integrate()).
+  if (zn <= 0.0 || zn >= in.far_t) return false;
+  const Eigen::Vector3d lo = Eigen::Vector3d(k.x, k.y, k.z) * s;
+  const Eigen::Vector3d hi = lo + Eigen::Vector3d::Constant(s);
+  const double uc = K.fx * c_C.x() / c_C.z() + K.cx, vc = K.fy * c_C.y() / c_C.z() + K.cy;
+  const int pu = static_cast<int>(std::lround(uc)), pv = static_cast<int>(std::lround(vc));
+  if (pu >= 0 && pv >= 0 && pu < cam.w && pv < cam.h &&
+      RayCarvesVoxel(in.px[static_cast<size_t>(pv) * cam.w + pu], cam.o, lo, hi, k)) {
+    return true;
+  }
+  return FootprintCarvesVoxel(in, k, c_C, zn, lo, hi);
+}
+
+/// Per candidate block, the voxels some ray carves (parallel, no map access).
+std::vector<BlockBits> CarvedVoxelsPerBlock(const VoxelCarveInputs& in,
+                                            const std::vector<BlockKey>& candidates, int threads) {
   std::vector<BlockBits> carve(candidates.size());
-  const double zh_voxel = z_half_per_edge * s;
   RunParallel(threads, [&](int th) {
     for (size_t ci = static_cast<size_t>(th); ci < candidates.size();
          ci += static_cast<size_t>(threads)) {
       const BlockKey& bk = candidates[ci];
       BlockBits& bits = carve[ci];
       for (int i = 0; i < kBlockVoxels; ++i) {
-        const VoxelKey k = mapping::KeyOf(bk, i);
-        const Eigen::Vector3d c_W = k.Center(s);
-        if ((c_W - o).squaredNorm() < near_r2) {
-          if (near_carved[near_index(k)]) bits.set(i);
-          continue;
-        }
-        const Eigen::Vector3d c_C = R_CW * c_W + t_CW;
-        const double zn = c_C.z() - zh_voxel;
-        // Outside the near sphere, a voxel reaching behind the image plane is outside any
-        // field of view below 150 degrees (checked in Integrate()).
-        if (zn <= 0.0 || zn >= far_t) continue;
-        const Eigen::Vector3d lo = Eigen::Vector3d(k.x, k.y, k.z) * s;
-        const Eigen::Vector3d hi = lo + Eigen::Vector3d::Constant(s);
-        const double uc = K.fx * c_C.x() / c_C.z() + K.cx, vc = K.fy * c_C.y() / c_C.z() + K.cy;
-        const int pu = static_cast<int>(std::lround(uc)), pv = static_cast<int>(std::lround(vc));
-        if (pu >= 0 && pv >= 0 && pu < w && pv < h &&
-            RayCarvesVoxel(px[static_cast<size_t>(pv) * w + pu], o, lo, hi, k)) {
-          bits.set(i);
-          continue;
-        }
-        // Pixels whose centres may lie in the voxel's projection: the box of its 8 corners.
-        double umin = std::numeric_limits<double>::infinity(), umax = -umin;
-        double vmin = umin, vmax = -umin;
-        for (const Eigen::Vector3d& off : corner_offsets) {
-          const Eigen::Vector3d q = c_C + off;
-          const double iz = 1.0 / q.z();
-          const double cu = K.fx * q.x() * iz, cv = K.fy * q.y() * iz;
-          umin = std::min(umin, cu);
-          umax = std::max(umax, cu);
-          vmin = std::min(vmin, cv);
-          vmax = std::max(vmax, cv);
-        }
-        const int u0 = std::max(0, static_cast<int>(std::floor(umin + K.cx)));
-        const int u1 = std::min(w - 1, static_cast<int>(std::ceil(umax + K.cx)));
-        const int v0 = std::max(0, static_cast<int>(std::floor(vmin + K.cy)));
-        const int v1 = std::min(h - 1, static_cast<int>(std::ceil(vmax + K.cy)));
-        if (u0 > u1 || v0 > v1) continue;
-        if (max_t_over(u0, v0, u1, v1) <= zn) continue;
-        bool carved = false;
-        for (int y = v0; y <= v1 && !carved; ++y) {
-          const float* row = t_end.data() + static_cast<size_t>(y) * w;
-          for (int x = u0; x <= u1; ++x) {
-            if (row[x] <= zn) continue;
-            if (RayCarvesVoxel(px[static_cast<size_t>(y) * w + x], o, lo, hi, k)) {
-              carved = true;
-              break;
-            }
-          }
-        }
-        if (carved) bits.set(i);
+        if (VoxelIsCarved(in, mapping::KeyOf(bk, i))) bits.set(i);
       }
     }
   });
+  return carve;
+}
 
-  // 4. Apply: allocate the blocks with something to carve, then update them in parallel (each
-  //    block belongs to one thread; voxels hit in this frame keep their hit).
+/// Applies the carved voxels of the candidate blocks that lie wholly in the ROI: allocates the
+/// blocks with something to carve, then updates them in parallel (each block belongs to one
+/// thread; voxels hit in this frame keep their hit). Clears their bits in `carve`.
+void ApplyWholeBlocks(const std::vector<BlockKey>& candidates, std::vector<BlockBits>& carve,
+                      OccupancyGrid& grid, int threads, IntegrationStats& stats) {
+  const float miss = grid.miss_log_odds();
   std::vector<BlockKey> to_prepare;
   std::vector<size_t> carving;
   for (size_t ci = 0; ci < candidates.size(); ++ci) {
     if (!carve[ci].any()) continue;
     const VoxelKey first = mapping::KeyOf(candidates[ci], 0);
     if (!grid.Admits(first) || !grid.Admits(mapping::KeyOf(candidates[ci], kBlockVoxels - 1))) {
-      // Partly outside the ROI: apply voxel by voxel below.
+      // Partly outside the ROI: applied voxel by voxel (ApplyRemainingVoxels).
       continue;
     }
     to_prepare.push_back(candidates[ci]);
@@ -518,24 +612,62 @@ void CarveProjective(const RgbdFrame& frame, const std::vector<RayEnd>& rays, Oc
     applied[static_cast<size_t>(th)] = n;
   });
   for (size_t n : applied) stats.free_updates += n;
+}
+
+/// Applies, voxel by voxel, what ApplyWholeBlocks left: the carved voxels of blocks partly outside
+/// the ROI, then the near voxels outside every candidate block (e.g. behind the image plane).
+void ApplyRemainingVoxels(const std::vector<BlockKey>& candidates,
+                          const std::vector<BlockBits>& carve, const NearCarving& near,
+                          OccupancyGrid& grid, IntegrationStats& stats) {
+  const float miss = grid.miss_log_odds();
   OccupancyGrid::Accessor acc(grid);
-  for (size_t ci = 0; ci < candidates.size(); ++ci) {  // blocks partly outside the ROI
+  for (size_t ci = 0; ci < candidates.size(); ++ci) {
     if (!carve[ci].any()) continue;
     carve[ci].ForEachSet([&](int i) {
       const VoxelKey k = mapping::KeyOf(candidates[ci], i);
       if (grid.Admits(k) && acc.UpdateOnce(k, miss)) ++stats.free_updates;
     });
   }
-  // Near voxels outside every candidate block (e.g. behind the image plane).
+  const int nd = near.nd, nr = near.nr;
   for (int z = 0; z < nd; ++z) {
     for (int y = 0; y < nd; ++y) {
       for (int x = 0; x < nd; ++x) {
-        if (!near_carved[static_cast<size_t>(x + nd * (y + nd * z))]) continue;
-        const VoxelKey k{ok.x + x - nr, ok.y + y - nr, ok.z + z - nr};
+        if (!near.carved[static_cast<size_t>(x + nd * (y + nd * z))]) continue;
+        const VoxelKey k{near.centre.x + x - nr, near.centre.y + y - nr, near.centre.z + z - nr};
         if (grid.Admits(k) && acc.UpdateOnce(k, miss)) ++stats.free_updates;
       }
     }
   }
+}
+
+/// Free space by projection, with ray casting's result. A ray through pixel p (direction D_p from
+/// the optical centre o, parameter t = camera z) carves voxel V iff it passes through V before its
+/// end point and the end point is not in V (OctoMap's computeRayKeys excludes the end voxel). This
+/// visits voxels instead of rays: for each voxel of the frustum it looks for one pixel whose ray
+/// carves it, first the pixel under the voxel centre (which settles almost every free voxel),
+/// then, unless a max-depth pyramid proves no ray in the voxel's footprint gets that far, every
+/// pixel of the footprint. Voxels within kNearRadius voxels of the optical centre, whose
+/// footprint is unbounded, are carved by walking the rays themselves. The result equals ray
+/// casting up to floating-point ties at voxel edges (see bench_map).
+void CarveProjective(const RgbdFrame& frame, const std::vector<RayEnd>& rays, OccupancyGrid& grid,
+                     int threads, IntegrationStats& stats) {
+  const ProjectiveCamera cam = MakeProjectiveCamera(frame, grid.voxel_size_m());
+  const PixelRays pixels = BuildPixelRays(cam, frame.depth_m, rays);
+  if (pixels.far_t <= 0.0) return;
+  const MaxDepthPyramid pyramid(pixels.px, cam.w, cam.h);
+  const std::array<Eigen::Vector3d, 8> corner_offsets = VoxelCornerOffsets(cam.R_CW, cam.s);
+  // 1. Near the optical centre: walk the rays.
+  const NearCarving near = CarveNearOpticalCentre(rays, cam.o, cam.s, threads);
+  // 2. Candidate blocks: in the frustum up to far_t, not entirely behind the camera or the returns.
+  const std::vector<BlockKey> candidates =
+      CandidateBlocks(cam, pyramid, corner_offsets, pixels.far_t);
+  // 3. Per candidate block, the voxels some ray carves.
+  const VoxelCarveInputs inputs{
+      cam, pixels.px, pyramid, corner_offsets, near, pixels.far_t, cam.z_half_per_edge * cam.s};
+  std::vector<BlockBits> carve = CarvedVoxelsPerBlock(inputs, candidates, threads);
+  // 4. Apply.
+  ApplyWholeBlocks(candidates, carve, grid, threads, stats);
+  ApplyRemainingVoxels(candidates, carve, near, grid, stats);
 }
 
 /// Reduces a frame's (voxel, mask) pairs to one observation per voxel: the label with most

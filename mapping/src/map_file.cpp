@@ -270,10 +270,23 @@ Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map, const MapSaveO
   return std::move(w.bytes());
 }
 
-Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* info) {
+namespace {
+
+// ---- Reading (DeserializeMap's stages)
+// ---------------------------------------------------------------
+
+/// The fixed part of a file, checked before anything else is read.
+struct FileFrame {
+  uint32_t version = 0;
+  uint64_t file_bytes = 0;
+  uint32_t crc32 = 0;  ///< the stored (and verified) checksum
+  size_t body = 0;     ///< bytes before the checksum
+};
+
+/// Magic: a shorter file whose bytes match the magic so far is truncated, otherwise not ours.
+Status CheckMagic(std::span<const uint8_t> bytes, ByteReader& header) {
   const size_t size = bytes.size();
   if (size == 0) return Corrupt("truncated at byte 0: the file is empty");
-  // 1. Magic: a shorter file whose bytes match the magic so far is truncated, otherwise not ours.
   const bool magic_prefix_ok =
       std::memcmp(bytes.data(), kMapFileMagic, std::min(size, kMagicBytes)) == 0;
   if (!magic_prefix_ok) {
@@ -282,76 +295,90 @@ Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* 
         "\"\\x89AVPMAP\\n\")",
         HexPrefix(bytes, kMagicBytes)));
   }
-  ByteReader header(bytes, size);
   if (!header.Need(kMagicBytes, "the magic")) return Corrupt(header.error());
   std::string magic;
   (void)header.String(kMagicBytes, magic, "the magic");
+  return Status::Ok();
+}
 
-  // 2. Version.
-  uint32_t version = 0;
-  if (!header.U32(version, "the format version")) return Corrupt(header.error());
-  if (version != kMapFileVersion) {
+/// Magic, version, declared size against the real size, checksum over everything before the last
+/// 4 bytes, and flags, in that order (the first failure is reported).
+Result<FileFrame> CheckFileFrame(std::span<const uint8_t> bytes) {
+  const size_t size = bytes.size();
+  ByteReader header(bytes, size);
+  AVP_RETURN_IF_ERROR(CheckMagic(bytes, header));
+  FileFrame frame;
+  if (!header.U32(frame.version, "the format version")) return Corrupt(header.error());
+  if (frame.version != kMapFileVersion) {
     return Corrupt(fmt::format("unsupported map file version {} (this build reads version {})",
-                               version, kMapFileVersion));
+                               frame.version, kMapFileVersion));
   }
-  // 3. Declared size against the real size.
   uint32_t flags = 0;
-  uint64_t file_bytes = 0;
-  if (!header.U32(flags, "the flags") || !header.U64(file_bytes, "the file size")) {
+  if (!header.U32(flags, "the flags") || !header.U64(frame.file_bytes, "the file size")) {
     return Corrupt(header.error());
   }
-  if (file_bytes != size) {
-    if (size < file_bytes) {
-      return Corrupt(
-          fmt::format("truncated at byte {}: the header declares {} bytes", size, file_bytes));
+  if (frame.file_bytes != size) {
+    if (size < frame.file_bytes) {
+      return Corrupt(fmt::format("truncated at byte {}: the header declares {} bytes", size,
+                                 frame.file_bytes));
     }
     return Corrupt(
         fmt::format("file has {} bytes but its header declares {} ({} unexpected "
                     "bytes at the end, or a corrupted size field)",
-                    size, file_bytes, size - file_bytes));
+                    size, frame.file_bytes, size - frame.file_bytes));
   }
   if (size < kFileBytesEnd + kCrcBytes) {
     return Corrupt(fmt::format("truncated at byte {}: too short for a map file", size));
   }
-  // 4. Checksum over everything before the last 4 bytes.
-  const size_t body = size - kCrcBytes;
-  uint32_t stored_crc = 0;
+  frame.body = size - kCrcBytes;
   for (size_t i = 0; i < kCrcBytes; ++i) {
-    stored_crc |= static_cast<uint32_t>(bytes[body + i]) << (8 * i);
+    frame.crc32 |= static_cast<uint32_t>(bytes[frame.body + i]) << (8 * i);
   }
-  const uint32_t computed_crc = Crc32(bytes.first(body));
-  if (stored_crc != computed_crc) {
+  const uint32_t computed_crc = Crc32(bytes.first(frame.body));
+  if (frame.crc32 != computed_crc) {
     return Corrupt(fmt::format(
         "checksum mismatch: stored CRC-32 0x{:08x}, computed 0x{:08x} (the file is corrupted)",
-        stored_crc, computed_crc));
+        frame.crc32, computed_crc));
   }
   if (flags != 0) {
     return Corrupt(fmt::format("unknown flags 0x{:08x} (this build knows none)", flags));
   }
+  return frame;
+}
 
-  // 5. Header fields. From here on the reader stops before the checksum.
-  ByteReader r(bytes, body);
-  {
-    std::string skip;
-    (void)r.String(kFileBytesEnd, skip, "the fixed header");
-  }
-  MapOptions options;
-  GridOptions& go = options.grid;
-  SemanticOptions& so = options.semantics;
+/// Voxel counts of a map: declared in the header, or counted while reading the blocks.
+struct VoxelCounts {
+  uint64_t known = 0, occupied = 0, cells = 0, labelled = 0;
+  bool operator==(const VoxelCounts&) const = default;
+};
+
+/// The header after the fixed part, as stored: the map's options (the fields with no direct
+/// MapOptions counterpart are kept raw until ValidateHeader), the counts and the note.
+struct MapHeader {
+  MapOptions options;  ///< without policy, remove_outliers_each_frame and roi
   uint8_t has_roi = 0, policy = 0, remove_outliers = 0, num_classes = 0;
-  double roi[6] = {};
-  uint64_t num_blocks = 0, known = 0, occupied = 0, cells = 0, labelled = 0;
-  uint32_t note_bytes = 0;
+  double roi[6] = {};  ///< min x, y, z, max x, y, z (m)
+  uint64_t num_blocks = 0;
+  VoxelCounts counts;
   std::string note;
+};
+
+/// Reads the header fields after the fixed part (the reader stands at kFileBytesEnd): the first
+/// truncation, or a note longer than kMaxMapNoteBytes, is an error.
+Result<MapHeader> ReadHeader(ByteReader& r) {
+  MapHeader h;
+  GridOptions& go = h.options.grid;
+  SemanticOptions& so = h.options.semantics;
+  uint32_t note_bytes = 0;
   r.F64(go.voxel_size_m, "voxel_size_m");
-  r.U8(has_roi, "the ROI flag");
-  for (double& v : roi) r.F64(v, "the ROI");
+  r.U8(h.has_roi, "the ROI flag");
+  for (double& v : h.roi) r.F64(v, "the ROI");
   r.F64(go.sensor.hit, "sensor.hit");
   r.F64(go.sensor.miss, "sensor.miss");
   r.F64(go.sensor.clamp_min, "sensor.clamp_min");
   r.F64(go.sensor.clamp_max, "sensor.clamp_max");
   r.F64(go.sensor.occupied_threshold, "sensor.occupied_threshold");
-  r.U8(policy, "the fusion policy");
+  r.U8(h.policy, "the fusion policy");
   r.F32(so.reference_penalty, "reference_penalty");
   r.F32(so.class_log_odds_min, "class_log_odds_min");
   r.F32(so.class_log_odds_max, "class_log_odds_max");
@@ -360,60 +387,233 @@ Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* 
   r.F32(so.instance_join_fraction, "instance_join_fraction");
   r.F32(so.instance_merge_fraction, "instance_merge_fraction");
   r.I32(so.outlier_min_neighbours, "outlier_min_neighbours");
-  r.U8(remove_outliers, "remove_outliers_each_frame");
-  r.U8(num_classes, "the number of semantic classes");
-  r.U64(num_blocks, "the block count");
-  r.U64(known, "the known voxel count");
-  r.U64(occupied, "the occupied voxel count");
-  r.U64(cells, "the semantic cell count");
-  r.U64(labelled, "the labelled voxel count");
+  r.U8(h.remove_outliers, "remove_outliers_each_frame");
+  r.U8(h.num_classes, "the number of semantic classes");
+  r.U64(h.num_blocks, "the block count");
+  r.U64(h.counts.known, "the known voxel count");
+  r.U64(h.counts.occupied, "the occupied voxel count");
+  r.U64(h.counts.cells, "the semantic cell count");
+  r.U64(h.counts.labelled, "the labelled voxel count");
   r.U32(note_bytes, "the note length");
   if (!r.ok()) return Corrupt(r.error());
   if (note_bytes > kMaxMapNoteBytes) {
     return Corrupt(
         fmt::format("note length {} exceeds the maximum {}", note_bytes, kMaxMapNoteBytes));
   }
-  if (!r.String(note_bytes, note, "the note")) return Corrupt(r.error());
+  if (!r.String(note_bytes, h.note, "the note")) return Corrupt(r.error());
+  return h;
+}
 
+/// Checks the header's raw fields (every problem is reported; the block count against the
+/// `remaining` bytes, before anything is allocated) and returns its complete, validated options.
+Result<MapOptions> ValidateHeader(const MapHeader& h, size_t remaining) {
   std::vector<std::string> errors;
-  if (has_roi > 1) errors.push_back(fmt::format("ROI flag ({}) must be 0 or 1", has_roi));
-  if (policy > static_cast<uint8_t>(FusionPolicy::kBayesian)) {
+  if (h.has_roi > 1) errors.push_back(fmt::format("ROI flag ({}) must be 0 or 1", h.has_roi));
+  if (h.policy > static_cast<uint8_t>(FusionPolicy::kBayesian)) {
     errors.push_back(
-        fmt::format("fusion policy ({}) is unknown (0 reference-max, 1 bayesian)", policy));
+        fmt::format("fusion policy ({}) is unknown (0 reference-max, 1 bayesian)", h.policy));
   }
-  if (remove_outliers > 1) {
+  if (h.remove_outliers > 1) {
     errors.push_back(
-        fmt::format("remove_outliers_each_frame ({}) must be 0 or 1", remove_outliers));
+        fmt::format("remove_outliers_each_frame ({}) must be 0 or 1", h.remove_outliers));
   }
-  if (num_classes != kNumSemanticClasses) {
+  if (h.num_classes != kNumSemanticClasses) {
     errors.push_back(fmt::format("the file has {} semantic classes, this build knows {}",
-                                 num_classes, kNumSemanticClasses));
+                                 h.num_classes, kNumSemanticClasses));
   }
-  if (has_roi == 1) {
+  const double* roi = h.roi;
+  if (h.has_roi == 1) {
     bool finite = true;
-    for (double v : roi) finite = finite && std::isfinite(v);
+    for (double v : h.roi) finite = finite && std::isfinite(v);
     if (!finite || roi[0] > roi[3] || roi[1] > roi[4] || roi[2] > roi[5]) {
       errors.push_back(fmt::format("ROI [{}, {}, {}] - [{}, {}, {}] is not a finite box", roi[0],
                                    roi[1], roi[2], roi[3], roi[4], roi[5]));
     }
   }
   // Every block needs at least kMinBlockBytes: bound the count before anything is allocated.
-  if (num_blocks > r.remaining() / kMinBlockBytes) {
+  if (h.num_blocks > remaining / kMinBlockBytes) {
     errors.push_back(fmt::format("block count {} cannot fit in the {} bytes that remain",
-                                 num_blocks, r.remaining()));
+                                 h.num_blocks, remaining));
   }
   if (!errors.empty()) {
     return Corrupt(fmt::format("invalid header: {}", fmt::join(errors, "; ")));
   }
-  so.policy = static_cast<FusionPolicy>(policy);
-  so.remove_outliers_each_frame = remove_outliers == 1;
-  if (has_roi == 1) {
-    go.roi = Box3(Eigen::Vector3d(roi[0], roi[1], roi[2]), Eigen::Vector3d(roi[3], roi[4], roi[5]));
+  MapOptions options = h.options;
+  options.semantics.policy = static_cast<FusionPolicy>(h.policy);
+  options.semantics.remove_outliers_each_frame = h.remove_outliers == 1;
+  if (h.has_roi == 1) {
+    options.grid.roi =
+        Box3(Eigen::Vector3d(roi[0], roi[1], roi[2]), Eigen::Vector3d(roi[3], roi[4], roi[5]));
   }
   if (Status s = options.Validate(); !s.ok()) {
     return Corrupt("invalid map options in the header: " + s.message());
   }
+  return options;
+}
 
+/// Where a block record lies, for error messages.
+struct BlockPlace {
+  uint64_t n = 0;      ///< 1-based position
+  uint64_t count = 0;  ///< blocks in the file
+  size_t start = 0;    ///< byte offset of the record
+  BlockKey key;
+
+  std::string Describe() const {
+    return fmt::format("block {} of {} at byte {}, key ({}, {}, {})", n, count, start, key.x, key.y,
+                       key.z);
+  }
+};
+
+/// A block's known voxels and their log-odds into the grid (the block is allocated even without
+/// known voxels, so the allocation order is kept). `place.key` is read here.
+Status ReadBlockOccupancy(ByteReader& r, BlockPlace& place, OccupancyGrid& grid,
+                          VoxelCounts& seen) {
+  constexpr int32_t kMaxBlockCoord = kMaxKeyMagnitude >> kBlockShift;
+  BlockKey& bk = place.key;
+  BlockBits known_bits;
+  r.I32(bk.x, "a block key");
+  r.I32(bk.y, "a block key");
+  r.I32(bk.z, "a block key");
+  for (uint64_t& word : known_bits.words) r.U64(word, "a block's known bitset");
+  if (!r.ok()) return Corrupt(r.error());
+  if (std::abs(int64_t{bk.x}) >= kMaxBlockCoord || std::abs(int64_t{bk.y}) >= kMaxBlockCoord ||
+      std::abs(int64_t{bk.z}) >= kMaxBlockCoord) {
+    return Corrupt(fmt::format("{}: key out of range (|coordinate| must be < {})", place.Describe(),
+                               kMaxBlockCoord));
+  }
+  if (grid.Lookup(bk) >= 0) {
+    return Corrupt(fmt::format("{}: the block appears twice", place.Describe()));
+  }
+  const size_t count = static_cast<size_t>(known_bits.count());
+  if (!r.Need(4 * count, "a block's log-odds")) return Corrupt(r.error());
+  grid.GetOrCreateBlock(bk);
+  const float occupied_log_odds = grid.occupied_log_odds();
+  std::string bad;
+  known_bits.ForEachSet([&](int i) {
+    float v = 0.0f;
+    r.F32(v, "a log-odds");
+    if (!bad.empty()) return;
+    const VoxelKey k = KeyOf(bk, i);
+    if (!(v >= grid.clamp_min_log_odds() && v <= grid.clamp_max_log_odds())) {
+      bad = fmt::format(
+          "voxel ({}, {}, {}) has a log-odds ({}) outside the sensor model's clamping range "
+          "[{}, {}]",
+          k.x, k.y, k.z, v, grid.clamp_min_log_odds(), grid.clamp_max_log_odds());
+    } else if (!grid.SetLogOdds(k, v)) {
+      bad = fmt::format("voxel ({}, {}, {}) lies outside the map's ROI", k.x, k.y, k.z);
+    } else {
+      ++seen.known;
+      if (*grid.LogOdds(k) >= occupied_log_odds) ++seen.occupied;
+    }
+  });
+  if (!r.ok()) return Corrupt(r.error());
+  if (!bad.empty()) return Corrupt(fmt::format("{}: {}", place.Describe(), bad));
+  return Status::Ok();
+}
+
+/// One semantic cell record into the grid; the problem as text ("" when none).
+std::string StoreSemanticCell(const SemanticCell& c, const VoxelKey& k, OccupancyGrid& grid,
+                              VoxelCounts& seen) {
+  if (c.semantic_class >= kNumSemanticClasses) {
+    return fmt::format("voxel ({}, {}, {}) has an unknown semantic class {}", k.x, k.y, k.z,
+                       c.semantic_class);
+  }
+  if (!(c.confidence >= 0.0f && c.confidence <= 1.0f)) {
+    return fmt::format("voxel ({}, {}, {}) has a confidence ({}) outside [0, 1]", k.x, k.y, k.z,
+                       c.confidence);
+  }
+  SemanticCell* cell = grid.MutableSemantic(k);
+  if (cell == nullptr) {
+    return fmt::format("semantic voxel ({}, {}, {}) lies outside the map's ROI", k.x, k.y, k.z);
+  }
+  *cell = c;
+  ++seen.cells;
+  if (c.has_label()) ++seen.labelled;
+  return {};
+}
+
+/// A block's semantics flag and, when set, its semantic cells into the grid.
+Status ReadBlockSemantics(ByteReader& r, const BlockPlace& place, OccupancyGrid& grid,
+                          VoxelCounts& seen) {
+  const BlockKey& bk = place.key;
+  uint8_t has_semantics = 0;
+  if (!r.U8(has_semantics, "a block's semantics flag")) return Corrupt(r.error());
+  if (has_semantics > 1) {
+    return Corrupt(
+        fmt::format("{}: semantics flag ({}) must be 0 or 1", place.Describe(), has_semantics));
+  }
+  if (has_semantics == 0) return Status::Ok();
+  BlockBits present;
+  for (uint64_t& word : present.words) r.U64(word, "a block's semantic bitset");
+  if (!r.ok()) return Corrupt(r.error());
+  const size_t num_cells = static_cast<size_t>(present.count());
+  if (!r.Need(kCellBytes * num_cells, "a block's semantic cells")) return Corrupt(r.error());
+  if (num_cells == 0) {
+    // An allocated but empty semantic payload: allocate it again so the maps match exactly.
+    for (int i = 0; i < kBlockVoxels; ++i) {
+      if (grid.MutableSemantic(KeyOf(bk, i)) != nullptr) break;
+    }
+    return Status::Ok();
+  }
+  std::string bad;
+  present.ForEachSet([&](int i) {
+    SemanticCell c;
+    r.U8(c.semantic_class, "a semantic cell");
+    r.U8(c.flags, "a semantic cell");
+    r.U16(c.instance_id, "a semantic cell");
+    r.U16(c.observations, "a semantic cell");
+    r.U16(c.misses, "a semantic cell");
+    r.F32(c.confidence, "a semantic cell");
+    for (int16_t& v : c.class_log_odds) r.I16(v, "a semantic cell");
+    if (!bad.empty() || !r.ok()) return;
+    bad = StoreSemanticCell(c, KeyOf(bk, i), grid, seen);
+  });
+  if (!r.ok()) return Corrupt(r.error());
+  if (!bad.empty()) return Corrupt(fmt::format("{}: {}", place.Describe(), bad));
+  return Status::Ok();
+}
+
+/// Reads the `num_blocks` block records into the grid and counts what they hold.
+Result<VoxelCounts> ReadBlocks(ByteReader& r, uint64_t num_blocks, OccupancyGrid& grid) {
+  VoxelCounts seen;
+  for (uint64_t n = 0; n < num_blocks; ++n) {
+    BlockPlace place{n + 1, num_blocks, r.position(), BlockKey{}};
+    AVP_RETURN_IF_ERROR(ReadBlockOccupancy(r, place, grid, seen));
+    AVP_RETURN_IF_ERROR(ReadBlockSemantics(r, place, grid, seen));
+  }
+  return seen;
+}
+
+/// After the blocks: no byte may remain before the checksum, and the header's counts must match
+/// the blocks'.
+Status CheckBlocksMatchHeader(const ByteReader& r, const VoxelCounts& declared,
+                              const VoxelCounts& seen) {
+  if (r.remaining() != 0) {
+    return Corrupt(fmt::format("{} unexpected bytes after the last block (at byte {})",
+                               r.remaining(), r.position()));
+  }
+  if (!(seen == declared)) {
+    return Corrupt(fmt::format(
+        "the counts in the header (known {}, occupied {}, semantic cells {}, labelled {}) do not "
+        "match the blocks (known {}, occupied {}, semantic cells {}, labelled {})",
+        declared.known, declared.occupied, declared.cells, declared.labelled, seen.known,
+        seen.occupied, seen.cells, seen.labelled));
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* info) {
+  AVP_ASSIGN_OR_RETURN(const FileFrame frame, CheckFileFrame(bytes));
+  // From here on the reader stops before the checksum.
+  ByteReader r(bytes, frame.body);
+  {
+    std::string skip;
+    (void)r.String(kFileBytesEnd, skip, "the fixed header");
+  }
+  AVP_ASSIGN_OR_RETURN(MapHeader header, ReadHeader(r));
+  AVP_ASSIGN_OR_RETURN(const MapOptions options, ValidateHeader(header, r.remaining()));
   std::optional<SemanticMap> loaded;
   try {
     loaded.emplace(options);
@@ -421,129 +621,22 @@ Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* 
     return Corrupt(fmt::format("invalid map options in the header: {}", e.what()));
   }
   OccupancyGrid& grid = loaded->grid();
-  const float occupied_log_odds = grid.occupied_log_odds();
+  AVP_ASSIGN_OR_RETURN(const VoxelCounts seen, ReadBlocks(r, header.num_blocks, grid));
+  AVP_RETURN_IF_ERROR(CheckBlocksMatchHeader(r, header.counts, seen));
 
-  // 6. Blocks.
-  constexpr int32_t kMaxBlockCoord = kMaxKeyMagnitude >> kBlockShift;
-  uint64_t seen_known = 0, seen_occupied = 0, seen_cells = 0, seen_labelled = 0;
-  for (uint64_t n = 0; n < num_blocks; ++n) {
-    const size_t block_start = r.position();
-    BlockKey bk;
-    BlockBits known_bits;
-    r.I32(bk.x, "a block key");
-    r.I32(bk.y, "a block key");
-    r.I32(bk.z, "a block key");
-    for (uint64_t& word : known_bits.words) r.U64(word, "a block's known bitset");
-    if (!r.ok()) return Corrupt(r.error());
-    const auto where = [&] {
-      return fmt::format("block {} of {} at byte {}, key ({}, {}, {})", n + 1, num_blocks,
-                         block_start, bk.x, bk.y, bk.z);
-    };
-    if (std::abs(int64_t{bk.x}) >= kMaxBlockCoord || std::abs(int64_t{bk.y}) >= kMaxBlockCoord ||
-        std::abs(int64_t{bk.z}) >= kMaxBlockCoord) {
-      return Corrupt(
-          fmt::format("{}: key out of range (|coordinate| must be < {})", where(), kMaxBlockCoord));
-    }
-    if (grid.Lookup(bk) >= 0) return Corrupt(fmt::format("{}: the block appears twice", where()));
-    const size_t count = static_cast<size_t>(known_bits.count());
-    if (!r.Need(4 * count, "a block's log-odds")) return Corrupt(r.error());
-    grid.GetOrCreateBlock(bk);  // also blocks without known voxels: allocation order is kept
-    std::string bad;
-    known_bits.ForEachSet([&](int i) {
-      float v = 0.0f;
-      r.F32(v, "a log-odds");
-      if (!bad.empty()) return;
-      const VoxelKey k = KeyOf(bk, i);
-      if (!(v >= grid.clamp_min_log_odds() && v <= grid.clamp_max_log_odds())) {
-        bad = fmt::format(
-            "voxel ({}, {}, {}) has a log-odds ({}) outside the sensor model's clamping range "
-            "[{}, {}]",
-            k.x, k.y, k.z, v, grid.clamp_min_log_odds(), grid.clamp_max_log_odds());
-      } else if (!grid.SetLogOdds(k, v)) {
-        bad = fmt::format("voxel ({}, {}, {}) lies outside the map's ROI", k.x, k.y, k.z);
-      } else {
-        ++seen_known;
-        if (*grid.LogOdds(k) >= occupied_log_odds) ++seen_occupied;
-      }
-    });
-    if (!r.ok()) return Corrupt(r.error());
-    if (!bad.empty()) return Corrupt(fmt::format("{}: {}", where(), bad));
-
-    uint8_t has_semantics = 0;
-    if (!r.U8(has_semantics, "a block's semantics flag")) return Corrupt(r.error());
-    if (has_semantics > 1) {
-      return Corrupt(fmt::format("{}: semantics flag ({}) must be 0 or 1", where(), has_semantics));
-    }
-    if (has_semantics == 0) continue;
-    BlockBits present;
-    for (uint64_t& word : present.words) r.U64(word, "a block's semantic bitset");
-    if (!r.ok()) return Corrupt(r.error());
-    const size_t num_cells = static_cast<size_t>(present.count());
-    if (!r.Need(kCellBytes * num_cells, "a block's semantic cells")) return Corrupt(r.error());
-    if (num_cells == 0) {
-      // An allocated but empty semantic payload: allocate it again so the maps match exactly.
-      for (int i = 0; i < kBlockVoxels; ++i) {
-        if (grid.MutableSemantic(KeyOf(bk, i)) != nullptr) break;
-      }
-      continue;
-    }
-    present.ForEachSet([&](int i) {
-      SemanticCell c;
-      r.U8(c.semantic_class, "a semantic cell");
-      r.U8(c.flags, "a semantic cell");
-      r.U16(c.instance_id, "a semantic cell");
-      r.U16(c.observations, "a semantic cell");
-      r.U16(c.misses, "a semantic cell");
-      r.F32(c.confidence, "a semantic cell");
-      for (int16_t& v : c.class_log_odds) r.I16(v, "a semantic cell");
-      if (!bad.empty() || !r.ok()) return;
-      const VoxelKey k = KeyOf(bk, i);
-      if (c.semantic_class >= kNumSemanticClasses) {
-        bad = fmt::format("voxel ({}, {}, {}) has an unknown semantic class {}", k.x, k.y, k.z,
-                          c.semantic_class);
-        return;
-      }
-      if (!(c.confidence >= 0.0f && c.confidence <= 1.0f)) {
-        bad = fmt::format("voxel ({}, {}, {}) has a confidence ({}) outside [0, 1]", k.x, k.y, k.z,
-                          c.confidence);
-        return;
-      }
-      SemanticCell* cell = grid.MutableSemantic(k);
-      if (cell == nullptr) {
-        bad = fmt::format("semantic voxel ({}, {}, {}) lies outside the map's ROI", k.x, k.y, k.z);
-        return;
-      }
-      *cell = c;
-      ++seen_cells;
-      if (c.has_label()) ++seen_labelled;
-    });
-    if (!r.ok()) return Corrupt(r.error());
-    if (!bad.empty()) return Corrupt(fmt::format("{}: {}", where(), bad));
-  }
-  if (r.remaining() != 0) {
-    return Corrupt(fmt::format("{} unexpected bytes after the last block (at byte {})",
-                               r.remaining(), r.position()));
-  }
-  if (seen_known != known || seen_occupied != occupied || seen_cells != cells ||
-      seen_labelled != labelled) {
-    return Corrupt(fmt::format(
-        "the counts in the header (known {}, occupied {}, semantic cells {}, labelled {}) do not "
-        "match the blocks (known {}, occupied {}, semantic cells {}, labelled {})",
-        known, occupied, cells, labelled, seen_known, seen_occupied, seen_cells, seen_labelled));
-  }
-
+  // The bookkeeping of a fresh map: no pending changes, instance ids from the cells.
   grid.ClearChanges();
   loaded->semantics().ResetFromGrid(grid);
   if (info != nullptr) {
-    info->version = version;
-    info->file_bytes = file_bytes;
-    info->crc32 = stored_crc;
-    info->num_blocks = num_blocks;
-    info->known_voxels = known;
-    info->occupied_voxels = occupied;
-    info->semantic_cells = cells;
-    info->labelled_voxels = labelled;
-    info->note = std::move(note);
+    info->version = frame.version;
+    info->file_bytes = frame.file_bytes;
+    info->crc32 = frame.crc32;
+    info->num_blocks = header.num_blocks;
+    info->known_voxels = header.counts.known;
+    info->occupied_voxels = header.counts.occupied;
+    info->semantic_cells = header.counts.cells;
+    info->labelled_voxels = header.counts.labelled;
+    info->note = std::move(header.note);
   }
   return std::move(*loaded);
 }

@@ -287,124 +287,137 @@ SemanticFrameStats SemanticFusion::Fuse(OccupancyGrid& grid,
   return stats;
 }
 
-void SemanticFusion::FuseMask(OccupancyGrid& grid, const InstanceMask& mask,
-                              std::span<const VoxelKey> keys, uint32_t frame,
-                              SemanticFrameStats& stats) {
-  const auto k = static_cast<uint8_t>(mask.semantic_class);
-  const size_t n = keys.size();
+namespace {
 
-  // 1. Votes: the mask's voxels already labelled with its class, by owning instance.
+// ---- FuseMask's stages (docs/mapping-semantics.md, "Instances")
+
+/// Votes: the mask's voxels already labelled with its class `cls`, counted by owning instance.
+std::map<uint16_t, size_t> InstanceVotes(const OccupancyGrid& grid, uint8_t cls,
+                                         std::span<const VoxelKey> keys) {
   std::map<uint16_t, size_t> votes;
   for (const VoxelKey& key : keys) {
     const SemanticCell* cell = grid.Semantic(key);
-    if (cell != nullptr && cell->semantic_class == k && cell->instance_id != 0) {
+    if (cell != nullptr && cell->semantic_class == cls && cell->instance_id != 0) {
       ++votes[cell->instance_id];
     }
   }
+  return votes;
+}
 
-  // 2. Spanned instances: enough of the votes and of the mask; the best one is the target.
+/// The instances a mask of n voxels spans, and the best of them.
+struct SpannedInstances {
+  std::vector<uint16_t> ids;  ///< ascending
+  uint16_t best = 0;          ///< most votes, ties to the lower id; 0 when none is spanned
+};
+
+/// Spanned instances: enough of the votes and of the mask's n voxels; the best one is the target.
+SpannedInstances FindSpannedInstances(const std::map<uint16_t, size_t>& votes, size_t n,
+                                      const SemanticOptions& options) {
   size_t total_votes = 0;
   for (const auto& [id, count] : votes) total_votes += count;
-  std::vector<uint16_t> spanned;  // ascending id
-  uint16_t best = 0;
+  SpannedInstances spanned;
   size_t best_votes = 0;
   for (const auto& [id, count] : votes) {
-    if (!AtLeastFraction(count, total_votes, options_.instance_join_fraction) ||
-        !AtLeastFraction(count, n, options_.instance_min_overlap_fraction)) {
+    if (!AtLeastFraction(count, total_votes, options.instance_join_fraction) ||
+        !AtLeastFraction(count, n, options.instance_min_overlap_fraction)) {
       continue;
     }
-    spanned.push_back(id);
+    spanned.ids.push_back(id);
     if (count > best_votes) {  // ties to the lower id
-      best = id;
+      spanned.best = id;
       best_votes = count;
     }
   }
+  return spanned;
+}
 
-  // Instances this mask keeps voxels for, with their centroids (used only when there are several).
-  struct Accepted {
-    uint16_t id;
-    Eigen::Vector3d centroid_W;
-  };
-  std::vector<Accepted> accepted;
-  uint16_t target = best;
+/// An instance a mask keeps voxels for, with its centroid (used only when there are several).
+struct AcceptedInstance {
+  uint16_t id;
+  Eigen::Vector3d centroid_W;
+};
 
-  if (spanned.size() >= 2) {
-    // Merge candidates: moments of every spanned instance (one pass over the labelled voxels).
-    std::map<uint16_t, Moments> moments;
-    std::map<uint16_t, std::vector<VoxelKey>> members;
-    for (uint16_t id : spanned) moments[id] = Moments{};
-    grid.ForEachSemanticVoxel([&](const VoxelKey& key, const SemanticCell& cell) {
-      auto it = moments.find(cell.instance_id);
-      if (it == moments.end()) return;
-      it->second.Add(grid.CenterOf(key));
-      members[cell.instance_id].push_back(key);
-    });
+/// The merge decision of a mask that spans several instances.
+struct MergeGroup {
+  uint16_t target = 0;        ///< the group's lowest id: the instance the group becomes
+  std::vector<uint16_t> ids;  ///< the group: the best spanned instance and those merged into it
+  /// The group (as target) and the spanned instances kept separate, ascending by id.
+  std::vector<AcceptedInstance> accepted;
+  /// Labelled voxels of each spanned instance.
+  std::map<uint16_t, std::vector<VoxelKey>> members;
+};
 
-    Moments group = moments[best];
-    size_t group_votes = votes[best];
-    std::vector<uint16_t> group_ids = {best};
-    std::vector<uint16_t> separate;
-    for (uint16_t j : spanned) {
-      if (j == best) continue;
-      const Moments& mj = moments[j];
-      const bool covers_both =
-          AtLeastFraction(votes[j], mj.n, options_.instance_merge_fraction) &&
-          AtLeastFraction(group_votes, group.n, options_.instance_merge_fraction);
-      const double separation = (group.Centroid() - mj.Centroid()).norm();
-      const bool close = options_.instance_merge_max_separation > 0.0f &&
-                         separation <= static_cast<double>(options_.instance_merge_max_separation) *
-                                           (group.Radius() + mj.Radius());
-      if (covers_both && close) {
-        group.Add(mj);
-        group_votes += votes[j];
-        group_ids.push_back(j);
-      } else {
-        separate.push_back(j);
-      }
+/// Merge candidates: the moments of every spanned instance (one pass over the labelled voxels);
+/// each joins the best one's group when the mask covers enough of both and they are close.
+MergeGroup GroupSpannedInstances(const OccupancyGrid& grid, const SpannedInstances& spanned,
+                                 const std::map<uint16_t, size_t>& votes,
+                                 const SemanticOptions& options) {
+  MergeGroup out;
+  std::map<uint16_t, Moments> moments;
+  for (uint16_t id : spanned.ids) moments[id] = Moments{};
+  grid.ForEachSemanticVoxel([&](const VoxelKey& key, const SemanticCell& cell) {
+    auto it = moments.find(cell.instance_id);
+    if (it == moments.end()) return;
+    it->second.Add(grid.CenterOf(key));
+    out.members[cell.instance_id].push_back(key);
+  });
+
+  const uint16_t best = spanned.best;
+  Moments group = moments[best];
+  size_t group_votes = votes.at(best);
+  out.ids = {best};
+  std::vector<uint16_t> separate;
+  for (uint16_t j : spanned.ids) {
+    if (j == best) continue;
+    const Moments& mj = moments[j];
+    const bool covers_both = AtLeastFraction(votes.at(j), mj.n, options.instance_merge_fraction) &&
+                             AtLeastFraction(group_votes, group.n, options.instance_merge_fraction);
+    const double separation = (group.Centroid() - mj.Centroid()).norm();
+    const bool close = options.instance_merge_max_separation > 0.0f &&
+                       separation <= static_cast<double>(options.instance_merge_max_separation) *
+                                         (group.Radius() + mj.Radius());
+    if (covers_both && close) {
+      group.Add(mj);
+      group_votes += votes.at(j);
+      out.ids.push_back(j);
+    } else {
+      separate.push_back(j);
     }
+  }
+  out.target = *std::min_element(out.ids.begin(), out.ids.end());
+  out.accepted.push_back({out.target, group.Centroid()});
+  for (uint16_t j : separate) out.accepted.push_back({j, moments[j].Centroid()});
+  std::sort(out.accepted.begin(), out.accepted.end(),
+            [](const AcceptedInstance& a, const AcceptedInstance& b) { return a.id < b.id; });
+  return out;
+}
 
-    target = *std::min_element(group_ids.begin(), group_ids.end());
-    for (uint16_t id : group_ids) {
-      if (id == target) continue;
-      for (const VoxelKey& key : members[id]) {
-        if (SemanticCell* cell = grid.MutableSemantic(key)) cell->instance_id = target;
-      }
-      if (id < frames_of_instance_.size()) {
-        // The merged instance spans both histories; the retired id keeps none.
-        const auto [first, last] = frames_of_instance_[id];
-        TouchInstance(target, last);
-        uint32_t& target_first = frames_of_instance_[target].first;
-        target_first = std::min(target_first, first);
-        frames_of_instance_[id] = {0, 0};
-      }
-      ++stats.merged_instances;
-    }
-    accepted.push_back({target, group.Centroid()});
-    for (uint16_t j : separate) accepted.push_back({j, moments[j].Centroid()});
-    std::sort(accepted.begin(), accepted.end(),
-              [](const Accepted& a, const Accepted& b) { return a.id < b.id; });
-  } else if (target != 0) {
-    accepted.push_back({target, Eigen::Vector3d::Zero()});
+/// The instances a mask keeps voxels for, and the one each of its voxels goes to.
+class InstanceChoice {
+ public:
+  explicit InstanceChoice(std::vector<AcceptedInstance> accepted)
+      : accepted_(std::move(accepted)) {}
+
+  bool Accepts(uint16_t id) const {
+    return std::any_of(accepted_.begin(), accepted_.end(),
+                       [id](const AcceptedInstance& a) { return a.id == id; });
   }
 
-  auto is_accepted = [&](uint16_t id) {
-    return std::any_of(accepted.begin(), accepted.end(),
-                       [id](const Accepted& a) { return a.id == id; });
-  };
-  // The instance a voxel of this mask goes to: the nearest accepted centroid when the mask spans
-  // several separate instances (ties to the lower id), else the target (created on first use).
-  auto destination = [&](const VoxelKey& key) -> uint16_t {
-    if (accepted.empty()) {
-      target = NewInstance(frame);
-      if (target == 0) return 0;
-      ++stats.new_instances;
-      accepted.push_back({target, Eigen::Vector3d::Zero()});
+  /// The instance the voxel `key` goes to: the nearest accepted centroid when the mask spans
+  /// several separate instances (ties to the lower id), else the target, created on first use by
+  /// new_instance() -> uint16_t (0: none could be, and the voxel gets none).
+  template <typename NewInstance>
+  uint16_t For(const OccupancyGrid& grid, const VoxelKey& key, NewInstance&& new_instance) {
+    if (accepted_.empty()) {
+      const uint16_t id = new_instance();
+      if (id == 0) return 0;
+      accepted_.push_back({id, Eigen::Vector3d::Zero()});
     }
-    if (accepted.size() == 1) return accepted.front().id;
+    if (accepted_.size() == 1) return accepted_.front().id;
     const Eigen::Vector3d p = grid.CenterOf(key);
-    const Accepted* nearest = &accepted.front();
+    const AcceptedInstance* nearest = &accepted_.front();
     double best_d2 = (p - nearest->centroid_W).squaredNorm();
-    for (const Accepted& a : accepted) {
+    for (const AcceptedInstance& a : accepted_) {
       const double d2 = (p - a.centroid_W).squaredNorm();
       if (d2 < best_d2) {
         best_d2 = d2;
@@ -412,6 +425,53 @@ void SemanticFusion::FuseMask(OccupancyGrid& grid, const InstanceMask& mask,
       }
     }
     return nearest->id;
+  }
+
+ private:
+  std::vector<AcceptedInstance> accepted_;
+};
+
+}  // namespace
+
+void SemanticFusion::AbsorbInstance(OccupancyGrid& grid, uint16_t id, uint16_t target,
+                                    std::span<const VoxelKey> members) {
+  for (const VoxelKey& key : members) {
+    if (SemanticCell* cell = grid.MutableSemantic(key)) cell->instance_id = target;
+  }
+  if (id < frames_of_instance_.size()) {
+    // The merged instance spans both histories; the retired id keeps none.
+    const auto [first, last] = frames_of_instance_[id];
+    TouchInstance(target, last);
+    uint32_t& target_first = frames_of_instance_[target].first;
+    target_first = std::min(target_first, first);
+    frames_of_instance_[id] = {0, 0};
+  }
+}
+
+void SemanticFusion::FuseMask(OccupancyGrid& grid, const InstanceMask& mask,
+                              std::span<const VoxelKey> keys, uint32_t frame,
+                              SemanticFrameStats& stats) {
+  const auto k = static_cast<uint8_t>(mask.semantic_class);
+  // 1. Votes; 2. spanned instances, the best one the target.
+  const std::map<uint16_t, size_t> votes = InstanceVotes(grid, k, keys);
+  const SpannedInstances spanned = FindSpannedInstances(votes, keys.size(), options_);
+  std::vector<AcceptedInstance> accepted;
+  if (spanned.ids.size() >= 2) {
+    MergeGroup group = GroupSpannedInstances(grid, spanned, votes, options_);
+    for (uint16_t id : group.ids) {
+      if (id == group.target) continue;
+      AbsorbInstance(grid, id, group.target, group.members[id]);
+      ++stats.merged_instances;
+    }
+    accepted = std::move(group.accepted);
+  } else if (spanned.best != 0) {
+    accepted.push_back({spanned.best, Eigen::Vector3d::Zero()});
+  }
+  InstanceChoice choice(std::move(accepted));
+  const auto new_instance = [&] {
+    const uint16_t id = NewInstance(frame);
+    if (id != 0) ++stats.new_instances;
+    return id;
   };
 
   // 3. Fuse every voxel, then place it.
@@ -428,13 +488,13 @@ void SemanticFusion::FuseMask(OccupancyGrid& grid, const InstanceMask& mask,
     if (cell->semantic_class != k) continue;  // the mask lost (reference) or is below threshold
 
     const uint16_t owner = cell->instance_id;
-    if (owner != 0 && is_accepted(owner)) {
+    if (owner != 0 && choice.Accepts(owner)) {
       SetContest(*cell, 0);
       TouchInstance(owner, frame);
       continue;
     }
     if (owner == 0) {
-      const uint16_t id = destination(key);
+      const uint16_t id = choice.For(grid, key, new_instance);
       cell->instance_id = id;
       TouchInstance(id, frame);
       continue;
@@ -445,7 +505,7 @@ void SemanticFusion::FuseMask(OccupancyGrid& grid, const InstanceMask& mask,
       SetContest(*cell, contest);
       continue;
     }
-    const uint16_t id = destination(key);
+    const uint16_t id = choice.For(grid, key, new_instance);
     if (id == 0) continue;
     cell->instance_id = id;
     SetContest(*cell, 0);

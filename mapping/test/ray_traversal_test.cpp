@@ -125,39 +125,36 @@ bool SegmentMeetsVoxel(const FixedSegment& s, const VoxelKey& k, bool open) {
   return c < 0 || (c == 0 && !lo.strict && !hi.strict);
 }
 
-/// Checks everything the walker promises about one segment. `exhaustive`: enumerate every voxel
-/// around the segment and require each one whose interior the segment meets to be visited
-/// (otherwise sample points along the segment).
-testing::AssertionResult CheckSegment(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                                      double voxel, bool exhaustive) {
-  std::ostringstream where;
-  where.precision(17);
-  where << " [segment (" << a.transpose() << ") -> (" << b.transpose() << "), voxel " << voxel
-        << "]";
-  const FixedSegment s(a, b, voxel);
-  int64_t returned = -1;
-  const std::vector<VoxelKey> keys = Walk(a, b, voxel, &returned);
+/// The walk's count, first and last voxels: TraverseRay's return value is the number of visits,
+/// |dk_x| + |dk_y| + |dk_z| + 1 voxels from the start point's to the end point's.
+testing::AssertionResult CheckEnds(const FixedSegment& s, const std::vector<VoxelKey>& keys,
+                                   int64_t returned, const std::string& where) {
   const VoxelKey k0 = s.start();
   const VoxelKey k1 = s.end();
   const int64_t expected_count = std::abs(int64_t{k1.x} - k0.x) + std::abs(int64_t{k1.y} - k0.y) +
                                  std::abs(int64_t{k1.z} - k0.z) + 1;
   if (returned != static_cast<int64_t>(keys.size())) {
     return testing::AssertionFailure()
-           << "TraverseRay returned " << returned << " but visited " << keys.size() << where.str();
+           << "TraverseRay returned " << returned << " but visited " << keys.size() << where;
   }
   if (static_cast<int64_t>(keys.size()) != expected_count) {
     return testing::AssertionFailure()
-           << "visited " << keys.size() << " voxels, expected " << expected_count << where.str();
+           << "visited " << keys.size() << " voxels, expected " << expected_count << where;
   }
   if (!(keys.front() == k0)) {
     return testing::AssertionFailure()
-           << "first voxel " << Str(keys.front()) << ", expected " << Str(k0) << where.str();
+           << "first voxel " << Str(keys.front()) << ", expected " << Str(k0) << where;
   }
   if (!(keys.back() == k1)) {
     return testing::AssertionFailure()
-           << "last voxel " << Str(keys.back()) << ", expected " << Str(k1) << where.str();
+           << "last voxel " << Str(keys.back()) << ", expected " << Str(k1) << where;
   }
-  // 6-connected, monotone steps; crossing parameters non-decreasing, ties: lower axis first.
+  return testing::AssertionSuccess();
+}
+
+/// 6-connected, monotone steps; crossing parameters non-decreasing, ties: lower axis first.
+testing::AssertionResult CheckSteps(const FixedSegment& s, const std::vector<VoxelKey>& keys,
+                                    const std::string& where) {
   Bound prev_t{0, 1, false};
   int prev_axis = -1;
   for (size_t i = 1; i < keys.size(); ++i) {
@@ -173,81 +170,109 @@ testing::AssertionResult CheckSegment(const Eigen::Vector3d& a, const Eigen::Vec
     }
     if (changed != 1 || std::abs(int64_t{q[axis]} - p[axis]) != 1) {
       return testing::AssertionFailure() << "step " << i << " from " << Str(keys[i - 1]) << " to "
-                                         << Str(keys[i]) << " is not a face step" << where.str();
+                                         << Str(keys[i]) << " is not a face step" << where;
     }
     const int step = q[axis] - p[axis];
     if ((step > 0) != (s.d[axis] > 0) || s.d[axis] == 0) {
       return testing::AssertionFailure()
-             << "step " << i << " on axis " << axis << " goes against the direction" << where.str();
+             << "step " << i << " on axis " << axis << " goes against the direction" << where;
     }
     const Int128 face = Int128{step > 0 ? q[axis] : p[axis]} * kOne;
     const Bound t = step > 0 ? Bound{face - s.u0[axis], s.d[axis], false}
                              : Bound{Int128{s.u0[axis]} - face, -s.d[axis], false};
     if (Compare(t, Bound{0, 1, false}) < 0 || Compare(t, Bound{1, 1, false}) > 0) {
       return testing::AssertionFailure()
-             << "step " << i << " crosses a face outside the segment" << where.str();
+             << "step " << i << " crosses a face outside the segment" << where;
     }
     const int c = Compare(t, prev_t);
     if (c < 0 || (c == 0 && axis < prev_axis)) {
-      return testing::AssertionFailure()
-             << "step " << i << " (axis " << axis << ") out of order after axis " << prev_axis
-             << where.str();
+      return testing::AssertionFailure() << "step " << i << " (axis " << axis
+                                         << ") out of order after axis " << prev_axis << where;
     }
     prev_t = t;
     prev_axis = axis;
   }
-  // Every visited voxel's closed box meets the segment.
-  for (const VoxelKey& k : keys) {
-    if (!SegmentMeetsVoxel(s, k, /*open=*/false)) {
-      return testing::AssertionFailure()
-             << "visited " << Str(k) << " which the segment does not touch" << where.str();
-    }
+  return testing::AssertionSuccess();
+}
+
+/// Every voxel around the segment whose interior the segment meets was visited.
+testing::AssertionResult CheckEveryCrossedVoxelVisited(const FixedSegment& s,
+                                                       const std::set<VoxelKey>& visited,
+                                                       const std::string& where) {
+  const VoxelKey k0 = s.start();
+  const VoxelKey k1 = s.end();
+  int32_t lo[3], hi[3];
+  const int32_t s0[3] = {k0.x, k0.y, k0.z}, s1[3] = {k1.x, k1.y, k1.z};
+  for (int j = 0; j < 3; ++j) {
+    lo[j] = std::min(s0[j], s1[j]) - 1;
+    hi[j] = std::max(s0[j], s1[j]) + 1;
   }
-  const std::set<VoxelKey> visited(keys.begin(), keys.end());
-  if (visited.size() != keys.size()) {
-    return testing::AssertionFailure() << "a voxel is visited twice" << where.str();
-  }
-  if (exhaustive) {
-    int32_t lo[3], hi[3];
-    const int32_t s0[3] = {k0.x, k0.y, k0.z}, s1[3] = {k1.x, k1.y, k1.z};
-    for (int j = 0; j < 3; ++j) {
-      lo[j] = std::min(s0[j], s1[j]) - 1;
-      hi[j] = std::max(s0[j], s1[j]) + 1;
-    }
-    for (int32_t z = lo[2]; z <= hi[2]; ++z) {
-      for (int32_t y = lo[1]; y <= hi[1]; ++y) {
-        for (int32_t x = lo[0]; x <= hi[0]; ++x) {
-          const VoxelKey k{x, y, z};
-          if (SegmentMeetsVoxel(s, k, /*open=*/true) && visited.count(k) == 0) {
-            return testing::AssertionFailure()
-                   << "the segment passes through the interior of " << Str(k)
-                   << " but it was not visited" << where.str();
-          }
+  for (int32_t z = lo[2]; z <= hi[2]; ++z) {
+    for (int32_t y = lo[1]; y <= hi[1]; ++y) {
+      for (int32_t x = lo[0]; x <= hi[0]; ++x) {
+        const VoxelKey k{x, y, z};
+        if (SegmentMeetsVoxel(s, k, /*open=*/true) && visited.count(k) == 0) {
+          return testing::AssertionFailure() << "the segment passes through the interior of "
+                                             << Str(k) << " but it was not visited" << where;
         }
-      }
-    }
-  } else {
-    // Points U0 + D i / n strictly inside a voxel (no coordinate on a face) must be visited.
-    constexpr int kSamples = 997;
-    for (int i = 0; i <= kSamples; ++i) {
-      int32_t key[3];
-      bool on_face = false;
-      for (int j = 0; j < 3; ++j) {
-        const Int128 num = Int128{s.u0[j]} * kSamples + Int128{s.d[j]} * i;  // / (kSamples kOne)
-        const Int128 den = Int128{kSamples} * kOne;
-        Int128 q = num / den;
-        if (num % den != 0 && num < 0) --q;  // floor
-        if (num % den == 0) on_face = true;
-        key[j] = static_cast<int32_t>(q);
-      }
-      if (!on_face && visited.count(VoxelKey{key[0], key[1], key[2]}) == 0) {
-        return testing::AssertionFailure()
-               << "sample " << i << " lies in " << Str(VoxelKey{key[0], key[1], key[2]})
-               << " which was not visited" << where.str();
       }
     }
   }
   return testing::AssertionSuccess();
+}
+
+/// Points U0 + D i / n strictly inside a voxel (no coordinate on a face) must be visited.
+testing::AssertionResult CheckSampledPointsVisited(const FixedSegment& s,
+                                                   const std::set<VoxelKey>& visited,
+                                                   const std::string& where) {
+  constexpr int kSamples = 997;
+  for (int i = 0; i <= kSamples; ++i) {
+    int32_t key[3];
+    bool on_face = false;
+    for (int j = 0; j < 3; ++j) {
+      const Int128 num = Int128{s.u0[j]} * kSamples + Int128{s.d[j]} * i;  // / (kSamples kOne)
+      const Int128 den = Int128{kSamples} * kOne;
+      Int128 q = num / den;
+      if (num % den != 0 && num < 0) --q;  // floor
+      if (num % den == 0) on_face = true;
+      key[j] = static_cast<int32_t>(q);
+    }
+    if (!on_face && visited.count(VoxelKey{key[0], key[1], key[2]}) == 0) {
+      return testing::AssertionFailure()
+             << "sample " << i << " lies in " << Str(VoxelKey{key[0], key[1], key[2]})
+             << " which was not visited" << where;
+    }
+  }
+  return testing::AssertionSuccess();
+}
+
+/// Checks everything the walker promises about one segment. `exhaustive`: enumerate every voxel
+/// around the segment and require each one whose interior the segment meets to be visited
+/// (otherwise sample points along the segment).
+testing::AssertionResult CheckSegment(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                      double voxel, bool exhaustive) {
+  std::ostringstream os;
+  os.precision(17);
+  os << " [segment (" << a.transpose() << ") -> (" << b.transpose() << "), voxel " << voxel << "]";
+  const std::string where = os.str();
+  const FixedSegment s(a, b, voxel);
+  int64_t returned = -1;
+  const std::vector<VoxelKey> keys = Walk(a, b, voxel, &returned);
+  if (testing::AssertionResult r = CheckEnds(s, keys, returned, where); !r) return r;
+  if (testing::AssertionResult r = CheckSteps(s, keys, where); !r) return r;
+  // Every visited voxel's closed box meets the segment.
+  for (const VoxelKey& k : keys) {
+    if (!SegmentMeetsVoxel(s, k, /*open=*/false)) {
+      return testing::AssertionFailure()
+             << "visited " << Str(k) << " which the segment does not touch" << where;
+    }
+  }
+  const std::set<VoxelKey> visited(keys.begin(), keys.end());
+  if (visited.size() != keys.size()) {
+    return testing::AssertionFailure() << "a voxel is visited twice" << where;
+  }
+  return exhaustive ? CheckEveryCrossedVoxelVisited(s, visited, where)
+                    : CheckSampledPointsVisited(s, visited, where);
 }
 
 // ---- Hand-made cases

@@ -11,7 +11,7 @@
 
 namespace avp::mapping {
 
-class PlanningSnapshot;
+class PlanningSnapshot;  // bench_map's (benchmarks/planning_snapshot.h)
 
 /// Exact voxel traversal of a segment, in integer arithmetic.
 ///
@@ -175,7 +175,9 @@ class RayWalker {
     return t - static_cast<int64_t>(v < static_cast<double>(t));
   }
 
-  friend class PlanningSnapshot;  // its CastRay runs the same decisions in registers
+  // bench_map's PlanningSnapshot (benchmarks/planning_snapshot.h): its CastRay runs the same
+  // decisions in registers.
+  friend class PlanningSnapshot;
   static constexpr int64_t kNever = std::numeric_limits<int64_t>::max();
   bool ok_ = true;
   int32_t key_[3] = {0, 0, 0};

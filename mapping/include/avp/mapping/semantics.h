@@ -164,6 +164,10 @@ class SemanticFusion {
   /// A fresh id (0 when all 65535 are used).
   uint16_t NewInstance(uint32_t frame);
   void TouchInstance(uint16_t id, uint32_t frame);
+  /// Merges instance `id` into `target` (FuseMask): relabels its voxels `members` and joins its
+  /// first/last frames into the target's; the retired id keeps none.
+  void AbsorbInstance(OccupancyGrid& grid, uint16_t id, uint16_t target,
+                      std::span<const VoxelKey> members);
 
   SemanticOptions options_;
   uint32_t next_instance_id_ = 1;  ///< 65536 = ids exhausted (masks then get no instance)

@@ -269,6 +269,9 @@ class GainGrid {
     return v;
   }
 
+  /// Build's stages (gain_grid.cpp).
+  struct Builder;
+
   static constexpr uint32_t kStateMask = 0x3;
   static constexpr int kClassShift = 2;
   static constexpr uint32_t kClassMask = 0x7;

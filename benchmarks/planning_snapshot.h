@@ -1,5 +1,11 @@
 #pragma once
 
+// The avp side of bench_map's NBV view evaluation rows (docs/benchmarks.md, "The planning
+// snapshot"): a one-byte-per-voxel copy of the map and a ray cast against it, timed against
+// OctoMap's computeRayKeys + search. Not part of the mapping library (the planner reads the map
+// through planning's GainGrid). It stays in avp::mapping because RayWalker befriends it: CastRay
+// runs the walker's decisions in registers.
+
 #include <cstdint>
 #include <vector>
 

@@ -1,5 +1,7 @@
 // PlanningSnapshot: exact copies of the grid over a box, class bits, size limits, and CastRay
 // against a brute-force walk (TraverseRay + grid.State).
+#include "planning_snapshot.h"
+
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -10,7 +12,6 @@
 #include <gtest/gtest.h>
 
 #include <avp/core/rng.h>
-#include <avp/mapping/planning_snapshot.h>
 #include <avp/mapping/ray_traversal.h>
 
 namespace avp::mapping {

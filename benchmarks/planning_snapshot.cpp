@@ -1,9 +1,10 @@
+#include "planning_snapshot.h"
+
 #include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>
 
-#include <avp/mapping/planning_snapshot.h>
 #include <avp/mapping/ray_traversal.h>
 
 namespace avp::mapping {
