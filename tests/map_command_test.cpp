@@ -69,7 +69,7 @@ TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
   EXPECT_EQ(info->options.semantics.policy, mapping::FusionPolicy::kReferenceMax);
   ASSERT_TRUE(info->options.grid.roi.has_value());
   const std::string text = FormatMapInfo(*info);
-  EXPECT_THAT(text, HasSubstr("format version 1"));
+  EXPECT_THAT(text, HasSubstr("format version 2"));
   EXPECT_THAT(text, HasSubstr("voxel size   8 mm"));
   EXPECT_THAT(text, HasSubstr("reference-max"));
   EXPECT_THAT(text, HasSubstr("--scenario tomato-single-cluster --seed 1 --views 3"));

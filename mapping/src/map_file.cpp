@@ -28,6 +28,10 @@ constexpr size_t kMagicBytes = sizeof(kMapFileMagic);
 constexpr size_t kVersionEnd = 12;    // magic + u32 version
 constexpr size_t kFileBytesEnd = 24;  // + u32 flags + u64 file_bytes
 constexpr size_t kCrcBytes = 4;
+// The first format: the header held fixed fields for the options (docs/map-format.md); still read.
+constexpr uint32_t kMapFileVersionV1 = 1;
+// Most options a version 2 header may name (the table has 21).
+constexpr uint32_t kMaxHeaderOptions = 1024;
 constexpr size_t kCellBytes = 12 + 2 * kNumSemanticClasses;  // 26 with 7 classes
 // Smallest block record: key (12) + known bitset (64) + has_semantics (1).
 constexpr size_t kMinBlockBytes = 12 + 8 * kBlockWords + 1;
@@ -171,6 +175,21 @@ std::string HexPrefix(std::span<const uint8_t> bytes, size_t n) {
 
 Status Corrupt(const std::string& message) { return ParseError(message); }
 
+/// `text` with bytes below 0x20, 0x7f and above as \xNN (a file's bytes in a message never reach
+/// a terminal raw).
+std::string EscapeControl(std::string_view text) {
+  std::string out;
+  for (const char c : text) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u < 0x20 || u >= 0x7f) {
+      out += fmt::format("\\x{:02x}", u);
+    } else {
+      out += c;
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 uint32_t Crc32(std::span<const uint8_t> bytes, uint32_t crc) {
@@ -180,6 +199,24 @@ uint32_t Crc32(std::span<const uint8_t> bytes, uint32_t crc) {
   return c ^ 0xFFFFFFFFu;
 }
 
+namespace {
+
+/// The map's options as the table names them (MapOptionTable: grid.voxel_size_m, grid.sensor.*,
+/// semantics.*): u32 count, then each as u16 key length, key, u16 value length, value (text that
+/// reads back to the same bits).
+void WriteOptions(const MapOptions& options, ByteWriter& w) {
+  const OptionValues values = MapOptionTable().Values(options);
+  w.U32(static_cast<uint32_t>(values.size()));
+  for (const auto& [key, value] : values) {
+    w.U16(static_cast<uint16_t>(key.size()));
+    w.Bytes(key.data(), key.size());
+    w.U16(static_cast<uint16_t>(value.size()));
+    w.Bytes(value.data(), value.size());
+  }
+}
+
+}  // namespace
+
 Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map, const MapSaveOptions& options) {
   if (options.note.size() > kMaxMapNoteBytes) {
     return InvalidArgumentError(fmt::format("map note has {} bytes; at most {} fit in a map file",
@@ -187,7 +224,6 @@ Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map, const MapSaveO
   }
   const OccupancyGrid& grid = map.grid();
   const GridOptions& go = grid.options();
-  const SemanticOptions& so = map.semantics().options();
   const float occupied = grid.occupied_log_odds();
 
   // Counts first (they go into the header).
@@ -211,31 +247,16 @@ Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map, const MapSaveO
   w.U32(kMapFileVersion);
   w.U32(0);  // flags (reserved)
   w.U64(0);  // file_bytes, patched below
-  w.F64(go.voxel_size_m);
   w.U8(go.roi.has_value() ? 1 : 0);
   for (int i = 0; i < 3; ++i) w.F64(go.roi ? go.roi->min()[i] : 0.0);
   for (int i = 0; i < 3; ++i) w.F64(go.roi ? go.roi->max()[i] : 0.0);
-  w.F64(go.sensor.hit);
-  w.F64(go.sensor.miss);
-  w.F64(go.sensor.clamp_min);
-  w.F64(go.sensor.clamp_max);
-  w.F64(go.sensor.occupied_threshold);
-  w.U8(static_cast<uint8_t>(so.policy));
-  w.F32(so.reference_penalty);
-  w.F32(so.class_log_odds_min);
-  w.F32(so.class_log_odds_max);
-  w.F32(so.miss_log_odds);
-  w.F32(so.label_threshold);
-  w.F32(so.instance_join_fraction);
-  w.F32(so.instance_merge_fraction);
-  w.I32(so.outlier_min_neighbours);
-  w.U8(so.remove_outliers_each_frame ? 1 : 0);
   w.U8(static_cast<uint8_t>(kNumSemanticClasses));
   w.U64(grid.num_blocks());
   w.U64(known);
   w.U64(occupied_voxels);
   w.U64(cells);
   w.U64(labelled);
+  WriteOptions(map.options(), w);
   w.U32(static_cast<uint32_t>(options.note.size()));
   w.Bytes(options.note.data(), options.note.size());
 
@@ -309,9 +330,10 @@ Result<FileFrame> CheckFileFrame(std::span<const uint8_t> bytes) {
   AVP_RETURN_IF_ERROR(CheckMagic(bytes, header));
   FileFrame frame;
   if (!header.U32(frame.version, "the format version")) return Corrupt(header.error());
-  if (frame.version != kMapFileVersion) {
-    return Corrupt(fmt::format("unsupported map file version {} (this build reads version {})",
-                               frame.version, kMapFileVersion));
+  if (frame.version != kMapFileVersion && frame.version != kMapFileVersionV1) {
+    return Corrupt(
+        fmt::format("unsupported map file version {} (this build reads versions {} and {})",
+                    frame.version, kMapFileVersionV1, kMapFileVersion));
   }
   uint32_t flags = 0;
   if (!header.U32(flags, "the flags") || !header.U64(frame.file_bytes, "the file size")) {
@@ -363,9 +385,10 @@ struct MapHeader {
   std::string note;
 };
 
-/// Reads the header fields after the fixed part (the reader stands at kFileBytesEnd): the first
-/// truncation, or a note longer than kMaxMapNoteBytes, is an error.
-Result<MapHeader> ReadHeader(ByteReader& r) {
+/// Reads a version 1 header after the fixed part (the reader stands at kFileBytesEnd): fixed
+/// fields for the options of that time (the others keep their defaults). The first truncation, or
+/// a note longer than kMaxMapNoteBytes, is an error.
+Result<MapHeader> ReadHeaderV1(ByteReader& r) {
   MapHeader h;
   GridOptions& go = h.options.grid;
   SemanticOptions& so = h.options.semantics;
@@ -396,6 +419,56 @@ Result<MapHeader> ReadHeader(ByteReader& r) {
   r.U64(h.counts.labelled, "the labelled voxel count");
   r.U32(note_bytes, "the note length");
   if (!r.ok()) return Corrupt(r.error());
+  if (note_bytes > kMaxMapNoteBytes) {
+    return Corrupt(
+        fmt::format("note length {} exceeds the maximum {}", note_bytes, kMaxMapNoteBytes));
+  }
+  if (!r.String(note_bytes, h.note, "the note")) return Corrupt(r.error());
+  return h;
+}
+
+/// The option section of a version 2 header (WriteOptions), applied over the defaults: an unknown
+/// key or a value the table does not take is an error naming it.
+Status ReadOptions(ByteReader& r, MapOptions& options) {
+  uint32_t count = 0;
+  if (!r.U32(count, "the option count")) return Corrupt(r.error());
+  if (count > kMaxHeaderOptions) {
+    return Corrupt(fmt::format("option count {} exceeds the maximum {}", count, kMaxHeaderOptions));
+  }
+  for (uint32_t i = 0; i < count; ++i) {
+    uint16_t key_bytes = 0, value_bytes = 0;
+    std::string key, value;
+    if (!r.U16(key_bytes, "an option name length") || !r.String(key_bytes, key, "an option name") ||
+        !r.U16(value_bytes, "an option value length") ||
+        !r.String(value_bytes, value, "an option value")) {
+      return Corrupt(r.error());
+    }
+    // Names and values come from the file: shown with their control bytes escaped.
+    if (const Status s = MapOptionTable().Set(options, key, value); !s.ok()) {
+      return Corrupt("invalid header: " + EscapeControl(s.message()));
+    }
+  }
+  return Status::Ok();
+}
+
+/// Reads a version 2 header after the fixed part: the ROI, the class count, the counts, the
+/// options (by name, ReadOptions) and the note.
+Result<MapHeader> ReadHeaderV2(ByteReader& r) {
+  MapHeader h;
+  uint32_t note_bytes = 0;
+  r.U8(h.has_roi, "the ROI flag");
+  for (double& v : h.roi) r.F64(v, "the ROI");
+  r.U8(h.num_classes, "the number of semantic classes");
+  r.U64(h.num_blocks, "the block count");
+  r.U64(h.counts.known, "the known voxel count");
+  r.U64(h.counts.occupied, "the occupied voxel count");
+  r.U64(h.counts.cells, "the semantic cell count");
+  r.U64(h.counts.labelled, "the labelled voxel count");
+  if (!r.ok()) return Corrupt(r.error());
+  AVP_RETURN_IF_ERROR(ReadOptions(r, h.options));
+  h.policy = static_cast<uint8_t>(h.options.semantics.policy);
+  h.remove_outliers = h.options.semantics.remove_outliers_each_frame ? 1 : 0;
+  if (!r.U32(note_bytes, "the note length")) return Corrupt(r.error());
   if (note_bytes > kMaxMapNoteBytes) {
     return Corrupt(
         fmt::format("note length {} exceeds the maximum {}", note_bytes, kMaxMapNoteBytes));
@@ -612,7 +685,8 @@ Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* 
     std::string skip;
     (void)r.String(kFileBytesEnd, skip, "the fixed header");
   }
-  AVP_ASSIGN_OR_RETURN(MapHeader header, ReadHeader(r));
+  AVP_ASSIGN_OR_RETURN(MapHeader header,
+                       frame.version == kMapFileVersionV1 ? ReadHeaderV1(r) : ReadHeaderV2(r));
   AVP_ASSIGN_OR_RETURN(const MapOptions options, ValidateHeader(header, r.remaining()));
   std::optional<SemanticMap> loaded;
   try {

@@ -1,6 +1,7 @@
 // The .avpmap file: exact round trips, deterministic bytes, and clear errors (never a crash) on
 // truncated, corrupted or foreign input. Also the semantic PLY export.
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -20,6 +21,8 @@
 
 namespace avp::mapping {
 namespace {
+
+namespace fs = std::filesystem;
 
 using ::testing::AnyOf;
 using ::testing::HasSubstr;
@@ -293,6 +296,40 @@ TEST_F(MapFileTest, SpecificCorruptionsNameWhatIsWrong) {
   }
 }
 
+// Version 2 header offsets (docs/map-format.md).
+constexpr size_t kBlockCountOffset = 74;
+constexpr size_t kOptionsOffset = 114;
+
+uint16_t U16At(const std::vector<uint8_t>& v, size_t at) {
+  return static_cast<uint16_t>(v[at] | (v[at + 1] << 8));
+}
+
+/// Offset of the value text of option `key` in the header's option section.
+size_t OptionValueOffset(const std::vector<uint8_t>& v, std::string_view key) {
+  size_t at = kOptionsOffset + 4;
+  const uint32_t count = v[kOptionsOffset] | (v[kOptionsOffset + 1] << 8);
+  for (uint32_t i = 0; i < count; ++i) {
+    const uint16_t key_bytes = U16At(v, at);
+    const std::string name(v.begin() + static_cast<std::ptrdiff_t>(at + 2),
+                           v.begin() + static_cast<std::ptrdiff_t>(at + 2 + key_bytes));
+    at += 2 + key_bytes;
+    if (name == key) return at + 2;
+    at += 2 + U16At(v, at);
+  }
+  return 0;
+}
+
+/// Offset of the note length: after the option section.
+size_t NoteLengthOffset(const std::vector<uint8_t>& v) {
+  size_t at = kOptionsOffset + 4;
+  const uint32_t count = v[kOptionsOffset] | (v[kOptionsOffset + 1] << 8);
+  for (uint32_t i = 0; i < count; ++i) {
+    at += 2 + U16At(v, at);
+    at += 2 + U16At(v, at);
+  }
+  return at;
+}
+
 /// Rewrites the checksum so that the parser itself (not the CRC) must cope with the damage.
 void FixChecksum(std::vector<uint8_t>& v) {
   const uint32_t crc = Crc32(std::span<const uint8_t>(v.data(), v.size() - 4));
@@ -326,27 +363,67 @@ TEST_F(MapFileTest, ParserSurvivesDamageBehindAValidChecksum) {
 
   // Absurd sizes are bounded before anything is allocated.
   auto v = bytes;
-  for (int i = 0; i < 8; ++i) v[156 + i] = 0xFF;  // block count
+  for (int i = 0; i < 8; ++i) v[kBlockCountOffset + i] = 0xFF;
   FixChecksum(v);
   Result<SemanticMap> r = DeserializeMap(v);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("block count 18446744073709551615 cannot fit"));
 
   v = bytes;
-  v[196] = 0xFF;  // note length 65535 + ...
-  v[197] = 0xFF;
-  v[198] = 0x01;
+  const size_t note = NoteLengthOffset(v);
+  v[note] = 0xFF;  // note length 65535 + ...
+  v[note + 1] = 0xFF;
+  v[note + 2] = 0x01;
   FixChecksum(v);
   r = DeserializeMap(v);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("note length 131071 exceeds"));
 
   v = bytes;
-  std::memset(v.data() + 24, 0, 8);  // voxel size 0
+  const size_t voxel = OptionValueOffset(v, "grid.voxel_size_m");
+  ASSERT_GT(voxel, 0u);
+  for (size_t i = voxel; i < voxel + U16At(v, voxel - 2); ++i) v[i] = '9';  // 9999... m voxels
   FixChecksum(v);
   r = DeserializeMap(v);
   ASSERT_FALSE(r.ok());
-  EXPECT_THAT(r.status().message(), HasSubstr("invalid map options"));
+  EXPECT_THAT(r.status().message(),
+              HasSubstr("invalid map options in the header: invalid map options: "
+                        "grid.voxel_size_m (9999"));
+  EXPECT_THAT(r.status().message(), HasSubstr(" m) must be in [0.002, 0.02]"));
+
+  v = bytes;
+  const size_t policy = OptionValueOffset(v, "semantics.policy");
+  v[policy] = 0x1b;  // an escape character: named, not echoed
+  FixChecksum(v);
+  r = DeserializeMap(v);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(),
+              HasSubstr("map option semantics.policy: '\\x1beference-max' is not one of"));
+}
+
+TEST_F(MapFileTest, VersionOneFilesStillLoad) {
+  // Written by avp map build at version 1 (fixed option fields): tomato-single-cluster, seed 0,
+  // one view, 20 mm voxels, reference-max, ray-cast carving.
+  MapFileInfo info;
+  const Result<SemanticMap> v1 =
+      LoadMap(fs::path(AVP_TEST_DATA_DIR_MAPPING) / "v1_tomato_single_cluster_20mm.avpmap", &info);
+  ASSERT_TRUE(v1.ok()) << v1.status().ToString();
+  EXPECT_EQ(info.version, 1u);
+  EXPECT_EQ(info.num_blocks, 198u);
+  EXPECT_EQ(info.known_voxels, 19002u);
+  EXPECT_EQ(info.occupied_voxels, 465u);
+  EXPECT_EQ(info.labelled_voxels, 75u);
+  EXPECT_THAT(info.note, HasSubstr("--policy reference-max --carving raycast"));
+  EXPECT_EQ(v1->voxel_size_m(), 0.02);
+  EXPECT_EQ(v1->options().semantics.policy, FusionPolicy::kReferenceMax);
+  EXPECT_EQ(v1->Instances().size(), 5u);
+  // Saved again it is version 2, and it reads back to the same map.
+  const auto v2_bytes = SerializeMap(*v1, {info.note}).value();
+  EXPECT_EQ(v2_bytes[8], kMapFileVersion);
+  const Result<SemanticMap> v2 = DeserializeMap(v2_bytes);
+  ASSERT_TRUE(v2.ok()) << v2.status().ToString();
+  EXPECT_EQ(SerializeMap(*v2, {info.note}).value(), v2_bytes);
+  EXPECT_TRUE(MapOptionTable().Differences(v2->options(), v1->options()).empty());
 }
 
 TEST_F(MapFileTest, TooLongNoteIsRejected) {

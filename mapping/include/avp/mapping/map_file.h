@@ -23,8 +23,10 @@ namespace avp::mapping {
 
 /// The 8 bytes every map file starts with: 0x89 'A' 'V' 'P' 'M' 'A' 'P' '\n'.
 inline constexpr char kMapFileMagic[8] = {'\x89', 'A', 'V', 'P', 'M', 'A', 'P', '\n'};
-/// The version this build writes (and the only one it reads).
-inline constexpr uint32_t kMapFileVersion = 1;
+/// The version this build writes: its header names the map's options as MapOptionTable does
+/// ("grid.voxel_size_m" = "0.005", ...), so a new option needs no new format. This build also
+/// reads version 1, whose header had fixed option fields.
+inline constexpr uint32_t kMapFileVersion = 2;
 /// Longest free-form note stored in a file, bytes.
 inline constexpr size_t kMaxMapNoteBytes = 65535;
 
