@@ -6,6 +6,7 @@
 
 #include <avp/core/error.h>
 #include <avp/planning/avp_nbv_planner.h>
+#include <avp/planning/farthest_view_planner.h>
 #include <avp/planning/isler_utilities.h>
 #include <avp/planning/planner_registry.h>
 #include <avp/planning/predefined_planner.h>
@@ -76,6 +77,7 @@ void RegisterBuiltinPlanners(PlannerRegistry& registry) {
   entries.push_back(ReferenceNbvPlannerEntry());
   entries.push_back(RandomPlannerEntry());
   for (PlannerEntry& e : IslerPlannerEntries()) entries.push_back(std::move(e));
+  entries.push_back(FarthestViewPlannerEntry());
   for (PlannerEntry& e : entries) {
     const std::string name = e.name;
     const Status s = registry.Add(std::move(e));

@@ -23,9 +23,10 @@ PlannerRegistry Builtins() {
 
 TEST(PlannerRegistryTest, RegistersTheBuiltinsInOrder) {
   const PlannerRegistry r = Builtins();
-  EXPECT_THAT(r.Names(), ElementsAre("avp-nbv", "predefined", "predefined-wide",
-                                     "predefined-generic", "reference-nbv", "random", "isler-ae",
-                                     "isler-oa", "isler-uv", "isler-rsv", "isler-rse", "isler-pc"));
+  EXPECT_THAT(r.Names(),
+              ElementsAre("avp-nbv", "predefined", "predefined-wide", "predefined-generic",
+                          "reference-nbv", "random", "isler-ae", "isler-oa", "isler-uv",
+                          "isler-rsv", "isler-rse", "isler-pc", "farthest-view"));
   for (const PlannerEntry& e : r.entries()) {
     EXPECT_FALSE(e.description.empty()) << e.name;
     EXPECT_FALSE(e.needs_ground_truth) << e.name;

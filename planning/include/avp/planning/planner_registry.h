@@ -88,7 +88,7 @@ class PlannerRegistry {
 
 /// Registers every planner of this module, in this order: avp-nbv, predefined, predefined-wide,
 /// predefined-generic, reference-nbv, random, isler-ae, isler-oa, isler-uv, isler-rsv,
-/// isler-rse, isler-pc. @throws avp::Error if a name is already taken.
+/// isler-rse, isler-pc, farthest-view. @throws avp::Error if a name is already taken.
 void RegisterBuiltinPlanners(PlannerRegistry& registry);
 
 }  // namespace avp::planning
