@@ -215,7 +215,9 @@ SemanticFusion::SemanticFusion(const SemanticOptions& options) : options_(option
 }
 
 void SemanticFusion::FuseHit(SemanticCell& cell, SemanticClass cls, float confidence) const {
-  if (options_.policy == FusionPolicy::kReferenceMax) {
+  if (options_.rule != nullptr) {
+    options_.rule->Hit(cell, cls, confidence);
+  } else if (options_.policy == FusionPolicy::kReferenceMax) {
     FuseReferenceMax(cell, cls, confidence, options_.reference_penalty);
   } else {
     FuseBayesianHit(cell, cls, confidence, options_);
@@ -264,15 +266,22 @@ SemanticFrameStats SemanticFusion::Fuse(OccupancyGrid& grid,
     }
   }
 
-  // Negative evidence first (Bayesian only; the reference has none), on voxels with evidence.
-  if (options_.policy == FusionPolicy::kBayesian) {
+  // Negative evidence first (Bayesian, or a rule that has it; the reference has none), on voxels
+  // with evidence.
+  const FusionRule* rule = options_.rule.get();
+  if (rule != nullptr ? rule->has_negative_evidence()
+                      : options_.policy == FusionPolicy::kBayesian) {
     for (const VoxelKey& key : misses) {
       const SemanticCell* existing = grid.Semantic(key);
       if (existing == nullptr || existing->observations == 0) continue;
       SemanticCell* cell = grid.MutableSemantic(key);
       if (cell == nullptr) continue;
       const uint8_t was = cell->semantic_class;
-      FuseBayesianMiss(*cell, options_);
+      if (rule != nullptr) {
+        rule->Miss(*cell);
+      } else {
+        FuseBayesianMiss(*cell, options_);
+      }
       if (cell->semantic_class != was) ClearInstance(*cell);
       ++stats.miss_updates;
     }

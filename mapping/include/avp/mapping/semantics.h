@@ -2,6 +2,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string_view>
@@ -35,6 +36,24 @@ std::string_view ToString(FusionPolicy policy);
 /// "reference-max" or "bayesian"; nullopt otherwise.
 std::optional<FusionPolicy> FusionPolicyFromString(std::string_view name);
 
+/// A semantic fusion rule of one's own (docs/extending.md, "Adding a map fusion rule"): how one
+/// observation changes a voxel's cell. Set SemanticOptions::rule to use it instead of the built-in
+/// policy; instance association, outlier removal and the map files are the same for every rule.
+class FusionRule {
+ public:
+  virtual ~FusionRule() = default;
+  /// A short name for records ("max-confidence").
+  virtual std::string_view name() const = 0;
+  /// One observation inside a mask of class `cls` (an object class) with calibrated confidence
+  /// `confidence` in [0, 1]. Must count it (SemanticCell::observations) and leave instance_id
+  /// alone.
+  virtual void Hit(SemanticCell& cell, SemanticClass cls, float confidence) const = 0;
+  /// Whether an endpoint seen outside every mask is evidence against the voxel's label.
+  virtual bool has_negative_evidence() const { return false; }
+  /// One such endpoint on a voxel that has evidence (only when has_negative_evidence()).
+  virtual void Miss(SemanticCell& cell) const { (void)cell; }
+};
+
 /// One frame's semantic evidence for one voxel: the integrator reduces all of a frame's endpoints
 /// in a voxel to one observation (the mask with most pixels there, ties to the higher confidence,
 /// then the lower index; or -1 when most pixels were outside every mask).
@@ -46,6 +65,9 @@ struct VoxelObservation {
 
 struct SemanticOptions {
   FusionPolicy policy = FusionPolicy::kBayesian;
+  /// A rule of one's own instead of `policy` (code, not configuration: not in the table, and a
+  /// saved map records only `policy`). Null: the built-in policy.
+  std::shared_ptr<const FusionRule> rule;
   /// kReferenceMax: the conflict / first-observation factor (0.9 in the reference), in (0, 1].
   float reference_penalty = 0.9f;
   /// kBayesian: clamp of each class's log-odds against background; -31 <= min < 0 < max <= 31
