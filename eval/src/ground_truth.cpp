@@ -202,10 +202,8 @@ const OptionTable<GroundTruthOptions>& GroundTruthOptionTable() {
       if (!(std::isfinite(o.max_range_m) && o.max_range_m > 0.0 && o.max_range_m <= 100.0)) {
         errors.push_back(fmt::format("max_range_m ({}) must be in (0, 100]", o.max_range_m));
       }
-      if (o.num_threads < 0) {
-        errors.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
-      }
     });
+    t->Threads("num_threads", &G::num_threads);
     return t;
   }();
   return *table;

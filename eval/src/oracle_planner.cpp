@@ -203,6 +203,7 @@ void RegisterOraclePlanners(planning::PlannerRegistry& registry) {
   OracleNbvOptions detect;
   detect.objective = OracleNbvOptions::Objective::kDetections;
   detect.observation_view_candidates = true;
+  std::vector<planning::PlannerEntry> entries;
   for (const auto& [name, description, defaults] :
        {std::tuple{"oracle-nbv",
                    "diagnostic upper bound: avp-nbv's candidates scored with the true new fruit "
@@ -227,9 +228,9 @@ void RegisterOraclePlanners(planning::PlannerRegistry& registry) {
               std::make_unique<OracleNbvPlanner>(truth->scene, truth->gt, o));
         });
     e.needs_ground_truth = true;
-    const Status s = registry.Add(std::move(e));
-    AVP_THROW_UNLESS(s.ok(), name, s.message());
+    entries.push_back(std::move(e));
   }
+  AddAll(registry, std::move(entries));
 }
 
 }  // namespace avp::eval

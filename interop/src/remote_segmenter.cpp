@@ -349,8 +349,9 @@ void RegisterRemoteSegmenter(segmentation::SegmenterRegistry& registry) {
     return std::unique_ptr<segmentation::Segmenter>(
         std::make_unique<RemoteSegmenter>(std::move(options)));
   };
-  const Status s = registry.Add(std::move(e));
-  AVP_THROW_UNLESS(s.ok(), s.message());
+  std::vector<segmentation::SegmenterEntry> entries;
+  entries.push_back(std::move(e));
+  AddAll(registry, std::move(entries));
 }
 
 }  // namespace avp::interop

@@ -385,6 +385,30 @@ struct MapHeader {
   std::string note;
 };
 
+/// The class count, the block count and the voxel counts (both versions; a truncation shows in
+/// r.ok()).
+void ReadClassesAndCounts(ByteReader& r, MapHeader& h) {
+  r.U8(h.num_classes, "the number of semantic classes");
+  r.U64(h.num_blocks, "the block count");
+  r.U64(h.counts.known, "the known voxel count");
+  r.U64(h.counts.occupied, "the occupied voxel count");
+  r.U64(h.counts.cells, "the semantic cell count");
+  r.U64(h.counts.labelled, "the labelled voxel count");
+}
+
+/// The note and its length (both versions): the first truncation, or a length over
+/// kMaxMapNoteBytes, is an error.
+Status ReadNote(ByteReader& r, MapHeader& h) {
+  uint32_t note_bytes = 0;
+  if (!r.U32(note_bytes, "the note length")) return Corrupt(r.error());
+  if (note_bytes > kMaxMapNoteBytes) {
+    return Corrupt(
+        fmt::format("note length {} exceeds the maximum {}", note_bytes, kMaxMapNoteBytes));
+  }
+  if (!r.String(note_bytes, h.note, "the note")) return Corrupt(r.error());
+  return Status::Ok();
+}
+
 /// Reads a version 1 header after the fixed part (the reader stands at kFileBytesEnd): fixed
 /// fields for the options of that time (the others keep their defaults). The first truncation, or
 /// a note longer than kMaxMapNoteBytes, is an error.
@@ -392,7 +416,6 @@ Result<MapHeader> ReadHeaderV1(ByteReader& r) {
   MapHeader h;
   GridOptions& go = h.options.grid;
   SemanticOptions& so = h.options.semantics;
-  uint32_t note_bytes = 0;
   r.F64(go.voxel_size_m, "voxel_size_m");
   r.U8(h.has_roi, "the ROI flag");
   for (double& v : h.roi) r.F64(v, "the ROI");
@@ -411,19 +434,8 @@ Result<MapHeader> ReadHeaderV1(ByteReader& r) {
   r.F32(so.instance_merge_fraction, "instance_merge_fraction");
   r.I32(so.outlier_min_neighbours, "outlier_min_neighbours");
   r.U8(h.remove_outliers, "remove_outliers_each_frame");
-  r.U8(h.num_classes, "the number of semantic classes");
-  r.U64(h.num_blocks, "the block count");
-  r.U64(h.counts.known, "the known voxel count");
-  r.U64(h.counts.occupied, "the occupied voxel count");
-  r.U64(h.counts.cells, "the semantic cell count");
-  r.U64(h.counts.labelled, "the labelled voxel count");
-  r.U32(note_bytes, "the note length");
-  if (!r.ok()) return Corrupt(r.error());
-  if (note_bytes > kMaxMapNoteBytes) {
-    return Corrupt(
-        fmt::format("note length {} exceeds the maximum {}", note_bytes, kMaxMapNoteBytes));
-  }
-  if (!r.String(note_bytes, h.note, "the note")) return Corrupt(r.error());
+  ReadClassesAndCounts(r, h);
+  AVP_RETURN_IF_ERROR(ReadNote(r, h));
   return h;
 }
 
@@ -455,25 +467,14 @@ Status ReadOptions(ByteReader& r, MapOptions& options) {
 /// options (by name, ReadOptions) and the note.
 Result<MapHeader> ReadHeaderV2(ByteReader& r) {
   MapHeader h;
-  uint32_t note_bytes = 0;
   r.U8(h.has_roi, "the ROI flag");
   for (double& v : h.roi) r.F64(v, "the ROI");
-  r.U8(h.num_classes, "the number of semantic classes");
-  r.U64(h.num_blocks, "the block count");
-  r.U64(h.counts.known, "the known voxel count");
-  r.U64(h.counts.occupied, "the occupied voxel count");
-  r.U64(h.counts.cells, "the semantic cell count");
-  r.U64(h.counts.labelled, "the labelled voxel count");
+  ReadClassesAndCounts(r, h);
   if (!r.ok()) return Corrupt(r.error());
   AVP_RETURN_IF_ERROR(ReadOptions(r, h.options));
   h.policy = static_cast<uint8_t>(h.options.semantics.policy);
   h.remove_outliers = h.options.semantics.remove_outliers_each_frame ? 1 : 0;
-  if (!r.U32(note_bytes, "the note length")) return Corrupt(r.error());
-  if (note_bytes > kMaxMapNoteBytes) {
-    return Corrupt(
-        fmt::format("note length {} exceeds the maximum {}", note_bytes, kMaxMapNoteBytes));
-  }
-  if (!r.String(note_bytes, h.note, "the note")) return Corrupt(r.error());
+  AVP_RETURN_IF_ERROR(ReadNote(r, h));
   return h;
 }
 

@@ -247,10 +247,8 @@ const OptionTable<AvpNbvOptions>& AvpNbvOptionTable() {
             fmt::format("coarse_ray_stride_px ({} px) must be 0 (off) or >= ray_stride_px ({} px)",
                         o.coarse_ray_stride_px, o.ray_stride_px));
       }
-      if (o.num_threads < 0) {
-        problems.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
-      }
     });
+    t->Threads("num_threads", &O::num_threads);
     return t;
   }();
   return *table;

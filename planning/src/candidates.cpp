@@ -187,11 +187,7 @@ const OptionTable<ShellCandidateOptions>& ShellCandidateOptionTable() {
             "within this of the plant's core an eye must be in known free space (0: off)");
     t->Integer("ik_restarts", &O::ik_restarts, "", ValueRange::AtLeast(0),
                "IK restarts per candidate after the attempt from the current joints");
-    t->AddRule([](const O& o, std::vector<std::string>& problems) {
-      if (o.num_threads < 0) {
-        problems.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
-      }
-    });
+    t->Threads("num_threads", &O::num_threads);
     return t;
   }();
   return *table;

@@ -398,11 +398,7 @@ const OptionTable<IslerPlannerOptions>& IslerPlannerOptionTable() {
     t->Nested("rays", &O::rays, IslerRayOptionTable());
     t->Real("gain_weight", &O::gain_weight, "", ValueRange::AtLeast(0), "w_ig of U");
     t->Real("cost_weight", &O::cost_weight, "", ValueRange::AtLeast(0), "w_c of U");
-    t->AddRule([](const O& o, std::vector<std::string>& problems) {
-      if (o.num_threads < 0) {
-        problems.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
-      }
-    });
+    t->Threads("num_threads", &O::num_threads);
     return t;
   }();
   return *table;

@@ -15,38 +15,6 @@
 
 namespace avp::planning {
 
-Status PlannerRegistry::Add(PlannerEntry entry) {
-  if (entry.name.empty()) return InvalidArgumentError("a planner needs a name");
-  if (Find(entry.name) != nullptr) {
-    return InvalidArgumentError(fmt::format("planner '{}' is already registered", entry.name));
-  }
-  if (!entry.make) {
-    return InvalidArgumentError(fmt::format("planner '{}' has no factory", entry.name));
-  }
-  entries_.push_back(std::move(entry));
-  return Status::Ok();
-}
-
-const PlannerEntry* PlannerRegistry::Find(std::string_view name) const {
-  for (const PlannerEntry& e : entries_) {
-    if (e.name == name) return &e;
-  }
-  return nullptr;
-}
-
-Result<const PlannerEntry*> PlannerRegistry::Get(std::string_view name) const {
-  if (const PlannerEntry* e = Find(name)) return e;
-  return NotFoundError(
-      fmt::format("unknown planner '{}' (known: {})", name, fmt::join(Names(), ", ")));
-}
-
-std::vector<std::string> PlannerRegistry::Names() const {
-  std::vector<std::string> names;
-  names.reserve(entries_.size());
-  for (const PlannerEntry& e : entries_) names.push_back(e.name);
-  return names;
-}
-
 Result<AnyOptions> PlannerRegistry::Options(std::string_view name,
                                             const OptionValues& overrides) const {
   AVP_ASSIGN_OR_RETURN(const PlannerEntry* entry, Get(name));
@@ -78,11 +46,7 @@ void RegisterBuiltinPlanners(PlannerRegistry& registry) {
   entries.push_back(RandomPlannerEntry());
   for (PlannerEntry& e : IslerPlannerEntries()) entries.push_back(std::move(e));
   entries.push_back(FarthestViewPlannerEntry());
-  for (PlannerEntry& e : entries) {
-    const std::string name = e.name;
-    const Status s = registry.Add(std::move(e));
-    AVP_THROW_UNLESS(s.ok(), name, s.message());
-  }
+  AddAll(registry, std::move(entries));
 }
 
 }  // namespace avp::planning

@@ -49,11 +49,7 @@ const OptionTable<ReferenceNbvOptions>& ReferenceNbvOptionTable() {
             "candidates this close to a fused view are dropped");
     t->Real("fused_angle_tol_rad", &O::fused_angle_tol_rad, "rad", non_negative,
             "... and this close in angle");
-    t->AddRule([](const O& o, std::vector<std::string>& problems) {
-      if (o.num_threads < 0) {
-        problems.push_back(fmt::format("num_threads ({}) must be >= 0", o.num_threads));
-      }
-    });
+    t->Threads("num_threads", &O::num_threads);
     return t;
   }();
   return *table;

@@ -14,37 +14,8 @@ bool SegmenterEntry::is_scheme() const {
   return name.size() >= 3 && name.compare(name.size() - 3, 3, "://") == 0;
 }
 
-Status SegmenterRegistry::Add(SegmenterEntry entry) {
-  if (entry.name.empty()) return InvalidArgumentError("a segmenter needs a name");
-  for (const SegmenterEntry& e : entries_) {
-    if (e.name == entry.name) {
-      return InvalidArgumentError(fmt::format("segmenter '{}' is already registered", entry.name));
-    }
-  }
-  if (!entry.make) {
-    return InvalidArgumentError(fmt::format("segmenter '{}' has no factory", entry.name));
-  }
-  entries_.push_back(std::move(entry));
-  return Status::Ok();
-}
-
-const SegmenterEntry* SegmenterRegistry::Find(std::string_view spec) const {
-  for (const SegmenterEntry& e : entries_) {
-    if (e.name == spec || (e.is_scheme() && spec.substr(0, e.name.size()) == e.name)) return &e;
-  }
-  return nullptr;
-}
-
-Result<const SegmenterEntry*> SegmenterRegistry::Get(std::string_view spec) const {
-  if (const SegmenterEntry* e = Find(spec)) return e;
-  return NotFoundError(
-      fmt::format("unknown segmenter '{}' (known: {})", spec, fmt::join(Names(), ", ")));
-}
-
-std::vector<std::string> SegmenterRegistry::Names() const {
-  std::vector<std::string> names;
-  for (const SegmenterEntry& e : entries_) names.push_back(e.is_scheme() ? e.name + "..." : e.name);
-  return names;
+bool SegmenterEntry::Matches(std::string_view spec) const {
+  return name == spec || (is_scheme() && spec.substr(0, name.size()) == name);
 }
 
 Result<AnyOptions> SegmenterRegistry::Options(std::string_view spec,
@@ -75,11 +46,7 @@ void RegisterBuiltinSegmenters(SegmenterRegistry& registry) {
   entries.push_back(OracleSegmenterEntry());
   entries.push_back(OraclePerfectSegmenterEntry());
   entries.push_back(ColorSegmenterEntry());
-  for (SegmenterEntry& e : entries) {
-    const std::string name = e.name;
-    const Status s = registry.Add(std::move(e));
-    AVP_THROW_UNLESS(s.ok(), name, s.message());
-  }
+  AddAll(registry, std::move(entries));
 }
 
 SegmenterRegistry BuiltinSegmenters() {

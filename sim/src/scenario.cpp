@@ -195,37 +195,8 @@ std::vector<ScenarioEntry> BuiltinEntries() {
 
 }  // namespace
 
-Status ScenarioRegistry::Add(ScenarioEntry entry) {
-  if (entry.name.empty()) return InvalidArgumentError("a scenario needs a name");
-  if (Find(entry.name) != nullptr) {
-    return InvalidArgumentError(fmt::format("scenario '{}' is already registered", entry.name));
-  }
-  if (!entry.build) {
-    return InvalidArgumentError(fmt::format("scenario '{}' has no builder", entry.name));
-  }
-  entries_.push_back(std::move(entry));
-  return Status::Ok();
-}
-
-const ScenarioEntry* ScenarioRegistry::Find(std::string_view name) const {
-  for (const ScenarioEntry& e : entries_) {
-    if (e.name == name) return &e;
-  }
-  return nullptr;
-}
-
-std::vector<std::string> ScenarioRegistry::Names() const {
-  std::vector<std::string> names;
-  for (const ScenarioEntry& e : entries_) names.push_back(e.name);
-  return names;
-}
-
 Result<Scene> ScenarioRegistry::Make(std::string_view name, uint64_t seed) const {
-  const ScenarioEntry* e = Find(name);
-  if (e == nullptr) {
-    return NotFoundError(
-        fmt::format("unknown scenario '{}' (known: {})", name, fmt::join(Names(), ", ")));
-  }
+  AVP_ASSIGN_OR_RETURN(const ScenarioEntry* e, Get(name));
   AVP_ASSIGN_OR_RETURN(Scene scene, e->build(seed));
   scene.name = e->name;
   scene.description = e->description;
@@ -233,13 +204,7 @@ Result<Scene> ScenarioRegistry::Make(std::string_view name, uint64_t seed) const
   return scene;
 }
 
-void RegisterBuiltinScenarios(ScenarioRegistry& registry) {
-  for (ScenarioEntry& e : BuiltinEntries()) {
-    const std::string name = e.name;
-    const Status s = registry.Add(std::move(e));
-    AVP_THROW_UNLESS(s.ok(), name, s.message());
-  }
-}
+void RegisterBuiltinScenarios(ScenarioRegistry& registry) { AddAll(registry, BuiltinEntries()); }
 
 ScenarioRegistry BuiltinScenarios() {
   ScenarioRegistry registry;

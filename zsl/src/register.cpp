@@ -75,6 +75,7 @@ Result<std::filesystem::path> ModelDirForSpec(std::string_view backend, std::str
 }
 
 void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry) {
+  std::vector<segmentation::SegmenterEntry> entries;
   for (const char* backend : {"ywes", "lsam"}) {
     const std::string name = backend;
     const std::string what =
@@ -90,10 +91,10 @@ void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry) {
                       const segmentation::SegmenterContext&) {
         return MakeZslSegmenter(name, spec);
       };
-      const Status s = registry.Add(std::move(e));
-      AVP_THROW_UNLESS(s.ok(), entry_name, s.message());
+      entries.push_back(std::move(e));
     }
   }
+  AddAll(registry, std::move(entries));
 }
 
 }  // namespace avp::zsl

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include <avp/core/options.h>
+#include <avp/core/registry.h>
 #include <avp/core/status.h>
 #include <avp/planning/view_planner.h>
 
@@ -40,6 +41,10 @@ struct PlannerEntry {
   /// Builds the planner from options of `options`' type (already validated).
   std::function<Result<std::unique_ptr<ViewPlanner>>(const AnyOptions&, const PlannerContext&)>
       make;
+
+  bool Matches(std::string_view spec) const { return name == spec; }
+  std::string DisplayName() const { return name; }
+  bool HasFactory() const { return static_cast<bool>(make); }
 };
 
 /// An entry for a planner with options of type Options (table `table`, defaults `defaults`):
@@ -59,19 +64,12 @@ PlannerEntry MakePlannerEntry(
   return e;
 }
 
-/// The planners a program knows, by name, in registration order. Built once at start-up
-/// (RegisterBuiltinPlanners, then any others), read-only afterwards: const methods may run on
-/// several threads at once.
-class PlannerRegistry {
+/// The planners a program knows, by name, in registration order (NamedRegistry: Add, Find, Get,
+/// Names, entries). Built once at start-up (RegisterBuiltinPlanners, then any others), read-only
+/// afterwards.
+class PlannerRegistry : public NamedRegistry<PlannerEntry> {
  public:
-  /// InvalidArgument when the name is empty or taken, or the entry has no factory.
-  Status Add(PlannerEntry entry);
-  /// nullptr for an unknown name.
-  const PlannerEntry* Find(std::string_view name) const;
-  /// The entry, or NotFound "unknown planner 'x' (known: a, b, ...)".
-  Result<const PlannerEntry*> Get(std::string_view name) const;
-  std::vector<std::string> Names() const;
-  const std::vector<PlannerEntry>& entries() const { return entries_; }
+  PlannerRegistry() : NamedRegistry("planner") {}
 
   /// The defaults of `name`'s options, then `overrides` (KEY=VALUE) applied and validated.
   /// Errors: NotFound (unknown planner), InvalidArgument (unknown key, bad or out-of-range value,
@@ -81,9 +79,6 @@ class PlannerRegistry {
   /// the planner needs the ground truth and the context has none.
   Result<std::unique_ptr<ViewPlanner>> Make(std::string_view name, const AnyOptions& options,
                                             const PlannerContext& context) const;
-
- private:
-  std::vector<PlannerEntry> entries_;
 };
 
 /// Registers every planner of this module, in this order: avp-nbv, predefined, predefined-wide,

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include <avp/core/options.h>
+#include <avp/core/registry.h>
 #include <avp/core/status.h>
 #include <avp/segmentation/segmenter.h>
 
@@ -36,6 +37,12 @@ struct SegmenterEntry {
                                                    const SegmenterContext&)>
       make;
   bool is_scheme() const;
+
+  /// The name, or (a scheme) a spec that starts with it.
+  bool Matches(std::string_view spec) const;
+  /// Schemes as "remote://...".
+  std::string DisplayName() const { return is_scheme() ? name + "..." : name; }
+  bool HasFactory() const { return static_cast<bool>(make); }
 };
 
 /// An entry for a segmenter with options of type Options.
@@ -56,20 +63,13 @@ SegmenterEntry MakeSegmenterEntry(std::string name, std::string description,
   return e;
 }
 
-/// The segmenters a program knows, in registration order. Built once at start-up
+/// The segmenters a program knows, in registration order (NamedRegistry: Add, Find, Get, Names,
+/// entries; Find matches a scheme by prefix). Built once at start-up
 /// (RegisterBuiltinSegmenters, then the network backends and the remote client register theirs),
-/// read-only afterwards: const methods may run on several threads at once.
-class SegmenterRegistry {
+/// read-only afterwards.
+class SegmenterRegistry : public NamedRegistry<SegmenterEntry> {
  public:
-  /// InvalidArgument when the name is empty or taken, or the entry has no factory.
-  Status Add(SegmenterEntry entry);
-  /// The entry whose name is `spec`, or whose scheme `spec` starts with; nullptr otherwise.
-  const SegmenterEntry* Find(std::string_view spec) const;
-  /// The entry, or NotFound "unknown segmenter 'x' (known: oracle, ..., remote://...)".
-  Result<const SegmenterEntry*> Get(std::string_view spec) const;
-  /// The names as messages list them: schemes written "remote://...".
-  std::vector<std::string> Names() const;
-  const std::vector<SegmenterEntry>& entries() const { return entries_; }
+  SegmenterRegistry() : NamedRegistry("segmenter") {}
 
   /// The defaults of `spec`'s entry, then `overrides` applied and validated.
   Result<AnyOptions> Options(std::string_view spec, const OptionValues& overrides = {}) const;
@@ -78,9 +78,6 @@ class SegmenterRegistry {
                                           const SegmenterContext& context) const;
   /// Builds `spec` with its entry's default options.
   Result<std::unique_ptr<Segmenter>> Make(std::string_view spec, uint64_t seed) const;
-
- private:
-  std::vector<SegmenterEntry> entries_;
 };
 
 /// Registers this module's segmenters, in this order: "oracle" (OracleSegmenter with

@@ -7,6 +7,7 @@
 #include <string_view>
 #include <vector>
 
+#include <avp/core/registry.h>
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/sim/scene.h>
@@ -21,23 +22,20 @@ struct ScenarioEntry {
   /// The scene for `seed` (deterministic: the same seed, the same scene on any machine). Make()
   /// sets its name, description and seed and finishes it (triangle counts, plant bounds).
   std::function<Result<Scene>(uint64_t seed)> build;
+
+  bool Matches(std::string_view spec) const { return name == spec; }
+  std::string DisplayName() const { return name; }
+  bool HasFactory() const { return static_cast<bool>(build); }
 };
 
-/// The scenarios a program knows, in registration order. Built once at start-up, read-only
-/// afterwards: const methods may run on several threads at once.
-class ScenarioRegistry {
+/// The scenarios a program knows, in registration order (NamedRegistry: Add, Find, Get, Names,
+/// entries). Built once at start-up, read-only afterwards.
+class ScenarioRegistry : public NamedRegistry<ScenarioEntry> {
  public:
-  /// InvalidArgument when the name is empty or taken, or the entry has no builder.
-  Status Add(ScenarioEntry entry);
-  const ScenarioEntry* Find(std::string_view name) const;
-  std::vector<std::string> Names() const;
-  const std::vector<ScenarioEntry>& entries() const { return entries_; }
+  ScenarioRegistry() : NamedRegistry("scenario") {}
   /// The scene of `name` for `seed`. Errors: NotFound naming the unknown scenario and listing
   /// the known ones; the builder's errors.
   Result<Scene> Make(std::string_view name, uint64_t seed) const;
-
- private:
-  std::vector<ScenarioEntry> entries_;
 };
 
 /// Registers the built-in scenarios (the paper's four tomato experiments and three espaliers).
