@@ -203,6 +203,8 @@ TEST_F(RunCommandTest, BenchWritesLongFormatSummaryAndPlots) {
   EXPECT_EQ(f1_rows, 4);  // 2 planners x 2 views
   EXPECT_THAT(ReadAll(o.out_dir / "summary.md"), HasSubstr("| avp-nbv | 2 |"));
   EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
+              HasSubstr("Run configuration over its defaults: `episode.views = 2`."));
+  EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
               HasSubstr("Fruits by their best visible fraction from a reachable observation view "
                         "(all seeds): ≥ 5 %: "));
   EXPECT_TRUE(fs::exists(o.out_dir / "f1_tomato-single-cluster.svg"));
@@ -240,6 +242,11 @@ TEST_F(RunCommandTest, BenchConfigFileAndErrors) {
   r = LoadBenchConfig(bad);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("unknown run configuration key 'episode.viewz'"));
+  std::ofstream(bad) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv]\nseeds: [0]\n"
+                        "run: {seed: 3}\n";
+  r = LoadBenchConfig(bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("run.seed is set by each job"));
 
   BenchConfig o;
   o.scenarios = {"tomato-nowhere"};

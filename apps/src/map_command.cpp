@@ -196,6 +196,12 @@ Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options,
       mapping::ToString(options.map.semantics.policy),
       mapping::ToString(options.integrator.carving), options.arc_deg, summary.radius_m,
       options.noise ? " --noise" : "");
+  // Every other map option that differs from the defaults (the header stores them all).
+  for (const auto& [key, value] : mapping::MapOptionTable().Differences(options.map, {})) {
+    if (key != "grid.voxel_size_m" && key != "semantics.policy") {
+      save.note += fmt::format(" --map-option {}={}", key, value);
+    }
+  }
   AVP_RETURN_IF_ERROR(mapping::SaveMap(map, options.out, save));
   std::error_code ec;
   summary.file_bytes = fs::file_size(options.out, ec);

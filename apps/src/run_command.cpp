@@ -39,7 +39,22 @@ Status ApplyIfGiven(const CLI::App& cmd, const char* flag, experiment::RunConfig
   return experiment::SetRunConfigKey(config, key, value);
 }
 
+/// `--scenario` / `--scene` replace the scene source a --config named, and `--planner` /
+/// `--segmenter` naming another component drop the options the file gave the previous one (they
+/// were that component's).
+void ReplaceSourceAndComponents(const CLI::App& cmd, const RunCli& cli, experiment::RunConfig& c) {
+  if (cmd.get_option("--scenario")->count() > 0) c.scene_file.clear();
+  if (cmd.get_option("--scene")->count() > 0) c.scenario.clear();
+  if (cmd.get_option("--planner")->count() > 0 && cli.planner != c.planner.name) {
+    c.planner.options.clear();
+  }
+  if (cmd.get_option("--segmenter")->count() > 0 && cli.segmenter != c.segmenter.name) {
+    c.segmenter.options.clear();
+  }
+}
+
 Status ApplyShorthands(const CLI::App& cmd, const RunCli& cli, experiment::RunConfig& c) {
+  ReplaceSourceAndComponents(cmd, cli, c);
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scenario", c, "scenario", cli.scenario));
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scene", c, "scene_file", cli.scene));
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--seed", c, "seed", std::to_string(cli.seed)));
@@ -138,6 +153,8 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   const Result<experiment::RunConfig> config = ResolveConfig(cmd, cli, registries);
   if (!config.ok()) return Failed("run", config.status());
   if (cli.print_config) {
+    // Only a valid configuration is printed, so that --config reads back whatever is printed.
+    if (const Status s = config->Validate(registries); !s.ok()) return Failed("run", s);
     const Result<YAML::Node> yaml = experiment::RunConfigToYaml(*config, registries);
     if (!yaml.ok()) return Failed("run", yaml.status());
     std::fputs(io::YamlText(*yaml).c_str(), stdout);

@@ -25,6 +25,17 @@ done
 "$avp" run --config "$dir/a.yaml" --views 7 --print-config > "$dir/c.yaml"
 grep -q "views: 7" "$dir/c.yaml" || fail "--views did not apply over --config"
 
+# A flag naming another planner or scene source replaces the file's (and its options).
+"$avp" run --config "$dir/a.yaml" --planner predefined --scene "${AVP_CONFIG_DIR:-configs}/scenes/example_plant.yaml" \
+  --print-config > "$dir/d.yaml" || fail "--planner / --scene over a printed file"
+grep -q "name: predefined" "$dir/d.yaml" || fail "--planner did not apply"
+grep -q '^scenario: ""' "$dir/d.yaml" || fail "--scene did not replace the scenario"
+# Only a valid configuration is printed.
+if "$avp" run --set camera.width=-13 --print-config > "$dir/out.txt" 2>&1; then
+  fail "an invalid configuration was printed"
+fi
+grep -q "camera.width (-13) must be > 0" "$dir/out.txt" || fail "$(cat "$dir/out.txt")"
+
 # Unknown keys and bad values are named.
 echo "episode: {viewz: 3}" > "$dir/bad.yaml"
 if "$avp" run --config "$dir/bad.yaml" --print-config > "$dir/out.txt" 2>&1; then

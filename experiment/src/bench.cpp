@@ -142,8 +142,9 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
     j.metrics.push_back(s.metrics);
     if (s.planned) j.plan_ms.push_back(s.times.plan_ms);
   }
-  nlohmann::json options = nlohmann::json::object();
-  for (const auto& [k, v] : c.planner.options) options[k] = v;
+  const planning::PlannerEntry* entry = registries.planners.Find(planner);
+  const nlohmann::json options = io::OptionsToJson(
+      c.planner.options, entry != nullptr ? entry->options.Info() : std::vector<OptionInfo>{});
   const nlohmann::json rec{{"scenario", j.scenario},
                            {"planner", j.planner},
                            {"seed", j.seed},
@@ -168,6 +169,8 @@ report::BenchDescription Describe(const BenchConfig& config, const std::vector<G
   d.voxel_size_m = config.base.map.grid.voxel_size_m;
   d.revision = report::SourceRevision();
   d.planner_options = config.planner_options;
+  d.description = config.description;
+  d.run_options = RunConfigTable().Differences(JobBase(config), JobBase(BenchConfig{}));
   for (const Group& g : groups) d.visibility[g.scenario].Add(*g.gt);
   return d;
 }
@@ -194,6 +197,21 @@ Status ReadStrings(const YAML::Node& root, const char* key, const std::string& c
     return InvalidArgumentError(fmt::format("{}: '{}' must be a non-empty list", ctx, key));
   }
   for (const YAML::Node& item : n) out.push_back(item.as<std::string>());
+  return Status::Ok();
+}
+
+/// What each job sets itself (its scenario, seed, planner; one thread) may not come from the run
+/// tree, where it would be silently overridden.
+Status RejectPerJobKeys(const YAML::Node& run, const std::string& ctx) {
+  if (!run || !run.IsMap()) return Status::Ok();
+  for (const char* key : {"scenario", "scene_file", "seed", "planner", "threads"}) {
+    if (run[key]) {
+      return InvalidArgumentError(fmt::format(
+          "{}: run.{} is set by each job (scenarios, planners, seeds lists; episodes run one "
+          "thread each): give it there, not in run",
+          ctx, key));
+    }
+  }
   return Status::Ok();
 }
 
@@ -267,6 +285,7 @@ Result<BenchConfig> LoadBenchConfig(const fs::path& yaml) {
     AVP_RETURN_IF_ERROR(ReadSeeds(root["seeds"], ctx, o.seeds));
     AVP_RETURN_IF_ERROR(ReadPlannerOptions(root["planner_options"], ctx, o));
     AVP_RETURN_IF_ERROR(ReadRunConfigYaml(root["run"], ctx + ": run", o.base));
+    AVP_RETURN_IF_ERROR(RejectPerJobKeys(root["run"], ctx));
   } catch (const YAML::Exception& e) {
     return InvalidArgumentError(fmt::format("{}: {}", ctx, e.what()));
   }

@@ -15,15 +15,6 @@
 
 namespace avp::planning {
 
-Result<AnyOptions> PlannerRegistry::Options(std::string_view name,
-                                            const OptionValues& overrides) const {
-  AVP_ASSIGN_OR_RETURN(const PlannerEntry* entry, Get(name));
-  AnyOptions options = entry->options;
-  AVP_RETURN_IF_ERROR(options.SetAll(overrides, fmt::format("planner '{}'", name)));
-  AVP_RETURN_IF_ERROR(options.Validate());
-  return options;
-}
-
 Result<std::unique_ptr<ViewPlanner>> PlannerRegistry::Make(std::string_view name,
                                                            const AnyOptions& options,
                                                            const PlannerContext& context) const {

@@ -16,9 +16,9 @@ using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 
 PlannerRegistry Builtins() {
-  PlannerRegistry r;
-  RegisterBuiltinPlanners(r);
-  return r;
+  PlannerRegistry builtins;
+  RegisterBuiltinPlanners(builtins);
+  return builtins;
 }
 
 TEST(PlannerRegistryTest, RegistersTheBuiltinsInOrder) {

@@ -109,6 +109,14 @@ std::string MarkdownHeader(const BenchDescription& bench, double seconds) {
       "t). `found` = fruits found / all fruits of the scene (docs/evaluation.md).\n",
       bench.scenarios.size(), bench.planners.size(), bench.seeds, bench.views, bench.segmenter,
       bench.voxel_size_m * 1e3, bench.revision, seconds);
+  if (!bench.description.empty()) md += fmt::format("\n{}.\n", bench.description);
+  if (!bench.run_options.empty()) {
+    std::string text;
+    for (const auto& [k, v] : bench.run_options) {
+      text += fmt::format("{}`{} = {}`", text.empty() ? "" : ", ", k, v);
+    }
+    md += fmt::format("\nRun configuration over its defaults: {}.\n", text);
+  }
   for (const auto& [planner, options] : bench.planner_options) {
     if (options.empty()) continue;
     std::string text;

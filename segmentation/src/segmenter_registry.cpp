@@ -18,15 +18,6 @@ bool SegmenterEntry::Matches(std::string_view spec) const {
   return name == spec || (is_scheme() && spec.substr(0, name.size()) == name);
 }
 
-Result<AnyOptions> SegmenterRegistry::Options(std::string_view spec,
-                                              const OptionValues& overrides) const {
-  AVP_ASSIGN_OR_RETURN(const SegmenterEntry* entry, Get(spec));
-  AnyOptions options = entry->options;
-  AVP_RETURN_IF_ERROR(options.SetAll(overrides, fmt::format("segmenter '{}'", spec)));
-  AVP_RETURN_IF_ERROR(options.Validate());
-  return options;
-}
-
 Result<std::unique_ptr<Segmenter>> SegmenterRegistry::Make(std::string_view spec,
                                                            const AnyOptions& options,
                                                            const SegmenterContext& context) const {

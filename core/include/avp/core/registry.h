@@ -50,6 +50,17 @@ class NamedRegistry {
     return NotFoundError("unknown " + kind_ + " '" + std::string(spec) +
                          "' (known: " + options_internal::Join(Names(), ", ") + ")");
   }
+  /// For entries with options (an AnyOptions `options` member): the defaults of `spec`'s entry,
+  /// then `overrides` (KEY=VALUE) applied and validated. Errors: NotFound (unknown name),
+  /// InvalidArgument (unknown key, bad or out-of-range value, or options given to an entry
+  /// without any).
+  Result<AnyOptions> Options(std::string_view spec, const OptionValues& overrides = {}) const {
+    AVP_ASSIGN_OR_RETURN(const Entry* entry, Get(spec));
+    AnyOptions options = entry->options;
+    AVP_RETURN_IF_ERROR(options.SetAll(overrides, kind_ + " '" + std::string(spec) + "'"));
+    AVP_RETURN_IF_ERROR(options.Validate());
+    return options;
+  }
   std::vector<std::string> Names() const {
     std::vector<std::string> names;
     names.reserve(entries_.size());

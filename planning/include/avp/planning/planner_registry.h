@@ -70,11 +70,6 @@ PlannerEntry MakePlannerEntry(
 class PlannerRegistry : public NamedRegistry<PlannerEntry> {
  public:
   PlannerRegistry() : NamedRegistry("planner") {}
-
-  /// The defaults of `name`'s options, then `overrides` (KEY=VALUE) applied and validated.
-  /// Errors: NotFound (unknown planner), InvalidArgument (unknown key, bad or out-of-range value,
-  /// or options given to a planner without any).
-  Result<AnyOptions> Options(std::string_view name, const OptionValues& overrides = {}) const;
   /// Builds `name` with `options` (of its entry's type; validated here). FailedPrecondition when
   /// the planner needs the ground truth and the context has none.
   Result<std::unique_ptr<ViewPlanner>> Make(std::string_view name, const AnyOptions& options,

@@ -46,6 +46,10 @@ struct BenchDescription {
   std::string revision;
   /// Per planner, its options over the registered defaults (none: not listed).
   std::map<std::string, OptionValues> planner_options;
+  /// The bench's one-line description (may be empty).
+  std::string description;
+  /// The episodes' run configuration where it differs from the defaults (KEY = VALUE).
+  OptionValues run_options;
   std::map<std::string, FruitVisibility> visibility;  ///< by scenario
 };
 

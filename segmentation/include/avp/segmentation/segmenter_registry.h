@@ -70,9 +70,6 @@ SegmenterEntry MakeSegmenterEntry(std::string name, std::string description,
 class SegmenterRegistry : public NamedRegistry<SegmenterEntry> {
  public:
   SegmenterRegistry() : NamedRegistry("segmenter") {}
-
-  /// The defaults of `spec`'s entry, then `overrides` applied and validated.
-  Result<AnyOptions> Options(std::string_view spec, const OptionValues& overrides = {}) const;
   /// Builds `spec` with `options` (of its entry's type; validated here).
   Result<std::unique_ptr<Segmenter>> Make(std::string_view spec, const AnyOptions& options,
                                           const SegmenterContext& context) const;
