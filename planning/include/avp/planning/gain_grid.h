@@ -282,7 +282,7 @@ class GainGrid {
   /// Added to a cell index (by the axis tables, or At) when the voxel centre is outside the ROI.
   static constexpr int64_t kNotInRoi = int64_t{1} << 50;
 
-  double voxel_size_m_ = 0.005;
+  double voxel_size_m_ = mapping::GridOptions{}.voxel_size_m;
   SemanticClass target_ = SemanticClass::kFruit;
   Box3 roi_;
   VoxelKey min_;

@@ -62,7 +62,7 @@ class ProximityField {
   static int64_t Threshold(double max_distance_m, double voxel_size_m);
 
  private:
-  double voxel_size_m_ = 0.005;
+  double voxel_size_m_ = mapping::GridOptions{}.voxel_size_m;
   double max_distance_m_ = 0.0;
   int64_t threshold_ = 0;
   VoxelKey min_;
