@@ -247,6 +247,17 @@ TEST_F(RunCommandTest, BenchConfigFileAndErrors) {
   r = LoadBenchConfig(bad);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("run.seed is set by each job"));
+  // Seed lists are bounded before they are allocated, and never wrap from a negative number.
+  std::ofstream(bad) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv]\n"
+                        "seeds: {first: 0, count: 18446744073709551615}\n";
+  r = LoadBenchConfig(bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(),
+              HasSubstr("seeds.count (18446744073709551615) must be at most 100000 seeds"));
+  std::ofstream(bad) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv]\nseeds: [0, -1]\n";
+  r = LoadBenchConfig(bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("a seed ('-1') must be a whole number >= 0"));
 
   BenchConfig o;
   o.scenarios = {"tomato-nowhere"};

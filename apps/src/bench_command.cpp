@@ -31,9 +31,11 @@ Result<std::vector<uint64_t>> ParseSeeds(const std::string& text) {
   if (items.size() == 1 && text.find(',') == std::string::npos) {
     const std::optional<uint64_t> n = options_internal::ParseUnsigned(items[0]);
     if (!n) return bad();
+    AVP_RETURN_IF_ERROR(experiment::CheckSeedCount(*n, "--seeds"));
     for (uint64_t i = 0; i < *n; ++i) seeds.push_back(i);
     return seeds;
   }
+  AVP_RETURN_IF_ERROR(experiment::CheckSeedCount(items.size(), "--seeds"));
   for (const std::string& item : items) {
     const std::optional<uint64_t> s = options_internal::ParseUnsigned(item);
     if (!s) return bad();

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cstdio>
 #include <mutex>
+#include <optional>
 #include <set>
 
 #include <fmt/format.h>
@@ -23,6 +24,14 @@ namespace avp::experiment {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
+
+Status CheckSeedCount(uint64_t count, std::string_view what) {
+  if (count > kMaxBenchSeeds) {
+    return InvalidArgumentError(
+        fmt::format("{} ({}) must be at most {} seeds", what, count, kMaxBenchSeeds));
+  }
+  return Status::Ok();
+}
 
 namespace {
 
@@ -117,7 +126,7 @@ Result<std::vector<Group>> BuildGroups(const BenchConfig& config, const Registri
 
 /// One episode into runs/<scenario>/<planner>/seed-<n>/: metrics.csv as it goes, record.json.
 report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registries, const Group& g,
-                            const std::string& planner) {
+                            const std::string& planner, const std::string& revision) {
   report::BenchEpisode j;
   j.scenario = g.scenario;
   j.planner = planner;
@@ -154,12 +163,13 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
                            {"end", std::string(pipeline::ToString(r->episode.end))},
                            {"end_reason", r->episode.end_reason},
                            {"episode_seconds", j.episode_s},
-                           {"git_revision", report::SourceRevision()}};
+                           {"git_revision", revision}};
   (void)io::WriteJsonFile(dir / "record.json", rec);
   return j;
 }
 
-report::BenchDescription Describe(const BenchConfig& config, const std::vector<Group>& groups) {
+report::BenchDescription Describe(const BenchConfig& config, const std::vector<Group>& groups,
+                                  const std::string& revision) {
   report::BenchDescription d;
   d.scenarios = config.scenarios;
   d.planners = config.planners;
@@ -167,7 +177,7 @@ report::BenchDescription Describe(const BenchConfig& config, const std::vector<G
   d.views = config.base.episode.views;
   d.segmenter = config.base.segmenter.name;
   d.voxel_size_m = config.base.map.grid.voxel_size_m;
-  d.revision = report::SourceRevision();
+  d.revision = revision;
   d.planner_options = config.planner_options;
   d.description = config.description;
   d.run_options = RunConfigTable().Differences(JobBase(config), JobBase(BenchConfig{}));
@@ -175,15 +185,34 @@ report::BenchDescription Describe(const BenchConfig& config, const std::vector<G
   return d;
 }
 
+/// A seed (or count) of the config: a whole number >= 0, never wrapped from a negative one.
+Result<uint64_t> SeedValue(const YAML::Node& node, const std::string& what) {
+  const std::optional<uint64_t> v =
+      node.IsScalar() ? options_internal::ParseUnsigned(node.Scalar()) : std::nullopt;
+  if (!v) {
+    return InvalidArgumentError(fmt::format("{} ('{}') must be a whole number >= 0", what,
+                                            node.IsScalar() ? node.Scalar() : "not a number"));
+  }
+  return *v;
+}
+
 Status ReadSeeds(const YAML::Node& seeds, const std::string& ctx, std::vector<uint64_t>& out) {
   if (seeds && seeds.IsSequence()) {
-    for (const YAML::Node& s : seeds) out.push_back(s.as<uint64_t>());
+    AVP_RETURN_IF_ERROR(CheckSeedCount(seeds.size(), ctx + ": seeds"));
+    for (const YAML::Node& s : seeds) {
+      AVP_ASSIGN_OR_RETURN(const uint64_t seed, SeedValue(s, ctx + ": a seed"));
+      out.push_back(seed);
+    }
     return Status::Ok();
   }
   if (seeds && seeds.IsMap()) {
     AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(seeds, {"first", "count"}, ctx + ": seeds"));
-    const uint64_t first = seeds["first"] ? seeds["first"].as<uint64_t>() : 0;
-    const uint64_t count = seeds["count"].as<uint64_t>();
+    uint64_t first = 0;
+    if (seeds["first"]) {
+      AVP_ASSIGN_OR_RETURN(first, SeedValue(seeds["first"], ctx + ": seeds.first"));
+    }
+    AVP_ASSIGN_OR_RETURN(const uint64_t count, SeedValue(seeds["count"], ctx + ": seeds.count"));
+    AVP_RETURN_IF_ERROR(CheckSeedCount(count, ctx + ": seeds.count"));
     for (uint64_t i = 0; i < count; ++i) out.push_back(first + i);
     return Status::Ok();
   }
@@ -301,6 +330,8 @@ Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& regis
     return IoError(fmt::format("cannot create '{}': {}", config.out_dir.string(), ec.message()));
   }
   AVP_ASSIGN_OR_RETURN(const std::vector<Group> groups, BuildGroups(config, registries));
+  // Asked of git once, not per episode (two processes each).
+  const std::string revision = report::SourceRevision();
   struct JobRef {
     size_t group;
     std::string planner;
@@ -313,13 +344,13 @@ Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& regis
   {
     ProgressBar bar(config.progress, refs.size(), "episodes");
     ParallelFor(refs.size(), config.jobs, [&](size_t i) {
-      episodes[i] = RunJob(config, registries, groups[refs[i].group], refs[i].planner);
+      episodes[i] = RunJob(config, registries, groups[refs[i].group], refs[i].planner, revision);
       bar.Tick();
     });
   }
   AVP_ASSIGN_OR_RETURN(report::BenchTables tables,
-                       report::WriteBenchSummary(config.out_dir, Describe(config, groups), episodes,
-                                                 SecondsSince(t0)));
+                       report::WriteBenchSummary(config.out_dir, Describe(config, groups, revision),
+                                                 episodes, SecondsSince(t0)));
   BenchSummary summary;
   summary.cells = std::move(tables.cells);
   summary.files = std::move(tables.files);

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <map>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <avp/core/options.h>
@@ -13,6 +14,12 @@
 #include <avp/report/bench_summary.h>
 
 namespace avp::experiment {
+
+/// The most seeds a bench takes (per scenario and planner): checked before any list is allocated.
+inline constexpr uint64_t kMaxBenchSeeds = 100000;
+
+/// InvalidArgument "<what> (n) must be at most 100000 seeds" above kMaxBenchSeeds.
+Status CheckSeedCount(uint64_t count, std::string_view what);
 
 /// `avp bench`: scenarios x planners x seeds, episodes in parallel (docs/experiments.md).
 struct BenchConfig {
