@@ -1,0 +1,61 @@
+#include "avp/rosmsg/convert.h"
+
+#include <cmath>
+
+#include <fmt/format.h>
+
+namespace avp::rosmsg {
+namespace {
+
+Result<RigidTransform> FromParts(const Point& p, const Quaternion& q, std::string_view what) {
+  const double values[] = {p.x, p.y, p.z, q.x, q.y, q.z, q.w};
+  for (const double v : values) {
+    if (!std::isfinite(v)) {
+      return InvalidArgumentError(fmt::format(
+          "{} has a non-finite value: position ({}, {}, {}), quaternion (x {}, y {}, z {}, w {})",
+          what, p.x, p.y, p.z, q.x, q.y, q.z, q.w));
+    }
+  }
+  Eigen::Quaterniond eq(q.w, q.x, q.y, q.z);
+  const double norm = eq.norm();
+  if (norm < 1e-6) {
+    return InvalidArgumentError(
+        fmt::format("{} has a quaternion of norm {} (x {}, y {}, z {}, w {}); it must not be zero",
+                    what, norm, q.x, q.y, q.z, q.w));
+  }
+  eq.coeffs() /= norm;
+  return RigidTransform(eq.toRotationMatrix(), Eigen::Vector3d(p.x, p.y, p.z));
+}
+
+}  // namespace
+
+Quaternion ToQuaternionMsg(const Eigen::Matrix3d& R) {
+  Eigen::Quaterniond q(R);
+  q.normalize();
+  if (q.w() < 0) q.coeffs() = -q.coeffs();
+  return Quaternion{q.x(), q.y(), q.z(), q.w()};
+}
+
+Pose ToPoseMsg(const RigidTransform& X_AB) {
+  return Pose{ToPointMsg(X_AB.translation()), ToQuaternionMsg(X_AB.rotation())};
+}
+
+Transform ToTransformMsg(const RigidTransform& X_AB) {
+  return Transform{ToVector3Msg(X_AB.translation()), ToQuaternionMsg(X_AB.rotation())};
+}
+
+Result<RigidTransform> FromPoseMsg(const Pose& pose) {
+  return FromParts(pose.position, pose.orientation, "geometry_msgs/msg/Pose");
+}
+
+Result<RigidTransform> FromTransformMsg(const Transform& transform) {
+  const Point p{transform.translation.x, transform.translation.y, transform.translation.z};
+  return FromParts(p, transform.rotation, "geometry_msgs/msg/Transform");
+}
+
+Point ToPointMsg(const Eigen::Vector3d& p) { return Point{p.x(), p.y(), p.z()}; }
+Eigen::Vector3d FromPointMsg(const Point& p) { return {p.x, p.y, p.z}; }
+Vector3 ToVector3Msg(const Eigen::Vector3d& v) { return Vector3{v.x(), v.y(), v.z()}; }
+Eigen::Vector3d FromVector3Msg(const Vector3& v) { return {v.x, v.y, v.z}; }
+
+}  // namespace avp::rosmsg
