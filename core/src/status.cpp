@@ -23,6 +23,12 @@ std::string_view ToString(StatusCode code) {
       return "OutOfRange";
     case StatusCode::kInternal:
       return "Internal";
+    case StatusCode::kDeadlineExceeded:
+      return "DeadlineExceeded";
+    case StatusCode::kUnavailable:
+      return "Unavailable";
+    case StatusCode::kCancelled:
+      return "Cancelled";
   }
   return "Unknown";
 }
@@ -53,6 +59,13 @@ Status OutOfRangeError(std::string message) {
   return {StatusCode::kOutOfRange, std::move(message)};
 }
 Status InternalError(std::string message) { return {StatusCode::kInternal, std::move(message)}; }
+Status DeadlineExceededError(std::string message) {
+  return {StatusCode::kDeadlineExceeded, std::move(message)};
+}
+Status UnavailableError(std::string message) {
+  return {StatusCode::kUnavailable, std::move(message)};
+}
+Status CancelledError(std::string message) { return {StatusCode::kCancelled, std::move(message)}; }
 
 void ThrowStatus(const Status& status) { throw Error(status.ToString()); }
 

@@ -32,6 +32,9 @@ TEST(StatusTest, CodeNames) {
   EXPECT_EQ(ToString(StatusCode::kFailedPrecondition), "FailedPrecondition");
   EXPECT_EQ(ToString(StatusCode::kOutOfRange), "OutOfRange");
   EXPECT_EQ(ToString(StatusCode::kInternal), "Internal");
+  EXPECT_EQ(ToString(StatusCode::kDeadlineExceeded), "DeadlineExceeded");
+  EXPECT_EQ(ToString(StatusCode::kUnavailable), "Unavailable");
+  EXPECT_EQ(ToString(StatusCode::kCancelled), "Cancelled");
   EXPECT_EQ(ToString(static_cast<StatusCode>(99)), "Unknown");
 }
 
@@ -54,6 +57,9 @@ TEST(StatusTest, FactoriesSetCodeAndMessage) {
       {FailedPreconditionError("m"), StatusCode::kFailedPrecondition},
       {OutOfRangeError("m"), StatusCode::kOutOfRange},
       {InternalError("m"), StatusCode::kInternal},
+      {DeadlineExceededError("m"), StatusCode::kDeadlineExceeded},
+      {UnavailableError("m"), StatusCode::kUnavailable},
+      {CancelledError("m"), StatusCode::kCancelled},
   };
   for (const auto& [status, code] : cases) {
     EXPECT_FALSE(status.ok());

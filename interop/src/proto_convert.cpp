@@ -281,6 +281,12 @@ grpc::Status ToGrpcStatus(const Status& status) {
       return {grpc::StatusCode::FAILED_PRECONDITION, status.message()};
     case StatusCode::kOutOfRange:
       return {grpc::StatusCode::OUT_OF_RANGE, status.message()};
+    case StatusCode::kDeadlineExceeded:
+      return {grpc::StatusCode::DEADLINE_EXCEEDED, status.message()};
+    case StatusCode::kUnavailable:
+      return {grpc::StatusCode::UNAVAILABLE, status.message()};
+    case StatusCode::kCancelled:
+      return {grpc::StatusCode::CANCELLED, status.message()};
     default:
       return {grpc::StatusCode::INTERNAL, status.message()};
   }

@@ -114,6 +114,20 @@ void RecordMapAfterView(const mapping::SemanticMap& map, SemanticClass target, M
   previous.target = step.target_voxels;
 }
 
+/// A status that ends the episode at once: the robot did not do what it was asked (it did not
+/// arrive, it stopped answering) or the run was cancelled.
+bool IsRobotFault(const Status& status) {
+  return status.code() == StatusCode::kDeadlineExceeded ||
+         status.code() == StatusCode::kUnavailable || status.code() == StatusCode::kCancelled;
+}
+
+/// Ends the episode as interrupted; returns true.
+bool Interrupted(EpisodeResult& result, std::string reason) {
+  result.end = EpisodeEnd::kInterrupted;
+  result.end_reason = std::move(reason);
+  return true;
+}
+
 /// What choosing and reaching the next view needs besides the step: fixed for the episode.
 struct NextViewContext {
   const EpisodeComponents& c;
@@ -177,6 +191,7 @@ std::string MoveToBestCandidate(robot::Arm& arm, const std::vector<planning::Vie
     ++step.refused_moves;
     if (refusals.size() < 400) refusals += (refusals.empty() ? "" : "; ") + move.status.ToString();
     step.move_status = move.status;
+    if (IsRobotFault(move.status)) break;  // where the arm is, is unknown: try nothing else
   }
   return refusals;
 }
@@ -186,6 +201,7 @@ std::string MoveToBestCandidate(robot::Arm& arm, const std::vector<planning::Vie
 /// candidate, every candidate refused).
 bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidTransform>& fused,
                  StepRecord& step, EpisodeResult& result) {
+  if (next.c.stop.stop_requested()) return Interrupted(result, "stop requested before planning");
   const planning::PlanningRequest req = PlanningRequestAfter(next, view, step, fused);
   auto t0 = Clock::now();
   Rng planner_rng = next.planner_root.Fork(static_cast<uint64_t>(view + 1));
@@ -210,12 +226,21 @@ bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidT
         plan.status.ok() ? "the planner returned no candidate" : plan.status.ToString();
     return true;
   }
+  if (next.c.stop.stop_requested()) return Interrupted(result, "stop requested before moving");
   // Move: the best candidate the arm accepts.
   t0 = Clock::now();
   Rng arm_rng = next.arm_root.Fork(static_cast<uint64_t>(view + 1));
   const std::string refusals = MoveToBestCandidate(*next.c.arm, plan.ranked, arm_rng, step);
   step.times.move_ms = MsSince(t0);
   if (step.chosen_rank >= 0) return false;
+  if (step.move_status.code() == StatusCode::kCancelled) {
+    return Interrupted(result, step.move_status.ToString());
+  }
+  if (IsRobotFault(step.move_status)) {
+    result.end = EpisodeEnd::kRobotFault;
+    result.end_reason = step.move_status.ToString();
+    return true;
+  }
   result.end = EpisodeEnd::kNoReachableMove;
   result.end_reason =
       fmt::format("the arm refused all {} ranked candidates: {}", plan.ranked.size(), refusals);
@@ -275,8 +300,10 @@ std::string_view ToString(EpisodeEnd end) {
       return "no-valid-candidate";
     case EpisodeEnd::kNoReachableMove:
       return "no-reachable-move";
-    case EpisodeEnd::kObserverAborted:
-      return "observer-aborted";
+    case EpisodeEnd::kInterrupted:
+      return "interrupted";
+    case EpisodeEnd::kRobotFault:
+      return "robot-fault";
   }
   return "unknown";
 }
@@ -310,6 +337,10 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
                  CountTargetVoxels(map.grid(), options.target_class)};
 
   for (int view = 0; view < options.views; ++view) {
+    if (c.stop.stop_requested()) {
+      Interrupted(result, fmt::format("stop requested before view {}", view));
+      break;
+    }
     const auto t_step = Clock::now();
     StepRecord step;
     step.view = view;
@@ -324,8 +355,11 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
       step.metrics = metrics(map);
       step.times.metrics_ms = MsSince(t0);
     }
-    // Plan and move, unless this was the last view.
-    const bool stop = view + 1 < options.views && PlanAndMove(next, view, fused, step, result);
+    // Plan and move, unless this was the last view or the capture was cancelled.
+    const bool cancelled = step.capture_status.code() == StatusCode::kCancelled;
+    if (cancelled) Interrupted(result, step.capture_status.ToString());
+    const bool stop =
+        cancelled || (view + 1 < options.views && PlanAndMove(next, view, fused, step, result));
     step.times.total_ms = MsSince(t_step);
     result.steps.push_back(step);
     for (EpisodeObserver* o : observers) {

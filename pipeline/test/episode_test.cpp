@@ -1,6 +1,7 @@
 // The active-vision loop with fake components: what "N views" counts, step records, observers,
 // and failures as outcomes (segmenter and capture errors, refused moves, no candidate, stop rule).
 #include <memory>
+#include <stop_token>
 #include <string>
 #include <vector>
 
@@ -23,11 +24,12 @@ CameraIntrinsics SmallCamera() {
 class WallSource final : public robot::RgbdSource {
  public:
   std::vector<int> fail_frames;
+  StatusCode fail_code = StatusCode::kIoError;
   int captured = 0;
   Result<robot::Observation> Capture(const RigidTransform& X_WC, int64_t stamp_ns) override {
     const int index = captured++;
     for (int f : fail_frames) {
-      if (f == index) return IoError("camera timeout on frame " + std::to_string(index));
+      if (f == index) return Status(fail_code, "camera timeout on frame " + std::to_string(index));
     }
     robot::Observation obs;
     obs.frame.K = SmallCamera();
@@ -103,6 +105,38 @@ class ScriptedPlanner final : public planning::ViewPlanner {
   }
 };
 
+/// A SimArm whose moves fail with `fault` from move number `fail_from` on (0-based), counting the
+/// requests it got.
+class FaultyArm final : public robot::Arm {
+ public:
+  FaultyArm(const robot::ArmModel& model, Status fault, int fail_from)
+      : robot::Arm(model),
+        q_(model.home_joints()),
+        fault_(std::move(fault)),
+        fail_from_(fail_from) {}
+  int requests = 0;
+
+ protected:
+  Eigen::VectorXd DoCurrentJoints() const override { return q_; }
+  robot::MoveResult DoMoveToJoints(const Eigen::VectorXd& q) override {
+    robot::MoveResult r;
+    r.q = q_;
+    if (requests++ >= fail_from_) {
+      r.status = fault_;
+      return r;
+    }
+    r.joint_path_length = (q - q_).norm();
+    q_ = q;
+    r.q = q_;
+    return r;
+  }
+
+ private:
+  Eigen::VectorXd q_;
+  Status fault_;
+  int fail_from_;
+};
+
 class Recorder final : public EpisodeObserver {
  public:
   std::vector<int> views;
@@ -134,8 +168,10 @@ class EpisodeTest : public ::testing::Test {
     q[1] = model_->upper_limits()[1] + 0.5;
     return q;
   }
-  Result<EpisodeResult> Run(const std::vector<EpisodeObserver*>& observers = {}) {
-    EpisodeComponents c{&source_, &segmenter_, arm_.get(), &planner_, &map_};
+  Result<EpisodeResult> Run(const std::vector<EpisodeObserver*>& observers = {},
+                            robot::Arm* arm = nullptr) {
+    EpisodeComponents c{&source_,  &segmenter_, arm != nullptr ? arm : arm_.get(),
+                        &planner_, &map_,       stop_.get_token()};
     return RunEpisode(
         c, options_,
         [](const mapping::SemanticMap& m) {
@@ -151,6 +187,7 @@ class EpisodeTest : public ::testing::Test {
   ScriptedPlanner planner_;
   mapping::SemanticMap map_;
   EpisodeOptions options_;
+  std::stop_source stop_;
 };
 
 TEST_F(EpisodeTest, NViewsAreNFusedObservationsAndNMinusOneMoves) {
@@ -261,7 +298,7 @@ TEST_F(EpisodeTest, CaptureErrorIsRecordedAndFusesNothing) {
 }
 
 TEST_F(EpisodeTest, MissingComponentsAndBadOptionsAreErrors) {
-  EpisodeComponents c{&source_, nullptr, arm_.get(), &planner_, &map_};
+  EpisodeComponents c{&source_, nullptr, arm_.get(), &planner_, &map_, {}};
   auto r = RunEpisode(c, options_);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.status().message().find("segmenter"), std::string::npos);
@@ -283,6 +320,78 @@ TEST_F(EpisodeTest, SingleViewEpisodePlansNothing) {
   EXPECT_EQ(r->views_fused(), 1);
   EXPECT_TRUE(planner_.asked.empty());
   EXPECT_EQ(arm_->num_moves(), 0);
+}
+
+TEST_F(EpisodeTest, ArmThatDoesNotArriveEndsTheEpisodeWithoutTryingOtherCandidates) {
+  planner_.script = {{Home(0.1)}, {Home(0.2), Home(0.3), Home(0.4)}, {Home(0.5)}};
+  FaultyArm arm(*model_, DeadlineExceededError("joint_states did not reach the goal in 30 s"), 1);
+  Recorder rec;
+  auto r = Run({&rec}, &arm);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->end, EpisodeEnd::kRobotFault);
+  EXPECT_EQ(ToString(r->end), "robot-fault");
+  EXPECT_NE(r->end_reason.find("did not reach the goal"), std::string::npos) << r->end_reason;
+  EXPECT_EQ(arm.requests, 2);  // one good move, one fault; the two other candidates untried
+  EXPECT_EQ(r->views_fused(), 2);
+  EXPECT_EQ(r->steps[1].refused_moves, 1);
+  EXPECT_TRUE(rec.ended);
+}
+
+TEST_F(EpisodeTest, UnavailableArmIsARobotFaultToo) {
+  planner_.script = {{Home(0.1), Home(0.2)}};
+  FaultyArm arm(*model_, UnavailableError("no /joint_states for 5 s"), 0);
+  auto r = Run({}, &arm);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kRobotFault);
+  EXPECT_EQ(arm.requests, 1);
+  EXPECT_EQ(r->views_fused(), 1);
+}
+
+TEST_F(EpisodeTest, RequestedStopEndsTheEpisodeAsInterruptedWithItsSteps) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  // The observer asks to stop after the second view, as Ctrl-C would.
+  class StopAfter final : public EpisodeObserver {
+   public:
+    explicit StopAfter(std::stop_source& s) : s_(s) {}
+    void OnStep(const StepRecord& step, const mapping::SemanticMap&) override {
+      if (step.view == 1) s_.request_stop();
+    }
+
+   private:
+    std::stop_source& s_;
+  } stopper(stop_);
+  Recorder rec;
+  auto r = Run({&stopper, &rec});
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kInterrupted);
+  EXPECT_EQ(ToString(r->end), "interrupted");
+  EXPECT_EQ(r->views_fused(), 2);
+  EXPECT_EQ(rec.views, (std::vector<int>{0, 1}));
+  EXPECT_TRUE(rec.ended);
+  EXPECT_EQ(source_.captured, 2);
+}
+
+TEST_F(EpisodeTest, CancelledCaptureEndsTheEpisodeAsInterrupted) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  source_.fail_frames = {2};
+  source_.fail_code = StatusCode::kCancelled;
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kInterrupted);
+  EXPECT_EQ(r->views_fused(), 3);
+  EXPECT_EQ(r->steps[2].capture_status.code(), StatusCode::kCancelled);
+  EXPECT_FALSE(r->steps[2].planned);
+}
+
+TEST_F(EpisodeTest, CameraDeadlineIsRecordedAndTheLoopGoesOn) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  source_.fail_frames = {1};
+  source_.fail_code = StatusCode::kDeadlineExceeded;
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kBudgetReached);
+  EXPECT_EQ(r->views_fused(), 4);
+  EXPECT_EQ(r->steps[1].capture_status.code(), StatusCode::kDeadlineExceeded);
 }
 
 }  // namespace

@@ -21,6 +21,9 @@ enum class StatusCode {
   kFailedPrecondition,  ///< the call is not valid in the current state
   kOutOfRange,          ///< an index or coordinate lies outside the valid range
   kInternal,            ///< a bug: an invariant did not hold
+  kDeadlineExceeded,    ///< a bounded wait ran out (a camera that stops, an arm that never arrives)
+  kUnavailable,         ///< a peer (robot, camera, service) is not there or stopped answering
+  kCancelled,           ///< the caller asked to stop (Ctrl-C)
 };
 
 std::string_view ToString(StatusCode code);
@@ -60,6 +63,9 @@ Status UnreachableError(std::string message);
 Status FailedPreconditionError(std::string message);
 Status OutOfRangeError(std::string message);
 Status InternalError(std::string message);
+Status DeadlineExceededError(std::string message);
+Status UnavailableError(std::string message);
+Status CancelledError(std::string message);
 
 /// A value or an error status (C++20 has no std::expected).
 template <typename T>

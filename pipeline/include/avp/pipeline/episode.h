@@ -2,6 +2,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <stop_token>
 #include <string>
 #include <utility>
 #include <vector>
@@ -111,7 +112,8 @@ enum class EpisodeEnd : uint8_t {
   kPlannerStopped,    ///< the planner's stopping rule fired
   kNoValidCandidate,  ///< the planner had no candidate
   kNoReachableMove,   ///< every ranked candidate was refused by the arm
-  kObserverAborted,   ///< not used yet
+  kInterrupted,       ///< a stop was requested (Ctrl-C, a time limit) or a component was cancelled
+  kRobotFault,  ///< the arm did not arrive or stopped answering (DeadlineExceeded, Unavailable)
 };
 std::string_view ToString(EpisodeEnd end);
 
@@ -145,6 +147,9 @@ struct EpisodeComponents {
   robot::Arm* arm = nullptr;
   planning::ViewPlanner* planner = nullptr;
   mapping::SemanticMap* map = nullptr;
+  /// Asked before every view, plan and move: a requested stop ends the episode (kInterrupted)
+  /// with the steps so far. Live sources and arms take the same token so that their waits end.
+  std::stop_token stop;
 };
 
 /// The active-vision loop: for each view, capture at the arm's current pose, segment, integrate,
@@ -152,8 +157,11 @@ struct EpisodeComponents {
 /// view and move there. Failures are outcomes: a capture or segmenter error is recorded and the
 /// loop goes on (a segmenter error fuses the depth without semantics; a capture error fuses
 /// nothing); an unreachable ranked candidate is skipped for the next one; no valid candidate,
-/// every candidate refused, or the planner's stopping rule end the episode with that reason.
-/// InvalidArgument for missing components or invalid options.
+/// every candidate refused, or the planner's stopping rule end the episode with that reason. An arm
+/// that reports DeadlineExceeded or Unavailable ends it as a robot fault (no other candidate is
+/// tried: where the arm is, is unknown); a Cancelled status from any component, or a stop
+/// requested through components.stop, ends it as interrupted. Observers see every step and the
+/// end in every case. InvalidArgument for missing components or invalid options.
 Result<EpisodeResult> RunEpisode(const EpisodeComponents& components, const EpisodeOptions& options,
                                  const MetricsHook& metrics = {},
                                  const std::vector<EpisodeObserver*>& observers = {});
