@@ -145,37 +145,48 @@ std::array<uint8_t, 3> OctomapVoxelColor(const SemanticCell* cell) {
   return {c[0], c[1], c[2]};
 }
 
-Result<OctomapExportStats> ExportOctomapBinary(const OccupancyGrid& grid, const fs::path& path) {
+Result<OctomapBinaryData> OctomapBinaryMessageData(const OccupancyGrid& grid) {
   AVP_RETURN_IF_ERROR(CheckOctomapRange(grid));
-  OctomapExportStats stats;
+  OctomapBinaryData out;
   octomap::OcTree tree(grid.voxel_size_m());
   ConfigureTree(tree, grid.sensor_model());
   const float occupied = grid.occupied_log_odds();
   grid.ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
     tree.setNodeValue(OcKey(k), log_odds, /*lazy_eval=*/true);
     if (log_odds >= occupied) {
-      ++stats.occupied_voxels;
+      ++out.stats.occupied_voxels;
     } else {
-      ++stats.free_voxels;
+      ++out.stats.free_voxels;
     }
   });
   tree.updateInnerOccupancy();
-  // What OcTree::writeBinary does (maximum likelihood, prune, header, data), spelled out so that
+  // What OcTree::writeBinary does (maximum likelihood, prune, data), spelled out so that
   // liboctomap's " done." on stderr stays out of the program's output.
   tree.toMaxLikelihood();
   tree.prune();
+  std::ostringstream data(std::ios::binary);
+  tree.writeBinaryData(data);
+  if (!data.good()) return IoError("OctoMap could not serialize the binary tree");
+  out.id = tree.getTreeType();
+  out.resolution_m = tree.getResolution();
+  out.data = data.str();
+  out.tree_nodes = tree.size();
+  out.stats.leaf_nodes = tree.getNumLeafNodes();
+  out.stats.file_bytes = out.data.size();
+  return out;
+}
+
+Result<OctomapExportStats> ExportOctomapBinary(const OccupancyGrid& grid, const fs::path& path) {
+  AVP_ASSIGN_OR_RETURN(const OctomapBinaryData tree, OctomapBinaryMessageData(grid));
   std::ostringstream out(std::ios::binary);
   out << kBinaryHeader
       << "\n# (feel free to add / change comments, but leave the first line as it is!)\n#\n";
-  out << "id " << tree.getTreeType() << "\n";
-  out << "size " << tree.size() << "\n";
-  out << "res " << tree.getResolution() << "\n";
+  out << "id " << tree.id << "\n";
+  out << "size " << tree.tree_nodes << "\n";
+  out << "res " << tree.resolution_m << "\n";
   out << "data\n";
-  tree.writeBinaryData(out);
-  if (!out.good()) {
-    return IoError(fmt::format("OctoMap could not serialize the tree for '{}'", path.string()));
-  }
-  stats.leaf_nodes = tree.getNumLeafNodes();
+  out << tree.data;
+  OctomapExportStats stats = tree.stats;
   const std::string bytes = out.str();
   stats.file_bytes = bytes.size();
   AVP_RETURN_IF_ERROR(WriteBytes(path, bytes, "OctoMap .bt file"));

@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include <avp/core/semantic_class.h>
@@ -64,6 +65,18 @@ struct OctomapExportStats {
 /// Errors: OutOfRange naming the first voxel outside OctoMap's key range; IoError.
 Result<OctomapExportStats> ExportOctomapBinary(const OccupancyGrid& grid,
                                                const std::filesystem::path& path);
+
+/// The binary tree of ExportOctomapBinary without the file header, as octomap_msgs/Octomap
+/// carries it (binary = true, id "OcTree"; octomap_msgs::binaryMapToMsg): what RViz's
+/// octomap_rviz_plugins and octomap_server read. Errors: OutOfRange as ExportOctomapBinary.
+struct OctomapBinaryData {
+  std::string id;  ///< "OcTree"
+  double resolution_m = 0.0;
+  std::string data;       ///< OcTree::writeBinaryData
+  size_t tree_nodes = 0;  ///< OcTree::size(), the .bt header's "size"
+  OctomapExportStats stats;
+};
+Result<OctomapBinaryData> OctomapBinaryMessageData(const OccupancyGrid& grid);
 
 /// Writes an OctoMap ColorOcTree (.ot, AbstractOcTree::write): every known voxel with its full
 /// log-odds (a float, as ours), occupied voxels coloured by OctomapVoxelColor, free voxels white
