@@ -1,4 +1,5 @@
 // avp run: one simulated active-vision episode into a run folder (docs/experiments.md).
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -10,27 +11,15 @@
 #include <avp/experiment/run_config.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/options_yaml.h>
+#include <avp/io/yaml.h>
 #include <avp/sim/scenario.h>
 
 #include "cli_common.h"
+#include "run_cli.h"
 
 namespace avp::apps {
 
 namespace {
-
-/// The flags of `avp run`. Shorthand flags apply only when given, over --config; then the
-/// --*-option and --set items, in that order.
-struct RunCli {
-  std::string config_file;
-  bool print_config = false;
-  std::string scenario, scene, planner, segmenter, prompt, policy, carving, gt, out = "out/run";
-  uint64_t seed = 0;
-  int views = 0, threads = 0;
-  double voxel_size_m = 0.0;
-  bool no_noise = false, oracle_regret = false;
-  std::vector<std::string> planner_options, segmenter_options, map_options, set;
-  std::vector<CLI::Option*> shorthands;  ///< each given one is applied (ApplyShorthands)
-};
 
 /// Sets `key` from a shorthand flag when the flag was given.
 Status ApplyIfGiven(const CLI::App& cmd, const char* flag, experiment::RunConfig& config,
@@ -83,13 +72,19 @@ Status ApplyKeyValues(const std::vector<std::string>& items, std::string_view wh
   return Status::Ok();
 }
 
-/// The configuration of this run: the defaults, --config, the shorthand flags, the --*-option
-/// items, --set; the default scenario when neither a scenario nor a scene file is named.
+}  // namespace
+
 Result<experiment::RunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& cli,
-                                            const experiment::Registries& registries) {
+                                            const experiment::Registries& registries,
+                                            const ConfigSection& section) {
   experiment::RunConfig c;
   if (!cli.config_file.empty()) {
-    AVP_ASSIGN_OR_RETURN(c, experiment::LoadRunConfig(cli.config_file, registries));
+    AVP_ASSIGN_OR_RETURN(YAML::Node root, io::LoadYamlFile(cli.config_file));
+    if (!section.name.empty() && root.IsMap() && root[section.name]) {
+      if (section.node != nullptr) *section.node = YAML::Clone(root[section.name]);
+      root.remove(section.name);
+    }
+    AVP_RETURN_IF_ERROR(experiment::ReadRunConfigYaml(root, cli.config_file, c));
   }
   AVP_RETURN_IF_ERROR(ApplyShorthands(cmd, cli, c));
   AVP_RETURN_IF_ERROR(ApplyKeyValues(cli.planner_options, "planner option", "planner.options.", c));
@@ -97,26 +92,40 @@ Result<experiment::RunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& c
       ApplyKeyValues(cli.segmenter_options, "segmenter option", "segmenter.options.", c));
   AVP_RETURN_IF_ERROR(ApplyKeyValues(cli.map_options, "map option", "map.", c));
   AVP_RETURN_IF_ERROR(ApplyKeyValues(cli.set, "--set item", "", c));
-  if (c.scenario.empty() && c.scene_file.empty()) {
+  if (section.default_scene && c.scenario.empty() && c.scene_file.empty()) {
     c.scenario = std::string(sim::DefaultScenarioName());
+  }
+  if (Status s = c.Validate(registries); !s.ok()) {
+    return cli.config_file.empty() ? s : s.WithContext(cli.config_file);
   }
   return c;
 }
 
 void PrintStep(const pipeline::StepRecord& s) {
   const Eigen::Vector3d eye = s.X_WC.translation();
+  const std::string metrics =
+      std::isnan(s.Metric("f1"))
+          ? std::string()
+          : fmt::format("  F1 {:.3f} (tol {:.3f})  fruits {:.0f}/{:.0f}", s.Metric("f1"),
+                        s.Metric("f1_tol"), s.Metric("fruits_found"), s.Metric("fruits_total"));
+  const std::string problems = !s.capture_status.ok() ? "  capture: " + s.capture_status.ToString()
+                               : !s.segment_status.ok()
+                                   ? "  segment: " + s.segment_status.ToString()
+                                   : std::string();
   std::printf(
-      "view %d/%d  eye (%.3f, %.3f, %.3f)  %zu masks  F1 %.3f (tol %.3f)  fruits %.0f/%.0f  "
-      "[segment %.0f ms, integrate %.0f ms, plan %.0f ms%s]\n",
-      s.view + 1, s.views_total, eye.x(), eye.y(), eye.z(), s.masks, s.Metric("f1"),
-      s.Metric("f1_tol"), s.Metric("fruits_found"), s.Metric("fruits_total"), s.times.segment_ms,
-      s.times.integrate_ms, s.times.plan_ms,
+      "view %d/%d  eye (%.3f, %.3f, %.3f)  %zu masks%s  [segment %.0f ms, integrate %.0f "
+      "ms, plan %.0f ms%s]%s\n",
+      s.view + 1, s.views_total, eye.x(), eye.y(), eye.z(), s.masks, metrics.c_str(),
+      s.times.segment_ms, s.times.integrate_ms, s.times.plan_ms,
       s.planned ? fmt::format(", {} of {} candidates reachable", s.candidates_reachable,
                               s.candidates_generated)
                       .c_str()
-                : "");
+                : "",
+      problems.c_str());
   std::fflush(stdout);
 }
+
+namespace {
 
 void PrintSummary(const experiment::RunConfig& config, const experiment::RunSummary& summary,
                   const std::filesystem::path& out_dir) {
@@ -153,8 +162,8 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   const Result<experiment::RunConfig> config = ResolveConfig(cmd, cli, registries);
   if (!config.ok()) return Failed("run", config.status());
   if (cli.print_config) {
-    // Only a valid configuration is printed, so that --config reads back whatever is printed.
-    if (const Status s = config->Validate(registries); !s.ok()) return Failed("run", s);
+    // Only a valid configuration is printed (ResolveConfig validates), so that --config reads
+    // back whatever is printed.
     const Result<YAML::Node> yaml = experiment::RunConfigToYaml(*config, registries);
     if (!yaml.ok()) return Failed("run", yaml.status());
     std::fputs(io::YamlText(*yaml).c_str(), stdout);
@@ -169,6 +178,8 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   PrintSummary(*config, *summary, options.out_dir);
   return 0;
 }
+
+}  // namespace
 
 void AddRunOptions(CLI::App& cmd, RunCli& cli) {
   const experiment::RunConfig d;
@@ -211,8 +222,6 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
                "the plan times include it)");
   cmd.add_option("--out", cli.out, "Run folder")->default_str(cli.out);
 }
-
-}  // namespace
 
 void AddRunCommand(CLI::App& app, CommandContext& context) {
   auto cli = std::make_shared<RunCli>();

@@ -41,7 +41,7 @@ class ProgressObserver final : public pipeline::EpisodeObserver {
 };
 
 /// map.ot, fruit_voxels.ply and metrics.svg of a finished episode.
-Status WriteMapAndPlot(const RunConfig& config, const sim::Scene& scene, const RunResult& result,
+Status WriteMapAndPlot(const RunConfig& config, const FolderRun& run, const RunResult& result,
                        const mapping::SemanticMap& map, const fs::path& dir,
                        std::vector<fs::path>& files) {
   const fs::path ot = dir / "map.ot";
@@ -53,34 +53,41 @@ Status WriteMapAndPlot(const RunConfig& config, const sim::Scene& scene, const R
   const fs::path svg = dir / "metrics.svg";
   AVP_RETURN_IF_ERROR(report::WriteLinePlotSvg(
       svg, report::EpisodeMetricsPlot(
-               fmt::format("{} — {} / {} (seed {})", scene.name, config.planner.name,
+               fmt::format("{} — {} / {} (seed {})", run.scene_name, config.planner.name,
                            config.segmenter.name, config.seed),
                result.episode.steps)));
   files.push_back(svg);
   return Status::Ok();
 }
 
-Result<json> RecordJson(const RunConfig& config, const Registries& registries,
-                        const sim::Scene& scene, const eval::GroundTruth& gt, double gt_s,
+Result<json> RecordJson(const RunConfig& config, const Registries& registries, const FolderRun& run,
                         const RunResult& result) {
   AVP_ASSIGN_OR_RETURN(json config_json, RunConfigJson(config, registries));
   json steps = json::array();
   for (const pipeline::StepRecord& s : result.episode.steps) steps.push_back(report::StepJson(s));
-  return json{
-      {"avp", "avp run"},
-      {"config", std::move(config_json)},
-      {"scene",
-       {{"name", scene.name}, {"description", scene.description}, {"fruits", gt.fruits.size()}}},
-      {"ground_truth", report::GroundTruthJson(gt, gt_s)},
-      {"git_revision", report::SourceRevision()},
-      {"host", report::HostDescription()},
-      {"end", std::string(pipeline::ToString(result.episode.end))},
-      {"end_reason", result.episode.end_reason},
-      {"views_fused", result.episode.views_fused()},
-      {"episode_seconds", result.episode.total_ms / 1e3},
-      {"final_metrics", report::MetricsJson(result.final_metrics)},
-      {"oracle_regret", report::RegretJson(result.regret)},
-      {"steps", steps}};
+  json record{{"avp", run.command},
+              {"config", std::move(config_json)},
+              {"scene",
+               {{"name", run.scene_name},
+                {"description", run.scene_description},
+                {"fruits", run.gt != nullptr ? json(run.gt->fruits.size()) : json(nullptr)}}},
+              {"ground_truth", run.gt != nullptr ? report::GroundTruthJson(*run.gt, run.gt_seconds)
+                                                 : json(nullptr)},
+              {"git_revision", report::SourceRevision()},
+              {"host", report::HostDescription()},
+              {"end", std::string(pipeline::ToString(result.episode.end))},
+              {"end_reason", result.episode.end_reason},
+              {"views_fused", result.episode.views_fused()},
+              {"episode_seconds", result.episode.total_ms / 1e3},
+              {"final_metrics",
+               run.gt != nullptr ? report::MetricsJson(result.final_metrics) : json(nullptr)},
+              {"oracle_regret", report::RegretJson(result.regret)},
+              {"steps", steps}};
+  if (run.extra) {
+    const json extra = run.extra();
+    for (const auto& [key, value] : extra.items()) record[key] = value;
+  }
+  return record;
 }
 
 }  // namespace
@@ -94,43 +101,60 @@ Result<json> RunConfigJson(const RunConfig& config, const Registries& registries
   return out;
 }
 
-Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& registries,
-                               const RunFolderOptions& options) {
+Result<RunSummary> RunEpisodeToFolder(const RunConfig& config, const Registries& registries,
+                                      const RunFolderOptions& options, const FolderRun& run,
+                                      const std::vector<pipeline::EpisodeObserver*>& observers) {
   const auto t0 = Clock::now();
   AVP_RETURN_IF_ERROR(config.Validate(registries));
   if (options.out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
+  if (!run.run) return InvalidArgumentError("RunEpisodeToFolder: no episode to run");
   std::error_code ec;
   fs::create_directories(options.out_dir, ec);
   if (ec) {
     return IoError(fmt::format("cannot create '{}': {}", options.out_dir.string(), ec.message()));
   }
-  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(config, registries));
   RunSummary summary;
-  summary.scene_name = scene.name;
-
-  const auto t_gt = Clock::now();
-  AVP_ASSIGN_OR_RETURN(const eval::GroundTruth gt, GroundTruthFor(config, scene));
-  const double gt_s = SecondsSince(t_gt);
-
+  summary.scene_name = run.scene_name;
   const fs::path csv_path = options.out_dir / "metrics.csv";
   AVP_ASSIGN_OR_RETURN(std::unique_ptr<report::MetricsCsvWriter> csv,
                        report::MetricsCsvWriter::Open(csv_path));
   ProgressObserver progress(options);
+  std::vector<pipeline::EpisodeObserver*> all = {csv.get(), &progress};
+  all.insert(all.end(), observers.begin(), observers.end());
   std::unique_ptr<mapping::SemanticMap> map;
-  AVP_ASSIGN_OR_RETURN(RunResult result, RunEpisodeOnScene(config, registries, scene, gt,
-                                                           {csv.get(), &progress}, &map));
+  AVP_ASSIGN_OR_RETURN(RunResult result, run.run(all, &map));
   csv.reset();
-  result.gt_ms = gt_s * 1e3;
+  result.gt_ms = run.gt_seconds * 1e3;
   summary.files.push_back(csv_path);
-  AVP_RETURN_IF_ERROR(WriteMapAndPlot(config, scene, result, *map, options.out_dir, summary.files));
+  if (map == nullptr) return InternalError("RunEpisodeToFolder: the episode returned no map");
+  AVP_RETURN_IF_ERROR(WriteMapAndPlot(config, run, result, *map, options.out_dir, summary.files));
 
-  AVP_ASSIGN_OR_RETURN(const json record, RecordJson(config, registries, scene, gt, gt_s, result));
+  AVP_ASSIGN_OR_RETURN(const json record, RecordJson(config, registries, run, result));
   const fs::path record_path = options.out_dir / "record.json";
   AVP_RETURN_IF_ERROR(io::WriteJsonFile(record_path, record));
   summary.files.insert(summary.files.begin(), record_path);
   summary.result = std::move(result);
   summary.seconds = SecondsSince(t0);
   return summary;
+}
+
+Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& registries,
+                               const RunFolderOptions& options) {
+  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  if (options.out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
+  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(config, registries));
+  const auto t_gt = Clock::now();
+  AVP_ASSIGN_OR_RETURN(const eval::GroundTruth gt, GroundTruthFor(config, scene));
+  FolderRun run;
+  run.scene_name = scene.name;
+  run.scene_description = scene.description;
+  run.gt = &gt;
+  run.gt_seconds = SecondsSince(t_gt);
+  run.run = [&](const std::vector<pipeline::EpisodeObserver*>& observers,
+                std::unique_ptr<mapping::SemanticMap>* map) {
+    return RunEpisodeOnScene(config, registries, scene, gt, observers, map);
+  };
+  return RunEpisodeToFolder(config, registries, options, run);
 }
 
 }  // namespace avp::experiment

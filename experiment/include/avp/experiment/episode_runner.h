@@ -1,8 +1,10 @@
 #pragma once
 
 #include <memory>
+#include <stop_token>
 #include <vector>
 
+#include <avp/core/box.h>
 #include <avp/core/status.h>
 #include <avp/eval/ground_truth.h>
 #include <avp/eval/metrics.h>
@@ -11,6 +13,8 @@
 #include <avp/experiment/run_config.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/pipeline/episode.h>
+#include <avp/robot/arm.h>
+#include <avp/robot/rgbd_source.h>
 #include <avp/sim/scene.h>
 
 namespace avp::experiment {
@@ -35,6 +39,34 @@ struct RunResult {
   /// Per plan step, with RunConfig::oracle_regret (empty otherwise).
   std::vector<eval::StepRegret> regret;
 };
+
+/// The robot side of one episode: where frames come from and what moves the camera (the
+/// simulator's SimRgbdSource and SimArm, or a live robot's), and the stop token that ends it.
+struct RobotSide {
+  robot::RgbdSource* source = nullptr;
+  robot::Arm* arm = nullptr;
+  std::stop_token stop;
+};
+
+/// What an episode is scored against, when it is known: the scene and its ground truth (both or
+/// neither). Without it the episode has no metrics, and planners that need the truth (oracle-*)
+/// and RunConfig::oracle_regret are refused.
+struct EpisodeTruth {
+  const sim::Scene* scene = nullptr;
+  const eval::GroundTruth* gt = nullptr;
+};
+
+/// Runs one episode of `config` with `robot` (the registered planner and segmenter with their
+/// options, a map of config.map), planning inside `roi`. Observers see every step as it
+/// completes; `map_out`, when given, receives the final map.
+Result<RunResult> RunEpisodeWithRobot(const RunConfig& config, const Registries& registries,
+                                      const RobotSide& robot, const Box3& roi,
+                                      const EpisodeTruth& truth,
+                                      const std::vector<pipeline::EpisodeObserver*>& observers = {},
+                                      std::unique_ptr<mapping::SemanticMap>* map_out = nullptr);
+
+/// The scene's start joints, or the arm's home when the scene names none.
+Eigen::VectorXd StartJoints(const sim::Scene& scene, const robot::ArmModel& arm);
 
 /// Runs one episode of `config` on `scene` against `gt` (compute it once per scene with
 /// GroundTruthFor and share it between planners and seeds): the simulated camera and arm

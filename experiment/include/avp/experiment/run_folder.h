@@ -2,6 +2,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,32 @@ struct RunSummary {
 ///   metrics.svg       F1 (exact and one-voxel tolerance) and fruits found per view
 Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& registries,
                                const RunFolderOptions& options);
+
+/// What a run folder records besides the configuration: how the episode is run, on what, and
+/// what it is scored against. RunToFolder fills it for the simulator; `avp live` for a robot.
+struct FolderRun {
+  /// record.json's "avp": the command ("avp run", "avp live").
+  std::string command = "avp run";
+  /// The plant: a scene's name and description, or what the user calls the live one.
+  std::string scene_name;
+  std::string scene_description;
+  /// The ground truth, when known (null: no metrics), and the seconds it took.
+  const eval::GroundTruth* gt = nullptr;
+  double gt_seconds = 0.0;
+  /// More record.json keys (e.g. "live": topics, frames, counters), asked for after the episode.
+  std::function<nlohmann::json()> extra;
+  /// Runs the episode with these observers (the CSV writer, the progress callback) and hands
+  /// over the final map.
+  std::function<Result<RunResult>(const std::vector<pipeline::EpisodeObserver*>&,
+                                  std::unique_ptr<mapping::SemanticMap>*)>
+      run;
+};
+
+/// Runs `run` into options.out_dir and writes the folder RunToFolder describes. The episode's
+/// results are written even when it ended early (interrupted, robot fault).
+Result<RunSummary> RunEpisodeToFolder(
+    const RunConfig& config, const Registries& registries, const RunFolderOptions& options,
+    const FolderRun& run, const std::vector<pipeline::EpisodeObserver*>& observers = {});
 
 /// record.json's "config": the effective configuration (RunConfigToYaml's tree) as JSON, numbers
 /// and flags typed.

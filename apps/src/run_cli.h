@@ -1,0 +1,52 @@
+#pragma once
+
+// The flags `avp run`, `avp live` and `avp sim ros2` share: the run configuration (--config, the
+// shorthands, --*-option, --set) and the per-step progress line.
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <yaml-cpp/yaml.h>
+
+#include <avp/core/status.h>
+#include <avp/experiment/registries.h>
+#include <avp/experiment/run_config.h>
+#include <avp/pipeline/episode.h>
+
+namespace avp::apps {
+
+/// The flags of `avp run`. Shorthand flags apply only when given, over --config; then the
+/// --*-option and --set items, in that order.
+struct RunCli {
+  std::string config_file;
+  bool print_config = false;
+  std::string scenario, scene, planner, segmenter, prompt, policy, carving, gt, out = "out/run";
+  uint64_t seed = 0;
+  int views = 0, threads = 0;
+  double voxel_size_m = 0.0;
+  bool no_noise = false, oracle_regret = false;
+  std::vector<std::string> planner_options, segmenter_options, map_options, set;
+};
+
+/// Adds the run configuration's flags to `cmd`.
+void AddRunOptions(CLI::App& cmd, RunCli& cli);
+
+/// A section of the --config file that is not the run configuration's (`live:`), handed to the
+/// command; and whether the default scenario applies when none is named.
+struct ConfigSection {
+  std::string name;
+  YAML::Node* node = nullptr;
+  bool default_scene = true;
+};
+
+/// The configuration: the defaults, --config (without `section`), the shorthand flags, the
+/// --*-option items, --set; the default scenario when none is named (section.default_scene);
+/// validated (errors name the file).
+Result<experiment::RunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& cli,
+                                            const experiment::Registries& registries,
+                                            const ConfigSection& section = {});
+
+/// One line per fused view: pose, masks, F1 and fruits (when there is ground truth), stage times.
+void PrintStep(const pipeline::StepRecord& s);
+
+}  // namespace avp::apps
