@@ -83,12 +83,23 @@ const std::map<std::string, std::set<std::string>> kAllowed = {
     // implement segmentation's Segmenter and are registered with it by apps/.
     {"zsl", {"core", "io", "segmentation", "zsl"}},
     {"interop", {"core", "io", "segmentation", "interop"}},
+    // ROS 2: the messages (no middleware), the DDS transport, the live robot (no simulator) and
+    // the simulator as a ROS 2 robot.
+    {"rosmsg", {"core", "rosmsg"}},
+    {"ros2", {"core", "rosmsg", "ros2"}},
+    {"live",
+     {"core", "io", "robot", "segmentation", "mapping", "planning", "pipeline", "rosmsg", "ros2",
+      "live"}},
+    {"simrobot", {"core", "io", "robot", "sim", "rosmsg", "ros2", "live", "simrobot"}},
 };
 
 // The external headers a module may include although they are in kForbiddenPrefixes.
 const std::map<std::string, std::set<std::string>> kAllowedExternal = {
     {"zsl", {"onnxruntime"}},
     {"interop", {"grpc", "grpcpp/"}},
+    {"ros2", {"dds/", "ddsc/", "spdlog/"}},
+    {"live", {"spdlog/"}},
+    {"simrobot", {"spdlog/"}},
 };
 
 const std::vector<std::string> kForbiddenPrefixes = {"CLI/",  "grpc",        "grpcpp/", "dds/",
@@ -164,6 +175,18 @@ TEST(ArchitectureTest, ThePipelineLinksNoSimulator) {
               ::testing::ElementsAre("avp_sim"));
 }
 
+TEST(ArchitectureTest, TheLiveRobotLinksNoSimulator) {
+  const LinkGraph& graph = TheLinkGraph();
+  if (!graph.count("avp_live")) {
+    GTEST_SKIP() << "built without AVP_WITH_ROS2: no avp_live in " << AVP_LINK_GRAPH_FILE;
+  }
+  EXPECT_THAT(ForbiddenLinks(graph, "avp_live", {"avp_sim", "embree", "assimp"}),
+              ::testing::IsEmpty())
+      << "avp::live drives a real robot: it may not link the simulator";
+  EXPECT_THAT(ForbiddenLinks(graph, "avp_simrobot", {"avp_sim"}),
+              ::testing::ElementsAre("avp_sim"));
+}
+
 TEST(ArchitectureTest, ForbiddenLinksFindsASimulatorInTheClosure) {
   // What the test above would see if pipeline linked sim (CMake writes the closure).
   std::istringstream text(
@@ -197,6 +220,9 @@ TEST(ArchitectureTest, ModulesLinkOnlyModulesBelowThem) {
   for (const auto& [module, direct] : kAllowed) {
     const std::set<std::string> allowed = TransitivelyAllowed(module);
     const auto it = graph.find("avp_" + module);
+    // The ROS 2 modules are built only with AVP_WITH_ROS2 (Cyclone DDS found).
+    const bool optional = module == "ros2" || module == "live" || module == "simrobot";
+    if (it == graph.end() && optional) continue;
     ASSERT_NE(it, graph.end()) << "avp_" << module << " is not in the link graph";
     for (const std::string& item : it->second) {
       if (item.rfind("avp_", 0) != 0) continue;

@@ -26,6 +26,10 @@ int main(int argc, char** argv) {
         avp::apps::AddSegmentCommand}) {
     add(app, context);
   }
+#ifdef AVP_WITH_ROS2
+  avp::apps::AddLiveCommand(app, context);
+  avp::apps::AddSimCommand(app, context);
+#endif
   CLI11_PARSE(app, argc, argv);
   return context.exit_code;
 }

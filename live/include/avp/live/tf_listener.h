@@ -1,0 +1,53 @@
+#pragma once
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include <avp/core/status.h>
+#include <avp/live/tf_buffer.h>
+#include <avp/ros2/node.h>
+#include <avp/rosmsg/messages.h>
+
+namespace avp::live {
+
+/// Fills a TfBuffer from /tf (reliable, keep-last 100) and /tf_static (reliable, transient
+/// local), as tf2_ros::TransformListener does. Transforms that TfBuffer refuses are counted and
+/// the last reason kept; they never stop the listener.
+class TfListener {
+ public:
+  static Result<std::unique_ptr<TfListener>> Create(
+      ros2::Node& node, TfBuffer& buffer, const std::string& tf_topic = "/tf",
+      const std::string& tf_static_topic = "/tf_static");
+  uint64_t received() const { return received_; }
+  uint64_t refused() const { return refused_; }
+  std::string last_problem() const;
+
+ private:
+  explicit TfListener(TfBuffer& buffer) : buffer_(buffer) {}
+  void OnMessage(const rosmsg::TFMessage& msg, bool is_static);
+
+  TfBuffer& buffer_;
+  std::atomic<uint64_t> received_{0};
+  std::atomic<uint64_t> refused_{0};
+  mutable std::mutex mutex_;
+  std::string last_problem_;
+  std::unique_ptr<ros2::Subscription<rosmsg::TFMessage>> tf_sub_, static_sub_;
+};
+
+/// Publishes transforms on /tf and /tf_static (tf2_ros::TransformBroadcaster and
+/// StaticTransformBroadcaster).
+class TfBroadcaster {
+ public:
+  static Result<std::unique_ptr<TfBroadcaster>> Create(ros2::Node& node);
+  Status Send(const rosmsg::TFMessage& msg);
+  /// Static transforms are latched: every call sends all static transforms given so far.
+  Status SendStatic(const std::vector<rosmsg::TransformStamped>& transforms);
+
+ private:
+  std::unique_ptr<ros2::Publisher<rosmsg::TFMessage>> tf_, static_;
+  std::vector<rosmsg::TransformStamped> statics_;
+};
+
+}  // namespace avp::live

@@ -1,0 +1,506 @@
+// The live adapters over DDS on loopback, against a fake camera and a fake arm in the same
+// process: image conversion and refusals, pairing by stamp, frames stamped before the capture,
+// a camera that stops, missing TF, a malformed sample, an arm that arrives, one that never does,
+// and a stop request.
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <stop_token>
+#include <thread>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <avp/core/error.h>
+#include <avp/live/ros2_arm.h>
+#include <avp/live/ros2_rgbd_source.h>
+#include <avp/live/rviz_publisher.h>
+#include <avp/live/tf_listener.h>
+#include <avp/robot/arm_model.h>
+#include <avp/rosmsg/convert.h>
+
+#include "ros2_test_support.h"
+
+namespace avp::live {
+namespace {
+
+using ros2::testing::LoopbackNode;
+using ros2::testing::TestDomainId;
+using ros2::testing::WaitFor;
+using ::testing::HasSubstr;
+
+/// The value of a Result that must be OK (the test fails and aborts otherwise).
+template <class T>
+T Take(Result<T> r) {
+  if (!r.ok()) throw Error(r.status().ToString());
+  return std::move(r).value();
+}
+
+rosmsg::Image ColorImage(int w, int h, const std::string& encoding, int64_t stamp_ns) {
+  rosmsg::Image m;
+  m.header.stamp = rosmsg::Time::FromNanoseconds(stamp_ns);
+  m.header.frame_id = "camera_color_optical_frame";
+  m.width = static_cast<uint32_t>(w);
+  m.height = static_cast<uint32_t>(h);
+  m.encoding = encoding;
+  m.step = static_cast<uint32_t>(3 * w);
+  m.data.resize(static_cast<size_t>(3 * w * h));
+  for (size_t i = 0; i < m.data.size(); i += 3) {
+    m.data[i] = 10;
+    m.data[i + 1] = 20;
+    m.data[i + 2] = 30;
+  }
+  return m;
+}
+
+rosmsg::Image DepthMm(int w, int h, uint16_t mm, int64_t stamp_ns) {
+  rosmsg::Image m;
+  m.header.stamp = rosmsg::Time::FromNanoseconds(stamp_ns);
+  m.header.frame_id = "camera_color_optical_frame";
+  m.width = static_cast<uint32_t>(w);
+  m.height = static_cast<uint32_t>(h);
+  m.encoding = "16UC1";
+  m.step = static_cast<uint32_t>(2 * w);
+  m.data.resize(static_cast<size_t>(2 * w * h));
+  for (size_t i = 0; i < m.data.size(); i += 2) {
+    m.data[i] = static_cast<uint8_t>(mm & 0xff);
+    m.data[i + 1] = static_cast<uint8_t>(mm >> 8);
+  }
+  return m;
+}
+
+rosmsg::Image DepthM(const std::vector<float>& z, int w, int h, int64_t stamp_ns) {
+  rosmsg::Image m;
+  m.header.stamp = rosmsg::Time::FromNanoseconds(stamp_ns);
+  m.width = static_cast<uint32_t>(w);
+  m.height = static_cast<uint32_t>(h);
+  m.encoding = "32FC1";
+  m.step = static_cast<uint32_t>(4 * w);
+  m.data.resize(4 * z.size());
+  std::memcpy(m.data.data(), z.data(), m.data.size());
+  return m;
+}
+
+rosmsg::CameraInfo Info(int w, int h) {
+  rosmsg::CameraInfo info;
+  info.header.frame_id = "camera_color_optical_frame";
+  info.width = static_cast<uint32_t>(w);
+  info.height = static_cast<uint32_t>(h);
+  info.distortion_model = "plumb_bob";
+  info.k = {50.0, 0, (w - 1) / 2.0, 0, 50.0, (h - 1) / 2.0, 0, 0, 1};
+  return info;
+}
+
+TEST(LiveImageTest, ColourAndDepthEncodingsConvert) {
+  const rosmsg::Image rgb = ColorImage(4, 3, "rgb8", 0);
+  const rosmsg::Image bgr = ColorImage(4, 3, "bgr8", 0);
+  auto a = Ros2RgbdSource::ColorFromMessage(rgb, "/c");
+  auto b = Ros2RgbdSource::ColorFromMessage(bgr, "/c");
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(a->at(1, 1, 0), 10);
+  EXPECT_EQ(a->at(1, 1, 2), 30);
+  EXPECT_EQ(b->at(1, 1, 0), 30);  // bgr8: blue first on the wire
+  EXPECT_EQ(b->at(1, 1, 2), 10);
+
+  auto mm = Ros2RgbdSource::DepthFromMessage(DepthMm(4, 3, 1234, 0), "/d");
+  ASSERT_TRUE(mm.ok());
+  EXPECT_FLOAT_EQ(mm->at(2, 2), 1.234f);
+  rosmsg::Image be = DepthMm(4, 3, 0x0102, 0);
+  be.is_bigendian = 1;  // the bytes 02 01 read big-endian: 0x0201
+  EXPECT_FLOAT_EQ(Ros2RgbdSource::DepthFromMessage(be, "/d")->at(0, 0), 0x0201 * 0.001f);
+
+  const float nan = std::nanf("");
+  auto m = Ros2RgbdSource::DepthFromMessage(
+      DepthM({1.5f, nan, 0.0f, -2.0f, INFINITY, 0.7f}, 3, 2, 0), "/d");
+  ASSERT_TRUE(m.ok());
+  EXPECT_FLOAT_EQ(m->at(0, 0), 1.5f);
+  EXPECT_EQ(m->at(1, 0), 0.0f);  // NaN: no return
+  EXPECT_EQ(m->at(2, 0), 0.0f);
+  EXPECT_EQ(m->at(0, 1), 0.0f);  // negative
+  EXPECT_EQ(m->at(1, 1), 0.0f);  // infinite
+  EXPECT_FLOAT_EQ(m->at(2, 1), 0.7f);
+}
+
+TEST(LiveImageTest, BadImagesAreRefusedByName) {
+  EXPECT_THAT(Ros2RgbdSource::ColorFromMessage(ColorImage(4, 3, "yuv422", 0), "/cam/color")
+                  .status()
+                  .message(),
+              HasSubstr("/cam/color: colour encoding 'yuv422' is not supported (rgb8, bgr8)"));
+  rosmsg::Image short_step = ColorImage(4, 3, "rgb8", 0);
+  short_step.step = 10;
+  EXPECT_THAT(Ros2RgbdSource::ColorFromMessage(short_step, "/c").status().message(),
+              HasSubstr("step 10 is shorter than a row"));
+  rosmsg::Image truncated = ColorImage(4, 3, "rgb8", 0);
+  truncated.data.resize(20);
+  EXPECT_THAT(Ros2RgbdSource::ColorFromMessage(truncated, "/c").status().message(),
+              HasSubstr("data holds 20 bytes, but step 12 x height 3 = 36"));
+  rosmsg::Image empty = ColorImage(4, 3, "rgb8", 0);
+  empty.width = 0;
+  EXPECT_THAT(Ros2RgbdSource::ColorFromMessage(empty, "/c").status().message(),
+              HasSubstr("out of range"));
+  EXPECT_THAT(
+      Ros2RgbdSource::DepthFromMessage(ColorImage(4, 3, "rgb8", 0), "/d").status().message(),
+      HasSubstr("depth encoding 'rgb8' is not supported"));
+  rosmsg::CameraInfo info = Info(4, 3);
+  info.k[0] = 0.0;
+  EXPECT_THAT(Ros2RgbdSource::IntrinsicsFromCameraInfo(info, CameraIntrinsics{}).status().message(),
+              HasSubstr("invalid intrinsics"));
+}
+
+/// A fake RealSense + robot_state_publisher on one node, avp's live side on another.
+class LiveSourceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const int domain = TestDomainId();
+    auto cam = ros2::Node::Create(LoopbackNode("fake_camera", domain));
+    auto avp = ros2::Node::Create(LoopbackNode("avp", domain));
+    ASSERT_TRUE(cam.ok() && avp.ok());
+    cam_ = std::move(*cam);
+    avp_ = std::move(*avp);
+    color_ = Take(
+        cam_->CreatePublisher<rosmsg::Image>(options_.color_topic, ros2::QosProfile::Default()));
+    depth_ = Take(
+        cam_->CreatePublisher<rosmsg::Image>(options_.depth_topic, ros2::QosProfile::Default()));
+    info_ = Take(cam_->CreatePublisher<rosmsg::CameraInfo>(options_.camera_info_topic,
+                                                           ros2::QosProfile::Default()));
+    auto tf = TfBroadcaster::Create(*cam_);
+    ASSERT_TRUE(tf.ok());
+    tf_pub_ = std::move(*tf);
+    auto listener = TfListener::Create(*avp_, tf_);
+    ASSERT_TRUE(listener.ok());
+    listener_ = std::move(*listener);
+    options_.best_effort = false;
+    options_.frame_timeout_s = 2.0;
+    options_.tf_timeout_s = 0.3;
+  }
+
+  /// CameraInfo at 20 Hz from a thread until the test ends (drivers publish it with every frame).
+  void StartInfo() {
+    info_thread_ = std::jthread([this](std::stop_token stop) {
+      while (!stop.stop_requested()) {
+        (void)info_->Publish(Info(8, 6));
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      }
+    });
+  }
+
+  void SendCameraTf(int64_t stamp_ns, double x) {
+    rosmsg::TFMessage msg;
+    rosmsg::TransformStamped t;
+    t.header.stamp = rosmsg::Time::FromNanoseconds(stamp_ns);
+    t.header.frame_id = "igus_rebel_base_link";
+    t.child_frame_id = "camera_color_optical_frame";
+    t.transform = rosmsg::ToTransformMsg(RigidTransform(Eigen::Vector3d(x, 0, 0)));
+    msg.transforms.push_back(t);
+    ASSERT_TRUE(tf_pub_->Send(msg).ok());
+  }
+
+  Result<std::unique_ptr<Ros2RgbdSource>> MakeSource(std::stop_token stop = {}) {
+    // Wait until the readers see the writers, so nothing published next is lost.
+    CameraIntrinsics range;
+    range.min_depth_m = 0.1;
+    range.max_depth_m = 3.0;
+    return Ros2RgbdSource::Create(*avp_, tf_, options_, range, stop);
+  }
+
+  void WaitMatched() {
+    ASSERT_TRUE(WaitFor([&] {
+      return color_->matched_subscriptions() > 0 && depth_->matched_subscriptions() > 0;
+    }));
+  }
+
+  CameraTopicsOptions options_;
+  std::unique_ptr<ros2::Node> cam_, avp_;
+  std::unique_ptr<ros2::Publisher<rosmsg::Image>> color_, depth_;
+  std::unique_ptr<ros2::Publisher<rosmsg::CameraInfo>> info_;
+  std::unique_ptr<TfBroadcaster> tf_pub_;
+  TfBuffer tf_;
+  std::unique_ptr<TfListener> listener_;
+  std::jthread info_thread_;
+};
+
+TEST_F(LiveSourceTest, CapturesThePairStampedAfterTheCallWithItsTransform) {
+  StartInfo();
+  auto source = MakeSource();
+  ASSERT_TRUE(source.ok()) << source.status().ToString();
+  WaitMatched();
+  EXPECT_EQ((*source)->intrinsics().width, 8);
+  EXPECT_DOUBLE_EQ((*source)->intrinsics().fx, 50.0);
+  // An old pair, stamped before the capture is asked for: never used.
+  const int64_t old = NowNs() - 1'000'000'000;
+  ASSERT_TRUE(color_->Publish(ColorImage(8, 6, "rgb8", old)).ok());
+  ASSERT_TRUE(depth_->Publish(DepthMm(8, 6, 500, old)).ok());
+  std::jthread camera([&](std::stop_token) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    const int64_t t = NowNs();
+    SendCameraTf(t - 10'000'000, 1.0);
+    SendCameraTf(t + 10'000'000, 3.0);
+    // An unpaired colour (6 ms before the depth), the depth, then its colour 4 ms later: paired
+    // within the 5 ms skew.
+    (void)color_->Publish(ColorImage(8, 6, "bgr8", t - 4'000'000));
+    (void)depth_->Publish(DepthMm(8, 6, 1500, t + 2'000'000));
+    (void)color_->Publish(ColorImage(8, 6, "rgb8", t + 4'000'000 + 2'000'000));
+  });
+  auto obs = (*source)->Capture(RigidTransform(), 0);
+  ASSERT_TRUE(obs.ok()) << obs.status().ToString();
+  EXPECT_FLOAT_EQ(obs->frame.depth_m.at(3, 3), 1.5f);
+  EXPECT_EQ(obs->frame.rgb.at(0, 0, 0), 10);  // the rgb8 frame
+  // X_WC interpolated at the colour stamp between x = 1 (t - 10 ms) and x = 3 (t + 10 ms).
+  EXPECT_NEAR(obs->frame.X_WC.translation().x(), 2.0 + 2.0 * 6.0 / 20.0, 1e-6);
+  EXPECT_FALSE(obs->labels.has_value());
+  EXPECT_EQ((*source)->counters().pairs_used, 1u);
+}
+
+TEST_F(LiveSourceTest, ACameraThatStopsIsADeadlineThatNamesTheTopics) {
+  StartInfo();
+  options_.frame_timeout_s = 0.3;
+  auto source = MakeSource();
+  ASSERT_TRUE(source.ok()) << source.status().ToString();
+  const auto t0 = std::chrono::steady_clock::now();
+  auto obs = (*source)->Capture(RigidTransform(), 0);
+  ASSERT_FALSE(obs.ok());
+  EXPECT_EQ(obs.status().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_THAT(obs.status().message(), HasSubstr("/camera/camera/color/image_raw"));
+  EXPECT_THAT(obs.status().message(), HasSubstr("received 0 colour, 0 depth"));
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(2));
+}
+
+TEST_F(LiveSourceTest, NoCameraInfoIsAClearError) {
+  options_.frame_timeout_s = 0.3;
+  auto source = MakeSource();
+  ASSERT_FALSE(source.ok());
+  EXPECT_EQ(source.status().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_THAT(source.status().message(),
+              HasSubstr("no usable CameraInfo on /camera/camera/color/camera_info"));
+}
+
+TEST_F(LiveSourceTest, UnsupportedEncodingsAndMalformedSamplesAreReportedAndSkipped) {
+  StartInfo();
+  options_.frame_timeout_s = 1.0;
+  auto source = MakeSource();
+  ASSERT_TRUE(source.ok()) << source.status().ToString();
+  WaitMatched();
+  // Garbage bytes on the colour topic with the Image type: the subscription counts and goes on.
+  auto raw = cam_->CreateRawPublisher(options_.color_topic, ros2::TypeInfo::Of<rosmsg::Image>(),
+                                      ros2::QosProfile::Default());
+  ASSERT_TRUE(raw.ok());
+  std::jthread camera([&](std::stop_token) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const uint8_t garbage[] = {0, 1, 0, 0, 0xff, 0xff, 0xff, 0x7f, 1, 2, 3};
+    (void)(*raw)->Publish(garbage);
+    const int64_t t = NowNs();
+    SendCameraTf(t, 1.0);
+    (void)color_->Publish(ColorImage(8, 6, "yuv422", t));
+    (void)depth_->Publish(DepthMm(8, 6, 1000, t));
+  });
+  auto obs = (*source)->Capture(RigidTransform(), 0);
+  ASSERT_FALSE(obs.ok());
+  EXPECT_EQ(obs.status().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_THAT(obs.status().message(), HasSubstr("colour encoding 'yuv422' is not supported"));
+  EXPECT_EQ((*source)->counters().refused, 1u);
+  // A good pair afterwards is captured.
+  std::jthread again([&](std::stop_token) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const int64_t t = NowNs();
+    SendCameraTf(t, 1.0);
+    (void)color_->Publish(ColorImage(8, 6, "rgb8", t));
+    (void)depth_->Publish(DepthMm(8, 6, 1000, t));
+  });
+  auto good = (*source)->Capture(RigidTransform(), 0);
+  EXPECT_TRUE(good.ok()) << good.status().ToString();
+}
+
+TEST_F(LiveSourceTest, MissingOrLateTransformIsAnErrorNamingTheFrames) {
+  StartInfo();
+  auto source = MakeSource();
+  ASSERT_TRUE(source.ok());
+  WaitMatched();
+  std::jthread camera([&](std::stop_token) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const int64_t t = NowNs();
+    (void)color_->Publish(ColorImage(8, 6, "rgb8", t));
+    (void)depth_->Publish(DepthMm(8, 6, 1000, t));
+  });
+  auto obs = (*source)->Capture(RigidTransform(), 0);
+  ASSERT_FALSE(obs.ok());
+  EXPECT_THAT(obs.status().message(),
+              HasSubstr("no transform igus_rebel_base_link -> camera_color_optical_frame"));
+  // TF that stops before the frame's stamp: "not available yet" after the TF timeout.
+  SendCameraTf(NowNs(), 1.0);
+  std::jthread late([&](std::stop_token) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const int64_t t = NowNs();
+    (void)color_->Publish(ColorImage(8, 6, "rgb8", t));
+    (void)depth_->Publish(DepthMm(8, 6, 1000, t));
+  });
+  auto late_obs = (*source)->Capture(RigidTransform(), 0);
+  ASSERT_FALSE(late_obs.ok());
+  EXPECT_EQ(late_obs.status().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_THAT(late_obs.status().message(), HasSubstr("not available yet"));
+}
+
+TEST_F(LiveSourceTest, AStopRequestEndsTheWaitAsCancelled) {
+  StartInfo();
+  std::stop_source stop;
+  options_.frame_timeout_s = 30.0;
+  auto source = MakeSource(stop.get_token());
+  ASSERT_TRUE(source.ok());
+  std::jthread stopper([&](std::stop_token) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    stop.request_stop();
+  });
+  const auto t0 = std::chrono::steady_clock::now();
+  auto obs = (*source)->Capture(RigidTransform(), 0);
+  EXPECT_EQ(obs.status().code(), StatusCode::kCancelled);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(2));
+}
+
+/// A fake arm: publishes joint states; follows trajectory goals when `follow` is set.
+class LiveArmTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    auto model = robot::LoadDefaultArm();
+    ASSERT_TRUE(model.ok());
+    model_ = std::make_unique<robot::ArmModel>(*model);
+    q_ = model_->home_joints();
+    const int domain = TestDomainId();
+    robot_ = Take(ros2::Node::Create(LoopbackNode("fake_arm", domain)));
+    avp_ = Take(ros2::Node::Create(LoopbackNode("avp", domain)));
+    joints_ = Take(robot_->CreatePublisher<rosmsg::JointState>("/joint_states",
+                                                               ros2::QosProfile::SensorData()));
+    goals_ = Take(robot_->CreateSubscription<rosmsg::JointTrajectory>(
+        options_.trajectory_topic, ros2::QosProfile::Default(),
+        [this](rosmsg::JointTrajectory&& t, const ros2::SampleInfo&) {
+          std::lock_guard lock(mutex_);
+          last_goal_ = t;
+          ++goals_received_;
+          if (follow_) {
+            for (size_t i = 0; i < t.joint_names.size(); ++i) {
+              q_[static_cast<Eigen::Index>(i)] = t.points.back().positions[i];
+            }
+          }
+        }));
+    options_.min_duration_s = 0.0;
+    options_.arrival_timeout_s = 0.5;
+    publisher_ = std::jthread([this](std::stop_token stop) {
+      while (!stop.stop_requested()) {
+        rosmsg::JointState js;
+        js.header.stamp = rosmsg::Time::FromNanoseconds(NowNs());
+        {
+          std::lock_guard lock(mutex_);
+          js.name = names_.empty() ? model_->joint_names() : names_;
+          js.position.assign(q_.data(), q_.data() + q_.size());
+        }
+        (void)joints_->Publish(js);
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      }
+    });
+  }
+  void TearDown() override { publisher_ = {}; }
+
+  std::unique_ptr<robot::ArmModel> model_;
+  ArmTopicsOptions options_;
+  std::unique_ptr<ros2::Node> robot_, avp_;
+  std::unique_ptr<ros2::Publisher<rosmsg::JointState>> joints_;
+  std::unique_ptr<ros2::Subscription<rosmsg::JointTrajectory>> goals_;
+  TfBuffer tf_;
+  std::mutex mutex_;
+  Eigen::VectorXd q_;
+  std::vector<std::string> names_;
+  bool follow_ = true;
+  rosmsg::JointTrajectory last_goal_;
+  int goals_received_ = 0;
+  std::jthread publisher_;
+};
+
+TEST_F(LiveArmTest, ArrivesWhenTheJointStatesReachTheGoal) {
+  auto arm = Ros2Arm::Create(*avp_, tf_, *model_, options_);
+  ASSERT_TRUE(arm.ok()) << arm.status().ToString();
+  ASSERT_TRUE(WaitFor([&] { return (*arm)->CurrentJoints().size() == 6; }));
+  EXPECT_NEAR(((*arm)->CurrentJoints() - model_->home_joints()).norm(), 0.0, 1e-12);
+  ASSERT_TRUE(WaitFor([&] { return goals_->matched_publishers() > 0; }));
+  Eigen::VectorXd goal = model_->home_joints();
+  goal[0] += 0.2;
+  const robot::MoveResult r = (*arm)->MoveToJoints(goal);
+  ASSERT_TRUE(r.ok()) << r.status.ToString();
+  EXPECT_NEAR((r.q - goal).norm(), 0.0, 1e-12);
+  EXPECT_NEAR(r.joint_path_length, 0.2, 1e-9);
+  std::lock_guard lock(mutex_);
+  EXPECT_EQ(goals_received_, 1);
+  EXPECT_EQ(last_goal_.joint_names, model_->joint_names());
+  ASSERT_EQ(last_goal_.points.size(), 1u);
+  // 0.2 rad at 0.5 rad/s.
+  EXPECT_EQ(last_goal_.points[0].time_from_start.ToNanoseconds(), 400'000'000);
+}
+
+TEST_F(LiveArmTest, AnArmThatNeverArrivesIsADeadlineNamingTheJoint) {
+  follow_ = false;
+  auto arm = Ros2Arm::Create(*avp_, tf_, *model_, options_);
+  ASSERT_TRUE(arm.ok());
+  Eigen::VectorXd goal = model_->home_joints();
+  goal[2] += 0.3;
+  const auto t0 = std::chrono::steady_clock::now();
+  const robot::MoveResult r = (*arm)->MoveToJoints(goal);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status.code(), StatusCode::kDeadlineExceeded);
+  EXPECT_THAT(r.status.message(), HasSubstr("did not arrive"));
+  EXPECT_THAT(r.status.message(), HasSubstr("joint 'joint3'"));
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(3));
+}
+
+TEST_F(LiveArmTest, JointStatesWithoutTheArmsJointsAreRefusedByName) {
+  {
+    std::lock_guard lock(mutex_);
+    names_ = {"a", "b", "c", "d", "e", "f"};
+  }
+  options_.state_timeout_s = 0.3;
+  auto arm = Ros2Arm::Create(*avp_, tf_, *model_, options_);
+  ASSERT_FALSE(arm.ok());
+  EXPECT_EQ(arm.status().code(), StatusCode::kUnavailable);
+  EXPECT_THAT(arm.status().message(), HasSubstr("joint 'joint1' is missing"));
+}
+
+TEST_F(LiveArmTest, AStopRequestWhileMovingIsCancelled) {
+  follow_ = false;
+  options_.arrival_timeout_s = 30.0;
+  std::stop_source stop;
+  auto arm = Ros2Arm::Create(*avp_, tf_, *model_, options_, stop.get_token());
+  ASSERT_TRUE(arm.ok());
+  std::jthread stopper([&](std::stop_token) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    stop.request_stop();
+  });
+  Eigen::VectorXd goal = model_->home_joints();
+  goal[0] += 0.3;
+  const robot::MoveResult r = (*arm)->MoveToJoints(goal);
+  EXPECT_EQ(r.status.code(), StatusCode::kCancelled);
+}
+
+TEST(RvizMarkersTest, CandidatesAreColouredByUtilityAndTheChosenViewIsLabelled) {
+  pipeline::StepRecord step;
+  step.view = 2;
+  for (int i = 0; i < 3; ++i) {
+    planning::ViewCandidate c;
+    c.X_WC = RigidTransform(Eigen::Vector3d(0.1 * i, 0, 0));
+    c.utility = 3.0 - i;
+    c.reachable = true;
+    step.top_candidates.push_back(c);
+  }
+  step.chosen = step.top_candidates[0];
+  step.chosen_rank = 0;
+  rosmsg::Header h;
+  h.frame_id = "igus_rebel_base_link";
+  const rosmsg::MarkerArray cands = CandidateMarkers(step, h);
+  ASSERT_EQ(cands.markers.size(), 4u);  // DELETEALL + 3 arrows
+  EXPECT_EQ(cands.markers[0].action, rosmsg::Marker::kDeleteAll);
+  // Best utility: viridis yellow; worst: viridis purple.
+  EXPECT_GT(cands.markers[1].color.r, 0.9f);
+  EXPECT_LT(cands.markers[3].color.r, 0.3f);
+  EXPECT_EQ(cands.markers[1].points.size(), 2u);
+  const rosmsg::MarkerArray chosen = ChosenMarkers(step, h);
+  ASSERT_EQ(chosen.markers.size(), 3u);
+  EXPECT_THAT(chosen.markers[2].text, HasSubstr("view 3 (rank 0): utility 3"));
+}
+
+}  // namespace
+}  // namespace avp::live

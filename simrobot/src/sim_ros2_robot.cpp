@@ -1,0 +1,346 @@
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <thread>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <avp/live/ros2_rgbd_source.h>
+#include <avp/rosmsg/convert.h>
+#include <avp/simrobot/sim_ros2_robot.h>
+
+namespace avp::simrobot {
+
+namespace {
+
+rosmsg::Image MakeImage(const std::string& frame, int width, int height, std::string encoding,
+                        int bytes_per_pixel) {
+  rosmsg::Image m;
+  m.header.frame_id = frame;
+  m.width = static_cast<uint32_t>(width);
+  m.height = static_cast<uint32_t>(height);
+  m.encoding = std::move(encoding);
+  m.is_bigendian = 0;
+  m.step = static_cast<uint32_t>(width * bytes_per_pixel);
+  m.data.resize(static_cast<size_t>(m.step) * m.height);
+  return m;
+}
+
+}  // namespace
+
+const OptionTable<SimRobotOptions>& SimRobotOptionTable() {
+  static const auto* table = [] {
+    using O = SimRobotOptions;
+    auto* t = new OptionTable<O>("simulated robot option");
+    t->Text("color_topic", &O::color_topic, "colour image (rgb8)");
+    t->Text("depth_topic", &O::depth_topic, "depth aligned to colour");
+    t->Text("camera_info_topic", &O::camera_info_topic, "CameraInfo");
+    t->Text("joint_states_topic", &O::joint_states_topic, "the arm's joint states");
+    t->Text("trajectory_topic", &O::trajectory_topic, "joint goals (JointTrajectory) obeyed");
+    t->Text("labels_prefix", &O::labels_prefix,
+            "simulator labels for the oracle segmenter (empty: none)");
+    t->Text("base_frame", &O::base_frame, "the arm's base frame");
+    t->Text("flange_frame", &O::flange_frame, "the arm's flange frame");
+    t->Text("camera_frame", &O::camera_frame, "the camera's optical frame");
+    t->Text("depth_encoding", &O::depth_encoding, "32FC1 (metres) or 16UC1 (millimetres)");
+    t->Real("camera_rate_hz", &O::camera_rate_hz, "Hz", ValueRange::LeftOpen(0, 200),
+            "images per second while the arm rests");
+    t->Real("joint_state_rate_hz", &O::joint_state_rate_hz, "Hz", ValueRange::LeftOpen(0, 1000),
+            "joint states and /tf per second");
+    t->Real("time_scale", &O::time_scale, "", ValueRange::Closed(0, 100),
+            "trajectories take time_from_start times this (0: jump)");
+    t->Flag("best_effort", &O::best_effort, "images best-effort (sensor data QoS)");
+    t->Flag("reference_joints", &O::reference_joints,
+            "joint states and goals in the reference convention (configs/arms)");
+    t->AddRule([](const O& o, std::vector<std::string>& errors) {
+      if (o.depth_encoding != "32FC1" && o.depth_encoding != "16UC1") {
+        errors.push_back(
+            fmt::format("depth_encoding ('{}') must be 32FC1 or 16UC1", o.depth_encoding));
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
+SimRos2Robot::SimRos2Robot(const sim::Scene& scene, robot::ArmModel model,
+                           const Eigen::VectorXd& q0, const CameraIntrinsics& camera,
+                           const sim::DepthNoiseConfig& noise, uint64_t seed,
+                           const SimRobotOptions& options)
+    : scene_(scene),
+      model_(std::move(model)),
+      options_(options),
+      camera_(camera),
+      source_(scene, camera, noise, seed),
+      q_(q0) {}
+
+SimRos2Robot::~SimRos2Robot() { trajectory_sub_.reset(); }
+
+Result<std::unique_ptr<SimRos2Robot>> SimRos2Robot::Create(
+    ros2::Node& node, const sim::Scene& scene, robot::ArmModel model, const Eigen::VectorXd& q0,
+    const CameraIntrinsics& camera, const sim::DepthNoiseConfig& noise, uint64_t seed,
+    const SimRobotOptions& options) {
+  if (std::vector<std::string> problems = SimRobotOptionTable().Problems(options);
+      !problems.empty()) {
+    return InvalidArgumentError(
+        fmt::format("invalid simulated robot options: {}", fmt::join(problems, "; ")));
+  }
+  AVP_RETURN_IF_ERROR(model.CheckJoints(q0));
+  AVP_RETURN_IF_ERROR(camera.Validate());
+  std::unique_ptr<SimRos2Robot> r;
+  try {
+    r.reset(new SimRos2Robot(scene, std::move(model), q0, camera, noise, seed, options));
+  } catch (const std::exception& e) {
+    return InvalidArgumentError(fmt::format("the simulated camera: {}", e.what()));
+  }
+  const ros2::QosProfile images =
+      options.best_effort ? ros2::QosProfile::SensorData() : ros2::QosProfile::Default();
+  AVP_ASSIGN_OR_RETURN(r->color_pub_,
+                       node.CreatePublisher<rosmsg::Image>(options.color_topic, images));
+  AVP_ASSIGN_OR_RETURN(r->depth_pub_,
+                       node.CreatePublisher<rosmsg::Image>(options.depth_topic, images));
+  AVP_ASSIGN_OR_RETURN(r->info_pub_,
+                       node.CreatePublisher<rosmsg::CameraInfo>(options.camera_info_topic, images));
+  AVP_ASSIGN_OR_RETURN(r->joints_pub_,
+                       node.CreatePublisher<rosmsg::JointState>(options.joint_states_topic,
+                                                                ros2::QosProfile::SensorData()));
+  if (!options.labels_prefix.empty()) {
+    AVP_ASSIGN_OR_RETURN(r->instance_pub_, node.CreatePublisher<rosmsg::Image>(
+                                               options.labels_prefix + "/instance", images));
+    AVP_ASSIGN_OR_RETURN(r->class_pub_, node.CreatePublisher<rosmsg::Image>(
+                                            options.labels_prefix + "/class", images));
+    AVP_ASSIGN_OR_RETURN(
+        r->fruits_pub_, node.CreatePublisher<rosmsg::MarkerArray>(options.labels_prefix + "/fruits",
+                                                                  ros2::QosProfile::Latched()));
+  }
+  AVP_ASSIGN_OR_RETURN(r->tf_, live::TfBroadcaster::Create(node));
+  SimRos2Robot* self = r.get();
+  AVP_ASSIGN_OR_RETURN(
+      r->trajectory_sub_,
+      node.CreateSubscription<rosmsg::JointTrajectory>(
+          options.trajectory_topic, ros2::QosProfile::Default(),
+          [self](rosmsg::JointTrajectory&& m, const ros2::SampleInfo&) { self->OnTrajectory(m); }));
+  // The camera's mount and the fruit: published once, latched.
+  const int64_t now = live::NowNs();
+  rosmsg::TransformStamped mount;
+  mount.header.stamp = rosmsg::Time::FromNanoseconds(now);
+  mount.header.frame_id = options.flange_frame;
+  mount.child_frame_id = options.camera_frame;
+  mount.transform = rosmsg::ToTransformMsg(r->model_.X_FC());
+  AVP_RETURN_IF_ERROR(r->tf_->SendStatic({mount}));
+  if (r->fruits_pub_ != nullptr) {
+    rosmsg::MarkerArray fruits;
+    for (const sim::FruitTruth& f : scene.Fruits()) {
+      rosmsg::Marker m;
+      m.header.stamp = mount.header.stamp;
+      m.header.frame_id = options.base_frame;
+      m.ns = "fruit";
+      m.id = f.instance_id;
+      m.type = rosmsg::Marker::kSphere;
+      m.action = rosmsg::Marker::kAdd;
+      m.pose.position = {f.center_W.x(), f.center_W.y(), f.center_W.z()};
+      m.pose.orientation.w = 1.0;
+      const double d = 2.0 * f.mean_radius_m();
+      m.scale = {d, d, d};
+      m.color = {1.0f, 0.2f, 0.1f, 0.5f};
+      fruits.markers.push_back(m);
+    }
+    AVP_RETURN_IF_ERROR(r->fruits_pub_->Publish(fruits));
+  }
+  // CameraInfo: the pinhole intrinsics, no distortion.
+  rosmsg::CameraInfo& info = r->info_;
+  info.header.frame_id = options.camera_frame;
+  info.width = static_cast<uint32_t>(camera.width);
+  info.height = static_cast<uint32_t>(camera.height);
+  info.distortion_model = "plumb_bob";
+  info.d = {0.0, 0.0, 0.0, 0.0, 0.0};
+  info.k = {camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0};
+  info.r = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+  info.p = {camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0};
+  return r;
+}
+
+void SimRos2Robot::OnTrajectory(const rosmsg::JointTrajectory& msg) {
+  std::string problem;
+  Goal goal;
+  const std::vector<std::string>& names = model_.joint_names();
+  goal.q.resize(static_cast<Eigen::Index>(names.size()));
+  if (msg.points.empty()) {
+    problem = "the trajectory has no point";
+  } else {
+    const rosmsg::JointTrajectoryPoint& last = msg.points.back();
+    if (last.positions.size() != msg.joint_names.size()) {
+      problem = fmt::format("{} joint names but {} positions", msg.joint_names.size(),
+                            last.positions.size());
+    }
+    for (size_t j = 0; j < names.size() && problem.empty(); ++j) {
+      size_t k = 0;
+      while (k < msg.joint_names.size() && msg.joint_names[k] != names[j]) ++k;
+      if (k == msg.joint_names.size()) {
+        problem = fmt::format("joint '{}' is missing (given: {})", names[j],
+                              fmt::join(msg.joint_names, ", "));
+      } else {
+        goal.q[static_cast<Eigen::Index>(j)] = last.positions[k];
+      }
+    }
+    if (problem.empty() && options_.reference_joints) goal.q = model_.FromReferenceJoints(goal.q);
+    const double t = static_cast<double>(last.time_from_start.ToNanoseconds()) * 1e-9;
+    goal.duration_s = std::max(0.0, t) * options_.time_scale;
+    if (problem.empty()) {
+      if (Status s = model_.CheckJoints(goal.q); !s.ok()) problem = s.message();
+    }
+  }
+  std::lock_guard lock(mutex_);
+  ++counters_.goals_received;
+  if (!problem.empty()) {
+    ++counters_.goals_refused;
+    counters_.last_problem =
+        fmt::format("{}: refused a goal: {}", options_.trajectory_topic, problem);
+    spdlog::warn("{}", counters_.last_problem);
+    return;
+  }
+  pending_ = goal;
+}
+
+Status SimRos2Robot::RenderAtRest(int64_t stamp_ns) {
+  Result<robot::Observation> obs = source_.Capture(model_.CameraPose(q_), stamp_ns);
+  if (!obs.ok()) return obs.status();
+  const int w = camera_.width;
+  const int h = camera_.height;
+  color_ = MakeImage(options_.camera_frame, w, h, "rgb8", 3);
+  std::memcpy(color_.data.data(), obs->frame.rgb.data().data(), color_.data.size());
+  const bool mm = options_.depth_encoding == "16UC1";
+  depth_ = MakeImage(options_.camera_frame, w, h, options_.depth_encoding, mm ? 2 : 4);
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const float z = obs->frame.depth_m.at(u, v);
+      const size_t i = static_cast<size_t>(v) * w + u;
+      if (mm) {
+        const double m = std::isfinite(z) && z > 0 ? std::round(z * 1000.0) : 0.0;
+        const uint16_t raw = static_cast<uint16_t>(std::min(m, 65535.0));
+        depth_.data[2 * i] = static_cast<uint8_t>(raw & 0xff);
+        depth_.data[2 * i + 1] = static_cast<uint8_t>(raw >> 8);
+      } else {
+        std::memcpy(&depth_.data[4 * i], &z, 4);
+      }
+    }
+  }
+  if (instance_pub_ != nullptr && obs->labels) {
+    instance_ = MakeImage(options_.camera_frame, w, h, "16UC1", 2);
+    class_ = MakeImage(options_.camera_frame, w, h, "mono8", 1);
+    for (int v = 0; v < h; ++v) {
+      for (int u = 0; u < w; ++u) {
+        const size_t i = static_cast<size_t>(v) * w + u;
+        const uint16_t id = obs->labels->instance_ids.at(u, v);
+        instance_.data[2 * i] = static_cast<uint8_t>(id & 0xff);
+        instance_.data[2 * i + 1] = static_cast<uint8_t>(id >> 8);
+        class_.data[i] = obs->labels->class_ids.at(u, v);
+      }
+    }
+  }
+  rendered_ = true;
+  std::lock_guard lock(mutex_);
+  ++counters_.frames_rendered;
+  return Status::Ok();
+}
+
+Status SimRos2Robot::PublishImages(int64_t stamp_ns) {
+  const rosmsg::Time stamp = rosmsg::Time::FromNanoseconds(stamp_ns);
+  color_.header.stamp = depth_.header.stamp = info_.header.stamp = stamp;
+  // Labels first, then depth, then colour: a reader that pairs on the colour finds the rest.
+  if (instance_pub_ != nullptr) {
+    instance_.header.stamp = class_.header.stamp = stamp;
+    AVP_RETURN_IF_ERROR(instance_pub_->Publish(instance_));
+    AVP_RETURN_IF_ERROR(class_pub_->Publish(class_));
+  }
+  AVP_RETURN_IF_ERROR(info_pub_->Publish(info_));
+  AVP_RETURN_IF_ERROR(depth_pub_->Publish(depth_));
+  AVP_RETURN_IF_ERROR(color_pub_->Publish(color_));
+  std::lock_guard lock(mutex_);
+  ++counters_.images_published;
+  return Status::Ok();
+}
+
+Status SimRos2Robot::PublishState(int64_t stamp_ns) {
+  const rosmsg::Time stamp = rosmsg::Time::FromNanoseconds(stamp_ns);
+  rosmsg::JointState js;
+  js.header.stamp = stamp;
+  js.name = model_.joint_names();
+  const Eigen::VectorXd q = options_.reference_joints ? model_.ToReferenceJoints(q_) : q_;
+  js.position.assign(q.data(), q.data() + q.size());
+  AVP_RETURN_IF_ERROR(joints_pub_->Publish(js));
+  rosmsg::TFMessage tf;
+  rosmsg::TransformStamped t;
+  t.header.stamp = stamp;
+  t.header.frame_id = options_.base_frame;
+  t.child_frame_id = options_.flange_frame;
+  t.transform = rosmsg::ToTransformMsg(model_.ForwardKinematics(q_));
+  tf.transforms.push_back(t);
+  AVP_RETURN_IF_ERROR(tf_->Send(tf));
+  std::lock_guard lock(mutex_);
+  ++counters_.joint_states_published;
+  return Status::Ok();
+}
+
+Status SimRos2Robot::Run(std::stop_token stop, double max_seconds) {
+  using Clock = std::chrono::steady_clock;
+  const auto t_end = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double>(max_seconds));
+  const auto state_period = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(1.0 / options_.joint_state_rate_hz));
+  const auto image_period = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(1.0 / options_.camera_rate_hz));
+  auto next_state = Clock::now();
+  auto next_image = Clock::now();
+  while (!stop.stop_requested() && (max_seconds <= 0.0 || Clock::now() < t_end)) {
+    const auto tick = Clock::now();
+    // A new goal replaces the motion, starting from where the arm is.
+    {
+      std::lock_guard lock(mutex_);
+      if (pending_) {
+        motion_ = Motion{q_, pending_->q, live::NowNs(),
+                         static_cast<int64_t>(pending_->duration_s * 1e9)};
+        pending_.reset();
+      }
+    }
+    if (motion_) {
+      const int64_t elapsed = live::NowNs() - motion_->start_ns;
+      if (elapsed >= motion_->duration_ns) {
+        q_ = motion_->to;  // exactly the goal
+        motion_.reset();
+        rendered_ = false;
+        std::lock_guard lock(mutex_);
+        ++counters_.arrivals;
+      } else {
+        const double a = static_cast<double>(elapsed) / static_cast<double>(motion_->duration_ns);
+        q_ = motion_->from + a * (motion_->to - motion_->from);
+      }
+    }
+    if (tick >= next_state || (!motion_ && !rendered_)) {
+      AVP_RETURN_IF_ERROR(PublishState(live::NowNs()));
+      next_state = tick + state_period;
+    }
+    if (!motion_) {
+      if (!rendered_) {
+        AVP_RETURN_IF_ERROR(RenderAtRest(live::NowNs()));
+        next_image = Clock::now();
+      }
+      if (Clock::now() >= next_image) {
+        AVP_RETURN_IF_ERROR(PublishImages(live::NowNs()));
+        next_image += image_period;
+        if (next_image < Clock::now()) next_image = Clock::now() + image_period;
+      }
+    }
+    const auto wake = motion_ ? next_state : std::min(next_state, next_image);
+    std::this_thread::sleep_until(std::min(wake, Clock::now() + std::chrono::milliseconds(5)));
+  }
+  return Status::Ok();
+}
+
+SimRobotCounters SimRos2Robot::counters() const {
+  std::lock_guard lock(mutex_);
+  return counters_;
+}
+
+}  // namespace avp::simrobot
