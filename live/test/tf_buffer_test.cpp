@@ -57,8 +57,8 @@ TEST(TfBufferTest, ChainsComposeParentToChildInOrder) {
   // Across branches: the camera in the table's frame.
   auto Y = tf.Lookup("table", "camera", 0);
   ASSERT_TRUE(Y.ok());
-  EXPECT_TRUE(Y->IsNearlyEqualTo(RigidTransform(Eigen::Vector3d(0, 0, 0.5)) * X_BF * X_FC, 1e-12,
-                                 1e-12));
+  EXPECT_TRUE(
+      Y->IsNearlyEqualTo(RigidTransform(Eigen::Vector3d(0, 0, 0.5)) * X_BF * X_FC, 1e-12, 1e-12));
 }
 
 TEST(TfBufferTest, AStampNewerThanTheLatestIsNotYetAndOlderThanTheCacheIsOutOfRange) {

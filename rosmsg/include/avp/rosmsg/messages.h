@@ -790,13 +790,14 @@ struct MessageTraits<ParticipantEntitiesInfo> {
 #undef AVP_ROSMSG_NAMES
 
 /// Calls X(Type) for every message type above (explicit instantiations, tests).
-#define AVP_ROSMSG_FOR_EACH_TYPE(X)                                                            \
-  X(Time)                                                                                      \
-  X(Duration) X(Header) X(ColorRGBA) X(Point) X(Vector3) X(Quaternion) X(Pose) X(PoseStamped)  \
-      X(PoseArray) X(Transform) X(TransformStamped) X(TFMessage) X(Image) X(CompressedImage)   \
-          X(RegionOfInterest) X(CameraInfo) X(JointState) X(PointField) X(PointCloud2)         \
-              X(JointTrajectoryPoint) X(JointTrajectory) X(UVCoordinate) X(MeshFile) X(Marker) \
-                  X(MarkerArray) X(Octomap) X(Gid) X(NodeEntitiesInfo) X(ParticipantEntitiesInfo)
+// clang-format off
+#define AVP_ROSMSG_FOR_EACH_TYPE(X)                                                               \
+  X(Time) X(Duration) X(Header) X(ColorRGBA) X(Point) X(Vector3) X(Quaternion) X(Pose)            \
+  X(PoseStamped) X(PoseArray) X(Transform) X(TransformStamped) X(TFMessage) X(Image)              \
+  X(CompressedImage) X(RegionOfInterest) X(CameraInfo) X(JointState) X(PointField)                \
+  X(PointCloud2) X(JointTrajectoryPoint) X(JointTrajectory) X(UVCoordinate) X(MeshFile)           \
+  X(Marker) X(MarkerArray) X(Octomap) X(Gid) X(NodeEntitiesInfo) X(ParticipantEntitiesInfo)
+// clang-format on
 
 // ---- Encoding -----------------------------------------------------------------------------------
 
