@@ -2,14 +2,11 @@
 // topics, the arm through JointTrajectory goals and /joint_states, the map and the planner's
 // views published for RViz; the same run folder as avp run. Ctrl-C or live.timeout_s stop it with
 // its results written.
-#include <atomic>
 #include <chrono>
-#include <csignal>
 #include <cstdio>
 #include <memory>
 #include <stop_token>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <fmt/format.h>
@@ -26,74 +23,17 @@
 #include <avp/robot/arm_model.h>
 
 #include "cli_common.h"
+#include "ros2_cli.h"
 #include "run_cli.h"
 
 namespace avp::apps {
 
 namespace {
 
-std::atomic<bool> g_interrupted{false};
-extern "C" void OnInterrupt(int) { g_interrupted.store(true); }
-
 struct LiveCli {
   RunCli run;
   std::vector<std::string> live_options;
 };
-
-/// Turns Ctrl-C (SIGINT, SIGTERM) and the time limit into a stop request; restores the handlers
-/// when it goes.
-class StopOnSignalOrTimeout {
- public:
-  StopOnSignalOrTimeout(std::stop_source& stop, double timeout_s) {
-    g_interrupted.store(false);
-    old_int_ = std::signal(SIGINT, OnInterrupt);
-    old_term_ = std::signal(SIGTERM, OnInterrupt);
-    watcher_ = std::jthread([&stop, timeout_s](std::stop_token done) {
-      const auto t0 = std::chrono::steady_clock::now();
-      while (!done.stop_requested()) {
-        if (g_interrupted.load()) {
-          std::fprintf(stderr, "\navp live: interrupted: finishing the step and saving results\n");
-          stop.request_stop();
-          return;
-        }
-        if (timeout_s > 0 &&
-            std::chrono::steady_clock::now() - t0 > std::chrono::duration<double>(timeout_s)) {
-          std::fprintf(stderr, "avp live: the time limit (%.0f s) is reached: saving results\n",
-                       timeout_s);
-          stop.request_stop();
-          return;
-        }
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-      }
-    });
-  }
-  ~StopOnSignalOrTimeout() {
-    watcher_ = {};
-    std::signal(SIGINT, old_int_);
-    std::signal(SIGTERM, old_term_);
-  }
-
- private:
-  void (*old_int_)(int) = SIG_DFL;
-  void (*old_term_)(int) = SIG_DFL;
-  std::jthread watcher_;
-};
-
-Result<live::LiveOptions> ResolveLiveOptions(const YAML::Node& section, const LiveCli& cli) {
-  live::LiveOptions o;
-  if (section) {
-    AVP_RETURN_IF_ERROR(
-        io::ReadOptionsYaml(live::LiveOptionTable(), o, section, cli.run.config_file + ": live"));
-  }
-  AVP_ASSIGN_OR_RETURN(const OptionValues values, ParseKeyValues(cli.live_options, "live option"));
-  for (const auto& [key, value] : values) {
-    AVP_RETURN_IF_ERROR(live::LiveOptionTable().Set(o, key, value));
-  }
-  if (std::vector<std::string> problems = live::LiveOptionTable().Problems(o); !problems.empty()) {
-    return InvalidArgumentError(fmt::format("invalid live options: {}", fmt::join(problems, "; ")));
-  }
-  return o;
-}
 
 nlohmann::json LiveRecord(const live::LiveOptions& o, const ros2::Node& node,
                           const live::Ros2RgbdSource& source, const live::Ros2Arm& arm,
@@ -121,7 +61,9 @@ int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& 
   const Result<experiment::RunConfig> config = ResolveConfig(
       cmd, cli.run, registries, {.name = "live", .node = &section, .default_scene = false});
   if (!config.ok()) return Failed("live", config.status());
-  const Result<live::LiveOptions> options = ResolveLiveOptions(section, cli);
+  const Result<live::LiveOptions> options =
+      ResolveSectionOptions(live::LiveOptionTable(), section, cli.live_options,
+                            cli.run.config_file + ": live", "live option");
   if (!options.ok()) return Failed("live", options.status());
   if (cli.run.print_config) {
     Result<YAML::Node> yaml = experiment::RunConfigToYaml(*config, registries);
@@ -154,7 +96,8 @@ int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& 
   }
 
   std::stop_source stop;
-  StopOnSignalOrTimeout stopper(stop, options->timeout_s);
+  StopOnSignal stopper(stop, options->timeout_s,
+                       "avp live: interrupted: finishing the step and saving results");
   Result<std::unique_ptr<ros2::Node>> node = ros2::Node::Create(live::NodeOptionsOf(*options));
   if (!node.ok()) return Failed("live", node.status());
   live::TfBuffer tf;

@@ -1,14 +1,10 @@
 // avp sim ros2: the simulator as a ROS 2 robot (docs/ros2.md): the scene of a run configuration
 // rendered as a RealSense would publish it, the arm's joint states and TF, obeying
 // JointTrajectory goals, until Ctrl-C or --duration.
-#include <atomic>
-#include <chrono>
-#include <csignal>
 #include <cstdio>
 #include <memory>
 #include <stop_token>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <fmt/format.h>
@@ -20,14 +16,12 @@
 #include <avp/simrobot/sim_ros2_robot.h>
 
 #include "cli_common.h"
+#include "ros2_cli.h"
 #include "run_cli.h"
 
 namespace avp::apps {
 
 namespace {
-
-std::atomic<bool> g_sim_interrupted{false};
-extern "C" void OnSimInterrupt(int) { g_sim_interrupted.store(true); }
 
 struct SimCli {
   RunCli run;
@@ -38,28 +32,14 @@ struct SimCli {
   double duration_s = 0.0;
 };
 
-Result<simrobot::SimRobotOptions> ResolveSimOptions(const YAML::Node& section, const SimCli& cli) {
-  simrobot::SimRobotOptions o;
-  if (section) {
-    AVP_RETURN_IF_ERROR(io::ReadOptionsYaml(simrobot::SimRobotOptionTable(), o, section,
-                                            cli.run.config_file + ": sim"));
-  }
-  AVP_ASSIGN_OR_RETURN(const OptionValues values, ParseKeyValues(cli.sim_options, "sim option"));
-  for (const auto& [key, value] : values) {
-    AVP_RETURN_IF_ERROR(simrobot::SimRobotOptionTable().Set(o, key, value));
-  }
-  if (std::vector<std::string> p = simrobot::SimRobotOptionTable().Problems(o); !p.empty()) {
-    return InvalidArgumentError(fmt::format("invalid sim options: {}", fmt::join(p, "; ")));
-  }
-  return o;
-}
-
 int SimRos2(const CLI::App& cmd, const SimCli& cli, const experiment::Registries& registries) {
   YAML::Node section;
   const Result<experiment::RunConfig> config =
       ResolveConfig(cmd, cli.run, registries, {.name = "sim", .node = &section});
   if (!config.ok()) return Failed("sim ros2", config.status());
-  const Result<simrobot::SimRobotOptions> options = ResolveSimOptions(section, cli);
+  const Result<simrobot::SimRobotOptions> options =
+      ResolveSectionOptions(simrobot::SimRobotOptionTable(), section, cli.sim_options,
+                            cli.run.config_file + ": sim", "sim option");
   if (!options.ok()) return Failed("sim ros2", options.status());
   if (cli.distro != "humble" && cli.distro != "jazzy") {
     return Failed("sim ros2", InvalidArgumentError(fmt::format(
@@ -97,14 +77,13 @@ int SimRos2(const CLI::App& cmd, const SimCli& cli, const experiment::Registries
       options->depth_topic.c_str(), options->camera_info_topic.c_str(),
       options->joint_states_topic.c_str(), options->trajectory_topic.c_str());
   std::fflush(stdout);
-  g_sim_interrupted.store(false);
-  auto old_int = std::signal(SIGINT, OnSimInterrupt);
-  auto old_term = std::signal(SIGTERM, OnSimInterrupt);
   std::stop_source stop;
   simrobot::SimRos2Robot* r = robot->get();
-  std::jthread watcher([&](std::stop_token done) {
-    uint64_t arrivals = 0, refused = 0;
-    while (!done.stop_requested() && !g_sim_interrupted.load()) {
+  uint64_t arrivals = 0, refused = 0;
+  Status s = Status::Ok();
+  {
+    // Progress: a line per arrival and per refused goal.
+    StopOnSignal stopper(stop, cli.duration_s, "avp sim ros2: stopping", [&] {
       const simrobot::SimRobotCounters c = r->counters();
       if (c.arrivals != arrivals) {
         arrivals = c.arrivals;
@@ -119,14 +98,9 @@ int SimRos2(const CLI::App& cmd, const SimCli& cli, const experiment::Registries
         std::printf("%s\n", c.last_problem.c_str());
         std::fflush(stdout);
       }
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    }
-    stop.request_stop();
-  });
-  const Status s = r->Run(stop.get_token(), cli.duration_s);
-  watcher = {};
-  std::signal(SIGINT, old_int);
-  std::signal(SIGTERM, old_term);
+    });
+    s = r->Run(stop.get_token());
+  }
   if (!s.ok()) return Failed("sim ros2", s);
   const simrobot::SimRobotCounters c = r->counters();
   std::printf("avp sim ros2: stopped after %llu goals (%llu refused), %llu frames rendered\n",

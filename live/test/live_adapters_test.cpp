@@ -251,6 +251,27 @@ TEST_F(LiveSourceTest, CapturesThePairStampedAfterTheCallWithItsTransform) {
   EXPECT_EQ((*source)->counters().pairs_used, 1u);
 }
 
+TEST_F(LiveSourceTest, FramesArrivingOutOfOrderArePairedByStamp) {
+  StartInfo();
+  auto source = MakeSource();
+  ASSERT_TRUE(source.ok()) << source.status().ToString();
+  WaitMatched();
+  std::jthread camera([&](std::stop_token) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const int64_t t = NowNs();
+    SendCameraTf(t, 1.0);
+    SendCameraTf(t + 100'000'000, 1.0);
+    // Colour t + 50 ms, then colour t + 20 ms, then the depth of t + 20 ms only.
+    (void)color_->Publish(ColorImage(8, 6, "bgr8", t + 50'000'000));
+    (void)color_->Publish(ColorImage(8, 6, "rgb8", t + 20'000'000));
+    (void)depth_->Publish(DepthMm(8, 6, 800, t + 20'000'000));
+  });
+  auto obs = (*source)->Capture(RigidTransform(), 0);
+  ASSERT_TRUE(obs.ok()) << obs.status().ToString();
+  EXPECT_EQ(obs->frame.rgb.at(0, 0, 0), 10);  // the rgb8 frame, paired with its depth
+  EXPECT_FLOAT_EQ(obs->frame.depth_m.at(0, 0), 0.8f);
+}
+
 TEST_F(LiveSourceTest, ACameraThatStopsIsADeadlineThatNamesTheTopics) {
   StartInfo();
   options_.frame_timeout_s = 0.3;
