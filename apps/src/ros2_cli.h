@@ -31,9 +31,7 @@ Result<T> ResolveSectionOptions(const OptionTable<T>& table, const YAML::Node& s
   if (section) AVP_RETURN_IF_ERROR(io::ReadOptionsYaml(table, o, section, context));
   AVP_ASSIGN_OR_RETURN(const OptionValues values, ParseKeyValues(items, what));
   for (const auto& [key, value] : values) AVP_RETURN_IF_ERROR(table.Set(o, key, value));
-  if (std::vector<std::string> problems = table.Problems(o); !problems.empty()) {
-    return InvalidArgumentError(fmt::format("invalid {}s: {}", what, fmt::join(problems, "; ")));
-  }
+  AVP_RETURN_IF_ERROR(table.Validate(o));
   return o;
 }
 

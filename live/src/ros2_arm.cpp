@@ -71,11 +71,7 @@ Result<std::unique_ptr<Ros2Arm>> Ros2Arm::Create(ros2::Node& node, TfBuffer& tf,
                                                  robot::ArmModel model,
                                                  const ArmTopicsOptions& options,
                                                  std::stop_token stop) {
-  if (std::vector<std::string> problems = ArmTopicsOptionTable().Problems(options);
-      !problems.empty()) {
-    return InvalidArgumentError(
-        fmt::format("invalid arm topic options: {}", fmt::join(problems, "; ")));
-  }
+  AVP_RETURN_IF_ERROR(ArmTopicsOptionTable().Validate(options));
   std::unique_ptr<Ros2Arm> arm(new Ros2Arm(tf, std::move(model), options, stop));
   Ros2Arm* self = arm.get();
   AVP_ASSIGN_OR_RETURN(

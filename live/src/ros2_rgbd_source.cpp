@@ -125,11 +125,7 @@ Result<std::unique_ptr<Ros2RgbdSource>> Ros2RgbdSource::Create(ros2::Node& node,
                                                                const CameraTopicsOptions& options,
                                                                const CameraIntrinsics& camera,
                                                                std::stop_token stop) {
-  if (std::vector<std::string> problems = CameraTopicsOptionTable().Problems(options);
-      !problems.empty()) {
-    return InvalidArgumentError(
-        fmt::format("invalid camera topic options: {}", fmt::join(problems, "; ")));
-  }
+  AVP_RETURN_IF_ERROR(CameraTopicsOptionTable().Validate(options));
   std::unique_ptr<Ros2RgbdSource> source(new Ros2RgbdSource(node, tf, options, camera, stop));
   AVP_RETURN_IF_ERROR(source->Subscribe());
   // The intrinsics before anything else: the planner needs them.

@@ -81,11 +81,7 @@ Result<std::unique_ptr<SimRos2Robot>> SimRos2Robot::Create(
     ros2::Node& node, const sim::Scene& scene, robot::ArmModel model, const Eigen::VectorXd& q0,
     const CameraIntrinsics& camera, const sim::DepthNoiseConfig& noise, uint64_t seed,
     const SimRobotOptions& options) {
-  if (std::vector<std::string> problems = SimRobotOptionTable().Problems(options);
-      !problems.empty()) {
-    return InvalidArgumentError(
-        fmt::format("invalid simulated robot options: {}", fmt::join(problems, "; ")));
-  }
+  AVP_RETURN_IF_ERROR(SimRobotOptionTable().Validate(options));
   AVP_RETURN_IF_ERROR(model.CheckJoints(q0));
   AVP_RETURN_IF_ERROR(camera.Validate());
   std::unique_ptr<SimRos2Robot> r;
