@@ -95,7 +95,7 @@ class NextViewToMoveIt(Node):
         self.busy = False  # a goal is planning or executing
         self.client = ActionClient(self, MoveGroup, action)
 
-        # What avp's publisher offers: reliable, volatile, keep last 1.
+        # avp publishes reliable and volatile (keep last 10); this reader keeps only the newest view.
         qos = QoSProfile(
             history=HistoryPolicy.KEEP_LAST,
             depth=1,
