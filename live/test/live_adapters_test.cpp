@@ -2,6 +2,7 @@
 // process: image conversion and refusals, pairing by stamp, frames stamped before the capture,
 // a camera that stops, missing TF, a malformed sample, an arm that arrives, one that never does,
 // and a stop request.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -203,9 +204,23 @@ class LiveSourceTest : public ::testing::Test {
     return Ros2RgbdSource::Create(*avp_, tf_, options_, range, stop);
   }
 
+  /// Waits until the image readers see the writers and /tf reaches the listener (a probe frame),
+  /// so that nothing the test publishes next is lost to discovery.
   void WaitMatched() {
     ASSERT_TRUE(WaitFor([&] {
       return color_->matched_subscriptions() > 0 && depth_->matched_subscriptions() > 0;
+    }));
+    ASSERT_TRUE(WaitFor([&] {
+      rosmsg::TFMessage msg;
+      rosmsg::TransformStamped t;
+      t.header.stamp = rosmsg::Time::FromNanoseconds(NowNs());
+      t.header.frame_id = "igus_rebel_base_link";
+      t.child_frame_id = "probe";
+      t.transform.rotation.w = 1.0;
+      msg.transforms.push_back(t);
+      (void)tf_pub_->Send(msg);
+      const std::vector<std::string> frames = tf_.Frames();
+      return std::find(frames.begin(), frames.end(), "probe") != frames.end();
     }));
   }
 
