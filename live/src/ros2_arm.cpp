@@ -19,10 +19,6 @@ int64_t SteadyNs() {
       .count();
 }
 
-SteadyClock::duration Seconds(double s) {
-  return std::chrono::duration_cast<SteadyClock::duration>(std::chrono::duration<double>(s));
-}
-
 }  // namespace
 
 const OptionTable<ArmTopicsOptions>& ArmTopicsOptionTable() {

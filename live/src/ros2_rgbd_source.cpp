@@ -17,10 +17,6 @@ using SteadyClock = std::chrono::steady_clock;
 
 int64_t StampNs(const rosmsg::Header& h) { return h.stamp.ToNanoseconds(); }
 
-std::string FormatStamp(int64_t ns) {
-  return fmt::format("{}.{:09d}", ns / 1'000'000'000, std::abs(ns % 1'000'000'000));
-}
-
 /// Checks an image's size, step and data length for `bytes_per_pixel`.
 Status CheckLayout(const rosmsg::Image& msg, std::string_view topic, int bytes_per_pixel) {
   if (msg.width == 0 || msg.height == 0 || msg.width > 16384 || msg.height > 16384) {
@@ -42,12 +38,23 @@ Status CheckLayout(const rosmsg::Image& msg, std::string_view topic, int bytes_p
   return Status::Ok();
 }
 
-int BytesPerPixel(std::string_view encoding) {
-  if (encoding == "rgb8" || encoding == "bgr8") return 3;
-  if (encoding == "16UC1" || encoding == "mono16") return 2;
-  if (encoding == "32FC1") return 4;
-  if (encoding == "mono8" || encoding == "8UC1") return 1;
-  return 0;
+/// A colour (rgb8, bgr8) or depth (16UC1/mono16 mm, 32FC1 m) image avp can use: its encoding,
+/// then its size, step and data length. Checked once on arrival and again on conversion.
+Status CheckImage(const rosmsg::Image& msg, std::string_view topic, bool is_color) {
+  if (is_color) {
+    if (msg.encoding != "rgb8" && msg.encoding != "bgr8") {
+      return InvalidArgumentError(fmt::format(
+          "{}: colour encoding '{}' is not supported (rgb8, bgr8)", topic, msg.encoding));
+    }
+    return CheckLayout(msg, topic, 3);
+  }
+  const bool mm = msg.encoding == "16UC1" || msg.encoding == "mono16";
+  if (!mm && msg.encoding != "32FC1") {
+    return InvalidArgumentError(fmt::format(
+        "{}: depth encoding '{}' is not supported (16UC1 in millimetres, 32FC1 in metres)", topic,
+        msg.encoding));
+  }
+  return CheckLayout(msg, topic, mm ? 2 : 4);
 }
 
 }  // namespace
@@ -56,6 +63,10 @@ int64_t NowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::system_clock::now().time_since_epoch())
       .count();
+}
+
+std::string FormatStamp(int64_t ns) {
+  return fmt::format("{}.{:09d}", ns / 1'000'000'000, std::abs(ns % 1'000'000'000));
 }
 
 Result<RigidTransform> ToRigidTransform(const rosmsg::Transform& t, std::string_view what) {
@@ -92,7 +103,7 @@ const OptionTable<CameraTopicsOptions>& CameraTopicsOptionTable() {
             "use frames stamped this long after the capture was asked for");
     t->Text("labels_prefix", &O::labels_prefix,
             "simulator label topics for the oracle segmenter (empty: none)");
-    t->Integer("queue", &O::queue, "", ValueRange::Closed(2, 1000),
+    t->Integer("queue", &O::queue, "", ValueRange::Closed(2, 120),
                "frames of each topic kept while waiting for a partner");
     t->AddRule([](const O& o, std::vector<std::string>& errors) {
       for (const auto& [key, value] : {std::pair{"color_topic", &o.color_topic},
@@ -130,9 +141,7 @@ Result<std::unique_ptr<Ros2RgbdSource>> Ros2RgbdSource::Create(ros2::Node& node,
   AVP_RETURN_IF_ERROR(source->Subscribe());
   // The intrinsics before anything else: the planner needs them.
   std::unique_lock lock(source->mutex_);
-  const auto deadline =
-      SteadyClock::now() + std::chrono::duration_cast<SteadyClock::duration>(
-                               std::chrono::duration<double>(options.frame_timeout_s));
+  const auto deadline = SteadyClock::now() + Seconds(options.frame_timeout_s);
   source->cv_.wait_until(lock, stop, deadline, [&] { return source->K_.has_value(); });
   if (stop.stop_requested()) return CancelledError("stopped while waiting for CameraInfo");
   if (!source->K_) {
@@ -187,12 +196,8 @@ Status Ros2RgbdSource::Subscribe() {
 
 Result<ImageRgb8> Ros2RgbdSource::ColorFromMessage(const rosmsg::Image& msg,
                                                    std::string_view topic) {
+  AVP_RETURN_IF_ERROR(CheckImage(msg, topic, /*is_color=*/true));
   const bool rgb = msg.encoding == "rgb8";
-  if (!rgb && msg.encoding != "bgr8") {
-    return InvalidArgumentError(
-        fmt::format("{}: colour encoding '{}' is not supported (rgb8, bgr8)", topic, msg.encoding));
-  }
-  AVP_RETURN_IF_ERROR(CheckLayout(msg, topic, 3));
   const int w = static_cast<int>(msg.width);
   const int h = static_cast<int>(msg.height);
   ImageRgb8 out(w, h);
@@ -210,13 +215,8 @@ Result<ImageRgb8> Ros2RgbdSource::ColorFromMessage(const rosmsg::Image& msg,
 
 Result<DepthImage> Ros2RgbdSource::DepthFromMessage(const rosmsg::Image& msg,
                                                     std::string_view topic) {
+  AVP_RETURN_IF_ERROR(CheckImage(msg, topic, /*is_color=*/false));
   const bool mm = msg.encoding == "16UC1" || msg.encoding == "mono16";
-  if (!mm && msg.encoding != "32FC1") {
-    return InvalidArgumentError(fmt::format(
-        "{}: depth encoding '{}' is not supported (16UC1 in millimetres, 32FC1 in metres)", topic,
-        msg.encoding));
-  }
-  AVP_RETURN_IF_ERROR(CheckLayout(msg, topic, mm ? 2 : 4));
   const int w = static_cast<int>(msg.width);
   const int h = static_cast<int>(msg.height);
   DepthImage out(w, h);
@@ -247,9 +247,14 @@ Result<DepthImage> Ros2RgbdSource::DepthFromMessage(const rosmsg::Image& msg,
 
 Result<CameraIntrinsics> Ros2RgbdSource::IntrinsicsFromCameraInfo(const rosmsg::CameraInfo& info,
                                                                   const CameraIntrinsics& range) {
+  if (info.width == 0 || info.height == 0 || info.width > 16384 || info.height > 16384) {
+    return InvalidArgumentError(
+        fmt::format("CameraInfo (frame '{}'): size {}x{} is out of range (1..16384)",
+                    info.header.frame_id, info.width, info.height));
+  }
   CameraIntrinsics K;
-  K.width = static_cast<int>(std::min<uint32_t>(info.width, 1u << 20));
-  K.height = static_cast<int>(std::min<uint32_t>(info.height, 1u << 20));
+  K.width = static_cast<int>(info.width);
+  K.height = static_cast<int>(info.height);
   K.fx = info.k[0];
   K.fy = info.k[4];
   K.cx = info.k[2];
@@ -297,20 +302,8 @@ void Ros2RgbdSource::OnCameraInfo(rosmsg::CameraInfo&& msg) {
 }
 
 void Ros2RgbdSource::OnImage(rosmsg::Image&& msg, bool is_color) {
-  const std::string& topic = is_color ? options_.color_topic : options_.depth_topic;
-  Status problem = Status::Ok();
-  const int bpp = BytesPerPixel(msg.encoding);
-  if (is_color && bpp != 3) {
-    problem = InvalidArgumentError(
-        fmt::format("{}: colour encoding '{}' is not supported (rgb8, bgr8)", topic, msg.encoding));
-  } else if (!is_color && msg.encoding != "16UC1" && msg.encoding != "mono16" &&
-             msg.encoding != "32FC1") {
-    problem = InvalidArgumentError(fmt::format(
-        "{}: depth encoding '{}' is not supported (16UC1 in millimetres, 32FC1 in metres)", topic,
-        msg.encoding));
-  } else {
-    problem = CheckLayout(msg, topic, bpp);
-  }
+  const Status problem =
+      CheckImage(msg, is_color ? options_.color_topic : options_.depth_topic, is_color);
   std::lock_guard lock(mutex_);
   ++(is_color ? counters_.color : counters_.depth);
   if (!problem.ok()) {
@@ -369,10 +362,7 @@ std::optional<std::pair<size_t, size_t>> Ros2RgbdSource::FindPair(int64_t not_be
 
 Result<robot::Observation> Ros2RgbdSource::Capture(const RigidTransform& X_WC, int64_t) {
   const int64_t not_before = NowNs() + static_cast<int64_t>(options_.settle_s * 1e9);
-  const auto deadline =
-      SteadyClock::now() +
-      std::chrono::duration_cast<SteadyClock::duration>(
-          std::chrono::duration<double>(options_.frame_timeout_s + options_.settle_s));
+  const auto deadline = SteadyClock::now() + Seconds(options_.frame_timeout_s + options_.settle_s);
   std::unique_lock lock(mutex_);
   std::optional<std::pair<size_t, size_t>> pair;
   const bool labels = !options_.labels_prefix.empty();
@@ -434,9 +424,7 @@ Result<robot::Observation> Ros2RgbdSource::Assemble(const rosmsg::Image& color,
       options_.camera_frame.empty() ? color.header.frame_id : options_.camera_frame;
   // The transform at the pair's stamp: wait (bounded) while it is not there yet.
   Result<RigidTransform> X_WC = tf_.Lookup(options_.base_frame, camera_frame, t);
-  const auto tf_deadline =
-      SteadyClock::now() + std::chrono::duration_cast<SteadyClock::duration>(
-                               std::chrono::duration<double>(options_.tf_timeout_s));
+  const auto tf_deadline = SteadyClock::now() + Seconds(options_.tf_timeout_s);
   while (!X_WC.ok() && SteadyClock::now() < tf_deadline && !stop_.stop_requested()) {
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
     X_WC = tf_.Lookup(options_.base_frame, camera_frame, t);

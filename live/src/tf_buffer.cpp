@@ -4,15 +4,12 @@
 
 #include <fmt/format.h>
 
+#include <avp/live/clock.h>
 #include <avp/live/tf_buffer.h>
 
 namespace avp::live {
 
 namespace {
-
-std::string FormatStamp(int64_t ns) {
-  return fmt::format("{}.{:09d}", ns / 1'000'000'000, std::abs(ns % 1'000'000'000));
-}
 
 RigidTransform Interpolate(const RigidTransform& a, const RigidTransform& b, double t) {
   const Eigen::Quaterniond qa = a.quaternion();

@@ -13,6 +13,7 @@
 #include <avp/core/camera.h>
 #include <avp/core/options.h>
 #include <avp/core/status.h>
+#include <avp/live/clock.h>
 #include <avp/live/tf_buffer.h>
 #include <avp/robot/rgbd_source.h>
 #include <avp/ros2/node.h>
@@ -120,9 +121,6 @@ class Ros2RgbdSource final : public robot::RgbdSource {
   std::unique_ptr<ros2::Subscription<rosmsg::CameraInfo>> info_sub_;
   std::unique_ptr<ros2::Subscription<rosmsg::MarkerArray>> fruits_sub_;
 };
-
-/// The system clock in nanoseconds (ROS time without /clock).
-int64_t NowNs();
 
 /// Transform message → RigidTransform as tf2 takes it: rosmsg::FromTransformMsg, refusing also a
 /// quaternion whose norm is not within 1e-3 of 1 (tf2's "denormalized quaternion"); the message
