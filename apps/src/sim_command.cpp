@@ -41,6 +41,11 @@ int SimRos2(const CLI::App& cmd, const SimCli& cli, const experiment::Registries
       ResolveSectionOptions(simrobot::SimRobotOptionTable(), section, cli.sim_options,
                             cli.run.config_file + ": sim", "sim option");
   if (!options.ok()) return Failed("sim ros2", options.status());
+  if (!(cli.duration_s >= 0.0 && cli.duration_s <= 1e7)) {
+    return Failed("sim ros2",
+                  InvalidArgumentError(fmt::format(
+                      "--duration {} must be in [0, 1e7] s (0: until Ctrl-C)", cli.duration_s)));
+  }
   if (cli.distro != "humble" && cli.distro != "jazzy") {
     return Failed("sim ros2", InvalidArgumentError(fmt::format(
                                   "--distro '{}' must be humble or jazzy", cli.distro)));

@@ -14,6 +14,10 @@ namespace avp::simrobot {
 
 namespace {
 
+/// The longest trajectory obeyed (its time_from_start; times time_scale <= 100 it stays far from
+/// int64 nanoseconds).
+constexpr double kMaxTrajectorySeconds = 3600.0;
+
 rosmsg::Image MakeImage(const std::string& frame, int width, int height, std::string encoding,
                         int bytes_per_pixel) {
   rosmsg::Image m;
@@ -182,6 +186,9 @@ void SimRos2Robot::OnTrajectory(const rosmsg::JointTrajectory& msg) {
     }
     if (problem.empty() && options_.reference_joints) goal.q = model_.FromReferenceJoints(goal.q);
     const double t = static_cast<double>(last.time_from_start.ToNanoseconds()) * 1e-9;
+    if (problem.empty() && !(t >= 0.0 && t <= kMaxTrajectorySeconds)) {
+      problem = fmt::format("time_from_start {} s is outside [0, {}] s", t, kMaxTrajectorySeconds);
+    }
     goal.duration_s = std::max(0.0, t) * options_.time_scale;
     if (problem.empty()) {
       if (Status s = model_.CheckJoints(goal.q); !s.ok()) problem = s.message();
