@@ -29,6 +29,8 @@ std::string_view ToString(StatusCode code) {
       return "Unavailable";
     case StatusCode::kCancelled:
       return "Cancelled";
+    case StatusCode::kResourceExhausted:
+      return "ResourceExhausted";
   }
   return "Unknown";
 }
@@ -66,6 +68,9 @@ Status UnavailableError(std::string message) {
   return {StatusCode::kUnavailable, std::move(message)};
 }
 Status CancelledError(std::string message) { return {StatusCode::kCancelled, std::move(message)}; }
+Status ResourceExhaustedError(std::string message) {
+  return {StatusCode::kResourceExhausted, std::move(message)};
+}
 
 void ThrowStatus(const Status& status) { throw Error(status.ToString()); }
 

@@ -35,6 +35,7 @@ TEST(StatusTest, CodeNames) {
   EXPECT_EQ(ToString(StatusCode::kDeadlineExceeded), "DeadlineExceeded");
   EXPECT_EQ(ToString(StatusCode::kUnavailable), "Unavailable");
   EXPECT_EQ(ToString(StatusCode::kCancelled), "Cancelled");
+  EXPECT_EQ(ToString(StatusCode::kResourceExhausted), "ResourceExhausted");
   EXPECT_EQ(ToString(static_cast<StatusCode>(99)), "Unknown");
 }
 
@@ -60,6 +61,7 @@ TEST(StatusTest, FactoriesSetCodeAndMessage) {
       {DeadlineExceededError("m"), StatusCode::kDeadlineExceeded},
       {UnavailableError("m"), StatusCode::kUnavailable},
       {CancelledError("m"), StatusCode::kCancelled},
+      {ResourceExhaustedError("m"), StatusCode::kResourceExhausted},
   };
   for (const auto& [status, code] : cases) {
     EXPECT_FALSE(status.ok());

@@ -287,6 +287,8 @@ grpc::Status ToGrpcStatus(const Status& status) {
       return {grpc::StatusCode::UNAVAILABLE, status.message()};
     case StatusCode::kCancelled:
       return {grpc::StatusCode::CANCELLED, status.message()};
+    case StatusCode::kResourceExhausted:
+      return {grpc::StatusCode::RESOURCE_EXHAUSTED, status.message()};
     default:
       return {grpc::StatusCode::INTERNAL, status.message()};
   }

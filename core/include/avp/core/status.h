@@ -24,6 +24,7 @@ enum class StatusCode {
   kDeadlineExceeded,    ///< a bounded wait ran out (a camera that stops, an arm that never arrives)
   kUnavailable,         ///< a peer (robot, camera, service) is not there or stopped answering
   kCancelled,           ///< the caller asked to stop (Ctrl-C)
+  kResourceExhausted,   ///< input asked for more than a named limit allows (core/limits.h)
 };
 
 std::string_view ToString(StatusCode code);
@@ -66,6 +67,7 @@ Status InternalError(std::string message);
 Status DeadlineExceededError(std::string message);
 Status UnavailableError(std::string message);
 Status CancelledError(std::string message);
+Status ResourceExhaustedError(std::string message);
 
 /// A value or an error status (C++20 has no std::expected).
 template <typename T>
