@@ -1,6 +1,6 @@
-#include <avp/core/limits.h>
-
 #include <fmt/format.h>
+
+#include <avp/core/limits.h>
 
 namespace avp {
 

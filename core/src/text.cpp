@@ -1,6 +1,6 @@
-#include <avp/core/text.h>
-
 #include <fmt/format.h>
+
+#include <avp/core/text.h>
 
 namespace avp {
 

@@ -11,9 +11,9 @@
 
 namespace avp {
 
-/// ResourceExhausted: "<what> (<amount>) exceeds the limit <limit_name> = <limit>[; <how_to_raise>]"
-/// e.g. ExceedsLimit("image of 20000 x 20000 pixels", 400000000, "max_image_pixels", 67108864,
-/// "raise it with --max-image-pixels").
+/// ResourceExhausted: "<what> (<amount>) exceeds the limit <limit_name> = <limit>" and
+/// "; <how_to_raise>" when given. For example ExceedsLimit("image of 20000 x 20000 pixels",
+/// 400000000, "max_image_pixels", 67108864, "raise it with --max-image-pixels").
 Status ExceedsLimit(std::string_view what, uint64_t amount, std::string_view limit_name,
                     uint64_t limit, std::string_view how_to_raise = "");
 
