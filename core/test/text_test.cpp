@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <avp/core/error.h>
 #include <avp/core/limits.h>
 #include <avp/core/text.h>
 
@@ -38,6 +39,53 @@ TEST(LimitsTest, ExceedsLimitNamesAmountLimitAndHowToRaise) {
             "prompt phrases (100000) exceeds the limit max_phrases = 64; raise it with --x");
   EXPECT_EQ(ExceedsLimit("seeds", 5, "max_seeds", 4).message(),
             "seeds (5) exceeds the limit max_seeds = 4");
+}
+
+}  // namespace
+}  // namespace avp
+
+namespace avp {
+namespace {
+
+const Limit& TestLimit() {
+  static const Limit limit("test_widgets", 10, "widgets", "widgets of a test");
+  return limit;
+}
+
+TEST(LimitsTest, RegisteredLimitChecksAndNamesHowToRaise) {
+  EXPECT_TRUE(TestLimit().Check("widgets", 10).ok());
+  const Status s = TestLimit().Check("widgets in the request", 11);
+  EXPECT_EQ(s.code(), StatusCode::kResourceExhausted);
+  EXPECT_EQ(s.message(),
+            "widgets in the request (11) exceeds the limit test_widgets = 10; raise it with "
+            "--limit test_widgets=N (docs/limits.md)");
+  bool listed = false;
+  for (const LimitInfo& info : RegisteredLimits()) {
+    if (info.name == "test_widgets") {
+      listed = true;
+      EXPECT_EQ(info.default_value, 10u);
+      EXPECT_EQ(info.unit, "widgets");
+    }
+  }
+  EXPECT_TRUE(listed);
+}
+
+TEST(LimitsTest, SetLimitsParsesStrictlyAndScopedLimitRestores) {
+  {
+    const ScopedLimit scoped(TestLimit(), 3);
+    EXPECT_EQ(TestLimit().value(), 3u);
+    ASSERT_TRUE(SetLimits("test_widgets=20").ok());
+    EXPECT_EQ(TestLimit().value(), 20u);
+  }
+  EXPECT_EQ(TestLimit().value(), 10u);
+  EXPECT_EQ(SetLimits("nope=3").code(), StatusCode::kNotFound);
+  EXPECT_NE(SetLimits("nope=3").message().find("unknown limit 'nope'"), std::string::npos);
+  for (const char* bad : {"test_widgets=-1", "test_widgets=0", "test_widgets=1e9",
+                          "test_widgets=99999999999999999999", "test_widgets", "test_widgets="}) {
+    EXPECT_EQ(SetLimits(bad).code(), StatusCode::kInvalidArgument) << bad;
+  }
+  EXPECT_EQ(TestLimit().value(), 10u);
+  EXPECT_THROW(Limit("test_widgets", 5, "", ""), Error);
 }
 
 }  // namespace
