@@ -44,5 +44,43 @@ TEST_F(WriteFileAtomicTest, FailureNamesThePathAndLeavesNothing) {
   EXPECT_EQ(Read(blocker), "x");
 }
 
+class ReadFileBoundedTest : public test::TempDirTest {};
+
+TEST_F(ReadFileBoundedTest, ReadsWholeFiles) {
+  const std::string bytes(
+      "a\0b\xff"
+      "c",
+      5);
+  ASSERT_TRUE(WriteFileAtomic(dir_ / "f.bin", bytes).ok());
+  const Result<std::string> r = ReadFileBounded(dir_ / "f.bin", "test file");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(*r, bytes);
+  ASSERT_TRUE(WriteFileAtomic(dir_ / "empty", "").ok());
+  EXPECT_EQ(ReadFileBounded(dir_ / "empty", "test file").value(), "");
+}
+
+TEST_F(ReadFileBoundedTest, MissingFolderAndTooLargeAreTold) {
+  const Status missing = ReadFileBounded(dir_ / "nope.ot", "OctoMap file").status();
+  EXPECT_EQ(missing.code(), StatusCode::kNotFound);
+  EXPECT_THAT(missing.message(), HasSubstr("OctoMap file '"));
+  EXPECT_THAT(missing.message(), HasSubstr("nope.ot' does not exist"));
+  // A folder is not "missing": it exists and is the wrong kind of thing.
+  const Status folder = ReadFileBounded(dir_, "map file").status();
+  EXPECT_EQ(folder.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(folder.message(), HasSubstr("is a folder, not a map file"));
+  ASSERT_TRUE(WriteFileAtomic(dir_ / "big", std::string(100, 'x')).ok());
+  const Status big = ReadFileBounded(dir_ / "big", "scene file", 99).status();
+  EXPECT_EQ(big.code(), StatusCode::kResourceExhausted);
+  EXPECT_THAT(big.message(), HasSubstr("of 100 bytes (100) exceeds the limit"));
+  EXPECT_TRUE(ReadFileBounded(dir_ / "big", "scene file", 100).ok());
+  {
+    const ScopedLimit limit(MaxFileBytes(), 50);
+    const Status s = ReadFileBounded(dir_ / "big", "scene file").status();
+    EXPECT_EQ(s.code(), StatusCode::kResourceExhausted);
+    EXPECT_THAT(s.message(), HasSubstr("max_file_bytes = 50; raise it with --limit"));
+  }
+  EXPECT_TRUE(ReadFileBounded(dir_ / "big", "scene file").ok());
+}
+
 }  // namespace
 }  // namespace avp::io
