@@ -1,9 +1,8 @@
 #include <cstdint>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 #include <limits>
-#include <optional>
+#include <string>
+#include <string_view>
 #include <system_error>
 #include <vector>
 
@@ -12,26 +11,52 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <avp/io/file.h>
 #include <avp/io/image_codec.h>
+#include <avp/io/image_limits.h>
 
 namespace avp::io {
 
 namespace {
 
-// Decodes to 8-bit RGB; an empty result when OpenCV cannot decode the bytes.
-std::optional<ImageRgb8> DecodeToRgb(std::span<const uint8_t> encoded) {
-  if (encoded.empty() || encoded.size() > static_cast<size_t>(std::numeric_limits<int>::max())) {
-    return std::nullopt;
+// Decodes to 8-bit RGB after checking the size the header declares (ReadImageHeader,
+// CheckImageSize) and before any pixel is decoded; the decoded size is checked against the header.
+// `what` names the image in errors ("image file 'a.png'", "image"): ParseError
+// "undecodable <what> (N bytes)[: reason]", ResourceExhausted from CheckImageSize.
+Result<ImageRgb8> DecodeToRgb(std::span<const uint8_t> encoded, std::string_view what) {
+  const auto undecodable = [&](std::string_view reason) {
+    return ParseError(fmt::format("undecodable {} ({} bytes){}{}", what, encoded.size(),
+                                  reason.empty() ? "" : ": ", reason));
+  };
+  if (encoded.empty()) return undecodable("");
+  if (encoded.size() > static_cast<size_t>(std::numeric_limits<int>::max())) {
+    return ResourceExhaustedError(
+        fmt::format("{} of {} bytes is larger than an encoded image may be ({} bytes)", what,
+                    encoded.size(), std::numeric_limits<int>::max()));
   }
+  Result<ImageHeader> header = ReadImageHeader(encoded);
+  if (!header.ok()) return undecodable(header.status().message());
+  AVP_RETURN_IF_ERROR(
+      CheckImageSize(header->width, header->height, fmt::format("{} {}", header->format, what)));
   cv::Mat bgr;
   try {
     const cv::Mat buffer(1, static_cast<int>(encoded.size()), CV_8UC1,
                          const_cast<uint8_t*>(encoded.data()));
     bgr = cv::imdecode(buffer, cv::IMREAD_COLOR);
   } catch (const cv::Exception&) {
-    return std::nullopt;
+    return undecodable("");
   }
-  if (bgr.empty() || bgr.type() != CV_8UC3) return std::nullopt;
+  if (bgr.empty()) return undecodable("");
+  // What OpenCV returns must be what the header declared (EXIF orientation may swap the sides).
+  const auto w = static_cast<uint64_t>(bgr.cols);
+  const auto h = static_cast<uint64_t>(bgr.rows);
+  const bool same =
+      (w == header->width && h == header->height) || (w == header->height && h == header->width);
+  if (bgr.type() != CV_8UC3 || !same) {
+    return undecodable(
+        fmt::format("the {} header declares {} x {} pixels, OpenCV decoded {} x {} of type {}",
+                    header->format, header->width, header->height, w, h, bgr.type()));
+  }
   ImageRgb8 rgb(bgr.cols, bgr.rows);
   cv::Mat out(bgr.rows, bgr.cols, CV_8UC3, rgb.data().data());
   cv::cvtColor(bgr, out, cv::COLOR_BGR2RGB);
@@ -41,31 +66,15 @@ std::optional<ImageRgb8> DecodeToRgb(std::span<const uint8_t> encoded) {
 }  // namespace
 
 Result<ImageRgb8> ReadImageFile(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return NotFoundError(fmt::format("image file {} does not exist", path.string()));
-  }
-  if (!std::filesystem::is_regular_file(path, ec)) {
-    return IoError(fmt::format("image file {} is not a regular file", path.string()));
-  }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return IoError(fmt::format("cannot open image file {}", path.string()));
-  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
-                                   std::istreambuf_iterator<char>());
-  if (in.bad()) return IoError(fmt::format("cannot read image file {}", path.string()));
+  AVP_ASSIGN_OR_RETURN(const std::string bytes, ReadFileBounded(path, "image file"));
   if (bytes.empty()) return ParseError(fmt::format("image file {} is empty", path.string()));
-  std::optional<ImageRgb8> rgb = DecodeToRgb(bytes);
-  if (!rgb) {
-    return ParseError(fmt::format("image file {} is not a decodable image ({} bytes)",
-                                  path.string(), bytes.size()));
-  }
-  return std::move(*rgb);
+  return DecodeToRgb(
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
+      fmt::format("image file {}", path.string()));
 }
 
 Result<ImageRgb8> DecodeImage(std::span<const uint8_t> encoded) {
-  std::optional<ImageRgb8> rgb = DecodeToRgb(encoded);
-  if (!rgb) return ParseError(fmt::format("undecodable image ({} bytes)", encoded.size()));
-  return std::move(*rgb);
+  return DecodeToRgb(encoded, "image");
 }
 
 namespace {
@@ -111,13 +120,9 @@ Result<std::vector<uint8_t>> EncodeJpeg(const ImageRgb8& image, int quality) {
 
 Status WritePngFile(const ImageRgb8& image, const std::filesystem::path& path) {
   AVP_ASSIGN_OR_RETURN(const std::vector<uint8_t> bytes, EncodePng(image));
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) return IoError(fmt::format("cannot open {} for writing", path.string()));
-  out.write(reinterpret_cast<const char*>(bytes.data()),
-            static_cast<std::streamsize>(bytes.size()));
-  out.close();
-  if (!out) return IoError(fmt::format("cannot write PNG file {}", path.string()));
-  return Status::Ok();
+  return WriteFileAtomic(
+      path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()),
+      "PNG file");
 }
 
 }  // namespace avp::io

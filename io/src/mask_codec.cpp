@@ -7,6 +7,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <avp/io/image_limits.h>
 #include <avp/io/mask_codec.h>
 
 namespace avp::io {
@@ -35,9 +36,12 @@ Result<MaskImage> RleToMask(std::span<const uint32_t> counts, int width, int hei
     return InvalidArgumentError(
         fmt::format("RLE mask size {} x {} must not be negative", width, height));
   }
+  const uint64_t pixels = static_cast<uint64_t>(width) * static_cast<uint64_t>(height);
+  // The size is checked before the mask is allocated.
+  AVP_RETURN_IF_ERROR(
+      MaxImagePixels().Check(fmt::format("RLE mask of {} x {} pixels", width, height), pixels));
   uint64_t sum = 0;
   for (const uint32_t c : counts) sum += c;
-  const uint64_t pixels = static_cast<uint64_t>(width) * static_cast<uint64_t>(height);
   if (sum != pixels) {
     return InvalidArgumentError(
         fmt::format("RLE counts ({} runs) sum to {}, expected {} x {} = {} pixels", counts.size(),

@@ -1,10 +1,14 @@
 #include <algorithm>
+#include <charconv>
+#include <cstdint>
 #include <map>
 #include <optional>
 #include <string>
+#include <system_error>
 
 #include <fmt/format.h>
 
+#include <avp/core/text.h>
 #include <avp/io/options_yaml.h>
 
 namespace avp::io {
@@ -38,7 +42,12 @@ YAML::Node Scalar(const std::string& value, OptionKind kind) {
 Status Flatten(const YAML::Node& node, const std::string& prefix, std::string_view context,
                OptionValues& out) {
   for (const auto& kv : node) {
-    const std::string key = prefix + kv.first.as<std::string>();
+    if (!kv.first.IsScalar()) {
+      return InvalidArgumentError(
+          fmt::format("{}: a key below {} is not a name", context,
+                      prefix.empty() ? std::string("the top level") : QuoteText(prefix)));
+    }
+    const std::string key = prefix + kv.first.Scalar();
     const YAML::Node& v = kv.second;
     if (v.IsMap()) {
       AVP_RETURN_IF_ERROR(Flatten(v, key + ".", context, out));
@@ -47,7 +56,7 @@ Status Flatten(const YAML::Node& node, const std::string& prefix, std::string_vi
       for (const YAML::Node& item : v) {
         if (!item.IsScalar()) {
           return InvalidArgumentError(
-              fmt::format("{}: '{}' must be a list of numbers or names", context, key));
+              fmt::format("{}: {} must be a list of numbers or names", context, QuoteText(key)));
         }
         items.push_back(item.Scalar());
       }
@@ -83,8 +92,17 @@ nlohmann::json JsonValue(const std::string& value, OptionKind kind) {
       const std::optional<double> v = options_internal::ParseReal(value);
       if (!v) return value;
       if (kind == OptionKind::kInteger) {
-        if (value.front() == '-') return std::stoll(value);
-        return std::stoull(value);
+        // Whole numbers only, exactly (no wrap-around, no partial parse); anything else stays text.
+        const char* first = value.data();
+        const char* last = value.data() + value.size();
+        if (value.front() == '-') {
+          int64_t i = 0;
+          const auto [end, ec] = std::from_chars(first, last, i);
+          return ec == std::errc() && end == last ? nlohmann::json(i) : nlohmann::json(value);
+        }
+        uint64_t u = 0;
+        const auto [end, ec] = std::from_chars(first, last, u);
+        return ec == std::errc() && end == last ? nlohmann::json(u) : nlohmann::json(value);
       }
       return *v;
     }

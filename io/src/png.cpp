@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <cerrno>
 #include <csetjmp>
 #include <cstdio>
 #include <cstring>
@@ -9,6 +10,9 @@
 #include <fmt/format.h>
 #include <png.h>
 
+#include <avp/core/text.h>
+#include <avp/io/file.h>
+#include <avp/io/image_limits.h>
 #include <avp/io/png.h>
 
 namespace avp::io {
@@ -36,30 +40,21 @@ void OnPngError(png_structp png, png_const_charp message) {
 
 void OnPngWarning(png_structp, png_const_charp) {}
 
-Status PrepareOutput(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (path.has_parent_path()) {
-    std::filesystem::create_directories(path.parent_path(), ec);
-    if (ec) {
-      return IoError(
-          fmt::format("cannot create folder '{}': {}", path.parent_path().string(), ec.message()));
-    }
-  }
-  return Status::Ok();
+void AppendToString(png_structp png, png_bytep data, png_size_t length) {
+  auto* out = static_cast<std::string*>(png_get_io_ptr(png));
+  out->append(reinterpret_cast<const char*>(data), length);
 }
 
-// Writes rows of `bytes_per_row` bytes; `color_type` and `bit_depth` as libpng expects. 16-bit
-// samples are passed in host order and swapped by libpng (png_set_swap).
+void FlushNothing(png_structp) {}
+
+// Encodes rows of `bytes_per_row` bytes in memory, then writes the file atomically
+// (WriteFileAtomic: a temporary name, flushed, renamed); `color_type` and `bit_depth` as libpng
+// expects. 16-bit samples are passed in host order and swapped by libpng (png_set_swap).
 Status WriteRows(const std::filesystem::path& path, int width, int height, int color_type,
                  int bit_depth, const uint8_t* data, size_t bytes_per_row) {
-  AVP_RETURN_IF_ERROR(PrepareOutput(path));
   if (width <= 0 || height <= 0) {
     return InvalidArgumentError(
         fmt::format("cannot write empty image {}x{} to '{}'", width, height, path.string()));
-  }
-  FilePtr file(std::fopen(path.c_str(), "wb"));
-  if (!file) {
-    return IoError(fmt::format("cannot open '{}' for writing", path.string()));
   }
   ErrorState state;
   png_structp png =
@@ -73,11 +68,13 @@ Status WriteRows(const std::filesystem::path& path, int width, int height, int c
   for (int v = 0; v < height; ++v) {
     rows[v] = const_cast<png_bytep>(data + static_cast<size_t>(v) * bytes_per_row);
   }
+  std::string encoded;
   if (setjmp(png_jmpbuf(png))) {
     png_destroy_write_struct(&png, &info);
-    return IoError(fmt::format("cannot write PNG '{}': {}", path.string(), state.message));
+    return InternalError(
+        fmt::format("cannot encode PNG '{}': {}", path.string(), EscapeText(state.message)));
   }
-  png_init_io(png, file.get());
+  png_set_write_fn(png, &encoded, AppendToString, FlushNothing);
   png_set_compression_level(png, 3);
   png_set_IHDR(png, info, static_cast<png_uint_32>(width), static_cast<png_uint_32>(height),
                bit_depth, color_type, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
@@ -87,10 +84,7 @@ Status WriteRows(const std::filesystem::path& path, int width, int height, int c
   png_write_image(png, rows.data());
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
-  if (std::fflush(file.get()) != 0 || std::ferror(file.get())) {
-    return IoError(fmt::format("cannot write PNG '{}': disk write failed", path.string()));
-  }
-  return Status::Ok();
+  return WriteFileAtomic(path, encoded, "PNG image");
 }
 
 struct Decoded {
@@ -104,13 +98,12 @@ struct Decoded {
 enum class Want { kRgb8, kGray8, kGray16 };
 
 Result<Decoded> Decode(const std::filesystem::path& path, Want want) {
+  // Missing, a folder, too large (max_file_bytes): told apart before opening.
+  AVP_RETURN_IF_ERROR(CheckReadableFile(path, "PNG file").status());
   FilePtr file(std::fopen(path.c_str(), "rb"));
   if (!file) {
-    std::error_code ec;
-    if (!std::filesystem::exists(path, ec)) {
-      return NotFoundError(fmt::format("PNG file '{}' does not exist", path.string()));
-    }
-    return IoError(fmt::format("cannot open '{}' for reading", path.string()));
+    return IoError(
+        fmt::format("cannot open '{}' for reading: {}", path.string(), std::strerror(errno)));
   }
   uint8_t signature[8] = {};
   if (std::fread(signature, 1, 8, file.get()) != 8 || png_sig_cmp(signature, 0, 8) != 0) {
@@ -128,12 +121,21 @@ Result<Decoded> Decode(const std::filesystem::path& path, Want want) {
   if (setjmp(png_jmpbuf(png))) {
     png_destroy_read_struct(&png, &info, nullptr);
     return ParseError(
-        fmt::format("corrupt or truncated PNG '{}': {}", path.string(), state.message));
+        fmt::format("corrupt or truncated PNG '{}': {}", path.string(), EscapeText(state.message)));
   }
   png_init_io(png, file.get());
   png_set_sig_bytes(png, 8);
-  png_set_user_limits(png, 1u << 15, 1u << 15);
+  // Sides up to PNG's own maximum; the pixel budget below is what bounds the allocation.
+  png_set_user_limits(png, PNG_UINT_31_MAX, PNG_UINT_31_MAX);
   png_read_info(png, info);
+  // The header (IHDR) is read: its size is checked before any row is allocated or decoded.
+  if (const Status size =
+          CheckImageSize(png_get_image_width(png, info), png_get_image_height(png, info),
+                         fmt::format("PNG image '{}'", path.string()));
+      !size.ok()) {
+    png_destroy_read_struct(&png, &info, nullptr);
+    return size;
+  }
   const int color_type = png_get_color_type(png, info);
   const int bit_depth = png_get_bit_depth(png, info);
   const bool is_gray =
@@ -161,6 +163,14 @@ Result<Decoded> Decode(const std::filesystem::path& path, Want want) {
   out.channels = png_get_channels(png, info);
   out.bit_depth = png_get_bit_depth(png, info);
   const size_t row_bytes = png_get_rowbytes(png, info);
+  const size_t expected_row_bytes = static_cast<size_t>(out.width) *
+                                    static_cast<size_t>(out.channels) *
+                                    static_cast<size_t>(out.bit_depth / 8);
+  if (out.bit_depth < 8 || row_bytes != expected_row_bytes) {
+    png_destroy_read_struct(&png, &info, nullptr);
+    return InternalError(fmt::format("PNG '{}' decodes to rows of {} bytes, expected {}",
+                                     path.string(), row_bytes, expected_row_bytes));
+  }
   out.bytes.resize(row_bytes * static_cast<size_t>(out.height));
   rows.resize(static_cast<size_t>(out.height));
   for (int v = 0; v < out.height; ++v) rows[v] = out.bytes.data() + v * row_bytes;

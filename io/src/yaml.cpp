@@ -4,7 +4,10 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <yaml-cpp/depthguard.h>
 
+#include <avp/core/text.h>
+#include <avp/io/file.h>
 #include <avp/io/yaml.h>
 
 namespace avp::io {
@@ -12,7 +15,7 @@ namespace avp::io {
 namespace {
 
 std::string Where(std::string_view context, std::string_view key) {
-  return fmt::format("{}: '{}'", context, key);
+  return fmt::format("{}: {}", context, QuoteText(key));
 }
 
 std::string Mark(const YAML::Node& node) {
@@ -21,11 +24,13 @@ std::string Mark(const YAML::Node& node) {
   return fmt::format(" (line {}, column {})", m.line + 1, m.column + 1);
 }
 
+/// The node's text as it may appear in a message: escaped and shortened (QuoteText), quotes
+/// included.
 std::string Text(const YAML::Node& node) {
-  if (node.IsScalar()) return node.Scalar();
+  if (node.IsScalar()) return QuoteText(node.Scalar());
   YAML::Emitter out;
   out << YAML::Flow << node;
-  return out.c_str();
+  return QuoteText(out.c_str());
 }
 
 // node[key] without yaml-cpp's exceptions, which operator[] throws for an invalid node (a const
@@ -34,7 +39,7 @@ std::string Text(const YAML::Node& node) {
 Result<YAML::Node> Child(const YAML::Node& node, std::string_view key, std::string_view context) {
   if (!node.IsDefined() || node.IsNull()) return YAML::Node(YAML::NodeType::Undefined);
   if (!node.IsMap()) {
-    return InvalidArgumentError(fmt::format("{}: expected a map with key '{}', got '{}'{}", context,
+    return InvalidArgumentError(fmt::format("{}: expected a map with key '{}', got {}{}", context,
                                             key, Text(node), Mark(node)));
   }
   return node[std::string(key)];
@@ -42,22 +47,157 @@ Result<YAML::Node> Child(const YAML::Node& node, std::string_view key, std::stri
 
 }  // namespace
 
-Result<YAML::Node> LoadYamlFile(const std::filesystem::path& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return NotFoundError(fmt::format("YAML file '{}' does not exist", path.string()));
+const Limit& MaxYamlBytes() {
+  static const Limit limit("max_yaml_bytes", uint64_t{1} << 20, "bytes",
+                           "size of one YAML file (run configuration, scene, arm)");
+  return limit;
+}
+
+const Limit& MaxYamlDepth() {
+  static const Limit limit("max_yaml_depth", 64, "levels",
+                           "nesting of collections in one YAML document");
+  return limit;
+}
+
+namespace {
+
+// Registered when the program starts, so `avp --limit NAME=N` knows them before the first read.
+[[maybe_unused]] const Limit& kRegisterMaxYamlBytes = MaxYamlBytes();
+[[maybe_unused]] const Limit& kRegisterMaxYamlDepth = MaxYamlDepth();
+
+bool IsSpace(char c) { return c == ' ' || c == '\t'; }
+
+}  // namespace
+
+Status CheckYamlDepth(std::string_view text, std::string_view name) {
+  // An upper estimate of the collections open at each point, without parsing: block collections
+  // from the indentation (each deeper indentation and each compact "- " / "? " indicator opens
+  // one), flow collections from the brackets outside quotes and comments. Block scalars (| >)
+  // are skipped. A document that passes cannot make yaml-cpp's recursive parser (or anything
+  // that walks the nodes) go deeper than this.
+  const uint64_t limit = MaxYamlDepth().value();
+  std::vector<size_t> block;  // indentation of the open block levels
+  uint64_t flow = 0;          // open flow collections
+  uint64_t flow_base = 0;     // block depth where the open flow collection started
+  char quote = 0;             // inside a quoted scalar: ' or "
+  bool block_scalar = false;
+  size_t block_scalar_indent = 0;
+  size_t line_no = 0;
+  size_t start = 0;
+  while (start <= text.size()) {
+    size_t end = text.find('\n', start);
+    if (end == std::string_view::npos) end = text.size();
+    std::string_view line = text.substr(start, end - start);
+    start = end + 1;
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    size_t indent = 0;
+    while (indent < line.size() && line[indent] == ' ') ++indent;
+    const bool blank = indent == line.size();
+    if (block_scalar) {
+      if (blank || indent > block_scalar_indent) continue;
+      block_scalar = false;
+    }
+    size_t at = 0;
+    uint64_t depth = flow_base + flow;
+    if (flow == 0 && quote == 0) {
+      if (blank || line[indent] == '#') continue;
+      if (indent == 0 && (line.starts_with("---") || line.starts_with("..."))) {
+        block.clear();
+        at = 3;
+      } else {
+        while (!block.empty() && block.back() >= indent) block.pop_back();
+        block.push_back(indent);
+        at = indent;
+        // Compact nested collections on one line: "- - x", "- ? x".
+        while (at + 1 <= line.size() && (line[at] == '-' || line[at] == '?') &&
+               (at + 1 == line.size() || IsSpace(line[at + 1]))) {
+          at += 1;
+          while (at < line.size() && IsSpace(line[at])) ++at;
+          block.push_back(at);
+        }
+      }
+      depth = block.size();
+      flow_base = depth;
+    }
+    bool token_start = true;
+    for (; at < line.size(); ++at) {
+      const char c = line[at];
+      if (quote == '\'') {
+        if (c == '\'') {
+          if (at + 1 < line.size() && line[at + 1] == '\'') {
+            ++at;
+          } else {
+            quote = 0;
+          }
+        }
+        continue;
+      }
+      if (quote == '"') {
+        if (c == '\\') {
+          ++at;
+        } else if (c == '"') {
+          quote = 0;
+        }
+        continue;
+      }
+      if (c == '#' && (at == 0 || IsSpace(line[at - 1]))) break;
+      if ((c == '\'' || c == '"') && token_start) {
+        quote = c;
+        continue;
+      }
+      if ((c == '[' || c == '{') && (flow > 0 || token_start)) {
+        ++flow;
+        if (flow_base + flow > depth) depth = flow_base + flow;
+        if (depth > limit) break;
+        token_start = true;
+        continue;
+      }
+      if ((c == ']' || c == '}') && flow > 0) {
+        --flow;
+        token_start = false;
+        continue;
+      }
+      if (flow == 0 && (c == '|' || c == '>') && token_start) {
+        // A block scalar header: its content is the following, more indented lines.
+        block_scalar = true;
+        block_scalar_indent = indent;
+        break;
+      }
+      token_start = IsSpace(c) || c == ',' || c == ':' || c == '-' || c == '?';
+    }
+    if (depth > limit) {
+      return MaxYamlDepth().Check(
+          fmt::format("YAML {}: collections nested at line {}", name, line_no), depth);
+    }
   }
-  if (std::filesystem::is_directory(path, ec)) {
-    return InvalidArgumentError(fmt::format("'{}' is a directory, not a YAML file", path.string()));
-  }
+  return Status::Ok();
+}
+
+Result<YAML::Node> ParseYaml(std::string_view text, std::string_view name) {
+  AVP_RETURN_IF_ERROR(
+      MaxYamlBytes().Check(fmt::format("YAML {} of {} bytes", name, text.size()), text.size()));
+  AVP_RETURN_IF_ERROR(CheckYamlDepth(text, name));
   try {
-    return YAML::LoadFile(path.string());
+    return YAML::Load(std::string(text));
+  } catch (const YAML::DeepRecursion& e) {
+    return ResourceExhaustedError(
+        fmt::format("YAML {} nests deeper than yaml-cpp allows ({} levels at line {}, column {})",
+                    name, e.depth(), e.mark.line + 1, e.mark.column + 1));
   } catch (const YAML::ParserException& e) {
-    return ParseError(fmt::format("malformed YAML in '{}' at line {}, column {}: {}", path.string(),
-                                  e.mark.line + 1, e.mark.column + 1, e.msg));
+    return ParseError(fmt::format("malformed YAML in {} at line {}, column {}: {}", name,
+                                  e.mark.line + 1, e.mark.column + 1, EscapeText(e.msg)));
   } catch (const YAML::Exception& e) {
-    return IoError(fmt::format("cannot read YAML file '{}': {}", path.string(), e.what()));
+    return ParseError(fmt::format("cannot read YAML {}: {}", name, EscapeText(e.what())));
   }
+}
+
+Result<YAML::Node> LoadYamlFile(const std::filesystem::path& path) {
+  AVP_ASSIGN_OR_RETURN(const uint64_t size, CheckReadableFile(path, "YAML file"));
+  AVP_RETURN_IF_ERROR(
+      MaxYamlBytes().Check(fmt::format("YAML file '{}' of {} bytes", path.string(), size), size));
+  AVP_ASSIGN_OR_RETURN(const std::string text, ReadFileBounded(path, "YAML file"));
+  return ParseYaml(text, fmt::format("'{}'", path.string()));
 }
 
 Status RejectUnknownKeys(const YAML::Node& node, std::initializer_list<std::string_view> allowed,
@@ -65,18 +205,22 @@ Status RejectUnknownKeys(const YAML::Node& node, std::initializer_list<std::stri
   if (!node.IsDefined() || node.IsNull()) return Status::Ok();
   if (!node.IsMap()) {
     return InvalidArgumentError(
-        fmt::format("{}: expected a map of keys, got '{}'{}", context, Text(node), Mark(node)));
+        fmt::format("{}: expected a map of keys, got {}{}", context, Text(node), Mark(node)));
   }
   std::vector<std::string> unknown;
   for (const auto& kv : node) {
-    const std::string key = kv.first.as<std::string>();
+    if (!kv.first.IsScalar()) {
+      return InvalidArgumentError(fmt::format("{}: a key must be a name, got {}{}", context,
+                                              Text(kv.first), Mark(kv.first)));
+    }
+    const std::string key = kv.first.Scalar();
     if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) unknown.push_back(key);
   }
   if (unknown.empty()) return Status::Ok();
   std::vector<std::string> sorted(allowed.begin(), allowed.end());
   std::sort(sorted.begin(), sorted.end());
   std::vector<std::string> quoted;
-  for (const std::string& k : unknown) quoted.push_back("'" + k + "'");
+  for (const std::string& k : unknown) quoted.push_back(QuoteText(k));
   return InvalidArgumentError(fmt::format("{}: unknown key{} {}{} (allowed: {})", context,
                                           unknown.size() > 1 ? "s" : "", fmt::join(quoted, ", "),
                                           Mark(node), fmt::join(sorted, ", ")));
@@ -89,8 +233,8 @@ Result<double> ReadDouble(const YAML::Node& node, std::string_view key, std::str
   }
   double out = 0.0;
   if (!v.IsScalar() || !YAML::convert<double>::decode(v, out) || !std::isfinite(out)) {
-    return InvalidArgumentError(fmt::format("{} must be a finite number, got '{}'{}",
-                                            Where(context, key), Text(v), Mark(v)));
+    return InvalidArgumentError(
+        fmt::format("{} must be a finite number, got {}{}", Where(context, key), Text(v), Mark(v)));
   }
   return out;
 }
@@ -103,7 +247,7 @@ Result<int64_t> ReadInt(const YAML::Node& node, std::string_view key, std::strin
   int64_t out = 0;
   if (!v.IsScalar() || !YAML::convert<int64_t>::decode(v, out)) {
     return InvalidArgumentError(
-        fmt::format("{} must be an integer, got '{}'{}", Where(context, key), Text(v), Mark(v)));
+        fmt::format("{} must be an integer, got {}{}", Where(context, key), Text(v), Mark(v)));
   }
   return out;
 }
@@ -116,7 +260,7 @@ Result<std::string> ReadString(const YAML::Node& node, std::string_view key,
   }
   if (!v.IsScalar()) {
     return InvalidArgumentError(
-        fmt::format("{} must be a string, got '{}'{}", Where(context, key), Text(v), Mark(v)));
+        fmt::format("{} must be a string, got {}{}", Where(context, key), Text(v), Mark(v)));
   }
   return v.Scalar();
 }
@@ -129,7 +273,7 @@ Result<bool> ReadBool(const YAML::Node& node, std::string_view key, std::string_
   bool out = false;
   if (!v.IsScalar() || !YAML::convert<bool>::decode(v, out)) {
     return InvalidArgumentError(
-        fmt::format("{} must be true or false, got '{}'{}", Where(context, key), Text(v), Mark(v)));
+        fmt::format("{} must be true or false, got {}{}", Where(context, key), Text(v), Mark(v)));
   }
   return out;
 }
@@ -141,14 +285,14 @@ Result<std::vector<double>> ReadDoubles(const YAML::Node& node, std::string_view
     return InvalidArgumentError(fmt::format("{} is missing", Where(context, key)));
   }
   if (!v.IsSequence()) {
-    return InvalidArgumentError(fmt::format("{} must be a list of numbers, got '{}'{}",
+    return InvalidArgumentError(fmt::format("{} must be a list of numbers, got {}{}",
                                             Where(context, key), Text(v), Mark(v)));
   }
   std::vector<double> out;
   for (size_t i = 0; i < v.size(); ++i) {
     double x = 0.0;
     if (!v[i].IsScalar() || !YAML::convert<double>::decode(v[i], x) || !std::isfinite(x)) {
-      return InvalidArgumentError(fmt::format("{}[{}] must be a finite number, got '{}'{}",
+      return InvalidArgumentError(fmt::format("{}[{}] must be a finite number, got {}{}",
                                               Where(context, key), i, Text(v[i]), Mark(v[i])));
     }
     out.push_back(x);

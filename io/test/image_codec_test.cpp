@@ -94,7 +94,9 @@ TEST_F(ImageIoTest, ErrorsNameTheFile) {
   ASSERT_FALSE(undecodable.ok());
   EXPECT_EQ(undecodable.status().code(), StatusCode::kParseError);
   EXPECT_THAT(undecodable.status().message(), HasSubstr(text.string()));
-  EXPECT_THAT(undecodable.status().message(), HasSubstr("not a decodable image (24 bytes)"));
+  EXPECT_THAT(undecodable.status().message(), HasSubstr("undecodable image file"));
+  EXPECT_THAT(undecodable.status().message(),
+              HasSubstr("(24 bytes): not a PNG, JPEG or BMP image"));
 
   const auto empty = Write("empty.jpg", "");
   const auto empty_result = ReadImageFile(empty);
@@ -104,8 +106,8 @@ TEST_F(ImageIoTest, ErrorsNameTheFile) {
 
   const auto folder = ReadImageFile(dir_);
   ASSERT_FALSE(folder.ok());
-  EXPECT_EQ(folder.status().code(), StatusCode::kIoError);
-  EXPECT_THAT(folder.status().message(), HasSubstr("not a regular file"));
+  EXPECT_EQ(folder.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(folder.status().message(), HasSubstr("is a folder, not a image file"));
 }
 
 TEST_F(ImageIoTest, UndecodableBytesSayHowMany) {
@@ -113,7 +115,7 @@ TEST_F(ImageIoTest, UndecodableBytesSayHowMany) {
   const auto r = DecodeImage(junk);
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), StatusCode::kParseError);
-  EXPECT_EQ(r.status().message(), "undecodable image (5 bytes)");
+  EXPECT_EQ(r.status().message(), "undecodable image (5 bytes): not a PNG, JPEG or BMP image");
   const auto none = DecodeImage({});
   ASSERT_FALSE(none.ok());
   EXPECT_EQ(none.status().message(), "undecodable image (0 bytes)");
@@ -132,7 +134,9 @@ TEST_F(ImageIoTest, EncodeAndWriteErrors) {
   EXPECT_EQ(empty.status().code(), StatusCode::kInvalidArgument);
   EXPECT_THAT(empty.status().message(), HasSubstr("0 x 0"));
 
-  const auto bad_path = dir_ / "no_such_folder" / "out.png";
+  // The parent "folder" is a file: it cannot be created.
+  Write("blocker", "x");
+  const auto bad_path = dir_ / "blocker" / "out.png";
   const Status s = WritePngFile(TestImage(), bad_path);
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.code(), StatusCode::kIoError);

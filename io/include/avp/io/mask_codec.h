@@ -18,7 +18,8 @@ std::vector<uint32_t> MaskToRle(const MaskImage& mask);
 
 /// The inverse of MaskToRle for a width x height mask: foreground pixels are 255, background 0.
 /// @return InvalidArgument when width or height is negative or when the counts do not sum to
-///   width·height (the message names the sum and the size).
+///   width·height (the message names the sum and the size); ResourceExhausted when width·height
+///   exceeds max_image_pixels (io/image_limits.h), checked before the mask is allocated.
 Result<MaskImage> RleToMask(std::span<const uint32_t> counts, int width, int height);
 
 /// The outer contours of a binary mask's 8-connected components (cv::findContours,

@@ -8,8 +8,11 @@
 
 namespace avp::io {
 
-/// PNG files through libpng. Writers create parent folders; every failure is a Status naming the
-/// file (never a crash on a corrupt or truncated file).
+/// PNG files through libpng. Writers encode in memory and write atomically (io::WriteFileAtomic:
+/// a temporary name, flushed, renamed; parent folders created). Readers check the file
+/// (io::CheckReadableFile: NotFound, a folder, max_file_bytes) and the size in the header
+/// (max_image_pixels, io/image_limits.h: ResourceExhausted) before any row is allocated; every
+/// failure is a Status naming the file (never a crash on a corrupt or truncated file).
 Status WritePngRgb8(const std::filesystem::path& path, const ImageRgb8& image);
 Status WritePngGray8(const std::filesystem::path& path, const Image<uint8_t>& image);
 /// 16-bit greyscale, big-endian on disk as PNG requires.
