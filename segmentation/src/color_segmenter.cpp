@@ -181,12 +181,14 @@ Result<Segmentation> ColorSegmenter::Segment(const SegmentationRequest& request)
   // HSV once per frame, then one pass per phrase.
   std::vector<Hsv8> hsv(frame.rgb.num_pixels());
   for (int v = 0; v < h; ++v) {
+    if (v % 64 == 0) AVP_RETURN_IF_ERROR(CheckInterrupt(request));
     for (int u = 0; u < w; ++u) {
       const auto p = frame.rgb.pixel(u, v);
       hsv[static_cast<size_t>(v) * w + u] = RgbToHsv(p[0], p[1], p[2]);
     }
   }
   for (const std::string& phrase : phrases) {
+    AVP_RETURN_IF_ERROR(CheckInterrupt(request));
     const std::optional<ColorFilter> filter = FilterForPhrase(phrase);
     if (!filter) continue;
     MaskImage passing(w, h, 0);

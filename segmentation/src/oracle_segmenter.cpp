@@ -399,15 +399,19 @@ Result<Segmentation> OracleSegmenter::Segment(const SegmentationRequest& request
   }
   if (target_phrase == nullptr) return out;  // nothing in the prompt names a simulated class
 
+  AVP_RETURN_IF_ERROR(CheckInterrupt(request));
   const std::map<uint16_t, InstanceStats> stats = InstanceStatsOf(labels);
   const Rng frame_rng = Rng(seed_).Fork("oracle").Fork(request.frame_index);
   const OracleOptions& o = options_;
   Detections detections = DetectedFruits(stats, truth_of, frame, o, frame_rng.Fork("fruit"));
+  AVP_RETURN_IF_ERROR(CheckInterrupt(request));
   const std::set<std::pair<uint16_t, uint16_t>> touching =
       PaintMasksAndFindTouchingPairs(labels, detections);
+  AVP_RETURN_IF_ERROR(CheckInterrupt(request));
   for (Detection& d : detections.list) {
     if (d.boundary_px != 0) d.mask = AdjustBoundary(d.mask, d.boundary_px);
   }
+  AVP_RETURN_IF_ERROR(CheckInterrupt(request));
   MergeTouchingDetections(touching, frame_rng.Fork("merge"), o.p_merge, detections);
   for (Detection& d : detections.list) {
     if (d.merged_away || CountPixels(d.mask) == 0) continue;  // eroded away: a missed detection

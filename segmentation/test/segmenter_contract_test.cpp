@@ -5,9 +5,12 @@
 #include <memory>
 #include <string>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/core/limits.h>
+#include <avp/core/text.h>
 #include <avp/segmentation/oracle_segmenter.h>
 #include <avp/segmentation/segmenter_registry.h>
 
@@ -39,8 +42,60 @@ TEST(SplitPromptTest, NothingLeftIsAnErrorNamingThePrompt) {
     const auto r = SplitPrompt(prompt);
     ASSERT_FALSE(r.ok()) << "\"" << prompt << "\"";
     EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
-    EXPECT_THAT(r.status().message(), HasSubstr("prompt (\"" + prompt + "\")"));
+    EXPECT_THAT(r.status().message(), HasSubstr("prompt (" + QuoteText(prompt) + ")"));
   }
+  // Control characters reach the message escaped.
+  const auto r = SplitPrompt("\x1b[2J, ,");
+  ASSERT_TRUE(r.ok());
+  const auto e = SplitPrompt(" ,\x1b");
+  ASSERT_TRUE(e.ok());  // ESC is a phrase, not space
+  const auto blank = SplitPrompt(std::string(" ,\r\n,\f"));
+  ASSERT_FALSE(blank.ok());
+  EXPECT_THAT(blank.status().message(), HasSubstr("prompt (' ,\\r\\n,\\x0c')"));
+}
+
+TEST(SplitPromptTest, DuplicatePhrasesCollapseToTheFirst) {
+  const auto r = SplitPrompt("tomato, green apple,tomato , green apple, tomato");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(*r, (std::vector<std::string>{"tomato", "green apple"}));
+}
+
+/// "tomato, tomato, ..." with `n` phrases.
+std::string RepeatedPrompt(size_t n) {
+  std::string prompt;
+  for (size_t i = 0; i < n; ++i) prompt += i == 0 ? "tomato" : ", tomato";
+  return prompt;
+}
+
+TEST(SplitPromptTest, AHundredThousandPhrasesAreRefusedByTheByteLimit) {
+  const std::string prompt = RepeatedPrompt(100000);
+  const auto r = SplitPrompt(prompt);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_THAT(r.status().message(),
+              HasSubstr(fmt::format("prompt ({}) exceeds the limit max_prompt_bytes = 4096",
+                                    prompt.size())));
+}
+
+TEST(SplitPromptTest, PhrasesBeyondTheLimitAreRefusedDuplicatesIncluded) {
+  // 65 phrases of "a" are 193 bytes: within max_prompt_bytes, one phrase too many.
+  std::string prompt = "a";
+  for (int i = 1; i < 65; ++i) prompt += ",a";
+  const auto r = SplitPrompt(prompt);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_THAT(r.status().message(),
+              HasSubstr("phrases in the prompt (65) exceeds the limit max_prompt_phrases = 64"));
+  EXPECT_TRUE(SplitPrompt(prompt.substr(2)).ok());  // 64 phrases
+  {
+    const ScopedLimit more(MaxPromptPhrases(), 100);
+    const auto raised = SplitPrompt(prompt);
+    ASSERT_TRUE(raised.ok()) << raised.status().ToString();
+    EXPECT_EQ(*raised, std::vector<std::string>{"a"});
+  }
+  const ScopedLimit fewer_bytes(MaxPromptBytes(), 5);
+  EXPECT_EQ(SplitPrompt("tomato").status().code(), StatusCode::kResourceExhausted);
+  EXPECT_TRUE(SplitPrompt("apple").ok());
 }
 
 TEST(SegmenterRegistryTest, BuildsEveryBuiltinAndRejectsUnknownNames) {
@@ -168,6 +223,50 @@ TEST_P(SegmenterContractTest, OutputValidatesForTheFrameWithConfidencesInUnitRan
   }
   // Four red fruits: every segmenter finds some of them in 8 frames.
   EXPECT_GE(total, 8u);
+}
+
+TEST_P(SegmenterContractTest, AnInterruptStopsTheWorkWithItsStatus) {
+  auto seg = Make();
+  // Stopped at once: the interrupt's own status comes back.
+  SegmentationRequest r = scene_.Request("tomato", 0);
+  int asked = 0;
+  r.interrupt = [&asked]() -> Status {
+    ++asked;
+    return CancelledError("the client left");
+  };
+  const auto stopped = seg->Segment(r);
+  ASSERT_FALSE(stopped.ok());
+  EXPECT_EQ(stopped.status().code(), StatusCode::kCancelled);
+  EXPECT_THAT(stopped.status().message(), HasSubstr("the client left"));
+  EXPECT_GE(asked, 1);
+  // Stopped later, after the first question: the deadline's status.
+  asked = 0;
+  r.interrupt = [&asked]() -> Status {
+    return ++asked > 1 ? DeadlineExceededError("deadline passed") : Status::Ok();
+  };
+  const auto late = seg->Segment(r);
+  ASSERT_FALSE(late.ok());
+  EXPECT_EQ(late.status().code(), StatusCode::kDeadlineExceeded);
+  // An interrupt that never fires changes nothing.
+  SegmentationRequest plain = scene_.Request("tomato", 0);
+  SegmentationRequest asked_ok = plain;
+  asked_ok.interrupt = [] { return Status::Ok(); };
+  const auto a = seg->Segment(plain);
+  const auto b = seg->Segment(asked_ok);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_TRUE(test::SameSegmentation(*a, *b));
+}
+
+TEST_P(SegmenterContractTest, DuplicatePhrasesGiveTheResultsOfOne) {
+  auto seg = Make();
+  const auto once = seg->Segment(scene_.Request("tomato", 2));
+  const auto thrice = seg->Segment(scene_.Request("tomato, tomato,tomato", 2));
+  ASSERT_TRUE(once.ok() && thrice.ok());
+  EXPECT_TRUE(test::SameSegmentation(*once, *thrice));
+  const auto huge = seg->Segment(scene_.Request(std::string(5000, 'a'), 2));
+  ASSERT_FALSE(huge.ok());
+  EXPECT_EQ(huge.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_THAT(huge.status().message(), HasSubstr("max_prompt_bytes"));
 }
 
 TEST_P(SegmenterContractTest, SameSeedAndFrameIndexGiveIdenticalResults) {

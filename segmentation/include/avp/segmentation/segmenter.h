@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -9,6 +10,7 @@
 #include <Eigen/Core>
 
 #include <avp/core/image.h>
+#include <avp/core/limits.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/core/segmentation.h>
 #include <avp/core/simulator_labels.h>
@@ -30,7 +32,18 @@ struct SegmentationRequest {
   /// Index of the frame in its episode: seeds per-frame randomness (noise models), so results do
   /// not depend on the order or the thread frames are segmented in.
   uint64_t frame_index = 0;
+  /// Asked by segmenters between units of work (phrases, rows, stages): a non-OK status stops
+  /// the work and Segment() returns it. Cancelled: the caller no longer wants the answer (its
+  /// client left, Ctrl-C); DeadlineExceeded: its deadline passed. Empty: never stops. The
+  /// segmentation service sets it, so that a worker is free again soon after its client leaves.
+  /// Called from the thread running Segment(); must be cheap (it is asked often).
+  std::function<Status()> interrupt;
 };
+
+/// request.interrupt's answer, or OK when it has none.
+inline Status CheckInterrupt(const SegmentationRequest& request) {
+  return request.interrupt ? request.interrupt() : Status::Ok();
+}
 
 /// Turns an image and a prompt into instance masks. Implementations: OracleSegmenter (simulator
 /// labels through a zero-shot-like error model), ColorSegmenter (HSV thresholds); the network
@@ -47,8 +60,17 @@ class Segmenter {
   virtual Result<Segmentation> Segment(const SegmentationRequest& request) = 0;
 };
 
+/// Process-wide limits of a prompt (core/limits.h; `avp limits`, `avp --limit NAME=N`), checked by
+/// SplitPrompt before it splits: bytes of the prompt text (default 4096) and phrases in it
+/// (default 64; counted before duplicates are dropped).
+const Limit& MaxPromptBytes();
+const Limit& MaxPromptPhrases();
+
 /// Splits a prompt on commas into trimmed, non-empty phrases ("tomato, green apple" -> {"tomato",
-/// "green apple"}). InvalidArgument when nothing is left.
+/// "green apple"}), each phrase once (the first occurrence kept, in prompt order: "tomato,
+/// tomato" -> {"tomato"}). InvalidArgument when nothing is left (the prompt quoted, escaped);
+/// ResourceExhausted naming max_prompt_bytes or max_prompt_phrases when the prompt is larger,
+/// before any phrase is copied.
 Result<std::vector<std::string>> SplitPrompt(std::string_view prompt);
 
 }  // namespace avp::segmentation
