@@ -1,14 +1,22 @@
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <fstream>
+#include <iterator>
+#include <limits>
+#include <mutex>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <system_error>
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <assimp/DefaultLogger.hpp>
 #include <assimp/Importer.hpp>
+#include <assimp/Logger.hpp>
 #include <assimp/config.h>
 #include <assimp/material.h>
 #include <assimp/postprocess.h>
@@ -19,6 +27,8 @@
 
 #include <avp/core/error.h>
 #include <avp/core/semantic_class.h>
+#include <avp/core/text.h>
+#include <avp/io/file.h>
 #include <avp/io/yaml.h>
 #include <avp/sim/mesh_builder.h>
 #include <avp/sim/scenario.h>
@@ -26,9 +36,32 @@
 
 namespace avp::sim {
 
+const Limit& MaxMeshVertices() {
+  static const Limit limit("max_mesh_vertices", uint64_t{1} << 24, "vertices",
+                           "vertices of one mesh file of a scene, and of all of them together");
+  return limit;
+}
+
+const Limit& MaxMeshFaces() {
+  static const Limit limit("max_mesh_faces", uint64_t{1} << 25, "faces",
+                           "faces of one mesh file of a scene, and triangles of all of them");
+  return limit;
+}
+
+const Limit& MaxMeshFileBytes() {
+  static const Limit limit("max_mesh_file_bytes", uint64_t{1} << 30, "bytes",
+                           "size of one mesh file of a scene");
+  return limit;
+}
+
 namespace {
 
 namespace fs = std::filesystem;
+
+// Registered when the program starts, so `avp --limit NAME=N` knows them before a scene is read.
+[[maybe_unused]] const Limit& kRegisterMaxMeshVertices = MaxMeshVertices();
+[[maybe_unused]] const Limit& kRegisterMaxMeshFaces = MaxMeshFaces();
+[[maybe_unused]] const Limit& kRegisterMaxMeshFileBytes = MaxMeshFileBytes();
 
 enum class UpAxis { kAuto, kY, kZ };
 enum class FruitInstances { kObjects, kComponents };
@@ -80,8 +113,8 @@ Result<SemanticClass> ReadClass(const YAML::Node& node, std::string_view key,
   AVP_ASSIGN_OR_RETURN(const std::string name, io::ReadString(node, key, context));
   const std::optional<SemanticClass> c = SemanticClassFromString(name);
   if (!c) {
-    return InvalidArgumentError(fmt::format("{}.{}: unknown semantic class '{}' (known: {})",
-                                            context, key, name, KnownClasses()));
+    return InvalidArgumentError(fmt::format("{}.{}: unknown semantic class {} (known: {})", context,
+                                            key, QuoteText(name), KnownClasses()));
   }
   return *c;
 }
@@ -109,9 +142,9 @@ Result<MeshEntry> ReadMeshEntry(const YAML::Node& node, const fs::path& base_dir
   entry.file = file.is_absolute() ? file : base_dir / file;
   std::error_code ec;
   if (!fs::is_regular_file(entry.file, ec)) {
-    return NotFoundError(fmt::format("{}.file: mesh file '{}' does not exist (given as '{}')",
-                                     context, entry.file.lexically_normal().string(),
-                                     entry.file_text));
+    return NotFoundError(fmt::format(
+        "{}.file: mesh file '{}' does not exist (given as {})", context,
+        EscapeText(entry.file.lexically_normal().string(), 300), QuoteText(entry.file_text)));
   }
   if (node["pose"].IsDefined()) {
     AVP_ASSIGN_OR_RETURN(entry.X_WM, io::ReadPose(node, "pose", context));
@@ -137,7 +170,7 @@ Result<MeshEntry> ReadMeshEntry(const YAML::Node& node, const fs::path& base_dir
       entry.up_axis = UpAxis::kZ;
     } else {
       return InvalidArgumentError(
-          fmt::format("{}.up_axis: must be 'y' or 'z', got '{}'", context, up));
+          fmt::format("{}.up_axis: must be 'y' or 'z', got {}", context, QuoteText(up)));
     }
   }
   if (node["default_class"].IsDefined()) {
@@ -153,8 +186,9 @@ Result<MeshEntry> ReadMeshEntry(const YAML::Node& node, const fs::path& base_dir
     } else if (mode == "components") {
       entry.fruit_instances = FruitInstances::kComponents;
     } else {
-      return InvalidArgumentError(fmt::format(
-          "{}.fruit_instances: must be 'objects' or 'components', got '{}'", context, mode));
+      return InvalidArgumentError(
+          fmt::format("{}.fruit_instances: must be 'objects' or 'components', got {}", context,
+                      QuoteText(mode)));
     }
   }
   if (const YAML::Node classes = node["classes"]; classes.IsDefined()) {
@@ -193,6 +227,175 @@ Eigen::Matrix4d ToEigen(const aiMatrix4x4& m) {
   return out;
 }
 
+/// Collects what assimp logs (warnings and errors) while alive, for the error message of a failed
+/// import. Assimp's logger is process-wide: one import at a time holds it (a mutex).
+class AssimpMessages {
+ public:
+  AssimpMessages() : lock_(Mutex()) { Assimp::DefaultLogger::set(new Collector(&text_)); }
+  ~AssimpMessages() { Assimp::DefaultLogger::kill(); }
+  AssimpMessages(const AssimpMessages&) = delete;
+  AssimpMessages& operator=(const AssimpMessages&) = delete;
+  /// "; assimp said: '...'" (escaped, shortened) or empty.
+  std::string Quote() const {
+    return text_.empty() ? std::string() : "; assimp said: " + QuoteText(text_, 300);
+  }
+
+ private:
+  class Collector : public Assimp::Logger {
+   public:
+    explicit Collector(std::string* text) : Assimp::Logger(Assimp::Logger::NORMAL), text_(text) {}
+    bool attachStream(Assimp::LogStream*, unsigned int) override { return false; }
+    bool detachStream(Assimp::LogStream*, unsigned int) override { return false; }
+
+   private:
+    void OnDebug(const char*) override {}
+    void OnVerboseDebug(const char*) override {}
+    void OnInfo(const char*) override {}
+    void OnWarn(const char* message) override { Add("warning", message); }
+    void OnError(const char* message) override { Add("error", message); }
+    void Add(std::string_view kind, const char* message) {
+      if (text_->size() > 4096) return;
+      if (!text_->empty()) *text_ += " | ";
+      *text_ += fmt::format("{}: {}", kind, message);
+    }
+    std::string* text_;
+  };
+  static std::mutex& Mutex() {
+    static std::mutex mutex;
+    return mutex;
+  }
+  std::lock_guard<std::mutex> lock_;
+  std::string text_;
+};
+
+/// Bytes of one value of a PLY scalar type, 0 for an unknown type name.
+size_t PlyTypeBytes(std::string_view type) {
+  if (type == "char" || type == "uchar" || type == "int8" || type == "uint8") return 1;
+  if (type == "short" || type == "ushort" || type == "int16" || type == "uint16") return 2;
+  if (type == "int" || type == "uint" || type == "int32" || type == "uint32" || type == "float" ||
+      type == "float32") {
+    return 4;
+  }
+  if (type == "double" || type == "float64") return 8;
+  return 0;
+}
+
+/// A PLY file's header, read and checked before assimp sees the file: every element's count
+/// against what the rest of the file can hold (each element needs at least its fixed-size
+/// properties and list counts in a binary file, two characters per property in an ASCII one), the
+/// vertex count against max_mesh_vertices and the face count against max_mesh_faces. A header
+/// that declares 10^9 vertices in a small file is refused here instead of making assimp reserve
+/// for them.
+Status CheckPlyHeader(const fs::path& file, uint64_t file_bytes, const std::string& context) {
+  constexpr size_t kMaxHeaderBytes = 65536;
+  std::ifstream in(file, std::ios::binary);
+  std::string head(static_cast<size_t>(std::min<uint64_t>(file_bytes, kMaxHeaderBytes)), '\0');
+  in.read(head.data(), static_cast<std::streamsize>(head.size()));
+  if (!in && !in.eof()) {
+    return IoError(fmt::format("{}.file: cannot read mesh '{}'", context, file.string()));
+  }
+  head.resize(static_cast<size_t>(in.gcount()));
+  const auto bad = [&](const std::string& what) {
+    return ParseError(
+        fmt::format("{}.file: PLY mesh '{}' has a bad header: {}", context, file.string(), what));
+  };
+  struct Element {
+    std::string name;
+    uint64_t count = 0;
+    uint64_t min_bytes = 0;  // per element
+    size_t line = 0;
+  };
+  std::vector<Element> elements;
+  bool binary = false;
+  size_t at = 0;
+  size_t line_no = 0;
+  bool ended = false;
+  while (!ended) {
+    const size_t end = head.find('\n', at);
+    if (end == std::string::npos) {
+      return bad(head.size() >= kMaxHeaderBytes
+                     ? fmt::format("no 'end_header' in its first {} bytes", kMaxHeaderBytes)
+                     : std::string("it ends before 'end_header'"));
+    }
+    std::string_view line(head.data() + at, end - at);
+    at = end + 1;
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    std::vector<std::string_view> words;
+    for (size_t i = 0; i < line.size();) {
+      while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+      const size_t j = i;
+      while (i < line.size() && line[i] != ' ' && line[i] != '\t') ++i;
+      if (i > j) words.push_back(line.substr(j, i - j));
+    }
+    if (line_no == 1) {
+      if (line != "ply") return Status::Ok();  // not a PLY: assimp says so in its own words
+      continue;
+    }
+    if (words.empty() || words[0] == "comment" || words[0] == "obj_info") continue;
+    if (words[0] == "format") {
+      if (words.size() != 3) return bad(fmt::format("line {}: {}", line_no, QuoteText(line)));
+      if (words[1] == "ascii") {
+        binary = false;
+      } else if (words[1] == "binary_little_endian" || words[1] == "binary_big_endian") {
+        binary = true;
+      } else {
+        return bad(fmt::format("line {}: unknown format {}", line_no, QuoteText(words[1])));
+      }
+    } else if (words[0] == "element") {
+      uint64_t count = 0;
+      const std::string_view n = words.size() == 3 ? words[2] : std::string_view();
+      const auto [ptr, ec] = std::from_chars(n.data(), n.data() + n.size(), count);
+      if (n.empty() || ec != std::errc() || ptr != n.data() + n.size()) {
+        return bad(fmt::format("line {}: {} is not 'element <name> <count>' with a whole count",
+                               line_no, QuoteText(line)));
+      }
+      elements.push_back({std::string(words[1]), count, 0, line_no});
+    } else if (words[0] == "property") {
+      if (elements.empty())
+        return bad(fmt::format("line {}: a property before any element", line_no));
+      Element& e = elements.back();
+      if (words.size() == 5 && words[1] == "list") {
+        const size_t count_bytes = PlyTypeBytes(words[2]);
+        if (count_bytes == 0 || PlyTypeBytes(words[3]) == 0) {
+          return bad(fmt::format("line {}: unknown type in {}", line_no, QuoteText(line)));
+        }
+        e.min_bytes += binary ? count_bytes : 2;
+      } else if (words.size() == 3) {
+        const size_t bytes = PlyTypeBytes(words[1]);
+        if (bytes == 0) {
+          return bad(fmt::format("line {}: unknown type {}", line_no, QuoteText(words[1])));
+        }
+        e.min_bytes += binary ? bytes : 2;
+      } else {
+        return bad(fmt::format("line {}: {}", line_no, QuoteText(line)));
+      }
+    } else if (words[0] == "end_header") {
+      ended = true;
+    } else {
+      return bad(fmt::format("line {} is {}", line_no, QuoteText(line)));
+    }
+  }
+  const uint64_t body = file_bytes - at;
+  for (const Element& e : elements) {
+    const std::string what = fmt::format("{}.file: PLY mesh '{}': element '{}' of {}", context,
+                                         file.string(), EscapeText(e.name), e.count);
+    if (e.name == "vertex") AVP_RETURN_IF_ERROR(MaxMeshVertices().Check(what, e.count));
+    if (e.name == "face") AVP_RETURN_IF_ERROR(MaxMeshFaces().Check(what, e.count));
+    // What the rest of the file can hold (elements without properties count as one byte).
+    const uint64_t min_bytes = std::max<uint64_t>(e.min_bytes, 1);
+    if (e.count > body / min_bytes) {
+      return ParseError(fmt::format(
+          "{}.file: PLY mesh '{}' declares {} '{}' elements on header line {}, but the {} bytes "
+          "after its header hold at most {} of them (at least {} bytes each): truncated or "
+          "corrupt",
+          context, file.string(), e.count, EscapeText(e.name), e.line, body, body / min_bytes,
+          min_bytes));
+    }
+  }
+  return Status::Ok();
+}
+
 /// Everything one mesh file contributes, before it is added to the scene.
 struct ImportedPart {
   std::string name;
@@ -202,8 +405,14 @@ struct ImportedPart {
 };
 
 Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::string& context) {
-  Assimp::Importer importer;
+  // The file's size, and a PLY's declared counts, before assimp reads anything.
+  AVP_ASSIGN_OR_RETURN(const uint64_t file_bytes, io::CheckReadableFile(entry.file, "mesh file"));
+  AVP_RETURN_IF_ERROR(MaxMeshFileBytes().Check(
+      fmt::format("{}.file: mesh '{}' of {} bytes", context, entry.file.string(), file_bytes),
+      file_bytes));
   const std::string ext = LowerExtension(entry.file);
+  if (ext == ".ply") AVP_RETURN_IF_ERROR(CheckPlyHeader(entry.file, file_bytes, context));
+  Assimp::Importer importer;
   const bool is_collada = ext == ".dae";
   const bool is_gltf = ext == ".gltf" || ext == ".glb";
   // Up axis: COLLADA declares one (assimp turns the file into its Y-up convention unless told to
@@ -217,13 +426,56 @@ Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::
   importer.SetPropertyBool(AI_CONFIG_IMPORT_COLLADA_USE_COLLADA_NAMES, true);
   importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE,
                               aiPrimitiveType_POINT | aiPrimitiveType_LINE);
-  const aiScene* ai = importer.ReadFile(
-      entry.file.string(), aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
+  const aiScene* ai = nullptr;
+  std::string assimp_said;
+  {
+    AssimpMessages messages;
+    ai = importer.ReadFile(entry.file.string(),
+                           aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
                                aiProcess_SortByPType | aiProcess_ValidateDataStructure);
+    assimp_said = messages.Quote();
+  }
   if (ai == nullptr || ai->mRootNode == nullptr || (ai->mFlags & AI_SCENE_FLAGS_INCOMPLETE) != 0) {
-    return ParseError(fmt::format("{}.file: cannot import mesh '{}': {}", context,
-                                  entry.file.string(),
-                                  ai == nullptr ? importer.GetErrorString() : "incomplete scene"));
+    return ParseError(
+        fmt::format("{}.file: cannot import mesh '{}': {}{}", context, entry.file.string(),
+                    ai == nullptr ? EscapeText(importer.GetErrorString(), 300) : "incomplete scene",
+                    assimp_said));
+  }
+  // What assimp read: the counts against the limits, every vertex finite, every index in range.
+  uint64_t vertices = 0, faces = 0;
+  for (unsigned i = 0; i < ai->mNumMeshes; ++i) {
+    const aiMesh* m = ai->mMeshes[i];
+    if (m == nullptr) {
+      return ParseError(fmt::format("{}.file: mesh '{}': assimp returned an empty mesh {}{}",
+                                    context, entry.file.string(), i, assimp_said));
+    }
+    vertices += m->mNumVertices;
+    faces += m->mNumFaces;
+  }
+  AVP_RETURN_IF_ERROR(MaxMeshVertices().Check(
+      fmt::format("{}.file: vertices of mesh '{}'", context, entry.file.string()), vertices));
+  AVP_RETURN_IF_ERROR(MaxMeshFaces().Check(
+      fmt::format("{}.file: faces of mesh '{}'", context, entry.file.string()), faces));
+  for (unsigned i = 0; i < ai->mNumMeshes; ++i) {
+    const aiMesh* m = ai->mMeshes[i];
+    for (unsigned v = 0; v < m->mNumVertices; ++v) {
+      const aiVector3D& p = m->mVertices[v];
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+        return ParseError(fmt::format(
+            "{}.file: mesh '{}': vertex {} of mesh {} is ({}, {}, {}); coordinates must be finite",
+            context, entry.file.string(), v, i, p.x, p.y, p.z));
+      }
+    }
+    for (unsigned f = 0; f < m->mNumFaces; ++f) {
+      const aiFace& face = m->mFaces[f];
+      for (unsigned k = 0; k < face.mNumIndices; ++k) {
+        if (face.mIndices[k] >= m->mNumVertices) {
+          return ParseError(
+              fmt::format("{}.file: mesh '{}': face {} of mesh {} uses vertex {} of {}", context,
+                          entry.file.string(), f, i, face.mIndices[k], m->mNumVertices));
+        }
+      }
+    }
   }
 
   // p_W = X_WM * diag(scale) * U * M_node * p_file, U: the up-axis correction.
@@ -452,10 +704,21 @@ Result<Scene> LoadSceneFile(const fs::path& yaml) {
         fmt::format("{}: 'meshes' must be a non-empty list of mesh entries", file));
   }
   const fs::path base_dir = yaml.parent_path();
+  uint64_t total_vertices = 0, total_triangles = 0;
   for (size_t i = 0; i < meshes.size(); ++i) {
     const std::string context = fmt::format("{}: meshes[{}]", file, i);
     AVP_ASSIGN_OR_RETURN(const MeshEntry entry, ReadMeshEntry(meshes[i], base_dir, context));
     AVP_ASSIGN_OR_RETURN(std::vector<ImportedPart> parts, ImportMesh(entry, context));
+    // The limits hold for all meshes of the scene together, too.
+    for (const ImportedPart& part : parts) {
+      total_vertices += part.mesh.vertices.size();
+      total_triangles += part.mesh.triangles.size();
+    }
+    AVP_RETURN_IF_ERROR(MaxMeshVertices().Check(
+        fmt::format("{}: vertices of the scene's meshes up to this one", context), total_vertices));
+    AVP_RETURN_IF_ERROR(MaxMeshFaces().Check(
+        fmt::format("{}: triangles of the scene's meshes up to this one", context),
+        total_triangles));
     for (ImportedPart& part : parts) {
       std::vector<TriangleMesh> pieces;
       if (part.semantic_class == SemanticClass::kFruit &&
@@ -463,6 +726,15 @@ Result<Scene> LoadSceneFile(const fs::path& yaml) {
         pieces = ConnectedComponents(part.mesh);
       } else {
         pieces.push_back(std::move(part.mesh));
+      }
+      // Instance ids are 16-bit: a scene holds at most 65535 objects (a mesh split into
+      // components could otherwise ask for millions).
+      constexpr size_t kMaxObjects = std::numeric_limits<uint16_t>::max();
+      if (scene.objects.size() + pieces.size() > kMaxObjects) {
+        return ResourceExhaustedError(fmt::format(
+            "{}: mesh '{}' adds {} objects to the {} of the scene; a scene holds at most {} "
+            "(instance ids are 16-bit)",
+            context, entry.file.string(), pieces.size(), scene.objects.size(), kMaxObjects));
       }
       for (size_t k = 0; k < pieces.size(); ++k) {
         SceneObject object;
@@ -491,13 +763,12 @@ Status SaveSceneFiles(const Scene& scene, const fs::path& dir) {
   const fs::path mtl_path = dir / (stem + ".mtl");
   const fs::path yaml_path = dir / (stem + ".yaml");
 
-  std::ofstream mtl(mtl_path);
-  std::ofstream obj(obj_path);
-  if (!mtl || !obj) {
-    return IoError(fmt::format("cannot write '{}' or '{}'", obj_path.string(), mtl_path.string()));
-  }
-  obj << fmt::format("# avp scene '{}' (seed {}), world frame, metres\nmtllib {}\n", scene.name,
-                     scene.seed, mtl_path.filename().string());
+  // Both meshes in memory first, then each file atomically: the YAML last, so it never names a
+  // mesh that is not complete.
+  std::string mtl;
+  std::string obj;
+  obj += fmt::format("# avp scene {} (seed {}), world frame, metres\nmtllib {}\n",
+                     QuoteText(scene.name), scene.seed, mtl_path.filename().string());
   std::vector<SemanticClass> classes_used;
   size_t vertex_base = 1;
   for (const SceneObject& o : scene.objects) {
@@ -505,17 +776,17 @@ Status SaveSceneFiles(const Scene& scene, const fs::path& dir) {
                                   ? std::get<TriangleMesh>(o.shape)
                                   : TessellateEllipsoid(std::get<Ellipsoid>(o.shape), 3);
     const std::string material = fmt::format("m{}", o.instance_id);
-    mtl << fmt::format("newmtl {}\nKd {:.6f} {:.6f} {:.6f}\n", material, o.albedo.x(), o.albedo.y(),
-                       o.albedo.z());
-    obj << fmt::format("o {}__{}__{}\nusemtl {}\n", ToString(o.semantic_class), o.instance_id,
-                       ObjSafe(o.name), material);
+    fmt::format_to(std::back_inserter(mtl), "newmtl {}\nKd {:.6f} {:.6f} {:.6f}\n", material,
+                   o.albedo.x(), o.albedo.y(), o.albedo.z());
+    fmt::format_to(std::back_inserter(obj), "o {}__{}__{}\nusemtl {}\n", ToString(o.semantic_class),
+                   o.instance_id, ObjSafe(o.name), material);
     for (const Eigen::Vector3f& v : mesh.vertices) {
-      obj << fmt::format("v {:.7g} {:.7g} {:.7g}\n", v.x(), v.y(), v.z());
+      fmt::format_to(std::back_inserter(obj), "v {:.7g} {:.7g} {:.7g}\n", v.x(), v.y(), v.z());
     }
     for (const Eigen::Vector3i& t : mesh.triangles) {
-      obj << fmt::format("f {} {} {}\n", vertex_base + static_cast<size_t>(t[0]),
-                         vertex_base + static_cast<size_t>(t[1]),
-                         vertex_base + static_cast<size_t>(t[2]));
+      fmt::format_to(
+          std::back_inserter(obj), "f {} {} {}\n", vertex_base + static_cast<size_t>(t[0]),
+          vertex_base + static_cast<size_t>(t[1]), vertex_base + static_cast<size_t>(t[2]));
     }
     vertex_base += mesh.vertices.size();
     if (std::find(classes_used.begin(), classes_used.end(), o.semantic_class) ==
@@ -523,12 +794,8 @@ Status SaveSceneFiles(const Scene& scene, const fs::path& dir) {
       classes_used.push_back(o.semantic_class);
     }
   }
-  obj.close();
-  mtl.close();
-  if (!obj || !mtl) {
-    return IoError(
-        fmt::format("writing '{}' or '{}' failed", obj_path.string(), mtl_path.string()));
-  }
+  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(mtl_path, mtl, "scene materials (MTL)"));
+  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(obj_path, obj, "scene mesh (OBJ)"));
 
   YAML::Emitter out;
   out.SetDoublePrecision(10);
@@ -566,11 +833,10 @@ Status SaveSceneFiles(const Scene& scene, const fs::path& dir) {
     out << YAML::EndMap;
   }
   out << YAML::EndSeq << YAML::EndMap << YAML::EndSeq << YAML::EndMap;
-  std::ofstream yaml_file(yaml_path);
-  yaml_file << "# Written by avp::sim::SaveSceneFiles (format: docs/scene-format.md)\n"
-            << out.c_str() << "\n";
-  yaml_file.close();
-  if (!yaml_file) return IoError(fmt::format("writing '{}' failed", yaml_path.string()));
+  const std::string yaml_text =
+      std::string("# Written by avp::sim::SaveSceneFiles (format: docs/scene-format.md)\n") +
+      out.c_str() + "\n";
+  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(yaml_path, yaml_text, "scene file"));
   return Status::Ok();
 }
 
