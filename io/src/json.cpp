@@ -1,9 +1,9 @@
 #include <cmath>
-#include <fstream>
 #include <limits>
 
 #include <fmt/format.h>
 
+#include <avp/core/text.h>
 #include <avp/io/file.h>
 #include <avp/io/json.h>
 
@@ -43,8 +43,8 @@ Result<double> Number(const nlohmann::json& j, const char* key, const char* cont
   }
   const nlohmann::json& v = j.at(key);
   if (!v.is_number() || !std::isfinite(v.get<double>())) {
-    return InvalidArgumentError(
-        fmt::format("{}: field '{}' must be a finite number, got {}", context, key, v.dump()));
+    return InvalidArgumentError(fmt::format("{}: field '{}' must be a finite number, got {}",
+                                            context, key, EscapeText(v.dump())));
   }
   return v.get<double>();
 }
@@ -57,13 +57,13 @@ Result<std::vector<double>> Numbers(const nlohmann::json& j, const char* key, si
   const nlohmann::json& v = j.at(key);
   if (!v.is_array() || v.size() != n) {
     return InvalidArgumentError(fmt::format("{}: field '{}' must be an array of {} numbers, got {}",
-                                            context, key, n, v.dump()));
+                                            context, key, n, EscapeText(v.dump())));
   }
   std::vector<double> out;
   for (const auto& x : v) {
     if (!x.is_number() || !std::isfinite(x.get<double>())) {
-      return InvalidArgumentError(
-          fmt::format("{}: field '{}' must hold finite numbers, got {}", context, key, v.dump()));
+      return InvalidArgumentError(fmt::format("{}: field '{}' must hold finite numbers, got {}",
+                                              context, key, EscapeText(v.dump())));
     }
     out.push_back(x.get<double>());
   }
@@ -131,26 +131,24 @@ Result<RigidTransform> TransformFromJson(const nlohmann::json& j) {
   }
   return InvalidArgumentError(
       fmt::format("{}: expected 'translation_m' + 'quaternion_wxyz' or a 4x4 'matrix', got {}",
-                  kContext, j.dump()));
+                  kContext, EscapeText(j.dump())));
 }
 
 Status WriteJsonFile(const std::filesystem::path& path, const nlohmann::json& j) {
-  return WriteFileAtomic(path, j.dump(2) + "\n", "JSON file");
+  // Invalid UTF-8 in a string (a name from a file) is replaced (U+FFFD), not thrown.
+  return WriteFileAtomic(
+      path, j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n", "JSON file");
 }
 
 Result<nlohmann::json> ReadJsonFile(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) {
-    std::error_code ec;
-    if (!std::filesystem::exists(path, ec)) {
-      return NotFoundError(fmt::format("JSON file '{}' does not exist", path.string()));
-    }
-    return IoError(fmt::format("cannot open '{}' for reading", path.string()));
-  }
+  AVP_ASSIGN_OR_RETURN(const std::string text, ReadFileBounded(path, "JSON file"));
   try {
-    return nlohmann::json::parse(in);
+    return nlohmann::json::parse(text);
   } catch (const nlohmann::json::parse_error& e) {
-    return ParseError(fmt::format("malformed JSON in '{}': {}", path.string(), e.what()));
+    // nlohmann quotes the text it last read: the file's bytes, escaped before they reach a
+    // terminal.
+    return ParseError(
+        fmt::format("malformed JSON in '{}': {}", path.string(), EscapeText(e.what(), 200)));
   }
 }
 

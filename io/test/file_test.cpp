@@ -1,7 +1,10 @@
 // WriteFileAtomic: writes and replaces whole files, creates folders, leaves no temporary file,
 // and names the path when it cannot write.
+#include <algorithm>
 #include <fstream>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -13,6 +16,7 @@ namespace avp::io {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 std::string Read(const std::filesystem::path& p) {
   std::ifstream in(p, std::ios::binary);
@@ -80,6 +84,114 @@ TEST_F(ReadFileBoundedTest, MissingFolderAndTooLargeAreTold) {
     EXPECT_THAT(s.message(), HasSubstr("max_file_bytes = 50; raise it with --limit"));
   }
   EXPECT_TRUE(ReadFileBounded(dir_ / "big", "scene file").ok());
+}
+
+// ---- Durable writes: no "Success" in errors, no temporary files left, step-by-step writers ------
+
+std::vector<std::string> Names(const std::filesystem::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    names.push_back(e.path().filename().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+TEST_F(WriteFileAtomicTest, ATargetThatIsAFolderIsToldAsSuch) {
+  // Before, rename() failed and the clean-up reused its error code: "cannot move ...: Success".
+  const std::filesystem::path folder = dir_ / "map.ot";
+  std::filesystem::create_directories(folder / "inside");
+  const Status s = WriteFileAtomic(folder, "bytes", "map file");
+  ASSERT_FALSE(s.ok());
+  EXPECT_THAT(s.message(), HasSubstr("map file '" + folder.string() + "'"));
+  EXPECT_THAT(s.message(), HasSubstr("is a folder"));
+  EXPECT_THAT(s.message(), Not(HasSubstr("Success")));
+  EXPECT_EQ(Names(dir_), std::vector<std::string>{"map.ot"});  // no temporary file left
+}
+
+TEST_F(WriteFileAtomicTest, LeavesOnlyTheFileAndKeepsTheOldOneOnFailure) {
+  const std::filesystem::path p = dir_ / "record.json";
+  ASSERT_TRUE(WriteFileAtomic(p, "old").ok());
+  ASSERT_TRUE(WriteFileAtomic(p, "new").ok());
+  EXPECT_EQ(Names(dir_), std::vector<std::string>{"record.json"});
+  EXPECT_EQ(Read(p), "new");
+  // An unwritable target (its parent is a file) fails naming the target and the reason.
+  const Status s = WriteFileAtomic(p / "x.json", "y", "JSON file");
+  ASSERT_FALSE(s.ok());
+  EXPECT_THAT(s.message(), HasSubstr((p / "x.json").string()));
+  EXPECT_THAT(s.message(), Not(HasSubstr("Success")));
+  EXPECT_EQ(Read(p), "new");
+}
+
+TEST(SyncFolderTest, FlushesAFolderAndNamesAMissingOne) {
+  EXPECT_TRUE(SyncFolder(std::filesystem::temp_directory_path()).ok());
+  const Status s = SyncFolder("/nonexistent-avp-folder");
+  EXPECT_EQ(s.code(), StatusCode::kIoError);
+  EXPECT_THAT(s.message(), HasSubstr("'/nonexistent-avp-folder'"));
+  EXPECT_THAT(s.message(), HasSubstr("No such file or directory"));
+}
+
+class StepFileWriterTest : public test::TempDirTest {};
+
+TEST_F(StepFileWriterTest, WritesEachStepAtOnce) {
+  const std::filesystem::path p = dir_ / "metrics.csv";
+  Result<StepFileWriter> w = StepFileWriter::Create(p, "metrics file");
+  ASSERT_TRUE(w.ok()) << w.status().ToString();
+  ASSERT_TRUE(w->Write("view,f1\n").ok());
+  EXPECT_EQ(Read(p), "view,f1\n");  // on the file before the writer is closed
+  ASSERT_TRUE(w->Write("1,0.5\n").ok());
+  EXPECT_EQ(Read(p), "view,f1\n1,0.5\n");
+  EXPECT_TRUE(w->Close().ok());
+  EXPECT_TRUE(w->Close().ok());
+}
+
+TEST_F(StepFileWriterTest, AFullDeviceStopsTheWriterNamingTheFile) {
+  if (!std::filesystem::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  Result<StepFileWriter> w = StepFileWriter::Create("/dev/full", "metrics file");
+  ASSERT_TRUE(w.ok()) << w.status().ToString();
+  const Status s = w->Write("view,f1\n");
+  EXPECT_EQ(s.code(), StatusCode::kIoError);
+  EXPECT_THAT(s.message(), HasSubstr("metrics file '/dev/full'"));
+  EXPECT_THAT(s.message(), HasSubstr("No space left on device"));
+  // Every later write and the close give the first error.
+  EXPECT_EQ(w->Write("1,0.5\n").message(), s.message());
+  EXPECT_EQ(w->Close().message(), s.message());
+}
+
+TEST_F(StepFileWriterTest, UnwritablePathsAreNamed) {
+  std::ofstream(dir_ / "file") << "x";
+  Status s = StepFileWriter::Create(dir_ / "file" / "metrics.csv", "metrics file").status();
+  EXPECT_EQ(s.code(), StatusCode::kIoError);
+  EXPECT_THAT(s.message(), HasSubstr((dir_ / "file" / "metrics.csv").string()));
+  EXPECT_THAT(s.message(), HasSubstr("Not a directory"));
+  s = StepFileWriter::Create(dir_, "metrics file").status();
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.message(), HasSubstr("it is a folder"));
+}
+
+class SameFileTest : public test::TempDirTest {};
+
+TEST_F(SameFileTest, TellsEverySpellingOfTheSameFile) {
+  const std::filesystem::path map = dir_ / "plant.avpmap";
+  std::ofstream(map) << "map";
+  EXPECT_TRUE(SameFile(map, map));
+  EXPECT_TRUE(SameFile(map, dir_ / "." / "plant.avpmap"));
+  EXPECT_TRUE(SameFile(map, dir_ / "sub" / ".." / "plant.avpmap"));
+  std::filesystem::create_symlink(map, dir_ / "link.avpmap");
+  EXPECT_TRUE(SameFile(map, dir_ / "link.avpmap"));
+  std::filesystem::create_hard_link(map, dir_ / "hard.avpmap");
+  EXPECT_TRUE(SameFile(map, dir_ / "hard.avpmap"));
+  EXPECT_FALSE(SameFile(map, dir_ / "other.avpmap"));
+  EXPECT_TRUE(SameFile(dir_ / "new.ply", dir_ / "." / "new.ply"));  // neither exists yet
+  EXPECT_FALSE(SameFile(map, ""));
+
+  const Status s = CheckOutputIsNotInput(dir_ / "link.avpmap", "export file", map, "map file");
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.message(), HasSubstr("export file '" + (dir_ / "link.avpmap").string() +
+                                     "' is the map file '" + map.string() + "'"));
+  EXPECT_THAT(s.message(), HasSubstr("outputs never overwrite inputs"));
+  EXPECT_TRUE(CheckOutputIsNotInput(dir_ / "out.ply", "export file", map, "map file").ok());
+  EXPECT_TRUE(CheckOutputIsNotInput(dir_ / "out.ply", "export file", "", "map file").ok());
 }
 
 }  // namespace

@@ -22,6 +22,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kPi = std::numbers::pi;
@@ -278,6 +279,31 @@ TEST_F(JsonFileTest, UnwritablePathIsAnIoError) {
   const Status status = WriteJsonFile(path, nlohmann::json::object());
   EXPECT_EQ(status.code(), StatusCode::kIoError);
   EXPECT_THAT(status.message(), HasSubstr(path.string()));
+}
+
+TEST_F(JsonFileTest, AFolderIsNotMissingAndFileBytesAreEscaped) {
+  const Status folder = ReadJsonFile(dir_).status();
+  EXPECT_EQ(folder.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(folder.message(), HasSubstr("is a folder, not a JSON file"));
+  EXPECT_THAT(folder.message(), Not(HasSubstr("does not exist")));
+  // A crafted file cannot send escape sequences to the terminal through the parse error.
+  const fs::path path = dir_ / "evil.json";
+  // (nlohmann writes C0 controls as <U+001B> itself, but passes other bytes through: 0x9b is
+  // the one-byte CSI of many terminals.)
+  std::ofstream(path) << "{\"a\": \x9b[2Jnope}";
+  const Status s = ReadJsonFile(path).status();
+  EXPECT_EQ(s.code(), StatusCode::kParseError);
+  EXPECT_THAT(s.message(), Not(HasSubstr("\x9b")));
+  EXPECT_THAT(s.message(), HasSubstr("\\x9b"));
+}
+
+TEST_F(JsonFileTest, InvalidUtf8IsWrittenReplacedNotThrown) {
+  const fs::path path = dir_ / "record.json";
+  const nlohmann::json j = {{"scene", std::string("plant\xff\xfe")}};
+  ASSERT_TRUE(WriteJsonFile(path, j).ok());
+  const Result<nlohmann::json> back = ReadJsonFile(path);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_EQ((*back)["scene"], "plant\xef\xbf\xbd\xef\xbf\xbd");  // U+FFFD twice
 }
 
 }  // namespace
