@@ -1,7 +1,3 @@
-#include <cerrno>
-#include <cstdio>
-#include <cstring>
-
 #include <fmt/format.h>
 
 #include <avp/report/metrics_csv.h>
@@ -41,31 +37,38 @@ std::vector<std::pair<std::string, double>> MetricsRow(const eval::MapMetrics& m
 
 Result<std::unique_ptr<MetricsCsvWriter>> MetricsCsvWriter::Open(
     const std::filesystem::path& path) {
-  std::FILE* f = std::fopen(path.c_str(), "w");
-  if (f == nullptr) {
-    return IoError(fmt::format("cannot write '{}': {}", path.string(), std::strerror(errno)));
-  }
-  return std::unique_ptr<MetricsCsvWriter>(new MetricsCsvWriter(f, path));
+  AVP_ASSIGN_OR_RETURN(io::StepFileWriter file, io::StepFileWriter::Create(path, "metrics file"));
+  return std::unique_ptr<MetricsCsvWriter>(new MetricsCsvWriter(std::move(file)));
 }
 
-MetricsCsvWriter::~MetricsCsvWriter() {
-  if (file_ != nullptr) std::fclose(file_);
+void MetricsCsvWriter::Write(const std::string& text) {
+  if (!status_.ok() || closed_) return;
+  status_ = file_.Write(text);
+  if (!status_.ok() && stop_.stop_possible()) stop_.request_stop();
+}
+
+Status MetricsCsvWriter::Close() {
+  if (closed_) return status_;
+  closed_ = true;
+  const Status s = file_.Close();
+  if (status_.ok()) status_ = s;
+  return status_;
 }
 
 void MetricsCsvWriter::OnStep(const pipeline::StepRecord& s, const mapping::SemanticMap&) {
-  if (file_ == nullptr) return;
   if (!header_written_) {
-    std::fprintf(file_, "view");
-    for (const auto& [name, value] : s.metrics) std::fprintf(file_, ",%s", name.c_str());
-    std::fprintf(file_,
-                 ",known_voxels,occupied_voxels,target_voxels,instances,masks,capture_ms,"
-                 "segment_ms,integrate_ms,metrics_ms,plan_ms,move_ms,step_ms,candidates,"
-                 "reachable,chosen_rank,chosen_utility,chosen_gain,joint_path_length,eye_x,"
-                 "eye_y,eye_z,status\n");
+    std::string header = "view";
+    for (const auto& [name, value] : s.metrics) header += "," + name;
+    header +=
+        ",known_voxels,occupied_voxels,target_voxels,instances,masks,capture_ms,"
+        "segment_ms,integrate_ms,metrics_ms,plan_ms,move_ms,step_ms,candidates,"
+        "reachable,chosen_rank,chosen_utility,chosen_gain,joint_path_length,eye_x,"
+        "eye_y,eye_z,status\n";
+    Write(header);
     header_written_ = true;
   }
-  std::fprintf(file_, "%d", s.view + 1);
-  for (const auto& [name, value] : s.metrics) std::fprintf(file_, ",%.9g", value);
+  std::string row = fmt::format("{}", s.view + 1);
+  for (const auto& [name, value] : s.metrics) row += fmt::format(",{:.9g}", value);
   const Eigen::Vector3d eye = s.X_WC.translation();
   std::string status = "ok";
   if (!s.capture_status.ok())
@@ -76,16 +79,16 @@ void MetricsCsvWriter::OnStep(const pipeline::StepRecord& s, const mapping::Sema
     status = "integrate-error";
   else if (s.planned && s.chosen_rank < 0)
     status = "no-move";
-  std::fprintf(file_,
-               ",%zu,%zu,%zu,%zu,%zu,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%zu,%zu,%d,%.6g,%.6g,"
-               "%.6g,%.4f,%.4f,%.4f,%s\n",
-               s.known_voxels, s.occupied_voxels, s.target_voxels, s.instances, s.masks,
-               s.times.capture_ms, s.times.segment_ms, s.times.integrate_ms, s.times.metrics_ms,
-               s.times.plan_ms, s.times.move_ms, s.times.total_ms, s.candidates_generated,
-               s.candidates_reachable, s.chosen_rank, s.chosen_rank >= 0 ? s.chosen.utility : 0.0,
-               s.chosen_rank >= 0 ? s.chosen.gain : 0.0, s.joint_path_length, eye.x(), eye.y(),
-               eye.z(), status.c_str());
-  std::fflush(file_);
+  row += fmt::format(
+      ",{},{},{},{},{},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{},{:.6g},{:.6g},"
+      "{:.6g},{:.4f},{:.4f},{:.4f},{}\n",
+      s.known_voxels, s.occupied_voxels, s.target_voxels, s.instances, s.masks, s.times.capture_ms,
+      s.times.segment_ms, s.times.integrate_ms, s.times.metrics_ms, s.times.plan_ms,
+      s.times.move_ms, s.times.total_ms, s.candidates_generated, s.candidates_reachable,
+      s.chosen_rank, s.chosen_rank >= 0 ? s.chosen.utility : 0.0,
+      s.chosen_rank >= 0 ? s.chosen.gain : 0.0, s.joint_path_length, eye.x(), eye.y(), eye.z(),
+      status);
+  Write(row);
 }
 
 }  // namespace avp::report
