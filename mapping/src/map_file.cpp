@@ -176,10 +176,11 @@ std::string HexPrefix(std::span<const uint8_t> bytes, size_t n) {
 Status Corrupt(const std::string& message) { return ParseError(message); }
 
 /// `text` with bytes below 0x20, 0x7f and above as \xNN (a file's bytes in a message never reach
-/// a terminal raw).
+/// a terminal raw), shortened. (The messages it escapes already quote their values: EscapeText
+/// would escape those quotes again.)
 std::string EscapeControl(std::string_view text) {
   std::string out;
-  for (const char c : text) {
+  for (const char c : text.substr(0, 1024)) {
     const auto u = static_cast<unsigned char>(c);
     if (u < 0x20 || u >= 0x7f) {
       out += fmt::format("\\x{:02x}", u);
@@ -187,6 +188,7 @@ std::string EscapeControl(std::string_view text) {
       out += c;
     }
   }
+  if (text.size() > 1024) out += fmt::format("...({} bytes)", text.size());
   return out;
 }
 
@@ -226,6 +228,18 @@ Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map, const MapSaveO
   const GridOptions& go = grid.options();
   const float occupied = grid.occupied_log_odds();
 
+  // The blocks written: every block with a known voxel or semantic payload, sorted by key. Blocks
+  // allocated but never reached (the parallel integrator allocates ahead) are left out, and the
+  // order does not depend on the order of allocation, so the same voxels give the same bytes
+  // whatever the number of threads that integrated them.
+  std::vector<const OccupancyBlock*> blocks;
+  blocks.reserve(grid.num_blocks());
+  grid.ForEachBlock([&](const OccupancyBlock& b) {
+    if (b.known.any() || b.semantics != nullptr) blocks.push_back(&b);
+  });
+  std::sort(blocks.begin(), blocks.end(),
+            [](const OccupancyBlock* a, const OccupancyBlock* b) { return a->key < b->key; });
+
   // Counts first (they go into the header).
   uint64_t known = 0, occupied_voxels = 0, cells = 0, labelled = 0;
   grid.ForEachBlock([&](const OccupancyBlock& b) {
@@ -251,7 +265,7 @@ Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map, const MapSaveO
   for (int i = 0; i < 3; ++i) w.F64(go.roi ? go.roi->min()[i] : 0.0);
   for (int i = 0; i < 3; ++i) w.F64(go.roi ? go.roi->max()[i] : 0.0);
   w.U8(static_cast<uint8_t>(kNumSemanticClasses));
-  w.U64(grid.num_blocks());
+  w.U64(blocks.size());
   w.U64(known);
   w.U64(occupied_voxels);
   w.U64(cells);
@@ -260,14 +274,15 @@ Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map, const MapSaveO
   w.U32(static_cast<uint32_t>(options.note.size()));
   w.Bytes(options.note.data(), options.note.size());
 
-  grid.ForEachBlock([&](const OccupancyBlock& b) {
+  for (const OccupancyBlock* block : blocks) {
+    const OccupancyBlock& b = *block;
     w.I32(b.key.x);
     w.I32(b.key.y);
     w.I32(b.key.z);
     for (uint64_t word : b.known.words) w.U64(word);
     b.known.ForEachSet([&](int i) { w.F32(b.log_odds[static_cast<size_t>(i)]); });
     w.U8(b.semantics ? 1 : 0);
-    if (!b.semantics) return;
+    if (!b.semantics) continue;
     BlockBits present;
     for (int i = 0; i < kBlockVoxels; ++i) {
       if (!((*b.semantics)[static_cast<size_t>(i)] == SemanticCell{})) present.set(i);
@@ -283,7 +298,7 @@ Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map, const MapSaveO
       w.F32(c.confidence);
       for (int16_t v : c.class_log_odds) w.I16(v);
     });
-  });
+  }
 
   const uint64_t total = w.bytes().size() + kCrcBytes;
   w.PatchU64(16, total);
@@ -689,6 +704,8 @@ Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* 
   AVP_ASSIGN_OR_RETURN(MapHeader header,
                        frame.version == kMapFileVersionV1 ? ReadHeaderV1(r) : ReadHeaderV2(r));
   AVP_ASSIGN_OR_RETURN(const MapOptions options, ValidateHeader(header, r.remaining()));
+  // Each block takes some 2.3 KB in memory whatever the file holds: bounded before allocating.
+  AVP_RETURN_IF_ERROR(MaxMapBlocks().Check("blocks of the map", header.num_blocks));
   std::optional<SemanticMap> loaded;
   try {
     loaded.emplace(options);
@@ -725,24 +742,23 @@ Status SaveMap(const SemanticMap& map, const std::filesystem::path& path,
 }
 
 Result<SemanticMap> LoadMap(const std::filesystem::path& path, MapFileInfo* info) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    return NotFoundError(fmt::format("map file '{}' does not exist", path.string()));
-  }
-  if (std::filesystem::is_directory(path, ec)) {
-    return IoError(fmt::format("map file '{}' is a folder", path.string()));
-  }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    return IoError(
-        fmt::format("cannot open map file '{}': {}", path.string(), std::strerror(errno)));
-  }
-  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
-                             std::istreambuf_iterator<char>());
-  if (in.bad()) return IoError(fmt::format("reading map file '{}' failed", path.string()));
-  Result<SemanticMap> map = DeserializeMap(bytes, info);
+  // Missing, a folder, over max_file_bytes: told apart before reading.
+  AVP_ASSIGN_OR_RETURN(const std::string bytes, io::ReadFileBounded(path, "map file"));
+  Result<SemanticMap> map = DeserializeMap(
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()), info);
   if (!map.ok()) return map.status().WithContext(fmt::format("map file '{}'", path.string()));
   return map;
 }
+
+const Limit& MaxMapBlocks() {
+  static const Limit limit("max_map_blocks", uint64_t{1} << 21, "blocks",
+                           "8^3-voxel blocks of one map read from a file (about 2.3 KB each)");
+  return limit;
+}
+
+namespace {
+// Registered when the program starts, so `avp --limit max_map_blocks=N` knows it.
+[[maybe_unused]] const Limit& kRegisterMaxMapBlocks = MaxMapBlocks();
+}  // namespace
 
 }  // namespace avp::mapping

@@ -1,17 +1,26 @@
 #include <algorithm>
+#include <charconv>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <memory>
+#include <mutex>
 #include <sstream>
 #include <string>
+#include <system_error>
 #include <unordered_set>
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 #include <octomap/ColorOcTree.h>
 #include <octomap/OcTree.h>
+#include <unistd.h>
 
+#include <avp/core/text.h>
+#include <avp/io/file.h>
 #include <avp/io/label_preview.h>
 #include <avp/mapping/octomap_io.h>
 
@@ -24,28 +33,71 @@ namespace fs = std::filesystem;
 constexpr std::string_view kBinaryHeader = "# Octomap OcTree binary file";
 constexpr std::string_view kGeneralHeader = "# Octomap OcTree file";
 
-/// liboctomap (as Debian builds it) reports progress and errors on std::cerr ("Reading binary
-/// octree type OcTree", " done."). While alive, this keeps that chatter out of the program's output
-/// and collects it, so that a failure can quote it. Not meant for concurrent std::cerr writers.
+/// liboctomap reports errors and warnings on std::cerr (OCTOMAP_ERROR_STR, OCTOMAP_WARNING_STR)
+/// and on the C stderr (OCTOMAP_ERROR, OCTOMAP_WARNING: printf-style). While alive, this sends
+/// both into buffers (std::cerr's rdbuf, and file descriptor 2 into a temporary file), so that the
+/// program's output stays clean and a failure can quote what OctoMap said. One at a time (a
+/// process-wide mutex): std::cerr and stderr are shared, and what other threads write to them
+/// meanwhile is collected too (and shown only if OctoMap's call fails).
 class OctomapChatter {
  public:
-  OctomapChatter() : old_(std::cerr.rdbuf(text_.rdbuf())) {}
-  ~OctomapChatter() { std::cerr.rdbuf(old_); }
+  OctomapChatter() : lock_(Mutex()), old_(std::cerr.rdbuf(text_.rdbuf())) {
+    std::fflush(stderr);
+    tmp_ = std::tmpfile();
+    saved_fd_ = tmp_ != nullptr ? ::dup(STDERR_FILENO) : -1;
+    if (saved_fd_ >= 0 && ::dup2(::fileno(tmp_), STDERR_FILENO) < 0) {
+      ::close(saved_fd_);
+      saved_fd_ = -1;
+    }
+  }
+  ~OctomapChatter() {
+    Restore();
+    if (tmp_ != nullptr) std::fclose(tmp_);
+    std::cerr.rdbuf(old_);
+  }
   OctomapChatter(const OctomapChatter&) = delete;
   OctomapChatter& operator=(const OctomapChatter&) = delete;
-  /// " (OctoMap said: ...)" or empty.
-  std::string Quote() const {
+  /// What OctoMap printed so far, one line, escaped and shortened (QuoteText); empty when
+  /// nothing.
+  std::string Text() {
+    Restore();
     std::string t = text_.str();
+    if (tmp_ != nullptr) {
+      std::rewind(tmp_);
+      char buffer[4096];
+      const size_t n = std::fread(buffer, 1, sizeof(buffer), tmp_);
+      t += std::string(buffer, n);
+    }
     while (!t.empty() && (t.back() == '\n' || t.back() == ' ')) t.pop_back();
     for (char& c : t) {
       if (c == '\n') c = ' ';
     }
+    return t.empty() ? std::string() : QuoteText(t, 300);
+  }
+  /// " (OctoMap said: '...')" or empty.
+  std::string Quote() {
+    const std::string t = Text();
     return t.empty() ? std::string() : " (OctoMap said: " + t + ")";
   }
 
  private:
+  /// Puts the C stderr back (idempotent).
+  void Restore() {
+    if (saved_fd_ < 0) return;
+    std::fflush(stderr);
+    ::dup2(saved_fd_, STDERR_FILENO);
+    ::close(saved_fd_);
+    saved_fd_ = -1;
+  }
+  static std::mutex& Mutex() {
+    static std::mutex mutex;
+    return mutex;
+  }
+  std::lock_guard<std::mutex> lock_;
   std::ostringstream text_;
   std::streambuf* old_;
+  std::FILE* tmp_ = nullptr;
+  int saved_fd_ = -1;
 };
 
 octomap::OcTreeKey OcKey(const VoxelKey& k) {
@@ -83,15 +135,10 @@ void ConfigureTree(octomap::AbstractOccupancyOcTree& tree, const SensorModel& se
   tree.setOccupancyThres(sensor.occupied_threshold);
 }
 
+/// Writes a whole file atomically (a temporary name beside it, flushed, renamed): a run killed
+/// half-way or a full disk never leaves a truncated tree behind.
 Status WriteBytes(const fs::path& path, const std::string& bytes, std::string_view what) {
-  std::error_code ec;
-  if (path.has_parent_path()) fs::create_directories(path.parent_path(), ec);
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) return IoError(fmt::format("cannot open '{}' to write the {}", path.string(), what));
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  out.close();
-  if (!out) return IoError(fmt::format("writing the {} to '{}' failed", what, path.string()));
-  return Status::Ok();
+  return io::WriteFileAtomic(path, bytes, what);
 }
 
 /// Every occupied leaf expanded to the finest voxels it covers; bounded by max_voxels.
@@ -230,48 +277,286 @@ Result<OctomapExportStats> ExportOctomapColor(const SemanticMap& map, const fs::
   return stats;
 }
 
-Result<VoxelSet> ImportOctomapOccupied(const fs::path& path, size_t max_voxels) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) {
-    return NotFoundError(fmt::format("OctoMap file '{}' does not exist", path.string()));
-  }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return IoError(fmt::format("cannot open OctoMap file '{}'", path.string()));
-  std::string first_line;
-  std::getline(in, first_line);
-  if (first_line.size() > 80) first_line = first_line.substr(0, 80) + "...";
-  in.clear();
-  in.seekg(0);
+namespace {
 
-  if (first_line.rfind(kBinaryHeader, 0) == 0) {
-    octomap::OcTree tree(0.1);  // readBinary sets the file's resolution
-    OctomapChatter chatter;
-    if (!tree.readBinary(in)) {
-      return ParseError(fmt::format("'{}' is not a readable OctoMap binary tree (.bt){}",
-                                    path.string(), chatter.Quote()));
+/// What an OctoMap file's text header says (checked strictly before OctoMap reads anything).
+struct OctomapHeader {
+  bool binary = false;  ///< .bt (maximum-likelihood bits) or .ot (full node data)
+  std::string id;
+  uint64_t size = 0;  ///< nodes in the tree
+  double resolution_m = 0.0;
+  size_t data_offset = 0;  ///< first byte of the tree
+};
+
+/// The longest header OctoMap writes is a few lines; anything longer is not one.
+constexpr size_t kMaxOctomapHeaderBytes = 4096;
+/// OctoMap's trees are 16 levels deep: the root at depth 0, the finest voxels at depth 16.
+constexpr int kOctomapTreeDepth = 16;
+/// Accepted voxel edges of a tree, metres.
+constexpr double kMinOctomapResolution = 1e-4;
+constexpr double kMaxOctomapResolution = 100.0;
+
+Result<OctomapHeader> ParseOctomapHeader(std::string_view bytes, const fs::path& path) {
+  const auto bad = [&](const std::string& what) {
+    return ParseError(fmt::format("'{}' is not a readable OctoMap file: {}", path.string(), what));
+  };
+  OctomapHeader h;
+  size_t at = 0;
+  size_t line_no = 0;
+  bool have_id = false, have_size = false, have_res = false;
+  while (true) {
+    if (at >= bytes.size()) {
+      return bad(fmt::format("its header ends after {} lines without a 'data' line", line_no));
+    }
+    if (at > kMaxOctomapHeaderBytes) {
+      return bad(fmt::format("no 'data' line in its first {} bytes", kMaxOctomapHeaderBytes));
+    }
+    const size_t end = bytes.find('\n', at);
+    if (end == std::string_view::npos) {
+      return bad(fmt::format("its header line {} is not terminated", line_no + 1));
+    }
+    std::string_view line = bytes.substr(at, end - at);
+    at = end + 1;
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    if (line_no == 1) {
+      if (line.starts_with(kBinaryHeader)) {
+        h.binary = true;
+      } else if (line.starts_with(kGeneralHeader)) {
+        h.binary = false;
+      } else {
+        return ParseError(fmt::format(
+            "'{}' is not an OctoMap file: its first line is {}, expected '{}' (.bt) or '{}' (.ot)",
+            path.string(), QuoteText(line), kBinaryHeader, kGeneralHeader));
+      }
+      continue;
+    }
+    if (line.starts_with("#")) continue;
+    const size_t space = line.find(' ');
+    const std::string_view key = line.substr(0, space);
+    const std::string_view value =
+        space == std::string_view::npos ? std::string_view() : line.substr(space + 1);
+    if (key == "data" && value.empty()) break;
+    if (key == "id") {
+      if (value.empty() || value.size() > 64 || value.find(' ') != std::string_view::npos) {
+        return bad(fmt::format("header line {}: id {} is not a tree type name", line_no,
+                               QuoteText(value)));
+      }
+      h.id = std::string(value);
+      have_id = true;
+    } else if (key == "size") {
+      const char* first = value.data();
+      const char* last = value.data() + value.size();
+      const auto [ptr, ec] = std::from_chars(first, last, h.size);
+      if (value.empty() || ec != std::errc() || ptr != last ||
+          h.size > std::numeric_limits<uint32_t>::max()) {
+        return bad(fmt::format("header line {}: size {} must be a node count in [0, {}]", line_no,
+                               QuoteText(value), std::numeric_limits<uint32_t>::max()));
+      }
+      have_size = true;
+    } else if (key == "res") {
+      const char* first = value.data();
+      const char* last = value.data() + value.size();
+      const auto [ptr, ec] = std::from_chars(first, last, h.resolution_m);
+      if (value.empty() || ec != std::errc() || ptr != last || !std::isfinite(h.resolution_m) ||
+          h.resolution_m < kMinOctomapResolution || h.resolution_m > kMaxOctomapResolution) {
+        return bad(fmt::format("header line {}: res {} must be a voxel edge in [{}, {}] m", line_no,
+                               QuoteText(value), kMinOctomapResolution, kMaxOctomapResolution));
+      }
+      have_res = true;
+    } else {
+      return bad(fmt::format("header line {} is {}; expected 'id', 'size', 'res' or 'data'",
+                             line_no, QuoteText(line)));
+    }
+  }
+  if (!have_id || !have_size || !have_res) {
+    return bad(fmt::format("its header lacks {}", !have_id     ? "'id'"
+                                                  : !have_size ? "'size'"
+                                                               : "'res'"));
+  }
+  if (h.id == "1") h.id = "OcTree";  // OctoMap's deprecated id
+  h.data_offset = at;
+  return h;
+}
+
+/// Walks the tree OctoMap would read (without OctoMap, iteratively, never deeper than its 16
+/// levels) and checks that it holds exactly the header's node count and ends exactly at the end
+/// of the file. .bt: 2 bytes per node (2 bits per child: 01 occupied, 10 free, 11 inner);
+/// .ot: the node's data (`value_bytes`: a float log-odds, + 3 colour bytes for a ColorOcTree)
+/// and one byte whose bits say which children follow. OK or what is wrong.
+Status CheckOctomapTree(std::string_view data, const OctomapHeader& h, size_t value_bytes,
+                        const fs::path& path) {
+  const auto bad = [&](const std::string& what) {
+    return ParseError(fmt::format("'{}' holds a broken OctoMap tree (id {}, {} nodes declared): {}",
+                                  path.string(), QuoteText(h.id), h.size, what));
+  };
+  if (h.size == 0) {
+    if (!data.empty()) {
+      return bad(fmt::format("{} bytes follow a header that declares an empty tree", data.size()));
+    }
+    return Status::Ok();
+  }
+  // Each entry: the depth of a node still to read. A node's children are pushed in reverse, so
+  // they are read in order (depth first, as OctoMap writes them).
+  std::vector<int> pending = {0};
+  size_t at = 0;
+  uint64_t nodes = 0;
+  const size_t node_bytes = h.binary ? 2 : value_bytes + 1;
+  while (!pending.empty()) {
+    const int depth = pending.back();
+    pending.pop_back();
+    ++nodes;
+    if (nodes > h.size) {
+      return bad(fmt::format("the tree has more nodes than its header declares (at byte {})",
+                             h.data_offset + at));
+    }
+    if (data.size() - at < node_bytes) {
+      return bad(
+          fmt::format("the file is truncated: node {} (depth {}) needs {} bytes at byte {}, "
+                      "{} remain",
+                      nodes, depth, node_bytes, h.data_offset + at, data.size() - at));
+    }
+    const auto* p = reinterpret_cast<const uint8_t*>(data.data() + at);
+    at += node_bytes;
+    if (h.binary) {
+      // Children 0-3 in the first byte, 4-7 in the second, two bits each (low bit first).
+      for (int child = 7; child >= 0; --child) {
+        const uint8_t byte = p[child / 4];
+        const int bits = (byte >> (2 * (child % 4))) & 3;
+        if (bits == 0) continue;
+        if (depth + 1 > kOctomapTreeDepth) {
+          return bad(fmt::format("a node at byte {} is deeper than OctoMap's {} levels",
+                                 h.data_offset + at - node_bytes, kOctomapTreeDepth));
+        }
+        if (bits == 3) {
+          if (depth + 1 == kOctomapTreeDepth) {
+            return bad(fmt::format("a node at byte {} has children below OctoMap's {} levels",
+                                   h.data_offset + at - node_bytes, kOctomapTreeDepth));
+          }
+          pending.push_back(depth + 1);
+        } else {
+          ++nodes;  // a leaf: no bytes of its own
+          if (nodes > h.size) {
+            return bad(fmt::format("the tree has more nodes than its header declares (at byte {})",
+                                   h.data_offset + at - node_bytes));
+          }
+        }
+      }
+      // Inner children are read after this node's leaves, in child order: pending holds them in
+      // reverse already (pushed from child 7 down).
+    } else {
+      float log_odds = 0.0f;
+      std::memcpy(&log_odds, p, sizeof(float));
+      if (!std::isfinite(log_odds)) {
+        return bad(fmt::format("node {} at byte {} has a log-odds of {}", nodes,
+                               h.data_offset + at - node_bytes, log_odds));
+      }
+      const uint8_t children = p[value_bytes];
+      if (children != 0 && depth + 1 > kOctomapTreeDepth) {
+        return bad(fmt::format("node {} at byte {} has children below OctoMap's {} levels", nodes,
+                               h.data_offset + at - node_bytes, kOctomapTreeDepth));
+      }
+      for (int child = 7; child >= 0; --child) {
+        if ((children >> child) & 1) pending.push_back(depth + 1);
+      }
+    }
+  }
+  if (nodes != h.size) {
+    return bad(
+        fmt::format("the tree ends at byte {} after {} nodes: the file is truncated or its "
+                    "header's size is wrong",
+                    h.data_offset + at, nodes));
+  }
+  if (at != data.size()) {
+    return bad(fmt::format("{} unexpected bytes follow the tree (from byte {})", data.size() - at,
+                           h.data_offset + at));
+  }
+  return Status::Ok();
+}
+
+/// After OctoMap's reader: the stream must have read the whole tree and nothing more, and the tree
+/// must hold the nodes the header declares.
+Status CheckOctomapRead(std::istream& in, size_t file_bytes, size_t tree_nodes,
+                        const OctomapHeader& h, OctomapChatter& chatter, const fs::path& path) {
+  const bool stream_ok = !in.fail();
+  const std::streampos pos = stream_ok ? in.tellg() : std::streampos(-1);
+  if (stream_ok && pos == static_cast<std::streampos>(file_bytes) && tree_nodes == h.size) {
+    return Status::Ok();
+  }
+  return ParseError(fmt::format(
+      "'{}': OctoMap's reader {} (read {} nodes of the {} the header declares){}", path.string(),
+      stream_ok ? fmt::format("stopped at byte {} of {}", static_cast<int64_t>(pos), file_bytes)
+                : std::string("failed"),
+      tree_nodes, h.size, chatter.Quote()));
+}
+
+}  // namespace
+
+const Limit& MaxOctomapNodes() {
+  static const Limit limit("max_octomap_nodes", uint64_t{1} << 26, "nodes",
+                           "nodes of one OctoMap tree read from a file (.bt, .ot)");
+  return limit;
+}
+
+namespace {
+// Registered when the program starts, so `avp --limit max_octomap_nodes=N` knows it.
+[[maybe_unused]] const Limit& kRegisterMaxOctomapNodes = MaxOctomapNodes();
+}  // namespace
+
+Result<VoxelSet> ImportOctomapOccupied(const fs::path& path, size_t max_voxels) {
+  AVP_ASSIGN_OR_RETURN(const std::string bytes, io::ReadFileBounded(path, "OctoMap file"));
+  AVP_ASSIGN_OR_RETURN(const OctomapHeader h, ParseOctomapHeader(bytes, path));
+  AVP_RETURN_IF_ERROR(
+      MaxOctomapNodes().Check(fmt::format("OctoMap tree of '{}'", path.string()), h.size));
+  const std::string_view data = std::string_view(bytes).substr(h.data_offset);
+  const bool color = h.id == "ColorOcTree";
+  if (!h.binary && h.id != "OcTree" && !color) {
+    // Let OctoMap say whether it knows the type at all (it prints why not).
+    std::string known;
+    {
+      OctomapChatter chatter;
+      std::unique_ptr<octomap::AbstractOcTree> tree(
+          octomap::AbstractOcTree::createTree(h.id, h.resolution_m));
+      if (!tree) {
+        return ParseError(fmt::format("'{}' holds an OctoMap tree of unknown type {}{}",
+                                      path.string(), QuoteText(h.id), chatter.Quote()));
+      }
+    }
+    return ParseError(fmt::format(
+        "'{}' holds an OctoMap tree of type {}; only OcTree and ColorOcTree can be imported",
+        path.string(), QuoteText(h.id)));
+  }
+  const size_t value_bytes = color ? sizeof(float) + 3 : sizeof(float);
+  AVP_RETURN_IF_ERROR(CheckOctomapTree(data, h, value_bytes, path));
+
+  // The tree is well formed: OctoMap reads it, and what it read is checked again.
+  std::istringstream in(bytes, std::ios::binary);
+  in.seekg(static_cast<std::streamoff>(h.data_offset));
+  if (h.binary) {
+    octomap::OcTree tree(h.resolution_m);
+    {
+      OctomapChatter chatter;
+      if (h.size > 0) tree.readBinaryData(in);
+      AVP_RETURN_IF_ERROR(CheckOctomapRead(in, bytes.size(), tree.size(), h, chatter, path));
     }
     return CollectOccupied(tree, max_voxels, path);
   }
-  if (first_line.rfind(kGeneralHeader, 0) == 0) {
-    OctomapChatter chatter;
-    std::unique_ptr<octomap::AbstractOcTree> tree(octomap::AbstractOcTree::read(in));
-    if (!tree) {
-      return ParseError(fmt::format("'{}' is not a readable OctoMap tree (.ot){}", path.string(),
-                                    chatter.Quote()));
+  if (color) {
+    octomap::ColorOcTree tree(h.resolution_m);
+    {
+      OctomapChatter chatter;
+      if (h.size > 0) tree.readData(in);
+      AVP_RETURN_IF_ERROR(CheckOctomapRead(in, bytes.size(), tree.size(), h, chatter, path));
     }
-    if (const auto* t = dynamic_cast<const octomap::OcTree*>(tree.get())) {
-      return CollectOccupied(*t, max_voxels, path);
-    }
-    if (const auto* t = dynamic_cast<const octomap::ColorOcTree*>(tree.get())) {
-      return CollectOccupied(*t, max_voxels, path);
-    }
-    return ParseError(fmt::format(
-        "'{}' holds an OctoMap tree of type '{}'; only OcTree and ColorOcTree can be imported",
-        path.string(), tree->getTreeType()));
+    return CollectOccupied(tree, max_voxels, path);
   }
-  return ParseError(fmt::format(
-      "'{}' is not an OctoMap file: its first line is '{}', expected '{}' (.bt) or '{}' (.ot)",
-      path.string(), first_line, kBinaryHeader, kGeneralHeader));
+  octomap::OcTree tree(h.resolution_m);
+  {
+    OctomapChatter chatter;
+    if (h.size > 0) tree.readData(in);
+    AVP_RETURN_IF_ERROR(CheckOctomapRead(in, bytes.size(), tree.size(), h, chatter, path));
+  }
+  return CollectOccupied(tree, max_voxels, path);
 }
 
 // ---- Comparison

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include <avp/core/limits.h>
 #include <avp/core/status.h>
 #include <avp/mapping/semantic_map.h>
 
@@ -52,7 +53,14 @@ struct MapSaveOptions {
   std::string note;
 };
 
-/// The file's bytes for `map`. Deterministic: the same map gives the same bytes.
+/// max_map_blocks: 8^3-voxel blocks of one map read from a file, 2^21 (2097152, about 4.8 GB in
+/// memory) by default; checked on the header's count before any block is allocated.
+const Limit& MaxMapBlocks();
+
+/// The file's bytes for `map`. Deterministic: the same voxels give the same bytes. Blocks are
+/// written sorted by key, and blocks with no known voxel and no semantic payload (allocated but
+/// never reached) are left out, so neither the order in which blocks were allocated nor the
+/// number of threads that integrated the map changes the file.
 /// Errors: InvalidArgument when the note is too long.
 Result<std::vector<uint8_t>> SerializeMap(const SemanticMap& map,
                                           const MapSaveOptions& options = {});
@@ -66,7 +74,8 @@ Result<SemanticMap> DeserializeMap(std::span<const uint8_t> bytes, MapFileInfo* 
 Status SaveMap(const SemanticMap& map, const std::filesystem::path& path,
                const MapSaveOptions& options = {});
 
-/// Reads a map file; errors name the path and what is wrong with it.
+/// Reads a map file; errors name the path and what is wrong with it: NotFound, InvalidArgument (a
+/// folder), ResourceExhausted (max_file_bytes, max_map_blocks), IoError, ParseError.
 Result<SemanticMap> LoadMap(const std::filesystem::path& path, MapFileInfo* info = nullptr);
 
 /// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320, as zlib's crc32 and PNG): `crc` is the

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include <avp/core/limits.h>
 #include <avp/core/semantic_class.h>
 #include <avp/core/status.h>
 #include <avp/core/voxel_key.h>
@@ -58,6 +59,9 @@ struct OctomapExportStats {
   size_t file_bytes = 0;
 };
 
+/// Both exporters write atomically (io::WriteFileAtomic: a temporary name, flushed, renamed), so a
+/// killed run or a full disk never leaves a truncated tree; every write error names the file.
+///
 /// Writes an OctoMap binary tree (.bt): every known voxel as an occupied or free leaf (maximum
 /// likelihood: OctoMap stores one bit per node), pruned. Log-odds and semantics are lost; the
 /// occupancy decision (log-odds >= the sensor model's threshold) is kept exactly. Readable by
@@ -96,11 +100,25 @@ struct VoxelSet {
   size_t coarse_leaves = 0;
 };
 
+/// max_octomap_nodes: nodes of one OctoMap tree read from a file, 2^26 (67108864) by default
+/// (OctoMap holds some 40 bytes per node).
+const Limit& MaxOctomapNodes();
+
 /// Reads an OctoMap file (.bt, or .ot holding an OcTree or ColorOcTree) and returns its occupied
 /// voxels at the finest resolution: pruned (coarse) occupied leaves are expanded to every voxel
-/// they cover. Free and unknown space is dropped. Errors: NotFound, ParseError (not an OctoMap
-/// file, unreadable tree, unsupported tree type), OutOfRange when the expansion would exceed
-/// `max_voxels` (a huge pruned leaf).
+/// they cover. Free and unknown space is dropped.
+///
+/// The file is never trusted: its size is checked (max_file_bytes), its text header is parsed
+/// strictly (id, size as a node count, res in [1e-4, 100] m; nothing else), the node count against
+/// max_octomap_nodes, and the tree is walked before OctoMap sees it (at most 16 levels, finite
+/// log-odds, exactly the declared node count, ending exactly at the end of the file), so a
+/// truncated or crafted file is refused instead of read as a different tree. After OctoMap's
+/// reader the stream state, the position and the node count are checked again; what OctoMap
+/// printed on std::cerr meanwhile is quoted (escaped) in the error.
+/// Errors: NotFound, InvalidArgument (a folder), ResourceExhausted (max_file_bytes,
+/// max_octomap_nodes), ParseError (not an OctoMap file, a bad header, a broken or truncated tree,
+/// an unsupported tree type), OutOfRange when the expansion would exceed `max_voxels` (a huge
+/// pruned leaf).
 Result<VoxelSet> ImportOctomapOccupied(const std::filesystem::path& path,
                                        size_t max_voxels = size_t{1} << 27);
 
