@@ -177,15 +177,15 @@ const OptionTable<ShellCandidateOptions>& ShellCandidateOptionTable() {
                 "camera elevations above the target, drawn between the smallest and the largest");
     t->Real("azimuth_half_range_deg", &O::azimuth_half_range_deg, "deg", ValueRange::Closed(0, 180),
             "azimuths within this of the direction from the target to the robot base");
-    t->Integer("max_targets", &O::max_targets, "", ValueRange::AtLeast(1),
+    t->Integer("max_targets", &O::max_targets, "", ValueRange::Closed(1, 256),
                "targets: fruit instances, then frontier clusters, then the ROI centre");
-    t->Integer("max_candidates", &O::max_candidates, "", ValueRange::AtLeast(1),
+    t->Integer("max_candidates", &O::max_candidates, "", ValueRange::Closed(1, 20000),
                "candidates generated before the reachability check");
     t->Real("clearance_m", &O::clearance_m, "m", ValueRange::HalfOpen(0, 0.5),
             "no eye this close to a known occupied voxel");
     t->Real("plant_core_radius_m", &O::plant_core_radius_m, "m", ValueRange::HalfOpen(0, 2),
             "within this of the plant's core an eye must be in known free space (0: off)");
-    t->Integer("ik_restarts", &O::ik_restarts, "", ValueRange::AtLeast(0),
+    t->Integer("ik_restarts", &O::ik_restarts, "", ValueRange::Closed(0, 32),
                "IK restarts per candidate after the attempt from the current joints");
     t->Threads("num_threads", &O::num_threads);
     return t;

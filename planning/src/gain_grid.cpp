@@ -407,7 +407,9 @@ const OptionTable<GainGridOptions>& GainGridOptionTable() {
   static const auto* table = [] {
     auto* t = new OptionTable<GainGridOptions>("gain grid option");
     t->Real("near_target_radius_m", &GainGridOptions::near_target_radius_m, "m",
-            ValueRange::AtLeast(0), "unknown voxels this close to a target voxel are near it");
+            ValueRange::Closed(0, 0.1),
+            "unknown voxels this close to a target voxel are near it (work per voxel grows with "
+            "its cube)");
     t->Flag("predict_target_surface", &GainGridOptions::predict_target_surface,
             "mark the predicted surfaces of the target instances (fitted spheres)");
     return t;

@@ -295,7 +295,7 @@ std::optional<double> ProximityField::DistanceToOccupied(const VoxelKey& k) cons
 const OptionTable<IslerRayOptions>& IslerRayOptionTable() {
   static const auto* table = [] {
     auto* t = new OptionTable<IslerRayOptions>("Isler ray option");
-    t->Real("max_range_m", &IslerRayOptions::max_range_m, "m", ValueRange::Above(0),
+    t->Real("max_range_m", &IslerRayOptions::max_range_m, "m", ValueRange::LeftOpen(0, 10),
             "ray length from the optical centre");
     t->Integer("ray_stride_px", &IslerRayOptions::ray_stride_px, "px", ValueRange::AtLeast(1),
                "a ray through every stride-th pixel");

@@ -41,7 +41,7 @@ const OptionTable<PredefinedOptions>& PredefinedOptionTable() {
             "generic: lowest camera height as a fraction of the ROI's height");
     t->Real("generic_top_fraction", &O::generic_top_fraction, "", ValueRange::Closed(0, 1),
             "generic: highest camera height as a fraction of the ROI's height");
-    t->Integer("generic_waypoints", &O::generic_waypoints, "", ValueRange::AtLeast(0),
+    t->Integer("generic_waypoints", &O::generic_waypoints, "", ValueRange::Closed(0, 1000),
                "generic: waypoints (0: one per view after the start)");
     t->AddRule([](const O& o, std::vector<std::string>& problems) {
       const ValueRange unit = ValueRange::Closed(0, 1);

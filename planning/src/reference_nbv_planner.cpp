@@ -33,13 +33,13 @@ const OptionTable<ReferenceNbvOptions>& ReferenceNbvOptionTable() {
     auto* t = new OptionTable<O>("reference-nbv option");
     const ValueRange non_negative = ValueRange::AtLeast(0);
     const ValueRange ratio = ValueRange::AtLeast(1);
-    t->Integer("grid_size", &O::grid_size, "", ValueRange::AtLeast(1),
+    t->Integer("grid_size", &O::grid_size, "", ValueRange::Closed(1, 64),
                "positions per axis of the square_random layout");
     t->Real("grid_spacing_m", &O::grid_spacing_m, "m", non_negative, "spacing of the positions");
     t->Real("jitter_m", &O::jitter_m, "m", non_negative, "half-range of the uniform jitter");
     t->Real("tilt_deg", &O::tilt_deg, "deg", ValueRange::HalfOpen(0, 90),
             "tilt of the 4 extra orientations");
-    t->Real("max_range_m", &O::max_range_m, "m", ValueRange::Above(0), "ray length");
+    t->Real("max_range_m", &O::max_range_m, "m", ValueRange::LeftOpen(0, 10), "ray length");
     t->Real("depth_ratio", &O::depth_ratio, "", ratio, "full_attention ROI: depth shrink");
     t->Real("width_ratio", &O::width_ratio, "", ratio, "full_attention ROI: width shrink");
     t->Real("height_ratio", &O::height_ratio, "", ratio, "full_attention ROI: height shrink");

@@ -15,6 +15,9 @@
 #include <avp/core/segmentation.h>
 #include <avp/mapping/integrator.h>
 #include <avp/planning/avp_nbv_planner.h>
+#include <avp/planning/isler_utilities.h>
+#include <avp/planning/predefined_planner.h>
+#include <avp/planning/reference_nbv_planner.h>
 #include <avp/robot/arm_model.h>
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/scenario.h>
@@ -498,6 +501,59 @@ TEST_F(AvpNbvPlannerTest, BadRequestsAndOptionsAreErrors) {
   o = AvpNbvOptions{};
   o.refine_top = 0;
   EXPECT_NE(o.Validate().message().find("refine_top (0)"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace avp::planning
+
+namespace avp::planning {
+namespace {
+
+/// `key=value` set through `table` must parse and then fail Validate() with `message`.
+template <typename O>
+void ExpectRefused(const OptionTable<O>& table, const std::string& key, const std::string& value,
+                   const std::string& message) {
+  O o;
+  ASSERT_TRUE(table.Set(o, key, value).ok()) << key;
+  const Status s = table.Validate(o);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << key;
+  EXPECT_NE(s.message().find(message), std::string::npos) << s.message();
+}
+
+TEST(PlannerOptionBoundsTest, OptionsThatScaleWorkHaveUpperBounds) {
+  ExpectRefused(AvpNbvOptionTable(), "candidates.max_candidates", "1000000000",
+                "candidates.max_candidates (1000000000) must be in [1, 20000]");
+  ExpectRefused(AvpNbvOptionTable(), "candidates.ik_restarts", "1000",
+                "candidates.ik_restarts (1000) must be in [0, 32]");
+  ExpectRefused(AvpNbvOptionTable(), "candidates.max_targets", "100000",
+                "candidates.max_targets (100000) must be in [1, 256]");
+  ExpectRefused(AvpNbvOptionTable(), "grid.near_target_radius_m", "5",
+                "grid.near_target_radius_m (5 m) must be in [0, 0.1]");
+  ExpectRefused(AvpNbvOptionTable(), "max_range_m", "1000",
+                "max_range_m (1000 m) must be in (0, 10]");
+  ExpectRefused(ReferenceNbvOptionTable(), "grid_size", "1000",
+                "grid_size (1000) must be in [1, 64]");
+  ExpectRefused(ReferenceNbvOptionTable(), "max_range_m", "1000",
+                "max_range_m (1000 m) must be in (0, 10]");
+  ExpectRefused(IslerPlannerOptionTable(), "rays.max_range_m", "1000",
+                "rays.max_range_m (1000 m) must be in (0, 10]");
+  ExpectRefused(PredefinedOptionTable(), "generic_waypoints", "1000000",
+                "generic_waypoints (1000000) must be in [0, 1000]");
+  // The bounds themselves are accepted.
+  AvpNbvOptions o;
+  ASSERT_TRUE(AvpNbvOptionTable().Set(o, "candidates.max_candidates", "20000").ok());
+  ASSERT_TRUE(AvpNbvOptionTable().Set(o, "candidates.ik_restarts", "32").ok());
+  ASSERT_TRUE(AvpNbvOptionTable().Set(o, "grid.near_target_radius_m", "0.1").ok());
+  EXPECT_TRUE(o.Validate().ok()) << o.Validate().ToString();
+  // Each bound is in the table's description (avp run --planner help).
+  bool found = false;
+  for (const OptionInfo& info : AvpNbvOptionTable().Info()) {
+    if (info.key == "candidates.max_candidates") {
+      found = true;
+      EXPECT_NE(info.range.find("20000"), std::string::npos) << info.range;
+    }
+  }
+  EXPECT_TRUE(found);
 }
 
 }  // namespace

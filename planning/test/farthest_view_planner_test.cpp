@@ -93,7 +93,7 @@ TEST_F(FarthestViewPlannerTest, IsRegisteredWithItsOptions) {
   EXPECT_EQ((*planner)->name(), "farthest-view");
   EXPECT_THAT(
       registry.Options("farthest-view", {{"candidates.max_candidates", "0"}}).status().message(),
-      HasSubstr("candidates.max_candidates (0) must be >= 1"));
+      HasSubstr("candidates.max_candidates (0) must be in [1, 20000]"));
   Rng rng(1);
   PlanningRequest bad = Request({});
   bad.map = nullptr;
