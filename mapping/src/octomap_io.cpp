@@ -505,6 +505,11 @@ namespace {
 
 Result<VoxelSet> ImportOctomapOccupied(const fs::path& path, size_t max_voxels) {
   AVP_ASSIGN_OR_RETURN(const std::string bytes, io::ReadFileBounded(path, "OctoMap file"));
+  return ImportOctomapOccupiedBytes(bytes, path, max_voxels);
+}
+
+Result<VoxelSet> ImportOctomapOccupiedBytes(const std::string& bytes, const fs::path& path,
+                                            size_t max_voxels) {
   AVP_ASSIGN_OR_RETURN(const OctomapHeader h, ParseOctomapHeader(bytes, path));
   AVP_RETURN_IF_ERROR(
       MaxOctomapNodes().Check(fmt::format("OctoMap tree of '{}'", path.string()), h.size));

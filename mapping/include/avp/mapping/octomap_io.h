@@ -121,6 +121,11 @@ const Limit& MaxOctomapNodes();
 /// pruned leaf).
 Result<VoxelSet> ImportOctomapOccupied(const std::filesystem::path& path,
                                        size_t max_voxels = size_t{1} << 27);
+/// The same on a file's bytes already in memory (fuzzing, tests); `path` only names it in errors.
+/// Safe on any bytes.
+Result<VoxelSet> ImportOctomapOccupiedBytes(const std::string& bytes,
+                                            const std::filesystem::path& path,
+                                            size_t max_voxels = size_t{1} << 27);
 
 // ---- Comparison against a ground-truth voxel set -----------------------------------------------
 
