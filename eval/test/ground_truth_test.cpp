@@ -505,5 +505,31 @@ TEST_F(GroundTruthFileTest, OctomapRoundTrip) {
   EXPECT_THAT(missing.status().message(), HasSubstr("missing.bt"));
 }
 
+TEST_F(GroundTruthFileTest, TruncatedOctomapGroundTruthIsRefused) {
+  // A truncated .ot given as ground truth used to load as a different tree (600 000 voxels
+  // instead of 1 690) and be scored against: now it is an error that says where the tree ends.
+  Result<sim::Scene> scene = sim::MakeScenario("tomato-single-cluster", 2);
+  ASSERT_TRUE(scene.ok());
+  const sim::FruitVoxels surface = sim::VoxelizeFruitSurfaces(*scene, 0.006);
+  mapping::MapOptions options;
+  options.grid.voxel_size_m = 0.006;
+  mapping::SemanticMap map(options);
+  for (const VoxelKey& k : surface.SortedKeys()) {
+    map.grid().SetLogOdds(k, map.grid().clamp_max_log_odds());
+  }
+  const std::filesystem::path ot = dir_ / "gt.ot";
+  ASSERT_TRUE(mapping::ExportOctomapColor(map, ot).ok());
+  const Result<GroundTruth> whole = GroundTruthFromOctomapFile(ot, &*scene);
+  ASSERT_TRUE(whole.ok()) << whole.status().ToString();
+  EXPECT_EQ(whole->voxels.size(), surface.voxels.size());
+
+  std::filesystem::resize_file(ot, std::filesystem::file_size(ot) * 2 / 3);
+  const Result<GroundTruth> cut = GroundTruthFromOctomapFile(ot, &*scene);
+  ASSERT_FALSE(cut.ok()) << "read " << cut->voxels.size() << " voxels from a truncated file";
+  EXPECT_EQ(cut.status().code(), StatusCode::kParseError);
+  EXPECT_THAT(cut.status().message(), HasSubstr("gt.ot"));
+  EXPECT_THAT(cut.status().message(), HasSubstr("truncated"));
+}
+
 }  // namespace
 }  // namespace avp::eval

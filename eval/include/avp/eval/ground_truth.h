@@ -133,7 +133,9 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
 /// resolution (mapping::ImportOctomapOccupied). With a scene, each voxel goes to the fruit whose
 /// surface is nearest its centre (distance | |p - c| - mean radius |, ties to the smaller id) and
 /// `fruits` / `voxels_per_fruit` are filled; without one (nullptr) every voxel has id 0 and there
-/// are no fruits. Errors: those of ImportOctomapOccupied (NotFound, ParseError, OutOfRange).
+/// are no fruits. The file is checked before and after OctoMap reads it, so a truncated or
+/// corrupt file is an error, never a different ground truth. Errors: those of
+/// ImportOctomapOccupied (NotFound, InvalidArgument, ResourceExhausted, ParseError, OutOfRange).
 Result<GroundTruth> GroundTruthFromOctomapFile(const std::filesystem::path& bt,
                                                const sim::Scene* scene);
 
