@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include <avp/core/error.h>
+#include <avp/core/text.h>
 #include <avp/sim/scene.h>
 
 namespace avp::sim {
@@ -139,29 +140,30 @@ void Scene::UpdatePlantBounds() {
 }
 
 Status Scene::Validate() const {
+  // Names come from files (mesh nodes, scene files): quoted escaped in messages.
   std::unordered_set<uint16_t> ids;
   for (const SceneObject& o : objects) {
     if (o.instance_id == 0) {
       return InvalidArgumentError(
-          fmt::format("scene '{}': object '{}' has instance id 0 (reserved "
+          fmt::format("scene {}: object {} has instance id 0 (reserved "
                       "for background)",
-                      name, o.name));
+                      QuoteText(name), QuoteText(o.name)));
     }
     if (!ids.insert(o.instance_id).second) {
-      return InvalidArgumentError(fmt::format(
-          "scene '{}': instance id {} is used twice (object '{}')", name, o.instance_id, o.name));
+      return InvalidArgumentError(fmt::format("scene {}: instance id {} is used twice (object {})",
+                                              QuoteText(name), o.instance_id, QuoteText(o.name)));
     }
     if (const auto* mesh = std::get_if<TriangleMesh>(&o.shape)) {
-      AVP_RETURN_IF_ERROR(
-          mesh->Validate().WithContext(fmt::format("scene '{}', object '{}'", name, o.name)));
+      AVP_RETURN_IF_ERROR(mesh->Validate().WithContext(
+          fmt::format("scene {}, object {}", QuoteText(name), QuoteText(o.name))));
     } else {
       const Ellipsoid& e = std::get<Ellipsoid>(o.shape);
       if (!e.center_W.allFinite() || !e.radii.allFinite() || (e.radii.array() <= 0.0).any()) {
         return InvalidArgumentError(fmt::format(
-            "scene '{}', object '{}': ellipsoid centre ({}, {}, {}) radii ({}, {}, {}) must be "
+            "scene {}, object {}: ellipsoid centre ({}, {}, {}) radii ({}, {}, {}) must be "
             "finite with radii > 0",
-            name, o.name, e.center_W.x(), e.center_W.y(), e.center_W.z(), e.radii.x(), e.radii.y(),
-            e.radii.z()));
+            QuoteText(name), QuoteText(o.name), e.center_W.x(), e.center_W.y(), e.center_W.z(),
+            e.radii.x(), e.radii.y(), e.radii.z()));
       }
     }
   }

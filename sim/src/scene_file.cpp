@@ -396,6 +396,90 @@ Status CheckPlyHeader(const fs::path& file, uint64_t file_bytes, const std::stri
   return Status::Ok();
 }
 
+/// OBJ and STL files declare no counts: before assimp reads one, its vertex and face lines are
+/// counted in one streaming pass (OBJ "v" and "f" lines, ASCII STL "facet" lines; a binary STL's
+/// triangle count against the file's size), and checked against max_mesh_vertices /
+/// max_mesh_faces, so a file of 100 million short lines is refused before assimp holds them.
+Status CheckObjOrStlCounts(const fs::path& file, uint64_t file_bytes, const std::string& ext,
+                           const std::string& context) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) return IoError(fmt::format("{}.file: cannot read mesh '{}'", context, file.string()));
+  std::string chunk(1 << 16, '\0');
+  if (ext == ".stl") {
+    in.read(chunk.data(), 84);
+    const auto got = static_cast<size_t>(in.gcount());
+    const bool ascii = got >= 5 && chunk.compare(0, 5, "solid") == 0;
+    if (!ascii) {
+      if (got < 84) {
+        return ParseError(
+            fmt::format("{}.file: STL mesh '{}' is truncated ({} bytes, a binary STL "
+                        "header needs 84)",
+                        context, file.string(), got));
+      }
+      const uint64_t triangles = uint64_t{static_cast<uint8_t>(chunk[80])} |
+                                 (uint64_t{static_cast<uint8_t>(chunk[81])} << 8) |
+                                 (uint64_t{static_cast<uint8_t>(chunk[82])} << 16) |
+                                 (uint64_t{static_cast<uint8_t>(chunk[83])} << 24);
+      const std::string what =
+          fmt::format("{}.file: STL mesh '{}': {} triangles", context, file.string(), triangles);
+      AVP_RETURN_IF_ERROR(MaxMeshFaces().Check(what, triangles));
+      AVP_RETURN_IF_ERROR(MaxMeshVertices().Check(what + " (3 vertices each)", 3 * triangles));
+      if (84 + 50 * triangles > file_bytes) {
+        return ParseError(fmt::format(
+            "{}.file: STL mesh '{}' declares {} triangles ({} bytes) in a file of {} bytes: "
+            "truncated or corrupt",
+            context, file.string(), triangles, 84 + 50 * triangles, file_bytes));
+      }
+      return Status::Ok();
+    }
+    in.clear();
+    in.seekg(0);
+  }
+  uint64_t vertices = 0, faces = 0;
+  bool line_start = true;
+  std::string first;  // the first token of the current line, up to 6 characters
+  bool in_first = true;
+  const auto end_token = [&] {
+    if (ext == ".obj") {
+      if (first == "v") ++vertices;
+      if (first == "f") ++faces;
+    } else if (first == "facet") {
+      ++faces;
+      vertices += 3;
+    }
+  };
+  while (in) {
+    in.read(chunk.data(), static_cast<std::streamsize>(chunk.size()));
+    const auto n = static_cast<size_t>(in.gcount());
+    for (size_t i = 0; i < n; ++i) {
+      const char c = chunk[i];
+      if (c == '\n') {
+        if (in_first) end_token();
+        line_start = true;
+        in_first = true;
+        first.clear();
+        continue;
+      }
+      if (!in_first) continue;
+      if (c == ' ' || c == '\t' || c == '\r') {
+        if (!line_start) {
+          end_token();
+          in_first = false;
+        }
+        continue;
+      }
+      line_start = false;
+      if (first.size() < 6) first.push_back(c);
+    }
+  }
+  if (in_first && !line_start) end_token();
+  AVP_RETURN_IF_ERROR(MaxMeshVertices().Check(
+      fmt::format("{}.file: vertex lines of mesh '{}'", context, file.string()), vertices));
+  AVP_RETURN_IF_ERROR(MaxMeshFaces().Check(
+      fmt::format("{}.file: face lines of mesh '{}'", context, file.string()), faces));
+  return Status::Ok();
+}
+
 /// Everything one mesh file contributes, before it is added to the scene.
 struct ImportedPart {
   std::string name;
@@ -412,6 +496,9 @@ Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::
       file_bytes));
   const std::string ext = LowerExtension(entry.file);
   if (ext == ".ply") AVP_RETURN_IF_ERROR(CheckPlyHeader(entry.file, file_bytes, context));
+  if (ext == ".obj" || ext == ".stl") {
+    AVP_RETURN_IF_ERROR(CheckObjOrStlCounts(entry.file, file_bytes, ext, context));
+  }
   Assimp::Importer importer;
   const bool is_collada = ext == ".dae";
   const bool is_gltf = ext == ".gltf" || ext == ".glb";

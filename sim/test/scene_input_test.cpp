@@ -100,6 +100,35 @@ TEST_F(SceneInputTest, MeshLimitsAreConfigurableAndCoverTheWholeScene) {
   }
 }
 
+TEST_F(SceneInputTest, ObjAndStlCountsAreCheckedBeforeAssimp) {
+  std::string obj = "o many\n";
+  for (int i = 0; i < 20; ++i) obj += "v " + std::to_string(i) + " 0 0\n";
+  obj += "f 1 2 3\n";
+  Write("many.obj", obj);
+  {
+    const ScopedLimit ten(MaxMeshVertices(), 10);
+    const Status s = LoadMesh("many.obj");
+    EXPECT_EQ(s.code(), StatusCode::kResourceExhausted) << s.ToString();
+    EXPECT_THAT(s.message(), HasSubstr("vertex lines of mesh"));
+    EXPECT_THAT(s.message(), HasSubstr("(20) exceeds the limit max_mesh_vertices = 10"));
+  }
+  EXPECT_TRUE(LoadMesh("many.obj").ok()) << LoadMesh("many.obj").ToString();
+  // A binary STL: 80 bytes of header, a triangle count, 50 bytes per triangle.
+  const auto stl = [&](uint32_t triangles) {
+    std::string bytes(80, 'x');
+    for (int i = 0; i < 4; ++i) bytes.push_back(static_cast<char>(triangles >> (8 * i)));
+    std::ofstream(dir_ / "t.stl", std::ios::binary) << bytes;
+  };
+  stl(1000000000u);
+  Status s = LoadMesh("t.stl");
+  EXPECT_EQ(s.code(), StatusCode::kResourceExhausted) << s.ToString();
+  EXPECT_THAT(s.message(), HasSubstr("max_mesh_faces"));
+  stl(5);
+  s = LoadMesh("t.stl");
+  EXPECT_EQ(s.code(), StatusCode::kParseError) << s.ToString();
+  EXPECT_THAT(s.message(), HasSubstr("declares 5 triangles (334 bytes) in a file of 84 bytes"));
+}
+
 TEST_F(SceneInputTest, NonFiniteVerticesAreRefused) {
   Write("nan.ply", PlyHeader("3", "1") + "0 0 0\nnan 0 0\n0.1 0.1 0\n3 0 1 2\n");
   Write("nan.obj", "o a\nv 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n");
