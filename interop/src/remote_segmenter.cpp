@@ -1,6 +1,8 @@
 #include <charconv>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
@@ -163,6 +165,9 @@ RemoteSegmenter::RemoteSegmenter(RemoteOptions options)
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
+  // A connection of its own: the server shares its queue fairly between connections, so two
+  // segmenters of one process are two clients (gRPC would otherwise share one connection).
+  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
   impl_->channel =
       grpc::CreateCustomChannel(options_.Address(), grpc::InsecureChannelCredentials(), args);
   impl_->stub = inference::GRPCInferenceService::NewStub(impl_->channel);
@@ -195,17 +200,22 @@ Status FromGrpc(const grpc::Status& s, const RemoteOptions& o, std::string_view 
     case grpc::StatusCode::OUT_OF_RANGE:
       return OutOfRangeError(fmt::format("{}: {}", where, s.error_message()));
     case grpc::StatusCode::UNAVAILABLE:
-      return IoError(fmt::format(
+      return UnavailableError(fmt::format(
           "{}: the segmentation server at {} is unavailable (is `avp serve segmentation --port "
           "{}` running there?): {}",
           where, o.Address(), o.port, s.error_message()));
     case grpc::StatusCode::DEADLINE_EXCEEDED:
-      return IoError(fmt::format("{}: no answer from {} within the deadline of {} s: {}", where,
-                                 o.Address(), o.deadline_s, s.error_message()));
+      return DeadlineExceededError(
+          fmt::format("{}: no answer from {} within the deadline of {} s: {}", where, o.Address(),
+                      o.deadline_s, s.error_message()));
+    case grpc::StatusCode::CANCELLED:
+      return CancelledError(fmt::format("{}: the call to {} was cancelled: {}", where, o.Address(),
+                                        s.error_message()));
     case grpc::StatusCode::RESOURCE_EXHAUSTED:
-      return IoError(fmt::format(
-          "{}: {} refused the message (larger than the {} bytes allowed on either end?): {}", where,
-          o.Address(), o.max_message_bytes, s.error_message()));
+      return ResourceExhaustedError(fmt::format(
+          "{}: {} refused the request (a limit of the server, its queue is full, or the message "
+          "is larger than the {} bytes allowed on either end): {}",
+          where, o.Address(), o.max_message_bytes, s.error_message()));
     case grpc::StatusCode::INTERNAL:
     case grpc::StatusCode::UNKNOWN:
       return InternalError(
@@ -234,7 +244,34 @@ Result<Segmentation> RemoteSegmenter::Segment(const segmentation::SegmentationRe
   inference::ModelInferResponse proto_response;
   grpc::ClientContext context;
   SetDeadline(context, options_.deadline_s);
-  const grpc::Status s = impl_->stub->ModelInfer(&context, proto_request, &proto_response);
+  grpc::Status s;
+  if (!request.interrupt) {
+    s = impl_->stub->ModelInfer(&context, proto_request, &proto_response);
+  } else {
+    // Asynchronously, asking the interrupt every 20 ms: a stop cancels the call (the server then
+    // stops its work too) and returns the interrupt's status.
+    std::mutex mutex;
+    std::condition_variable cv;
+    bool done = false;
+    impl_->stub->async()->ModelInfer(&context, &proto_request, &proto_response,
+                                     [&](grpc::Status status) {
+                                       std::lock_guard lock(mutex);
+                                       s = std::move(status);
+                                       done = true;
+                                       cv.notify_all();
+                                     });
+    Status stop;
+    std::unique_lock lock(mutex);
+    while (!cv.wait_for(lock, std::chrono::milliseconds(20), [&] { return done; })) {
+      if (stop.ok()) {
+        lock.unlock();
+        stop = request.interrupt();
+        if (!stop.ok()) context.TryCancel();
+        lock.lock();
+      }
+    }
+    if (!stop.ok()) return stop.WithContext(fmt::format("remote segmenter {}", spec_));
+  }
   if (!s.ok()) return FromGrpc(s, options_, "ModelInfer");
   Result<InferResponse> response = internal::FromProto(proto_response);
   if (!response.ok()) {

@@ -16,6 +16,8 @@
 #include <fmt/ranges.h>
 #include <grpcpp/grpcpp.h>
 
+#include <avp/core/limits.h>
+#include <avp/core/text.h>
 #include <avp/interop/segmentation_codec.h>
 #include <avp/interop/segmentation_server.h>
 #include <avp/segmentation/segmenter.h>
@@ -64,9 +66,10 @@ class SegmenterCache {
     e.last_used = ++tick_;
   }
 
-  /// A segmenter for `seed`, built on first use; waits for a free instance until `deadline`.
+  /// A segmenter for `seed`, built on first use; waits for a free instance until `interrupt`
+  /// says stop (the client left or the deadline passed: its status is returned).
   Result<std::unique_ptr<segmentation::Segmenter>> Acquire(
-      uint64_t seed, std::chrono::system_clock::time_point deadline) {
+      uint64_t seed, const std::function<Status()>& interrupt) {
     std::unique_lock lock(mutex_);
     while (true) {
       Entry& e = entries_[seed];
@@ -101,11 +104,10 @@ class SegmenterCache {
         }
         return built;
       }
-      if (cv_.wait_until(lock, deadline) == std::cv_status::timeout &&
-          std::chrono::system_clock::now() >= deadline) {
-        return Status(
-            StatusCode::kIoError,
-            fmt::format("deadline exceeded while waiting for a free '{}' segmenter", backend_));
+      // Woken by Release; asks the interrupt every 20 ms (a client that left frees its place).
+      cv_.wait_for(lock, std::chrono::milliseconds(20));
+      if (Status stop = interrupt(); !stop.ok()) {
+        return stop.WithContext(fmt::format("while waiting for a free '{}' segmenter", backend_));
       }
     }
   }
@@ -157,21 +159,42 @@ struct Model {
   std::unique_ptr<SegmenterCache> cache;  // null when not ready
 };
 
-/// A fixed pool of worker threads over a FIFO queue.
+/// A fixed pool of worker threads over a bounded queue shared fairly between clients: each
+/// client (a key, the gRPC peer) has its own FIFO, and the workers take the clients' next
+/// requests in turn (round robin). At most `max_depth` tasks wait in all, at most `per_client`
+/// of one client.
 class WorkQueue {
  public:
-  explicit WorkQueue(int threads) {
+  WorkQueue(int threads, size_t max_depth, size_t per_client)
+      : max_depth_(max_depth), per_client_(per_client) {
     for (int i = 0; i < threads; ++i) workers_.emplace_back([this] { Loop(); });
   }
   ~WorkQueue() { Stop(); }
 
-  void Push(std::function<void()> task) {
+  enum class Pushed : uint8_t { kQueued, kQueueFull, kClientFull };
+
+  /// Queues `task` for `client`, or refuses it (nothing queued) when the queue or the client's
+  /// share is full.
+  Pushed Push(const std::string& client, std::function<void()> task) {
     {
       std::lock_guard lock(mutex_);
-      tasks_.push_back(std::move(task));
+      if (size_ >= max_depth_) return Pushed::kQueueFull;
+      std::deque<std::function<void()>>& mine = clients_[client];
+      if (mine.size() >= per_client_) return Pushed::kClientFull;
+      if (mine.empty()) turns_.push_back(client);
+      mine.push_back(std::move(task));
+      ++size_;
     }
     cv_.notify_one();
+    return Pushed::kQueued;
   }
+
+  size_t max_depth() const { return max_depth_; }
+  size_t size() const {
+    std::lock_guard lock(mutex_);
+    return size_;
+  }
+  size_t per_client() const { return per_client_; }
 
   /// Runs what is queued, then joins the workers.
   void Stop() {
@@ -192,18 +215,32 @@ class WorkQueue {
       std::function<void()> task;
       {
         std::unique_lock lock(mutex_);
-        cv_.wait(lock, [this] { return stopping_ || !tasks_.empty(); });
-        if (tasks_.empty()) return;
-        task = std::move(tasks_.front());
-        tasks_.pop_front();
+        cv_.wait(lock, [this] { return stopping_ || size_ > 0; });
+        if (size_ == 0) return;
+        // The client whose turn it is; back of the line if it has more.
+        const std::string client = std::move(turns_.front());
+        turns_.pop_front();
+        const auto it = clients_.find(client);
+        task = std::move(it->second.front());
+        it->second.pop_front();
+        --size_;
+        if (it->second.empty()) {
+          clients_.erase(it);
+        } else {
+          turns_.push_back(client);
+        }
       }
       task();
     }
   }
 
-  std::mutex mutex_;
+  const size_t max_depth_;
+  const size_t per_client_;
+  mutable std::mutex mutex_;
   std::condition_variable cv_;
-  std::deque<std::function<void()>> tasks_;
+  std::map<std::string, std::deque<std::function<void()>>> clients_;
+  std::deque<std::string> turns_;  ///< clients with queued tasks, in the order they are served
+  size_t size_ = 0;
   bool stopping_ = false;
   std::vector<std::thread> workers_;
 };
@@ -234,12 +271,35 @@ Status ServerOptions::Validate() const {
     errors.push_back(
         fmt::format("instances_per_model ({}) must be in [1, 64]", instances_per_model));
   }
-  if (max_cached_seeds < 1) {
-    errors.push_back(fmt::format("max_cached_seeds ({}) must be >= 1", max_cached_seeds));
+  if (max_cached_seeds < 1 || max_cached_seeds > 1024) {
+    errors.push_back(fmt::format("max_cached_seeds ({}) must be in [1, 1024]", max_cached_seeds));
   }
-  if (max_message_bytes < (1 << 20)) {
+  if (max_message_bytes < (1 << 20) || max_message_bytes > (1 << 30)) {
     errors.push_back(
-        fmt::format("max_message_bytes ({}) must be >= 1 MiB (1048576)", max_message_bytes));
+        fmt::format("max_message_bytes ({}) must be in [1 MiB (1048576), 1 GiB (1073741824)]",
+                    max_message_bytes));
+  }
+  if (max_queue_depth < 1 || max_queue_depth > 100000) {
+    errors.push_back(fmt::format("max_queue_depth ({}) must be in [1, 100000]", max_queue_depth));
+  }
+  if (max_queued_per_client < 1 || max_queued_per_client > std::max(max_queue_depth, 1)) {
+    errors.push_back(fmt::format("max_queued_per_client ({}) must be in [1, max_queue_depth ({})]",
+                                 max_queued_per_client, max_queue_depth));
+  }
+  if (max_image_pixels < 1 || max_image_pixels > (uint64_t{1} << 30)) {
+    errors.push_back(fmt::format("max_image_pixels ({}) must be in [1, 1073741824 (32768^2)]",
+                                 max_image_pixels));
+  }
+  if (max_prompt_bytes < 1 || max_prompt_bytes > (uint64_t{1} << 20)) {
+    errors.push_back(
+        fmt::format("max_prompt_bytes ({}) must be in [1, 1048576 (1 MiB)]", max_prompt_bytes));
+  }
+  if (max_prompt_phrases < 1 || max_prompt_phrases > 4096) {
+    errors.push_back(
+        fmt::format("max_prompt_phrases ({}) must be in [1, 4096]", max_prompt_phrases));
+  }
+  if (max_instances < 1 || max_instances > 65535) {
+    errors.push_back(fmt::format("max_instances ({}) must be in [1, 65535]", max_instances));
   }
   if (errors.empty()) return Status::Ok();
   return InvalidArgumentError(fmt::format("invalid server options: {}", fmt::join(errors, "; ")));
@@ -249,13 +309,15 @@ Status ServerOptions::Validate() const {
 
 struct SegmentationServer::Impl final : public inference::GRPCInferenceService::CallbackService {
   ServerOptions options;
+  RequestBudget budget_;
   std::vector<Model> models;  // in the order of options.backends
   std::unique_ptr<WorkQueue> queue;
   std::unique_ptr<grpc::Server> server;
   int port = 0;
   std::mutex shutdown_mutex;
   bool shut_down = false;
-  std::atomic<uint64_t> infer_ok{0}, infer_failed{0}, infer_expired{0};
+  std::atomic<uint64_t> infer_ok{0}, infer_failed{0}, infer_expired{0}, infer_interrupted{0},
+      infer_queue_full{0}, infer_over_budget{0};
 
   const Model* FindModel(std::string_view name) const {
     for (const Model& m : models) {
@@ -356,17 +418,34 @@ struct SegmentationServer::Impl final : public inference::GRPCInferenceService::
     const Clock::time_point queued = Clock::now();
     // Off the gRPC threads: a worker decodes, segments and answers. context, request and
     // response stay valid until the reactor finishes.
-    queue->Push([this, context, request, response, reactor, queued] {
-      grpc::Status status;
-      try {
-        status = Infer(context, *request, response, queued);
-      } catch (const std::exception& e) {
-        status = grpc::Status(grpc::StatusCode::INTERNAL,
-                              fmt::format("model '{}' threw: {}", request->model_name(), e.what()));
-      }
-      (status.ok() ? infer_ok : infer_failed).fetch_add(1);
-      reactor->Finish(status);
-    });
+    const WorkQueue::Pushed pushed =
+        queue->Push(context->peer(), [this, context, request, response, reactor, queued] {
+          grpc::Status status;
+          try {
+            status = Infer(context, *request, response, queued);
+          } catch (const std::exception& e) {
+            status =
+                grpc::Status(grpc::StatusCode::INTERNAL,
+                             fmt::format("model '{}' threw: {}", request->model_name(), e.what()));
+          }
+          (status.ok() ? infer_ok : infer_failed).fetch_add(1);
+          reactor->Finish(status);
+        });
+    if (pushed != WorkQueue::Pushed::kQueued) {
+      infer_queue_full.fetch_add(1);
+      infer_failed.fetch_add(1);
+      const Status refused =
+          pushed == WorkQueue::Pushed::kQueueFull
+              ? ExceedsLimit("requests waiting for a worker", queue->max_depth() + 1,
+                             "max_queue_depth", queue->max_depth(),
+                             "the server is busy: retry later, or raise it with `avp serve "
+                             "segmentation --max-queue-depth N`")
+              : ExceedsLimit("requests of this client waiting for a worker",
+                             queue->per_client() + 1, "max_queued_per_client", queue->per_client(),
+                             "wait for answers before sending more, or raise it with `avp serve "
+                             "segmentation --max-queued-per-client N`");
+      reactor->Finish(internal::ToGrpcStatus(refused));
+    }
     return reactor;
   }
 
@@ -385,6 +464,18 @@ struct SegmentationServer::Impl final : public inference::GRPCInferenceService::
               fmt::format("the deadline passed while the request waited {:.0f} ms in the queue",
                           MsBetween(queued, started))};
     }
+    // Stops the work once the client cancelled or left, or the deadline passed.
+    const std::function<Status()> interrupt = [context, deadline]() -> Status {
+      if (context->IsCancelled()) return CancelledError("the client cancelled the call or left");
+      if (std::chrono::system_clock::now() >= deadline) {
+        return DeadlineExceededError("the call's deadline passed");
+      }
+      return Status::Ok();
+    };
+    const auto stopped = [this](const Status& status) {
+      infer_interrupted.fetch_add(1);
+      return internal::ToGrpcStatus(status);
+    };
     Result<const Model*> model = Lookup(proto.model_name(), proto.model_version());
     if (!model.ok()) return internal::ToGrpcStatus(model.status());
     const Model& m = **model;
@@ -392,42 +483,78 @@ struct SegmentationServer::Impl final : public inference::GRPCInferenceService::
       return {grpc::StatusCode::FAILED_PRECONDITION,
               fmt::format("model '{}' is not ready: {}", m.state.name, m.state.reason)};
     }
+    // Counts before anything is converted: a request with a million tensors or parameters is
+    // refused without copying them.
+    if (static_cast<size_t>(proto.inputs_size()) > kMaxRequestInputs ||
+        static_cast<size_t>(proto.outputs_size()) > kMaxRequestedOutputs ||
+        static_cast<size_t>(proto.parameters_size()) > kMaxRequestParameters) {
+      return {grpc::StatusCode::INVALID_ARGUMENT,
+              fmt::format("the request has {} inputs, {} requested outputs and {} parameters: a "
+                          "segmentation request has at most {}, {} and {}",
+                          proto.inputs_size(), proto.outputs_size(), proto.parameters_size(),
+                          kMaxRequestInputs, kMaxRequestedOutputs, kMaxRequestParameters)};
+    }
     Result<InferRequest> request = internal::FromProto(proto);
     if (!request.ok()) return internal::ToGrpcStatus(request.status());
-    Result<DecodedSegmentationRequest> decoded = DecodeSegmentationRequest(*request);
-    if (!decoded.ok()) return internal::ToGrpcStatus(decoded.status());
+    if (Status budget = CheckRequestBudget(*request, budget_); !budget.ok()) {
+      if (budget.code() == StatusCode::kResourceExhausted) infer_over_budget.fetch_add(1);
+      return internal::ToGrpcStatus(budget);
+    }
     for (const std::string& name : request->requested_outputs) {
       const auto& outs = SegmentationOutputs();
       if (std::none_of(outs.begin(), outs.end(),
                        [&](const TensorSpec& s) { return s.name == name; })) {
         return {grpc::StatusCode::INVALID_ARGUMENT,
-                fmt::format("requested output '{}' does not exist; outputs: masks, classes, "
+                fmt::format("requested output {} does not exist; outputs: masks, classes, "
                             "scores, labels, boxes, has_box, mask_scores",
-                            name)};
+                            QuoteText(name))};
       }
     }
+    if (Status stop = interrupt(); !stop.ok()) return stopped(stop.WithContext("before decoding"));
+    Result<DecodedSegmentationRequest> decoded = DecodeSegmentationRequest(*request, budget_);
+    if (!decoded.ok()) return internal::ToGrpcStatus(decoded.status());
     const Clock::time_point decoded_at = Clock::now();
 
     const uint64_t seed = decoded->seed.value_or(options.default_seed);
-    Result<std::unique_ptr<segmentation::Segmenter>> segmenter = m.cache->Acquire(seed, deadline);
+    Result<std::unique_ptr<segmentation::Segmenter>> segmenter = m.cache->Acquire(seed, interrupt);
     if (!segmenter.ok()) {
-      if (segmenter.status().code() == StatusCode::kIoError) {
-        return {grpc::StatusCode::DEADLINE_EXCEEDED, segmenter.status().message()};
+      const StatusCode code = segmenter.status().code();
+      if (code == StatusCode::kCancelled || code == StatusCode::kDeadlineExceeded) {
+        return stopped(segmenter.status());
       }
       return internal::ToGrpcStatus(segmenter.status());
     }
     const Clock::time_point acquired = Clock::now();
     Result<Segmentation> segmentation = InternalError("not segmented");
+    segmentation::SegmentationRequest segmentation_request = decoded->request();
+    segmentation_request.interrupt = interrupt;
     try {
-      segmentation = (*segmenter)->Segment(decoded->request());
+      segmentation = (*segmenter)->Segment(segmentation_request);
     } catch (const std::exception& e) {
       segmentation = InternalError(fmt::format("model '{}' threw: {}", m.state.name, e.what()));
     }
     m.cache->Release(seed, std::move(*segmenter));
     const Clock::time_point segmented = Clock::now();
+    // A backend that does not ask the interrupt still has its answer dropped when nobody waits.
+    if (Status stop = interrupt(); !stop.ok()) {
+      return stopped(stop.WithContext(fmt::format("model '{}'", m.state.name)));
+    }
     if (!segmentation.ok()) {
-      return internal::ToGrpcStatus(
-          segmentation.status().WithContext(fmt::format("model '{}'", m.state.name)));
+      const StatusCode code = segmentation.status().code();
+      const Status status =
+          segmentation.status().WithContext(fmt::format("model '{}'", m.state.name));
+      if (code == StatusCode::kCancelled || code == StatusCode::kDeadlineExceeded) {
+        return stopped(status);
+      }
+      return internal::ToGrpcStatus(status);
+    }
+    if (Status n = CheckLimit(fmt::format("instances found by model '{}'", m.state.name),
+                              segmentation->instances.size(), "max_instances",
+                              static_cast<uint64_t>(options.max_instances),
+                              "raise it with `avp serve segmentation --max-instances N`, or "
+                              "narrow the prompt");
+        !n.ok()) {
+      return internal::ToGrpcStatus(n);
     }
     const int w = decoded->frame.rgb.width();
     const int h = decoded->frame.rgb.height();
@@ -489,7 +616,12 @@ Result<std::unique_ptr<SegmentationServer>> SegmentationServer::Start(
     }
     impl->models.push_back(std::move(m));
   }
-  impl->queue = std::make_unique<WorkQueue>(options.threads);
+  impl->budget_.max_image_pixels = options.max_image_pixels;
+  impl->budget_.max_prompt_bytes = options.max_prompt_bytes;
+  impl->budget_.max_prompt_phrases = options.max_prompt_phrases;
+  impl->queue =
+      std::make_unique<WorkQueue>(options.threads, static_cast<size_t>(options.max_queue_depth),
+                                  static_cast<size_t>(options.max_queued_per_client));
 
   const std::string address =
       options.host.find(':') != std::string::npos && options.host.front() != '['
@@ -534,6 +666,10 @@ ServerStats SegmentationServer::stats() const {
   s.infer_ok = impl_->infer_ok.load();
   s.infer_failed = impl_->infer_failed.load();
   s.infer_expired = impl_->infer_expired.load();
+  s.infer_interrupted = impl_->infer_interrupted.load();
+  s.infer_queue_full = impl_->infer_queue_full.load();
+  s.infer_over_budget = impl_->infer_over_budget.load();
+  s.queued = impl_->queue ? impl_->queue->size() : 0;
   return s;
 }
 

@@ -6,10 +6,13 @@
 #include <string>
 #include <vector>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/core/limits.h>
 #include <avp/interop/segmentation_codec.h>
+#include <avp/io/image_codec.h>
 #include <avp/segmentation/oracle_segmenter.h>
 
 #include "test_scene.h"
@@ -377,6 +380,166 @@ TEST_F(MalformedRequestTest, BadValuesAndParameters) {
   r = good_;
   r.parameters["frame_index"] = std::string("seven");
   EXPECT_THAT(Error(r), HasSubstr("parameter 'frame_index' (string \"seven\")"));
+}
+
+// ---- budgets: checked before anything is decoded
+// -----------------------------------------------------------------
+
+/// A PNG of 8-byte signature and IHDR chunk declaring w x h, and no pixels at all.
+std::string PngHeader(uint32_t w, uint32_t h) {
+  std::string png = "\x89PNG\r\n\x1a\n";
+  const auto be32 = [&](uint32_t v) {
+    for (int i = 3; i >= 0; --i) png.push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+  };
+  be32(13);
+  png += "IHDR";
+  be32(w);
+  be32(h);
+  png += std::string("\x08\x02\x00\x00\x00", 5);  // 8-bit RGB
+  be32(0);                                        // CRC (never read)
+  png += "garbage instead of IDAT";
+  return png;
+}
+
+/// A JPEG: SOI, an APP0 segment, then an SOF0 frame header declaring w x h.
+std::string JpegHeader(uint16_t w, uint16_t h) {
+  std::string jpeg = "\xff\xd8";
+  jpeg += std::string("\xff\xe0\x00\x06JFIF", 8);
+  jpeg += std::string("\xff\xc0\x00\x11\x08", 5);
+  jpeg.push_back(static_cast<char>(h >> 8));
+  jpeg.push_back(static_cast<char>(h & 0xff));
+  jpeg.push_back(static_cast<char>(w >> 8));
+  jpeg.push_back(static_cast<char>(w & 0xff));
+  jpeg += "rest of a frame that is never decoded";
+  return jpeg;
+}
+
+class BudgetTest : public MalformedRequestTest {
+ protected:
+  /// The decoder's error for `r`, which must be ResourceExhausted.
+  std::string Exhausted(const InferRequest& r, const RequestBudget& budget = {}) {
+    auto d = DecodeSegmentationRequest(r, budget);
+    EXPECT_FALSE(d.ok());
+    if (d.ok()) return "";
+    EXPECT_EQ(d.status().code(), StatusCode::kResourceExhausted) << d.status().ToString();
+    EXPECT_EQ(CheckRequestBudget(r, budget).message(), d.status().message());
+    return d.status().message();
+  }
+  InferRequest WithImage(std::string bytes) {
+    InferRequest r = good_;
+    std::erase_if(r.inputs, [](const Tensor& t) { return t.name != "prompt"; });
+    r.inputs.push_back(MakeBytesTensor("image", {std::move(bytes)}));
+    return r;
+  }
+};
+
+TEST(EncodedImageSizeTest, ReadsPngAndJpegHeadersOnly) {
+  EXPECT_EQ(EncodedImageSize(PngHeader(20000, 20000)), std::make_pair(20000u, 20000u));
+  EXPECT_EQ(EncodedImageSize(JpegHeader(640, 480)), std::make_pair(640u, 480u));
+  // A real PNG from the codec.
+  ImageRgb8 rgb(7, 5, 10);
+  auto png = io::EncodePng(rgb);
+  ASSERT_TRUE(png.ok());
+  EXPECT_EQ(EncodedImageSize(std::string(png->begin(), png->end())), std::make_pair(7u, 5u));
+  auto jpeg = io::EncodeJpeg(rgb, 90);
+  ASSERT_TRUE(jpeg.ok());
+  EXPECT_EQ(EncodedImageSize(std::string(jpeg->begin(), jpeg->end())), std::make_pair(7u, 5u));
+  // Cut short, other formats, nothing.
+  EXPECT_EQ(EncodedImageSize(PngHeader(1, 1).substr(0, 20)), std::nullopt);
+  EXPECT_EQ(EncodedImageSize(JpegHeader(1, 1).substr(0, 14)), std::nullopt);
+  EXPECT_EQ(EncodedImageSize("BM\x36\x00\x00\x00"), std::nullopt);
+  EXPECT_EQ(EncodedImageSize(""), std::nullopt);
+  EXPECT_EQ(EncodedImageSize(std::string("\xff\xd8\xff\xd9", 4)), std::nullopt);
+}
+
+TEST_F(BudgetTest, AnImageDeclaring20000x20000PixelsIsRefusedBeforeDecoding) {
+  // A few dozen bytes that declare 400 million pixels: refused from the header, never decoded
+  // (decoding them would fail as undecodable instead).
+  EXPECT_EQ(Exhausted(WithImage(PngHeader(20000, 20000))),
+            "input 'image' declaring 20000 x 20000 pixels (400000000) exceeds the limit "
+            "max_image_pixels = 16777216; raise it with `avp serve segmentation "
+            "--max-image-pixels N` (docs/segmentation-service.md)");
+  EXPECT_THAT(Exhausted(WithImage(JpegHeader(20000, 20000))),
+              HasSubstr("input 'image' declaring 20000 x 20000 pixels (400000000)"));
+  // A raw 'rgb' declaring the same, with no bytes at all: its shape is enough.
+  InferRequest r = good_;
+  Tensor* rgb = FindMutable(r, "rgb");
+  rgb->shape = {20000, 20000, 3};
+  rgb->data.clear();
+  EXPECT_THAT(Exhausted(r), HasSubstr("input 'rgb' of 20000 x 20000 pixels (400000000) exceeds "
+                                      "the limit max_image_pixels"));
+  rgb->shape = {1, 20000, 20000, 3};
+  EXPECT_THAT(Exhausted(r), HasSubstr("max_image_pixels"));
+  r = good_;
+  FindMutable(r, "depth")->shape = {1 << 30, 1 << 30};
+  EXPECT_THAT(Exhausted(r), HasSubstr("input 'depth' of 1073741824 x 1073741824 pixels"));
+  // The budget is the server's: a smaller one refuses the 160 x 120 frame too.
+  RequestBudget small;
+  small.max_image_pixels = 160 * 120 - 1;
+  EXPECT_THAT(Exhausted(good_, small), HasSubstr("input 'rgb' of 160 x 120 pixels (19200)"));
+  small.max_image_pixels = 160 * 120;
+  EXPECT_TRUE(DecodeSegmentationRequest(good_, small).ok());
+}
+
+TEST_F(BudgetTest, OnlyPngAndJpegAreAccepted) {
+  // OpenCV would decode a BMP (and read its declared size first): the format is not accepted.
+  const std::string bmp = std::string("BM") + std::string(52, '\0');
+  EXPECT_EQ(Error(WithImage(bmp)),
+            "input 'image': the 54 bytes are not a PNG or JPEG image OpenCV can decode");
+  InferRequest r = WithImage("x");
+  r.inputs.back().shape = {100000};
+  EXPECT_THAT(Error(r), HasSubstr("input 'image' must be BYTES [1]"));
+  EXPECT_THAT(Error(r), HasSubstr("got BYTES [100000]"));
+}
+
+TEST_F(BudgetTest, AHundredThousandPhrasePromptIsRefusedNamingTheLimit) {
+  std::string prompt = "tomato";
+  for (int i = 1; i < 100000; ++i) prompt += ", tomato";
+  InferRequest r = good_;
+  *FindMutable(r, "prompt") = MakeBytesTensor("prompt", {prompt});
+  EXPECT_EQ(Exhausted(r),
+            "input 'prompt' (799998) exceeds the limit max_prompt_bytes = 4096; raise it with "
+            "`avp serve segmentation --max-prompt-bytes N` (docs/segmentation-service.md)");
+  // As 100 000 elements.
+  *FindMutable(r, "prompt") = MakeBytesTensor("prompt", std::vector<std::string>(100000, "tomato"));
+  EXPECT_THAT(Exhausted(r), HasSubstr("phrases (elements) of input 'prompt' (100000) exceeds the "
+                                      "limit max_prompt_phrases = 64"));
+  // Within the bytes, beyond the phrases.
+  std::string many = "a";
+  for (int i = 1; i < 65; ++i) many += ",a";
+  *FindMutable(r, "prompt") = MakeBytesTensor("prompt", {many});
+  EXPECT_THAT(Exhausted(r), HasSubstr("phrases in input 'prompt' (65) exceeds the limit "
+                                      "max_prompt_phrases = 64"));
+  RequestBudget more;
+  more.max_prompt_phrases = 65;
+  const ScopedLimit more_in_process(segmentation::MaxPromptPhrases(), 65);
+  auto d = DecodeSegmentationRequest(r, more);
+  ASSERT_TRUE(d.ok()) << d.status().ToString();
+}
+
+TEST_F(BudgetTest, CountsOfInputsParametersAndFruitsAreBounded) {
+  InferRequest r = good_;
+  for (int i = 0; i < 10; ++i) r.inputs.push_back(MakeBytesTensor("x", {"y"}));
+  EXPECT_THAT(Error(r), HasSubstr("the request has 18 inputs: a segmentation request has at most "
+                                  "9"));
+  r = good_;
+  for (int i = 0; i < 65; ++i) r.parameters[fmt::format("p{}", i)] = int64_t{i};
+  EXPECT_THAT(Error(r), HasSubstr("parameters: at most 64 are accepted"));
+  r = good_;
+  r.parameters["frame_id"] = std::string(5000, '\x1b');
+  EXPECT_THAT(Error(r), HasSubstr("parameter 'frame_id' is 5008 bytes long"));
+  r = good_;
+  r.requested_outputs.assign(8, "masks");
+  EXPECT_THAT(Error(r), HasSubstr("asks for 8 outputs"));
+  r = good_;
+  FindMutable(r, "fruits")->shape = {70000, 5};
+  EXPECT_THAT(Error(r), HasSubstr("input 'fruits' has 70000 rows: at most 65535"));
+  r = good_;
+  r.inputs.push_back(MakeBytesTensor(std::string(300, '\x1b'), {"y"}));
+  const std::string unknown = Error(r);
+  EXPECT_THAT(unknown, HasSubstr("unknown input '\\x1b\\x1b"));
+  EXPECT_EQ(unknown.find('\x1b'), std::string::npos);
+  EXPECT_LT(unknown.size(), 500u);
 }
 
 TEST_F(CodecTest, EncodeRejectsBadRequests) {

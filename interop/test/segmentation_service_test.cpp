@@ -3,8 +3,10 @@
 // on), a server that is down, deadlines, and concurrent clients.
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -68,6 +70,27 @@ class ThrowingSegmenter final : public segmentation::Segmenter {
   }
 };
 
+/// A backend that blocks until its request's interrupt says stop (at most 20 s), counting how
+/// many calls entered and how many were stopped.
+class BlockingSegmenter final : public segmentation::Segmenter {
+ public:
+  static inline std::atomic<int> entered{0};
+  static inline std::atomic<int> stopped{0};
+  std::string_view name() const override { return "test-block"; }
+  Result<Segmentation> Segment(const segmentation::SegmentationRequest& request) override {
+    entered.fetch_add(1);
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (std::chrono::steady_clock::now() < until) {
+      if (Status stop = segmentation::CheckInterrupt(request); !stop.ok()) {
+        stopped.fetch_add(1);
+        return stop;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return InternalError("test-block: never interrupted");
+  }
+};
+
 template <typename S>
 segmentation::SegmenterEntry TestEntry(const char* name) {
   segmentation::SegmenterEntry e;
@@ -85,6 +108,7 @@ const segmentation::SegmenterRegistry& TestSegmenters() {
     auto* r = new segmentation::SegmenterRegistry(segmentation::BuiltinSegmenters());
     EXPECT_TRUE(r->Add(TestEntry<SlowSegmenter>("test-slow")).ok());
     EXPECT_TRUE(r->Add(TestEntry<ThrowingSegmenter>("test-throws")).ok());
+    EXPECT_TRUE(r->Add(TestEntry<BlockingSegmenter>("test-block")).ok());
     RegisterRemoteSegmenter(*r);
     return r;
   }();
@@ -411,7 +435,7 @@ TEST_F(ServiceTest, MalformedRequestsAreRefusedAndTheServerGoesOn) {
                                     server_->port())));
 }
 
-TEST_F(ServiceTest, DeadlineThatExpiresIsAnIoError) {
+TEST_F(ServiceTest, DeadlineThatExpiresIsDeadlineExceeded) {
   RemoteOptions o = Client("test-slow");
   o.deadline_s = 0.1;
   RemoteSegmenter client(o);
@@ -420,7 +444,7 @@ TEST_F(ServiceTest, DeadlineThatExpiresIsAnIoError) {
   const double waited_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.status().code(), StatusCode::kIoError);
+  EXPECT_EQ(s.status().code(), StatusCode::kDeadlineExceeded);
   EXPECT_THAT(s.status().message(),
               HasSubstr(fmt::format("no answer from 127.0.0.1:{} within the deadline of 0.1 s",
                                     server_->port())));
@@ -466,7 +490,285 @@ TEST_F(ServiceTest, ConcurrentClientsGetTheInProcessResults) {
 // ---- without the shared server
 // -------------------------------------------------------------------
 
-TEST(ServerLifecycleTest, ServerDownIsAClearIoError) {
+// ---- budgets: refused before any work
+// ----------------------------------------------------------------------------
+
+/// A PNG signature and IHDR declaring w x h, without pixels.
+std::string PngHeader(uint32_t w, uint32_t h) {
+  std::string png = "\x89PNG\r\n\x1a\n";
+  const auto be32 = [&](uint32_t v) {
+    for (int i = 3; i >= 0; --i) png.push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+  };
+  be32(13);
+  png += "IHDR";
+  be32(w);
+  be32(h);
+  png += std::string("\x08\x02\x00\x00\x00\x00\x00\x00\x00", 9);
+  return png;
+}
+
+Tensor& InputOf(InferRequest& r, std::string_view name) {
+  for (Tensor& t : r.inputs) {
+    if (t.name == name) return t;
+  }
+  throw std::runtime_error("no input " + std::string(name));
+}
+
+TEST_F(ServiceTest, AHundredThousandPhrasePromptIsRefusedAtOnce) {
+  const ServerStats before = server_->stats();
+  std::string prompt = "tomato";
+  for (int i = 1; i < 100000; ++i) prompt += ", tomato";
+  InferRequest r = GoodRequest("color");
+  InputOf(r, "prompt") = MakeBytesTensor("prompt", {prompt});
+  inference::ModelInferResponse response;
+  grpc::Status s = RawInfer(r, &response);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
+  EXPECT_THAT(s.error_message(),
+              HasSubstr("input 'prompt' (799998) exceeds the limit max_prompt_bytes = 4096; "
+                        "raise it with `avp serve segmentation --max-prompt-bytes N`"));
+  // As 100 000 elements of one phrase each.
+  InputOf(r, "prompt") = MakeBytesTensor("prompt", std::vector<std::string>(100000, "tomato"));
+  s = RawInfer(r, &response);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
+  EXPECT_THAT(s.error_message(), HasSubstr("(100000) exceeds the limit max_prompt_phrases = 64"));
+  EXPECT_EQ(server_->stats().infer_over_budget, before.infer_over_budget + 2);
+  // The client refuses it too, before sending (the process-wide limit of SplitPrompt).
+  RemoteSegmenter client(Client("color"));
+  auto seg = client.Segment(frame_->Request(0, prompt));
+  ASSERT_FALSE(seg.ok());
+  EXPECT_EQ(seg.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_THAT(seg.status().message(), HasSubstr("max_prompt_bytes"));
+  ExpectStillServing();
+}
+
+TEST_F(ServiceTest, AnImageDeclaring20000x20000PixelsIsRefusedBeforeDecoding) {
+  InferRequest r = GoodRequest();
+  InputOf(r, "rgb") = MakeBytesTensor("image", {PngHeader(20000, 20000)});
+  inference::ModelInferResponse response;
+  grpc::Status s = RawInfer(r, &response);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
+  EXPECT_THAT(s.error_message(),
+              HasSubstr("input 'image' declaring 20000 x 20000 pixels (400000000) exceeds the "
+                        "limit max_image_pixels = 16777216"));
+  // A raw image's shape alone (no bytes sent) is enough.
+  r = GoodRequest();
+  InputOf(r, "rgb").shape = {20000, 20000, 3};
+  InputOf(r, "rgb").data.clear();
+  s = RawInfer(r, &response);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
+  EXPECT_THAT(s.error_message(), HasSubstr("input 'rgb' of 20000 x 20000 pixels"));
+  // Thousands of tensors or parameters are refused from their counts.
+  inference::ModelInferRequest proto;
+  internal::ToProto(GoodRequest(), &proto);
+  for (int i = 0; i < 5000; ++i) proto.add_inputs()->set_name("x");
+  grpc::ClientContext context;
+  s = RawStub()->ModelInfer(&context, proto, &response);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(s.error_message(), HasSubstr("the request has 5008 inputs"));
+  ExpectStillServing();
+}
+
+// ---- a server of one worker: queue, fairness, cancellation
+// ------------------------------------------------------
+
+/// One ModelInfer in flight (a callback call); Wait() for its status.
+struct AsyncInfer {
+  grpc::ClientContext context;
+  inference::ModelInferRequest request;
+  inference::ModelInferResponse response;
+  std::mutex mutex;
+  std::condition_variable cv;
+  bool done = false;
+  grpc::Status status;
+
+  AsyncInfer(inference::GRPCInferenceService::Stub& stub, InferRequest r, double deadline_s = 30) {
+    internal::ToProto(std::move(r), &request);
+    context.set_deadline(std::chrono::system_clock::now() +
+                         std::chrono::milliseconds(static_cast<int>(deadline_s * 1000)));
+    stub.async()->ModelInfer(&context, &request, &response, [this](grpc::Status s) {
+      std::lock_guard lock(mutex);
+      status = std::move(s);
+      done = true;
+      cv.notify_all();
+    });
+  }
+  grpc::Status Wait() {
+    std::unique_lock lock(mutex);
+    cv.wait(lock, [this] { return done; });
+    return status;
+  }
+};
+
+/// Polls `done` every 2 ms for up to 10 s (a bound for a broken build, not a timing check).
+bool Eventually(const std::function<bool()>& done) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (std::chrono::steady_clock::now() < until) {
+    if (done()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  return done();
+}
+
+class OneWorkerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    BlockingSegmenter::entered = 0;
+    BlockingSegmenter::stopped = 0;
+  }
+  void Start(int max_queue_depth, int max_queued_per_client, int max_instances = 256) {
+    ServerOptions o;
+    o.segmenters = &TestSegmenters();
+    o.port = 0;
+    o.threads = 1;
+    o.max_queue_depth = max_queue_depth;
+    o.max_queued_per_client = max_queued_per_client;
+    o.max_instances = max_instances;
+    o.backends = {"oracle", "test-block"};
+    auto server = SegmentationServer::Start(o);
+    ASSERT_TRUE(server.ok()) << server.status().ToString();
+    server_ = std::move(*server);
+  }
+  /// A stub on a connection of its own (one client, as the server tells clients apart).
+  std::unique_ptr<inference::GRPCInferenceService::Stub> NewClient() {
+    grpc::ChannelArguments args;
+    args.SetMaxReceiveMessageSize(64 << 20);
+    args.SetMaxSendMessageSize(64 << 20);
+    args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+    return inference::GRPCInferenceService::NewStub(grpc::CreateCustomChannel(
+        fmt::format("127.0.0.1:{}", server_->port()), grpc::InsecureChannelCredentials(), args));
+  }
+  InferRequest Request(const std::string& model) {
+    RequestEncodeOptions o;
+    o.model_name = model;
+    return *EncodeSegmentationRequest(frame_.Request(3), o);
+  }
+  /// Occupies the one worker with a test-block call from its own client.
+  std::unique_ptr<AsyncInfer> Occupy(inference::GRPCInferenceService::Stub& stub,
+                                     double deadline_s = 30) {
+    auto call = std::make_unique<AsyncInfer>(stub, Request("test-block"), deadline_s);
+    EXPECT_TRUE(Eventually([] { return BlockingSegmenter::entered.load() == 1; }));
+    return call;
+  }
+  test::TestFrame frame_;
+  std::unique_ptr<SegmentationServer> server_;
+};
+
+TEST_F(OneWorkerTest, AFullQueueIsRefusedAtOnceAndACancelledCallFreesTheWorker) {
+  Start(/*max_queue_depth=*/1, /*max_queued_per_client=*/1);
+  auto a = NewClient(), b = NewClient(), c = NewClient();
+  std::unique_ptr<AsyncInfer> blocked = Occupy(*a);
+  AsyncInfer waiting(*b, Request("oracle"));
+  ASSERT_TRUE(Eventually([&] { return server_->stats().queued == 1; }));
+  // The queue holds one request: the next one is refused without waiting.
+  inference::ModelInferRequest proto;
+  internal::ToProto(Request("oracle"), &proto);
+  inference::ModelInferResponse response;
+  grpc::ClientContext context;
+  const grpc::Status refused = c->ModelInfer(&context, proto, &response);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_THAT(refused.error_message(),
+              HasSubstr("requests waiting for a worker (2) exceeds the limit max_queue_depth = 1"));
+  EXPECT_EQ(server_->stats().infer_queue_full, 1u);
+  // The blocked client leaves: its work stops, and the worker takes the waiting request.
+  blocked->context.TryCancel();
+  EXPECT_EQ(blocked->Wait().error_code(), grpc::StatusCode::CANCELLED);
+  const grpc::Status served = waiting.Wait();
+  EXPECT_TRUE(served.ok()) << served.error_message();
+  EXPECT_TRUE(Eventually([&] { return server_->stats().infer_interrupted == 1; }));
+  EXPECT_EQ(BlockingSegmenter::stopped.load(), 1);
+}
+
+TEST_F(OneWorkerTest, OneClientsFloodDoesNotPushOutAnother) {
+  Start(/*max_queue_depth=*/8, /*max_queued_per_client=*/2);
+  auto a = NewClient(), flood = NewClient(), other = NewClient();
+  std::unique_ptr<AsyncInfer> blocked = Occupy(*a);
+  std::vector<std::unique_ptr<AsyncInfer>> flooded;
+  for (int i = 0; i < 5; ++i) {
+    flooded.push_back(std::make_unique<AsyncInfer>(*flood, Request("oracle")));
+  }
+  // Two of the flood wait; the three others are refused at once.
+  ASSERT_TRUE(Eventually([&] {
+    const ServerStats st = server_->stats();
+    return st.queued == 2 && st.infer_queue_full == 3;
+  }));
+  // Another client still gets a place, and its request is served.
+  AsyncInfer mine(*other, Request("oracle"));
+  ASSERT_TRUE(Eventually([&] { return server_->stats().queued == 3; }));
+  blocked->context.TryCancel();
+  EXPECT_EQ(blocked->Wait().error_code(), grpc::StatusCode::CANCELLED);
+  EXPECT_TRUE(mine.Wait().ok());
+  int ok = 0, refused = 0;
+  for (auto& call : flooded) {
+    const grpc::Status st = call->Wait();
+    if (st.ok()) {
+      ++ok;
+    } else {
+      ++refused;
+      EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << st.error_message();
+      EXPECT_THAT(st.error_message(),
+                  HasSubstr("requests of this client waiting for a worker (3) exceeds the limit "
+                            "max_queued_per_client = 2"));
+    }
+  }
+  EXPECT_EQ(ok, 2);
+  EXPECT_EQ(refused, 3);
+}
+
+TEST_F(OneWorkerTest, ADeadlinePassingStopsTheWorkAndFreesTheWorker) {
+  Start(4, 4);
+  auto a = NewClient(), b = NewClient();
+  std::unique_ptr<AsyncInfer> late = Occupy(*a, /*deadline_s=*/0.3);
+  EXPECT_EQ(late->Wait().error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  // The server stopped the segmenter (it would block for 20 s otherwise).
+  EXPECT_TRUE(Eventually([] { return BlockingSegmenter::stopped.load() == 1; }));
+  EXPECT_TRUE(Eventually([&] { return server_->stats().infer_interrupted == 1; }));
+  inference::ModelInferRequest proto;
+  internal::ToProto(Request("oracle"), &proto);
+  inference::ModelInferResponse response;
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  const grpc::Status s = b->ModelInfer(&context, proto, &response);
+  EXPECT_TRUE(s.ok()) << s.error_message();
+}
+
+TEST_F(OneWorkerTest, TheClientsInterruptCancelsItsRemoteCall) {
+  Start(4, 4);
+  RemoteOptions o;
+  o.port = server_->port();
+  o.model = "test-block";
+  RemoteSegmenter client(o);
+  segmentation::SegmentationRequest r = frame_.Request(0);
+  r.interrupt = []() -> Status {
+    return BlockingSegmenter::entered.load() > 0 ? CancelledError("Ctrl-C") : Status::Ok();
+  };
+  auto seg = client.Segment(r);
+  ASSERT_FALSE(seg.ok());
+  EXPECT_EQ(seg.status().code(), StatusCode::kCancelled);
+  EXPECT_THAT(seg.status().message(), HasSubstr("Ctrl-C"));
+  EXPECT_TRUE(Eventually([] { return BlockingSegmenter::stopped.load() == 1; }));
+}
+
+TEST_F(OneWorkerTest, MoreInstancesThanTheLimitAreRefused) {
+  Start(4, 4, /*max_instances=*/1);
+  auto local = TestSegmenters().Make("oracle", 0);
+  ASSERT_TRUE(local.ok());
+  const auto expected = (*local)->Segment(frame_.Request(3));
+  ASSERT_TRUE(expected.ok());
+  ASSERT_GT(expected->instances.size(), 1u) << "the test frame must show several fruits";
+  RemoteOptions o;
+  o.port = server_->port();
+  o.seed = 0;
+  RemoteSegmenter client(o);
+  auto seg = client.Segment(frame_.Request(3));
+  ASSERT_FALSE(seg.ok());
+  EXPECT_EQ(seg.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_THAT(seg.status().message(),
+              HasSubstr(fmt::format("instances found by model 'oracle' ({}) exceeds the limit "
+                                    "max_instances = 1",
+                                    expected->instances.size())));
+}
+
+TEST(ServerLifecycleTest, ServerDownIsUnavailableNamingTheAddress) {
   int port = 0;
   {
     ServerOptions o;
@@ -485,7 +787,7 @@ TEST(ServerLifecycleTest, ServerDownIsAClearIoError) {
   TestFrame scene;
   auto s = client.Segment(scene.Request(0));
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.status().code(), StatusCode::kIoError);
+  EXPECT_EQ(s.status().code(), StatusCode::kUnavailable);
   EXPECT_THAT(
       s.status().message(),
       HasSubstr(fmt::format("the segmentation server at 127.0.0.1:{} is unavailable", port)));
@@ -506,8 +808,28 @@ TEST(ServerLifecycleTest, BadOptionsAndBusyPorts) {
             "invalid server options: port (70000) must be in [0, 65535]; backends[1] "
             "(\"oracle\") is listed twice; threads (0) must be in [1, 256]");
 
-  ServerOptions o;
+  ServerOptions limits;
+  limits.segmenters = &TestSegmenters();
+  limits.max_queue_depth = 0;
+  limits.max_queued_per_client = 5;
+  limits.max_image_pixels = 0;
+  limits.max_prompt_bytes = uint64_t{1} << 30;
+  limits.max_prompt_phrases = 0;
+  limits.max_instances = 70000;
+  limits.max_cached_seeds = 5000;
+  const auto l = SegmentationServer::Start(limits);
+  ASSERT_FALSE(l.ok());
+  for (const char* problem : {"max_cached_seeds (5000) must be in [1, 1024]",
+                              "max_queue_depth (0) must be in [1, 100000]",
+                              "max_queued_per_client (5) must be in [1, max_queue_depth (0)]",
+                              "max_image_pixels (0) must be in [1, 1073741824 (32768^2)]",
+                              "max_prompt_bytes (1073741824) must be in [1, 1048576 (1 MiB)]",
+                              "max_prompt_phrases (0) must be in [1, 4096]",
+                              "max_instances (70000) must be in [1, 65535]"}) {
+    EXPECT_THAT(l.status().message(), HasSubstr(problem));
+  }
 
+  ServerOptions o;
   o.segmenters = &TestSegmenters();
   o.port = 0;
   auto first = SegmentationServer::Start(o);

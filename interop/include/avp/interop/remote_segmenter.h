@@ -74,9 +74,9 @@ struct ServerMetadata {
 /// A Segmenter that sends each request to a segmentation server over KServe v2 / OIP gRPC
 /// (avp's own `avp serve segmentation`, or Triton / KServe serving a model with the tensors of
 /// segmentation_codec.h). Connecting is lazy: construction never fails on a missing server; each
-/// call that cannot reach it returns IoError naming host:port, and the pipeline records the
-/// failed step and goes on. Calls have a deadline (RemoteOptions::deadline_s). Segment() and the
-/// queries are thread-safe.
+/// call that cannot reach it returns Unavailable naming host:port, and the pipeline ends the
+/// episode as a segmenter fault (pipeline/episode.h). Calls have a deadline
+/// (RemoteOptions::deadline_s). Segment() and the queries are thread-safe.
 class RemoteSegmenter final : public segmentation::Segmenter {
  public:
   /// @throws avp::Error when options.Validate() fails (use ParseRemoteSpec for user input).
@@ -88,9 +88,10 @@ class RemoteSegmenter final : public segmentation::Segmenter {
   /// The spec, "remote://host:port/model".
   std::string_view name() const override;
   /// Encodes, calls ModelInfer, decodes. Errors: the server's INVALID_ARGUMENT / NOT_FOUND /
-  /// FAILED_PRECONDITION as InvalidArgument / NotFound / FailedPrecondition; a server that cannot
-  /// be reached, a deadline that passed and transport failures as IoError; all prefixed with the
-  /// spec.
+  /// FAILED_PRECONDITION / RESOURCE_EXHAUSTED as InvalidArgument / NotFound / FailedPrecondition
+  /// / ResourceExhausted; a server that cannot be reached as Unavailable; a deadline that passed
+  /// as DeadlineExceeded; CANCELLED as Cancelled; other transport failures as IoError; all
+  /// prefixed with the spec and naming host:port.
   Result<Segmentation> Segment(const segmentation::SegmentationRequest& request) override;
 
   Result<bool> ServerLive();

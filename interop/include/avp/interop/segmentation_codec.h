@@ -4,6 +4,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <avp/core/rgbd_frame.h>
@@ -122,12 +123,45 @@ struct DecodedSegmentationRequest {
   segmentation::SegmentationRequest request() const;
 };
 
-/// Decodes and checks a request. InvalidArgument naming the tensor or parameter and what was
-/// expected: an unknown input; a wrong datatype or shape; contents that do not match the shape;
-/// neither or both of rgb and image; an image OpenCV cannot decode; an empty prompt; sizes that
-/// differ from the image's; one of instance_ids / class_ids without the other; fruits without
-/// labels; a pose that is not rigid; a bad parameter type or value.
-Result<DecodedSegmentationRequest> DecodeSegmentationRequest(const InferRequest& request);
+/// What one request may ask for. The server's come from its ServerOptions; each is named in the
+/// refusal together with the `avp serve segmentation` flag that raises it.
+struct RequestBudget {
+  /// H x W of the colour image: from the shape of 'rgb', or from the PNG / JPEG header of 'image'
+  /// (read before its pixels are decoded); also bounds depth and the label images.
+  uint64_t max_image_pixels = uint64_t{16} << 20;
+  /// Bytes of the prompt's phrases together.
+  uint64_t max_prompt_bytes = 4096;
+  /// Phrases of the prompt (its BYTES elements and comma-separated phrases), duplicates included.
+  uint64_t max_prompt_phrases = 64;
+};
+
+/// Fixed bounds of the request format (not configurable: a valid request never comes near them).
+inline constexpr size_t kMaxRequestInputs = 9;       ///< one of each known input
+inline constexpr size_t kMaxRequestedOutputs = 7;    ///< one of each output
+inline constexpr size_t kMaxRequestParameters = 64;  ///< known and unknown ones together
+inline constexpr size_t kMaxStringParameterBytes = 1024;
+inline constexpr int64_t kMaxFruits = 65535;  ///< one per UINT16 instance id
+
+/// The request's cost against `budget` and the format's fixed bounds, from shapes, counts and
+/// image headers alone: nothing is decoded, copied or parsed into elements. ResourceExhausted
+/// naming the limit (max_image_pixels, max_prompt_bytes, max_prompt_phrases) and how to raise
+/// it; InvalidArgument for an unknown input name (quoted, escaped), too many inputs, outputs or
+/// parameters, an over-long string parameter, an 'image' that is not BYTES [1] holding a PNG or
+/// JPEG, or more fruit rows than kMaxFruits.
+Status CheckRequestBudget(const InferRequest& request, const RequestBudget& budget);
+
+/// The width and height in the header of an encoded PNG (IHDR) or JPEG (the first SOFn frame
+/// header), without decoding it; nullopt when `bytes` is neither or the header is cut short.
+std::optional<std::pair<uint32_t, uint32_t>> EncodedImageSize(std::string_view bytes);
+
+/// Decodes and checks a request, after CheckRequestBudget(request, budget) passed (so nothing is
+/// decoded for a request past its budget). InvalidArgument naming the tensor or parameter and
+/// what was expected: an unknown input; a wrong datatype or shape; contents that do not match the
+/// shape; neither or both of rgb and image; an image OpenCV cannot decode; an empty prompt; sizes
+/// that differ from the image's; one of instance_ids / class_ids without the other; fruits
+/// without labels; a pose that is not rigid; a bad parameter type or value.
+Result<DecodedSegmentationRequest> DecodeSegmentationRequest(const InferRequest& request,
+                                                             const RequestBudget& budget = {});
 
 /// The outputs and parameters for `segmentation` (model name and id are left to the caller).
 /// InvalidArgument when a mask's size differs from width x height.
