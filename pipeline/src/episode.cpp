@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/core/text.h>
 #include <avp/pipeline/episode.h>
 
 namespace avp::pipeline {
@@ -39,8 +40,15 @@ size_t CountTargetInstances(const mapping::SemanticMap& map, SemanticClass targe
 /// Internal error naming the segmenter.
 Result<Segmentation> CheckedSegmentation(segmentation::Segmenter& segmenter,
                                          const robot::Observation& obs,
-                                         const EpisodeOptions& options, int view) {
+                                         const EpisodeOptions& options, int view,
+                                         const std::stop_token& stop) {
   segmentation::SegmentationRequest request;
+  if (stop.stop_possible()) {
+    request.interrupt = [stop]() -> Status {
+      return stop.stop_requested() ? CancelledError("stop requested while segmenting")
+                                   : Status::Ok();
+    };
+  }
   request.frame = &obs.frame;
   request.prompt = options.prompt;
   request.score_threshold = options.score_threshold;
@@ -76,7 +84,7 @@ void FuseView(const EpisodeComponents& c, const EpisodeOptions& options,
     return;
   }
   t0 = Clock::now();
-  Result<Segmentation> seg = CheckedSegmentation(*c.segmenter, *obs, options, view);
+  Result<Segmentation> seg = CheckedSegmentation(*c.segmenter, *obs, options, view, c.stop);
   step.times.segment_ms = MsSince(t0);
   if (seg.ok()) {
     step.masks = seg->instances.size();
@@ -119,6 +127,26 @@ void RecordMapAfterView(const mapping::SemanticMap& map, SemanticClass target, M
 bool IsRobotFault(const Status& status) {
   return status.code() == StatusCode::kDeadlineExceeded ||
          status.code() == StatusCode::kUnavailable || status.code() == StatusCode::kCancelled;
+}
+
+/// Whether the view's segmenter error ends the episode (`failures_in_a_row` counts this view):
+/// a segmenter that is not there (Unavailable) at once, any other error after
+/// max_segment_failures views in a row. Sets the end and its reason.
+bool SegmenterFault(const StepRecord& step, int failures_in_a_row, const EpisodeOptions& options,
+                    EpisodeResult& result) {
+  const Status& s = step.segment_status;
+  if (s.ok()) return false;
+  if (s.code() == StatusCode::kUnavailable) {
+    result.end = EpisodeEnd::kSegmenterFault;
+    result.end_reason = s.ToString();
+    return true;
+  }
+  if (failures_in_a_row < options.max_segment_failures) return false;
+  result.end = EpisodeEnd::kSegmenterFault;
+  result.end_reason =
+      fmt::format("the segmenter failed {} views in a row (max_segment_failures): {}",
+                  failures_in_a_row, s.ToString());
+  return true;
 }
 
 /// Ends the episode as interrupted; returns true.
@@ -265,12 +293,18 @@ const OptionTable<EpisodeOptions>& EpisodeOptionTable() {
     t->Text("prompt", &E::prompt, "comma-separated phrases naming what to find");
     t->Real("score_threshold", &E::score_threshold, "", ValueRange::Closed(0, 1),
             "instances scoring below this are dropped");
-    t->Integer("record_top_candidates", &E::record_top_candidates, "", ValueRange::AtLeast(0),
+    t->Integer("record_top_candidates", &E::record_top_candidates, "", ValueRange::Closed(0, 1000),
                "ranked candidates kept in each step's record");
+    t->Integer(
+        "max_segment_failures", &E::max_segment_failures, "", ValueRange::Closed(1, 1000),
+        "views in a row whose segmentation failed before the episode ends (segmenter-fault)");
     t->Nested("integrator", &E::integrator, mapping::IntegratorOptionTable());
     t->AddRule([](const E& o, std::vector<std::string>& errors) {
       if (o.prompt.find_first_not_of(" ,\t") == std::string::npos) {
-        errors.push_back(fmt::format("prompt ('{}') names no class", o.prompt));
+        errors.push_back(fmt::format("prompt ({}) names no class", QuoteText(o.prompt)));
+      } else if (Result<std::vector<std::string>> phrases = segmentation::SplitPrompt(o.prompt);
+                 !phrases.ok()) {
+        errors.push_back(phrases.status().message());
       }
     });
     return t;
@@ -304,6 +338,8 @@ std::string_view ToString(EpisodeEnd end) {
       return "interrupted";
     case EpisodeEnd::kRobotFault:
       return "robot-fault";
+    case EpisodeEnd::kSegmenterFault:
+      return "segmenter-fault";
   }
   return "unknown";
 }
@@ -336,6 +372,7 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
   MapTally tally{map.grid().CountKnownVoxels(),
                  CountTargetVoxels(map.grid(), options.target_class)};
 
+  int segment_failures_in_a_row = 0;
   for (int view = 0; view < options.views; ++view) {
     if (c.stop.stop_requested()) {
       Interrupted(result, fmt::format("stop requested before view {}", view));
@@ -355,11 +392,19 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
       step.metrics = metrics(map);
       step.times.metrics_ms = MsSince(t0);
     }
-    // Plan and move, unless this was the last view or the capture was cancelled.
-    const bool cancelled = step.capture_status.code() == StatusCode::kCancelled;
-    if (cancelled) Interrupted(result, step.capture_status.ToString());
-    const bool stop =
-        cancelled || (view + 1 < options.views && PlanAndMove(next, view, fused, step, result));
+    // Plan and move, unless this was the last view, the capture or the segmentation was
+    // cancelled, or the segmenter is gone.
+    segment_failures_in_a_row = step.segment_status.ok() ? 0 : segment_failures_in_a_row + 1;
+    const bool cancelled = step.capture_status.code() == StatusCode::kCancelled ||
+                           step.segment_status.code() == StatusCode::kCancelled;
+    if (cancelled) {
+      Interrupted(result, step.capture_status.code() == StatusCode::kCancelled
+                              ? step.capture_status.ToString()
+                              : step.segment_status.ToString());
+    }
+    const bool stop = cancelled ||
+                      SegmenterFault(step, segment_failures_in_a_row, options, result) ||
+                      (view + 1 < options.views && PlanAndMove(next, view, fused, step, result));
     step.times.total_ms = MsSince(t_step);
     result.steps.push_back(step);
     for (EpisodeObserver* o : observers) {

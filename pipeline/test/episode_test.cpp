@@ -47,14 +47,22 @@ class HalfSegmenter final : public segmentation::Segmenter {
  public:
   std::vector<uint64_t> fail_frames;
   bool throw_instead = false;
+  StatusCode fail_code = StatusCode::kInternal;
+  /// Asked to stop on this frame (as Ctrl-C would), then returns what the interrupt says.
+  std::stop_source* stop_on = nullptr;
+  uint64_t stop_frame = 0;
   std::vector<uint64_t> seen;
   std::string_view name() const override { return "half"; }
   Result<Segmentation> Segment(const segmentation::SegmentationRequest& r) override {
     seen.push_back(r.frame_index);
+    if (stop_on != nullptr && r.frame_index == stop_frame) {
+      stop_on->request_stop();
+      AVP_RETURN_IF_ERROR(segmentation::CheckInterrupt(r));
+    }
     for (uint64_t f : fail_frames) {
       if (f == r.frame_index) {
         if (throw_instead) throw std::runtime_error("model crashed");
-        return InternalError("inference server unavailable");
+        return Status(fail_code, "inference server unavailable at 10.0.0.7:8001");
       }
     }
     Segmentation s;
@@ -274,6 +282,88 @@ TEST_F(EpisodeTest, SegmenterErrorIsRecordedAndTheLoopGoesOn) {
   EXPECT_GT(r->steps[1].integration.endpoints, 0u);
   EXPECT_EQ(r->steps[1].integration.masked_endpoints, 0u);
   EXPECT_GT(r->steps[2].integration.masked_endpoints, 0u);
+}
+
+TEST_F(EpisodeTest, UnavailableSegmenterEndsTheEpisodeAsASegmenterFault) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  segmenter_.fail_frames = {1, 2, 3};
+  segmenter_.fail_code = StatusCode::kUnavailable;
+  Recorder rec;
+  auto r = Run({&rec});
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kSegmenterFault);
+  EXPECT_EQ(ToString(r->end), "segmenter-fault");
+  EXPECT_NE(r->end_reason.find("unavailable at 10.0.0.7:8001"), std::string::npos) << r->end_reason;
+  // The view was fused (depth only) and recorded; nothing was planned after it.
+  EXPECT_EQ(r->views_fused(), 2);
+  EXPECT_EQ(r->steps[1].segment_status.code(), StatusCode::kUnavailable);
+  EXPECT_GT(r->steps[1].integration.endpoints, 0u);
+  EXPECT_FALSE(r->steps[1].planned);
+  EXPECT_EQ(rec.views, (std::vector<int>{0, 1}));
+  EXPECT_TRUE(rec.ended);
+}
+
+TEST_F(EpisodeTest, SegmenterFailingMaxSegmentFailuresViewsInARowEndsTheEpisode) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}, {Home(0.4)}, {Home(0.5)}};
+  options_.views = 5;
+  options_.max_segment_failures = 2;
+  segmenter_.fail_frames = {0, 2, 3, 4};  // 0 alone, then 2 and 3 in a row
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kSegmenterFault);
+  EXPECT_EQ(r->views_fused(), 4);
+  EXPECT_NE(r->end_reason.find("the segmenter failed 2 views in a row (max_segment_failures)"),
+            std::string::npos)
+      << r->end_reason;
+}
+
+TEST_F(EpisodeTest, SegmenterFailuresNotInARowDoNotEndTheEpisode) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}, {Home(0.4)}, {Home(0.5)}};
+  options_.max_segment_failures = 2;
+  segmenter_.fail_frames = {0, 2};  // never 2 in a row
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->views_fused(), 4);
+  EXPECT_EQ(r->end, EpisodeEnd::kBudgetReached);
+  EXPECT_EQ(r->steps[2].segment_status.code(), StatusCode::kInternal);
+}
+
+TEST_F(EpisodeTest, MaxSegmentFailuresAndThePromptAreBounded) {
+  EXPECT_TRUE(options_.Validate().ok()) << options_.Validate().ToString();
+  options_.max_segment_failures = 0;
+  EXPECT_NE(options_.Validate().message().find("max_segment_failures (0) must be in [1, 1000]"),
+            std::string::npos)
+      << options_.Validate().ToString();
+  options_.max_segment_failures = 3;
+  options_.record_top_candidates = 100000;
+  EXPECT_NE(options_.Validate().message().find("record_top_candidates (100000)"), std::string::npos)
+      << options_.Validate().ToString();
+  options_.record_top_candidates = 5;
+  std::string prompt = "tomato";
+  for (int i = 1; i < 100000; ++i) prompt += ", tomato";
+  options_.prompt = prompt;
+  const Status s = options_.Validate();
+  EXPECT_NE(s.message().find("prompt (799998) exceeds the limit max_prompt_bytes = 4096"),
+            std::string::npos)
+      << s.ToString();
+  options_.prompt = " ,\x1b[2J";
+  EXPECT_TRUE(options_.Validate().ok());  // the escape sequence is a phrase (of a kind)
+  options_.prompt = " ,\t";
+  EXPECT_NE(options_.Validate().message().find("prompt (' ,\\t') names no class"),
+            std::string::npos)
+      << options_.Validate().ToString();
+}
+
+TEST_F(EpisodeTest, AStopWhileSegmentingEndsTheEpisodeAsInterrupted) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  segmenter_.stop_on = &stop_;
+  segmenter_.stop_frame = 1;
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kInterrupted);
+  EXPECT_EQ(r->views_fused(), 2);
+  EXPECT_EQ(r->steps[1].segment_status.code(), StatusCode::kCancelled);
+  EXPECT_FALSE(r->steps[1].planned);
 }
 
 TEST_F(EpisodeTest, ThrowingSegmenterBecomesAStatus) {

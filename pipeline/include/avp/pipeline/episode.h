@@ -96,14 +96,18 @@ struct EpisodeOptions {
   int record_top_candidates = 5;
   /// Seeds the planner's and the arm's random choices (forked per view).
   uint64_t seed = 0;
-  /// The table's ranges, a prompt that names something, a target class other than background
-  /// and a finite, non-empty ROI.
+  /// Views in a row whose segmentation failed before the episode ends as a segmenter fault, in
+  /// [1, 1000] (a segmenter that reports Unavailable, a service that is down, ends it at once).
+  int max_segment_failures = 3;
+  /// The table's ranges, a prompt that names something (within the prompt limits of
+  /// segmentation::SplitPrompt), a target class other than background and a finite, non-empty
+  /// ROI.
   Status Validate() const;
 };
 
 /// The configurable fields of EpisodeOptions: views, prompt, score_threshold,
-/// record_top_candidates and integrator.* (the ROI, the target class and the seed come from the
-/// scene, the prompt and the run).
+/// record_top_candidates, max_segment_failures and integrator.* (the ROI, the target class and
+/// the seed come from the scene, the prompt and the run).
 const OptionTable<EpisodeOptions>& EpisodeOptionTable();
 
 /// How the episode ended.
@@ -114,6 +118,10 @@ enum class EpisodeEnd : uint8_t {
   kNoReachableMove,   ///< every ranked candidate was refused by the arm
   kInterrupted,       ///< a stop was requested (Ctrl-C, a time limit) or a component was cancelled
   kRobotFault,  ///< the arm did not arrive or stopped answering (DeadlineExceeded, Unavailable)
+  /// The segmenter is not there (it reported Unavailable: a segmentation service that is down or
+  /// unreachable) or failed EpisodeOptions::max_segment_failures views in a row. The steps so
+  /// far are kept; end_reason is the segmenter's last error (naming the service's address).
+  kSegmenterFault,
 };
 std::string_view ToString(EpisodeEnd end);
 
@@ -159,8 +167,11 @@ struct EpisodeComponents {
 /// nothing); an unreachable ranked candidate is skipped for the next one; no valid candidate,
 /// every candidate refused, or the planner's stopping rule end the episode with that reason. An arm
 /// that reports DeadlineExceeded or Unavailable ends it as a robot fault (no other candidate is
-/// tried: where the arm is, is unknown); a Cancelled status from any component, or a stop
-/// requested through components.stop, ends it as interrupted. Observers see every step and the
+/// tried: where the arm is, is unknown); a segmenter that reports Unavailable, or fails
+/// options.max_segment_failures views in a row, ends it as a segmenter fault after that view is
+/// fused (depth only) and recorded; a Cancelled status from any component, or a stop requested
+/// through components.stop, ends it as interrupted. The segmenter's requests carry an interrupt
+/// that reports Cancelled once components.stop is requested. Observers see every step and the
 /// end in every case. InvalidArgument for missing components or invalid options.
 Result<EpisodeResult> RunEpisode(const EpisodeComponents& components, const EpisodeOptions& options,
                                  const MetricsHook& metrics = {},
