@@ -38,6 +38,7 @@ Result<ImageRgb8> DecodeToRgb(std::span<const uint8_t> encoded, std::string_view
   if (!header.ok()) return undecodable(header.status().message());
   AVP_RETURN_IF_ERROR(
       CheckImageSize(header->width, header->height, fmt::format("{} {}", header->format, what)));
+  if (header->format == "JPEG") AVP_RETURN_IF_ERROR(CheckJpegScans(encoded, what));
   cv::Mat bgr;
   try {
     const cv::Mat buffer(1, static_cast<int>(encoded.size()), CV_8UC1,

@@ -131,6 +131,36 @@ std::string_view OtherFormat(std::span<const uint8_t> b) {
 
 }  // namespace
 
+Status CheckJpegScans(std::span<const uint8_t> b, std::string_view what) {
+  if (b.size() < 2 || b[0] != 0xFF || b[1] != 0xD8) return Status::Ok();
+  size_t at = 2;
+  size_t scans = 0;
+  while (at + 4 <= b.size()) {
+    if (b[at] != 0xFF) break;  // not a marker: the decoder says what is wrong
+    while (at < b.size() && b[at] == 0xFF) ++at;
+    if (at >= b.size()) break;
+    const uint8_t marker = b[at++];
+    if (marker == 0xD9) break;  // EOI
+    if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD8)) continue;
+    if (at + 2 > b.size()) break;
+    const uint32_t length = Be16(b, at);
+    if (length < 2) break;
+    at += length;
+    if (marker != 0xDA) continue;
+    if (++scans > kMaxJpegScans) {
+      return ResourceExhaustedError(fmt::format(
+          "JPEG {} has more than {} scans (each one a pass over the whole image): refused", what,
+          kMaxJpegScans));
+    }
+    // The entropy-coded data: up to a marker that is neither a stuffed 0xFF00 nor a restart.
+    while (at + 1 < b.size() &&
+           !(b[at] == 0xFF && b[at + 1] != 0x00 && !(b[at + 1] >= 0xD0 && b[at + 1] <= 0xD7))) {
+      ++at;
+    }
+  }
+  return Status::Ok();
+}
+
 Status CheckImageSize(uint64_t width, uint64_t height, std::string_view what) {
   if (width == 0 || height == 0) {
     return InvalidArgumentError(fmt::format(

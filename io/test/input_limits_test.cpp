@@ -161,6 +161,24 @@ TEST_F(InputLimitsTest, ImageHeadersAreReadWithoutDecoding) {
   }
 }
 
+TEST_F(InputLimitsTest, JpegWithThousandsOfScansIsRefused) {
+  // A small progressive-style file: a frame header, then 1000 scan headers with one byte of data.
+  std::vector<uint8_t> j = JpegDeclaring(64, 64);
+  j.resize(j.size() - 2);  // drop EOI
+  for (int i = 0; i < 1000; ++i) {
+    j.insert(j.end(), {0xFF, 0xDA, 0x00, 0x08, 0x01, 0x01, 0x00, 0x00, 0x3F, 0x00, 0x12});
+  }
+  j.insert(j.end(), {0xFF, 0xD9});
+  const Status s = DecodeImage(j).status();
+  EXPECT_EQ(s.code(), StatusCode::kResourceExhausted) << s.ToString();
+  EXPECT_THAT(s.message(), HasSubstr("more than 256 scans"));
+  // A real encoder's JPEG passes.
+  const Result<std::vector<uint8_t>> real = EncodeJpeg(ImageRgb8(40, 30, 90));
+  ASSERT_TRUE(real.ok());
+  EXPECT_TRUE(CheckJpegScans(*real, "image").ok());
+  EXPECT_TRUE(DecodeImage(*real).ok());
+}
+
 TEST_F(InputLimitsTest, OtherFormatsAreRefusedByName) {
   const std::vector<uint8_t> tiff = {'I', 'I', '*', 0, 8, 0, 0, 0, 0, 0};
   const Status s = DecodeImage(tiff).status();

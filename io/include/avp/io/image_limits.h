@@ -4,6 +4,7 @@
 // header and checked before any pixel is decoded, so a small file that declares 20000 x 20000
 // pixels is refused with ResourceExhausted instead of allocating gigabytes.
 
+#include <cstddef>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -23,6 +24,14 @@ const Limit& MaxImagePixels();
 /// ResourceExhausted naming max_image_pixels otherwise; `what` names the image in the message
 /// ("PNG image 'a.png'").
 Status CheckImageSize(uint64_t width, uint64_t height, std::string_view what);
+
+/// Most scans a JPEG may have: a progressive JPEG decodes every scan over the whole image, so a
+/// small file of thousands of tiny scans costs minutes of CPU (real encoders write about 10).
+inline constexpr size_t kMaxJpegScans = 256;
+
+/// OK unless `encoded` is a JPEG with more than kMaxJpegScans scans (ResourceExhausted naming
+/// `what`); a walk over its markers, no decoding. Safe on any bytes.
+Status CheckJpegScans(std::span<const uint8_t> encoded, std::string_view what);
 
 /// What an encoded image says about itself in its header.
 struct ImageHeader {
