@@ -129,6 +129,38 @@ TEST_F(SceneInputTest, ObjAndStlCountsAreCheckedBeforeAssimp) {
   EXPECT_THAT(s.message(), HasSubstr("declares 5 triangles (334 bytes) in a file of 84 bytes"));
 }
 
+TEST_F(SceneInputTest, AMeshOfMoreThan65535FruitsIsRefused) {
+  // 65536 separate triangles, each its own fruit with fruit_instances: components; instance ids
+  // are 16-bit. (Scene::Add used to throw here, after a quadratic scan.)
+  const int n = 65536;
+  std::string ply = "ply\nformat binary_little_endian 1.0\nelement vertex " +
+                    std::to_string(3 * n) +
+                    "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+                    std::to_string(n) + "\nproperty list uchar int vertex_indices\nend_header\n";
+  const auto put = [&](const auto& v) { ply.append(reinterpret_cast<const char*>(&v), sizeof(v)); };
+  for (int i = 0; i < n; ++i) {
+    const float x = static_cast<float>(i % 256) * 0.01f, y = static_cast<float>(i / 256) * 0.01f;
+    const float corners[3][2] = {{0.0f, 0.0f}, {0.004f, 0.0f}, {0.0f, 0.004f}};
+    for (const auto& c : corners) {
+      put(x + c[0]);
+      put(y + c[1]);
+      put(0.0f);
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    put(static_cast<uint8_t>(3));
+    for (int k = 0; k < 3; ++k) put(static_cast<int32_t>(3 * i + k));
+  }
+  std::ofstream(dir_ / "many.ply", std::ios::binary) << ply;
+  const Status s = LoadSceneFile(Write("scene.yaml",
+                                       "version: 1\nmeshes:\n  - file: many.ply\n"
+                                       "    default_class: fruit\n"
+                                       "    fruit_instances: components\n"))
+                       .status();
+  EXPECT_EQ(s.code(), StatusCode::kResourceExhausted) << s.ToString();
+  EXPECT_THAT(s.message(), HasSubstr("at most 65535"));
+}
+
 TEST_F(SceneInputTest, NonFiniteVerticesAreRefused) {
   Write("nan.ply", PlyHeader("3", "1") + "0 0 0\nnan 0 0\n0.1 0.1 0\n3 0 1 2\n");
   Write("nan.obj", "o a\nv 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n");
