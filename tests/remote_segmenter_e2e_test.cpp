@@ -72,11 +72,10 @@ TEST(RemoteSegmenterEndToEndTest, RemoteEpisodeEqualsInProcessEpisode) {
   EXPECT_EQ(b->final_metrics.exact.f1, a->final_metrics.exact.f1);
 }
 
-TEST(RemoteSegmenterEndToEndTest, ServerDownIsARecordedStepFailure) {
+TEST(RemoteSegmenterEndToEndTest, ServerDownEndsTheEpisodeAsASegmenterFaultNamingTheAddress) {
   int port = 0;
   {
     interop::ServerOptions so;
-    so.segmenters = &Registries().segmenters;
     so.segmenters = &Registries().segmenters;
     so.port = 0;
     auto server = interop::SegmentationServer::Start(so);
@@ -88,7 +87,7 @@ TEST(RemoteSegmenterEndToEndTest, ServerDownIsARecordedStepFailure) {
   c.seed = 7;
   c.planner.name = "predefined";
   c.segmenter.name = fmt::format("remote://127.0.0.1:{}/oracle", port);
-  c.episode.views = 2;
+  c.episode.views = 3;
   c.threads = 2;
   auto scene = sim::MakeScenario(c.scenario, c.seed);
   ASSERT_TRUE(scene.ok());
@@ -96,11 +95,17 @@ TEST(RemoteSegmenterEndToEndTest, ServerDownIsARecordedStepFailure) {
   ASSERT_TRUE(gt.ok());
   auto r = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
-  ASSERT_FALSE(r->episode.steps.empty());
+  // Not three views of empty masks: the episode ends at the first view, as a segmenter fault
+  // whose reason names the service's address; that view is kept (depth fused).
+  EXPECT_EQ(r->episode.end, pipeline::EpisodeEnd::kSegmenterFault);
+  ASSERT_EQ(r->episode.steps.size(), 1u);
   const Status& s = r->episode.steps.front().segment_status;
-  EXPECT_EQ(s.code(), StatusCode::kIoError) << s.ToString();
-  EXPECT_NE(s.message().find(fmt::format("127.0.0.1:{} is unavailable", port)), std::string::npos)
-      << s.message();
+  EXPECT_EQ(s.code(), StatusCode::kUnavailable) << s.ToString();
+  const std::string where =
+      fmt::format("the segmentation server at 127.0.0.1:{} is unavailable", port);
+  EXPECT_NE(s.message().find(where), std::string::npos) << s.message();
+  EXPECT_NE(r->episode.end_reason.find(where), std::string::npos) << r->episode.end_reason;
+  EXPECT_GT(r->episode.steps.front().integration.endpoints, 0u);
 }
 
 }  // namespace
