@@ -2,15 +2,32 @@
 #   make demo   set up, build, run the main job (a simulated view of the default scenario)
 #   make test   set up, build, run every test
 # Also: make build, make bench (benchmark programs, one JSON file each under bench-results/),
-# make format.
+# make format, make fuzz, make sanitize (docs/limits.md, "Fuzzing and sanitizers").
 
 BUILD_DIR  ?= build
 BUILD_TYPE ?= Release
 JOBS       ?= $(shell nproc)
 DEMO_OUT   ?= out/demo
 CMAKE_ARGS ?=
+# The clang build of the fuzzers and the ASan + UBSan suites (cmake/AvpSanitizeBuild.cmake).
+SAN_DIR    ?= $(BUILD_DIR)/sanitize
+SAN_CMAKE_ARGS ?=
+# make test fuzzes every target FUZZ_TEST_SECONDS; make fuzz FUZZ_SECONDS (FUZZ_TARGETS: some).
+FUZZ_TEST_SECONDS ?= 15
+FUZZ_SECONDS ?= 600
+FUZZ_TARGETS ?=
+# The suites make test runs under ASan + UBSan: the modules that read untrusted input.
+SAN_TESTS  ?= avp_core_test avp_io_test avp_rosmsg_test avp_mapping_test avp_interop_test
+# make sanitize: every suite of the sanitizer build.
+SAN_ALL_TESTS ?= avp_core_test avp_io_test avp_rosmsg_test avp_robot_test avp_sim_scene_test \
+  avp_sim_render_test avp_mapping_test avp_segmentation_test avp_planning_test avp_pipeline_test \
+  avp_eval_test avp_report_test avp_experiment_test avp_interop_test avp_zsl_text_test \
+  avp_zsl_geometry_test avp_architecture_test avp_run_command_test avp_planner_contract_test \
+  avp_episode_end_to_end_test avp_remote_segmenter_e2e_test avp_extending_examples_test \
+  avp_scenario_start_pose_test
 
-.PHONY: all setup configure build test demo bench format check-format clean
+.PHONY: all setup configure build test demo bench format check-format clean \
+        sanitize-configure fuzz-build fuzz-test sanitize-test fuzz sanitize
 
 all: build
 
@@ -25,8 +42,36 @@ configure: setup
 build: configure
 	@cmake --build $(BUILD_DIR) -j $(JOBS)
 
+# Every test of the normal build (with the replay tests of the fuzz corpora), then each fuzzer
+# briefly, then the suites of SAN_TESTS under ASan + UBSan.
 test: build
 	@ctest --test-dir $(BUILD_DIR) --output-on-failure -j $(JOBS) --no-tests=error
+	@$(MAKE) --no-print-directory fuzz-test sanitize-test
+
+sanitize-configure: setup
+	@if [ ! -f $(SAN_DIR)/build.ninja ]; then \
+	  cmake -C cmake/AvpSanitizeBuild.cmake -S . -B $(SAN_DIR) -G Ninja $(SAN_CMAKE_ARGS); \
+	fi
+
+fuzz-build: sanitize-configure
+	@cmake --build $(SAN_DIR) -j $(JOBS) --target avp_fuzzers
+
+fuzz-test: fuzz-build
+	@FUZZ_JOBS=$(JOBS) ./fuzz/run_fuzzers.sh $(SAN_DIR) $(FUZZ_TEST_SECONDS)
+
+sanitize-test: sanitize-configure
+	@cmake --build $(SAN_DIR) -j $(JOBS) --target $(SAN_TESTS)
+	@FUZZ_JOBS=$(JOBS) ./fuzz/run_sanitized_tests.sh $(SAN_DIR) $(SAN_TESTS)
+
+# Longer fuzzing (FUZZ_SECONDS per target, e.g. make fuzz FUZZ_SECONDS=3600 FUZZ_TARGETS=map_file).
+fuzz: fuzz-build
+	@FUZZ_JOBS=$(JOBS) ./fuzz/run_fuzzers.sh $(SAN_DIR) $(FUZZ_SECONDS) $(FUZZ_TARGETS)
+
+# The nightly check: every suite under ASan + UBSan, and every fuzzer briefly.
+sanitize: sanitize-configure
+	@cmake --build $(SAN_DIR) -j $(JOBS) --target avp_fuzzers $(SAN_ALL_TESTS)
+	@FUZZ_JOBS=$(JOBS) ./fuzz/run_sanitized_tests.sh $(SAN_DIR) $(SAN_ALL_TESTS)
+	@FUZZ_JOBS=$(JOBS) ./fuzz/run_fuzzers.sh $(SAN_DIR) $(FUZZ_TEST_SECONDS)
 
 demo: build
 	@./scripts/demo $(BUILD_DIR) $(DEMO_OUT)

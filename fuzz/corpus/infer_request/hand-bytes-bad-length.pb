@@ -1,0 +1,5 @@
+
+color*
+rgbUINT8*
+promptBYTES:È :
+ÿÿÿÿtomato

@@ -1,0 +1,4 @@
+
+color*
+rgbUINT8þÿÿÿÿÿÿÿÿ*
+promptBYTES*Btomato

@@ -1,0 +1,4 @@
+
+color*
+rgbUINT8€€€€€€€€@*
+promptBYTES*Btomato
