@@ -73,8 +73,12 @@ Status RunServeSegmentation(const ServeOptions& options) {
                        interop::SegmentationServer::Start(options.server));
   log(ServeLogLevel::kInfo,
       fmt::format("serving segmentation (KServe v2 / Open Inference Protocol, gRPC) on {} with {} "
-                  "worker threads",
-                  server->address(), options.server.threads));
+                  "worker threads; queue {} ({} per client); per request at most {} pixels, a "
+                  "{}-byte prompt of {} phrases, {} instances",
+                  server->address(), options.server.threads, options.server.max_queue_depth,
+                  options.server.max_queued_per_client, options.server.max_image_pixels,
+                  options.server.max_prompt_bytes, options.server.max_prompt_phrases,
+                  options.server.max_instances));
   int ready = 0;
   for (const interop::ModelState& m : server->models()) {
     if (m.ready) {
@@ -113,8 +117,10 @@ Status RunServeSegmentation(const ServeOptions& options) {
   const interop::ServerStats stats = server->stats();
   log(ServeLogLevel::kInfo,
       fmt::format("stopped after {} answered and {} refused inference requests ({} expired in "
-                  "the queue)",
-                  stats.infer_ok, stats.infer_failed, stats.infer_expired));
+                  "the queue, {} stopped when their client left or their deadline passed, {} "
+                  "refused with a full queue, {} over a per-request limit)",
+                  stats.infer_ok, stats.infer_failed, stats.infer_expired, stats.infer_interrupted,
+                  stats.infer_queue_full, stats.infer_over_budget));
   return Status::Ok();
 }
 
@@ -164,6 +170,30 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
       ->default_val(server.instances_per_model);
   cmd->add_option("--seed", server.default_seed, "Segmenter seed of requests that send none")
       ->default_val(server.default_seed);
+  cmd->add_option("--max-queue-depth", server.max_queue_depth,
+                  "Requests waiting for a worker, all clients together; more are refused at once "
+                  "(RESOURCE_EXHAUSTED)")
+      ->default_val(server.max_queue_depth);
+  cmd->add_option("--max-queued-per-client", server.max_queued_per_client,
+                  "Requests of one client (connection) waiting at once; clients are served in turn")
+      ->default_val(server.max_queued_per_client);
+  cmd->add_option("--max-image-pixels", server.max_image_pixels,
+                  "Pixels (H x W) of a request's image, from its shape or PNG / JPEG header, "
+                  "checked before decoding")
+      ->default_val(server.max_image_pixels);
+  cmd->add_option("--max-prompt-bytes", server.max_prompt_bytes,
+                  "Bytes of a request's prompt (the segmenters' process-wide max_prompt_bytes "
+                  "applies too: avp --limit)")
+      ->default_val(server.max_prompt_bytes);
+  cmd->add_option("--max-prompt-phrases", server.max_prompt_phrases,
+                  "Phrases in a request's prompt, duplicates included (and the process-wide "
+                  "max_prompt_phrases)")
+      ->default_val(server.max_prompt_phrases);
+  cmd->add_option("--max-instances", server.max_instances, "Instances in one answer")
+      ->default_val(server.max_instances);
+  cmd->add_option("--max-cached-seeds", server.max_cached_seeds,
+                  "(backend, seed) pairs whose segmenters are kept")
+      ->default_val(server.max_cached_seeds);
   cmd->add_option("--port-file", cli->port_file,
                   "Write the bound port to this file once listening");
   cmd->callback([cli, &context] {
