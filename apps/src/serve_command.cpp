@@ -177,6 +177,9 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
   cmd->add_option("--max-queued-per-client", server.max_queued_per_client,
                   "Requests of one client (connection) waiting at once; clients are served in turn")
       ->default_val(server.max_queued_per_client);
+  cmd->add_option("--max-running-per-client", server.max_running_per_client,
+                  "Requests of one client running at once (0: half the worker threads)")
+      ->default_val(server.max_running_per_client);
   cmd->add_option("--max-image-pixels", server.max_image_pixels,
                   "Pixels (H x W) of a request's image, from its shape or PNG / JPEG header, "
                   "checked before decoding")

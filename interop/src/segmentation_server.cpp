@@ -161,12 +161,12 @@ struct Model {
 
 /// A fixed pool of worker threads over a bounded queue shared fairly between clients: each
 /// client (a key, the gRPC peer) has its own FIFO, and the workers take the clients' next
-/// requests in turn (round robin). At most `max_depth` tasks wait in all, at most `per_client`
-/// of one client.
+/// requests in turn (round robin), skipping a client that already has `running_per_client`
+/// tasks running. At most `max_depth` tasks wait in all, at most `per_client` of one client.
 class WorkQueue {
  public:
-  WorkQueue(int threads, size_t max_depth, size_t per_client)
-      : max_depth_(max_depth), per_client_(per_client) {
+  WorkQueue(int threads, size_t max_depth, size_t per_client, size_t running_per_client)
+      : max_depth_(max_depth), per_client_(per_client), running_per_client_(running_per_client) {
     for (int i = 0; i < threads; ++i) workers_.emplace_back([this] { Loop(); });
   }
   ~WorkQueue() { Stop(); }
@@ -213,17 +213,23 @@ class WorkQueue {
   void Loop() {
     while (true) {
       std::function<void()> task;
+      std::string client;
       {
         std::unique_lock lock(mutex_);
-        cv_.wait(lock, [this] { return stopping_ || size_ > 0; });
-        if (size_ == 0) return;
-        // The client whose turn it is; back of the line if it has more.
-        const std::string client = std::move(turns_.front());
-        turns_.pop_front();
+        auto turn = turns_.end();
+        cv_.wait(lock, [&] {
+          turn = NextTurnLocked();
+          return turn != turns_.end() || (stopping_ && size_ == 0);
+        });
+        if (turn == turns_.end()) return;
+        // The first client in line that may run one more; back of the line if it has more.
+        client = std::move(*turn);
+        turns_.erase(turn);
         const auto it = clients_.find(client);
         task = std::move(it->second.front());
         it->second.pop_front();
         --size_;
+        ++running_[client];
         if (it->second.empty()) {
           clients_.erase(it);
         } else {
@@ -231,11 +237,27 @@ class WorkQueue {
         }
       }
       task();
+      {
+        std::lock_guard lock(mutex_);
+        if (--running_[client] == 0) running_.erase(client);
+      }
+      cv_.notify_all();  // a client at its running limit may go again
     }
+  }
+
+  /// The first client in line with fewer than running_per_client_ tasks running, or end().
+  std::deque<std::string>::iterator NextTurnLocked() {
+    for (auto it = turns_.begin(); it != turns_.end(); ++it) {
+      const auto r = running_.find(*it);
+      if (r == running_.end() || r->second < running_per_client_) return it;
+    }
+    return turns_.end();
   }
 
   const size_t max_depth_;
   const size_t per_client_;
+  const size_t running_per_client_;
+  std::map<std::string, size_t> running_;  ///< tasks running now, per client
   mutable std::mutex mutex_;
   std::condition_variable cv_;
   std::map<std::string, std::deque<std::function<void()>>> clients_;
@@ -285,6 +307,12 @@ Status ServerOptions::Validate() const {
   if (max_queued_per_client < 1 || max_queued_per_client > std::max(max_queue_depth, 1)) {
     errors.push_back(fmt::format("max_queued_per_client ({}) must be in [1, max_queue_depth ({})]",
                                  max_queued_per_client, max_queue_depth));
+  }
+  if (max_running_per_client < 0 || max_running_per_client > std::max(threads, 1)) {
+    errors.push_back(
+        fmt::format("max_running_per_client ({}) must be in [0 (half the threads), "
+                    "threads ({})]",
+                    max_running_per_client, threads));
   }
   if (max_image_pixels < 1 || max_image_pixels > (uint64_t{1} << 30)) {
     errors.push_back(fmt::format("max_image_pixels ({}) must be in [1, 1073741824 (32768^2)]",
@@ -619,9 +647,11 @@ Result<std::unique_ptr<SegmentationServer>> SegmentationServer::Start(
   impl->budget_.max_image_pixels = options.max_image_pixels;
   impl->budget_.max_prompt_bytes = options.max_prompt_bytes;
   impl->budget_.max_prompt_phrases = options.max_prompt_phrases;
-  impl->queue =
-      std::make_unique<WorkQueue>(options.threads, static_cast<size_t>(options.max_queue_depth),
-                                  static_cast<size_t>(options.max_queued_per_client));
+  impl->queue = std::make_unique<WorkQueue>(
+      options.threads, static_cast<size_t>(options.max_queue_depth),
+      static_cast<size_t>(options.max_queued_per_client),
+      static_cast<size_t>(options.max_running_per_client > 0 ? options.max_running_per_client
+                                                             : std::max(1, options.threads / 2)));
 
   const std::string address =
       options.host.find(':') != std::string::npos && options.host.front() != '['

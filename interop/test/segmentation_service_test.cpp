@@ -714,6 +714,43 @@ TEST_F(OneWorkerTest, OneClientsFloodDoesNotPushOutAnother) {
   EXPECT_EQ(refused, 3);
 }
 
+TEST_F(OneWorkerTest, AClientRunsOnAtMostHalfTheWorkers) {
+  // Two workers: one client's two blocking calls take one of them; the second waits although a
+  // worker is free, and another client's request is served by that worker.
+  ServerOptions o;
+  o.segmenters = &TestSegmenters();
+  o.port = 0;
+  o.threads = 2;
+  o.backends = {"oracle", "test-block"};
+  auto server = SegmentationServer::Start(o);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  server_ = std::move(*server);
+  auto greedy = NewClient(), other = NewClient();
+  AsyncInfer first(*greedy, Request("test-block"));
+  ASSERT_TRUE(Eventually([] { return BlockingSegmenter::entered.load() == 1; }));
+  AsyncInfer second(*greedy, Request("test-block"));
+  ASSERT_TRUE(Eventually([&] { return server_->stats().queued == 1; }));
+  inference::ModelInferRequest proto;
+  internal::ToProto(Request("oracle"), &proto);
+  inference::ModelInferResponse response;
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  const grpc::Status served = other->ModelInfer(&context, proto, &response);
+  EXPECT_TRUE(served.ok()) << served.error_message();
+  EXPECT_EQ(BlockingSegmenter::entered.load(), 1);  // the greedy client's second call still waits
+  first.context.TryCancel();
+  EXPECT_EQ(first.Wait().error_code(), grpc::StatusCode::CANCELLED);
+  ASSERT_TRUE(Eventually([] { return BlockingSegmenter::entered.load() == 2; }));
+  second.context.TryCancel();
+  EXPECT_EQ(second.Wait().error_code(), grpc::StatusCode::CANCELLED);
+
+  ServerOptions bad = o;
+  bad.max_running_per_client = 3;
+  EXPECT_THAT(
+      SegmentationServer::Start(bad).status().message(),
+      HasSubstr("max_running_per_client (3) must be in [0 (half the threads), threads (2)]"));
+}
+
 TEST_F(OneWorkerTest, ADeadlinePassingStopsTheWorkAndFreesTheWorker) {
   Start(4, 4);
   auto a = NewClient(), b = NewClient();

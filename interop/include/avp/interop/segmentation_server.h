@@ -34,6 +34,9 @@ struct ServerOptions {
   /// the others' are still taken. Workers take the clients' requests in turn (round robin), so a
   /// flood from one client delays another's request by at most one request per worker.
   int max_queued_per_client = 16;
+  /// Requests of one client running at once, in [0, threads]; 0 = half the workers (at least
+  /// one), so that a client with many requests in flight leaves workers free for the others.
+  int max_running_per_client = 0;
   /// Per-request budgets, checked before anything of the request is decoded
   /// (DecodeSegmentationRequest, RequestBudget): pixels of the colour image (from the shape of
   /// 'rgb' or the PNG / JPEG header of 'image'; also bounds depth and labels), in [1, 2^30].
