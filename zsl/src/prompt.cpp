@@ -1,9 +1,13 @@
 // Detector prompt parsing: comma-separated class names, normalised and de-duplicated.
 #include "prompt.h"
 
+#include <cstdint>
 #include <unordered_set>
 
 #include <fmt/format.h>
+
+#include <avp/core/text.h>
+#include <avp/segmentation/segmenter.h>
 
 namespace avp::zsl {
 namespace {
@@ -33,6 +37,17 @@ std::string NormalizeClassName(std::string_view name) {
 }
 
 Result<std::vector<std::string>> ParsePromptClasses(std::string_view prompt, size_t max_classes) {
+  // The prompt limits of every segmenter (segmentation::SplitPrompt), before anything is copied.
+  AVP_RETURN_IF_ERROR(segmentation::MaxPromptBytes().Check("prompt", prompt.size()));
+  uint64_t pieces = 0;
+  for (size_t begin = 0; begin <= prompt.size();) {
+    size_t end = prompt.find(',', begin);
+    if (end == std::string_view::npos) end = prompt.size();
+    const std::string_view piece = prompt.substr(begin, end - begin);
+    if (piece.find_first_not_of(" \t\n\r\f\v") != std::string_view::npos) ++pieces;
+    begin = end + 1;
+  }
+  AVP_RETURN_IF_ERROR(segmentation::MaxPromptPhrases().Check("phrases in the prompt", pieces));
   std::vector<std::string> classes;
   std::unordered_set<std::string> seen;
   size_t begin = 0;
@@ -45,8 +60,8 @@ Result<std::vector<std::string>> ParsePromptClasses(std::string_view prompt, siz
   }
   if (classes.empty()) {
     return InvalidArgumentError(fmt::format(
-        "prompt '{}' has no classes: expected comma-separated names such as 'tomato, leaf'",
-        prompt));
+        "prompt {} has no classes: expected comma-separated names such as 'tomato, leaf'",
+        QuoteText(prompt)));
   }
   if (max_classes > 0 && classes.size() > max_classes) {
     return InvalidArgumentError(

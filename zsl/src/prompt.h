@@ -20,10 +20,13 @@ std::string NormalizeClassName(std::string_view name);
 /// NormalizeClassName each piece, drop empty pieces and keep only the first occurrence of each name
 /// (in prompt order): {"tomato", "leaf", "stem"}.
 ///
-/// `max_classes` is the detector's fixed class count N_max (0 = unlimited).
-/// Errors (InvalidArgument): the prompt yields no class (the message quotes the prompt), or more
-/// than `max_classes` classes remain after de-duplication ("prompt has 40 classes; the detector
-/// takes at most 32 (N_max)").
+/// `max_classes` is the detector's fixed class count N_max (0 = no detector limit).
+/// Errors: ResourceExhausted, before anything is copied, when the prompt is longer than the
+/// process-wide max_prompt_bytes or has more phrases (duplicates included) than
+/// max_prompt_phrases (segmentation::MaxPromptBytes / MaxPromptPhrases, as SplitPrompt);
+/// InvalidArgument when the prompt yields no class (the message quotes the prompt, escaped and
+/// shortened), or more than `max_classes` classes remain after de-duplication ("prompt has 40
+/// classes; the detector takes at most 32 (N_max)").
 Result<std::vector<std::string>> ParsePromptClasses(std::string_view prompt,
                                                     size_t max_classes = 0);
 

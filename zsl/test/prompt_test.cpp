@@ -5,6 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <avp/core/limits.h>
+#include <avp/segmentation/segmenter.h>
+
 namespace avp::zsl {
 namespace {
 
@@ -59,8 +62,27 @@ TEST(ParsePromptClassesTest, EmptyPromptIsAnErrorQuotingThePrompt) {
   const auto commas = ParsePromptClasses(" , ,\t");
   ASSERT_FALSE(commas.ok());
   EXPECT_EQ(commas.status().code(), StatusCode::kInvalidArgument);
-  EXPECT_NE(commas.status().message().find("prompt ' , ,\t' has no classes"), std::string::npos)
+  EXPECT_NE(commas.status().message().find("prompt ' , ,\\t' has no classes"), std::string::npos)
       << commas.status().message();
+}
+
+TEST(ParsePromptClassesTest, TheProcessWidePromptLimitsApply) {
+  std::string prompt = "tomato";
+  for (int i = 1; i < 100000; ++i) prompt += ", tomato";
+  const auto huge = ParsePromptClasses(prompt);
+  ASSERT_FALSE(huge.ok());
+  EXPECT_EQ(huge.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_NE(huge.status().message().find("prompt (799998) exceeds the limit max_prompt_bytes"),
+            std::string::npos)
+      << huge.status().message();
+  std::string many = "a";
+  for (int i = 1; i < 65; ++i) many += ",a";  // 65 phrases, one class
+  const auto phrases = ParsePromptClasses(many);
+  ASSERT_FALSE(phrases.ok());
+  EXPECT_NE(phrases.status().message().find("phrases in the prompt (65) exceeds the limit "
+                                            "max_prompt_phrases = 64"),
+            std::string::npos)
+      << phrases.status().message();
 }
 
 std::string NumberedClasses(int count) {
@@ -92,7 +114,9 @@ TEST(ParsePromptClassesTest, DuplicatesDoNotCountTowardsTheLimit) {
   EXPECT_FALSE(ParsePromptClasses("a, b, c, d", 3).ok());
 }
 
-TEST(ParsePromptClassesTest, ZeroLimitMeansUnlimited) {
+TEST(ParsePromptClassesTest, ZeroLimitMeansNoDetectorLimit) {
+  // Only the process-wide max_prompt_phrases (64 by default) applies then.
+  const ScopedLimit more(segmentation::MaxPromptPhrases(), 100);
   const auto classes = ParsePromptClasses(NumberedClasses(100));
   ASSERT_TRUE(classes.ok()) << classes.status().ToString();
   EXPECT_EQ(classes->size(), 100u);
