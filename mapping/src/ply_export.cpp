@@ -1,12 +1,10 @@
 #include <bit>
-#include <cerrno>
-#include <cstring>
-#include <fstream>
 #include <string>
 #include <vector>
 
 #include <fmt/format.h>
 
+#include <avp/io/file.h>
 #include <avp/io/label_preview.h>
 #include <avp/mapping/ply_export.h>
 
@@ -65,17 +63,9 @@ Result<PlyExportStats> ExportSemanticPly(const OccupancyGrid& grid,
       "property ushort instance\nproperty ushort observations\n"
       "end_header\n";
 
-  std::error_code ec;
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) {
-    return IoError(
-        fmt::format("cannot open '{}' for writing: {}", path.string(), std::strerror(errno)));
-  }
-  out.write(header.data(), static_cast<std::streamsize>(header.size()));
-  out.write(body.data(), static_cast<std::streamsize>(body.size()));
-  out.close();
-  if (!out) return IoError(fmt::format("writing PLY file '{}' failed", path.string()));
+  // Atomic and durable (a temporary file, fsync, rename): a kill or a full disk never leaves a
+  // truncated PLY behind.
+  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(path, header + body, "PLY file"));
   stats.file_bytes = header.size() + body.size();
   return stats;
 }

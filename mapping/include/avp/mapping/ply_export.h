@@ -30,7 +30,8 @@ struct PlyExportStats {
 ///   ushort instance          instance id (0 = none)
 ///   ushort observations      frames in which a mask covered the voxel
 /// The header carries `comment voxel_size_m <s>`. Readable by MeshLab, CloudCompare, Open3D.
-/// Errors: IoError naming the path.
+/// Written atomically and durably (io::WriteFileAtomic): `path` holds the old file or the whole new
+/// one, never a truncated one. Errors: IoError naming the path.
 Result<PlyExportStats> ExportSemanticPly(const OccupancyGrid& grid,
                                          const std::filesystem::path& path,
                                          const PlyExportOptions& options = {});
