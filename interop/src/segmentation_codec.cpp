@@ -781,6 +781,12 @@ Result<Segmentation> DecodeSegmentation(const InferResponse& response) {
   const std::string_view per_instance = "(one per instance in 'masks')";
   AVP_RETURN_IF_ERROR(ExpectTensor(*scores_t, "output", DataType::kFp32, {n}, "[N]", per_instance));
   AVP_ASSIGN_OR_RETURN(const std::vector<float> scores, ReadValues<float>(*scores_t));
+  for (size_t i = 0; i < scores.size(); ++i) {
+    if (!(std::isfinite(scores[i]) && scores[i] >= 0.0f && scores[i] <= 1.0f)) {
+      return InvalidArgumentError(fmt::format(
+          "output 'scores'[{}] ({}) must be a confidence: finite and in [0, 1]", i, scores[i]));
+    }
+  }
 
   std::vector<int32_t> classes(static_cast<size_t>(n), static_cast<int32_t>(SemanticClass::kFruit));
   if (const Tensor* t = response.FindOutput(names::kClasses)) {

@@ -263,6 +263,16 @@ TEST(SegmentationCodecTest, MalformedResponsesAreErrorsNamingTheOutput) {
   EXPECT_EQ(DecodeSegmentation(r).status().message(),
             "output 'classes'[0] (9) is not a semantic class id (0 - 6)");
 
+  for (const float bad : {1.5f, -0.1f, std::numeric_limits<float>::quiet_NaN()}) {
+    r = good;
+    const std::vector<float> score = {bad};
+    r.outputs[2] = MakeTensor<float>("scores", DataType::kFp32, {1}, std::span<const float>(score));
+    const auto d = DecodeSegmentation(r);
+    ASSERT_FALSE(d.ok()) << bad;
+    EXPECT_THAT(d.status().message(), HasSubstr("output 'scores'[0] ("));
+    EXPECT_THAT(d.status().message(), HasSubstr("must be a confidence: finite and in [0, 1]"));
+  }
+
   r = good;
   r.parameters["timings"] = std::string("[{\"stage\": 3}]");
   EXPECT_THAT(DecodeSegmentation(r).status().message(), HasSubstr("parameter 'timings'"));
