@@ -3,7 +3,9 @@
 // ground truth; bad input gives messages that name the bad value.
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <numbers>
+#include <string>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -206,6 +208,50 @@ TEST_F(MapCommandTest, BadInputsNameTheBadValue) {
   c = RunMapCompare(cmp);
   ASSERT_FALSE(c.ok());
   EXPECT_THAT(c.status().message(), HasSubstr("none.avpmap"));
+}
+
+TEST_F(MapCommandTest, ExportNeverOverwritesItsInput) {
+  // Refused before the map is read: X is left byte for byte as it was.
+  const fs::path map = dir_ / "plant.ply";
+  const std::string bytes = "AVPMAP\x01 not really a map";
+  std::ofstream(map, std::ios::binary) << bytes;
+  MapExportOptions exp;
+  exp.map = map;
+  for (const fs::path& out : {map, dir_ / "." / "plant.ply", dir_ / "link.ply"}) {
+    if (out.filename() == "link.ply") fs::create_symlink(map, out);
+    exp.out = out;
+    const Status s = RunMapExport(exp).status();
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << out;
+    EXPECT_THAT(s.message(), HasSubstr("is the map file '" + map.string() + "' it reads"));
+    EXPECT_THAT(s.message(), HasSubstr("outputs never overwrite inputs"));
+    std::ifstream in(map, std::ios::binary);
+    EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), bytes) << out;
+  }
+  // compare --json is an output too.
+  MapCompareOptions cmp;
+  cmp.map = map;
+  cmp.gt = dir_ / "gt.bt";
+  std::ofstream(cmp.gt) << "gt";
+  cmp.json_out = cmp.gt;
+  EXPECT_THAT(RunMapCompare(cmp).status().message(),
+              HasSubstr("is the ground truth file '" + cmp.gt.string() + "'"));
+}
+
+TEST_F(MapCommandTest, AFolderGivenForAMapIsNotSaidToBeMissing) {
+  const fs::path folder = dir_ / "maps";
+  fs::create_directories(folder);
+  MapExportOptions exp;
+  exp.map = folder;
+  exp.out = dir_ / "x.ply";
+  MapCompareOptions cmp;
+  cmp.map = folder;
+  cmp.gt = folder;
+  for (const Status& s :
+       {RunMapInfo(folder).status(), RunMapExport(exp).status(), RunMapCompare(cmp).status()}) {
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+    EXPECT_THAT(s.message(), HasSubstr("'" + folder.string() + "' is a folder, not a map file"));
+    EXPECT_THAT(s.message(), Not(HasSubstr("does not exist")));
+  }
 }
 
 TEST(ArcViewPosesTest, ViewsLookAtTheTargetFromTheArc) {

@@ -6,6 +6,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/core/text.h>
 #include <avp/experiment/bench.h>
 
 #include "cli_common.h"
@@ -17,29 +18,27 @@ namespace {
 struct BenchCli {
   std::string config, scenarios, planners, seeds, segmenter, out = "out/bench";
   int views = 0, jobs = 0;
+  bool force = false;
   std::vector<std::string> planner_options, set;
 };
 
-/// "N" for 0..N-1, or a list "0,1,5". InvalidArgument naming the text otherwise.
+/// "N" for 0..N-1 (N >= 1), or a list "0,1,5" (no empty item). InvalidArgument naming the text
+/// otherwise; at most kMaxBenchSeeds seeds, checked before the list is made.
 Result<std::vector<uint64_t>> ParseSeeds(const std::string& text) {
-  const std::vector<std::string> items = SplitCommaList(text);
+  AVP_ASSIGN_OR_RETURN(const std::vector<std::string> items,
+                       ParseCliList("--seeds", text, experiment::kMaxBenchSeeds));
   std::vector<uint64_t> seeds;
-  const auto bad = [&] {
-    return InvalidArgumentError(
-        fmt::format("bad --seeds '{}' (a count N, or a list like 0,1,5)", text));
-  };
   if (items.size() == 1 && text.find(',') == std::string::npos) {
-    const std::optional<uint64_t> n = options_internal::ParseUnsigned(items[0]);
-    if (!n) return bad();
-    AVP_RETURN_IF_ERROR(experiment::CheckSeedCount(*n, "--seeds"));
-    for (uint64_t i = 0; i < *n; ++i) seeds.push_back(i);
+    AVP_ASSIGN_OR_RETURN(const uint64_t n,
+                         ParseCliUnsigned("--seeds (a count N for seeds 0..N-1)", items[0], 1,
+                                          experiment::kMaxBenchSeeds));
+    for (uint64_t i = 0; i < n; ++i) seeds.push_back(i);
     return seeds;
   }
-  AVP_RETURN_IF_ERROR(experiment::CheckSeedCount(items.size(), "--seeds"));
   for (const std::string& item : items) {
-    const std::optional<uint64_t> s = options_internal::ParseUnsigned(item);
-    if (!s) return bad();
-    seeds.push_back(*s);
+    AVP_ASSIGN_OR_RETURN(const uint64_t s,
+                         ParseCliUnsigned("--seeds: a seed", item, 0, MaxOf<uint64_t>()));
+    seeds.push_back(s);
   }
   return seeds;
 }
@@ -57,8 +56,8 @@ Status ApplyPlannerOptions(const std::vector<std::string>& items, experiment::Be
       planner = b.planners.front();
     } else {
       return InvalidArgumentError(fmt::format(
-          "planner option '{}' must name its planner: PLANNER:KEY=VALUE (e.g. avp-nbv:{})", item,
-          item));
+          "planner option {} must name its planner: PLANNER:KEY=VALUE (e.g. avp-nbv:{})",
+          QuoteText(item), EscapeText(item)));
     }
     AVP_ASSIGN_OR_RETURN(const OptionValues values, ParseKeyValues({key_value}, "planner option"));
     for (const auto& kv : values) b.planner_options[planner].push_back(kv);
@@ -75,15 +74,23 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   }
   if (cmd.get_option("--views")->count() > 0) b.base.episode.views = cli.views;
   if (cmd.get_option("--segmenter")->count() > 0) b.base.segmenter.name = cli.segmenter;
-  if (!cli.scenarios.empty()) b.scenarios = SplitCommaList(cli.scenarios);
-  if (!cli.planners.empty()) b.planners = SplitCommaList(cli.planners);
-  if (b.scenarios.empty()) b.scenarios = registries.scenarios.Names();
-  if (b.planners.empty()) b.planners = {"avp-nbv", "predefined", "reference-nbv"};
-  if (!cli.seeds.empty()) {
+  // A list given on the command line is used as given: an empty one is an error, never "the
+  // defaults" (those apply only when neither the option nor --config names the list).
+  if (cmd.get_option("--scenarios")->count() > 0) {
+    AVP_ASSIGN_OR_RETURN(b.scenarios, ParseCliList("--scenarios", cli.scenarios));
+  }
+  if (cmd.get_option("--planners")->count() > 0) {
+    AVP_ASSIGN_OR_RETURN(b.planners, ParseCliList("--planners", cli.planners));
+  }
+  if (cmd.get_option("--seeds")->count() > 0) {
     AVP_ASSIGN_OR_RETURN(b.seeds, ParseSeeds(cli.seeds));
   }
-  if (b.seeds.empty()) {
-    for (uint64_t i = 0; i < 10; ++i) b.seeds.push_back(i);
+  if (cli.config.empty()) {
+    if (b.scenarios.empty()) b.scenarios = registries.scenarios.Names();
+    if (b.planners.empty()) b.planners = {"avp-nbv", "predefined", "reference-nbv"};
+    if (b.seeds.empty()) {
+      for (uint64_t i = 0; i < 10; ++i) b.seeds.push_back(i);
+    }
   }
   AVP_RETURN_IF_ERROR(ApplyPlannerOptions(cli.planner_options, b));
   AVP_ASSIGN_OR_RETURN(const OptionValues set, ParseKeyValues(cli.set, "--set item"));
@@ -92,6 +99,8 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   }
   b.jobs = cli.jobs;
   b.out_dir = cli.out;
+  b.force = cli.force;
+  if (!cli.config.empty()) b.inputs.emplace_back(cli.config, "bench configuration file");
   return b;
 }
 
@@ -131,16 +140,19 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
   cmd->add_option("--planners", cli->planners, "Comma-separated planners (overrides the config)");
   cmd->add_option("--seeds", cli->seeds,
                   "Comma-separated seeds, or N for 0..N-1 (overrides the config)");
-  cmd->add_option("--views", cli->views, "Fused views per episode")
+  AddNumberOption(*cmd, "--views", cli->views, 0, MaxOf<int>(), "Fused views per episode")
       ->default_str(std::to_string(d.episode.views));
   cmd->add_option("--segmenter", cli->segmenter, "Segmenter")->default_str(d.segmenter.name);
-  cmd->add_option("--jobs", cli->jobs, "Episodes at once (0 = hardware threads)")->default_str("0");
+  AddNumberOption(*cmd, "--jobs", cli->jobs, 0, experiment::kMaxThreads,
+                  "Episodes at once (0 = hardware threads)");
   AddKeyValueOption(*cmd, "--planner-option", cli->planner_options,
                     "PLANNER:KEY=VALUE for that planner's episodes (repeatable; KEY=VALUE when "
                     "the bench has one planner); over the config's planner_options");
   AddKeyValueOption(*cmd, "--set", cli->set,
                     "Any key of the episodes' run configuration (avp run --print-config)");
   cmd->add_option("--out", cli->out, "Output folder")->default_str(cli->out);
+  cmd->add_flag("--force", cli->force,
+                "Replace the results an earlier bench left in --out (only an avp bench folder)");
   cmd->callback([cli, cmd, &context] {
     RunGuarded(context, [&] { return Bench(*cmd, *cli, *context.registries); });
   });

@@ -1,10 +1,16 @@
 #include "cli_common.h"
 
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdlib>
 #include <exception>
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <avp/core/error.h>
+#include <avp/core/text.h>
 
 namespace avp::apps {
 
@@ -27,6 +33,96 @@ int Failed(std::string_view command, const Status& status) {
 
 std::vector<std::string> SplitCommaList(std::string_view text) {
   return options_internal::SplitList(text);
+}
+
+Result<std::vector<std::string>> ParseCliList(std::string_view option, std::string_view text,
+                                              size_t max_items) {
+  std::vector<std::string> items;
+  size_t start = 0;
+  size_t index = 0;
+  while (start <= text.size()) {
+    size_t end = text.find(',', start);
+    if (end == std::string_view::npos) end = text.size();
+    std::string_view item = text.substr(start, end - start);
+    while (!item.empty() && (item.front() == ' ' || item.front() == '\t')) item.remove_prefix(1);
+    while (!item.empty() && (item.back() == ' ' || item.back() == '\t')) item.remove_suffix(1);
+    ++index;
+    if (item.empty()) {
+      if (text.find_first_not_of(" \t") == std::string_view::npos) {
+        return InvalidArgumentError(fmt::format(
+            "{} {} is empty: give at least one item (leave the option out for the defaults)",
+            option, QuoteText(text)));
+      }
+      return InvalidArgumentError(
+          fmt::format("{} {}: item {} is empty", option, QuoteText(text), index));
+    }
+    if (items.size() == max_items) {
+      return InvalidArgumentError(fmt::format("{} has more than {} items", option, max_items));
+    }
+    items.emplace_back(item);
+    start = end + 1;
+  }
+  return items;
+}
+
+namespace {
+
+Status NotInRange(std::string_view option, std::string_view text, std::string_view kind,
+                  const std::string& min, const std::string& max) {
+  return InvalidArgumentError(
+      fmt::format("{} {} must be {} in [{}, {}]", option, QuoteText(text), kind, min, max));
+}
+
+}  // namespace
+
+Result<uint64_t> ParseCliUnsigned(std::string_view option, std::string_view text, uint64_t min,
+                                  uint64_t max) {
+  const auto bad = [&] {
+    return NotInRange(option, text, "a whole number", std::to_string(min), std::to_string(max));
+  };
+  if (text.empty() || text.find_first_not_of("0123456789") != std::string_view::npos) {
+    return bad();
+  }
+  uint64_t v = 0;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+  if (ec != std::errc() || ptr != text.data() + text.size() || v < min || v > max) return bad();
+  return v;
+}
+
+Result<int64_t> ParseCliInteger(std::string_view option, std::string_view text, int64_t min,
+                                int64_t max) {
+  const auto bad = [&] {
+    return NotInRange(option, text, "a whole number", std::to_string(min), std::to_string(max));
+  };
+  const std::string_view digits = !text.empty() && text.front() == '-' ? text.substr(1) : text;
+  if (digits.empty() || digits.find_first_not_of("0123456789") != std::string_view::npos) {
+    return bad();
+  }
+  int64_t v = 0;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+  if (ec != std::errc() || ptr != text.data() + text.size() || v < min || v > max) return bad();
+  return v;
+}
+
+Result<double> ParseCliReal(std::string_view option, std::string_view text, double min,
+                            double max) {
+  const auto bad = [&] {
+    return NotInRange(option, text, "a number", options_internal::FormatReal(min),
+                      options_internal::FormatReal(max));
+  };
+  // Decimal only: no leading space or '+', no hex floats, no inf or nan.
+  if (text.empty() || text.size() > 400 ||
+      text.find_first_not_of("0123456789.-eE") != std::string_view::npos) {
+    return bad();
+  }
+  const std::string t(text);
+  char* end = nullptr;
+  errno = 0;
+  const double v = std::strtod(t.c_str(), &end);
+  if (end != t.c_str() + t.size() || errno == ERANGE || !std::isfinite(v) || v < min || v > max) {
+    return bad();
+  }
+  return v;
 }
 
 CLI::Option* AddKeyValueOption(CLI::App& cmd, const std::string& name,

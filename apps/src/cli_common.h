@@ -2,8 +2,11 @@
 #pragma once
 
 #include <functional>
+#include <limits>
 #include <string>
 #include <string_view>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -23,6 +26,63 @@ int Failed(std::string_view command, const Status& status);
 
 /// "a, b, c" split on commas, items trimmed, empty ones dropped.
 std::vector<std::string> SplitCommaList(std::string_view text);
+
+/// A list given explicitly on the command line ("--scenarios a,b"): split on commas, items
+/// trimmed. InvalidArgument naming `option` for an empty list ("--scenarios ''": never "the
+/// defaults") or an empty item ("a,,b"), and for more than `max_items` items.
+Result<std::vector<std::string>> ParseCliList(std::string_view option, std::string_view text,
+                                              size_t max_items = 100000);
+
+/// Strict numbers of the command line: the whole text is the number (no trailing text, no
+/// leading space or '+', no hex or octal), an unsigned option takes no sign (never "-1" wrapped to
+/// 2^64 - 1), a real is finite, and the value lies in [min, max]. The error names the option, the
+/// range and the text (QuoteText: a 300-digit number is not echoed whole).
+Result<uint64_t> ParseCliUnsigned(std::string_view option, std::string_view text, uint64_t min,
+                                  uint64_t max);
+Result<int64_t> ParseCliInteger(std::string_view option, std::string_view text, int64_t min,
+                                int64_t max);
+Result<double> ParseCliReal(std::string_view option, std::string_view text, double min, double max);
+
+/// A number option of `cmd` parsed with ParseCli* into `value` (left as it is when the option is
+/// not given; `value`'s current value is shown as the default). A bad value is a command-line
+/// error (CLI::ValidationError, exit code 105) with ParseCli*'s message.
+template <typename T>
+CLI::Option* AddNumberOption(CLI::App& cmd, const std::string& name, T& value, T min, T max,
+                             const std::string& description) {
+  static_assert(std::is_arithmetic_v<T> && !std::is_same_v<T, bool>);
+  CLI::Option* option = cmd.add_option_function<std::string>(
+      name,
+      [&value, name, min, max](const std::string& text) {
+        if constexpr (std::is_floating_point_v<T>) {
+          const Result<double> v =
+              ParseCliReal(name, text, static_cast<double>(min), static_cast<double>(max));
+          if (!v.ok()) throw CLI::ValidationError(v.status().message());
+          value = static_cast<T>(*v);
+        } else if constexpr (std::is_unsigned_v<T>) {
+          const Result<uint64_t> v = ParseCliUnsigned(name, text, min, max);
+          if (!v.ok()) throw CLI::ValidationError(v.status().message());
+          value = static_cast<T>(*v);
+        } else {
+          const Result<int64_t> v = ParseCliInteger(name, text, min, max);
+          if (!v.ok()) throw CLI::ValidationError(v.status().message());
+          value = static_cast<T>(*v);
+        }
+      },
+      description);
+  option->type_name(std::is_floating_point_v<T> ? "REAL" : std::is_unsigned_v<T> ? "UINT" : "INT");
+  if constexpr (std::is_floating_point_v<T>) {
+    option->default_str(options_internal::FormatReal(static_cast<double>(value)));
+  } else {
+    option->default_str(std::to_string(value));
+  }
+  return option;
+}
+
+/// The largest value of T (for AddNumberOption's max).
+template <typename T>
+constexpr T MaxOf() {
+  return std::numeric_limits<T>::max();
+}
 
 /// Repeatable "--<name> KEY=VALUE" option bound to `values`.
 CLI::Option* AddKeyValueOption(CLI::App& cmd, const std::string& name,

@@ -13,6 +13,7 @@
 #include <spdlog/spdlog.h>
 
 #include <avp/experiment/episode_runner.h>
+#include <avp/experiment/output_folder.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/options_yaml.h>
 #include <avp/live/live_options.h>
@@ -74,6 +75,12 @@ int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& 
     return 0;
   }
 
+  // A run folder that holds results is refused before the robot is waited for.
+  if (const Status s =
+          experiment::CheckOutputFolder(cli.run.out, experiment::RunFolderKind(), cli.run.force);
+      !s.ok()) {
+    return Failed("live", s);
+  }
   // The plant, when named: its ROI and the ground truth the steps are scored against.
   std::optional<sim::Scene> scene;
   std::optional<eval::GroundTruth> gt;
@@ -135,12 +142,18 @@ int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& 
   };
   const experiment::RobotSide robot{source->get(), arm->get(), stop.get_token()};
   run.run = [&](const std::vector<pipeline::EpisodeObserver*>& observers,
-                std::unique_ptr<mapping::SemanticMap>* map) {
+                std::unique_ptr<mapping::SemanticMap>* map, std::stop_token write_failed) {
+    // A result that cannot be written stops the robot's episode like Ctrl-C does.
+    const std::stop_callback forward(write_failed, [&] { stop.request_stop(); });
     const experiment::EpisodeTruth truth{scene ? &*scene : nullptr, gt ? &*gt : nullptr};
     return experiment::RunEpisodeWithRobot(*config, registries, robot, roi, truth, observers, map);
   };
   experiment::RunFolderOptions folder;
   folder.out_dir = cli.run.out;
+  folder.force = cli.run.force;
+  if (!cli.run.config_file.empty()) {
+    folder.inputs.emplace_back(cli.run.config_file, "configuration file");
+  }
   folder.on_step = PrintStep;
   std::vector<pipeline::EpisodeObserver*> observers;
   if (rviz) observers.push_back(rviz.get());

@@ -12,6 +12,9 @@
 #include <avp/core/options.h>
 #include <avp/core/rng.h>
 #include <avp/core/segmentation.h>
+#include <avp/core/text.h>
+#include <avp/experiment/run_config.h>
+#include <avp/io/file.h>
 #include <avp/io/json.h>
 #include <avp/mapping/ply_export.h>
 #include <avp/mapping/semantic_map.h>
@@ -72,7 +75,10 @@ Status ValidateBuildOptions(const MapBuildOptions& o) {
   if (!(o.mask_confidence > 0.0f && o.mask_confidence < 1.0f)) {
     errors.push_back(fmt::format("mask confidence ({}) must be in (0, 1)", o.mask_confidence));
   }
-  if (o.threads < 0) errors.push_back(fmt::format("threads ({}) must be >= 0", o.threads));
+  if (o.threads < 0 || o.threads > experiment::kMaxThreads) {
+    errors.push_back(
+        fmt::format("threads ({}) must be in [0, {}]", o.threads, experiment::kMaxThreads));
+  }
   if (o.out.empty()) errors.push_back("the output file (--out) is empty");
   if (errors.empty()) return Status::Ok();
   return InvalidArgumentError(
@@ -236,6 +242,7 @@ Result<MapGtSummary> RunMapGt(const MapGtOptions& options, const sim::ScenarioRe
 Result<MapInfo> RunMapInfo(const fs::path& path) {
   MapInfo info;
   info.path = path;
+  AVP_RETURN_IF_ERROR(io::CheckReadableFile(path, "map file").status());
   AVP_ASSIGN_OR_RETURN(const mapping::SemanticMap map, mapping::LoadMap(path, &info.file));
   const mapping::OccupancyGrid& grid = map.grid();
   info.options = map.options();
@@ -267,7 +274,8 @@ std::string FormatMapInfo(const MapInfo& info) {
   line("map file",
        fmt::format("{} ({}, format version {}, CRC-32 0x{:08x})", info.path.string(),
                    HumanBytes(info.file.file_bytes), info.file.version, info.file.crc32));
-  if (!info.file.note.empty()) line("made by", info.file.note);
+  // The note is the file's text: escaped, so that a crafted map cannot reach the terminal.
+  if (!info.file.note.empty()) line("made by", EscapeText(info.file.note, 1000));
   line("voxel size", fmt::format("{:g} mm", g.voxel_size_m * 1000.0));
   line("ROI", g.roi ? fmt::format("{} - {} m", FormatPoint(g.roi->min()), FormatPoint(g.roi->max()))
                     : std::string("none"));
@@ -333,9 +341,13 @@ Result<MapExportSummary> RunMapExport(const MapExportOptions& options) {
   const std::optional<MapExportFormat> f = MapExportFormatFromString(format);
   if (!f) {
     return InvalidArgumentError(
-        fmt::format("unknown export format '{}' (from {}): use bt, ot or ply", format,
+        fmt::format("unknown export format {} (from {}): use bt, ot or ply", QuoteText(format),
                     options.format.empty() ? "the extension of --out" : "--format"));
   }
+  // Outputs never overwrite inputs: `map export X --out X` would replace the map it reads.
+  AVP_RETURN_IF_ERROR(
+      io::CheckOutputIsNotInput(options.out, "export file (--out)", options.map, "map file"));
+  AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.map, "map file").status());
   AVP_ASSIGN_OR_RETURN(const mapping::SemanticMap map, mapping::LoadMap(options.map));
   MapExportSummary summary;
   summary.format = *f;
@@ -369,6 +381,14 @@ Result<MapCompareSummary> RunMapCompare(const MapCompareOptions& options) {
   compare.tolerance_voxels = options.tolerance_voxels;
   compare.semantic_class = options.semantic_class;
   AVP_RETURN_IF_ERROR(compare.Validate());
+  if (!options.json_out.empty()) {
+    AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.json_out, "result file (--json)",
+                                                  options.map, "map file"));
+    AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.json_out, "result file (--json)",
+                                                  options.gt, "ground truth file"));
+  }
+  AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.map, "map file").status());
+  AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.gt, "ground truth file").status());
   AVP_ASSIGN_OR_RETURN(const mapping::SemanticMap map, mapping::LoadMap(options.map));
   AVP_ASSIGN_OR_RETURN(const mapping::VoxelSet gt, mapping::ImportOctomapOccupied(options.gt));
   MapCompareSummary summary;
@@ -563,9 +583,10 @@ void AddMapBuild(CLI::App& map_cmd, CommandContext& context) {
   cmd->add_option("--scenario", b.scene.scenario,
                   "Built-in scenario name (see `avp scenes`); default: " +
                       std::string(sim::DefaultScenarioName()));
-  cmd->add_option("--seed", b.scene.seed, "Seed of the procedural plant")->default_val(0);
-  cmd->add_option("--views", b.views, "Number of views")->default_val(b.views);
-  cli->voxel_opt = cmd->add_option("--voxel-size", cli->voxel_size_m,
+  AddNumberOption(*cmd, "--seed", b.scene.seed, uint64_t{0}, MaxOf<uint64_t>(),
+                  "Seed of the procedural plant");
+  AddNumberOption(*cmd, "--views", b.views, 1, 360, "Number of views");
+  cli->voxel_opt = AddNumberOption(*cmd, "--voxel-size", cli->voxel_size_m, 0.0, 1e6,
                                    "Voxel edge in metres (map option grid.voxel_size_m)")
                        ->default_str(fmt::format("{}", b.map.grid.voxel_size_m));
   cmd->add_option("--policy", cli->policy, "Semantic fusion (map option semantics.policy)")
@@ -577,14 +598,13 @@ void AddMapBuild(CLI::App& map_cmd, CommandContext& context) {
   AddKeyValueOption(*cmd, "--map-option", cli->map_options,
                     "Map option over the defaults (repeatable): grid.voxel_size_m, "
                     "grid.sensor.hit, semantics.policy, ... (docs/mapping.md)");
-  cmd->add_option("--arc-deg", b.arc_deg,
+  AddNumberOption(*cmd, "--arc-deg", b.arc_deg, 0.0, 360.0,
                   "Arc of view azimuths around the plant, centred on the start view "
-                  "(360 = full ring)")
-      ->default_val(b.arc_deg);
-  cmd->add_option("--radius", b.radius_m,
-                  "Horizontal camera distance from the plant centre, m (0 = the start camera's)")
-      ->default_val(b.radius_m);
-  cmd->add_option("--threads", b.threads, "Integrator threads (0 = all)")->default_val(b.threads);
+                  "(360 = full ring)");
+  AddNumberOption(*cmd, "--radius", b.radius_m, 0.0, 3.0,
+                  "Horizontal camera distance from the plant centre, m (0 = the start camera's)");
+  AddNumberOption(*cmd, "--threads", b.threads, 0, experiment::kMaxThreads,
+                  "Integrator threads (0 = all)");
   cmd->add_flag("--noise", b.noise, "Apply the seeded D435-like depth noise model");
   cmd->add_option("--out", cli->out, "Output map file (.avpmap)")->default_val(cli->out);
   cmd->callback([cli, &context] {
@@ -602,9 +622,9 @@ void AddMapGt(CLI::App& map_cmd, CommandContext& context) {
   CLI::App* cmd = map_cmd.add_subcommand(
       "gt", "Write a scenario's fruit surface voxels as an OctoMap .bt ground truth");
   cmd->add_option("--scenario", gt->scene.scenario, "Built-in scenario name");
-  cmd->add_option("--seed", gt->scene.seed, "Seed of the procedural plant")->default_val(0);
-  cmd->add_option("--voxel-size", gt->voxel_size_m, "Voxel edge in metres")
-      ->default_val(gt->voxel_size_m);
+  AddNumberOption(*cmd, "--seed", gt->scene.seed, uint64_t{0}, MaxOf<uint64_t>(),
+                  "Seed of the procedural plant");
+  AddNumberOption(*cmd, "--voxel-size", gt->voxel_size_m, 0.0, 1e6, "Voxel edge in metres");
   cmd->add_option("--out", *out, "Output .bt file")->default_val(*out);
   cmd->callback([gt, out, &context] {
     RunGuarded(context, [&] {
@@ -660,9 +680,8 @@ void AddMapCompare(CLI::App& map_cmd, CommandContext& context) {
   cmd->add_option("file", cli->map, "Map file (.avpmap)")->required();
   cmd->add_option("--gt", cli->gt, "Ground truth: OctoMap .bt (or .ot) of occupied voxels")
       ->required();
-  cmd->add_option("--tolerance-voxels", cli->options.tolerance_voxels,
-                  "Also report matches within this many map voxels (0 = exact only)")
-      ->default_val(cli->options.tolerance_voxels);
+  AddNumberOption(*cmd, "--tolerance-voxels", cli->options.tolerance_voxels, 0, MaxOf<int>(),
+                  "Also report matches within this many map voxels (0 = exact only)");
   cmd->add_option("--class", cli->semantic_class, "Class of the predicted voxels")
       ->default_val(cli->semantic_class);
   cmd->add_option("--json", cli->json, "Also write the result as JSON to this file");
@@ -671,7 +690,8 @@ void AddMapCompare(CLI::App& map_cmd, CommandContext& context) {
       const auto cls = SemanticClassFromString(cli->semantic_class);
       if (!cls) {
         return Failed("map compare",
-                      InvalidArgumentError(fmt::format("unknown class '{}'", cli->semantic_class)));
+                      InvalidArgumentError(fmt::format("unknown class {} for --class",
+                                                       QuoteText(cli->semantic_class))));
       }
       MapCompareOptions o = cli->options;
       o.map = cli->map;

@@ -9,6 +9,7 @@
 #include <avp/apps/render_command.h>
 #include <avp/core/rng.h>
 #include <avp/io/depth.h>
+#include <avp/io/file.h>
 #include <avp/io/json.h>
 #include <avp/io/label_preview.h>
 #include <avp/io/png.h>
@@ -38,6 +39,11 @@ Result<RigidTransform> PoseFromVector(const std::vector<double>& v) {
                                  Eigen::Vector3d(v[0], v[1], v[2]));
 }
 
+/// Every file RunRender writes into its folder.
+constexpr const char* kRenderFiles[] = {"rgb.png",    "depth.png",          "instance.png",
+                                        "class.png",  "labels_preview.png", "camera.json",
+                                        "fruits.json"};
+
 Result<robot::ArmModel> LoadArm(const std::filesystem::path& config) {
   if (config.empty()) return robot::LoadDefaultArm();
   return robot::LoadArm(config);
@@ -50,6 +56,13 @@ Result<RenderSummary> RunRender(const RenderOptions& options,
   AVP_RETURN_IF_ERROR(options.intrinsics.Validate());
   if (options.joints_deg && options.camera_pose) {
     return InvalidArgumentError("give either --joints or --camera-pose, not both");
+  }
+  // Outputs never overwrite inputs: none of the files written may be the scene or the arm config.
+  for (const char* name : kRenderFiles) {
+    AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out_dir / name, "render output",
+                                                  options.scene.scene_file, "scene file"));
+    AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out_dir / name, "render output",
+                                                  options.arm_config, "arm config"));
   }
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
 
@@ -197,8 +210,8 @@ void AddRenderCommand(CLI::App& app, CommandContext& context) {
                   "Built-in scenario name (see `avp scenes`); default: " +
                       std::string(sim::DefaultScenarioName()));
   cmd->add_option("--scene", cli->scene_file, "YAML scene file (docs/scene-format.md)");
-  cmd->add_option("--seed", cli->options.scene.seed, "Seed of the procedural plant and the noise")
-      ->default_val(0);
+  AddNumberOption(*cmd, "--seed", cli->options.scene.seed, uint64_t{0}, MaxOf<uint64_t>(),
+                  "Seed of the procedural plant and the noise");
   cli->joints_opt = cmd->add_option("--joints", cli->joints,
                                     "Arm joint angles in degrees, comma separated, e.g. "
                                     "--joints=0,-70,60,0,47.5,0 (default: the scene's start)")

@@ -24,7 +24,7 @@ struct RunCli {
   uint64_t seed = 0;
   int views = 0, threads = 0;
   double voxel_size_m = 0.0;
-  bool no_noise = false, oracle_regret = false;
+  bool no_noise = false, oracle_regret = false, force = false;
   std::vector<std::string> planner_options, segmenter_options, map_options, set;
 };
 

@@ -171,6 +171,8 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   }
   experiment::RunFolderOptions options;
   options.out_dir = cli.out;
+  options.force = cli.force;
+  if (!cli.config_file.empty()) options.inputs.emplace_back(cli.config_file, "configuration file");
   options.on_step = PrintStep;
   const Result<experiment::RunSummary> summary =
       experiment::RunToFolder(*config, registries, options);
@@ -189,16 +191,16 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
                "Print the effective configuration as YAML (--config reads it back) and exit");
   cmd.add_option("--scenario", cli.scenario, "Built-in scenario (see avp scenes)");
   cmd.add_option("--scene", cli.scene, "YAML scene file instead of a scenario");
-  cmd.add_option("--seed", cli.seed, "Seed of the plant, the noise and every choice")
-      ->default_str("0");
+  AddNumberOption(cmd, "--seed", cli.seed, uint64_t{0}, MaxOf<uint64_t>(),
+                  "Seed of the plant, the noise and every choice");
   cmd.add_option("--planner", cli.planner, "View planner; `--planner help` lists them")
       ->default_str(d.planner.name);
   cmd.add_option("--segmenter", cli.segmenter, "Segmenter; `--segmenter help` lists them")
       ->default_str(d.segmenter.name);
-  cmd.add_option("--views", cli.views, "Fused views, start view included")
+  AddNumberOption(cmd, "--views", cli.views, 0, MaxOf<int>(), "Fused views, start view included")
       ->default_str(std::to_string(d.episode.views));
   cmd.add_option("--prompt", cli.prompt, "Text prompt")->default_str(d.episode.prompt);
-  cmd.add_option("--voxel-size", cli.voxel_size_m, "Voxel edge in metres")
+  AddNumberOption(cmd, "--voxel-size", cli.voxel_size_m, 0.0, 1e6, "Voxel edge in metres")
       ->default_str(fmt::format("{}", d.map.grid.voxel_size_m));
   cmd.add_option("--policy", cli.policy, "Semantic fusion: bayesian or reference-max")
       ->default_str(std::string(mapping::ToString(d.map.semantics.policy)));
@@ -207,8 +209,8 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
   cmd.add_flag("--no-noise", cli.no_noise, "Noise-free depth");
   cmd.add_option("--gt", cli.gt,
                  "Ground truth from an OctoMap .bt instead of the observable fruit surface");
-  cmd.add_option("--threads", cli.threads, "Threads (0 = all; results do not depend on it)")
-      ->default_str("0");
+  AddNumberOption(cmd, "--threads", cli.threads, 0, experiment::kMaxThreads,
+                  "Threads (0 = all; results do not depend on it)");
   AddKeyValueOption(cmd, "--planner-option", cli.planner_options,
                     "Planner option over its defaults (repeatable; `--planner help` lists them)");
   AddKeyValueOption(cmd, "--segmenter-option", cli.segmenter_options,
@@ -221,6 +223,8 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
                "Measure each plan step's regret with the truth (record.json oracle_regret; "
                "the plan times include it)");
   cmd.add_option("--out", cli.out, "Run folder")->default_str(cli.out);
+  cmd.add_flag("--force", cli.force,
+               "Replace the results an earlier run left in --out (only an avp run folder)");
 }
 
 void AddRunCommand(CLI::App& app, CommandContext& context) {

@@ -11,6 +11,7 @@
 #include <avp/apps/segment_command.h>
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
+#include <avp/core/text.h>
 #include <avp/io/file.h>
 #include <avp/io/image_codec.h>
 #include <avp/io/mask_codec.h>
@@ -50,9 +51,9 @@ Result<std::string> SegmenterSpecFor(const SegmentOptions& options) {
   if (options.models.empty()) return options.backend;
   if (!IsZslBackend(options.backend)) {
     return InvalidArgumentError(fmt::format(
-        "--models applies to the ywes and lsam backends, not '{}' (a \"ywes://DIR\" spec names "
+        "--models applies to the ywes and lsam backends, not {} (a \"ywes://DIR\" spec names "
         "its directory itself)",
-        options.backend));
+        QuoteText(options.backend)));
   }
   return options.backend + "://" + options.models.string();
 }
@@ -61,6 +62,12 @@ Result<SegmentResult> RunSegment(const SegmentOptions& options,
                                  const segmentation::SegmenterRegistry& segmenters) {
   AVP_RETURN_IF_ERROR(options.Validate());
   AVP_ASSIGN_OR_RETURN(const std::string spec, SegmenterSpecFor(options));
+  // Outputs never overwrite inputs: the overlay or the JSON may not be the image read.
+  for (const char* name : {"overlay.png", "instances.json"}) {
+    AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out_dir / name, "segment output",
+                                                  options.image, "image"));
+  }
+  AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.image, "image").status());
   AVP_ASSIGN_OR_RETURN(ImageRgb8 image, io::ReadImageFile(options.image));
   AVP_ASSIGN_OR_RETURN(const AnyOptions segmenter_options,
                        segmenters.Options(spec, options.segmenter_options));
@@ -144,7 +151,8 @@ std::string SegmentationJson(const SegmentResult& result, const SegmentOptions& 
       {"total_ms", result.total_ms},
       {"timings", std::move(timings)},
       {"instances", std::move(instances)}};
-  return doc.dump(2) + "\n";
+  // Invalid UTF-8 in the prompt or a label is replaced (U+FFFD), not thrown.
+  return doc.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
 }
 
 std::string FormatSegmentSummary(const SegmentResult& result) {
@@ -211,9 +219,10 @@ void AddSegmentCommand(CLI::App& app, CommandContext& context) {
                   "Model directory of ywes / lsam (default: AVP_ZSL_MODEL_DIR)");
   AddKeyValueOption(*cmd, "--segmenter-option", cli->segmenter_options,
                     "Segmenter option over its defaults (repeatable)");
-  cmd->add_option("--threshold", s.threshold, "Drop instances scoring below this")
-      ->default_val(s.threshold);
-  cmd->add_option("--seed", s.seed, "Segmenter seed (noisy segmenters only)")->default_val(s.seed);
+  AddNumberOption(*cmd, "--threshold", s.threshold, 0.0f, 1.0f,
+                  "Drop instances scoring below this");
+  AddNumberOption(*cmd, "--seed", s.seed, decltype(s.seed){0}, MaxOf<decltype(s.seed)>(),
+                  "Segmenter seed (noisy segmenters only)");
   cmd->add_option("--out", cli->out, "Output folder")->default_val(cli->out);
   cmd->callback([cli, &context] {
     RunGuarded(context, [&] {

@@ -127,17 +127,18 @@ void AddSimCommand(CLI::App& app, CommandContext& context) {
       "JointTrajectory goals (docs/ros2.md)");
   AddRunOptions(*cmd, cli->run);
   cmd->remove_option(cmd->get_option("--out"));
+  cmd->remove_option(cmd->get_option("--force"));
   AddKeyValueOption(*cmd, "--sim-option", cli->sim_options,
                     "A key of the config's sim: section (repeatable), e.g. time_scale=0, "
                     "depth_encoding=16UC1, camera_rate_hz=30");
   cmd->add_option("--node-name", cli->node_name, "The ROS 2 node's name")
       ->default_str(cli->node_name);
-  cmd->add_option("--domain-id", cli->domain_id, "ROS_DOMAIN_ID (-1: the environment's, else 0)")
-      ->default_str("-1");
+  AddNumberOption(*cmd, "--domain-id", cli->domain_id, -1, 232,
+                  "ROS_DOMAIN_ID (-1: the environment's, else 0)");
   cmd->add_option("--distro", cli->distro, "The peers' ROS 2 distribution: humble or jazzy")
       ->default_str(cli->distro);
-  cmd->add_option("--duration", cli->duration_s, "Stop after this many seconds (0: Ctrl-C)")
-      ->default_str("0");
+  AddNumberOption(*cmd, "--duration", cli->duration_s, 0.0, 1e7,
+                  "Stop after this many seconds (0: Ctrl-C)");
   cmd->callback([cli, cmd, &context] {
     RunGuarded(context, [&] { return SimRos2(*cmd, *cli, *context.registries); });
   });

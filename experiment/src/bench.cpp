@@ -5,6 +5,7 @@
 #include <mutex>
 #include <optional>
 #include <set>
+#include <stop_token>
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -12,8 +13,11 @@
 #include <yaml-cpp/yaml.h>
 
 #include <avp/core/parallel.h>
+#include <avp/core/text.h>
 #include <avp/experiment/bench.h>
 #include <avp/experiment/episode_runner.h>
+#include <avp/experiment/output_folder.h>
+#include <avp/io/file.h>
 #include <avp/io/json.h>
 #include <avp/io/options_yaml.h>
 #include <avp/io/yaml.h>
@@ -24,6 +28,12 @@ namespace avp::experiment {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
+
+const Limit& MaxBenchEpisodes() {
+  static const Limit limit("max_bench_episodes", 100000, "episodes",
+                           "episodes of one avp bench (scenarios x planners x seeds)");
+  return limit;
+}
 
 Status CheckSeedCount(uint64_t count, std::string_view what) {
   if (count > kMaxBenchSeeds) {
@@ -124,26 +134,72 @@ Result<std::vector<Group>> BuildGroups(const BenchConfig& config, const Registri
   return groups;
 }
 
-/// One episode into runs/<scenario>/<planner>/seed-<n>/: metrics.csv as it goes, record.json.
+/// The first result of the bench that could not be written: it asks every running episode to
+/// stop and keeps new ones from starting.
+class WriteFailure {
+ public:
+  void Set(const Status& s) {
+    {
+      const std::lock_guard<std::mutex> lock(mu_);
+      if (first_.ok()) first_ = s;
+    }
+    stop_.request_stop();
+  }
+  bool failed() const { return stop_.stop_requested(); }
+  std::stop_source& stop() { return stop_; }
+  Status first() {
+    const std::lock_guard<std::mutex> lock(mu_);
+    return first_;
+  }
+
+ private:
+  std::mutex mu_;
+  Status first_;
+  std::stop_source stop_;
+};
+
+/// One episode into runs/<scenario>/<planner>/seed-<n>/: metrics.csv as it goes, record.json,
+/// avp-state.json around them. A file that cannot be written fails the bench (WriteFailure).
 report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registries, const Group& g,
-                            const std::string& planner, const std::string& revision) {
+                            const std::string& planner, const std::string& revision,
+                            WriteFailure& failure) {
   report::BenchEpisode j;
   j.scenario = g.scenario;
   j.planner = planner;
   j.seed = g.seed;
+  if (failure.failed()) {
+    j.status = CancelledError("not run: the bench stopped (a result could not be written)");
+    return j;
+  }
   const RunConfig c = JobConfig(config, g.scenario, g.seed, planner);
   const fs::path dir = config.out_dir / "runs" / report::SafeFileName(j.scenario) /
                        report::SafeFileName(j.planner) / fmt::format("seed-{}", j.seed);
-  std::error_code e;
-  fs::create_directories(dir, e);
+  const auto fail = [&](const Status& s) {
+    failure.Set(s);
+    MarkFailed(dir, RunFolderKind(), "avp bench", s);
+    j.status = s;
+    return j;
+  };
+  // The bench folder was empty (or emptied by --force): a per-run folder holding anything now is
+  // a mix of two runs, refused.
+  if (Status s = PrepareOutputFolder(dir, RunFolderKind(), false); !s.ok()) {
+    failure.Set(s);
+    j.status = s;
+    return j;
+  }
+  if (Status s = MarkInProgress(dir, RunFolderKind(), "avp bench"); !s.ok()) return fail(s);
   Result<std::unique_ptr<report::MetricsCsvWriter>> csv =
       report::MetricsCsvWriter::Open(dir / "metrics.csv");
-  std::vector<pipeline::EpisodeObserver*> observers;
-  if (csv.ok()) observers.push_back(csv->get());
+  if (!csv.ok()) return fail(csv.status());
+  (*csv)->StopOnError(failure.stop());
+  const std::vector<pipeline::EpisodeObserver*> observers = {csv->get()};
   const auto te = Clock::now();
-  Result<RunResult> r = RunEpisodeOnScene(c, registries, *g.scene, *g.gt, observers);
+  Result<RunResult> r = RunEpisodeOnScene(c, registries, *g.scene, *g.gt, observers, nullptr,
+                                          failure.stop().get_token());
   j.episode_s = SecondsSince(te);
+  if (Status s = (*csv)->Close(); !s.ok()) return fail(s);
   if (!r.ok()) {
+    MarkFailed(dir, RunFolderKind(), "avp bench", r.status());
     j.status = r.status();
     return j;
   }
@@ -164,7 +220,8 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
                            {"end_reason", r->episode.end_reason},
                            {"episode_seconds", j.episode_s},
                            {"git_revision", revision}};
-  (void)io::WriteJsonFile(dir / "record.json", rec);
+  if (Status s = io::WriteJsonFile(dir / "record.json", rec); !s.ok()) return fail(s);
+  if (Status s = MarkComplete(dir, RunFolderKind(), "avp bench"); !s.ok()) return fail(s);
   return j;
 }
 
@@ -190,8 +247,9 @@ Result<uint64_t> SeedValue(const YAML::Node& node, const std::string& what) {
   const std::optional<uint64_t> v =
       node.IsScalar() ? options_internal::ParseUnsigned(node.Scalar()) : std::nullopt;
   if (!v) {
-    return InvalidArgumentError(fmt::format("{} ('{}') must be a whole number >= 0", what,
-                                            node.IsScalar() ? node.Scalar() : "not a number"));
+    return InvalidArgumentError(
+        fmt::format("{} ({}) must be a whole number >= 0", what,
+                    node.IsScalar() ? QuoteText(node.Scalar()) : std::string("not a number")));
   }
   return *v;
 }
@@ -286,9 +344,30 @@ Status BenchConfig::Validate(const Registries& registries) const {
                       planner, fmt::join(planners, ", ")));
     }
   }
+  for (const std::string& s : scenarios) {
+    if (s.empty()) errors.push_back("a scenario name is empty");
+  }
+  for (const std::string& p : planners) {
+    if (p.empty()) errors.push_back("a planner name is empty");
+  }
+  if (Status s = CheckSeedCount(seeds.size(), "seeds"); !s.ok()) errors.push_back(s.message());
+  uint64_t shown = 0;
+  if (__builtin_mul_overflow(uint64_t{scenarios.size()}, uint64_t{planners.size()}, &shown) ||
+      __builtin_mul_overflow(shown, uint64_t{seeds.size()}, &shown)) {
+    shown = UINT64_MAX;
+  }
+  if (Status s =
+          MaxBenchEpisodes().Check(fmt::format("{} scenarios x {} planners x {} seeds",
+                                               scenarios.size(), planners.size(), seeds.size()),
+                                   shown);
+      !s.ok()) {
+    return s;
+  }
   const std::set<uint64_t> unique(seeds.begin(), seeds.end());
   if (unique.size() != seeds.size()) errors.push_back("seeds repeat");
-  if (jobs < 0) errors.push_back(fmt::format("jobs ({}) must be >= 0", jobs));
+  if (jobs < 0 || jobs > kMaxThreads) {
+    errors.push_back(fmt::format("jobs ({}) must be in [0, {}]", jobs, kMaxThreads));
+  }
   if (out_dir.empty()) errors.push_back("the output folder (--out) is empty");
   if (errors.empty()) {
     RunConfig probe = JobBase(*this);
@@ -321,13 +400,37 @@ Result<BenchConfig> LoadBenchConfig(const fs::path& yaml) {
   return o;
 }
 
-Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& registries) {
-  const auto t0 = Clock::now();
-  AVP_RETURN_IF_ERROR(config.Validate(registries));
+namespace {
+
+/// Outputs never overwrite inputs: the bench folder and its summary files against the inputs.
+Status CheckBenchOutputs(const BenchConfig& config) {
+  for (const auto& [input, what] : config.inputs) {
+    AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(config.out_dir, "bench folder", input, what));
+    for (const char* name : {"summary.md", "summary.csv", "avp-state.json"}) {
+      AVP_RETURN_IF_ERROR(
+          io::CheckOutputIsNotInput(config.out_dir / name, "bench output", input, what));
+    }
+    // An input inside the bench folder would be removed by --force or mixed with results.
+    std::error_code ec;
+    const fs::path in = fs::weakly_canonical(input, ec);
+    const fs::path out = fs::weakly_canonical(config.out_dir, ec);
+    if (!ec && std::mismatch(out.begin(), out.end(), in.begin(), in.end()).first == out.end()) {
+      return InvalidArgumentError(fmt::format(
+          "the {} '{}' is inside the bench folder '{}': outputs never overwrite inputs; give "
+          "another --out",
+          what, input.string(), config.out_dir.string()));
+    }
+  }
+  return Status::Ok();
+}
+
+Result<BenchSummary> RunBenchInFolder(const BenchConfig& config, const Registries& registries,
+                                      Clock::time_point t0) {
   std::error_code ec;
   fs::create_directories(config.out_dir / "runs", ec);
   if (ec) {
-    return IoError(fmt::format("cannot create '{}': {}", config.out_dir.string(), ec.message()));
+    return IoError(
+        fmt::format("cannot create '{}': {}", (config.out_dir / "runs").string(), ec.message()));
   }
   AVP_ASSIGN_OR_RETURN(const std::vector<Group> groups, BuildGroups(config, registries));
   // Asked of git once, not per episode (two processes each).
@@ -341,13 +444,16 @@ Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& regis
     for (const std::string& p : config.planners) refs.push_back({gi, p});
   }
   std::vector<report::BenchEpisode> episodes(refs.size());
+  WriteFailure failure;
   {
     ProgressBar bar(config.progress, refs.size(), "episodes");
     ParallelFor(refs.size(), config.jobs, [&](size_t i) {
-      episodes[i] = RunJob(config, registries, groups[refs[i].group], refs[i].planner, revision);
+      episodes[i] =
+          RunJob(config, registries, groups[refs[i].group], refs[i].planner, revision, failure);
       bar.Tick();
     });
   }
+  if (failure.failed()) return failure.first();
   AVP_ASSIGN_OR_RETURN(report::BenchTables tables,
                        report::WriteBenchSummary(config.out_dir, Describe(config, groups, revision),
                                                  episodes, SecondsSince(t0)));
@@ -356,7 +462,24 @@ Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& regis
   summary.files = std::move(tables.files);
   summary.episodes = episodes.size();
   summary.failed = tables.failed;
-  summary.seconds = SecondsSince(t0);
+  return summary;
+}
+
+}  // namespace
+
+Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& registries) {
+  const auto t0 = Clock::now();
+  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  AVP_RETURN_IF_ERROR(CheckBenchOutputs(config));
+  AVP_RETURN_IF_ERROR(PrepareOutputFolder(config.out_dir, BenchFolderKind(), config.force));
+  AVP_RETURN_IF_ERROR(MarkInProgress(config.out_dir, BenchFolderKind(), "avp bench"));
+  Result<BenchSummary> summary = RunBenchInFolder(config, registries, t0);
+  if (!summary.ok()) {
+    MarkFailed(config.out_dir, BenchFolderKind(), "avp bench", summary.status());
+    return summary.status();
+  }
+  AVP_RETURN_IF_ERROR(MarkComplete(config.out_dir, BenchFolderKind(), "avp bench"));
+  summary->seconds = SecondsSince(t0);
   return summary;
 }
 

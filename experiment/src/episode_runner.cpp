@@ -162,7 +162,8 @@ Result<RunResult> RunEpisodeWithRobot(const RunConfig& config, const Registries&
 Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const Registries& registries,
                                     const sim::Scene& scene, const eval::GroundTruth& gt,
                                     const std::vector<pipeline::EpisodeObserver*>& observers,
-                                    std::unique_ptr<mapping::SemanticMap>* map_out) {
+                                    std::unique_ptr<mapping::SemanticMap>* map_out,
+                                    std::stop_token stop) {
   AVP_RETURN_IF_ERROR(config.Validate(registries));
   AVP_RETURN_IF_ERROR(CheckSceneAndTruth(config, scene, gt));
   AVP_ASSIGN_OR_RETURN(const robot::ArmModel arm_model, robot::LoadDefaultArm());
@@ -170,7 +171,7 @@ Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const Registries& r
   AVP_RETURN_IF_ERROR(arm_model.CheckJoints(q0));
   sim::SimArm arm(arm_model, q0);
   sim::SimRgbdSource source(scene, config.camera, config.depth_noise, config.seed);
-  return RunEpisodeWithRobot(config, registries, {&source, &arm, {}},
+  return RunEpisodeWithRobot(config, registries, {&source, &arm, stop},
                              scene.plant_bounds.Inflated(config.roi_margin_m), {&scene, &gt},
                              observers, map_out);
 }

@@ -62,7 +62,7 @@ const OptionTable<RunConfig>& RunConfigTable() {
     t->Path("scene_file", &R::scene_file, "a YAML scene file instead of a scenario");
     t->Integer("seed", &R::seed, "", ValueRange::Any(),
                "seed of the plant, the noise and every choice");
-    t->Integer("threads", &R::threads, "", ValueRange::AtLeast(0),
+    t->Integer("threads", &R::threads, "", ValueRange::Closed(0, kMaxThreads),
                "threads (0 = all); results do not depend on it");
     t->Real("roi_margin_m", &R::roi_margin_m, "m", ValueRange::Closed(0, 1),
             "the planning ROI is the plant's bounds inflated by this");

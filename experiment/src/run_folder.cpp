@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/experiment/output_folder.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
 #include <avp/io/options_yaml.h>
@@ -101,29 +102,49 @@ Result<json> RunConfigJson(const RunConfig& config, const Registries& registries
   return out;
 }
 
-Result<RunSummary> RunEpisodeToFolder(const RunConfig& config, const Registries& registries,
-                                      const RunFolderOptions& options, const FolderRun& run,
-                                      const std::vector<pipeline::EpisodeObserver*>& observers) {
-  const auto t0 = Clock::now();
-  AVP_RETURN_IF_ERROR(config.Validate(registries));
-  if (options.out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
-  if (!run.run) return InvalidArgumentError("RunEpisodeToFolder: no episode to run");
-  std::error_code ec;
-  fs::create_directories(options.out_dir, ec);
-  if (ec) {
-    return IoError(fmt::format("cannot create '{}': {}", options.out_dir.string(), ec.message()));
+namespace {
+
+/// Every file a run folder holds.
+constexpr std::string_view kRunOutputs[] = {kStateFileName, "record.json",      "metrics.csv",
+                                            "map.ot",       "fruit_voxels.ply", "metrics.svg"};
+
+/// Outputs never overwrite inputs: the folder and each of its files against the scene file, the
+/// ground truth file and options.inputs.
+Status CheckOutputsAreNotInputs(const RunConfig& config, const RunFolderOptions& options) {
+  std::vector<std::pair<fs::path, std::string>> inputs = options.inputs;
+  if (!config.scene_file.empty()) inputs.emplace_back(config.scene_file, "scene file");
+  if (!config.ground_truth_file.empty()) {
+    inputs.emplace_back(config.ground_truth_file, "ground truth file");
   }
+  for (const auto& [input, what] : inputs) {
+    AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out_dir, "run folder", input, what));
+    for (const std::string_view name : kRunOutputs) {
+      AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out_dir / std::string(name),
+                                                    "run folder output", input, what));
+    }
+  }
+  return Status::Ok();
+}
+
+/// The episode and every result, into a prepared folder.
+Result<RunSummary> WriteRunFolder(const RunConfig& config, const Registries& registries,
+                                  const RunFolderOptions& options, const FolderRun& run,
+                                  const std::vector<pipeline::EpisodeObserver*>& observers) {
   RunSummary summary;
   summary.scene_name = run.scene_name;
   const fs::path csv_path = options.out_dir / "metrics.csv";
   AVP_ASSIGN_OR_RETURN(std::unique_ptr<report::MetricsCsvWriter> csv,
                        report::MetricsCsvWriter::Open(csv_path));
+  // A row that cannot be written (a full disk) stops the episode: the run fails naming the file
+  // rather than going on without its results.
+  std::stop_source write_failed;
+  csv->StopOnError(write_failed);
   ProgressObserver progress(options);
   std::vector<pipeline::EpisodeObserver*> all = {csv.get(), &progress};
   all.insert(all.end(), observers.begin(), observers.end());
   std::unique_ptr<mapping::SemanticMap> map;
-  AVP_ASSIGN_OR_RETURN(RunResult result, run.run(all, &map));
-  csv.reset();
+  AVP_ASSIGN_OR_RETURN(RunResult result, run.run(all, &map, write_failed.get_token()));
+  AVP_RETURN_IF_ERROR(csv->Close());
   result.gt_ms = run.gt_seconds * 1e3;
   summary.files.push_back(csv_path);
   if (map == nullptr) return InternalError("RunEpisodeToFolder: the episode returned no map");
@@ -134,7 +155,28 @@ Result<RunSummary> RunEpisodeToFolder(const RunConfig& config, const Registries&
   AVP_RETURN_IF_ERROR(io::WriteJsonFile(record_path, record));
   summary.files.insert(summary.files.begin(), record_path);
   summary.result = std::move(result);
-  summary.seconds = SecondsSince(t0);
+  return summary;
+}
+
+}  // namespace
+
+Result<RunSummary> RunEpisodeToFolder(const RunConfig& config, const Registries& registries,
+                                      const RunFolderOptions& options, const FolderRun& run,
+                                      const std::vector<pipeline::EpisodeObserver*>& observers) {
+  const auto t0 = Clock::now();
+  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  if (options.out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
+  if (!run.run) return InvalidArgumentError("RunEpisodeToFolder: no episode to run");
+  AVP_RETURN_IF_ERROR(CheckOutputsAreNotInputs(config, options));
+  AVP_RETURN_IF_ERROR(PrepareOutputFolder(options.out_dir, RunFolderKind(), options.force));
+  AVP_RETURN_IF_ERROR(MarkInProgress(options.out_dir, RunFolderKind(), run.command));
+  Result<RunSummary> summary = WriteRunFolder(config, registries, options, run, observers);
+  if (!summary.ok()) {
+    MarkFailed(options.out_dir, RunFolderKind(), run.command, summary.status());
+    return summary.status();
+  }
+  AVP_RETURN_IF_ERROR(MarkComplete(options.out_dir, RunFolderKind(), run.command));
+  summary->seconds = SecondsSince(t0);
   return summary;
 }
 
@@ -142,6 +184,9 @@ Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& regist
                                const RunFolderOptions& options) {
   AVP_RETURN_IF_ERROR(config.Validate(registries));
   if (options.out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
+  // Refused at once, before the scene's ground truth is computed.
+  AVP_RETURN_IF_ERROR(CheckOutputsAreNotInputs(config, options));
+  AVP_RETURN_IF_ERROR(CheckOutputFolder(options.out_dir, RunFolderKind(), options.force));
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(config, registries));
   const auto t_gt = Clock::now();
   AVP_ASSIGN_OR_RETURN(const eval::GroundTruth gt, GroundTruthFor(config, scene));
@@ -151,8 +196,8 @@ Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& regist
   run.gt = &gt;
   run.gt_seconds = SecondsSince(t_gt);
   run.run = [&](const std::vector<pipeline::EpisodeObserver*>& observers,
-                std::unique_ptr<mapping::SemanticMap>* map) {
-    return RunEpisodeOnScene(config, registries, scene, gt, observers, map);
+                std::unique_ptr<mapping::SemanticMap>* map, std::stop_token stop) {
+    return RunEpisodeOnScene(config, registries, scene, gt, observers, map, stop);
   };
   return RunEpisodeToFolder(config, registries, options, run);
 }

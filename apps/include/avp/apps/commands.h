@@ -24,6 +24,8 @@ void AddRunCommand(CLI::App& app, CommandContext& context);
 void AddBenchCommand(CLI::App& app, CommandContext& context);
 void AddServeCommand(CLI::App& app, CommandContext& context);
 void AddSegmentCommand(CLI::App& app, CommandContext& context);
+/// avp limits: every process-wide limit (name, value, default, unit, what it bounds).
+void AddLimitsCommand(CLI::App& app, CommandContext& context);
 /// ROS 2 commands (built with AVP_WITH_ROS2): avp live, avp sim ros2.
 void AddLiveCommand(CLI::App& app, CommandContext& context);
 void AddSimCommand(CLI::App& app, CommandContext& context);

@@ -71,10 +71,12 @@ Eigen::VectorXd StartJoints(const sim::Scene& scene, const robot::ArmModel& arm)
 /// Runs one episode of `config` on `scene` against `gt` (compute it once per scene with
 /// GroundTruthFor and share it between planners and seeds): the simulated camera and arm
 /// (sim::SimRgbdSource, sim::SimArm), the registered planner and segmenter with their options.
-/// `map_out`, when given, receives the final map. Observers see every step as it completes.
+/// `map_out`, when given, receives the final map. Observers see every step as it completes; a stop
+/// requested through `stop` ends the episode as interrupted (a result could not be written).
 Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const Registries& registries,
                                     const sim::Scene& scene, const eval::GroundTruth& gt,
                                     const std::vector<pipeline::EpisodeObserver*>& observers = {},
-                                    std::unique_ptr<mapping::SemanticMap>* map_out = nullptr);
+                                    std::unique_ptr<mapping::SemanticMap>* map_out = nullptr,
+                                    std::stop_token stop = {});
 
 }  // namespace avp::experiment

@@ -18,6 +18,9 @@
 
 namespace avp::experiment {
 
+/// The most threads a run (RunConfig::threads) or a bench (BenchConfig::jobs) asks for.
+inline constexpr int kMaxThreads = 1024;
+
 /// A registered component picked by name, with KEY=VALUE settings over its registered defaults
 /// (checked against its options table when the configuration is validated).
 struct ComponentChoice {

@@ -3,7 +3,9 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <stop_token>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -19,6 +21,12 @@ namespace avp::experiment {
 /// Where `avp run` writes and what it reports while it runs.
 struct RunFolderOptions {
   std::filesystem::path out_dir = "out/run";
+  /// A folder that already holds results is refused unless `force`, which empties it first (only
+  /// when it is an avp run folder holding nothing else: PrepareOutputFolder).
+  bool force = false;
+  /// Files the run reads besides the configuration's scene and ground truth (the --config file):
+  /// no output may be one of them.
+  std::vector<std::pair<std::filesystem::path, std::string>> inputs;
   /// Called after every step (progress printing); may be empty.
   std::function<void(const pipeline::StepRecord&)> on_step;
 };
@@ -32,6 +40,8 @@ struct RunSummary {
 };
 
 /// `avp run`: one episode of `config` into a run folder (docs/experiments.md):
+///   avp-state.json    the folder's lifecycle: "in-progress" from the start, "complete" after
+///                     the last result (output_folder.h); a killed run stays "in-progress"
 ///   record.json       the effective configuration, seed, git revision, host, timings, how it
 ///                     ended, the ground truth, final metrics and every step
 ///   metrics.csv       one row per fused view, written as the episode goes
@@ -56,13 +66,18 @@ struct FolderRun {
   std::function<nlohmann::json()> extra;
   /// Runs the episode with these observers (the CSV writer, the progress callback) and hands
   /// over the final map.
+  /// The stop token asks the episode to stop (a result could not be written).
   std::function<Result<RunResult>(const std::vector<pipeline::EpisodeObserver*>&,
-                                  std::unique_ptr<mapping::SemanticMap>*)>
+                                  std::unique_ptr<mapping::SemanticMap>*, std::stop_token)>
       run;
 };
 
 /// Runs `run` into options.out_dir and writes the folder RunToFolder describes. The episode's
-/// results are written even when it ended early (interrupted, robot fault).
+/// results are written even when it ended early (interrupted, robot fault). The folder is
+/// prepared first (PrepareOutputFolder: a folder holding results is refused without `force`) and
+/// no output may be an input (the scene, the ground truth, options.inputs). A write error stops
+/// the episode (through the stop token handed to run.run) and is the error, naming the file; the
+/// folder is then marked "failed".
 Result<RunSummary> RunEpisodeToFolder(
     const RunConfig& config, const Registries& registries, const RunFolderOptions& options,
     const FolderRun& run, const std::vector<pipeline::EpisodeObserver*>& observers = {});

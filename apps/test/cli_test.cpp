@@ -1,0 +1,204 @@
+// The `avp` program as a user runs it: strict numbers and lists on the command line (no
+// wrap-around, no silent defaults, ranges named, outside text quoted and shortened), the limits
+// (`avp limits`, `--limit`, AVP_LIMITS), outputs that never overwrite inputs and run folders that
+// refuse a rerun. Each runs the built binary and checks its exit code and messages.
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <avp/test/temp_dir_test.h>
+
+#ifndef AVP_BINARY
+#error "AVP_BINARY (the avp program under test) is not defined"
+#endif
+
+namespace avp {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+struct Ran {
+  int exit_code = -1;
+  std::string output;  ///< stdout and stderr
+};
+
+/// Runs `env avp args` through the shell, stdout and stderr together.
+Ran Avp(const std::string& args, const std::string& env = "") {
+  const std::string command = env + " '" AVP_BINARY "' " + args + " 2>&1";
+  Ran r;
+  std::FILE* p = ::popen(command.c_str(), "r");
+  if (p == nullptr) return r;
+  char buf[4096];
+  size_t n = 0;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
+  const int status = ::pclose(p);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+std::string ReadAll(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+class CliTest : public test::TempDirTest {};
+
+TEST_F(CliTest, NegativeSeedIsRefusedNotWrapped) {
+  const Ran r = Avp("run --seed -1 --print-config");
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output,
+              HasSubstr("--seed '-1' must be a whole number in [0, 18446744073709551615]"));
+  EXPECT_THAT(r.output, Not(HasSubstr("seed: 18446744073709551615")));
+  for (const char* bad : {"0x10", "+3", "3x", "18446744073709551616", "' 7'", "1e3"}) {
+    const Ran b = Avp(std::string("run --print-config --seed ") + bad);
+    EXPECT_NE(b.exit_code, 0) << bad << ": " << b.output;
+    EXPECT_THAT(b.output, HasSubstr("must be a whole number in [0, ")) << bad;
+  }
+  const Ran ok = Avp("run --print-config --seed 18446744073709551615");
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+  EXPECT_THAT(ok.output, HasSubstr("seed: 18446744073709551615"));
+}
+
+TEST_F(CliTest, AHugeNumberIsNotEchoedWhole) {
+  const std::string digits(300, '9');
+  const Ran r = Avp("run --print-config --seed " + digits);
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("(300 bytes)"));
+  EXPECT_THAT(r.output, Not(HasSubstr(digits)));
+}
+
+TEST_F(CliTest, NumbersAreCheckedAgainstTheirRange) {
+  Ran r = Avp("run --print-config --threads 100000");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--threads '100000' must be a whole number in [0, 1024]"));
+  r = Avp("run --print-config --voxel-size nan");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--voxel-size 'nan' must be a number in [0, "));
+  r = Avp("run --print-config --views 99999999999");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--views '99999999999' must be a whole number in [0, "));
+  r = Avp("run --print-config --views 5000");  // an int, then the configuration's range
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("views (5000) must be in [1, 1000]"));
+  r = Avp("bench --jobs -1 --out " + (dir_ / "b").string());
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--jobs '-1' must be a whole number in [0, 1024]"));
+  r = Avp("map build --views 0 --out " + (dir_ / "m.avpmap").string());
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--views '0' must be a whole number in [1, 360]"));
+  r = Avp("segment --image x.png --threshold 1.5");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--threshold '1.5' must be a number in [0, 1]"));
+}
+
+TEST_F(CliTest, EmptyListsAndZeroSeedsAreNotTheDefaults) {
+  // Each would have meant "the defaults" (a whole bench); an unknown planner keeps the old code
+  // from running one.
+  const std::string out = " --out " + (dir_ / "bench").string();
+  Ran r = Avp("bench --seeds 0 --planners nope" + out);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("--seeds (a count N for seeds 0..N-1) '0' must be a whole "
+                                  "number in [1, 100000]"));
+  r = Avp("bench --scenarios '' --seeds 1 --planners nope" + out);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("--scenarios '' is empty"));
+  r = Avp("bench --scenarios tomato-single-cluster,,x --seeds 1 --planners nope" + out);
+  EXPECT_THAT(r.output, HasSubstr("item 2 is empty"));
+  r = Avp("bench --seeds 1,-1 --planners nope" + out);
+  EXPECT_THAT(r.output, HasSubstr("--seeds: a seed '-1' must be a whole number"));
+  r = Avp("bench --seeds 100001 --planners nope" + out);
+  EXPECT_THAT(r.output, HasSubstr("must be a whole number in [1, 100000]"));
+  r = Avp("bench --planners '' --seeds 1" + out);
+  EXPECT_THAT(r.output, HasSubstr("--planners '' is empty"));
+  EXPECT_FALSE(fs::exists(dir_ / "bench"));
+}
+
+TEST_F(CliTest, LimitsAreListedAndSet) {
+  Ran r = Avp("limits");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("limit"));
+  EXPECT_THAT(r.output, HasSubstr("max_file_bytes"));
+  EXPECT_THAT(r.output, HasSubstr("2147483648"));
+  EXPECT_THAT(r.output, HasSubstr("max_bench_episodes"));
+  r = Avp("--limit max_file_bytes=5 --limit max_bench_episodes=7 limits");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("5  2147483648  bytes"));
+  EXPECT_THAT(r.output, HasSubstr("(changed)"));
+  r = Avp("limits", "AVP_LIMITS=max_file_bytes=6,max_bench_episodes=8");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("6  2147483648  bytes"));
+  // --limit applies over the environment.
+  r = Avp("--limit max_file_bytes=9 limits", "AVP_LIMITS=max_file_bytes=6");
+  EXPECT_THAT(r.output, HasSubstr("9  2147483648  bytes"));
+}
+
+TEST_F(CliTest, BadLimitsNameTheBadItem) {
+  Ran r = Avp("--limit max_pixels=1 limits");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("unknown limit 'max_pixels' (known: "));
+  EXPECT_THAT(r.output, HasSubstr("max_file_bytes"));
+  r = Avp("--limit max_file_bytes=0 limits");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("max_file_bytes"));
+  r = Avp("--limit max_file_bytes limits");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--limit 'max_file_bytes' must be one NAME=VALUE"));
+  r = Avp("limits", "AVP_LIMITS='max_file_bytes=1,colour=red'");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.output, HasSubstr("AVP_LIMITS="));
+  EXPECT_THAT(r.output, HasSubstr("'colour'"));
+}
+
+TEST_F(CliTest, ALimitAppliesToTheCommand) {
+  const fs::path map = dir_ / "plant.avpmap";
+  std::ofstream(map) << std::string(100, 'x');
+  const Ran r = Avp("--limit max_file_bytes=10 map info " + map.string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("exceeds the limit max_file_bytes = 10"));
+}
+
+TEST_F(CliTest, MapExportRefusesToOverwriteItsInput) {
+  const fs::path map = dir_ / "plant.ot";
+  const std::string bytes = "not a map, but mine";
+  std::ofstream(map) << bytes;
+  const Ran r = Avp("map export " + map.string() + " --out " + map.string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("outputs never overwrite inputs"));
+  EXPECT_EQ(ReadAll(map), bytes);
+}
+
+TEST_F(CliTest, AFolderIsNotAMissingFile) {
+  const Ran r = Avp("map info " + dir_.string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("is a folder, not a map file"));
+  EXPECT_THAT(r.output, Not(HasSubstr("does not exist")));
+}
+
+TEST_F(CliTest, RunIntoAFolderWithResultsRefusesAtOnce) {
+  const fs::path out = dir_ / "run";
+  fs::create_directories(out);
+  std::ofstream(out / "avp-state.json")
+      << R"({"kind": "run", "state": "complete", "command": "avp run", "finished": "then"})";
+  std::ofstream(out / "record.json") << "{}";
+  Ran r = Avp("run --views 2 --out " + out.string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("already holds the results of a complete avp run"));
+  EXPECT_THAT(r.output, HasSubstr("--force"));
+  EXPECT_EQ(ReadAll(out / "record.json"), "{}");
+  std::ofstream(out / "thesis.tex") << "mine";
+  r = Avp("run --views 2 --force --out " + out.string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("so --force does not empty it"));
+  EXPECT_EQ(ReadAll(out / "thesis.tex"), "mine");
+}
+
+}  // namespace
+}  // namespace avp
