@@ -1,14 +1,15 @@
 #include "bench_report.h"
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 #include <string_view>
 #include <utility>
 
 #include <benchmark/benchmark.h>
+#include <fcntl.h>
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
@@ -118,13 +119,37 @@ bool WriteBenchRecords(const std::string& path, const std::vector<BenchRecord>& 
                     {"target", Optional(r.target)},
                     {"meets_target", Optional(r.meets_target)}});
   }
-  std::ofstream out(path);
-  out << list.dump(1) << "\n";
-  out.close();
-  if (!out) {
-    std::fprintf(stderr, "cannot write benchmark records to '%s'\n", path.c_str());
+  // Atomic and durable (a temporary file, every write checked, fsync, rename): a killed or
+  // disk-full benchmark never leaves a truncated record file. (avp_bench_support does not see
+  // avp::io, whose io::WriteFileAtomic does the same.)
+  const std::string text = list.dump(1, ' ', false, Json::error_handler_t::replace) + "\n";
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  const auto fail = [&](const char* step) {
+    const int e = errno;
+    std::fprintf(stderr, "cannot write benchmark records to '%s' (%s '%s'): %s\n", path.c_str(),
+                 step, tmp.c_str(), e != 0 ? std::strerror(e) : "unknown error");
+    std::remove(tmp.c_str());
     return false;
+  };
+  errno = 0;
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+  if (fd < 0) return fail("creating");
+  std::string_view rest = text;
+  while (!rest.empty()) {
+    const ssize_t n = ::write(fd, rest.data(), rest.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      ::close(fd);
+      return fail("writing");
+    }
+    rest.remove_prefix(static_cast<size_t>(n));
   }
+  if (::fsync(fd) != 0 && errno != EINVAL) {
+    ::close(fd);
+    return fail("flushing");
+  }
+  if (::close(fd) != 0) return fail("closing");
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) return fail("renaming");
   return true;
 }
 
