@@ -12,6 +12,8 @@
 #include <memory>
 #include <string>
 
+#include <google/protobuf/stubs/logging.h>
+
 #include <avp/interop/segmentation_codec.h>
 #include <avp/interop/tensor.h>
 #include <avp/segmentation/segmenter_registry.h>
@@ -23,6 +25,11 @@
 namespace {
 
 using namespace avp::interop;
+
+// protobuf logs every string field with invalid UTF-8 it parses: quiet, so that findings stand out.
+void IgnoreProtobufLog(google::protobuf::LogLevel, const char*, int, const std::string&) {}
+[[maybe_unused]] const bool kQuietProtobuf =
+    (google::protobuf::SetLogHandler(&IgnoreProtobufLog), true);
 
 const avp::segmentation::SegmenterRegistry& Registry() {
   static const auto* registry =

@@ -8,6 +8,8 @@
 #include <cstdint>
 #include <string>
 
+#include <google/protobuf/stubs/logging.h>
+
 #include <avp/interop/segmentation_codec.h>
 #include <avp/interop/tensor.h>
 
@@ -18,6 +20,11 @@
 namespace {
 
 using namespace avp::interop;
+
+// protobuf logs every string field with invalid UTF-8 it parses: quiet, so that findings stand out.
+void IgnoreProtobufLog(google::protobuf::LogLevel, const char*, int, const std::string&) {}
+[[maybe_unused]] const bool kQuietProtobuf =
+    (google::protobuf::SetLogHandler(&IgnoreProtobufLog), true);
 
 void ReadTensor(const Tensor& t) {
   if (!CheckTensor(t, "output").ok()) return;
