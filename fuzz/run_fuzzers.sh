@@ -48,6 +48,8 @@ export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:symbolize=1
 if [ -z "${ASAN_SYMBOLIZER_PATH:-}" ] && [ -x /usr/lib/llvm-14/bin/llvm-symbolizer ]; then
   export ASAN_SYMBOLIZER_PATH=/usr/lib/llvm-14/bin/llvm-symbolizer
 fi
+# Leaks inside third-party libraries that avp cannot free (each explained in fuzz/lsan.supp).
+export LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)/lsan.supp:print_suppressions=0}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1:silence_unsigned_overflow=1}"
 export AVP_FUZZ_SECONDS="$seconds" AVP_FUZZ_BUILD="$build" AVP_FUZZ_SRC="$fuzz_dir" AVP_FUZZ_WORK="$work"
 export AVP_FUZZ_ARTIFACTS="$artifacts" AVP_FUZZ_TIMEOUT="$timeout_s" AVP_FUZZ_RSS_MB="$rss_mb"

@@ -26,6 +26,8 @@ export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:symbolize=1:detect_stack_use
 if [ -z "${ASAN_SYMBOLIZER_PATH:-}" ] && [ -x /usr/lib/llvm-14/bin/llvm-symbolizer ]; then
   export ASAN_SYMBOLIZER_PATH=/usr/lib/llvm-14/bin/llvm-symbolizer
 fi
+# Leaks inside third-party libraries that avp cannot free (each explained in fuzz/lsan.supp).
+export LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)/lsan.supp:print_suppressions=0}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 export AVP_CONFIG_DIR="${AVP_CONFIG_DIR:-$src/configs}"
 export AVP_SAN_BUILD="$build" AVP_SAN_WORK="$work" AVP_SAN_TIMEOUT="${SANITIZE_TIMEOUT:-1200}"
