@@ -59,9 +59,12 @@ fuzz-build: sanitize-configure
 fuzz-test: fuzz-build
 	@FUZZ_JOBS=$(JOBS) ./fuzz/run_fuzzers.sh $(SAN_DIR) $(FUZZ_TEST_SECONDS)
 
+# (make test SAN_TESTS= skips them.)
 sanitize-test: sanitize-configure
-	@cmake --build $(SAN_DIR) -j $(JOBS) --target $(SAN_TESTS)
-	@FUZZ_JOBS=$(JOBS) ./fuzz/run_sanitized_tests.sh $(SAN_DIR) $(SAN_TESTS)
+	@if [ -n "$(strip $(SAN_TESTS))" ]; then \
+	  cmake --build $(SAN_DIR) -j $(JOBS) --target $(SAN_TESTS) && \
+	  FUZZ_JOBS=$(JOBS) ./fuzz/run_sanitized_tests.sh $(SAN_DIR) $(SAN_TESTS); \
+	fi
 
 # Longer fuzzing (FUZZ_SECONDS per target, e.g. make fuzz FUZZ_SECONDS=3600 FUZZ_TARGETS=map_file).
 fuzz: fuzz-build
