@@ -2,6 +2,7 @@
 // files and their content, the bench's long-format summary CSV, Markdown and plots, the experiment
 // YAML, and bad input.
 #include <algorithm>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -9,8 +10,10 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 
 #include <avp/experiment/bench.h>
+#include <avp/experiment/output_folder.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
 #include <avp/test/temp_dir_test.h>
@@ -20,6 +23,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 std::string ReadAll(const fs::path& p) {
   std::ifstream in(p);
@@ -265,6 +269,232 @@ TEST_F(RunCommandTest, BenchConfigFileAndErrors) {
   o.seeds = {0, 0};
   EXPECT_THAT(o.Validate(registries_).message(), HasSubstr("unknown scenario 'tomato-nowhere'"));
   EXPECT_THAT(o.Validate(registries_).message(), HasSubstr("seeds repeat"));
+}
+
+// ---- Results that survive: the run folder's lifecycle, reruns, write errors ------------------
+
+/// A quick episode: the predefined planner on 1 cm voxels.
+RunConfig SmallRun(int views = 2) {
+  RunConfig c;
+  c.scenario = "tomato-single-cluster";
+  c.seed = 1;
+  c.episode.views = views;
+  c.threads = 2;
+  c.planner.name = "predefined";
+  c.map.grid.voxel_size_m = 0.01;
+  return c;
+}
+
+TEST_F(RunCommandTest, RunFolderIsInProgressWhileItRunsAndCompleteAfter) {
+  const RunConfig c = SmallRun(3);
+  RunFolderOptions o;
+  o.out_dir = dir_ / "run";
+  // A kill after the second step is this snapshot of the folder: it says "in-progress", has two
+  // rows of metrics.csv and no record.json.
+  const fs::path killed = dir_ / "killed";
+  std::string state_while_running;
+  o.on_step = [&](const pipeline::StepRecord& s) {
+    if (s.view != 1) return;
+    const Result<FolderState> st = ReadFolderState(o.out_dir);
+    state_while_running = st.ok() ? st->state : st.status().ToString();
+    fs::copy(o.out_dir, killed, fs::copy_options::recursive);
+  };
+  const auto r = RunToFolder(c, registries_, o);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(state_while_running, "in-progress");
+  const Result<FolderState> done = ReadFolderState(o.out_dir);
+  ASSERT_TRUE(done.ok()) << done.status().ToString();
+  EXPECT_EQ(done->state, "complete");
+  EXPECT_EQ(done->kind, "run");
+  EXPECT_EQ(done->command, "avp run");
+  EXPECT_FALSE(done->finished.empty());
+
+  EXPECT_EQ(ReadFolderState(killed).value().state, "in-progress");
+  EXPECT_FALSE(fs::exists(killed / "record.json"));
+  EXPECT_EQ(Lines(killed / "metrics.csv").size(), 3u);  // header + 2 views
+
+  // A rerun into the killed folder refuses, saying what it holds; --force starts clean.
+  o.on_step = nullptr;
+  o.out_dir = killed;
+  const Status refused = RunToFolder(c, registries_, o).status();
+  EXPECT_EQ(refused.code(), StatusCode::kFailedPrecondition);
+  EXPECT_THAT(refused.message(), HasSubstr("output folder '" + killed.string() + "'"));
+  EXPECT_THAT(refused.message(), HasSubstr("an avp run that did not finish"));
+  EXPECT_THAT(refused.message(), HasSubstr("--force"));
+  o.force = true;
+  const auto again = RunToFolder(c, registries_, o);
+  ASSERT_TRUE(again.ok()) << again.status().ToString();
+  EXPECT_EQ(ReadFolderState(killed).value().state, "complete");
+  EXPECT_EQ(Lines(killed / "metrics.csv").size(), 4u);  // header + 3 views, none of the old run
+}
+
+TEST_F(RunCommandTest, RerunIntoACompleteFolderRefusesAndForceReplacesIt) {
+  RunConfig c = SmallRun();
+  RunFolderOptions o;
+  o.out_dir = dir_ / "run";
+  ASSERT_TRUE(RunToFolder(c, registries_, o).ok());
+  const std::string first_record = ReadAll(o.out_dir / "record.json");
+  c.seed = 5;
+  const Status refused = RunToFolder(c, registries_, o).status();
+  EXPECT_EQ(refused.code(), StatusCode::kFailedPrecondition);
+  EXPECT_THAT(refused.message(), HasSubstr("the results of a complete avp run"));
+  EXPECT_EQ(ReadAll(o.out_dir / "record.json"), first_record);  // untouched
+  o.force = true;
+  ASSERT_TRUE(RunToFolder(c, registries_, o).ok());
+  EXPECT_EQ(io::ReadJsonFile(o.out_dir / "record.json").value()["config"]["seed"], 5);
+}
+
+TEST_F(RunCommandTest, ForceNeverEmptiesAFolderThatIsNotARunFolder) {
+  const RunConfig c = SmallRun();
+  RunFolderOptions o;
+  o.out_dir = dir_ / "thesis";
+  fs::create_directories(o.out_dir);
+  std::ofstream(o.out_dir / "chapter1.tex") << "precious";
+  o.force = true;
+  const Status s = RunToFolder(c, registries_, o).status();
+  EXPECT_EQ(s.code(), StatusCode::kFailedPrecondition);
+  EXPECT_THAT(s.message(), HasSubstr("'chapter1.tex'"));
+  EXPECT_THAT(s.message(), HasSubstr("not an avp run folder, so --force does not empty it"));
+  EXPECT_EQ(ReadAll(o.out_dir / "chapter1.tex"), "precious");
+  // Nor a run folder with something else in it.
+  o.out_dir = dir_ / "run";
+  o.force = false;
+  ASSERT_TRUE(RunToFolder(c, registries_, o).ok());
+  std::ofstream(o.out_dir / "notes.txt") << "mine";
+  o.force = true;
+  EXPECT_THAT(RunToFolder(c, registries_, o).status().message(), HasSubstr("'notes.txt'"));
+  EXPECT_TRUE(fs::exists(o.out_dir / "notes.txt"));
+  EXPECT_TRUE(fs::exists(o.out_dir / "record.json"));
+}
+
+TEST_F(RunCommandTest, OutputsNeverOverwriteInputs) {
+  // The ground truth given as the run folder's own map.ot: --force would replace it.
+  RunConfig c = SmallRun();
+  RunFolderOptions o;
+  o.out_dir = dir_ / "run";
+  ASSERT_TRUE(RunToFolder(c, registries_, o).ok());
+  c.ground_truth_file = o.out_dir / "map.ot";
+  o.force = true;
+  const std::string before = ReadAll(c.ground_truth_file);
+  const Status s = RunToFolder(c, registries_, o).status();
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.message(), HasSubstr("is the ground truth file"));
+  EXPECT_THAT(s.message(), HasSubstr("outputs never overwrite inputs"));
+  EXPECT_EQ(ReadAll(c.ground_truth_file), before);
+  // A configuration file the run read, reached through another spelling of the path.
+  c.ground_truth_file.clear();
+  o.inputs = {{o.out_dir / "." / "record.json", "configuration file"}};
+  EXPECT_THAT(RunToFolder(c, registries_, o).status().message(),
+              HasSubstr("is the configuration file"));
+}
+
+TEST_F(RunCommandTest, AWriteErrorStopsTheRunNamingTheFile) {
+  // The run folder's parent is a regular file: nothing can be written, and the error says where.
+  std::ofstream(dir_ / "file") << "x";
+  RunFolderOptions o;
+  o.out_dir = dir_ / "file" / "run";
+  const Status s = RunToFolder(SmallRun(), registries_, o).status();
+  EXPECT_EQ(s.code(), StatusCode::kIoError);
+  EXPECT_THAT(s.message(), HasSubstr(o.out_dir.string()));
+  EXPECT_THAT(s.message(), HasSubstr("Not a directory"));
+  EXPECT_THAT(s.message(), Not(HasSubstr("Success")));
+}
+
+/// Files of this process may grow to `bytes` at most while it lives (a full disk, as the writers
+/// see it: writes past it fail with EFBIG); SIGXFSZ is ignored meanwhile.
+class ScopedFileSizeLimit {
+ public:
+  explicit ScopedFileSizeLimit(rlim_t bytes) {
+    getrlimit(RLIMIT_FSIZE, &saved_);
+    old_handler_ = std::signal(SIGXFSZ, SIG_IGN);
+    rlimit r = saved_;
+    r.rlim_cur = bytes;
+    setrlimit(RLIMIT_FSIZE, &r);
+  }
+  ~ScopedFileSizeLimit() {
+    setrlimit(RLIMIT_FSIZE, &saved_);
+    std::signal(SIGXFSZ, old_handler_);
+  }
+
+ private:
+  rlimit saved_{};
+  void (*old_handler_)(int) = nullptr;
+};
+
+TEST_F(RunCommandTest, AFullDiskStopsTheRunAtTheStepNamingTheFile) {
+  const RunConfig c = SmallRun(8);
+  RunFolderOptions o;
+  o.out_dir = dir_ / "run";
+  int steps = 0;
+  o.on_step = [&](const pipeline::StepRecord&) { ++steps; };
+  Status s;
+  {
+    const ScopedFileSizeLimit full(1500);  // metrics.csv's header and a few rows
+    s = RunToFolder(c, registries_, o).status();
+  }
+  EXPECT_EQ(s.code(), StatusCode::kIoError);
+  EXPECT_THAT(s.message(), HasSubstr((o.out_dir / "metrics.csv").string()));
+  EXPECT_THAT(s.message(), HasSubstr("File too large"));
+  EXPECT_LT(steps, 8) << "the episode went on after metrics.csv could not be written";
+  EXPECT_FALSE(fs::exists(o.out_dir / "record.json"));
+  const Result<FolderState> state = ReadFolderState(o.out_dir);
+  ASSERT_TRUE(state.ok()) << state.status().ToString();
+  EXPECT_EQ(state->state, "failed");
+  EXPECT_THAT(state->error, HasSubstr("metrics.csv"));
+}
+
+TEST_F(RunCommandTest, BenchFolderHasTheLifecycleAndRefusesReruns) {
+  BenchConfig o;
+  o.scenarios = {"tomato-single-cluster"};
+  o.planners = {"predefined"};
+  o.seeds = {0};
+  o.base.episode.views = 2;
+  o.base.map.grid.voxel_size_m = 0.01;
+  o.out_dir = dir_ / "bench";
+  o.progress = false;
+  ASSERT_TRUE(RunBench(o, registries_).ok());
+  EXPECT_EQ(ReadFolderState(o.out_dir).value().state, "complete");
+  EXPECT_EQ(ReadFolderState(o.out_dir).value().kind, "bench");
+  const fs::path run = o.out_dir / "runs" / "tomato-single-cluster" / "predefined" / "seed-0";
+  EXPECT_EQ(ReadFolderState(run).value().state, "complete");
+  EXPECT_TRUE(fs::exists(run / "record.json"));
+
+  const Status refused = RunBench(o, registries_).status();
+  EXPECT_EQ(refused.code(), StatusCode::kFailedPrecondition);
+  EXPECT_THAT(refused.message(), HasSubstr("the results of a complete avp bench"));
+  o.force = true;
+  o.seeds = {3};
+  ASSERT_TRUE(RunBench(o, registries_).ok());
+  EXPECT_FALSE(fs::exists(run)) << "--force left the earlier bench's runs";
+  EXPECT_TRUE(fs::exists(o.out_dir / "runs" / "tomato-single-cluster" / "predefined" / "seed-3"));
+  // A run folder is not a bench folder.
+  RunFolderOptions ro;
+  ro.out_dir = dir_ / "run";
+  ASSERT_TRUE(RunToFolder(SmallRun(), registries_, ro).ok());
+  o.out_dir = ro.out_dir;
+  EXPECT_THAT(RunBench(o, registries_).status().message(),
+              HasSubstr("not an avp bench folder, so --force does not empty it"));
+  EXPECT_TRUE(fs::exists(ro.out_dir / "record.json"));
+}
+
+TEST_F(RunCommandTest, BenchLimitsEpisodesSeedsAndJobs) {
+  BenchConfig o;
+  o.scenarios = {"tomato-single-cluster", "tomato-full-occlusion"};
+  o.planners = {"predefined", "avp-nbv"};
+  o.seeds = {0, 1, 2};
+  {
+    const ScopedLimit limit(MaxBenchEpisodes(), 11);
+    const Status s = o.Validate(registries_);
+    EXPECT_EQ(s.code(), StatusCode::kResourceExhausted);
+    EXPECT_THAT(s.message(), HasSubstr("2 scenarios x 2 planners x 3 seeds (12) exceeds the "
+                                       "limit max_bench_episodes = 11"));
+  }
+  EXPECT_TRUE(o.Validate(registries_).ok());
+  o.jobs = 5000;
+  EXPECT_THAT(o.Validate(registries_).message(), HasSubstr("jobs (5000) must be in [0, 1024]"));
+  o.jobs = 0;
+  o.planners = {"predefined", ""};
+  EXPECT_THAT(o.Validate(registries_).message(), HasSubstr("a planner name is empty"));
 }
 
 }  // namespace
