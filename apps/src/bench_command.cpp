@@ -124,6 +124,13 @@ int Bench(const CLI::App& cmd, const BenchCli& cli, const experiment::Registries
   const Result<experiment::BenchSummary> summary = experiment::RunBench(*bench, registries);
   if (!summary.ok()) return Failed("bench", summary.status());
   PrintBench(*bench, *summary);
+  if (summary->failed > 0) {
+    // Failed episodes are left out of the statistics; the command says so and fails.
+    return Failed("bench", UnavailableError(fmt::format(
+                               "{} of {} episodes failed (each run folder's avp-state.json or "
+                               "record.json says why)",
+                               summary->failed, summary->episodes)));
+  }
   return 0;
 }
 

@@ -172,7 +172,11 @@ int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& 
   }
   std::printf("\nwrote %zu files to %s:\n", summary->files.size(), folder.out_dir.string().c_str());
   for (const auto& f : summary->files) std::printf("  %s\n", f.string().c_str());
-  // An episode cut short by the robot is a failure of the command, its results saved.
+  // An episode cut short by the robot or the segmenter is a failure of the command, its results
+  // saved.
+  if (e.end == pipeline::EpisodeEnd::kSegmenterFault) {
+    return Failed("live", UnavailableError(fmt::format("segmenter fault: {}", e.end_reason)));
+  }
   return e.end == pipeline::EpisodeEnd::kRobotFault ? 1 : 0;
 }
 

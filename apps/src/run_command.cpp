@@ -178,6 +178,12 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
       experiment::RunToFolder(*config, registries, options);
   if (!summary.ok()) return Failed("run", summary.status());
   PrintSummary(*config, *summary, options.out_dir);
+  // An episode cut short by its segmenter (a service that is down) is a failure of the command,
+  // its results saved.
+  if (summary->result.episode.end == pipeline::EpisodeEnd::kSegmenterFault) {
+    return Failed("run", UnavailableError(fmt::format("segmenter fault: {}",
+                                                      summary->result.episode.end_reason)));
+  }
   return 0;
 }
 

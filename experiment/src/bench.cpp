@@ -222,6 +222,11 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
                            {"git_revision", revision}};
   if (Status s = io::WriteJsonFile(dir / "record.json", rec); !s.ok()) return fail(s);
   if (Status s = MarkComplete(dir, RunFolderKind(), "avp bench"); !s.ok()) return fail(s);
+  // A segmenter that failed (a service that is down) leaves views without segmentation: the
+  // episode is kept on disk but counted as failed, out of the statistics.
+  if (r->episode.end == pipeline::EpisodeEnd::kSegmenterFault) {
+    j.status = UnavailableError(fmt::format("segmenter fault: {}", r->episode.end_reason));
+  }
   return j;
 }
 

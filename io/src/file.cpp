@@ -23,6 +23,18 @@ std::string Reason(int error) {
 
 }  // namespace
 
+namespace {
+
+/// "an" before a vowel ("an image file"), else "a".
+std::string_view Article(std::string_view noun) {
+  return !noun.empty() &&
+                 std::string_view("aeiouAEIOU").find(noun.front()) != std::string_view::npos
+             ? "an"
+             : "a";
+}
+
+}  // namespace
+
 const Limit& MaxFileBytes() {
   static const Limit limit("max_file_bytes", uint64_t{2} << 30, "bytes",
                            "size of one input file read whole (map, scene, image, config)");
@@ -40,11 +52,12 @@ Result<uint64_t> CheckReadableFile(const std::filesystem::path& path, std::strin
     return NotFoundError(fmt::format("{} '{}' does not exist", what, path.string()));
   }
   if (std::filesystem::is_directory(st)) {
-    return InvalidArgumentError(fmt::format("'{}' is a folder, not a {}", path.string(), what));
+    return InvalidArgumentError(
+        fmt::format("'{}' is a folder, not {} {}", path.string(), Article(what), what));
   }
   if (!std::filesystem::is_regular_file(st)) {
-    return InvalidArgumentError(
-        fmt::format("'{}' is not a regular file (expected a {})", path.string(), what));
+    return InvalidArgumentError(fmt::format("'{}' is not a regular file (expected {} {})",
+                                            path.string(), Article(what), what));
   }
   const uint64_t size = std::filesystem::file_size(path, ec);
   if (ec) {

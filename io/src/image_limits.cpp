@@ -110,6 +110,33 @@ bool StartsWith(std::span<const uint8_t> b, std::string_view prefix) {
   return true;
 }
 
+/// PNM (P1..P6): "P6", then width and height as decimal text, separated by whitespace and
+/// "#" comments (to the end of the line). Safe on any bytes: at most 10 digits per number.
+Result<ImageHeader> PnmHeader(std::span<const uint8_t> b) {
+  size_t at = 2;
+  uint64_t sides[2] = {0, 0};
+  for (uint64_t& side : sides) {
+    while (at < b.size()) {
+      if (b[at] == '#') {
+        while (at < b.size() && b[at] != '\n' && b[at] != '\r') ++at;
+      } else if (b[at] == ' ' || b[at] == '\t' || b[at] == '\n' || b[at] == '\r' || b[at] == '\v' ||
+                 b[at] == '\f') {
+        ++at;
+      } else {
+        break;
+      }
+    }
+    size_t digits = 0;
+    while (at < b.size() && b[at] >= '0' && b[at] <= '9') {
+      if (++digits > 10) return ParseError("PNM header: a side of more than 10 digits");
+      side = side * 10 + static_cast<uint64_t>(b[at] - '0');
+      ++at;
+    }
+    if (digits == 0) return ParseError("PNM header: truncated or malformed width/height");
+  }
+  return ImageHeader{"PNM", sides[0], sides[1]};
+}
+
 /// Formats OpenCV would decode but DecodeImage does not accept, by signature.
 std::string_view OtherFormat(std::span<const uint8_t> b) {
   if (StartsWith(b, "II*\0") || StartsWith(b, std::string_view("MM\0*", 4))) return "TIFF";
@@ -122,7 +149,7 @@ std::string_view OtherFormat(std::span<const uint8_t> b) {
   if (StartsWith(b, std::string_view("\0\0\0\x0cjP  ", 8)) || StartsWith(b, "\xff\x4f\xff\x51")) {
     return "JPEG 2000";
   }
-  if (b.size() >= 2 && b[0] == 'P' && b[1] >= '1' && b[1] <= '7') return "PNM";
+  if (b.size() >= 2 && b[0] == 'P' && b[1] == '7') return "PAM";
   if (b.size() >= 2 && b[0] == 'P' && (b[1] == 'F' || b[1] == 'f')) return "PFM";
   if (StartsWith(b, "\x59\xa6\x6a\x95")) return "Sun raster";
   if (StartsWith(b, "GIF8")) return "GIF";
@@ -182,11 +209,12 @@ Result<ImageHeader> ReadImageHeader(std::span<const uint8_t> encoded) {
   }
   if (b.size() >= 3 && b[0] == 0xFF && b[1] == 0xD8 && b[2] == 0xFF) return JpegHeader(b);
   if (StartsWith(b, "BM")) return BmpHeader(b);
+  if (b.size() >= 2 && b[0] == 'P' && b[1] >= '1' && b[1] <= '6') return PnmHeader(b);
   if (const std::string_view other = OtherFormat(b); !other.empty()) {
     return ParseError(
-        fmt::format("{} images are not accepted (only PNG, JPEG and BMP are)", other));
+        fmt::format("{} images are not accepted (only PNG, JPEG, BMP and PNM are)", other));
   }
-  return ParseError("not a PNG, JPEG or BMP image");
+  return ParseError("not a PNG, JPEG, BMP or PNM image");
 }
 
 }  // namespace avp::io

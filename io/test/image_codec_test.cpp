@@ -96,7 +96,7 @@ TEST_F(ImageIoTest, ErrorsNameTheFile) {
   EXPECT_THAT(undecodable.status().message(), HasSubstr(text.string()));
   EXPECT_THAT(undecodable.status().message(), HasSubstr("undecodable image file"));
   EXPECT_THAT(undecodable.status().message(),
-              HasSubstr("(24 bytes): not a PNG, JPEG or BMP image"));
+              HasSubstr("(24 bytes): not a PNG, JPEG, BMP or PNM image"));
 
   const auto empty = Write("empty.jpg", "");
   const auto empty_result = ReadImageFile(empty);
@@ -107,7 +107,7 @@ TEST_F(ImageIoTest, ErrorsNameTheFile) {
   const auto folder = ReadImageFile(dir_);
   ASSERT_FALSE(folder.ok());
   EXPECT_EQ(folder.status().code(), StatusCode::kInvalidArgument);
-  EXPECT_THAT(folder.status().message(), HasSubstr("is a folder, not a image file"));
+  EXPECT_THAT(folder.status().message(), HasSubstr("is a folder, not an image file"));
 }
 
 TEST_F(ImageIoTest, UndecodableBytesSayHowMany) {
@@ -115,7 +115,7 @@ TEST_F(ImageIoTest, UndecodableBytesSayHowMany) {
   const auto r = DecodeImage(junk);
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), StatusCode::kParseError);
-  EXPECT_EQ(r.status().message(), "undecodable image (5 bytes): not a PNG, JPEG or BMP image");
+  EXPECT_EQ(r.status().message(), "undecodable image (5 bytes): not a PNG, JPEG, BMP or PNM image");
   const auto none = DecodeImage({});
   ASSERT_FALSE(none.ok());
   EXPECT_EQ(none.status().message(), "undecodable image (0 bytes)");

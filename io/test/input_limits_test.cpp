@@ -183,9 +183,10 @@ TEST_F(InputLimitsTest, OtherFormatsAreRefusedByName) {
   const std::vector<uint8_t> tiff = {'I', 'I', '*', 0, 8, 0, 0, 0, 0, 0};
   const Status s = DecodeImage(tiff).status();
   EXPECT_EQ(s.code(), StatusCode::kParseError);
-  EXPECT_EQ(s.message(),
-            "undecodable image (10 bytes): TIFF images are not accepted (only PNG, JPEG and BMP "
-            "are)");
+  EXPECT_EQ(
+      s.message(),
+      "undecodable image (10 bytes): TIFF images are not accepted (only PNG, JPEG, BMP and PNM "
+      "are)");
   // A BMP declaring 100000 x 100000 pixels.
   std::vector<uint8_t> bmp = {'B', 'M', 0, 0, 0, 0, 0, 0, 0, 0, 54, 0, 0, 0, 40, 0, 0, 0};
   for (const uint32_t side : {100000u, 100000u}) {
@@ -193,6 +194,30 @@ TEST_F(InputLimitsTest, OtherFormatsAreRefusedByName) {
   }
   bmp.resize(60, 0);
   EXPECT_EQ(DecodeImage(bmp).status().code(), StatusCode::kResourceExhausted);
+}
+
+TEST_F(InputLimitsTest, PnmHeadersAreReadAndHugeOnesRefused) {
+  // A 2 x 1 binary PPM decodes; a 20-byte one declaring 20000 x 20000 does not get decoded.
+  const std::string small("P6\n# a comment\n2 1\n255\n\xff\x00\x00\x00\xff\x00", 29);
+  const std::vector<uint8_t> small_bytes(small.begin(), small.end());
+  const Result<ImageHeader> h = ReadImageHeader(small_bytes);
+  ASSERT_TRUE(h.ok()) << h.status().ToString();
+  EXPECT_EQ(h->format, "PNM");
+  EXPECT_EQ(h->width, 2u);
+  EXPECT_EQ(h->height, 1u);
+  const Result<ImageRgb8> img = DecodeImage(small_bytes);
+  ASSERT_TRUE(img.ok()) << img.status().ToString();
+  EXPECT_EQ(img->width(), 2);
+  EXPECT_EQ(img->at(0, 0, 0), 255);  // red
+  EXPECT_EQ(img->at(1, 0, 1), 255);  // green
+  const std::string huge = "P6 20000 20000 255\n";
+  const Status s = DecodeImage(std::vector<uint8_t>(huge.begin(), huge.end())).status();
+  EXPECT_EQ(s.code(), StatusCode::kResourceExhausted) << s.ToString();
+  EXPECT_THAT(s.message(), HasSubstr("20000 x 20000"));
+  for (const std::string& bad :
+       std::vector<std::string>{"P6", "P6 12", "P6 99999999999 1 255\n", "P7\nWIDTH 1\n"}) {
+    EXPECT_FALSE(ReadImageHeader(std::vector<uint8_t>(bad.begin(), bad.end())).ok()) << bad;
+  }
 }
 
 TEST_F(InputLimitsTest, PixelLimitIsConfigurable) {

@@ -13,7 +13,7 @@
 // known formats: png.h.)
 namespace avp::io {
 
-/// Reads a PNG, JPEG or BMP through OpenCV's imgcodecs as 8-bit RGB: grey images are expanded,
+/// Reads a PNG, JPEG, BMP or PNM through OpenCV's imgcodecs as 8-bit RGB: grey images are expanded,
 /// alpha is dropped, 16-bit samples are reduced, and the EXIF orientation is applied (as
 /// cv2.imread in the reference). The size the header declares is checked (io/image_limits.h:
 /// max_image_pixels) before any pixel is decoded, and the decoded size against the header.
@@ -25,7 +25,7 @@ Result<ImageRgb8> ReadImageFile(const std::filesystem::path& path);
 
 /// Decodes an encoded image held in memory, as ReadImageFile. Safe on any bytes.
 /// @return ParseError "undecodable image (N bytes)[: reason]" when the bytes are empty, not a
-///   PNG, JPEG or BMP, or undecodable; ResourceExhausted (max_image_pixels) for an image whose
+///   PNG, JPEG, BMP or PNM, or undecodable; ResourceExhausted (max_image_pixels) for an image whose
 ///   header declares too many pixels, before decoding.
 Result<ImageRgb8> DecodeImage(std::span<const uint8_t> encoded);
 

@@ -35,13 +35,14 @@ Status CheckJpegScans(std::span<const uint8_t> encoded, std::string_view what);
 
 /// What an encoded image says about itself in its header.
 struct ImageHeader {
-  std::string format;  ///< "PNG", "JPEG" or "BMP"
+  std::string format;  ///< "PNG", "JPEG", "BMP" or "PNM"
   uint64_t width = 0;
   uint64_t height = 0;
 };
 
 /// The format and size an encoded image declares, read from its header without decoding a pixel:
-/// PNG (IHDR), JPEG (the first SOF marker), BMP (the DIB header). ParseError for anything else
+/// PNG (IHDR), JPEG (the first SOF marker), BMP (the DIB header), PNM P1..P6 (its text header).
+/// ParseError for anything else
 /// (other formats OpenCV could decode, such as TIFF or WebP, are not accepted: their headers are
 /// not checked) and for a truncated or malformed header. Safe on any bytes.
 Result<ImageHeader> ReadImageHeader(std::span<const uint8_t> encoded);
