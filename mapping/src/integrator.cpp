@@ -433,6 +433,15 @@ std::pair<BlockKey, BlockKey> FrustumBlockRange(const ProjectiveCamera& cam, dou
           BlockOf(VoxelKey::FromPoint(aabb.max(), cam.s))};
 }
 
+/// A pixel coordinate `v` (already floored or ceiled) as an int in [lo, hi], clamped in double
+/// before the cast: a corner near the camera plane projects to a huge or infinite coordinate that
+/// no int holds (UBSan found it); NaN gives lo.
+int ClampToInt(double v, int lo, int hi) {
+  if (!(v >= lo)) return lo;
+  if (v > hi) return hi;
+  return static_cast<int>(v);
+}
+
 /// Whether a block (centre c_C in the camera frame, half depth extent zh) may hold a carved voxel:
 /// not entirely behind the camera or beyond far_t, and, when wholly in front of the image plane,
 /// its projection (the box of its 8 projected corners) inside the image and not entirely behind
@@ -454,10 +463,10 @@ bool BlockMayBeCarved(const ProjectiveCamera& cam, const MaxDepthPyramid& pyrami
     vmin = std::min(vmin, cv);
     vmax = std::max(vmax, cv);
   }
-  const int u0 = static_cast<int>(std::floor(umin + K.cx));
-  const int u1 = static_cast<int>(std::ceil(umax + K.cx));
-  const int v0 = static_cast<int>(std::floor(vmin + K.cy));
-  const int v1 = static_cast<int>(std::ceil(vmax + K.cy));
+  const int u0 = ClampToInt(std::floor(umin + K.cx), -1, cam.w);
+  const int u1 = ClampToInt(std::ceil(umax + K.cx), -1, cam.w);
+  const int v0 = ClampToInt(std::floor(vmin + K.cy), -1, cam.h);
+  const int v1 = ClampToInt(std::ceil(vmax + K.cy), -1, cam.h);
   if (u1 < 0 || v1 < 0 || u0 >= cam.w || v0 >= cam.h) return false;
   return pyramid.MaxOver(std::max(u0, 0), std::max(v0, 0), std::min(u1, cam.w - 1),
                          std::min(v1, cam.h - 1)) > zn;
@@ -514,10 +523,11 @@ bool FootprintCarvesVoxel(const VoxelCarveInputs& in, const VoxelKey& k, const E
     vmin = std::min(vmin, cv);
     vmax = std::max(vmax, cv);
   }
-  const int u0 = std::max(0, static_cast<int>(std::floor(umin + K.cx)));
-  const int u1 = std::min(w - 1, static_cast<int>(std::ceil(umax + K.cx)));
-  const int v0 = std::max(0, static_cast<int>(std::floor(vmin + K.cy)));
-  const int v1 = std::min(h - 1, static_cast<int>(std::ceil(vmax + K.cy)));
+  // Clamped before the cast (ClampToInt): out-of-image spans stay empty.
+  const int u0 = ClampToInt(std::floor(umin + K.cx), 0, w);
+  const int u1 = ClampToInt(std::ceil(umax + K.cx), -1, w - 1);
+  const int v0 = ClampToInt(std::floor(vmin + K.cy), 0, h);
+  const int v1 = ClampToInt(std::ceil(vmax + K.cy), -1, h - 1);
   if (u0 > u1 || v0 > v1) return false;
   if (in.pyramid.MaxOver(u0, v0, u1, v1) <= zn) return false;
   for (int y = v0; y <= v1; ++y) {
