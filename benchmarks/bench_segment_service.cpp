@@ -65,21 +65,25 @@ struct Frame {
   SimulatorLabels labels;
 };
 
+/// The default scenario's start view at the D435's intrinsics scaled by `scale`, with its labels.
+Frame* RenderStartView(double scale) {
+  auto* f = new Frame;
+  Result<sim::Scene> scene = sim::MakeScenario(sim::DefaultScenarioName(), 3);
+  if (!scene.ok()) throw Error(scene.status().ToString());
+  const sim::RgbdRenderer renderer(*scene);
+  const CameraIntrinsics K = CameraIntrinsics::RealSenseD435();
+  sim::RenderedFrame r = renderer.Render(scale == 1.0 ? K : K.Scaled(scale), scene->X_WC_start);
+  f->frame = std::move(r.rgbd);
+  f->labels.instance_ids = std::move(r.instance_ids);
+  f->labels.class_ids = std::move(r.class_ids);
+  for (const sim::FruitTruth& fruit : scene->Fruits()) {
+    f->labels.fruits.push_back({fruit.instance_id, fruit.center_W, fruit.mean_radius_m()});
+  }
+  return f;
+}
+
 const Frame& TheFrame() {
-  static const Frame* frame = [] {
-    auto* f = new Frame;
-    Result<sim::Scene> scene = sim::MakeScenario(sim::DefaultScenarioName(), 3);
-    if (!scene.ok()) throw Error(scene.status().ToString());
-    const sim::RgbdRenderer renderer(*scene);
-    sim::RenderedFrame r = renderer.Render(CameraIntrinsics::RealSenseD435(), scene->X_WC_start);
-    f->frame = std::move(r.rgbd);
-    f->labels.instance_ids = std::move(r.instance_ids);
-    f->labels.class_ids = std::move(r.class_ids);
-    for (const sim::FruitTruth& fruit : scene->Fruits()) {
-      f->labels.fruits.push_back({fruit.instance_id, fruit.center_W, fruit.mean_radius_m()});
-    }
-    return f;
-  }();
+  static const Frame* frame = RenderStartView(1.0);
   return *frame;
 }
 
@@ -344,27 +348,9 @@ double Percentile(std::vector<double> v, double p) {
   return v[i];
 }
 
-struct Frame320 {
-  RgbdFrame frame;
-  SimulatorLabels labels;
-};
-
-const Frame320& SmallFrame() {
-  static const Frame320* frame = [] {
-    auto* f = new Frame320;
-    Result<sim::Scene> scene = sim::MakeScenario(sim::DefaultScenarioName(), 3);
-    if (!scene.ok()) throw Error(scene.status().ToString());
-    const sim::RgbdRenderer renderer(*scene);
-    sim::RenderedFrame r =
-        renderer.Render(CameraIntrinsics::RealSenseD435().Scaled(0.5), scene->X_WC_start);
-    f->frame = std::move(r.rgbd);
-    f->labels.instance_ids = std::move(r.instance_ids);
-    f->labels.class_ids = std::move(r.class_ids);
-    for (const sim::FruitTruth& fruit : scene->Fruits()) {
-      f->labels.fruits.push_back({fruit.instance_id, fruit.center_W, fruit.mean_radius_m()});
-    }
-    return f;
-  }();
+/// The start view at half resolution (320 x 240), for the mixed-load clients.
+const Frame& SmallFrame() {
+  static const Frame* frame = RenderStartView(0.5);
   return *frame;
 }
 
