@@ -98,6 +98,13 @@ const OutputFolderKind& BenchFolderKind() {
 
 Result<FolderState> ReadFolderState(const fs::path& dir) {
   const fs::path path = dir / std::string(kStateFileName);
+  // A state marker is a few hundred bytes: one of more than 64 KiB is not avp's, and is refused
+  // before it is read (not read whole up to max_file_bytes). A missing one is ReadJsonFile's
+  // NotFound.
+  if (const Result<uint64_t> size = io::CheckReadableFile(path, "avp state file", 64 << 10);
+      !size.ok() && size.status().code() != StatusCode::kNotFound) {
+    return size.status();
+  }
   AVP_ASSIGN_OR_RETURN(const json j, io::ReadJsonFile(path));
   FolderState s;
   const auto text = [&](const char* key, std::string& out) {

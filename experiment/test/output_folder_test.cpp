@@ -46,6 +46,15 @@ TEST_F(OutputFolderTest, StatesFollowTheRun) {
   EXPECT_THAT(s->error, HasSubstr("writing 'map.ot' failed"));
 }
 
+TEST_F(OutputFolderTest, AnOversizedStateFileIsRefusedBeforeItIsRead) {
+  const fs::path d = dir_ / "run";
+  fs::create_directories(d);
+  std::ofstream(d / "avp-state.json") << std::string((64 << 10) + 1, ' ');
+  const Status s = ReadFolderState(d).status();
+  EXPECT_EQ(s.code(), StatusCode::kResourceExhausted) << s.ToString();
+  EXPECT_THAT(s.message(), HasSubstr("avp state file"));
+}
+
 TEST_F(OutputFolderTest, AFolderWithResultsIsRefusedSayingWhatItHolds) {
   const fs::path d = dir_ / "run";
   ASSERT_TRUE(PrepareOutputFolder(d, RunFolderKind(), false).ok());
