@@ -12,10 +12,13 @@
 #include <gtest/gtest.h>
 #include <sys/resource.h>
 
+#include <avp/core/semantic_class.h>
 #include <avp/experiment/bench.h>
+#include <avp/experiment/episode_runner.h>
 #include <avp/experiment/output_folder.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
+#include <avp/sim/rgbd_renderer.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::experiment {
@@ -37,6 +40,78 @@ std::vector<std::string> Lines(const fs::path& p) {
   std::ifstream in(p);
   for (std::string line; std::getline(in, line);) out.push_back(line);
   return out;
+}
+
+/// record.json's per-fruit list against the record's own counts: one entry per scene fruit with
+/// the ground truth's best visible fraction; the found flags are final_metrics' fruits_found;
+/// found_view (1-based, like steps[].view) agrees with fruits_found after every view of
+/// metrics.csv (`csv`, header + one line per view); the errors average to the aggregates.
+void ExpectFruitListMatchesTheRecord(const nlohmann::json& record,
+                                     const std::vector<std::string>& csv) {
+  const auto& fruits = record["fruits"];
+  ASSERT_TRUE(fruits.is_array());
+  ASSERT_EQ(fruits.size(), record["scene"]["fruits"].get<size_t>());
+  const auto& gt_fruits = record["ground_truth"]["fruits"];
+  ASSERT_EQ(gt_fruits.size(), fruits.size());
+  int found = 0;
+  double center_sum = 0.0;
+  double radius_sum = 0.0;
+  int estimated = 0;
+  for (size_t i = 0; i < fruits.size(); ++i) {
+    const auto& f = fruits[i];
+    EXPECT_EQ(f["fruit"], gt_fruits[i]["fruit"]);
+    EXPECT_EQ(f["best_visible_fraction"], gt_fruits[i]["best_visible_fraction"]);
+    EXPECT_EQ(f["center_m"].size(), 3u);
+    EXPECT_GT(f["radius_m"].get<double>(), 0.01);
+    if (f["found"].get<bool>()) {
+      ++found;
+      EXPECT_FALSE(f["found_view"].is_null());
+      EXPECT_FALSE(f["found_since_view"].is_null());
+      EXPECT_LE(f["found_view"].get<int>(), f["found_since_view"].get<int>());
+    } else {
+      EXPECT_TRUE(f["found_since_view"].is_null());
+      EXPECT_TRUE(f["estimate"].is_null());
+    }
+    if (!f["center_error_m"].is_null()) {
+      ++estimated;
+      center_sum += f["center_error_m"].get<double>();
+      radius_sum += f["radius_error_m"].get<double>();
+      EXPECT_LT(f["center_error_m"].get<double>(), 0.05);
+    }
+  }
+  const auto& final_metrics = record["final_metrics"];
+  EXPECT_EQ(found, final_metrics["fruits_found"].get<int>());
+  ASSERT_GT(found, 0);
+  ASSERT_GT(estimated, 0);
+  EXPECT_NEAR(center_sum / estimated, final_metrics["center_error_m"].get<double>(), 1e-12);
+  EXPECT_NEAR(radius_sum / estimated, final_metrics["radius_error_m"].get<double>(), 1e-12);
+  // After view k: the fruits whose found_view <= k, less those lost again, are fruits_found.
+  const auto& steps = record["steps"];
+  ASSERT_EQ(csv.size(), steps.size() + 1);
+  for (size_t k = 1; k <= steps.size(); ++k) {
+    int first_found = 0;
+    int found_now_lower_bound = 0;
+    for (const auto& f : fruits) {
+      if (!f["found_view"].is_null() && f["found_view"].get<size_t>() <= k) ++first_found;
+      if (!f["found_since_view"].is_null() && f["found_since_view"].get<size_t>() <= k) {
+        ++found_now_lower_bound;
+      }
+    }
+    const int found_k = steps[k - 1]["metrics"]["fruits_found"].get<int>();
+    EXPECT_EQ(steps[k - 1]["view"].get<size_t>(), k);
+    EXPECT_LE(found_now_lower_bound, found_k) << "view " << k;
+    EXPECT_GE(first_found, found_k) << "view " << k;
+    // metrics.csv's fruits_found of the same view (its column from the header).
+    std::vector<std::string> header, row;
+    for (std::stringstream h(csv[0]); std::getline(h, header.emplace_back(), ',');) {
+    }
+    for (std::stringstream l(csv[k]); std::getline(l, row.emplace_back(), ',');) {
+    }
+    const size_t col = static_cast<size_t>(std::find(header.begin(), header.end(), "fruits_found") -
+                                           header.begin());
+    ASSERT_LT(col, row.size());
+    EXPECT_EQ(std::stoi(row[col]), found_k) << "view " << k;
+  }
 }
 
 class RunCommandTest : public test::TempDirTest {
@@ -98,6 +173,77 @@ TEST_F(RunCommandTest, RunWritesTheRunFolder) {
   const double f1 = (*record)["final_metrics"]["f1"].get<double>();
   EXPECT_EQ(f1, r->result.final_metrics.exact.f1);
   EXPECT_THAT(ReadAll(o.out_dir / "metrics.svg"), HasSubstr("voxel F1 (exact)"));
+  ExpectFruitListMatchesTheRecord(*record, lines);
+}
+
+TEST_F(RunCommandTest, EpisodeVisibilityOfEachFruitIsWhatTheRendererShows) {
+  // Render every fused view again, independently, and count each fruit's pixels (class fruit,
+  // depth within the integrator's range) over the unoccluded area pi (f r / z)^2: the largest
+  // fraction over the views is the record's episode_visible_fraction, at the view it names.
+  RunConfig c;
+  c.scenario = "tomato-single-cluster";
+  c.seed = 3;
+  c.episode.views = 3;
+  c.threads = 2;
+  c.depth_noise.enabled = false;  // the render below has no noise either
+  auto scene = LoadScene(c, registries_);
+  ASSERT_TRUE(scene.ok()) << scene.status().ToString();
+  auto gt = GroundTruthFor(c, *scene);
+  ASSERT_TRUE(gt.ok()) << gt.status().ToString();
+  auto r = RunEpisodeOnScene(c, registries_, *scene, *gt);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->episode.views_fused(), 3);
+  ASSERT_EQ(r->fruits.size(), scene->Fruits().size());
+  const sim::RgbdRenderer renderer(*scene);
+  const double max_range = c.episode.integrator.max_range_m;
+  struct Best {
+    double fraction = 0.0;
+    int view = -1;
+  };
+  const auto rendered_best = [&](const RunResult& run) {
+    std::map<uint16_t, Best> best;
+    for (const pipeline::StepRecord& step : run.episode.steps) {
+      const sim::RenderedFrame frame = renderer.Render(c.camera, step.X_WC);
+      const CameraIntrinsics& K = frame.rgbd.K;
+      std::map<uint16_t, int> pixels;
+      for (int v = 0; v < K.height; ++v) {
+        for (int u = 0; u < K.width; ++u) {
+          if (frame.class_ids.at(u, v) != static_cast<uint8_t>(SemanticClass::kFruit)) continue;
+          const double d = frame.rgbd.depth_m.at(u, v);
+          const Eigen::Vector3d p((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
+          if (d > 0.0 && p.norm() <= max_range) ++pixels[frame.instance_ids.at(u, v)];
+        }
+      }
+      for (const sim::FruitTruth& f : scene->Fruits()) {
+        const double z = (step.X_WC.inverse() * f.center_W).z();
+        const double fr = std::sqrt(K.fx * K.fy) * f.mean_radius_m();
+        const double area = M_PI * (fr / z) * (fr / z);
+        const double fraction = std::min(1.0, pixels[f.instance_id] / area);
+        Best& b = best[f.instance_id];
+        if (b.view < 0 || fraction > b.fraction) b = {fraction, step.view};
+      }
+    }
+    return best;
+  };
+  std::map<uint16_t, Best> best = rendered_best(*r);
+  int seen = 0;
+  for (const eval::FruitResult& f : r->fruits) {
+    EXPECT_NEAR(f.episode_visible_fraction, best[f.instance_id].fraction, 1e-9) << f.name;
+    if (best[f.instance_id].fraction > 0.0) {
+      EXPECT_EQ(f.episode_best_view, best[f.instance_id].view) << f.name;
+      ++seen;
+    }
+  }
+  EXPECT_GE(seen, 3);  // the single cluster: several fruits in view
+  // The default depth noise drops or moves depths: a dropped fruit pixel still counts (the
+  // labels are ground truth), so the fractions stay within a few percent of the clean render.
+  c.depth_noise.enabled = true;
+  auto noisy = RunEpisodeOnScene(c, registries_, *scene, *gt);
+  ASSERT_TRUE(noisy.ok()) << noisy.status().ToString();
+  best = rendered_best(*noisy);
+  for (const eval::FruitResult& f : noisy->fruits) {
+    EXPECT_NEAR(f.episode_visible_fraction, best[f.instance_id].fraction, 0.02) << f.name;
+  }
 }
 
 TEST_F(RunCommandTest, RunRejectsBadInput) {
@@ -217,6 +363,45 @@ TEST_F(RunCommandTest, BenchWritesLongFormatSummaryAndPlots) {
                          "metrics.csv"));
   ASSERT_EQ(r->cells.size(), 2u);
   EXPECT_EQ(r->cells[0].runs, 2u);
+
+  // Per-fruit results: each run's record.json lists its fruits; fruits_by_visibility.csv bins
+  // them by best visible fraction, per planner every fruit of both seeds once, and the found
+  // counts are the runs' found flags.
+  std::map<std::string, int> fruits_of, found_of;
+  for (const char* planner : {"avp-nbv", "predefined"}) {
+    for (const char* seed : {"seed-0", "seed-1"}) {
+      auto rec = io::ReadJsonFile(o.out_dir / "runs" / "tomato-single-cluster" / planner / seed /
+                                  "record.json");
+      ASSERT_TRUE(rec.ok()) << rec.status().ToString();
+      ASSERT_TRUE((*rec)["fruits"].is_array());
+      ASSERT_GT((*rec)["fruits"].size(), 0u);
+      for (const auto& f : (*rec)["fruits"]) {
+        ++fruits_of[planner];
+        found_of[planner] += f["found"].get<bool>() ? 1 : 0;
+        EXPECT_TRUE(f.contains("found_view"));
+        EXPECT_TRUE(f.contains("episode_visible_fraction"));
+      }
+    }
+  }
+  const auto bins = Lines(o.out_dir / "fruits_by_visibility.csv");
+  ASSERT_EQ(bins.size(), 1u + 2u * 4u);  // header + 2 planners x 4 bins
+  EXPECT_EQ(bins[0],
+            "scenario,planner,segmenter,visible_from,visible_to,fruits,found,fraction,wilson_lo,"
+            "wilson_hi");
+  EXPECT_THAT(bins[1], HasSubstr("tomato-single-cluster,avp-nbv,oracle,0,0.05,"));
+  EXPECT_THAT(bins[8], HasSubstr("tomato-single-cluster,predefined,oracle,0.5,1,"));
+  std::map<std::string, int> binned, binned_found;
+  for (size_t i = 1; i < bins.size(); ++i) {
+    std::vector<std::string> cells;
+    for (std::stringstream l(bins[i]); std::getline(l, cells.emplace_back(), ',');) {
+    }
+    binned[cells[1]] += std::stoi(cells[5]);
+    binned_found[cells[1]] += std::stoi(cells[6]);
+  }
+  EXPECT_EQ(binned, fruits_of);
+  EXPECT_EQ(binned_found, found_of);
+  EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
+              HasSubstr("Fruits found at the final view by best visible fraction"));
 }
 
 TEST_F(RunCommandTest, BenchConfigFileAndErrors) {

@@ -159,27 +159,44 @@ std::vector<VoxelKey> PredictedVoxels(const mapping::SemanticMap& map, SemanticC
   return predicted;
 }
 
-std::vector<uint16_t> FoundFruitIds(const std::vector<VoxelKey>& predicted, const GroundTruth& gt,
-                                    const EvalOptions& options) {
+namespace {
+
+/// GT voxels per fruit with a predicted voxel in their 26-neighbourhood.
+std::map<uint16_t, size_t> RecalledPerFruit(const std::vector<VoxelKey>& predicted,
+                                            const GroundTruth& gt) {
   const KeySet pred_set(predicted.begin(), predicted.end());
-  std::map<uint16_t, size_t>
-      recalled;  // GT voxels with a predicted voxel in their 26-neighbourhood
+  std::map<uint16_t, size_t> recalled;
   for (const auto& [k, id] : gt.voxels) {
     if (HasNeighbour(pred_set, k, 1)) ++recalled[id];
   }
+  return recalled;
+}
+
+size_t ObservableVoxels(const GroundTruth& gt, uint16_t id) {
+  const auto it = gt.voxels_per_fruit.find(id);
+  return it == gt.voxels_per_fruit.end() ? 0 : it->second;
+}
+
+/// FoundFruitIds' rule for one fruit.
+bool IsFound(size_t hits, size_t observable, const EvalOptions& options) {
+  const double needed = std::max(static_cast<double>(options.found_min_voxels),
+                                 options.found_min_fraction * static_cast<double>(observable));
+  return observable > 0 && hits > 0 && static_cast<double>(hits) >= needed;
+}
+
+}  // namespace
+
+std::vector<uint16_t> FoundFruitIds(const std::vector<VoxelKey>& predicted, const GroundTruth& gt,
+                                    const EvalOptions& options) {
   std::vector<uint16_t> found;  // ascending: std::map's order
-  for (const auto& [id, hits] : recalled) {
-    const auto it = gt.voxels_per_fruit.find(id);
-    const size_t observable = it == gt.voxels_per_fruit.end() ? 0 : it->second;
-    const double needed = std::max(static_cast<double>(options.found_min_voxels),
-                                   options.found_min_fraction * static_cast<double>(observable));
-    if (observable > 0 && hits > 0 && static_cast<double>(hits) >= needed) found.push_back(id);
+  for (const auto& [id, hits] : RecalledPerFruit(predicted, gt)) {
+    if (IsFound(hits, ObservableVoxels(gt, id), options)) found.push_back(id);
   }
   return found;
 }
 
 MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
-                       const EvalOptions& options) {
+                       const EvalOptions& options, std::vector<FruitResult>* fruits) {
   const Status valid = options.Validate();
   if (!valid.ok()) ThrowStatus(valid);
   const double s = map.voxel_size_m();
@@ -202,8 +219,8 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
   m.exact = ScoreVoxelSets(predicted, gt, 0);
   m.tolerant = ScoreVoxelSets(predicted, gt, 1);
 
-  // ---- Fruits: found ones (FoundFruitIds) and matched predicted voxels per fruit.
-  const std::vector<uint16_t> found_ids = FoundFruitIds(predicted, gt, options);
+  // ---- Fruits: found ones (FoundFruitIds' rule) and matched predicted voxels per fruit.
+  const std::map<uint16_t, size_t> recalled = RecalledPerFruit(predicted, gt);
   std::map<uint16_t, std::vector<Eigen::Vector3d>> matched;
   for (const VoxelKey& k : predicted) {  // sorted: the fits see their points in a fixed order
     bool found = false;
@@ -215,19 +232,45 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
   double center_error_sum = 0.0;
   double radius_error_sum = 0.0;
   size_t fitted = 0;
+  if (fruits != nullptr) {
+    fruits->clear();
+    fruits->reserve(gt.fruits.size());
+  }
   for (const sim::FruitTruth& fruit : gt.fruits) {
-    const auto it = gt.voxels_per_fruit.find(fruit.instance_id);
-    const size_t observable = it == gt.voxels_per_fruit.end() ? 0 : it->second;
-    if (observable == 0) continue;
-    ++f.observable;
-    if (!std::binary_search(found_ids.begin(), found_ids.end(), fruit.instance_id)) continue;
-    ++f.found;
+    FruitResult r;
+    r.instance_id = fruit.instance_id;
+    r.name = fruit.name;
+    r.center_W = fruit.center_W;
+    r.radii = fruit.radii;
+    r.radius_m = fruit.mean_radius_m();
+    if (const auto v = gt.best_visible_fraction.find(fruit.instance_id);
+        v != gt.best_visible_fraction.end()) {
+      r.best_visible_fraction = v->second;
+    }
+    r.observable_voxels = ObservableVoxels(gt, fruit.instance_id);
+    if (const auto h = recalled.find(fruit.instance_id); h != recalled.end()) {
+      r.recalled_voxels = h->second;
+    }
     const auto pts = matched.find(fruit.instance_id);
-    if (pts == matched.end() || pts->second.empty()) continue;
-    const SphereFit fit = FitSphere(pts->second);
-    center_error_sum += (fit.center - fruit.center_W).norm();
-    radius_error_sum += std::abs(fit.radius_m - fruit.mean_radius_m());
-    ++fitted;
+    r.matched_voxels = pts == matched.end() ? 0 : pts->second.size();
+    r.found = IsFound(r.recalled_voxels, r.observable_voxels, options);
+    if (r.observable_voxels > 0) ++f.observable;
+    if (r.found) {
+      ++f.found;
+      if (r.matched_voxels > 0) {
+        const SphereFit fit = FitSphere(pts->second);
+        r.estimated = true;
+        r.sphere_fitted = fit.fitted;
+        r.estimated_center_W = fit.center;
+        r.estimated_radius_m = fit.radius_m;
+        r.center_error_m = (fit.center - fruit.center_W).norm();
+        r.radius_error_m = std::abs(fit.radius_m - r.radius_m);
+        center_error_sum += r.center_error_m;
+        radius_error_sum += r.radius_error_m;
+        ++fitted;
+      }
+    }
+    if (fruits != nullptr) fruits->push_back(std::move(r));
   }
   f.found_fraction = Ratio(f.found, f.total);
   if (fitted > 0) {
@@ -256,6 +299,13 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
     }
   }
   return m;
+}
+
+std::vector<FruitResult> EvaluateFruits(const mapping::SemanticMap& map, const GroundTruth& gt,
+                                        const EvalOptions& options) {
+  std::vector<FruitResult> fruits;
+  EvaluateMap(map, gt, options, &fruits);
+  return fruits;
 }
 
 }  // namespace avp::eval

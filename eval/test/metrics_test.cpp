@@ -262,6 +262,100 @@ TEST(MetricsTest, CentreAndSizeErrorOfAPerfectMapAreBelowAVoxel) {
   EXPECT_NEAR(ms.fruits.mean_center_error_m, s, 0.3 * s);
 }
 
+TEST(MetricsTest, PerFruitResultsMatchHandCountsAndTheAggregates) {
+  // RowGt: fruit 1 = keys x 0..4, fruit 2 = x 20, 21, fruit 3 never observable. Predicted: x 0..3
+  // (recall all five of fruit 1: x 4 touches x 3) and x 22 (recalls x 21 only).
+  GroundTruth gt = RowGt();
+  gt.best_visible_fraction = {{1, 0.8}, {2, 0.1}, {3, 0.0}};
+  mapping::SemanticMap map = EmptyMap();
+  for (int x = 0; x <= 3; ++x) Label(map, {x, 0, 0}, SemanticClass::kFruit);
+  Label(map, {22, 0, 0}, SemanticClass::kFruit);
+  std::vector<FruitResult> fruits;
+  const MapMetrics m = EvaluateMap(map, gt, {}, &fruits);
+  ASSERT_EQ(fruits.size(), 3u);
+  EXPECT_EQ(fruits[0].instance_id, 1);
+  EXPECT_EQ(fruits[0].observable_voxels, 5u);
+  EXPECT_EQ(fruits[0].recalled_voxels, 5u);
+  EXPECT_EQ(fruits[0].matched_voxels, 4u);
+  EXPECT_TRUE(fruits[0].found);
+  EXPECT_DOUBLE_EQ(fruits[0].best_visible_fraction, 0.8);
+  EXPECT_DOUBLE_EQ(fruits[0].radius_m, 0.03);
+  // Four points: the centroid (0.02, 0.005, 0.005), radius = mean distance 0.01.
+  EXPECT_TRUE(fruits[0].estimated);
+  EXPECT_FALSE(fruits[0].sphere_fitted);
+  EXPECT_TRUE(fruits[0].estimated_center_W.isApprox(Eigen::Vector3d(0.02, 0.005, 0.005)));
+  EXPECT_NEAR(fruits[0].estimated_radius_m, 0.01, 1e-12);
+  EXPECT_NEAR(fruits[0].center_error_m, std::sqrt(0.00045), 1e-12);
+  EXPECT_NEAR(fruits[0].radius_error_m, 0.02, 1e-12);
+  // Fruit 2: one recalled voxel of the three needed: not found, no estimate.
+  EXPECT_EQ(fruits[1].recalled_voxels, 1u);
+  EXPECT_EQ(fruits[1].matched_voxels, 1u);
+  EXPECT_FALSE(fruits[1].found);
+  EXPECT_FALSE(fruits[1].estimated);
+  EXPECT_TRUE(std::isnan(fruits[1].center_error_m));
+  EXPECT_DOUBLE_EQ(fruits[1].best_visible_fraction, 0.1);
+  EXPECT_EQ(fruits[2].observable_voxels, 0u);
+  EXPECT_FALSE(fruits[2].found);
+  // The episode fields are the runner's: unset here.
+  for (const FruitResult& f : fruits) {
+    EXPECT_EQ(f.found_view, -1);
+    EXPECT_TRUE(std::isnan(f.episode_visible_fraction));
+  }
+  // The same found set and errors as the aggregates, and as FoundFruitIds.
+  EXPECT_EQ(m.fruits.found, 1u);
+  EXPECT_DOUBLE_EQ(m.fruits.mean_center_error_m, fruits[0].center_error_m);
+  EXPECT_DOUBLE_EQ(m.fruits.mean_radius_error_m, fruits[0].radius_error_m);
+  EXPECT_EQ(FoundFruitIds(PredictedVoxels(map, SemanticClass::kFruit), gt, {}),
+            std::vector<uint16_t>{1});
+  // EvaluateFruits gives the same list; a ground truth without fruits gives none.
+  const std::vector<FruitResult> again = EvaluateFruits(map, gt);
+  ASSERT_EQ(again.size(), 3u);
+  EXPECT_EQ(again[0].center_error_m, fruits[0].center_error_m);
+  GroundTruth file = MakeGt({{{0, 0, 0}, 0}, {{1, 0, 0}, 0}}, {});
+  EXPECT_TRUE(EvaluateFruits(map, file).empty());
+  // No best visible fraction in the ground truth: NaN.
+  EXPECT_TRUE(std::isnan(EvaluateFruits(map, RowGt())[0].best_visible_fraction));
+}
+
+TEST(MetricsTest, PerFruitErrorsOfTwoSpheresAverageToTheAggregates) {
+  const double s = 0.005;
+  sim::Scene scene;
+  for (const auto& [c, r] : {std::pair{Eigen::Vector3d(0.50, 0.10, 0.60), 0.03},
+                             std::pair{Eigen::Vector3d(0.50, 0.20, 0.62), 0.025}}) {
+    sim::SceneObject o;
+    o.name = "fruit";
+    o.semantic_class = SemanticClass::kFruit;
+    sim::Ellipsoid e;
+    e.center_W = c;
+    e.radii = Eigen::Vector3d::Constant(r);
+    o.shape = e;
+    scene.Add(o);
+  }
+  const sim::FruitVoxels surface = sim::VoxelizeFruitSurfaces(scene, s);
+  std::vector<std::pair<VoxelKey, uint16_t>> voxels(surface.voxels.begin(), surface.voxels.end());
+  const GroundTruth gt = MakeGt(voxels, scene.Fruits(), s);
+  // The prediction: the half of each fruit facing -x, shifted one voxel along +x.
+  mapping::SemanticMap map = EmptyMap(s);
+  for (const auto& [k, id] : voxels) {
+    if (k.Center(s).x() < 0.50) Label(map, {k.x + 1, k.y, k.z}, SemanticClass::kFruit);
+  }
+  std::vector<FruitResult> fruits;
+  const MapMetrics m = EvaluateMap(map, gt, {}, &fruits);
+  ASSERT_EQ(fruits.size(), 2u);
+  ASSERT_TRUE(fruits[0].found && fruits[1].found);
+  EXPECT_TRUE(fruits[0].sphere_fitted && fruits[1].sphere_fitted);
+  EXPECT_DOUBLE_EQ(fruits[1].radius_m, 0.025);
+  for (const FruitResult& f : fruits) {
+    EXPECT_GT(f.matched_voxels, 50u);
+    EXPECT_LT(f.center_error_m, 2.0 * s) << f.instance_id;  // about the one-voxel shift
+    EXPECT_LT(f.radius_error_m, 1.5 * s) << f.instance_id;
+  }
+  EXPECT_NEAR(m.fruits.mean_center_error_m,
+              (fruits[0].center_error_m + fruits[1].center_error_m) / 2.0, 1e-15);
+  EXPECT_NEAR(m.fruits.mean_radius_error_m,
+              (fruits[0].radius_error_m + fruits[1].radius_error_m) / 2.0, 1e-15);
+}
+
 TEST(MetricsTest, EntropyOfTargetLabelledVoxels) {
   const GroundTruth gt = RowGt();
   mapping::SemanticMap map = EmptyMap();

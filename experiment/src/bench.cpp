@@ -23,6 +23,7 @@
 #include <avp/io/yaml.h>
 #include <avp/report/metrics_csv.h>
 #include <avp/report/provenance.h>
+#include <avp/report/run_report.h>
 
 namespace avp::experiment {
 
@@ -207,6 +208,11 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
     j.metrics.push_back(s.metrics);
     if (s.planned) j.plan_ms.push_back(s.times.plan_ms);
   }
+  for (const eval::FruitResult& f : r->fruits) {
+    j.fruits.push_back({.best_visible_fraction = f.best_visible_fraction,
+                        .episode_visible_fraction = f.episode_visible_fraction,
+                        .found = f.found});
+  }
   const planning::PlannerEntry* entry = registries.planners.Find(planner);
   const nlohmann::json options = io::OptionsToJson(
       c.planner.options, entry != nullptr ? entry->options.Info() : std::vector<OptionInfo>{});
@@ -219,7 +225,8 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
                            {"end", std::string(pipeline::ToString(r->episode.end))},
                            {"end_reason", r->episode.end_reason},
                            {"episode_seconds", j.episode_s},
-                           {"git_revision", revision}};
+                           {"git_revision", revision},
+                           {"fruits", report::FruitsJson(r->fruits)}};
   if (Status s = io::WriteJsonFile(dir / "record.json", rec); !s.ok()) return fail(s);
   if (Status s = MarkComplete(dir, RunFolderKind(), "avp bench"); !s.ok()) return fail(s);
   // A segmenter that failed (a service that is down) leaves views without segmentation: the

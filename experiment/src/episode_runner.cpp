@@ -1,9 +1,13 @@
+#include <algorithm>
 #include <cmath>
 #include <memory>
+#include <optional>
+#include <unordered_map>
 
 #include <fmt/format.h>
 
 #include <avp/core/rng.h>
+#include <avp/core/semantic_class.h>
 #include <avp/experiment/episode_runner.h>
 #include <avp/report/metrics_csv.h>
 #include <avp/robot/arm_model.h>
@@ -39,6 +43,126 @@ struct EpisodeParts {
   // The regret probe sees the planner's own results (an oracle planner's included).
   std::unique_ptr<eval::OracleNbvPlanner> probe_oracle;
   std::unique_ptr<eval::RegretProbe> probe;
+};
+
+/// Each fruit's visible fraction in the frames an episode captures, from their simulator labels:
+/// the fruit's pixels (instance id, class fruit) over segmentation::ExpectedFruitAreaPx at the
+/// frame's camera, clamped to [0, 1] (1 when the area is undefined), as
+/// eval::GroundTruth::best_visible_fraction counts them: a pixel with a valid depth farther than
+/// max_range_m from the camera does not count; one whose depth the sensor model dropped does (the
+/// labels are ground truth). Wraps the episode's source; frames without labels (a real camera)
+/// give nothing. Counting is one pass over the label image: no rendering.
+class VisibilityProbe final : public robot::RgbdSource {
+ public:
+  VisibilityProbe(robot::RgbdSource& inner, const std::vector<sim::FruitTruth>& fruits,
+                  double max_range_m)
+      : inner_(inner), max_range_m_(max_range_m) {
+    for (const sim::FruitTruth& f : fruits) {
+      truth_[f.instance_id] = {f.instance_id, f.center_W, f.mean_radius_m()};
+    }
+  }
+
+  Result<robot::Observation> Capture(const RigidTransform& X_WC, int64_t stamp_ns) override {
+    Result<robot::Observation> obs = inner_.Capture(X_WC, stamp_ns);
+    if (obs.ok() && obs->labels.has_value()) last_ = Fractions(*obs);
+    return obs;
+  }
+  CameraIntrinsics intrinsics() const override { return inner_.intrinsics(); }
+
+  /// The fractions of the frame captured since the last call, if any (then forgotten).
+  std::optional<std::unordered_map<uint16_t, double>> Take() {
+    std::optional<std::unordered_map<uint16_t, double>> out = std::move(last_);
+    last_.reset();
+    return out;
+  }
+
+ private:
+  std::unordered_map<uint16_t, double> Fractions(const robot::Observation& obs) const {
+    const SimulatorLabels& labels = *obs.labels;
+    const RgbdFrame& frame = obs.frame;
+    const CameraIntrinsics& K = frame.K;
+    const auto fruit = static_cast<uint8_t>(SemanticClass::kFruit);
+    std::unordered_map<uint16_t, size_t> pixels;
+    const int w = std::min(labels.instance_ids.width(), frame.depth_m.width());
+    const int h = std::min(labels.instance_ids.height(), frame.depth_m.height());
+    for (int v = 0; v < h; ++v) {
+      for (int u = 0; u < w; ++u) {
+        if (labels.class_ids.at(u, v) != fruit) continue;
+        const uint16_t id = labels.instance_ids.at(u, v);
+        if (truth_.count(id) == 0) continue;
+        const float d = frame.depth_m.at(u, v);
+        if (std::isfinite(d) && d > 0.0f) {
+          const Eigen::Vector3d p_C((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
+          if (p_C.norm() > max_range_m_) continue;
+        }
+        ++pixels[id];
+      }
+    }
+    std::unordered_map<uint16_t, double> out;
+    for (const auto& [id, n] : pixels) {
+      const std::optional<double> area =
+          segmentation::ExpectedFruitAreaPx(K, frame.X_WC, truth_.at(id));
+      out[id] = area ? std::clamp(static_cast<double>(n) / *area, 0.0, 1.0) : 1.0;
+    }
+    return out;
+  }
+
+  robot::RgbdSource& inner_;
+  double max_range_m_;
+  std::unordered_map<uint16_t, GroundTruthFruit> truth_;
+  std::optional<std::unordered_map<uint16_t, double>> last_;
+};
+
+/// The episode's per-fruit results as the views come: after each fused view, the fruits found
+/// (the view that first found each, and the one from which it stayed found) and each fruit's
+/// visible fraction in that view.
+class FruitTracker {
+ public:
+  /// After view `view` (0-based) was fused: `now` is the map's evaluation, `visible` the view's
+  /// fractions (none: no labelled frame).
+  void AfterView(int view, std::vector<eval::FruitResult> now,
+                 const std::optional<std::unordered_map<uint16_t, double>>& visible) {
+    if (first_found_.empty()) {
+      first_found_.assign(now.size(), -1);
+      found_since_.assign(now.size(), -1);
+      best_visible_.assign(now.size(), eval::FruitResult::kNaN);
+      best_view_.assign(now.size(), -1);
+    }
+    for (size_t i = 0; i < now.size() && i < first_found_.size(); ++i) {
+      if (now[i].found) {
+        if (first_found_[i] < 0) first_found_[i] = view;
+        if (found_since_[i] < 0) found_since_[i] = view;
+      } else {
+        found_since_[i] = -1;
+      }
+      if (visible.has_value()) {
+        const auto it = visible->find(now[i].instance_id);
+        const double v = it == visible->end() ? 0.0 : it->second;
+        if (std::isnan(best_visible_[i]) || v > best_visible_[i]) {
+          best_visible_[i] = v;
+          best_view_[i] = view;
+        }
+      }
+    }
+    last_ = std::move(now);
+  }
+
+  /// The last evaluation with the episode's fields.
+  std::vector<eval::FruitResult> Result() const {
+    std::vector<eval::FruitResult> out = last_;
+    for (size_t i = 0; i < out.size() && i < first_found_.size(); ++i) {
+      out[i].found_view = first_found_[i];
+      out[i].found_since_view = found_since_[i];
+      out[i].episode_visible_fraction = best_visible_[i];
+      out[i].episode_best_view = best_view_[i];
+    }
+    return out;
+  }
+
+ private:
+  std::vector<eval::FruitResult> last_;
+  std::vector<int> first_found_, found_since_, best_view_;
+  std::vector<double> best_visible_;
 };
 
 Status CheckSceneAndTruth(const RunConfig& config, const sim::Scene& scene,
@@ -136,15 +260,26 @@ Result<RunResult> RunEpisodeWithRobot(const RunConfig& config, const Registries&
   eval_options.roi = eo.roi;
   eval::MapMetrics last;
   pipeline::MetricsHook hook;
+  // Per-fruit results: evaluated with the step's metrics (no second evaluation), the views'
+  // visible fractions counted from the captured frames' labels.
+  std::optional<VisibilityProbe> visibility;
+  FruitTracker fruits;
+  int view = 0;
   if (truth.gt != nullptr) {
+    if (robot.source != nullptr) {
+      visibility.emplace(*robot.source, truth.gt->fruits, eo.integrator.max_range_m);
+    }
     hook = [&](const mapping::SemanticMap& m) {
-      last = eval::EvaluateMap(m, *truth.gt, eval_options);
+      std::vector<eval::FruitResult> now;
+      last = eval::EvaluateMap(m, *truth.gt, eval_options, &now);
+      fruits.AfterView(view++, std::move(now), visibility ? visibility->Take() : std::nullopt);
       return report::MetricsRow(last);
     };
   }
   planning::ViewPlanner* planner = e.probe ? e.probe.get() : e.planner.get();
-  const pipeline::EpisodeComponents components{robot.source, e.segmenter.get(), robot.arm,
-                                               planner,      e.map.get(),       robot.stop};
+  robot::RgbdSource* source = visibility ? &*visibility : robot.source;
+  const pipeline::EpisodeComponents components{source,  e.segmenter.get(), robot.arm,
+                                               planner, e.map.get(),       robot.stop};
   AVP_ASSIGN_OR_RETURN(pipeline::EpisodeResult episode,
                        pipeline::RunEpisode(components, eo, hook, observers));
   RunResult result;
@@ -154,6 +289,7 @@ Result<RunResult> RunEpisodeWithRobot(const RunConfig& config, const Registries&
     result.gt_voxels = truth.gt->voxels.size();
     result.gt_fruits = truth.gt->fruits.size();
   }
+  if (truth.gt != nullptr) result.fruits = fruits.Result();
   if (e.probe != nullptr) result.regret = e.probe->steps();
   if (map_out != nullptr) *map_out = std::move(e.map);
   return result;

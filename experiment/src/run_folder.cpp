@@ -82,6 +82,9 @@ Result<json> RecordJson(const RunConfig& config, const Registries& registries, c
               {"episode_seconds", result.episode.total_ms / 1e3},
               {"final_metrics",
                run.gt != nullptr ? report::MetricsJson(result.final_metrics) : json(nullptr)},
+              // Every ground-truth fruit: found or not, from which view, how visible, its
+              // errors; null without a ground truth, [] for one without fruits (a file).
+              {"fruits", run.gt != nullptr ? report::FruitsJson(result.fruits) : json(nullptr)},
               {"oracle_regret", report::RegretJson(result.regret)},
               {"steps", steps}};
   if (run.extra) {

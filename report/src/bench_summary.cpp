@@ -2,6 +2,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <tuple>
 
 #include <fmt/format.h>
@@ -168,6 +169,60 @@ std::string FinalViewTable(const Aggregates& a, const BenchDescription& bench,
   return md;
 }
 
+std::string BinLabel(const VisibilityBin& b) {
+  return fmt::format("[{:.2f}, {:.2f}{}", b.lo, b.hi, b.hi >= 1.0 ? "]" : ")");
+}
+
+/// fruits_by_visibility.csv: FoundByVisibility per scenario, planner and bin.
+std::string VisibilityCsv(const std::vector<BenchEpisode>& episodes,
+                          const BenchDescription& bench) {
+  std::string csv =
+      "scenario,planner,segmenter,visible_from,visible_to,fruits,found,fraction,wilson_lo,"
+      "wilson_hi\n";
+  for (const std::string& s : bench.scenarios) {
+    for (const std::string& p : bench.planners) {
+      for (const VisibilityBin& b : FoundByVisibility(episodes, s, p)) {
+        csv += fmt::format("{},{},{},{},{},{},{},{},{},{}\n", s, p, bench.segmenter, FormatG9(b.lo),
+                           FormatG9(b.hi), b.fruits, b.found, FormatG9(b.fraction),
+                           FormatG9(b.ci_lo), FormatG9(b.ci_hi));
+      }
+    }
+  }
+  return csv;
+}
+
+/// The fraction found per visibility bin of one scenario (empty when no fruit has a best
+/// visible fraction).
+std::string VisibilityTable(const std::vector<BenchEpisode>& episodes,
+                            const BenchDescription& bench, const std::string& scenario) {
+  std::string rows;
+  std::vector<VisibilityBin> header;
+  size_t binned = 0;
+  for (const std::string& p : bench.planners) {
+    const std::vector<VisibilityBin> bins = FoundByVisibility(episodes, scenario, p);
+    header = bins;
+    rows += "| " + p + " |";
+    for (const VisibilityBin& b : bins) {
+      binned += b.fruits;
+      if (b.fruits == 0) {
+        rows += " – |";
+      } else {
+        rows += fmt::format(" {} / {} = {:.2f} [{:.2f}, {:.2f}] |", b.found, b.fruits, b.fraction,
+                            b.ci_lo, b.ci_hi);
+      }
+    }
+    rows += "\n";
+  }
+  if (binned == 0) return "";
+  std::string md =
+      "\nFruits found at the final view by best visible fraction (found / fruits over all seeds, "
+      "Wilson 95 % interval):\n\n| planner |";
+  for (const VisibilityBin& b : header) md += " " + BinLabel(b) + " |";
+  md += "\n|---|";
+  for (size_t i = 0; i < header.size(); ++i) md += "---|";
+  return md + "\n" + rows;
+}
+
 /// How hidden the fruits are (docs/evaluation.md): a fruit that no reachable view shows much of is
 /// hard to find for any planner. Only for observable ground truths (a file has no views).
 std::string VisibilityLine(const BenchDescription& bench, const std::string& scenario) {
@@ -241,6 +296,49 @@ void FruitVisibility::Add(const eval::GroundTruth& gt) {
   }
 }
 
+std::pair<double, double> WilsonInterval95(size_t k, size_t n) {
+  if (n == 0) {
+    return {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  }
+  constexpr double z = 1.96;
+  const double nn = static_cast<double>(n);
+  const double p = static_cast<double>(k) / nn;
+  const double denom = 1.0 + z * z / nn;
+  const double centre = (p + z * z / (2.0 * nn)) / denom;
+  const double half = z * std::sqrt(p * (1.0 - p) / nn + z * z / (4.0 * nn * nn)) / denom;
+  // The ends are exact: 0 found has lower bound 0, all found upper bound 1.
+  return {k == 0 ? 0.0 : std::max(0.0, centre - half), k == n ? 1.0 : std::min(1.0, centre + half)};
+}
+
+std::vector<VisibilityBin> FoundByVisibility(const std::vector<BenchEpisode>& episodes,
+                                             const std::string& scenario,
+                                             const std::string& planner) {
+  constexpr size_t kLevels = eval::kVisibleFractionLevels.size();
+  std::vector<VisibilityBin> bins(kLevels + 1);
+  for (size_t i = 0; i < bins.size(); ++i) {
+    bins[i].lo = i == 0 ? 0.0 : eval::kVisibleFractionLevels[i - 1];
+    bins[i].hi = i == kLevels ? 1.0 : eval::kVisibleFractionLevels[i];
+  }
+  for (const BenchEpisode& e : episodes) {
+    if (e.scenario != scenario || e.planner != planner || !e.status.ok() || e.metrics.empty()) {
+      continue;
+    }
+    for (const BenchFruit& f : e.fruits) {
+      if (!std::isfinite(f.best_visible_fraction)) continue;
+      size_t i = 0;
+      while (i < kLevels && f.best_visible_fraction >= eval::kVisibleFractionLevels[i]) ++i;
+      ++bins[i].fruits;
+      bins[i].found += f.found ? 1 : 0;
+    }
+  }
+  for (VisibilityBin& b : bins) {
+    if (b.fruits == 0) continue;
+    b.fraction = static_cast<double>(b.found) / static_cast<double>(b.fruits);
+    std::tie(b.ci_lo, b.ci_hi) = WilsonInterval95(b.found, b.fruits);
+  }
+  return bins;
+}
+
 std::string SafeFileName(std::string s) {
   for (char& c : s) {
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.')) c = '_';
@@ -255,17 +353,20 @@ Result<BenchTables> WriteBenchSummary(const fs::path& out_dir, const BenchDescri
   tables.failed = a.failed_total;
   const fs::path csv_path = out_dir / "summary.csv";
   AVP_RETURN_IF_ERROR(io::WriteFileAtomic(csv_path, SummaryCsv(a, bench)));
+  const fs::path visibility_csv = out_dir / "fruits_by_visibility.csv";
+  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(visibility_csv, VisibilityCsv(episodes, bench)));
   std::vector<fs::path> plots;
   std::string md = MarkdownHeader(bench, seconds);
   for (const std::string& s : bench.scenarios) {
     md += FinalViewTable(a, bench, s, tables.cells);
     md += VisibilityLine(bench, s);
+    md += VisibilityTable(episodes, bench, s);
     md += F1PerViewTable(a, bench, s);
     AVP_RETURN_IF_ERROR(WriteScenarioPlots(out_dir, a, bench, s, plots));
   }
   const fs::path md_path = out_dir / "summary.md";
   AVP_RETURN_IF_ERROR(io::WriteFileAtomic(md_path, md));
-  tables.files = {md_path, csv_path};
+  tables.files = {md_path, csv_path, visibility_csv};
   tables.files.insert(tables.files.end(), plots.begin(), plots.end());
   return tables;
 }

@@ -88,6 +88,37 @@ json GroundTruthJson(const eval::GroundTruth& gt, double seconds) {
           {"seconds", seconds}};
 }
 
+json FruitsJson(const std::vector<eval::FruitResult>& fruits) {
+  const auto view = [](int v) { return v >= 0 ? json(v + 1) : json(nullptr); };
+  const auto vec = [](const Eigen::Vector3d& p) {
+    return p.allFinite() ? json::array({p.x(), p.y(), p.z()}) : json(nullptr);
+  };
+  json out = json::array();
+  for (const eval::FruitResult& f : fruits) {
+    out.push_back({{"fruit", f.instance_id},
+                   {"name", f.name},
+                   {"center_m", vec(f.center_W)},
+                   {"radius_m", f.radius_m},
+                   {"semi_axes_m", vec(f.radii)},
+                   {"best_visible_fraction", Finite(f.best_visible_fraction)},
+                   {"episode_visible_fraction", Finite(f.episode_visible_fraction)},
+                   {"episode_best_view", view(f.episode_best_view)},
+                   {"observable_voxels", f.observable_voxels},
+                   {"recalled_voxels", f.recalled_voxels},
+                   {"matched_voxels", f.matched_voxels},
+                   {"found", f.found},
+                   {"found_view", view(f.found_view)},
+                   {"found_since_view", view(f.found_since_view)},
+                   {"estimate", f.estimated ? json{{"center_m", vec(f.estimated_center_W)},
+                                                   {"radius_m", f.estimated_radius_m},
+                                                   {"sphere_fitted", f.sphere_fitted}}
+                                            : json(nullptr)},
+                   {"center_error_m", Finite(f.center_error_m)},
+                   {"radius_error_m", Finite(f.radius_error_m)}});
+  }
+  return out;
+}
+
 json RegretJson(const std::vector<eval::StepRegret>& regret) {
   json out = json::array();
   for (const eval::StepRegret& g : regret) {

@@ -1,7 +1,9 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -81,6 +83,54 @@ struct MapMetrics {
   size_t roi_known_voxels = 0;
 };
 
+/// One ground-truth fruit's result (docs/evaluation.md, "Per-fruit results"). EvaluateFruits fills
+/// the map's fields; the episode runner (experiment::RunEpisodeWithRobot) fills the episode's.
+struct FruitResult {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  uint16_t instance_id = 0;
+  std::string name;
+  Eigen::Vector3d center_W = Eigen::Vector3d::Zero();  ///< true centre, metres
+  Eigen::Vector3d radii = Eigen::Vector3d::Zero();     ///< true semi-axes, metres
+  double radius_m = 0.0;                               ///< their mean
+  /// GroundTruth::best_visible_fraction (how observable it is from the ground truth's reachable
+  /// observation views); NaN when the ground truth has none (a file).
+  double best_visible_fraction = kNaN;
+  size_t observable_voxels = 0;  ///< its GT voxels (GroundTruth::voxels_per_fruit)
+  /// Its GT voxels with a predicted voxel in their 26-neighbourhood (FoundFruitIds' count).
+  size_t recalled_voxels = 0;
+  /// Predicted voxels whose nearest GT voxel (26-neighbourhood) is this fruit's: the points of
+  /// its estimate.
+  size_t matched_voxels = 0;
+  /// FoundFruitIds' rule; FruitScores::found counts these.
+  bool found = false;
+  /// The map's estimate, for a found fruit with matched voxels (FitSphere of their centres):
+  /// centre, radius, whether the least-squares fit held (false: the centroid fallback), and the
+  /// errors |estimated centre - true centre| and |estimated radius - true mean radius|, metres,
+  /// whose means over the fruits that have them are FruitScores::mean_center_error_m /
+  /// mean_radius_error_m. NaN (estimated = false) otherwise.
+  bool estimated = false;
+  bool sphere_fitted = false;
+  Eigen::Vector3d estimated_center_W = Eigen::Vector3d::Constant(kNaN);
+  double estimated_radius_m = kNaN;
+  double center_error_m = kNaN;
+  double radius_error_m = kNaN;
+
+  // ---- The episode's (experiment::RunEpisodeWithRobot; -1 / NaN elsewhere). Views are 0-based
+  // fused-view indices (pipeline::StepRecord::view; record.json writes them 1-based).
+  /// The first fused view after which the fruit counted as found; -1 when it never did.
+  int found_view = -1;
+  /// The view from which it stayed found to the end (a map can lose a fruit again: voxels freed
+  /// or relabelled by later views); -1 when it is not found at the end. found_view when found
+  /// never lapsed.
+  int found_since_view = -1;
+  /// The largest visible fraction of the fruit over the episode's fused views (its pixels in the
+  /// view's simulator labels over segmentation::ExpectedFruitAreaPx, best_visible_fraction's
+  /// rule at the episode camera), and the view it came from; NaN / -1 when no fused view had
+  /// simulator labels (a live camera) or the episode has no ground truth.
+  double episode_visible_fraction = kNaN;
+  int episode_best_view = -1;
+};
+
 /// The prediction EvaluateMap scores: the occupied voxels labelled `target`, ascending.
 std::vector<VoxelKey> PredictedVoxels(const mapping::SemanticMap& map, SemanticClass target);
 
@@ -92,8 +142,16 @@ std::vector<uint16_t> FoundFruitIds(const std::vector<VoxelKey>& predicted, cons
 
 /// Scores a map against a ground truth. Predicted voxels: labelled `options.target` and occupied.
 /// @throws avp::Error if the options are invalid or the map's voxel size differs from gt's.
+/// With `fruits` not null it receives EvaluateFruits' list from the same evaluation: its found
+/// flags are the ones FruitScores counts and its errors the ones it averages.
 MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
-                       const EvalOptions& options = {});
+                       const EvalOptions& options = {}, std::vector<FruitResult>* fruits = nullptr);
+
+/// Every fruit of gt.fruits (instance-id order) with the map's result for it (FruitResult's map
+/// fields; the episode fields are left unset). Empty for a ground truth without fruits (a file
+/// read without a scene). @throws avp::Error as EvaluateMap.
+std::vector<FruitResult> EvaluateFruits(const mapping::SemanticMap& map, const GroundTruth& gt,
+                                        const EvalOptions& options = {});
 
 /// Scores a set of predicted keys (duplicates ignored) on gt's lattice with a Chebyshev tolerance
 /// of `tolerance_voxels` (0 = exact, 1 = 26-neighbourhood). O(N (2t + 1)^3) with hashed sets.

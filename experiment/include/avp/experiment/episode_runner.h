@@ -38,6 +38,11 @@ struct RunResult {
   double gt_ms = 0.0;
   /// Per plan step, with RunConfig::oracle_regret (empty otherwise).
   std::vector<eval::StepRegret> regret;
+  /// Every ground-truth fruit (instance-id order) with the final map's result for it
+  /// (eval::EvaluateFruits, the same evaluation as final_metrics) and the episode's: the view
+  /// that found it, and how visible it was in the fused views (eval::FruitResult). Empty without
+  /// a ground truth or for one without fruits (a file read without a scene).
+  std::vector<eval::FruitResult> fruits;
 };
 
 /// The robot side of one episode: where frames come from and what moves the camera (the

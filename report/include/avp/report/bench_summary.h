@@ -3,6 +3,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <string>
 #include <utility>
@@ -14,6 +15,15 @@
 
 namespace avp::report {
 
+/// One ground-truth fruit of a bench episode (eval::FruitResult, at the final view).
+struct BenchFruit {
+  /// eval::GroundTruth::best_visible_fraction; NaN for a ground truth without it (a file).
+  double best_visible_fraction = std::numeric_limits<double>::quiet_NaN();
+  /// How visible it was in the episode's fused views (NaN: unknown).
+  double episode_visible_fraction = std::numeric_limits<double>::quiet_NaN();
+  bool found = false;  ///< at the final view
+};
+
 /// One episode of a bench as its summary needs it.
 struct BenchEpisode {
   std::string scenario, planner;
@@ -24,7 +34,32 @@ struct BenchEpisode {
   std::vector<std::vector<std::pair<std::string, double>>> metrics;
   std::vector<double> plan_ms;
   double episode_s = 0.0;
+  /// Every ground-truth fruit of the episode (empty for a ground truth without fruits).
+  std::vector<BenchFruit> fruits;
 };
+
+/// Fruits of one visibility bin, [lo, hi) (the last bin includes hi = 1): the bins' edges are
+/// 0, eval::kVisibleFractionLevels and 1.
+struct VisibilityBin {
+  double lo = 0.0, hi = 0.0;
+  size_t fruits = 0;  ///< over the successful episodes (seeds), pooled
+  size_t found = 0;
+  /// found / fruits and its Wilson score 95 % interval; NaN when the bin is empty.
+  double fraction = std::numeric_limits<double>::quiet_NaN();
+  double ci_lo = std::numeric_limits<double>::quiet_NaN();
+  double ci_hi = std::numeric_limits<double>::quiet_NaN();
+};
+
+/// The fraction of fruits found at the final view per bin of best visible fraction, for the
+/// successful episodes of (scenario, planner), every seed's fruits pooled (docs/evaluation.md,
+/// "Per-fruit results"). Fruits without a best visible fraction (a file's ground truth) are in
+/// no bin. Four bins: [0, 0.05), [0.05, 0.25), [0.25, 0.5), [0.5, 1].
+std::vector<VisibilityBin> FoundByVisibility(const std::vector<BenchEpisode>& episodes,
+                                             const std::string& scenario,
+                                             const std::string& planner);
+
+/// Wilson's score interval of a proportion k / n at 95 % (z = 1.96): {lo, hi}; NaN for n = 0.
+std::pair<double, double> WilsonInterval95(size_t k, size_t n);
 
 /// How hidden a scenario's fruits are, over its seeds (eval::GroundTruth::best_visible_fraction):
 /// fruits in all, and those whose best visible fraction reaches each of
@@ -66,16 +101,18 @@ struct BenchCell {
 
 struct BenchTables {
   std::vector<BenchCell> cells;
-  /// summary.md, summary.csv, then the plots.
+  /// summary.md, summary.csv, fruits_by_visibility.csv, then the plots.
   std::vector<std::filesystem::path> files;
   size_t failed = 0;
 };
 
 /// Writes the bench's summary into `out_dir` (docs/experiments.md): summary.csv (long format:
 /// scenario, planner, segmenter, view, metric, mean, ci95, n; an episode that ended early keeps
-/// its last metrics for the remaining views), summary.md (the final view per planner, how hidden
-/// the fruits are, F1 per view), and per scenario f1_<s>.svg and fruits_<s>.svg (mean +- 95 % CI
-/// per planner, the paper's Fig. 3). `seconds` is the bench's wall time so far.
+/// its last metrics for the remaining views), fruits_by_visibility.csv (FoundByVisibility per
+/// scenario, planner and bin), summary.md (the final view per planner, how hidden the fruits are,
+/// the fraction found per visibility bin, F1 per view), and per scenario f1_<s>.svg and
+/// fruits_<s>.svg (mean +- 95 % CI per planner, the paper's Fig. 3). `seconds` is the bench's wall
+/// time so far.
 Result<BenchTables> WriteBenchSummary(const std::filesystem::path& out_dir,
                                       const BenchDescription& bench,
                                       const std::vector<BenchEpisode>& episodes, double seconds);

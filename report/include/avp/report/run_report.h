@@ -25,6 +25,11 @@ nlohmann::json MetricsJson(const eval::MapMetrics& metrics);
 /// fruit), and how long it took.
 nlohmann::json GroundTruthJson(const eval::GroundTruth& gt, double seconds);
 
+/// record.json's per-fruit list (docs/evaluation.md, "Per-fruit results"): one object per
+/// ground-truth fruit of experiment::RunResult::fruits. Views are 1-based like record.json's
+/// steps; values that do not exist (NaN, view -1) are null.
+nlohmann::json FruitsJson(const std::vector<eval::FruitResult>& fruits);
+
 /// record.json's oracle_regret: one entry per plan step (empty without --oracle-regret).
 nlohmann::json RegretJson(const std::vector<eval::StepRegret>& regret);
 
