@@ -418,7 +418,8 @@ namespace {
 Status CheckBenchOutputs(const BenchConfig& config) {
   for (const auto& [input, what] : config.inputs) {
     AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(config.out_dir, "bench folder", input, what));
-    for (const char* name : {"summary.md", "summary.csv", "avp-state.json"}) {
+    for (const char* name :
+         {"summary.md", "summary.csv", "fruits_by_visibility.csv", "avp-state.json"}) {
       AVP_RETURN_IF_ERROR(
           io::CheckOutputIsNotInput(config.out_dir / name, "bench output", input, what));
     }

@@ -86,7 +86,8 @@ const OutputFolderKind& BenchFolderKind() {
   static const OutputFolderKind kind{
       "bench", [](const std::string& name) {
         static const std::vector<std::string> files = {std::string(kStateFileName), "summary.md",
-                                                       "summary.csv", "runs"};
+                                                       "summary.csv", "fruits_by_visibility.csv",
+                                                       "runs"};
         if (std::find(files.begin(), files.end(), name) != files.end() || IsTempOf(name, files)) {
           return true;
         }
