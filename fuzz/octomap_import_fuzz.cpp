@@ -1,6 +1,8 @@
 // Fuzz target: the OctoMap import (mapping/octomap_io.h) of a .bt or .ot file with any contents,
 // through ImportOctomapOccupiedBytes (the reader of ImportOctomapOccupied, on bytes in memory).
-// Property: an import that succeeds returns sorted, unique keys and a positive resolution.
+// Property: an import that succeeds returns sorted, unique keys and a positive resolution; the
+// same bytes read as a map (ImportOctomapMapBytes, the OctoMap half of mapping::LoadAnyMap) hold
+// exactly as many occupied voxels whenever both succeed.
 
 #include <algorithm>
 #include <cstddef>
@@ -25,5 +27,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     avp::fuzz::Fail("ImportOctomapOccupiedBytes returned keys that are not sorted and unique");
   }
   if (!(set->resolution_m > 0.0)) avp::fuzz::Fail("ImportOctomapOccupiedBytes: resolution <= 0");
+  // Small enough that a crafted pruned leaf cannot make the map reader allocate much.
+  const avp::Result<avp::mapping::OctomapMapImport> map =
+      avp::mapping::ImportOctomapMapBytes(bytes, "fuzz-input.ot", size_t{1} << 20);
+  if (map.ok() && map->map.grid().CountOccupiedVoxels() != keys.size()) {
+    avp::fuzz::Fail(
+        "ImportOctomapMapBytes and ImportOctomapOccupiedBytes disagree on the occupied "
+        "voxels");
+  }
   return 0;
 }

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <string>
 #include <system_error>
+#include <type_traits>
 #include <unordered_set>
 
 #include <fmt/format.h>
@@ -508,8 +509,12 @@ Result<VoxelSet> ImportOctomapOccupied(const fs::path& path, size_t max_voxels) 
   return ImportOctomapOccupiedBytes(bytes, path, max_voxels);
 }
 
-Result<VoxelSet> ImportOctomapOccupiedBytes(const std::string& bytes, const fs::path& path,
-                                            size_t max_voxels) {
+namespace {
+
+/// Parses and checks an OctoMap file's bytes, lets OctoMap read the tree, checks what it read and
+/// calls fn(header, tree) with the octomap::OcTree or octomap::ColorOcTree; returns fn's result.
+template <class R, class Fn>
+Result<R> WithCheckedOctomapTree(const std::string& bytes, const fs::path& path, Fn&& fn) {
   AVP_ASSIGN_OR_RETURN(const OctomapHeader h, ParseOctomapHeader(bytes, path));
   AVP_RETURN_IF_ERROR(
       MaxOctomapNodes().Check(fmt::format("OctoMap tree of '{}'", path.string()), h.size));
@@ -544,7 +549,7 @@ Result<VoxelSet> ImportOctomapOccupiedBytes(const std::string& bytes, const fs::
       if (h.size > 0) tree.readBinaryData(in);
       AVP_RETURN_IF_ERROR(CheckOctomapRead(in, bytes.size(), tree.size(), h, chatter, path));
     }
-    return CollectOccupied(tree, max_voxels, path);
+    return fn(h, tree);
   }
   if (color) {
     octomap::ColorOcTree tree(h.resolution_m);
@@ -553,7 +558,7 @@ Result<VoxelSet> ImportOctomapOccupiedBytes(const std::string& bytes, const fs::
       if (h.size > 0) tree.readData(in);
       AVP_RETURN_IF_ERROR(CheckOctomapRead(in, bytes.size(), tree.size(), h, chatter, path));
     }
-    return CollectOccupied(tree, max_voxels, path);
+    return fn(h, tree);
   }
   octomap::OcTree tree(h.resolution_m);
   {
@@ -561,7 +566,128 @@ Result<VoxelSet> ImportOctomapOccupiedBytes(const std::string& bytes, const fs::
     if (h.size > 0) tree.readData(in);
     AVP_RETURN_IF_ERROR(CheckOctomapRead(in, bytes.size(), tree.size(), h, chatter, path));
   }
-  return CollectOccupied(tree, max_voxels, path);
+  return fn(h, tree);
+}
+
+/// The leaves of `tree` (occupied and free) as a SemanticMap: see ImportOctomapMapBytes.
+template <class Tree>
+Result<OctomapMapImport> TreeToMap(const OctomapHeader& h, const Tree& tree, size_t max_voxels,
+                                   const fs::path& path) {
+  constexpr bool kColor = std::is_same_v<Tree, octomap::ColorOcTree>;
+  MapOptions options;
+  options.grid.voxel_size_m = tree.getResolution();
+  if (const Status s = options.Validate(); !s.ok()) {
+    return InvalidArgumentError(
+        fmt::format("'{}': its OctoMap resolution {} m cannot be an avp map's voxel size: {}",
+                    path.string(), tree.getResolution(), s.message()));
+  }
+  const unsigned tree_depth = tree.getTreeDepth();
+  // Pass 1: counts, so that nothing is allocated for a tree that expands too far.
+  uint64_t occupied_total = 0, free_total = 0;
+  size_t occupied_leaves = 0, free_leaves = 0, coarse = 0;
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    const unsigned level = tree_depth - it.getDepth();
+    const uint64_t n = uint64_t{1} << (3 * level);
+    if (level > 0) ++coarse;
+    if (tree.isNodeOccupied(*it)) {
+      ++occupied_leaves;
+      occupied_total += n;
+      if (occupied_total > max_voxels) {
+        return OutOfRangeError(fmt::format(
+            "'{}': expanding the occupied leaves to {} m voxels needs more than {} voxels (a leaf "
+            "of depth {} alone covers {}^3)",
+            path.string(), tree.getResolution(), max_voxels, it.getDepth(), uint64_t{1} << level));
+      }
+    } else {
+      ++free_leaves;
+      free_total = std::min<uint64_t>(free_total + n, uint64_t{1} << 62);
+    }
+  }
+  OctomapMapImport out;
+  out.map = SemanticMap(options);
+  out.binary = h.binary;
+  out.tree_type = h.id;
+  out.tree_nodes = h.size;
+  out.occupied_leaves = occupied_leaves;
+  out.free_leaves = free_leaves;
+  out.coarse_leaves = coarse;
+  out.free_space_dropped = free_total > max_voxels;
+  OccupancyGrid& grid = out.map.grid();
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    const bool occupied = tree.isNodeOccupied(*it);
+    if (!occupied && out.free_space_dropped) continue;
+    const unsigned level = tree_depth - it.getDepth();
+    const octomap::OcTreeKey base = it.getIndexKey();
+    const int n = 1 << level;
+    const float log_odds = it->getLogOdds();
+    SemanticClass cls = SemanticClass::kBackground;
+    if constexpr (kColor) {
+      if (occupied) {
+        const octomap::ColorOcTreeNode::Color c = it->getColor();
+        const std::array<uint8_t, 3> rgb = {c.r, c.g, c.b};
+        cls = ClassOfOctomapColor(rgb);
+        const size_t voxels = size_t{1} << (3 * level);
+        if (cls != SemanticClass::kBackground) {
+          out.labelled_by_colour += voxels;
+        } else if (rgb == kUnlabelledOccupiedColor) {
+          out.unlabelled_grey += voxels;
+        } else {
+          out.foreign_colour += voxels;
+        }
+      }
+    }
+    for (int dz = 0; dz < n; ++dz) {
+      for (int dy = 0; dy < n; ++dy) {
+        for (int dx = 0; dx < n; ++dx) {
+          const VoxelKey k = FromOctomapKey(static_cast<uint16_t>(base[0] + dx),
+                                            static_cast<uint16_t>(base[1] + dy),
+                                            static_cast<uint16_t>(base[2] + dz));
+          grid.SetLogOdds(k, log_odds);
+          if (occupied) {
+            ++out.occupied_voxels;
+          } else {
+            ++out.free_voxels;
+          }
+          if (cls == SemanticClass::kBackground) continue;
+          SemanticCell* cell = grid.MutableSemantic(k);
+          if (cell == nullptr) continue;
+          cell->semantic_class = static_cast<uint8_t>(cls);
+          cell->confidence = 1.0f;
+          cell->observations = 1;
+        }
+      }
+    }
+  }
+  grid.ClearChanges();
+  out.map.semantics().ResetFromGrid(grid);
+  return out;
+}
+
+}  // namespace
+
+Result<VoxelSet> ImportOctomapOccupiedBytes(const std::string& bytes, const fs::path& path,
+                                            size_t max_voxels) {
+  return WithCheckedOctomapTree<VoxelSet>(
+      bytes, path, [&](const OctomapHeader&, const auto& tree) -> Result<VoxelSet> {
+        return CollectOccupied(tree, max_voxels, path);
+      });
+}
+
+SemanticClass ClassOfOctomapColor(const std::array<uint8_t, 3>& rgb) {
+  for (SemanticClass c : AllSemanticClasses()) {
+    if (c == SemanticClass::kBackground) continue;
+    const auto k = io::ClassColor(c);
+    if (k[0] == rgb[0] && k[1] == rgb[1] && k[2] == rgb[2]) return c;
+  }
+  return SemanticClass::kBackground;
+}
+
+Result<OctomapMapImport> ImportOctomapMapBytes(const std::string& bytes, const fs::path& path,
+                                               size_t max_voxels) {
+  return WithCheckedOctomapTree<OctomapMapImport>(
+      bytes, path, [&](const OctomapHeader& h, const auto& tree) -> Result<OctomapMapImport> {
+        return TreeToMap(h, tree, max_voxels, path);
+      });
 }
 
 // ---- Comparison

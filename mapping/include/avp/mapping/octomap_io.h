@@ -127,6 +127,47 @@ Result<VoxelSet> ImportOctomapOccupiedBytes(const std::string& bytes,
                                             const std::filesystem::path& path,
                                             size_t max_voxels = size_t{1} << 27);
 
+/// An OctoMap file read as a map (ImportOctomapMap): every leaf, occupied and free, on avp's
+/// lattice, with the class of a ColorOcTree voxel whose colour is exactly a class colour.
+struct OctomapMapImport {
+  SemanticMap map;
+  bool binary = false;    ///< .bt (one bit per node) or .ot (full node data)
+  std::string tree_type;  ///< the header's id: "OcTree", "ColorOcTree"
+  uint64_t tree_nodes = 0;
+  size_t occupied_leaves = 0;
+  size_t free_leaves = 0;
+  size_t coarse_leaves = 0;  ///< leaves coarser than one voxel (pruned), occupied or free
+  size_t occupied_voxels = 0;
+  size_t free_voxels = 0;  ///< 0 when free space was dropped
+  /// Free leaves would expand to more than `max_voxels` voxels: free space was left out (the
+  /// occupied voxels are all there).
+  bool free_space_dropped = false;
+  /// ColorOcTree, occupied voxels: coloured exactly as a class (io::ClassColor, background
+  /// excluded) and read back as that class; avp's unlabelled grey (kUnlabelledOccupiedColor);
+  /// any other colour (occupied, unlabelled).
+  size_t labelled_by_colour = 0;
+  size_t unlabelled_grey = 0;
+  size_t foreign_colour = 0;
+};
+
+/// The class an occupied ColorOcTree voxel of this colour gets: the labelled class whose
+/// io::ClassColor is exactly `rgb`, kBackground (unlabelled) otherwise.
+SemanticClass ClassOfOctomapColor(const std::array<uint8_t, 3>& rgb);
+
+/// Reads an OctoMap file (.bt, or .ot holding an OcTree or ColorOcTree) as a SemanticMap with the
+/// tree's resolution and avp's default sensor model (its occupancy threshold, p >= 0.5, is
+/// OctoMap's default; .ot files do not store theirs): every leaf's log-odds (.bt: OctoMap's
+/// clamping bounds, as OcTree::readBinary gives them) expanded to the finest voxels; ColorOcTree
+/// voxels get the class of their colour (ClassOfOctomapColor) with confidence 1, one observation
+/// and no instance. The same checks as ImportOctomapOccupied (size, strict header,
+/// max_octomap_nodes, the tree walked before OctoMap reads it, OctoMap's reader checked after);
+/// errors name the file. Occupied voxels over `max_voxels`: OutOfRange; free voxels over
+/// `max_voxels`: free space is dropped (free_space_dropped). Other tree types: ParseError naming
+/// the type. A resolution outside avp's voxel sizes: InvalidArgument naming it.
+Result<OctomapMapImport> ImportOctomapMapBytes(const std::string& bytes,
+                                               const std::filesystem::path& path,
+                                               size_t max_voxels = size_t{1} << 27);
+
 // ---- Comparison against a ground-truth voxel set -----------------------------------------------
 
 struct GroundTruthCompareOptions {
