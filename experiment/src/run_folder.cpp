@@ -6,6 +6,7 @@
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
 #include <avp/io/options_yaml.h>
+#include <avp/mapping/map_file.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/mapping/ply_export.h>
 #include <avp/report/metrics_csv.h>
@@ -41,10 +42,19 @@ class ProgressObserver final : public pipeline::EpisodeObserver {
   const RunFolderOptions& options_;
 };
 
-/// map.ot, fruit_voxels.ply and metrics.svg of a finished episode.
+/// map.avpmap, map.ot, fruit_voxels.ply and metrics.svg of a finished episode.
 Status WriteMapAndPlot(const RunConfig& config, const FolderRun& run, const RunResult& result,
                        const mapping::SemanticMap& map, const fs::path& dir,
                        std::vector<fs::path>& files) {
+  // avp's own map file (everything the map holds; `avp map info / compare / export` read it) ...
+  const fs::path avpmap = dir / "map.avpmap";
+  mapping::MapSaveOptions save;
+  save.note = fmt::format("{} of {} (planner {}, segmenter {}, seed {})", run.command,
+                          run.scene_name, config.planner.name, config.segmenter.name, config.seed);
+  if (save.note.size() > mapping::kMaxMapNoteBytes) save.note.resize(mapping::kMaxMapNoteBytes);
+  AVP_RETURN_IF_ERROR(mapping::SaveMap(map, avpmap, save));
+  files.push_back(avpmap);
+  // ... and the OctoMap ColorOcTree (octovis, other systems' tools).
   const fs::path ot = dir / "map.ot";
   AVP_RETURN_IF_ERROR(mapping::ExportOctomapColor(map, ot).status());
   files.push_back(ot);
@@ -108,8 +118,9 @@ Result<json> RunConfigJson(const RunConfig& config, const Registries& registries
 namespace {
 
 /// Every file a run folder holds.
-constexpr std::string_view kRunOutputs[] = {kStateFileName, "record.json",      "metrics.csv",
-                                            "map.ot",       "fruit_voxels.ply", "metrics.svg"};
+constexpr std::string_view kRunOutputs[] = {kStateFileName, "record.json", "metrics.csv",
+                                            "map.avpmap",   "map.ot",      "fruit_voxels.ply",
+                                            "metrics.svg"};
 
 /// Outputs never overwrite inputs: the folder and each of its files against the scene file, the
 /// ground truth file and options.inputs.

@@ -34,7 +34,7 @@ struct RunFolderOptions {
 struct RunSummary {
   RunResult result;
   std::string scene_name;
-  /// record.json first, then metrics.csv, map.ot, fruit_voxels.ply, metrics.svg.
+  /// record.json first, then metrics.csv, map.avpmap, map.ot, fruit_voxels.ply, metrics.svg.
   std::vector<std::filesystem::path> files;
   double seconds = 0.0;
 };
@@ -45,6 +45,7 @@ struct RunSummary {
 ///   record.json       the effective configuration, seed, git revision, host, timings, how it
 ///                     ended, the ground truth, final metrics and every step
 ///   metrics.csv       one row per fused view, written as the episode goes
+///   map.avpmap        the final map as avp's map file (all of it: avp map info / compare)
 ///   map.ot            the final map as an OctoMap ColorOcTree (octovis)
 ///   fruit_voxels.ply  the final fruit voxels with class, confidence, instance
 ///   metrics.svg       F1 (exact and one-voxel tolerance) and fruits found per view
