@@ -1,6 +1,7 @@
 // End-to-end: `avp map build | gt | info | export | compare` as library calls: a map of a simulated
 // plant is built, described, exported to OctoMap and PLY, and scored against the scene's fruit
 // ground truth; bad input gives messages that name the bad value.
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -11,6 +12,8 @@
 #include <gtest/gtest.h>
 
 #include <avp/apps/map_command.h>
+#include <avp/experiment/registries.h>
+#include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/test/temp_dir_test.h>
@@ -252,6 +255,219 @@ TEST_F(MapCommandTest, AFolderGivenForAMapIsNotSaidToBeMissing) {
     EXPECT_THAT(s.message(), HasSubstr("'" + folder.string() + "' is a folder, not a map file"));
     EXPECT_THAT(s.message(), Not(HasSubstr("does not exist")));
   }
+}
+
+std::string ReadBytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), {}};
+}
+
+/// The exact and tolerant scores of two comparisons are the same.
+void ExpectSameScores(const MapCompareSummary& a, const MapCompareSummary& b) {
+  ASSERT_EQ(a.results.size(), b.results.size());
+  for (size_t i = 0; i < a.results.size(); ++i) {
+    EXPECT_EQ(a.results[i].predicted, b.results[i].predicted) << i;
+    EXPECT_EQ(a.results[i].ground_truth, b.results[i].ground_truth) << i;
+    EXPECT_EQ(a.results[i].tp, b.results[i].tp) << i;
+    EXPECT_EQ(a.results[i].gt_found, b.results[i].gt_found) << i;
+    EXPECT_DOUBLE_EQ(a.results[i].f1, b.results[i].f1) << i;
+  }
+  EXPECT_DOUBLE_EQ(a.best_shift_f1, b.best_shift_f1);
+}
+
+TEST_F(MapCommandTest, ARunsMapFilesScoreTheSameAgainstABtGroundTruth) {
+  // avp run writes map.avpmap and map.ot; both compare against `avp map gt`'s .bt alike.
+  experiment::RunConfig c;
+  c.scenario = "tomato-single-cluster";
+  c.seed = 2;
+  c.episode.views = 3;
+  c.threads = 2;
+  experiment::RunFolderOptions o;
+  o.out_dir = dir_ / "run";
+  const auto run = experiment::RunToFolder(c, experiment::BuiltinRegistries(), o);
+  ASSERT_TRUE(run.ok()) << run.status().ToString();
+  ASSERT_TRUE(fs::exists(o.out_dir / "map.avpmap"));
+  ASSERT_TRUE(fs::exists(o.out_dir / "map.ot"));
+  EXPECT_NE(std::find(run->files.begin(), run->files.end(), o.out_dir / "map.avpmap"),
+            run->files.end());
+
+  MapGtOptions gt;
+  gt.scene.scenario = c.scenario;
+  gt.scene.seed = c.seed;
+  gt.voxel_size_m = 0.005;  // the run's map voxel size
+  gt.out = dir_ / "gt.bt";
+  ASSERT_TRUE(RunMapGt(gt, scenarios_).ok());
+
+  MapCompareOptions cmp;
+  cmp.gt = gt.out;
+  cmp.map = o.out_dir / "map.avpmap";
+  const Result<MapCompareSummary> from_avpmap = RunMapCompare(cmp);
+  ASSERT_TRUE(from_avpmap.ok()) << from_avpmap.status().ToString();
+  cmp.map = o.out_dir / "map.ot";
+  const Result<MapCompareSummary> from_ot = RunMapCompare(cmp);
+  ASSERT_TRUE(from_ot.ok()) << from_ot.status().ToString();
+  ExpectSameScores(*from_avpmap, *from_ot);
+  const auto& exact = from_avpmap->results[0];
+  EXPECT_FALSE(exact.resampled);
+  EXPECT_GT(exact.predicted, 100u);
+  EXPECT_GT(exact.tp, exact.predicted / 2);
+  EXPECT_GE(from_avpmap->results[1].f1, exact.f1);
+  EXPECT_EQ(from_ot->map_source.tree_type, "ColorOcTree");
+  EXPECT_FALSE(from_ot->gt_used_labels);
+  const std::string report = FormatMapCompare(*from_ot);
+  EXPECT_THAT(report, HasSubstr("(ot ColorOcTree, 5 mm voxels)"));
+  EXPECT_THAT(report, HasSubstr("(bt OcTree, 5 mm voxels"));
+  EXPECT_THAT(report, HasSubstr("lattice check"));
+  EXPECT_THAT(report, Not(HasSubstr("resolutions differ")));
+
+  // The run's map.avpmap is the whole map: info says what made it.
+  const Result<MapInfo> info = RunMapInfo(o.out_dir / "map.avpmap");
+  ASSERT_TRUE(info.ok()) << info.status().ToString();
+  EXPECT_THAT(info->file.note, HasSubstr("avp run of tomato-single-cluster"));
+  EXPECT_EQ(info->occupied_by_class[static_cast<size_t>(SemanticClass::kFruit)], exact.predicted);
+}
+
+TEST_F(MapCommandTest, InfoExportCompareReadEveryMapFormat) {
+  const MapBuildOptions build = SmallBuild();
+  const Result<MapBuildSummary> built = RunMapBuild(build, scenarios_);
+  ASSERT_TRUE(built.ok()) << built.status().ToString();
+  MapExportOptions exp;
+  exp.map = build.out;
+  exp.out = dir_ / "plant.ot";
+  ASSERT_TRUE(RunMapExport(exp).ok());
+  exp.out = dir_ / "plant.bt";
+  ASSERT_TRUE(RunMapExport(exp).ok());
+
+  // info on .ot / .bt: the same voxels; classes from the colours of the .ot, none in the .bt.
+  const Result<MapInfo> ot = RunMapInfo(dir_ / "plant.ot");
+  ASSERT_TRUE(ot.ok()) << ot.status().ToString();
+  EXPECT_EQ(ot->occupied_voxels, built->occupied_voxels);
+  EXPECT_EQ(ot->known_voxels, built->known_voxels);
+  EXPECT_EQ(ot->occupied_by_class[static_cast<size_t>(SemanticClass::kFruit)], built->fruit_voxels);
+  const std::string ot_text = FormatMapInfo(*ot);
+  EXPECT_THAT(ot_text, HasSubstr("OctoMap ColorOcTree .ot"));
+  EXPECT_THAT(ot_text, HasSubstr("in a class colour (read as that class)"));
+  EXPECT_THAT(ot_text, HasSubstr("not kept"));
+  EXPECT_THAT(ot_text, HasSubstr("voxel size   8 mm"));
+  const Result<MapInfo> bt = RunMapInfo(dir_ / "plant.bt");
+  ASSERT_TRUE(bt.ok()) << bt.status().ToString();
+  EXPECT_EQ(bt->occupied_voxels, built->occupied_voxels);
+  EXPECT_EQ(bt->known_voxels, built->known_voxels);
+  EXPECT_EQ(bt->labelled_voxels, 0u);
+  EXPECT_THAT(FormatMapInfo(*bt), HasSubstr("a .bt file holds occupancy only"));
+
+  // export .ot -> .avpmap (the format from the extension) and .bt -> .ot.
+  exp.map = dir_ / "plant.ot";
+  exp.out = dir_ / "from_ot.avpmap";
+  const Result<MapExportSummary> to_avpmap = RunMapExport(exp);
+  ASSERT_TRUE(to_avpmap.ok()) << to_avpmap.status().ToString();
+  EXPECT_EQ(to_avpmap->format, MapExportFormat::kAvpMap);
+  EXPECT_EQ(to_avpmap->occupied_voxels, built->occupied_voxels);
+  EXPECT_FALSE(to_avpmap->source.lost.empty());
+  mapping::MapFileInfo file;
+  const auto reread = mapping::LoadMap(exp.out, &file);
+  ASSERT_TRUE(reread.ok()) << reread.status().ToString();
+  EXPECT_EQ(reread->grid().CountOccupiedVoxels(), built->occupied_voxels);
+  EXPECT_THAT(file.note, HasSubstr("plant.ot (ot, ColorOcTree)"));
+  exp.map = dir_ / "plant.bt";
+  exp.out = dir_ / "from_bt.ot";
+  const Result<MapExportSummary> to_ot = RunMapExport(exp);
+  ASSERT_TRUE(to_ot.ok()) << to_ot.status().ToString();
+  EXPECT_EQ(to_ot->occupied_voxels, built->occupied_voxels);
+  EXPECT_EQ(to_ot->labelled_voxels, 0u);
+
+  // compare: the map against its own files as ground truth. A labelled GT (.avpmap, ColorOcTree
+  // in class colours) gives its fruit voxels: F1 1; a .bt gives every occupied voxel.
+  MapCompareOptions cmp;
+  cmp.map = build.out;
+  for (const fs::path& gt_path : {build.out, dir_ / "plant.ot", dir_ / "from_ot.avpmap"}) {
+    cmp.gt = gt_path;
+    const Result<MapCompareSummary> self = RunMapCompare(cmp);
+    ASSERT_TRUE(self.ok()) << self.status().ToString();
+    EXPECT_TRUE(self->gt_used_labels) << gt_path;
+    EXPECT_DOUBLE_EQ(self->results[0].f1, 1.0) << gt_path;
+    EXPECT_LT(self->best_shift_f1, 1.0) << gt_path;
+  }
+  cmp.gt = dir_ / "plant.bt";
+  const Result<MapCompareSummary> vs_bt = RunMapCompare(cmp);
+  ASSERT_TRUE(vs_bt.ok()) << vs_bt.status().ToString();
+  EXPECT_FALSE(vs_bt->gt_used_labels);
+  EXPECT_EQ(vs_bt->results[0].ground_truth, built->occupied_voxels);
+  EXPECT_DOUBLE_EQ(vs_bt->results[0].precision, 1.0);  // every fruit voxel is occupied
+  // A ground truth one voxel off (another frame): exact F1 collapses, the lattice check finds the
+  // shift and warns.
+  {
+    const auto map = mapping::LoadMap(build.out);
+    ASSERT_TRUE(map.ok());
+    mapping::GridOptions g;
+    g.voxel_size_m = map->voxel_size_m();
+    mapping::OccupancyGrid shifted(g);
+    for (const VoxelKey& k : mapping::OccupiedVoxelsOfClass(map->grid(), SemanticClass::kFruit)) {
+      shifted.SetLogOdds({k.x, k.y, k.z - 1}, shifted.clamp_max_log_odds());
+    }
+    ASSERT_TRUE(mapping::ExportOctomapBinary(shifted, dir_ / "shifted.bt").ok());
+    cmp.gt = dir_ / "shifted.bt";
+    const Result<MapCompareSummary> off = RunMapCompare(cmp);
+    ASSERT_TRUE(off.ok()) << off.status().ToString();
+    EXPECT_LT(off->results[0].f1, 0.8);
+    EXPECT_EQ(off->best_shift, (VoxelKey{0, 0, -1}));
+    EXPECT_DOUBLE_EQ(off->best_shift_f1, 1.0);
+    const std::string text = FormatMapCompare(*off);
+    EXPECT_THAT(text, HasSubstr("(+0, +0, -1), gives exact F1 1.0000"));
+    EXPECT_THAT(text, HasSubstr("a one-voxel shift raises exact F1 by 0.1 or more"));
+  }
+  // The .bt as the map: no labels, nothing predicted.
+  cmp.map = dir_ / "plant.bt";
+  const Result<MapCompareSummary> bt_map = RunMapCompare(cmp);
+  ASSERT_TRUE(bt_map.ok()) << bt_map.status().ToString();
+  EXPECT_EQ(bt_map->results[0].predicted, 0u);
+}
+
+TEST_F(MapCommandTest, CompareNamesResolutionMismatchesAndBrokenFiles) {
+  const MapBuildOptions build = SmallBuild();  // 8 mm
+  ASSERT_TRUE(RunMapBuild(build, scenarios_).ok());
+  MapGtOptions gt;
+  gt.scene = build.scene;
+  gt.voxel_size_m = 0.006;
+  gt.out = dir_ / "gt6.bt";
+  ASSERT_TRUE(RunMapGt(gt, scenarios_).ok());
+  MapCompareOptions cmp;
+  cmp.map = build.out;
+  cmp.gt = gt.out;
+  cmp.json_out = dir_ / "cmp.json";
+  const Result<MapCompareSummary> r = RunMapCompare(cmp);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_TRUE(r->results[0].resampled);
+  const std::string text = FormatMapCompare(*r);
+  EXPECT_THAT(text, HasSubstr("resolutions differ (map 8 mm, ground truth 6 mm)"));
+  EXPECT_THAT(text, HasSubstr("--voxel-size 0.006"));
+  const auto json = io::ReadJsonFile(cmp.json_out);
+  ASSERT_TRUE(json.ok());
+  EXPECT_EQ((*json)["gt_format"], "bt");
+  EXPECT_EQ((*json)["map_format"], "avpmap");
+  EXPECT_EQ((*json)["best_one_voxel_shift"].size(), 3u);
+
+  // A truncated ground truth: the file and the byte are named.
+  const std::string bytes = ReadBytes(gt.out);
+  const fs::path cut = dir_ / "cut.bt";
+  std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() - 5);
+  cmp.gt = cut;
+  cmp.json_out.clear();
+  Status s = RunMapCompare(cmp).status();
+  EXPECT_EQ(s.code(), StatusCode::kParseError);
+  EXPECT_THAT(s.message(), HasSubstr("cut.bt"));
+  EXPECT_THAT(s.message(), HasSubstr("byte"));
+  // Neither format: the first bytes are quoted.
+  const fs::path text_file = dir_ / "gt.ot";
+  std::ofstream(text_file) << "x y z\n1 2 3\n";
+  cmp.gt = text_file;
+  s = RunMapCompare(cmp).status();
+  EXPECT_THAT(s.message(), HasSubstr("gt.ot"));
+  EXPECT_THAT(s.message(), HasSubstr("'x y z"));
+  cmp.gt = gt.out;
+  cmp.map = cut;
+  s = RunMapInfo(cut).status();
+  EXPECT_THAT(s.message(), HasSubstr("cut.bt"));
 }
 
 TEST(ArcViewPosesTest, ViewsLookAtTheTargetFromTheArc) {

@@ -243,7 +243,10 @@ Result<MapInfo> RunMapInfo(const fs::path& path) {
   MapInfo info;
   info.path = path;
   AVP_RETURN_IF_ERROR(io::CheckReadableFile(path, "map file").status());
-  AVP_ASSIGN_OR_RETURN(const mapping::SemanticMap map, mapping::LoadMap(path, &info.file));
+  AVP_ASSIGN_OR_RETURN(const mapping::LoadedMap loaded, mapping::LoadAnyMap(path));
+  info.source = loaded.source;
+  info.file = loaded.source.avpmap;
+  const mapping::SemanticMap& map = loaded.map;
   const mapping::OccupancyGrid& grid = map.grid();
   info.options = map.options();
   info.blocks = grid.num_blocks();
@@ -271,24 +274,45 @@ std::string FormatMapInfo(const MapInfo& info) {
   const auto line = [&](std::string_view key, const std::string& value) {
     out += fmt::format("{:<13}{}\n", key, value);
   };
-  line("map file",
-       fmt::format("{} ({}, format version {}, CRC-32 0x{:08x})", info.path.string(),
-                   HumanBytes(info.file.file_bytes), info.file.version, info.file.crc32));
+  const mapping::MapSource& src = info.source;
+  const bool octomap = src.format != mapping::MapFileFormat::kAvpMap;
+  if (!octomap) {
+    line("map file",
+         fmt::format("{} ({}, format version {}, CRC-32 0x{:08x})", info.path.string(),
+                     HumanBytes(info.file.file_bytes), info.file.version, info.file.crc32));
+  } else {
+    line("map file", fmt::format("{} ({}, OctoMap {} {}, {} tree nodes)", info.path.string(),
+                                 HumanBytes(src.file_bytes), EscapeText(src.tree_type, 64),
+                                 mapping::MapFileExtension(src.format), src.tree_nodes));
+    line("leaves", fmt::format("{} occupied, {} free ({} coarser than one voxel, expanded)",
+                               src.occupied_leaves, src.free_leaves, src.coarse_leaves));
+    if (src.tree_type == "ColorOcTree") {
+      line("colours", fmt::format("{} occupied voxels in a class colour (read as that class), {} "
+                                  "in avp's unlabelled grey, {} in other colours (unlabelled)",
+                                  src.labelled_by_colour, src.unlabelled_grey, src.foreign_colour));
+    }
+    for (const std::string& lost : src.lost) line("not kept", lost);
+  }
+  if (!src.extension_note.empty()) line("note", src.extension_note);
   // The note is the file's text: escaped, so that a crafted map cannot reach the terminal.
   if (!info.file.note.empty()) line("made by", EscapeText(info.file.note, 1000));
   line("voxel size", fmt::format("{:g} mm", g.voxel_size_m * 1000.0));
+  line("lattice", "voxel k covers [k s, (k + 1) s) on each axis (a voxel corner at the origin)");
   line("ROI", g.roi ? fmt::format("{} - {} m", FormatPoint(g.roi->min()), FormatPoint(g.roi->max()))
                     : std::string("none"));
-  line("sensor model", fmt::format("hit {:g}, miss {:g}, clamp [{:g}, {:g}], occupied at p >= {:g}",
-                                   g.sensor.hit, g.sensor.miss, g.sensor.clamp_min,
-                                   g.sensor.clamp_max, g.sensor.occupied_threshold));
-  if (s.policy == mapping::FusionPolicy::kReferenceMax) {
-    line("fusion",
-         fmt::format("{} (penalty {:g})", mapping::ToString(s.policy), s.reference_penalty));
-  } else {
-    line("fusion", fmt::format("{} (class log-odds [{:g}, {:g}], miss {:g}, label at p >= {:g})",
-                               mapping::ToString(s.policy), s.class_log_odds_min,
-                               s.class_log_odds_max, s.miss_log_odds, s.label_threshold));
+  if (!octomap) {
+    line("sensor model",
+         fmt::format("hit {:g}, miss {:g}, clamp [{:g}, {:g}], occupied at p >= {:g}", g.sensor.hit,
+                     g.sensor.miss, g.sensor.clamp_min, g.sensor.clamp_max,
+                     g.sensor.occupied_threshold));
+    if (s.policy == mapping::FusionPolicy::kReferenceMax) {
+      line("fusion",
+           fmt::format("{} (penalty {:g})", mapping::ToString(s.policy), s.reference_penalty));
+    } else {
+      line("fusion", fmt::format("{} (class log-odds [{:g}, {:g}], miss {:g}, label at p >= {:g})",
+                                 mapping::ToString(s.policy), s.class_log_odds_min,
+                                 s.class_log_odds_max, s.miss_log_odds, s.label_threshold));
+    }
   }
   line("blocks",
        fmt::format("{} of 8^3 voxels ({} with semantics)", info.blocks, info.semantic_blocks));
@@ -328,6 +352,7 @@ std::optional<MapExportFormat> MapExportFormatFromString(std::string_view name) 
   if (name == "bt") return MapExportFormat::kBt;
   if (name == "ot") return MapExportFormat::kOt;
   if (name == "ply") return MapExportFormat::kPly;
+  if (name == "avpmap") return MapExportFormat::kAvpMap;
   return std::nullopt;
 }
 
@@ -340,18 +365,39 @@ Result<MapExportSummary> RunMapExport(const MapExportOptions& options) {
   }
   const std::optional<MapExportFormat> f = MapExportFormatFromString(format);
   if (!f) {
-    return InvalidArgumentError(
-        fmt::format("unknown export format {} (from {}): use bt, ot or ply", QuoteText(format),
-                    options.format.empty() ? "the extension of --out" : "--format"));
+    return InvalidArgumentError(fmt::format(
+        "unknown export format {} (from {}): use avpmap, bt, ot or ply", QuoteText(format),
+        options.format.empty() ? "the extension of --out" : "--format"));
   }
   // Outputs never overwrite inputs: `map export X --out X` would replace the map it reads.
   AVP_RETURN_IF_ERROR(
       io::CheckOutputIsNotInput(options.out, "export file (--out)", options.map, "map file"));
   AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.map, "map file").status());
-  AVP_ASSIGN_OR_RETURN(const mapping::SemanticMap map, mapping::LoadMap(options.map));
+  AVP_ASSIGN_OR_RETURN(const mapping::LoadedMap loaded, mapping::LoadAnyMap(options.map));
+  const mapping::SemanticMap& map = loaded.map;
   MapExportSummary summary;
   summary.format = *f;
   summary.out = options.out;
+  summary.source = loaded.source;
+  if (*f == MapExportFormat::kAvpMap) {
+    mapping::MapSaveOptions save;
+    save.note = fmt::format(
+        "avp map export of {} ({}{})", options.map.filename().string(),
+        mapping::ToString(loaded.source.format),
+        loaded.source.tree_type.empty() ? std::string() : ", " + loaded.source.tree_type);
+    if (loaded.source.format == mapping::MapFileFormat::kAvpMap &&
+        !loaded.source.avpmap.note.empty()) {
+      save.note += "; made by: " + loaded.source.avpmap.note;
+    }
+    if (save.note.size() > mapping::kMaxMapNoteBytes) save.note.resize(mapping::kMaxMapNoteBytes);
+    AVP_RETURN_IF_ERROR(mapping::SaveMap(map, options.out, save));
+    summary.occupied_voxels = map.grid().CountOccupiedVoxels();
+    summary.free_voxels = map.grid().CountKnownVoxels() - summary.occupied_voxels;
+    summary.labelled_voxels = map.grid().CountSemanticVoxels();
+    std::error_code ec;
+    summary.file_bytes = fs::file_size(options.out, ec);
+    return summary;
+  }
   if (*f == MapExportFormat::kPly) {
     mapping::PlyExportOptions ply;
     ply.binary = !options.ply_ascii;
@@ -389,9 +435,16 @@ Result<MapCompareSummary> RunMapCompare(const MapCompareOptions& options) {
   }
   AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.map, "map file").status());
   AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.gt, "ground truth file").status());
-  AVP_ASSIGN_OR_RETURN(const mapping::SemanticMap map, mapping::LoadMap(options.map));
-  AVP_ASSIGN_OR_RETURN(const mapping::VoxelSet gt, mapping::ImportOctomapOccupied(options.gt));
+  AVP_ASSIGN_OR_RETURN(const mapping::LoadedMap loaded, mapping::LoadAnyMap(options.map));
+  const mapping::SemanticMap& map = loaded.map;
   MapCompareSummary summary;
+  summary.map_source = loaded.source;
+  mapping::VoxelSet gt;
+  {
+    AVP_ASSIGN_OR_RETURN(const mapping::LoadedMap gt_map, mapping::LoadAnyMap(options.gt));
+    gt = mapping::GroundTruthVoxels(gt_map, options.semantic_class, &summary.gt_used_labels);
+    summary.gt_source = gt_map.source;
+  }
   summary.map = options.map;
   summary.gt = options.gt;
   summary.semantic_class = options.semantic_class;
@@ -405,6 +458,34 @@ Result<MapCompareSummary> RunMapCompare(const MapCompareOptions& options) {
                          mapping::CompareToGroundTruth(map.grid(), gt, compare));
     summary.results.push_back(r);
   }
+  // Lattice check: the best exact F1 over the 26 one-voxel shifts of the prediction.
+  {
+    const mapping::OccupancyGrid& grid = map.grid();
+    std::vector<VoxelKey> gt_keys;
+    gt_keys.reserve(gt.keys.size());
+    for (const VoxelKey& k : gt.keys) {
+      gt_keys.push_back(summary.results.front().resampled ? grid.KeyOf(k.Center(gt.resolution_m))
+                                                          : k);
+    }
+    const std::vector<VoxelKey> predicted =
+        mapping::OccupiedVoxelsOfClass(grid, options.semantic_class);
+    std::vector<VoxelKey> shifted(predicted.size());
+    for (int dz = -1; dz <= 1; ++dz) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          if (dx == 0 && dy == 0 && dz == 0) continue;
+          for (size_t i = 0; i < predicted.size(); ++i) {
+            shifted[i] = VoxelKey{predicted[i].x + dx, predicted[i].y + dy, predicted[i].z + dz};
+          }
+          const double f1 = mapping::CompareVoxelSets(shifted, gt_keys, 0).f1;
+          if (f1 > summary.best_shift_f1) {
+            summary.best_shift_f1 = f1;
+            summary.best_shift = VoxelKey{dx, dy, dz};
+          }
+        }
+      }
+    }
+  }
   if (!options.json_out.empty()) {
     AVP_RETURN_IF_ERROR(io::WriteJsonFile(options.json_out, ToJson(summary)));
   }
@@ -414,18 +495,42 @@ Result<MapCompareSummary> RunMapCompare(const MapCompareOptions& options) {
 std::string FormatMapCompare(const MapCompareSummary& s) {
   std::string out;
   const mapping::GroundTruthComparison& first = s.results.front();
-  out += fmt::format("map          {} ({:g} mm voxels)\n", s.map.string(),
-                     first.map_resolution_m * 1000.0);
-  out += fmt::format(
-      "ground truth {} ({:g} mm voxels, {} occupied voxels from {} leaves, {} of "
-      "them pruned)\n",
-      s.gt.string(), first.gt_resolution_m * 1000.0, first.gt_voxels_original, s.gt_occupied_leaves,
-      s.gt_coarse_leaves);
+  const auto describe = [](const mapping::MapSource& src) {
+    return src.tree_type.empty()
+               ? std::string(mapping::ToString(src.format))
+               : fmt::format("{} {}", mapping::ToString(src.format), EscapeText(src.tree_type, 64));
+  };
+  out += fmt::format("map          {} ({}, {:g} mm voxels)\n", s.map.string(),
+                     describe(s.map_source), first.map_resolution_m * 1000.0);
+  if (s.gt_used_labels) {
+    out += fmt::format("ground truth {} ({}, {:g} mm voxels, {} occupied voxels labelled {})\n",
+                       s.gt.string(), describe(s.gt_source), first.gt_resolution_m * 1000.0,
+                       first.gt_voxels_original, ToString(s.semantic_class));
+  } else {
+    out += fmt::format(
+        "ground truth {} ({}, {:g} mm voxels, {} occupied voxels from {} leaves, {} of "
+        "them pruned)\n",
+        s.gt.string(), describe(s.gt_source), first.gt_resolution_m * 1000.0,
+        first.gt_voxels_original, s.gt_occupied_leaves, s.gt_coarse_leaves);
+  }
+  out +=
+      "lattice      both sides: voxel k covers [k s, (k + 1) s) on each axis (a corner at the "
+      "origin)\n";
+  if (!s.map_source.extension_note.empty()) {
+    out += fmt::format("note         map: {}\n", s.map_source.extension_note);
+  }
+  if (!s.gt_source.extension_note.empty()) {
+    out += fmt::format("note         ground truth: {}\n", s.gt_source.extension_note);
+  }
   if (first.resampled) {
     out += fmt::format(
-        "note         resolutions differ: GT voxel centres were mapped onto the map's {:g} mm "
-        "lattice ({} GT voxels -> {})\n",
-        first.map_resolution_m * 1000.0, first.gt_voxels_original, first.ground_truth);
+        "warning      resolutions differ (map {:g} mm, ground truth {:g} mm): GT voxel centres "
+        "were mapped onto the map's {:g} mm lattice ({} GT voxels -> {}), so the exact scores "
+        "also measure the resampling; for exact scores build the map at the GT's resolution "
+        "(avp map build --voxel-size {:g})\n",
+        first.map_resolution_m * 1000.0, first.gt_resolution_m * 1000.0,
+        first.map_resolution_m * 1000.0, first.gt_voxels_original, first.ground_truth,
+        first.gt_resolution_m);
   }
   out += fmt::format("predicted    {} occupied voxels labelled {}\n", first.predicted,
                      ToString(s.semantic_class));
@@ -436,6 +541,29 @@ std::string FormatMapCompare(const MapCompareSummary& s) {
                        r.tolerance_voxels == 0 ? std::string("exact")
                                                : fmt::format("+-{} voxel", r.tolerance_voxels),
                        r.tp, r.fp, r.gt_found, r.fn, r.precision, r.recall, r.f1);
+  }
+  if (first.predicted > 0 && first.ground_truth > 0) {
+    out += fmt::format(
+        "lattice check: the best one-voxel shift of the map, ({:+d}, {:+d}, {:+d}), gives exact "
+        "F1 {:.4f} (unshifted {:.4f})\n",
+        s.best_shift.x, s.best_shift.y, s.best_shift.z, s.best_shift_f1, first.f1);
+    const mapping::GroundTruthComparison& last = s.results.back();
+    if (last.tolerance_voxels > 0 && last.precision >= 0.95 && first.precision < 0.8) {
+      out += fmt::format(
+          "note         {:.0f} % of the predicted voxels lie within {} voxel(s) of the ground "
+          "truth but only {:.0f} % on it: the two sides mark the same surfaces on different "
+          "lattices or by different rules (resolution, a sub-voxel offset, solid vs surface); "
+          "exact scores then measure that difference, tolerant ones the map (docs/evaluation.md, "
+          "Comparing with another system's ground truth)\n",
+          100.0 * last.precision, last.tolerance_voxels, 100.0 * first.precision);
+    }
+    if (s.best_shift_f1 >= first.f1 + 0.1) {
+      out +=
+          "warning      a one-voxel shift raises exact F1 by 0.1 or more: the two surfaces sit "
+          "about a voxel apart (different frames, lattices or surface definitions); exact F1 "
+          "is not comparable here, see docs/evaluation.md (Comparing with another system's "
+          "ground truth)\n";
+    }
   }
   out +=
       "TP: predicted voxels with a GT voxel within the tolerance (FP = predicted - TP); GT found: "
@@ -468,6 +596,12 @@ nlohmann::json ToJson(const MapCompareSummary& s) {
           {"gt_voxels_original", first.gt_voxels_original},
           {"gt_occupied_leaves", s.gt_occupied_leaves},
           {"gt_coarse_leaves", s.gt_coarse_leaves},
+          {"map_format", std::string(mapping::ToString(s.map_source.format))},
+          {"gt_format", std::string(mapping::ToString(s.gt_source.format))},
+          {"gt_tree_type", s.gt_source.tree_type},
+          {"gt_used_labels", s.gt_used_labels},
+          {"best_one_voxel_shift", {s.best_shift.x, s.best_shift.y, s.best_shift.z}},
+          {"best_one_voxel_shift_exact_f1", s.best_shift_f1},
           {"definitions",
            "tp: predicted voxels with a GT voxel within the tolerance cube; fp = predicted - tp; "
            "gt_found: GT voxels with a predicted voxel within it; fn = ground_truth - gt_found; "
@@ -534,8 +668,16 @@ int MapExportAndReport(const MapExportOptions& options) {
                 s.out.string().c_str(), s.occupied_voxels, s.free_voxels,
                 s.format == MapExportFormat::kOt
                     ? fmt::format(", {} coloured by class", s.labelled_voxels).c_str()
+                : s.format == MapExportFormat::kAvpMap
+                    ? fmt::format(", {} labelled", s.labelled_voxels).c_str()
                     : "",
                 static_cast<unsigned long long>(s.file_bytes));
+  }
+  if (s.source.format != mapping::MapFileFormat::kAvpMap) {
+    std::printf("read %s as OctoMap %s %s; not kept:\n", options.map.string().c_str(),
+                EscapeText(s.source.tree_type, 64).c_str(),
+                std::string(mapping::MapFileExtension(s.source.format)).c_str());
+    for (const std::string& lost : s.source.lost) std::printf("  - %s\n", lost.c_str());
   }
   return 0;
 }
@@ -637,8 +779,10 @@ void AddMapGt(CLI::App& map_cmd, CommandContext& context) {
 
 void AddMapInfo(CLI::App& map_cmd, CommandContext& context) {
   auto file = std::make_shared<std::string>();
-  CLI::App* cmd = map_cmd.add_subcommand("info", "Describe a map file");
-  cmd->add_option("file", *file, "Map file (.avpmap)")->required();
+  CLI::App* cmd =
+      map_cmd.add_subcommand("info", "Describe a map file (.avpmap, OctoMap .bt / .ot)");
+  cmd->add_option("file", *file, "Map file: .avpmap, .bt or .ot (told apart by content)")
+      ->required();
   cmd->callback([file, &context] { RunGuarded(context, [&] { return MapInfoAndReport(*file); }); });
 }
 
@@ -650,10 +794,13 @@ struct MapExportCli {
 void AddMapExport(CLI::App& map_cmd, CommandContext& context) {
   auto cli = std::make_shared<MapExportCli>();
   CLI::App* cmd = map_cmd.add_subcommand(
-      "export", "Export a map to OctoMap (.bt occupancy, .ot coloured by class) or PLY");
-  cmd->add_option("file", cli->map, "Map file (.avpmap)")->required();
-  cmd->add_option("--format", cli->options.format, "bt, ot or ply (default: from --out)")
-      ->check(CLI::IsMember({"bt", "ot", "ply"}));
+      "export",
+      "Convert a map file (.avpmap, .bt, .ot) to OctoMap (.bt occupancy, .ot coloured by class), "
+      "PLY or avp's .avpmap");
+  cmd->add_option("file", cli->map, "Map file: .avpmap, .bt or .ot (told apart by content)")
+      ->required();
+  cmd->add_option("--format", cli->options.format, "avpmap, bt, ot or ply (default: from --out)")
+      ->check(CLI::IsMember({"avpmap", "bt", "ot", "ply"}));
   cmd->add_option("--out", cli->out, "Output file")->required();
   cmd->add_flag("--ascii", cli->options.ply_ascii, "PLY: ASCII instead of binary little-endian");
   cmd->add_flag("--all-labelled", cli->options.ply_all_labelled,
@@ -676,9 +823,13 @@ struct MapCompareCli {
 void AddMapCompare(CLI::App& map_cmd, CommandContext& context) {
   auto cli = std::make_shared<MapCompareCli>();
   CLI::App* cmd = map_cmd.add_subcommand(
-      "compare", "Precision / recall / F1 of a map's labelled voxels against a ground-truth .bt");
-  cmd->add_option("file", cli->map, "Map file (.avpmap)")->required();
-  cmd->add_option("--gt", cli->gt, "Ground truth: OctoMap .bt (or .ot) of occupied voxels")
+      "compare", "Precision / recall / F1 of a map's labelled voxels against a ground truth");
+  cmd->add_option("file", cli->map,
+                  "Map file: .avpmap, .bt or .ot (a ColorOcTree in class colours)")
+      ->required();
+  cmd->add_option("--gt", cli->gt,
+                  "Ground truth: .bt / OcTree .ot (its occupied voxels) or a labelled .avpmap / "
+                  "ColorOcTree .ot (its voxels of --class)")
       ->required();
   AddNumberOption(*cmd, "--tolerance-voxels", cli->options.tolerance_voxels, 0, MaxOf<int>(),
                   "Also report matches within this many map voxels (0 = exact only)");

@@ -18,6 +18,7 @@
 #include <avp/core/transform.h>
 #include <avp/mapping/integrator.h>
 #include <avp/mapping/map_file.h>
+#include <avp/mapping/map_reader.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/mapping/semantics.h>
 #include <avp/sim/scenario.h>
@@ -123,9 +124,12 @@ Result<MapGtSummary> RunMapGt(const MapGtOptions& options, const sim::ScenarioRe
 // ---- avp map info
 // ---------------------------------------------------------------------------------
 
+/// Any map file LoadAnyMap reads (.avpmap, .bt, .ot): `file` is the .avpmap header (empty for
+/// OctoMap files), `source` says what the file was and what reading it kept.
 struct MapInfo {
   std::filesystem::path path;
   mapping::MapFileInfo file;
+  mapping::MapSource source;
   mapping::MapOptions options;
   size_t blocks = 0;
   size_t semantic_blocks = 0;
@@ -148,10 +152,11 @@ std::string FormatMapInfo(const MapInfo& info);
 // ---- avp map export
 // -------------------------------------------------------------------------------
 
-enum class MapExportFormat { kBt, kOt, kPly };
-/// "bt", "ot", "ply"; nullopt otherwise.
+enum class MapExportFormat { kBt, kOt, kPly, kAvpMap };
+/// "bt", "ot", "ply", "avpmap"; nullopt otherwise.
 std::optional<MapExportFormat> MapExportFormatFromString(std::string_view name);
 
+/// The input may be any map file LoadAnyMap reads (.avpmap, .bt, .ot): e.g. .ot -> .avpmap.
 struct MapExportOptions {
   std::filesystem::path map;
   /// Empty: taken from the extension of `out`.
@@ -166,14 +171,18 @@ struct MapExportSummary {
   std::filesystem::path out;
   size_t occupied_voxels = 0;  ///< bt / ot
   size_t free_voxels = 0;      ///< bt / ot
-  size_t labelled_voxels = 0;  ///< ot: coloured by class; ply: vertices
+  size_t labelled_voxels = 0;  ///< ot: coloured by class; ply: vertices; avpmap: labelled
   uint64_t file_bytes = 0;
+  mapping::MapSource source;  ///< what was read
 };
 Result<MapExportSummary> RunMapExport(const MapExportOptions& options);
 
 // ---- avp map compare
 // ------------------------------------------------------------------------------
 
+/// Both files may be any map file LoadAnyMap reads. The ground truth is the GT file's occupied
+/// voxels labelled `semantic_class` when it carries labels (an .avpmap, a ColorOcTree in class
+/// colours), otherwise all its occupied voxels (.bt, OcTree).
 struct MapCompareOptions {
   std::filesystem::path map;
   std::filesystem::path gt;
@@ -189,8 +198,18 @@ struct MapCompareSummary {
   SemanticClass semantic_class = SemanticClass::kFruit;
   size_t gt_occupied_leaves = 0;
   size_t gt_coarse_leaves = 0;
+  mapping::MapSource map_source;
+  mapping::MapSource gt_source;
+  /// The GT file carried labels and only its voxels of `semantic_class` were taken.
+  bool gt_used_labels = false;
   /// Exact first, then the tolerance (when > 0).
   std::vector<mapping::GroundTruthComparison> results;
+  /// Lattice check: the exact F1 after moving every predicted voxel by the one-voxel shift
+  /// (each component in {-1, 0, 1}, not all 0) that raises it most; a large gain over the
+  /// unshifted exact F1 means the two sides' surfaces sit a voxel apart (a frame or lattice
+  /// offset, or a different surface definition), not that the map is wrong.
+  VoxelKey best_shift;
+  double best_shift_f1 = 0.0;
 };
 Result<MapCompareSummary> RunMapCompare(const MapCompareOptions& options);
 std::string FormatMapCompare(const MapCompareSummary& summary);
