@@ -427,10 +427,17 @@ std::vector<TriangleMesh> ConnectedComponents(const TriangleMesh& mesh) {
   std::vector<TriangleMesh> components;
   std::unordered_map<size_t, size_t> component_of_root;
   std::vector<int> new_index(nv, -1);
-  for (const Eigen::Vector3i& t : mesh.triangles) {
+  // Texture coordinates, the texture and per-triangle colours go with their vertices/triangles.
+  const bool uvs = mesh.uvs.size() == nv;
+  const bool faces = mesh.face_albedo.size() == mesh.triangles.size();
+  for (size_t ti = 0; ti < mesh.triangles.size(); ++ti) {
+    const Eigen::Vector3i& t = mesh.triangles[ti];
     const size_t root = sets.Find(static_cast<size_t>(t[0]));
     auto [it, inserted] = component_of_root.emplace(root, components.size());
-    if (inserted) components.emplace_back();
+    if (inserted) {
+      components.emplace_back();
+      components.back().texture = mesh.texture;
+    }
     TriangleMesh& out = components[it->second];
     Eigen::Vector3i mapped;
     for (int k = 0; k < 3; ++k) {
@@ -438,10 +445,12 @@ std::vector<TriangleMesh> ConnectedComponents(const TriangleMesh& mesh) {
       if (new_index[vi] < 0) {
         new_index[vi] = static_cast<int>(out.vertices.size());
         out.vertices.push_back(mesh.vertices[vi]);
+        if (uvs) out.uvs.push_back(mesh.uvs[vi]);
       }
       mapped[k] = new_index[vi];
     }
     out.triangles.push_back(mapped);
+    if (faces && !mesh.face_albedo.empty()) out.face_albedo.push_back(mesh.face_albedo[ti]);
   }
   return components;
 }

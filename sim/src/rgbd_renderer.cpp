@@ -15,6 +15,12 @@
 // than min_depth_m occludes what lies behind it and reads as "no return" (depth 0, labels 0,
 // background colour), as on a real stereo camera; anything beyond max_depth_m is never found.
 //
+// Colour: an object's albedo times a per-instance tint (base_rgb, computed once). A mesh with
+// colours of its own (TriangleMesh::texture or face_albedo) looks its colour up per hit instead:
+// the texture bilinearly sampled at the texture coordinates interpolated with Embree's barycentric
+// (u, v), or the triangle's colour, times the same tint; then the same lighting. Objects without
+// colours of their own take the original path, bit for bit.
+//
 // Threads: the image is cut into bands of kBandRows rows, handed out by an atomic counter. Each
 // pixel's result depends only on the pixel (fixed packet layout), so output is bit-identical for
 // any thread count.
@@ -30,6 +36,7 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -191,6 +198,29 @@ struct ObjectInfo {
   uint8_t class_id = 0;
   Eigen::Vector3f base_rgb = Eigen::Vector3f::Zero();  ///< albedo x per-instance tint, linear
   bool is_mesh = false;
+  /// Index into Impl::surfaces for a mesh with colours of its own (texture, per-triangle
+  /// colours), -1 otherwise (base_rgb everywhere).
+  int32_t surface = -1;
+};
+
+/// The colours of a mesh with colours of its own, per triangle, with the object's tint applied as
+/// to base_rgb: (colour x hue) x brightness, clamped to [0, 1].
+struct SurfaceColors {
+  /// Textured: the triangle's three texture coordinates, in vertex order.
+  std::shared_ptr<const Texture> texture;
+  std::vector<std::array<Eigen::Vector2f, 3>> triangle_uvs;
+  /// Per-triangle colours, tint applied (when not textured).
+  std::vector<Eigen::Vector3f> face_rgb;
+  Eigen::Vector3f hue = Eigen::Vector3f::Ones();
+  float brightness = 1.0f;
+
+  /// Base colour at barycentric (u, v) of triangle `prim` (Embree: p = (1-u-v) p0 + u p1 + v p2).
+  Eigen::Vector3f BaseColor(unsigned prim, float u, float v) const {
+    if (texture == nullptr) return face_rgb[prim];
+    const std::array<Eigen::Vector2f, 3>& st = triangle_uvs[prim];
+    const Eigen::Vector2f uv = (1.0f - u - v) * st[0] + u * st[1] + v * st[2];
+    return (texture->Sample(uv).cwiseProduct(hue) * brightness).cwiseMax(0.0f).cwiseMin(1.0f);
+  }
 };
 
 /// One traced pixel, as Embree left it.
@@ -199,6 +229,8 @@ struct PixelHit {
   unsigned geom_id;
   unsigned prim_id;
   float ng[3];
+  float u;  ///< barycentric coordinates of the hit on a triangle
+  float v;
 };
 
 /// Raw views of the output images (each thread writes disjoint pixels).
@@ -264,6 +296,7 @@ struct RgbdRenderer::Impl {
   unsigned ellipsoid_geom_id = RTC_INVALID_GEOMETRY_ID;
   std::vector<EllipsoidPrim> ellipsoids;  // referenced by the user geometry: never resized later
   std::vector<int32_t> ellipsoid_objects;
+  std::vector<SurfaceColors> surfaces;
   size_t num_triangles = 0;
   std::array<uint8_t, 3> background_srgb{};
   const std::array<uint8_t, 4096>* srgb_lut = &SrgbLut();
@@ -331,10 +364,12 @@ void RgbdRenderer::Impl::Shade(const PixelHit& h, const Eigen::Vector3f& dir_W, 
     light *= 1.0f + kTriangleBrightness *
                         HashSigned((static_cast<uint64_t>(obj->instance_id) << 32) | h.prim_id);
   }
+  const Eigen::Vector3f base =
+      obj->surface < 0 ? obj->base_rgb : surfaces[obj->surface].BaseColor(h.prim_id, h.u, h.v);
   const auto& lut = *srgb_lut;
-  rgb[0] = ToSrgb8(obj->base_rgb.x() * light, lut);
-  rgb[1] = ToSrgb8(obj->base_rgb.y() * light, lut);
-  rgb[2] = ToSrgb8(obj->base_rgb.z() * light, lut);
+  rgb[0] = ToSrgb8(base.x() * light, lut);
+  rgb[1] = ToSrgb8(base.y() * light, lut);
+  rgb[2] = ToSrgb8(base.z() * light, lut);
 }
 
 namespace {
@@ -403,8 +438,9 @@ void RgbdRenderer::Impl::TraceBand(int band, const FrameRays& rays, const FrameO
         rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
         rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
         rtcIntersect1(scene, &context, &rh);
-        const PixelHit h{
-            rh.ray.tfar, rh.hit.geomID, rh.hit.primID, {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z}};
+        const PixelHit h{rh.ray.tfar,   rh.hit.geomID,
+                         rh.hit.primID, {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z},
+                         rh.hit.u,      rh.hit.v};
         Shade(h, d, rays.min_depth, static_cast<size_t>(v) * width + u, out);
       }
     }
@@ -446,10 +482,9 @@ void RgbdRenderer::Impl::TraceBand(int band, const FrameRays& rays, const FrameO
           if (valid[i] == 0) continue;
           const int u = u0 + i % Traits::kW;
           const int v = v0 + i / Traits::kW;
-          const PixelHit h{rh.ray.tfar[i],
-                           rh.hit.geomID[i],
-                           rh.hit.primID[i],
-                           {rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]}};
+          const PixelHit h{rh.ray.tfar[i],   rh.hit.geomID[i],
+                           rh.hit.primID[i], {rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]},
+                           rh.hit.u[i],      rh.hit.v[i]};
           Shade(h, dirs[i], rays.min_depth, static_cast<size_t>(v) * width + u, out);
         }
       }
@@ -522,6 +557,27 @@ RgbdRenderer::RgbdRenderer(const Scene& scene, RendererOptions options)
         ib[3 * i + 0] = static_cast<unsigned>(mesh->triangles[i].x());
         ib[3 * i + 1] = static_cast<unsigned>(mesh->triangles[i].y());
         ib[3 * i + 2] = static_cast<unsigned>(mesh->triangles[i].z());
+      }
+      if (mesh->has_own_colors()) {
+        // Textured or per-triangle colours: shaded per hit (Shade); base_rgb stays the albedo's.
+        SurfaceColors surface;
+        surface.hue = hue;
+        surface.brightness = brightness;
+        if (mesh->texture != nullptr) {
+          surface.texture = mesh->texture;
+          surface.triangle_uvs.reserve(mesh->triangles.size());
+          for (const Eigen::Vector3i& t : mesh->triangles) {
+            surface.triangle_uvs.push_back({mesh->uvs[t[0]], mesh->uvs[t[1]], mesh->uvs[t[2]]});
+          }
+        } else {
+          surface.face_rgb.reserve(mesh->face_albedo.size());
+          for (const Eigen::Vector3f& c : mesh->face_albedo) {
+            surface.face_rgb.push_back(
+                (c.cwiseProduct(hue) * brightness).cwiseMax(0.0f).cwiseMin(1.0f));
+          }
+        }
+        info.surface = static_cast<int32_t>(m.surfaces.size());
+        m.surfaces.push_back(std::move(surface));
       }
       rtcCommitGeometry(geom);
       const unsigned geom_id = rtcAttachGeometry(m.scene, geom);

@@ -101,7 +101,8 @@ bool IsClosed(const TriangleMesh& mesh);
 
 /// Splits a mesh into connected components. Triangles are connected when they share a vertex
 /// index or a vertex position (exactly equal coordinates), so unwelded meshes are handled too.
-/// Components are returned in the order of their first triangle, each with compacted vertices.
+/// Components are returned in the order of their first triangle, each with compacted vertices
+/// (and their texture coordinates), the texture and its triangles' colours.
 std::vector<TriangleMesh> ConnectedComponents(const TriangleMesh& mesh);
 
 /// `n` >= 1 nearly evenly spread unit vectors (Fibonacci lattice), deterministic.

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <variant>
 #include <vector>
@@ -8,26 +9,83 @@
 #include <Eigen/Core>
 
 #include <avp/core/box.h>
+#include <avp/core/image.h>
 #include <avp/core/semantic_class.h>
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 
 namespace avp::sim {
 
+/// A colour texture: the diffuse / base-colour map of a mesh part (docs/scene-format.md,
+/// "Textures"). Texels are 8-bit sRGB as in the image file, row 0 the image's top row; alpha is not
+/// kept.
+struct Texture {
+  ImageRgb8 image;
+  /// Linear-RGB factor every sample is multiplied by, each in [0, 1] (glTF's baseColorFactor; 1
+  /// for OBJ and COLLADA, whose texture replaces the material colour).
+  Eigen::Vector3f factor = Eigen::Vector3f::Ones();
+  /// Where the texels came from (an image file, or "'plant.glb' embedded texture 0"), for messages.
+  std::string source;
+
+  /// Linear RGB at texture coordinates st = (s, t), OpenGL convention: (0, 0) is the bottom-left
+  /// corner of the image, (1, 1) the top-right (s to the right, t up). Wrap mode repeat (s and t
+  /// modulo 1); bilinear between texel centres, interpolated in linear RGB (each texel decoded
+  /// from sRGB with the IEC 61966-2-1 transfer function), times `factor`. Non-finite coordinates
+  /// give MeanColor(). The image must not be empty (Validate).
+  Eigen::Vector3f Sample(const Eigen::Vector2f& st) const;
+  /// Mean linear colour (times factor) over the triangle with texture coordinates a, b, c: the
+  /// mean of Sample() at the 45 points of a barycentric lattice of step 1/8 (corners included).
+  Eigen::Vector3f MeanOverTriangle(const Eigen::Vector2f& a, const Eigen::Vector2f& b,
+                                   const Eigen::Vector2f& c) const;
+  /// Mean linear colour of every texel, times factor.
+  Eigen::Vector3f MeanColor() const;
+  /// A non-empty image and a finite factor in [0, 1]; names the source.
+  Status Validate() const;
+};
+
 /// An indexed triangle mesh in the world frame (metres). Triangles are counter-clockwise seen
 /// from outside where that matters (it does not for ray casting: both sides are hit).
+///
+/// Colour of a triangle, first that applies: the texture sampled at the texture coordinates
+/// interpolated over the triangle, face_albedo[triangle], the albedo of the object holding the
+/// mesh. A mesh has either a texture or per-triangle colours, not both.
 struct TriangleMesh {
   std::vector<Eigen::Vector3f> vertices;
   std::vector<Eigen::Vector3i> triangles;
+  /// Texture coordinates, one per vertex (Texture::Sample's convention), or empty: none.
+  std::vector<Eigen::Vector2f> uvs;
+  /// The colour map (needs uvs), or null. Shared: parts of a mesh file share a decoded image.
+  std::shared_ptr<const Texture> texture;
+  /// Linear-RGB colour in [0, 1] per triangle, or empty: the object's albedo (e.g. a fruit whose
+  /// calyx part, of another colour, was merged into it).
+  std::vector<Eigen::Vector3f> face_albedo;
 
   size_t num_triangles() const { return triangles.size(); }
   bool empty() const { return triangles.empty(); }
-  /// Appends `other` transformed by X_WO (other's vertices are in frame O).
+  /// True when the mesh carries colours of its own (a texture or per-triangle colours).
+  bool has_own_colors() const { return texture != nullptr || !face_albedo.empty(); }
+  /// Appends `other` transformed by X_WO (other's vertices are in frame O). Texture coordinates
+  /// are kept where both meshes have them (or this one has no vertices yet). Colours: meshes
+  /// without colours of their own stay so; a texture is kept when both share it (the same
+  /// pointer) or this mesh has no triangles yet, per-triangle colours are concatenated. Any other
+  /// mix becomes per-triangle colours (FaceColors()), which needs the colour of a mesh without
+  /// its own: use the overload with the objects' albedos; this one throws avp::Error then.
   void Append(const TriangleMesh& other, const RigidTransform& X_WO = RigidTransform::Identity());
+  /// As above; `albedo` and `other_albedo` are the colours of the objects that hold this mesh and
+  /// `other`. Two meshes without colours of their own and different albedos become per-triangle
+  /// colours, so the merged mesh renders each part in its own colour under object albedo `albedo`.
+  void Append(const TriangleMesh& other, const RigidTransform& X_WO, const Eigen::Vector3f& albedo,
+              const Eigen::Vector3f& other_albedo);
+  /// The colour of every triangle: the texture's mean over the triangle
+  /// (Texture::MeanOverTriangle), face_albedo, or `albedo` (the object's).
+  std::vector<Eigen::Vector3f> FaceColors(const Eigen::Vector3f& albedo) const;
+  /// Moves the vertices; texture coordinates and colours are unchanged.
   void Transform(const RigidTransform& X_WO);
   Box3 Bounds() const;
   /// Every index in range, every vertex finite, no degenerate (zero-area) triangles is not
-  /// required. Names the first bad element.
+  /// required; uvs empty or one per vertex, finite; a texture only with uvs, and valid;
+  /// face_albedo empty or one per triangle, finite in [0, 1]; not both a texture and face_albedo.
+  /// Names the first bad element.
   Status Validate() const;
 };
 
@@ -49,7 +107,9 @@ struct SceneObject {
   SemanticClass semantic_class = SemanticClass::kOther;
   /// Unique per object, > 0; written into instance label images. Assigned by Scene::Add.
   uint16_t instance_id = 0;
-  /// Base colour, linear RGB in [0, 1]; the renderer shades it.
+  /// Base colour, linear RGB in [0, 1]; the renderer shades it. A mesh with colours of its own
+  /// (a texture, per-triangle colours) renders those; albedo is then the representative colour
+  /// (a texture's mean colour) used where an object has one colour (scene check, OBJ export).
   Eigen::Vector3f albedo = Eigen::Vector3f(0.5f, 0.5f, 0.5f);
   std::variant<TriangleMesh, Ellipsoid> shape;
 
@@ -80,6 +140,11 @@ struct Scene {
   RigidTransform X_WC_start;
   /// The plant's region of interest (bounds of every non-ground object), metres.
   Box3 plant_bounds;
+  /// What a scene file's loader found doubtful but loadable (a placeholder material replaced,
+  /// classes one colour shares, a class rule matching nothing, fruit fragments merged or
+  /// dropped ...; docs/scene-format.md), one sentence each. Commands that load a scene print
+  /// them; `avp scene check` lists them. Empty for the built-in scenarios.
+  std::vector<std::string> warnings;
 
   /// Adds an object, assigns the next free instance id and returns it.
   /// @throws avp::Error when more than 65535 objects are added.
@@ -99,7 +164,8 @@ struct Scene {
 };
 
 /// Empty when `a` and `b` hold the same objects with bit-identical geometry, names, classes, ids
-/// and colours (same seed, same scene); otherwise a description of the first difference.
+/// and colours (texture coordinates, per-triangle colours and textures included; same seed, same
+/// scene); otherwise a description of the first difference.
 std::string DescribeDifference(const Scene& a, const Scene& b);
 
 }  // namespace avp::sim
