@@ -301,6 +301,44 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
   return m;
 }
 
+void FruitTracker::AfterView(int view, std::vector<FruitResult> now,
+                             const std::optional<std::unordered_map<uint16_t, double>>& visible) {
+  if (first_found_.size() != now.size()) {
+    first_found_.assign(now.size(), -1);
+    found_since_.assign(now.size(), -1);
+    best_visible_.assign(now.size(), FruitResult::kNaN);
+    best_view_.assign(now.size(), -1);
+  }
+  for (size_t i = 0; i < now.size(); ++i) {
+    if (now[i].found) {
+      if (first_found_[i] < 0) first_found_[i] = view;
+      if (found_since_[i] < 0) found_since_[i] = view;
+    } else {
+      found_since_[i] = -1;  // lost (or never found): a later find starts a new run
+    }
+    if (visible.has_value()) {
+      const auto it = visible->find(now[i].instance_id);
+      const double v = it == visible->end() ? 0.0 : it->second;
+      if (std::isnan(best_visible_[i]) || v > best_visible_[i]) {
+        best_visible_[i] = v;
+        best_view_[i] = view;
+      }
+    }
+  }
+  last_ = std::move(now);
+}
+
+std::vector<FruitResult> FruitTracker::Result() const {
+  std::vector<FruitResult> out = last_;
+  for (size_t i = 0; i < out.size() && i < first_found_.size(); ++i) {
+    out[i].found_view = first_found_[i];
+    out[i].found_since_view = found_since_[i];
+    out[i].episode_visible_fraction = best_visible_[i];
+    out[i].episode_best_view = best_view_[i];
+  }
+  return out;
+}
+
 std::vector<FruitResult> EvaluateFruits(const mapping::SemanticMap& map, const GroundTruth& gt,
                                         const EvalOptions& options) {
   std::vector<FruitResult> fruits;

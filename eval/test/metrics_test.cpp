@@ -2,6 +2,8 @@
 // voxel scores, the found-fruit rule at its threshold, the sphere fit, entropy, coverage.
 #include <cmath>
 #include <limits>
+#include <optional>
+#include <unordered_map>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -354,6 +356,44 @@ TEST(MetricsTest, PerFruitErrorsOfTwoSpheresAverageToTheAggregates) {
               (fruits[0].center_error_m + fruits[1].center_error_m) / 2.0, 1e-15);
   EXPECT_NEAR(m.fruits.mean_radius_error_m,
               (fruits[0].radius_error_m + fruits[1].radius_error_m) / 2.0, 1e-15);
+}
+
+TEST(MetricsTest, FruitTrackerKeepsTheFirstFindAndTheLastFoundRun) {
+  // RowGt's fruit 1 (x 0..4) and fruit 2 (x 20, 21; needs 3 recalled: never found) over four
+  // views: fruit 1 found after view 0, lost after view 1 (its voxels carved away), found again
+  // after view 2 and kept. Fruit 1 is visible 0.3, then 0.6 at view 2; view 1 has no labels.
+  const GroundTruth gt = RowGt();
+  mapping::SemanticMap found = EmptyMap();
+  for (int x = 0; x <= 4; ++x) Label(found, {x, 0, 0}, SemanticClass::kFruit);
+  mapping::SemanticMap lost = EmptyMap();
+  Label(lost, {0, 0, 0}, SemanticClass::kFruit);  // two recalled voxels: below 3
+  using Visible = std::optional<std::unordered_map<uint16_t, double>>;
+  FruitTracker tracker;
+  EXPECT_TRUE(tracker.Result().empty());
+  tracker.AfterView(0, EvaluateFruits(found, gt), Visible({{1, 0.3}}));
+  tracker.AfterView(1, EvaluateFruits(lost, gt), std::nullopt);
+  std::vector<FruitResult> r = tracker.Result();
+  ASSERT_EQ(r.size(), 3u);
+  EXPECT_FALSE(r[0].found);  // the last view's evaluation
+  EXPECT_EQ(r[0].found_view, 0);
+  EXPECT_EQ(r[0].found_since_view, -1);  // not found at the end
+  tracker.AfterView(2, EvaluateFruits(found, gt), Visible({{1, 0.6}, {2, 0.1}}));
+  tracker.AfterView(3, EvaluateFruits(found, gt), Visible({{1, 0.5}}));
+  r = tracker.Result();
+  EXPECT_TRUE(r[0].found);
+  EXPECT_EQ(r[0].found_view, 0);
+  EXPECT_EQ(r[0].found_since_view, 2);
+  EXPECT_DOUBLE_EQ(r[0].episode_visible_fraction, 0.6);
+  EXPECT_EQ(r[0].episode_best_view, 2);
+  EXPECT_FALSE(r[1].found);
+  EXPECT_EQ(r[1].found_view, -1);
+  EXPECT_DOUBLE_EQ(r[1].episode_visible_fraction, 0.1);
+  EXPECT_EQ(r[1].episode_best_view, 2);
+  // Fruit 3 was in no view's fractions: 0 from the first labelled view on.
+  EXPECT_DOUBLE_EQ(r[2].episode_visible_fraction, 0.0);
+  EXPECT_EQ(r[2].episode_best_view, 0);
+  // The map fields are the last evaluation's.
+  EXPECT_EQ(r[0].recalled_voxels, 5u);
 }
 
 TEST(MetricsTest, EntropyOfTargetLabelledVoxels) {

@@ -113,58 +113,6 @@ class VisibilityProbe final : public robot::RgbdSource {
   std::optional<std::unordered_map<uint16_t, double>> last_;
 };
 
-/// The episode's per-fruit results as the views come: after each fused view, the fruits found
-/// (the view that first found each, and the one from which it stayed found) and each fruit's
-/// visible fraction in that view.
-class FruitTracker {
- public:
-  /// After view `view` (0-based) was fused: `now` is the map's evaluation, `visible` the view's
-  /// fractions (none: no labelled frame).
-  void AfterView(int view, std::vector<eval::FruitResult> now,
-                 const std::optional<std::unordered_map<uint16_t, double>>& visible) {
-    if (first_found_.empty()) {
-      first_found_.assign(now.size(), -1);
-      found_since_.assign(now.size(), -1);
-      best_visible_.assign(now.size(), eval::FruitResult::kNaN);
-      best_view_.assign(now.size(), -1);
-    }
-    for (size_t i = 0; i < now.size() && i < first_found_.size(); ++i) {
-      if (now[i].found) {
-        if (first_found_[i] < 0) first_found_[i] = view;
-        if (found_since_[i] < 0) found_since_[i] = view;
-      } else {
-        found_since_[i] = -1;
-      }
-      if (visible.has_value()) {
-        const auto it = visible->find(now[i].instance_id);
-        const double v = it == visible->end() ? 0.0 : it->second;
-        if (std::isnan(best_visible_[i]) || v > best_visible_[i]) {
-          best_visible_[i] = v;
-          best_view_[i] = view;
-        }
-      }
-    }
-    last_ = std::move(now);
-  }
-
-  /// The last evaluation with the episode's fields.
-  std::vector<eval::FruitResult> Result() const {
-    std::vector<eval::FruitResult> out = last_;
-    for (size_t i = 0; i < out.size() && i < first_found_.size(); ++i) {
-      out[i].found_view = first_found_[i];
-      out[i].found_since_view = found_since_[i];
-      out[i].episode_visible_fraction = best_visible_[i];
-      out[i].episode_best_view = best_view_[i];
-    }
-    return out;
-  }
-
- private:
-  std::vector<eval::FruitResult> last_;
-  std::vector<int> first_found_, found_since_, best_view_;
-  std::vector<double> best_visible_;
-};
-
 Status CheckSceneAndTruth(const RunConfig& config, const sim::Scene& scene,
                           const eval::GroundTruth& gt) {
   if (scene.plant_bounds.IsEmpty()) {
@@ -263,7 +211,7 @@ Result<RunResult> RunEpisodeWithRobot(const RunConfig& config, const Registries&
   // Per-fruit results: evaluated with the step's metrics (no second evaluation), the views'
   // visible fractions counted from the captured frames' labels.
   std::optional<VisibilityProbe> visibility;
-  FruitTracker fruits;
+  eval::FruitTracker fruits;
   int view = 0;
   if (truth.gt != nullptr) {
     if (robot.source != nullptr) {

@@ -3,7 +3,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <optional>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include <Eigen/Core>
@@ -158,6 +160,28 @@ std::vector<FruitResult> EvaluateFruits(const mapping::SemanticMap& map, const G
 /// @throws avp::Error unless 0 <= tolerance_voxels <= 8.
 VoxelScores ScoreVoxelSets(const std::vector<VoxelKey>& predicted, const GroundTruth& gt,
                            int tolerance_voxels);
+
+/// An episode's per-fruit results as its views are fused (experiment::RunEpisodeWithRobot feeds it
+/// the evaluation it computes after every view): the view that first found each fruit, the view
+/// from which it stayed found, and its largest visible fraction over the views.
+class FruitTracker {
+ public:
+  /// After view `view` (0-based, in order) was fused: `now` is EvaluateFruits of the map then
+  /// (the same fruits every time), `visible` each fruit's visible fraction in that view (a fruit
+  /// missing from it: 0), or nullopt when the view had none (no simulator labels, a failed
+  /// capture).
+  void AfterView(int view, std::vector<FruitResult> now,
+                 const std::optional<std::unordered_map<uint16_t, double>>& visible);
+
+  /// The last evaluation with the episode's fields (found_view, found_since_view,
+  /// episode_visible_fraction, episode_best_view); empty before the first view.
+  std::vector<FruitResult> Result() const;
+
+ private:
+  std::vector<FruitResult> last_;
+  std::vector<int> first_found_, found_since_, best_view_;
+  std::vector<double> best_visible_;
+};
 
 /// A sphere fitted to points.
 struct SphereFit {
