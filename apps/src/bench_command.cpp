@@ -1,4 +1,5 @@
 // avp bench: scenarios x planners x seeds in parallel, with summary tables and plots.
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -107,10 +108,13 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
 void PrintBench(const experiment::BenchConfig& bench, const experiment::BenchSummary& s) {
   std::printf("%zu episodes (%zu failed) in %.1f s. Final view, mean ± 95 %% CI over %zu seeds:\n",
               s.episodes, s.failed, s.seconds, bench.seeds.size());
-  std::printf("  %-28s %-16s %-17s %-17s %s\n", "scenario", "planner", "F1 (exact)", "fruits found",
-              "plan ms/step");
+  size_t width = 28;
+  for (const auto& c : s.cells) width = std::max(width, c.scenario.size());
+  const int w = static_cast<int>(width);
+  std::printf("  %-*s %-16s %-17s %-17s %s\n", w, "scenario", "planner", "F1 (exact)",
+              "fruits found", "plan ms/step");
   for (const auto& c : s.cells) {
-    std::printf("  %-28s %-16s %.3f ± %.3f     %.3f ± %.3f     %.0f\n", c.scenario.c_str(),
+    std::printf("  %-*s %-16s %.3f ± %.3f     %.3f ± %.3f     %.0f\n", w, c.scenario.c_str(),
                 c.planner.c_str(), c.final_f1_mean, c.final_f1_ci95, c.final_found_mean,
                 c.final_found_ci95, c.plan_ms_mean);
   }
@@ -143,7 +147,9 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
       "bench", "Scenarios x planners x seeds in parallel, with summary tables and plots");
   cmd->add_option("--config", cli->config, "Experiment YAML (e.g. configs/experiments/paper.yaml)");
   cmd->add_option("--scenarios", cli->scenarios,
-                  "Comma-separated scenarios (overrides the config)");
+                  "Comma-separated scenarios and scene files (FILE.yaml, relative to the current "
+                  "folder), each optionally @ARRANGEMENT (FILE.yaml@paper: the four paper "
+                  "arrangements); overrides the config");
   cmd->add_option("--planners", cli->planners, "Comma-separated planners (overrides the config)");
   cmd->add_option("--seeds", cli->seeds,
                   "Comma-separated seeds, or N for 0..N-1 (overrides the config)");

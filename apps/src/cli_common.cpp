@@ -125,6 +125,16 @@ Result<double> ParseCliReal(std::string_view option, std::string_view text, doub
   return v;
 }
 
+CLI::Option* AddArrangementOption(CLI::App& cmd, std::string& value) {
+  return cmd
+      .add_option("--arrangement", value,
+                  "How the scene file's plant is arranged: reference, full-occlusion, "
+                  "single-cluster, unoriented-start, or KEY=VALUE items joined by '+' "
+                  "(plant-x/y/z=M, plant-yaw=DEG, start-yaw=DEG, cluster-gap=M; "
+                  "docs/scene-format.md, Arrangements)")
+      ->type_name("SPEC");
+}
+
 CLI::Option* AddKeyValueOption(CLI::App& cmd, const std::string& name,
                                std::vector<std::string>& values, const std::string& description) {
   return cmd.add_option(name, values, description)->type_name("KEY=VALUE");

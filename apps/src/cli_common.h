@@ -84,6 +84,10 @@ constexpr T MaxOf() {
   return std::numeric_limits<T>::max();
 }
 
+/// "--arrangement SPEC" bound to `value`: how a scene file's plant is arranged
+/// (sim::ParseArrangement; checked when the scene is loaded).
+CLI::Option* AddArrangementOption(CLI::App& cmd, std::string& value);
+
 /// Repeatable "--<name> KEY=VALUE" option bound to `values`.
 CLI::Option* AddKeyValueOption(CLI::App& cmd, const std::string& name,
                                std::vector<std::string>& values, const std::string& description);

@@ -119,6 +119,8 @@ Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options,
   const auto t_start = Clock::now();
   AVP_RETURN_IF_ERROR(ValidateBuildOptions(options));
   AVP_RETURN_IF_ERROR(options.intrinsics.Validate());
+  AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out, "map file (--out)",
+                                                options.scene.scene_file, "scene file"));
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
   if (scene.plant_bounds.IsEmpty()) {
     return InvalidArgumentError(fmt::format("scene '{}' has no plant to map", scene.name));
@@ -195,10 +197,18 @@ Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options,
   summary.instances = map.Instances();
 
   mapping::MapSaveOptions save;
+  const std::string source =
+      options.scene.scene_file.empty()
+          ? fmt::format("--scenario {}", options.scene.scenario.empty()
+                                             ? sim::DefaultScenarioName()
+                                             : std::string_view(options.scene.scenario))
+          : fmt::format("--scene {}", options.scene.scene_file.string());
   save.note = fmt::format(
-      "avp map build --scenario {} --seed {} --views {} --voxel-size {} --policy {} --carving {} "
+      "avp map build {}{} --seed {} --views {} --voxel-size {} --policy {} --carving {} "
       "--arc-deg {} --radius {:.3f}{}",
-      scene.name, options.scene.seed, options.views, options.map.grid.voxel_size_m,
+      source,
+      options.scene.arrangement.empty() ? "" : " --arrangement " + options.scene.arrangement,
+      options.scene.seed, options.views, options.map.grid.voxel_size_m,
       mapping::ToString(options.map.semantics.policy),
       mapping::ToString(options.integrator.carving), options.arc_deg, summary.radius_m,
       options.noise ? " --noise" : "");
@@ -219,6 +229,8 @@ Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options,
 // ------------------------------------------------------------------------------------------
 
 Result<MapGtSummary> RunMapGt(const MapGtOptions& options, const sim::ScenarioRegistry& scenarios) {
+  AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out, "ground truth file (--out)",
+                                                options.scene.scene_file, "scene file"));
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
   mapping::GridOptions grid_options;
   grid_options.voxel_size_m = options.voxel_size_m;
@@ -695,6 +707,7 @@ int MapCompareAndReport(const MapCompareOptions& options) {
 struct MapBuildCli {
   MapBuildOptions options;
   std::string out = MapBuildOptions{}.out.string();
+  std::string scene_file;
   std::string policy, carving;
   double voxel_size_m = 0.0;
   std::vector<std::string> map_options;
@@ -714,6 +727,7 @@ Status ResolveBuildOptions(const MapBuildCli& cli, MapBuildOptions& o) {
   AVP_ASSIGN_OR_RETURN(const OptionValues values, ParseKeyValues(cli.map_options, "map option"));
   AVP_RETURN_IF_ERROR(mapping::MapOptionTable().SetAll(o.map, values));
   o.out = cli.out;
+  o.scene.scene_file = cli.scene_file;
   return Status::Ok();
 }
 
@@ -725,8 +739,11 @@ void AddMapBuild(CLI::App& map_cmd, CommandContext& context) {
   cmd->add_option("--scenario", b.scene.scenario,
                   "Built-in scenario name (see `avp scenes`); default: " +
                       std::string(sim::DefaultScenarioName()));
+  cmd->add_option("--scene", cli->scene_file,
+                  "YAML scene file instead of a scenario (docs/scene-format.md)");
+  AddArrangementOption(*cmd, b.scene.arrangement);
   AddNumberOption(*cmd, "--seed", b.scene.seed, uint64_t{0}, MaxOf<uint64_t>(),
-                  "Seed of the procedural plant");
+                  "Seed of the procedural plant and the noise");
   AddNumberOption(*cmd, "--views", b.views, 1, 360, "Number of views");
   cli->voxel_opt = AddNumberOption(*cmd, "--voxel-size", cli->voxel_size_m, 0.0, 1e6,
                                    "Voxel edge in metres (map option grid.voxel_size_m)")
@@ -761,17 +778,23 @@ void AddMapBuild(CLI::App& map_cmd, CommandContext& context) {
 void AddMapGt(CLI::App& map_cmd, CommandContext& context) {
   auto gt = std::make_shared<MapGtOptions>();
   auto out = std::make_shared<std::string>(gt->out.string());
+  auto scene_file = std::make_shared<std::string>();
   CLI::App* cmd = map_cmd.add_subcommand(
-      "gt", "Write a scenario's fruit surface voxels as an OctoMap .bt ground truth");
+      "gt",
+      "Write the fruit surface voxels of a scenario or scene file as an OctoMap .bt ground truth");
   cmd->add_option("--scenario", gt->scene.scenario, "Built-in scenario name");
+  cmd->add_option("--scene", *scene_file,
+                  "YAML scene file instead of a scenario (docs/scene-format.md)");
+  AddArrangementOption(*cmd, gt->scene.arrangement);
   AddNumberOption(*cmd, "--seed", gt->scene.seed, uint64_t{0}, MaxOf<uint64_t>(),
                   "Seed of the procedural plant");
   AddNumberOption(*cmd, "--voxel-size", gt->voxel_size_m, 0.0, 1e6, "Voxel edge in metres");
   cmd->add_option("--out", *out, "Output .bt file")->default_val(*out);
-  cmd->callback([gt, out, &context] {
+  cmd->callback([gt, out, scene_file, &context] {
     RunGuarded(context, [&] {
       MapGtOptions o = *gt;
       o.out = *out;
+      o.scene.scene_file = *scene_file;
       return MapGtAndReport(o, context.registries->scenarios);
     });
   });

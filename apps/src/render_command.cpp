@@ -152,7 +152,10 @@ Result<RenderSummary> RunRender(const RenderOptions& options,
        {{"file", "depth.png"}, {"unit", "millimetre"}, {"invalid", 0}, {"type", "z-depth"}}},
       {"labels",
        {{"instance_file", "instance.png"}, {"class_file", "class.png"}, {"classes", classes_json}}},
-      {"scene", {{"name", scene.name}, {"seed", options.scene.seed}}},
+      {"scene",
+       {{"name", scene.name},
+        {"seed", options.scene.seed},
+        {"arrangement", options.scene.arrangement}}},
       {"noise", options.noise},
   };
   if (!summary.joints_deg.empty()) camera["joints_deg"] = summary.joints_deg;
@@ -210,6 +213,7 @@ void AddRenderCommand(CLI::App& app, CommandContext& context) {
                   "Built-in scenario name (see `avp scenes`); default: " +
                       std::string(sim::DefaultScenarioName()));
   cmd->add_option("--scene", cli->scene_file, "YAML scene file (docs/scene-format.md)");
+  AddArrangementOption(*cmd, cli->options.scene.arrangement);
   AddNumberOption(*cmd, "--seed", cli->options.scene.seed, uint64_t{0}, MaxOf<uint64_t>(),
                   "Seed of the procedural plant and the noise");
   cli->joints_opt = cmd->add_option("--joints", cli->joints,

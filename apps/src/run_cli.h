@@ -20,7 +20,8 @@ namespace avp::apps {
 struct RunCli {
   std::string config_file;
   bool print_config = false;
-  std::string scenario, scene, planner, segmenter, prompt, policy, carving, gt, out = "out/run";
+  std::string scenario, scene, arrangement, planner, segmenter, prompt, policy, carving, gt,
+      out = "out/run";
   uint64_t seed = 0;
   int views = 0, threads = 0;
   double voxel_size_m = 0.0;

@@ -32,7 +32,10 @@ Status ApplyIfGiven(const CLI::App& cmd, const char* flag, experiment::RunConfig
 /// `--segmenter` naming another component drop the options the file gave the previous one (they
 /// were that component's).
 void ReplaceSourceAndComponents(const CLI::App& cmd, const RunCli& cli, experiment::RunConfig& c) {
-  if (cmd.get_option("--scenario")->count() > 0) c.scene_file.clear();
+  if (cmd.get_option("--scenario")->count() > 0) {
+    c.scene_file.clear();
+    c.arrangement.clear();  // a scenario is arranged by its generator
+  }
   if (cmd.get_option("--scene")->count() > 0) c.scenario.clear();
   if (cmd.get_option("--planner")->count() > 0 && cli.planner != c.planner.name) {
     c.planner.options.clear();
@@ -46,6 +49,7 @@ Status ApplyShorthands(const CLI::App& cmd, const RunCli& cli, experiment::RunCo
   ReplaceSourceAndComponents(cmd, cli, c);
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scenario", c, "scenario", cli.scenario));
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scene", c, "scene_file", cli.scene));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--arrangement", c, "arrangement", cli.arrangement));
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--seed", c, "seed", std::to_string(cli.seed)));
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--planner", c, "planner.name", cli.planner));
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--segmenter", c, "segmenter.name", cli.segmenter));
@@ -197,6 +201,7 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
                "Print the effective configuration as YAML (--config reads it back) and exit");
   cmd.add_option("--scenario", cli.scenario, "Built-in scenario (see avp scenes)");
   cmd.add_option("--scene", cli.scene, "YAML scene file instead of a scenario");
+  AddArrangementOption(cmd, cli.arrangement);
   AddNumberOption(cmd, "--seed", cli.seed, uint64_t{0}, MaxOf<uint64_t>(),
                   "Seed of the plant, the noise and every choice");
   cmd.add_option("--planner", cli.planner, "View planner; `--planner help` lists them")

@@ -1,7 +1,10 @@
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
+#include <map>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <set>
@@ -24,6 +27,7 @@
 #include <avp/report/metrics_csv.h>
 #include <avp/report/provenance.h>
 #include <avp/report/run_report.h>
+#include <avp/sim/scene_file.h>
 
 namespace avp::experiment {
 
@@ -50,11 +54,13 @@ double SecondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-/// One (scenario, seed): its scene and ground truth, shared by the planners.
+/// One (scenario, seed): its scene and ground truth, shared by the planners. A scene file's scene
+/// is one for all seeds (shared); a registered scenario's is built per seed.
 struct Group {
-  std::string scenario;
+  std::string scenario;  ///< the display name (BenchScenario::display_name)
   uint64_t seed = 0;
-  Result<sim::Scene> scene = InternalError("not built");
+  const BenchScenario* source = nullptr;
+  std::shared_ptr<const sim::Scene> scene;
   Result<eval::GroundTruth> gt = InternalError("not computed");
 };
 
@@ -94,13 +100,16 @@ RunConfig JobBase(const BenchConfig& config) {
   RunConfig base = config.base;
   base.threads = 1;
   base.scene_file.clear();
+  base.arrangement.clear();
   return base;
 }
 
-RunConfig JobConfig(const BenchConfig& config, const std::string& scenario, uint64_t seed,
+RunConfig JobConfig(const BenchConfig& config, const BenchScenario& scenario, uint64_t seed,
                     const std::string& planner) {
   RunConfig c = JobBase(config);
-  c.scenario = scenario;
+  c.scenario = scenario.scenario;
+  c.scene_file = scenario.scene_file;
+  c.arrangement = scenario.arrangement;
   c.seed = seed;
   c.planner.name = planner;
   const auto options = config.planner_options.find(planner);
@@ -108,25 +117,122 @@ RunConfig JobConfig(const BenchConfig& config, const std::string& scenario, uint
   return c;
 }
 
-Result<std::vector<Group>> BuildGroups(const BenchConfig& config, const Registries& registries) {
-  std::vector<Group> groups;
-  for (const std::string& s : config.scenarios) {
-    for (uint64_t seed : config.seeds) groups.push_back(Group{s, seed});
+/// A scenarios entry in a message: escaped, and long enough for a path (QuoteText shortens).
+std::string QuoteEntry(std::string_view entry) {
+  return fmt::format("'{}'", EscapeText(entry, 4096));
+}
+
+/// "scenarios entry 'plant.yaml@paper' (scene file '/abs/plant.yaml'): <status>".
+Status EntryError(const BenchScenario& b, const Status& s) {
+  std::string where = fmt::format("scenarios entry {}", QuoteEntry(b.entry));
+  if (!b.scene_file.empty()) where += fmt::format(" (scene file '{}')", b.scene_file.string());
+  return s.WithContext(where);
+}
+
+/// Two entries with the same display name, or names that give the same run folder, are an error
+/// naming both entries.
+Status CheckDisplayNames(const std::vector<BenchScenario>& list) {
+  std::map<std::string, const BenchScenario*> by_name, by_folder;
+  for (const BenchScenario& b : list) {
+    if (b.display_name.empty()) continue;  // a scene file not read yet
+    const auto [n, new_name] = by_name.emplace(b.display_name, &b);
+    const auto [f, new_folder] = by_folder.emplace(report::SafeFileName(b.display_name), &b);
+    if (!new_name || !new_folder) {
+      const BenchScenario& other = !new_name ? *n->second : *f->second;
+      return InvalidArgumentError(fmt::format(
+          "scenarios entries {} and {} have the same name {} in the summaries and run folders{}: "
+          "list each once, or give one scene file another `name:`",
+          QuoteEntry(other.entry), QuoteEntry(b.entry), QuoteText(other.display_name),
+          other.display_name == b.display_name ? std::string()
+                                               : fmt::format(" (folder {})", QuoteText(f->first))));
+    }
   }
+  return Status::Ok();
+}
+
+/// The scene of each scene-file entry of `list`: every file read once, then arranged once per
+/// entry (in parallel); fills the entries' display names. Registered scenarios get nullptr (they
+/// are built per seed). Two entries with the same display name (or the same run folder name) are
+/// an error naming both.
+Result<std::vector<std::shared_ptr<const sim::Scene>>> LoadSceneFiles(
+    const BenchConfig& config, std::vector<BenchScenario>& list) {
+  std::vector<fs::path> files;
+  for (const BenchScenario& b : list) {
+    if (!b.scene_file.empty() &&
+        std::find(files.begin(), files.end(), b.scene_file) == files.end()) {
+      files.push_back(b.scene_file);
+    }
+  }
+  std::vector<Result<sim::Scene>> read(files.size(), InternalError("not read"));
+  ParallelFor(files.size(), config.jobs, [&](size_t i) { read[i] = sim::LoadSceneFile(files[i]); });
+  std::vector<Result<sim::Scene>> arranged(list.size(), InternalError("not arranged"));
+  ParallelFor(list.size(), config.jobs, [&](size_t i) {
+    const BenchScenario& b = list[i];
+    if (b.scene_file.empty()) return;
+    const size_t f =
+        static_cast<size_t>(std::find(files.begin(), files.end(), b.scene_file) - files.begin());
+    if (!read[f].ok()) {
+      arranged[i] = read[f].status();
+      return;
+    }
+    Result<sim::Arrangement> a = sim::ParseArrangement(b.arrangement);
+    if (!a.ok()) {
+      arranged[i] = a.status();
+      return;
+    }
+    sim::Scene scene = *read[f];
+    if (Result<sim::ArrangementReport> r = sim::ApplyArrangement(scene, *a); !r.ok()) {
+      arranged[i] = r.status();
+      return;
+    }
+    arranged[i] = std::move(scene);
+  });
+  std::vector<std::shared_ptr<const sim::Scene>> scenes(list.size());
+  for (size_t i = 0; i < list.size(); ++i) {
+    if (list[i].scene_file.empty()) continue;
+    if (!arranged[i].ok()) return EntryError(list[i], arranged[i].status());
+    list[i].display_name = arranged[i]->name;
+    scenes[i] = std::make_shared<const sim::Scene>(std::move(*arranged[i]));
+  }
+  AVP_RETURN_IF_ERROR(CheckDisplayNames(list));
+  return scenes;
+}
+
+Result<std::vector<Group>> BuildGroups(const BenchConfig& config, const Registries& registries,
+                                       std::vector<BenchScenario>& list) {
+  AVP_ASSIGN_OR_RETURN(const std::vector<std::shared_ptr<const sim::Scene>> files,
+                       LoadSceneFiles(config, list));
+  std::vector<Group> groups;
+  for (size_t i = 0; i < list.size(); ++i) {
+    for (uint64_t seed : config.seeds) {
+      Group g;
+      g.scenario = list[i].display_name;
+      g.seed = seed;
+      g.source = &list[i];
+      g.scene = files[i];
+      groups.push_back(std::move(g));
+    }
+  }
+  std::vector<Status> scene_status(groups.size());
   ProgressBar bar(config.progress, groups.size(), "ground truth");
   ParallelFor(groups.size(), config.jobs, [&](size_t i) {
     Group& g = groups[i];
-    g.scene = registries.scenarios.Make(g.scenario, g.seed);
-    if (g.scene.ok()) {
-      RunConfig c = JobBase(config);
-      c.scenario = g.scenario;
-      c.seed = g.seed;
-      g.gt = GroundTruthFor(c, *g.scene);
+    if (g.scene == nullptr) {
+      Result<sim::Scene> scene = registries.scenarios.Make(g.source->scenario, g.seed);
+      if (!scene.ok()) {
+        scene_status[i] = scene.status();
+        bar.Tick();
+        return;
+      }
+      scene->name = g.scenario;
+      g.scene = std::make_shared<const sim::Scene>(std::move(*scene));
     }
+    g.gt = GroundTruthFor(JobConfig(config, *g.source, g.seed, ""), *g.scene);
     bar.Tick();
   });
-  for (const Group& g : groups) {
-    if (!g.scene.ok()) return g.scene.status();
+  for (size_t i = 0; i < groups.size(); ++i) {
+    const Group& g = groups[i];
+    if (!scene_status[i].ok()) return scene_status[i];
     if (!g.gt.ok()) {
       return Status(g.gt.status().code(), fmt::format("ground truth of {} seed {}: {}", g.scenario,
                                                       g.seed, g.gt.status().message()));
@@ -172,7 +278,7 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
     j.status = CancelledError("not run: the bench stopped (a result could not be written)");
     return j;
   }
-  const RunConfig c = JobConfig(config, g.scenario, g.seed, planner);
+  const RunConfig c = JobConfig(config, *g.source, g.seed, planner);
   const fs::path dir = config.out_dir / "runs" / report::SafeFileName(j.scenario) /
                        report::SafeFileName(j.planner) / fmt::format("seed-{}", j.seed);
   const auto fail = [&](const Status& s) {
@@ -237,10 +343,10 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
   return j;
 }
 
-report::BenchDescription Describe(const BenchConfig& config, const std::vector<Group>& groups,
-                                  const std::string& revision) {
+report::BenchDescription Describe(const BenchConfig& config, const std::vector<BenchScenario>& list,
+                                  const std::vector<Group>& groups, const std::string& revision) {
   report::BenchDescription d;
-  d.scenarios = config.scenarios;
+  for (const BenchScenario& b : list) d.scenarios.push_back(b.display_name);
   d.planners = config.planners;
   d.seeds = config.seeds.size();
   d.views = config.base.episode.views;
@@ -303,7 +409,7 @@ Status ReadStrings(const YAML::Node& root, const char* key, const std::string& c
 /// tree, where it would be silently overridden.
 Status RejectPerJobKeys(const YAML::Node& run, const std::string& ctx) {
   if (!run || !run.IsMap()) return Status::Ok();
-  for (const char* key : {"scenario", "scene_file", "seed", "planner", "threads"}) {
+  for (const char* key : {"scenario", "scene_file", "arrangement", "seed", "planner", "threads"}) {
     if (run[key]) {
       return InvalidArgumentError(fmt::format(
           "{}: run.{} is set by each job (scenarios, planners, seeds lists; episodes run one "
@@ -331,16 +437,101 @@ Status ReadPlannerOptions(const YAML::Node& node, const std::string& ctx, BenchC
 
 }  // namespace
 
+bool IsSceneFileEntry(std::string_view entry) {
+  const std::string_view path = entry.substr(0, entry.rfind('@'));
+  const auto ends_with = [&](std::string_view suffix) {
+    if (path.size() < suffix.size()) return false;
+    const std::string_view tail = path.substr(path.size() - suffix.size());
+    return std::equal(tail.begin(), tail.end(), suffix.begin(), [](char a, char b) {
+      return std::tolower(static_cast<unsigned char>(a)) == b;
+    });
+  };
+  return ends_with(".yaml") || ends_with(".yml") || path.find('/') != std::string_view::npos;
+}
+
+Result<std::vector<BenchScenario>> ExpandScenarioList(const std::vector<std::string>& entries,
+                                                      const sim::ScenarioRegistry& scenarios) {
+  std::vector<BenchScenario> out;
+  for (const std::string& entry : entries) {
+    if (entry.empty()) return InvalidArgumentError("a scenario name is empty");
+    const size_t at = entry.rfind('@');
+    const std::string base = entry.substr(0, at);
+    const std::string arrangement = at == std::string::npos ? "" : entry.substr(at + 1);
+    const auto bad = [&](const std::string& why) {
+      return InvalidArgumentError(fmt::format("scenarios entry {}: {}", QuoteEntry(entry), why));
+    };
+    if (base.empty()) return bad("no scenario or scene file before '@'");
+    if (at != std::string::npos && arrangement.empty()) {
+      return bad(fmt::format("no arrangement after '@' (known: {}, {})",
+                             fmt::join(sim::ArrangementNames(), ", "), sim::kPaperArrangements));
+    }
+    const bool file = IsSceneFileEntry(entry);
+    std::vector<std::string> arrangements = {arrangement};
+    if (arrangement == sim::kPaperArrangements) {
+      if (!file) {
+        return bad(fmt::format(
+            "'{}' arranges a scene file's plant four ways; the scenario '{}' is arranged by its "
+            "generator (the paper's scenarios are tomato-multiple-clusters, "
+            "tomato-full-occlusion, tomato-single-cluster and tomato-unoriented-start)",
+            sim::kPaperArrangements, base));
+      }
+      arrangements = sim::ArrangementNames();
+    }
+    for (const std::string& a : arrangements) {
+      const Result<sim::Arrangement> parsed = sim::ParseArrangement(a);
+      if (!parsed.ok()) return bad(parsed.status().message());
+      BenchScenario b;
+      b.entry = entry;
+      b.arrangement = a;
+      if (file) {
+        b.scene_file = base;
+      } else {
+        if (scenarios.Find(base) == nullptr) {
+          return bad(fmt::format(
+              "unknown scenario '{}' (known: {}; a scene file ends in .yaml or .yml, or has a "
+              "'/': ./{})",
+              base, fmt::join(scenarios.Names(), ", "), base));
+        }
+        if (!parsed->IsIdentity()) {
+          return bad(fmt::format(
+              "arrangement '{}' is for scene files: the scenario '{}' is arranged by its "
+              "generator (only 'reference' is accepted)",
+              a, base));
+        }
+        b.scenario = base;
+        b.display_name = a.empty() ? base : base + "@" + a;
+      }
+      out.push_back(std::move(b));
+    }
+  }
+  return out;
+}
+
 Status BenchConfig::Validate(const Registries& registries) const {
   std::vector<std::string> errors;
   if (scenarios.empty()) errors.push_back("no scenario");
   if (planners.empty()) errors.push_back("no planner");
   if (seeds.empty()) errors.push_back("no seed");
-  for (const std::string& s : scenarios) {
-    if (registries.scenarios.Find(s) == nullptr) {
-      errors.push_back(fmt::format("unknown scenario '{}' (known: {})", s,
-                                   fmt::join(registries.scenarios.Names(), ", ")));
+  const Result<std::vector<BenchScenario>> list =
+      ExpandScenarioList(scenarios, registries.scenarios);
+  if (!list.ok()) {
+    errors.push_back(list.status().message());
+  } else {
+    for (const BenchScenario& b : *list) {
+      std::error_code ec;
+      if (!b.scene_file.empty() && !fs::is_regular_file(b.scene_file, ec)) {
+        errors.push_back(fmt::format(
+            "scenarios entry {}: scene file '{}' {}", QuoteEntry(b.entry), b.scene_file.string(),
+            fs::exists(b.scene_file, ec) ? "is not a regular file" : "does not exist"));
+      }
     }
+    if (Status s = CheckDisplayNames(*list); !s.ok()) errors.push_back(s.message());
+  }
+  if (!base.arrangement.empty()) {
+    errors.push_back(
+        fmt::format("the run configuration's arrangement ('{}') is set per scenarios entry: give "
+                    "FILE.yaml@ARRANGEMENT there",
+                    base.arrangement));
   }
   for (const std::string& p : planners) {
     const auto options = planner_options.find(p);
@@ -356,22 +547,19 @@ Status BenchConfig::Validate(const Registries& registries) const {
                       planner, fmt::join(planners, ", ")));
     }
   }
-  for (const std::string& s : scenarios) {
-    if (s.empty()) errors.push_back("a scenario name is empty");
-  }
   for (const std::string& p : planners) {
     if (p.empty()) errors.push_back("a planner name is empty");
   }
   if (Status s = CheckSeedCount(seeds.size(), "seeds"); !s.ok()) errors.push_back(s.message());
+  const size_t num_scenarios = list.ok() ? list->size() : scenarios.size();
   uint64_t shown = 0;
-  if (__builtin_mul_overflow(uint64_t{scenarios.size()}, uint64_t{planners.size()}, &shown) ||
+  if (__builtin_mul_overflow(uint64_t{num_scenarios}, uint64_t{planners.size()}, &shown) ||
       __builtin_mul_overflow(shown, uint64_t{seeds.size()}, &shown)) {
     shown = UINT64_MAX;
   }
-  if (Status s =
-          MaxBenchEpisodes().Check(fmt::format("{} scenarios x {} planners x {} seeds",
-                                               scenarios.size(), planners.size(), seeds.size()),
-                                   shown);
+  if (Status s = MaxBenchEpisodes().Check(fmt::format("{} scenarios x {} planners x {} seeds",
+                                                      num_scenarios, planners.size(), seeds.size()),
+                                          shown);
       !s.ok()) {
     return s;
   }
@@ -383,7 +571,8 @@ Status BenchConfig::Validate(const Registries& registries) const {
   if (out_dir.empty()) errors.push_back("the output folder (--out) is empty");
   if (errors.empty()) {
     RunConfig probe = JobBase(*this);
-    probe.scenario = scenarios.front();
+    probe.scenario = list->front().scenario;
+    probe.scene_file = list->front().scene_file;
     probe.planner.name = planners.front();
     probe.planner.options.clear();
     return probe.Validate(registries).WithContext("invalid bench configuration");
@@ -401,6 +590,16 @@ Result<BenchConfig> LoadBenchConfig(const fs::path& yaml) {
   try {
     if (root["description"]) o.description = root["description"].as<std::string>();
     AVP_RETURN_IF_ERROR(ReadStrings(root, "scenarios", ctx, o.scenarios));
+    // A scene file of the list is relative to the config file.
+    for (std::string& entry : o.scenarios) {
+      if (!IsSceneFileEntry(entry)) continue;
+      const size_t at = entry.rfind('@');
+      const fs::path file = entry.substr(0, at);
+      if (file.is_relative()) {
+        entry = (yaml.parent_path() / file).lexically_normal().string() +
+                (at == std::string::npos ? std::string() : entry.substr(at));
+      }
+    }
     AVP_RETURN_IF_ERROR(ReadStrings(root, "planners", ctx, o.planners));
     AVP_RETURN_IF_ERROR(ReadSeeds(root["seeds"], ctx, o.seeds));
     AVP_RETURN_IF_ERROR(ReadPlannerOptions(root["planner_options"], ctx, o));
@@ -415,8 +614,12 @@ Result<BenchConfig> LoadBenchConfig(const fs::path& yaml) {
 namespace {
 
 /// Outputs never overwrite inputs: the bench folder and its summary files against the inputs.
-Status CheckBenchOutputs(const BenchConfig& config) {
-  for (const auto& [input, what] : config.inputs) {
+Status CheckBenchOutputs(const BenchConfig& config, const std::vector<BenchScenario>& list) {
+  std::vector<std::pair<fs::path, std::string>> inputs = config.inputs;
+  for (const BenchScenario& b : list) {
+    if (!b.scene_file.empty()) inputs.emplace_back(b.scene_file, "scene file");
+  }
+  for (const auto& [input, what] : inputs) {
     AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(config.out_dir, "bench folder", input, what));
     for (const char* name :
          {"summary.md", "summary.csv", "fruits_by_visibility.csv", "avp-state.json"}) {
@@ -438,14 +641,14 @@ Status CheckBenchOutputs(const BenchConfig& config) {
 }
 
 Result<BenchSummary> RunBenchInFolder(const BenchConfig& config, const Registries& registries,
-                                      Clock::time_point t0) {
+                                      std::vector<BenchScenario>& list, Clock::time_point t0) {
   std::error_code ec;
   fs::create_directories(config.out_dir / "runs", ec);
   if (ec) {
     return IoError(
         fmt::format("cannot create '{}': {}", (config.out_dir / "runs").string(), ec.message()));
   }
-  AVP_ASSIGN_OR_RETURN(const std::vector<Group> groups, BuildGroups(config, registries));
+  AVP_ASSIGN_OR_RETURN(const std::vector<Group> groups, BuildGroups(config, registries, list));
   // Asked of git once, not per episode (two processes each).
   const std::string revision = report::SourceRevision();
   struct JobRef {
@@ -467,9 +670,10 @@ Result<BenchSummary> RunBenchInFolder(const BenchConfig& config, const Registrie
     });
   }
   if (failure.failed()) return failure.first();
-  AVP_ASSIGN_OR_RETURN(report::BenchTables tables,
-                       report::WriteBenchSummary(config.out_dir, Describe(config, groups, revision),
-                                                 episodes, SecondsSince(t0)));
+  AVP_ASSIGN_OR_RETURN(
+      report::BenchTables tables,
+      report::WriteBenchSummary(config.out_dir, Describe(config, list, groups, revision), episodes,
+                                SecondsSince(t0)));
   BenchSummary summary;
   summary.cells = std::move(tables.cells);
   summary.files = std::move(tables.files);
@@ -483,10 +687,12 @@ Result<BenchSummary> RunBenchInFolder(const BenchConfig& config, const Registrie
 Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& registries) {
   const auto t0 = Clock::now();
   AVP_RETURN_IF_ERROR(config.Validate(registries));
-  AVP_RETURN_IF_ERROR(CheckBenchOutputs(config));
+  AVP_ASSIGN_OR_RETURN(std::vector<BenchScenario> list,
+                       ExpandScenarioList(config.scenarios, registries.scenarios));
+  AVP_RETURN_IF_ERROR(CheckBenchOutputs(config, list));
   AVP_RETURN_IF_ERROR(PrepareOutputFolder(config.out_dir, BenchFolderKind(), config.force));
   AVP_RETURN_IF_ERROR(MarkInProgress(config.out_dir, BenchFolderKind(), "avp bench"));
-  Result<BenchSummary> summary = RunBenchInFolder(config, registries, t0);
+  Result<BenchSummary> summary = RunBenchInFolder(config, registries, list, t0);
   if (!summary.ok()) {
     MarkFailed(config.out_dir, BenchFolderKind(), "avp bench", summary.status());
     return summary.status();

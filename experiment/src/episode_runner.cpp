@@ -170,7 +170,8 @@ Result<EpisodeParts> BuildParts(const RunConfig& config, const Registries& regis
 }  // namespace
 
 Result<sim::Scene> LoadScene(const RunConfig& config, const Registries& registries) {
-  return sim::LoadScene({config.scenario, config.scene_file, config.seed}, registries.scenarios);
+  return sim::LoadScene({config.scenario, config.scene_file, config.seed, config.arrangement},
+                        registries.scenarios);
 }
 
 Result<eval::GroundTruth> GroundTruthFor(const RunConfig& config, const sim::Scene& scene) {

@@ -7,6 +7,7 @@
 #include <avp/experiment/run_config.h>
 #include <avp/io/options_yaml.h>
 #include <avp/io/yaml.h>
+#include <avp/sim/scenario.h>
 
 namespace avp::experiment {
 
@@ -60,6 +61,9 @@ const OptionTable<RunConfig>& RunConfigTable() {
     auto* t = new OptionTable<R>("run configuration key");
     t->Text("scenario", &R::scenario, "a registered scenario (empty: the default one)");
     t->Path("scene_file", &R::scene_file, "a YAML scene file instead of a scenario");
+    t->Text("arrangement", &R::arrangement,
+            "how the scene file's plant is arranged: reference, full-occlusion, single-cluster, "
+            "unoriented-start or KEY=VALUE items joined by '+' (docs/scene-format.md)");
     t->Integer("seed", &R::seed, "", ValueRange::Any(),
                "seed of the plant, the noise and every choice");
     t->Integer("threads", &R::threads, "", ValueRange::Closed(0, kMaxThreads),
@@ -113,6 +117,14 @@ Status RunConfig::Validate(const Registries& registries) const {
   if (!scenario.empty() && registries.scenarios.Find(scenario) == nullptr) {
     errors.push_back(fmt::format("unknown scenario '{}' (known: {})", scenario,
                                  fmt::join(registries.scenarios.Names(), ", ")));
+  }
+  if (const Result<sim::Arrangement> a = sim::ParseArrangement(arrangement); !a.ok()) {
+    errors.push_back(a.status().message());
+  } else if (scene_file.empty() && !a->IsIdentity()) {
+    errors.push_back(fmt::format(
+        "arrangement '{}' needs a scene file (scene_file): a scenario ('{}') is arranged by its "
+        "generator (only 'reference' is accepted)",
+        arrangement, scenario.empty() ? sim::DefaultScenarioName() : scenario));
   }
   if (Result<AnyOptions> p = PlannerOptions(*this, registries); !p.ok()) {
     errors.push_back(p.status().message());

@@ -9,6 +9,7 @@
 
 #include <avp/core/error.h>
 #include <avp/core/rng.h>
+#include <avp/core/text.h>
 #include <avp/sim/espalier.h>
 #include <avp/sim/mesh_builder.h>
 #include <avp/sim/scenario.h>
@@ -225,10 +226,25 @@ Result<Scene> LoadScene(const SceneSource& source, const ScenarioRegistry& scena
         fmt::format("give either a scenario ('{}') or a scene file ('{}'), not both",
                     source.scenario, source.scene_file.string()));
   }
-  if (!source.scene_file.empty()) return LoadSceneFile(source.scene_file);
+  AVP_ASSIGN_OR_RETURN(const Arrangement arrangement, ParseArrangement(source.arrangement));
+  if (!source.scene_file.empty()) {
+    AVP_ASSIGN_OR_RETURN(Scene scene, LoadSceneFile(source.scene_file));
+    if (Result<ArrangementReport> r = ApplyArrangement(scene, arrangement); !r.ok()) {
+      return r.status().WithContext(source.scene_file.string());
+    }
+    return scene;
+  }
   const std::string name =
       source.scenario.empty() ? std::string(DefaultScenarioName()) : source.scenario;
-  return scenarios.Make(name, source.seed);
+  if (!arrangement.IsIdentity()) {
+    return InvalidArgumentError(fmt::format(
+        "arrangement {} is for scene files: the scenario '{}' is arranged by its generator (only "
+        "'reference' is accepted)",
+        QuoteText(source.arrangement), name));
+  }
+  AVP_ASSIGN_OR_RETURN(Scene scene, scenarios.Make(name, source.seed));
+  if (!source.arrangement.empty()) scene.name += "@" + source.arrangement;
+  return scene;
 }
 
 std::vector<double> ReferenceStartJointsRad(double yaw_q1_deg) {

@@ -14,6 +14,7 @@
 #include <avp/experiment/registries.h>
 #include <avp/experiment/run_config.h>
 #include <avp/report/bench_summary.h>
+#include <avp/sim/scenario.h>
 
 namespace avp::experiment {
 
@@ -27,10 +28,38 @@ Status CheckSeedCount(uint64_t count, std::string_view what);
 /// default (`avp --limit max_bench_episodes=N bench ...`). Checked before any job is listed.
 const Limit& MaxBenchEpisodes();
 
+/// One entry of a bench's scenario list, resolved: a registered scenario or a scene file, with
+/// its arrangement (docs/experiments.md, "Your own plant").
+struct BenchScenario {
+  std::string entry;     ///< the list entry it comes from, as given
+  std::string scenario;  ///< a registered scenario; empty for a scene file
+  std::filesystem::path scene_file;
+  std::string arrangement;  ///< sim::ParseArrangement's text; empty: none
+  /// Its name in summaries and run folders: the scenario's name or the scene's (the file's
+  /// `name:` or stem), "@<arrangement>" appended when one is given. Empty for a scene file until
+  /// the file is read.
+  std::string display_name;
+};
+
+/// True when a scenario list entry names a scene file: its part before the last '@' ends in
+/// .yaml or .yml, or contains a '/'.
+bool IsSceneFileEntry(std::string_view entry);
+
+/// The entries of a scenario list, each "NAME", "NAME@ARRANGEMENT", "FILE" or "FILE@ARRANGEMENT";
+/// "FILE@paper" stands for the four paper arrangements (reference, full-occlusion,
+/// single-cluster, unoriented-start). Errors (InvalidArgument naming the entry): an empty entry or
+/// arrangement, a bad arrangement (sim::ParseArrangement), an unknown scenario, an arrangement
+/// other than reference for a scenario. Files are not read here.
+Result<std::vector<BenchScenario>> ExpandScenarioList(const std::vector<std::string>& entries,
+                                                      const sim::ScenarioRegistry& scenarios);
+
 /// `avp bench`: scenarios x planners x seeds, episodes in parallel (docs/experiments.md).
 struct BenchConfig {
   /// One line for the summary.
   std::string description;
+  /// Registered scenarios and scene files, each optionally "@ARRANGEMENT" (ExpandScenarioList).
+  /// A scene file path is relative to the current directory (LoadBenchConfig makes a config's
+  /// relative to the config file).
   std::vector<std::string> scenarios;
   std::vector<std::string> planners;
   std::vector<uint64_t> seeds;
@@ -50,13 +79,16 @@ struct BenchConfig {
   /// Progress bars on stderr.
   bool progress = true;
 
-  /// Every problem at once: empty or unknown scenarios and planners, empty names, repeated
-  /// seeds, too many seeds or episodes (max_bench_episodes), jobs out of [0, kMaxThreads], options
-  /// of a planner that is not in the bench or that it does not have, a bad base configuration.
+  /// Every problem at once: empty or unknown scenarios and planners, empty names, bad
+  /// arrangements, missing scene files (naming the entry and the file), repeated seeds, too many
+  /// seeds or episodes (max_bench_episodes), jobs out of [0, kMaxThreads], options of a planner
+  /// that is not in the bench or that it does not have, a bad base configuration. Scene files are
+  /// read by RunBench (their errors, and two entries with the same display name, fail it there).
   Status Validate(const Registries& registries) const;
 };
 
-/// Reads an experiment YAML (configs/experiments/paper.yaml): keys description, scenarios,
+/// Reads an experiment YAML (configs/experiments/paper.yaml): keys description, scenarios (scene
+/// files among them relative to the YAML file),
 /// planners (lists), seeds (a list, or {first, count}), planner_options ({planner: {key:
 /// value}}), run (a run configuration tree over the defaults, as `avp run --print-config` prints
 /// it). Unknown keys are errors naming them and the known ones.
@@ -70,7 +102,8 @@ struct BenchSummary {
   double seconds = 0.0;
 };
 
-/// Runs the bench: each (scenario, seed) scene and ground truth once, shared by the planners;
+/// Runs the bench: each scene file read once (and arranged once per arrangement), each
+/// (scenario, seed) scene and ground truth once, shared by the planners;
 /// per-run metrics.csv and record.json under runs/<scenario>/<planner>/seed-<n>/, then the
 /// summary (report::WriteBenchSummary). The bench folder and each per-run folder have the run
 /// folder's lifecycle (avp-state.json, output_folder.h): a folder holding results is refused

@@ -35,6 +35,10 @@ struct RunConfig {
   /// A registered scenario (empty: the default one) or a YAML scene file (then scenario is empty).
   std::string scenario;
   std::filesystem::path scene_file;
+  /// How the scene file's plant is arranged (sim::ParseArrangement: "full-occlusion",
+  /// "plant-y=0.4+start-yaw=20", ...; empty: as the file places it; a scenario takes only
+  /// "reference").
+  std::string arrangement;
   /// Seed of the plant, the noise and every choice (forked per subsystem).
   uint64_t seed = 0;
   /// Threads inside the planner, the integrator and the ground truth (0 = all). Results do not

@@ -7,6 +7,9 @@
 #include <string_view>
 #include <vector>
 
+#include <Eigen/Core>
+
+#include <avp/core/camera.h>
 #include <avp/core/registry.h>
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
@@ -55,11 +58,94 @@ struct SceneSource {
   std::string scenario;              ///< empty: use scene_file, or the default scenario
   std::filesystem::path scene_file;  ///< a YAML scene (docs/scene-format.md)
   uint64_t seed = 0;
+  /// How the scene file's plant is arranged (ParseArrangement; empty: as the file places it). A
+  /// registered scenario takes only "reference" (or nothing).
+  std::string arrangement;
 };
 
-/// Builds the scene of `source` from `scenarios` or the file; errors name the bad scenario or
-/// file. Giving both is an error.
+/// Builds the scene of `source` from `scenarios` or the file, then arranges it
+/// (ApplyArrangement); errors name the bad scenario, file or arrangement. Giving both a scenario
+/// and a file is an error, and so is an arrangement other than "reference" for a scenario.
 Result<Scene> LoadScene(const SceneSource& source, const ScenarioRegistry& scenarios);
+
+// ---- Arrangements: one plant placed like each of the paper's tomato scenarios -------------------
+//
+// A scene file holds one plant as its author placed it. An arrangement moves that plant, keeps
+// some of its fruit and turns the arm's start, so that one mesh runs the paper's four tomato
+// experiments (docs/scene-format.md, "Arrangements"). It uses nothing but the scene's objects:
+// the plant is every object that is neither ground nor background (Scene::UpdatePlantBounds), the
+// fruit are its fruit-class objects (Scene::Fruits).
+
+/// An arrangement, parsed. Applied in this order: the start yaw (the arm and its start camera),
+/// then one fruit cluster kept, then the plant turned about the vertical axis through the centre
+/// of its plant_bounds (a fixed yaw, or the one that hides the most fruit), then moved.
+struct Arrangement {
+  /// The text it was parsed from ("full-occlusion", "plant-y=0.4+start-yaw=20"); empty: none.
+  std::string spec;
+  /// Added to every plant object's position after the turn, metres (world frame).
+  Eigen::Vector3d plant_offset_m = Eigen::Vector3d::Zero();
+  /// The plant's turn about the vertical axis through its plant_bounds centre, degrees
+  /// (counter-clockwise seen from above).
+  double plant_yaw_deg = 0.0;
+  /// Choose plant_yaw_deg among 0, 15, ..., 345 as the one that leaves the fewest fruit pixels in
+  /// the rendered start view (ties: the smallest yaw).
+  bool occluding_yaw = false;
+  /// Keep only the fruit of one cluster (FruitClusters with cluster_gap_m): the one with the most
+  /// fruit, ties: the one whose centroid is nearest the start camera.
+  bool single_cluster = false;
+  double cluster_gap_m = 0.04;
+  /// Added to arm joint 1 (q1) at the start, degrees; the start camera turns by Rz(-q1) about the
+  /// world z axis through the base (ReferenceStartCameraPose).
+  double start_yaw_deg = 0.0;
+
+  /// True when it changes nothing.
+  bool IsIdentity() const;
+};
+
+/// The named arrangements, the paper's four tomato scenarios: "reference" (as the file places it:
+/// tomato-multiple-clusters), "full-occlusion", "single-cluster", "unoriented-start" (plant-y=0.4
+/// + start-yaw=20, as tomato-unoriented-start).
+const std::vector<std::string>& ArrangementNames();
+/// "paper": in an avp bench scenario list, `scene.yaml@paper` stands for the four named ones.
+inline constexpr std::string_view kPaperArrangements = "paper";
+
+/// The spacing of occluding_yaw's candidates, degrees.
+inline constexpr double kOcclusionYawStepDeg = 15.0;
+
+/// Parses "NAME" or items joined by '+': a name of ArrangementNames(), or KEY=VALUE with KEY one
+/// of plant-x, plant-y, plant-z (metres), plant-yaw (degrees), start-yaw (degrees), cluster-gap
+/// (metres, with single-cluster). "" gives the identity. Errors (InvalidArgument, naming the spec
+/// and the item): an unknown name or key (listing the known ones), a bad or out-of-range number,
+/// a field set twice (e.g. full-occlusion+plant-yaw=30), "paper" (a bench list's shorthand).
+Result<Arrangement> ParseArrangement(std::string_view spec);
+
+/// What ApplyArrangement did.
+struct ArrangementReport {
+  double plant_yaw_deg = 0.0;  ///< the turn applied (the one chosen with occluding_yaw)
+  /// With occluding_yaw: the start view's fruit pixels at each candidate yaw (0, 15, ...).
+  std::vector<size_t> fruit_pixels_by_yaw;
+  size_t fruits_kept = 0, fruits_removed = 0;
+  std::string summary;  ///< one line, also appended to the scene's description
+};
+
+/// The scene's fruit in clusters: single linkage, two fruit linked when their centres are at most
+/// r_a + r_b + gap_m apart (r: FruitTruth::mean_radius_m, so gap_m is the gap between their
+/// surfaces). Each cluster lists instance ids ascending; clusters ordered by their first id.
+std::vector<std::vector<uint16_t>> FruitClusters(const Scene& scene, double gap_m);
+
+/// The fruit pixels (class fruit) of `scene` rendered from `X_WC` with `camera`.
+size_t CountFruitPixels(const Scene& scene, const CameraIntrinsics& camera,
+                        const RigidTransform& X_WC);
+
+/// Arranges `scene` in place (see Arrangement for the order), then recomputes plant_bounds and
+/// appends "@<spec>" to its name (when spec is not empty) and the report's summary to its
+/// description. Fruit ground truth follows (it is read from the objects). occluding_yaw renders
+/// the start view with `camera` (the plant alone, without ground and background objects).
+/// Errors: InvalidArgument for a scene without plant, single_cluster without fruit, a start yaw
+/// with no start joints.
+Result<ArrangementReport> ApplyArrangement(
+    Scene& scene, const Arrangement& arrangement,
+    const CameraIntrinsics& camera = CameraIntrinsics::RealSenseD435());
 
 // ---- Arm start configuration shared by the scenarios (and scene files) --------------------------
 
