@@ -28,9 +28,17 @@ const std::array<float, 256>& SrgbToLinearLut() {
   return lut;
 }
 
+/// floor(x) for finite |x| < 2^23 without a libm call (the baseline x86-64 build has no
+/// roundss); larger floats are whole numbers already.
+inline float FastFloor(float x) {
+  if (!(std::abs(x) < 8388608.0f)) return x;
+  const float t = static_cast<float>(static_cast<int32_t>(x));
+  return t > x ? t - 1.0f : t;
+}
+
 /// Fractional part in [0, 1) (repeat wrap); x finite.
 inline float Wrap01(float x) {
-  const float f = x - std::floor(x);
+  const float f = x - FastFloor(x);
   return f < 1.0f ? f : 0.0f;  // x slightly below an integer can round up to 1
 }
 
@@ -43,8 +51,8 @@ Eigen::Vector3f Texture::Sample(const Eigen::Vector2f& st) const {
   // Continuous texel coordinates with texel centres at integers; row 0 is the top (t = 1).
   const float x = Wrap01(st.x()) * static_cast<float>(w) - 0.5f;
   const float y = (1.0f - Wrap01(st.y())) * static_cast<float>(h) - 0.5f;
-  const float fx0 = std::floor(x);
-  const float fy0 = std::floor(y);
+  const float fx0 = FastFloor(x);
+  const float fy0 = FastFloor(y);
   const float ax = x - fx0;
   const float ay = y - fy0;
   // Neighbours wrap around the edges (repeat); floor(x) >= -1 and <= w - 1.
