@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 
 #include <avp/apps/render_command.h>
+#include <avp/apps/scene_command.h>
 #include <avp/core/rng.h>
 #include <avp/io/depth.h>
 #include <avp/io/file.h>
@@ -65,6 +66,7 @@ Result<RenderSummary> RunRender(const RenderOptions& options,
                                                   options.arm_config, "arm config"));
   }
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
+  LogSceneWarnings(scene);
 
   RenderSummary summary;
   if (options.camera_pose) {

@@ -8,11 +8,13 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <avp/apps/scene_command.h>
 #include <avp/experiment/run_config.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/options_yaml.h>
 #include <avp/io/yaml.h>
 #include <avp/sim/scenario.h>
+#include <avp/sim/scene_file.h>
 
 #include "cli_common.h"
 #include "run_cli.h"
@@ -172,6 +174,12 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
     if (!yaml.ok()) return Failed("run", yaml.status());
     std::fputs(io::YamlText(*yaml).c_str(), stdout);
     return 0;
+  }
+  // A scene file's warnings (placeholder materials, classes one colour shares ...) before the run.
+  if (!config->scene_file.empty()) {
+    if (const Result<sim::Scene> scene = sim::LoadSceneFile(config->scene_file); scene.ok()) {
+      LogSceneWarnings(*scene);
+    }
   }
   experiment::RunFolderOptions options;
   options.out_dir = cli.out;

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <string>
 #include <system_error>
+#include <unordered_map>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -33,6 +34,8 @@
 #include <avp/sim/mesh_builder.h>
 #include <avp/sim/scenario.h>
 #include <avp/sim/scene_file.h>
+
+#include "scene_textures.h"
 
 namespace avp::sim {
 
@@ -65,6 +68,18 @@ namespace fs = std::filesystem;
 
 enum class UpAxis { kAuto, kY, kZ };
 enum class FruitInstances { kObjects, kComponents };
+/// `materials:` use: material colours (and textures) win over class defaults; ignore: class
+/// defaults; auto: as use, except placeholder colours (docs/scene-format.md).
+enum class MaterialMode { kAuto, kUse, kIgnore };
+enum class SmallParts { kMerge, kDrop };
+
+/// `merge: [{match: "Fruit*_calyx", into: "Fruit*"}]`: a part whose node or mesh name matches
+/// `match` joins the part named `into`, with each '*' of `into` replaced by what the
+/// corresponding '*' of `match` matched.
+struct MergeRule {
+  std::string match;
+  std::string into;
+};
 
 struct ClassRule {
   std::string pattern;
@@ -82,10 +97,19 @@ struct MeshEntry {
   std::optional<Eigen::Vector3f> color;
   FruitInstances fruit_instances = FruitInstances::kObjects;
   std::vector<ClassRule> rules;
+  MaterialMode materials = MaterialMode::kAuto;
+  /// A fruit instance whose bounding box is under this volume, or that has fewer vertices, is a
+  /// fragment: it joins its nearest fruit within fruit_merge_reach_mm (merge) or is dropped.
+  double fruit_min_volume_cm3 = 0.0;
+  int64_t fruit_min_vertices = 0;
+  SmallParts fruit_small_parts = SmallParts::kMerge;
+  double fruit_merge_reach_mm = 10.0;
+  std::vector<MergeRule> merge;
 };
 
-/// Default colours per class when neither the file nor a rule gives one (linear RGB).
-Eigen::Vector3f DefaultColor(SemanticClass c) {
+}  // namespace
+
+Eigen::Vector3f DefaultClassColor(SemanticClass c) {
   switch (c) {
     case SemanticClass::kFruit:
       return {0.55f, 0.05f, 0.03f};
@@ -101,6 +125,36 @@ Eigen::Vector3f DefaultColor(SemanticClass c) {
       return {0.5f, 0.5f, 0.5f};
   }
 }
+
+bool IsAchromatic(const Eigen::Vector3f& rgb) {
+  const float hi = rgb.maxCoeff();
+  const float lo = rgb.minCoeff();
+  return hi < 0.01f || (hi - lo) < kAchromaticSaturation * hi;
+}
+
+std::string_view ToString(ColorSource source) {
+  switch (source) {
+    case ColorSource::kRule:
+      return "rule";
+    case ColorSource::kEntry:
+      return "entry";
+    case ColorSource::kTexture:
+      return "texture";
+    case ColorSource::kMaterial:
+      return "material";
+    case ColorSource::kClassDefault:
+      return "class default";
+    case ColorSource::kPlaceholder:
+      return "placeholder replaced";
+  }
+  return "?";
+}
+
+namespace {
+
+/// A class whose default colour has a hue: an achromatic material colour shared by all its parts
+/// is taken for a placeholder under `materials: auto`.
+bool ChromaticClass(SemanticClass c) { return !IsAchromatic(DefaultClassColor(c)); }
 
 std::string KnownClasses() {
   std::vector<std::string> names;
@@ -134,7 +188,9 @@ Result<MeshEntry> ReadMeshEntry(const YAML::Node& node, const fs::path& base_dir
                                 const std::string& context) {
   AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(
       node,
-      {"file", "pose", "scale", "up_axis", "default_class", "color", "fruit_instances", "classes"},
+      {"file", "pose", "scale", "up_axis", "default_class", "color", "fruit_instances", "classes",
+       "materials", "fruit_min_volume_cm3", "fruit_min_vertices", "fruit_small_parts",
+       "fruit_merge_reach_mm", "merge"},
       context));
   MeshEntry entry;
   AVP_ASSIGN_OR_RETURN(entry.file_text, io::ReadString(node, "file", context));
@@ -207,6 +263,80 @@ Result<MeshEntry> ReadMeshEntry(const YAML::Node& node, const fs::path& base_dir
         AVP_ASSIGN_OR_RETURN(rule.color, ReadColor(r, "color", rule_context));
       }
       entry.rules.push_back(std::move(rule));
+    }
+  }
+  if (node["materials"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(const std::string mode, io::ReadString(node, "materials", context));
+    if (mode == "auto") {
+      entry.materials = MaterialMode::kAuto;
+    } else if (mode == "use") {
+      entry.materials = MaterialMode::kUse;
+    } else if (mode == "ignore") {
+      entry.materials = MaterialMode::kIgnore;
+    } else {
+      return InvalidArgumentError(fmt::format(
+          "{}.materials: must be 'auto', 'use' or 'ignore', got {}", context, QuoteText(mode)));
+    }
+  }
+  if (node["fruit_min_volume_cm3"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(entry.fruit_min_volume_cm3,
+                         io::ReadDouble(node, "fruit_min_volume_cm3", context));
+    if (!std::isfinite(entry.fruit_min_volume_cm3) || entry.fruit_min_volume_cm3 < 0.0) {
+      return InvalidArgumentError(fmt::format("{}.fruit_min_volume_cm3: must be >= 0, got {}",
+                                              context, entry.fruit_min_volume_cm3));
+    }
+  }
+  if (node["fruit_min_vertices"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(entry.fruit_min_vertices,
+                         io::ReadInt(node, "fruit_min_vertices", context));
+    if (entry.fruit_min_vertices < 0) {
+      return InvalidArgumentError(fmt::format("{}.fruit_min_vertices: must be >= 0, got {}",
+                                              context, entry.fruit_min_vertices));
+    }
+  }
+  if (node["fruit_small_parts"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(const std::string mode,
+                         io::ReadString(node, "fruit_small_parts", context));
+    if (mode == "merge") {
+      entry.fruit_small_parts = SmallParts::kMerge;
+    } else if (mode == "drop") {
+      entry.fruit_small_parts = SmallParts::kDrop;
+    } else {
+      return InvalidArgumentError(fmt::format(
+          "{}.fruit_small_parts: must be 'merge' or 'drop', got {}", context, QuoteText(mode)));
+    }
+  }
+  if (node["fruit_merge_reach_mm"].IsDefined()) {
+    AVP_ASSIGN_OR_RETURN(entry.fruit_merge_reach_mm,
+                         io::ReadDouble(node, "fruit_merge_reach_mm", context));
+    if (!std::isfinite(entry.fruit_merge_reach_mm) || entry.fruit_merge_reach_mm < 0.0) {
+      return InvalidArgumentError(fmt::format("{}.fruit_merge_reach_mm: must be >= 0, got {}",
+                                              context, entry.fruit_merge_reach_mm));
+    }
+  }
+  if (const YAML::Node merge = node["merge"]; merge.IsDefined()) {
+    if (!merge.IsSequence()) {
+      return InvalidArgumentError(
+          fmt::format("{}.merge: must be a list of {{match, into}} rules", context));
+    }
+    for (size_t i = 0; i < merge.size(); ++i) {
+      const std::string rule_context = fmt::format("{}.merge[{}]", context, i);
+      const YAML::Node r = merge[i];
+      AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(r, {"match", "into"}, rule_context));
+      MergeRule rule;
+      AVP_ASSIGN_OR_RETURN(rule.match, io::ReadString(r, "match", rule_context));
+      AVP_ASSIGN_OR_RETURN(rule.into, io::ReadString(r, "into", rule_context));
+      if (rule.match.size() > 256 || rule.into.size() > 256) {
+        return InvalidArgumentError(
+            fmt::format("{}: 'match' and 'into' hold at most 256 characters (got {} and {})",
+                        rule_context, rule.match.size(), rule.into.size()));
+      }
+      if (rule.match.empty() || rule.into.empty()) {
+        return InvalidArgumentError(
+            fmt::format("{}: 'match' and 'into' must not be empty (got {} and {})", rule_context,
+                        QuoteText(rule.match), QuoteText(rule.into)));
+      }
+      entry.merge.push_back(std::move(rule));
     }
   }
   return entry;
@@ -483,12 +613,19 @@ Status CheckObjOrStlCounts(const fs::path& file, uint64_t file_bytes, const std:
 /// Everything one mesh file contributes, before it is added to the scene.
 struct ImportedPart {
   std::string name;
+  std::string node_name;
+  std::string mesh_name;
+  std::string material;  // the material's name, "" when none
   SemanticClass semantic_class = SemanticClass::kOther;
+  int rule = -1;  // the class rule that gave the class, -1: default_class
   Eigen::Vector3f albedo;
+  ColorSource color_source = ColorSource::kClassDefault;
+  Eigen::Vector3f material_color = Eigen::Vector3f::Zero();  // when kPlaceholder
   TriangleMesh mesh;
 };
 
-Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::string& context) {
+Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::string& context,
+                                             std::vector<std::string>& warnings) {
   // The file's size, and a PLY's declared counts, before assimp reads anything.
   AVP_ASSIGN_OR_RETURN(const uint64_t file_bytes, io::CheckReadableFile(entry.file, "mesh file"));
   AVP_RETURN_IF_ERROR(MaxMeshFileBytes().Check(
@@ -576,6 +713,7 @@ Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::
 
   std::vector<ImportedPart> parts;
   const std::string stem = entry.file.stem().string();
+  internal::TextureLoader textures(*ai, entry.file);
   // Iterative depth-first traversal (children in file order) with accumulated transforms.
   struct Item {
     const aiNode* node;
@@ -598,24 +736,53 @@ Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::
 
       // Class: the first rule matching the node, mesh or material name.
       ImportedPart part;
+      part.node_name = node_name;
+      part.mesh_name = mesh_name;
+      part.material = mat;
       part.semantic_class = entry.default_class;
-      std::optional<Eigen::Vector3f> color = entry.color;
-      for (const ClassRule& rule : entry.rules) {
+      std::optional<Eigen::Vector3f> color;
+      for (size_t r = 0; r < entry.rules.size(); ++r) {
+        const ClassRule& rule = entry.rules[r];
         if (GlobMatch(rule.pattern, node_name) || GlobMatch(rule.pattern, mesh_name) ||
             (!mat.empty() && GlobMatch(rule.pattern, mat))) {
           part.semantic_class = rule.semantic_class;
-          if (rule.color) color = rule.color;
+          part.rule = static_cast<int>(r);
+          if (rule.color) {
+            color = rule.color;
+            part.color_source = ColorSource::kRule;
+          }
           break;
         }
       }
-      if (!color && material != nullptr && !mat.empty() && mat != AI_DEFAULT_MATERIAL_NAME) {
+      if (!color && entry.color) {
+        color = entry.color;
+        part.color_source = ColorSource::kEntry;
+      }
+      // The material (texture, then diffuse colour) unless `materials: ignore`; assimp's default
+      // material (a mesh without one) gives nothing. Placeholders (`materials: auto`) are
+      // replaced after every part of the file is read (ReplacePlaceholderColors).
+      if (!color && entry.materials != MaterialMode::kIgnore && material != nullptr) {
+        // A diffuse / base-colour texture: texture coordinates and image onto the part's mesh,
+        // its colour over the part as albedo (scene_textures.h; unusable: a warning, then Kd).
+        const std::string label = fmt::format(
+            "{}/{}{}", stem, node_name.empty() ? stem : node_name,
+            mesh_name.empty() || mesh_name == node_name ? std::string() : "/" + mesh_name);
+        if (const std::optional<Eigen::Vector3f> mean =
+                textures.Attach(*material, *m, label, &part.mesh)) {
+          color = *mean;
+          part.color_source = ColorSource::kTexture;
+        }
+      }
+      if (!color && entry.materials != MaterialMode::kIgnore && material != nullptr &&
+          !mat.empty() && mat != AI_DEFAULT_MATERIAL_NAME) {
         aiColor3D kd;
         if (material->Get(AI_MATKEY_COLOR_DIFFUSE, kd) == AI_SUCCESS) {
           color = Eigen::Vector3f(std::clamp(kd.r, 0.0f, 1.0f), std::clamp(kd.g, 0.0f, 1.0f),
                                   std::clamp(kd.b, 0.0f, 1.0f));
+          part.color_source = ColorSource::kMaterial;
         }
       }
-      part.albedo = color.value_or(DefaultColor(part.semantic_class));
+      part.albedo = color.value_or(DefaultClassColor(part.semantic_class));
 
       for (unsigned v = 0; v < m->mNumVertices; ++v) {
         const aiVector3D& p = m->mVertices[v];
@@ -645,6 +812,7 @@ Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::
     return ParseError(
         fmt::format("{}.file: mesh '{}' contains no triangles", context, entry.file.string()));
   }
+  for (const std::string& w : textures.Warnings()) warnings.push_back(context + ": " + w);
   return parts;
 }
 
@@ -709,7 +877,323 @@ bool GlobMatch(std::string_view pattern, std::string_view text) {
   return p == pattern.size();
 }
 
-Result<Scene> LoadSceneFile(const fs::path& yaml) {
+bool GlobCapture(std::string_view pattern, std::string_view text,
+                 std::vector<std::string>* captures) {
+  // Depth-first search, each '*' trying the shortest text first, with the (pattern, text)
+  // positions known to fail remembered: O(|pattern| * |text|^2) time at worst, recursion depth
+  // at most |pattern|.
+  const size_t np = pattern.size();
+  const size_t nt = text.size();
+  std::vector<char> failed((np + 1) * (nt + 1), 0);
+  std::vector<std::pair<size_t, size_t>> spans;
+  const auto match = [&](const auto& self, size_t p, size_t t) -> bool {
+    char& known_bad = failed[p * (nt + 1) + t];
+    if (known_bad != 0) return false;
+    bool ok = false;
+    if (p == np) {
+      ok = t == nt;
+    } else if (pattern[p] == '*') {
+      for (size_t k = t; k <= nt && !ok; ++k) {
+        spans.emplace_back(t, k);
+        ok = self(self, p + 1, k);
+        if (!ok) spans.pop_back();
+      }
+    } else if (t < nt && (pattern[p] == '?' || pattern[p] == text[t])) {
+      ok = self(self, p + 1, t + 1);
+    }
+    if (!ok) known_bad = 1;
+    return ok;
+  };
+  const bool ok = match(match, 0, 0);
+  if (captures != nullptr) {
+    captures->clear();
+    if (ok) {
+      for (const auto& [a, b] : spans) captures->emplace_back(text.substr(a, b - a));
+    }
+  }
+  return ok;
+}
+
+namespace {
+
+std::string FormatColor(const Eigen::Vector3f& c) {
+  return fmt::format("[{:.3g}, {:.3g}, {:.3g}]", c.x(), c.y(), c.z());
+}
+
+/// Equal within half an 8-bit step.
+bool SameColor(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  return (a - b).cwiseAbs().maxCoeff() <= 0.5f / 255.0f;
+}
+
+/// Up to three names quoted, then "and N more".
+std::string NameList(const std::vector<std::string>& names) {
+  std::vector<std::string> shown;
+  for (size_t i = 0; i < names.size() && i < 3; ++i) shown.push_back(QuoteText(names[i], 80));
+  std::string out = fmt::format("{}", fmt::join(shown, ", "));
+  if (names.size() > 3) out += fmt::format(" and {} more", names.size() - 3);
+  return out;
+}
+
+/// `materials: auto`: an achromatic material colour shared by every part of a chromatic class
+/// whose colour comes from its material is a placeholder; those parts get the class default.
+void ReplacePlaceholderColors(const MeshEntry& entry, const std::string& context,
+                              std::vector<ImportedPart>& parts,
+                              std::vector<std::string>& warnings) {
+  if (entry.materials != MaterialMode::kAuto) return;
+  // One warning per (materials, colour): the usual single placeholder material is one sentence
+  // naming every class it was replaced in.
+  struct Group {
+    std::string materials;
+    Eigen::Vector3f color;
+    std::vector<std::string> classes;  // "fruit (25 parts)"
+  };
+  std::vector<Group> groups;
+  for (const SemanticClass c : AllSemanticClasses()) {
+    if (!ChromaticClass(c)) continue;
+    std::vector<ImportedPart*> from_material;
+    for (ImportedPart& part : parts) {
+      if (part.semantic_class == c && part.color_source == ColorSource::kMaterial) {
+        from_material.push_back(&part);
+      }
+    }
+    if (from_material.empty()) continue;
+    const Eigen::Vector3f color = from_material.front()->albedo;
+    if (!IsAchromatic(color)) continue;
+    if (!std::all_of(from_material.begin(), from_material.end(),
+                     [&](const ImportedPart* p) { return SameColor(p->albedo, color); })) {
+      continue;
+    }
+    std::vector<std::string> materials;
+    for (ImportedPart* part : from_material) {
+      if (std::find(materials.begin(), materials.end(), part->material) == materials.end()) {
+        materials.push_back(part->material);
+      }
+      part->material_color = part->albedo;
+      part->albedo = DefaultClassColor(c);
+      part->color_source = ColorSource::kPlaceholder;
+    }
+    const std::string names = NameList(materials);
+    const std::string what =
+        fmt::format("{} ({} part{}, now {})", ToString(c), from_material.size(),
+                    from_material.size() == 1 ? "" : "s", FormatColor(DefaultClassColor(c)));
+    auto it = std::find_if(groups.begin(), groups.end(), [&](const Group& g) {
+      return g.materials == names && SameColor(g.color, color);
+    });
+    if (it == groups.end()) {
+      groups.push_back({names, color, {what}});
+    } else {
+      it->classes.push_back(what);
+    }
+  }
+  for (const Group& g : groups) {
+    warnings.push_back(fmt::format(
+        "{} ({}): material {} colour {} looks like a placeholder (every part of the class coloured "
+        "by its material has this one achromatic colour), replaced by the class default in {} "
+        "('materials: use' keeps the material colour, a class rule's 'color' sets another)",
+        context, QuoteText(entry.file_text, 80), g.materials, FormatColor(g.color),
+        fmt::join(g.classes, ", ")));
+  }
+}
+
+/// Distance between two boxes (0 when they touch or overlap), metres.
+double BoxGap(const Box3& a, const Box3& b) {
+  const Eigen::Vector3d d =
+      (a.min() - b.max()).cwiseMax(b.min() - a.max()).cwiseMax(Eigen::Vector3d::Zero());
+  return d.norm();
+}
+
+double VolumeCm3(const Box3& box) { return box.Volume() * 1e6; }
+
+/// Without a size rule, fruit instances whose bounding box is under this fraction of the largest
+/// fruit's are pointed out (a warning), as likely fragments.
+constexpr double kTinyFruitFraction = 0.02;
+
+/// One future scene object of a mesh entry: a part, or one connected component of a fruit part.
+struct Piece {
+  TriangleMesh mesh;
+  size_t part = 0;
+  std::string name;
+  std::vector<std::string> merged;  // fragments joined to it
+  std::string fate = "object";
+  bool removed = false;  // merged into another piece or dropped
+};
+
+/// Per-entry results of the merge and size rules, for warnings and the report.
+struct FragmentCounts {
+  size_t name_merged = 0;
+  size_t small_merged = 0;
+  size_t small_dropped = 0;
+  size_t dropped_out_of_reach = 0;
+};
+
+/// Parts joined by `merge` rules (part index -> target part index, -1: none), with the warnings
+/// for rules that match nothing or whose target is missing.
+std::vector<int> ResolveMergeRules(const MeshEntry& entry, const std::string& context,
+                                   const std::vector<ImportedPart>& parts,
+                                   std::vector<int>& rule_of_part,
+                                   std::vector<std::string>& warnings) {
+  std::vector<int> target(parts.size(), -1);
+  rule_of_part.assign(parts.size(), -1);
+  if (entry.merge.empty()) return target;
+  // Which parts are sources (they never become targets themselves), with their captures.
+  std::vector<std::vector<std::string>> captures(parts.size());
+  for (size_t i = 0; i < parts.size(); ++i) {
+    for (size_t m = 0; m < entry.merge.size(); ++m) {
+      if (GlobCapture(entry.merge[m].match, parts[i].node_name, &captures[i]) ||
+          GlobCapture(entry.merge[m].match, parts[i].mesh_name, &captures[i])) {
+        rule_of_part[i] = static_cast<int>(m);
+        break;
+      }
+    }
+  }
+  // Targets by exact node or mesh name (the first part of each name), for `into` without
+  // wildcards once substituted: no scan over every part per fragment.
+  std::unordered_map<std::string, size_t> by_name;
+  for (size_t j = 0; j < parts.size(); ++j) {
+    if (rule_of_part[j] >= 0) continue;
+    by_name.emplace(parts[j].node_name, j);
+    by_name.emplace(parts[j].mesh_name, j);
+  }
+  std::vector<size_t> matched(entry.merge.size(), 0);
+  std::vector<std::vector<std::string>> unresolved(entry.merge.size());
+  for (size_t i = 0; i < parts.size(); ++i) {
+    if (rule_of_part[i] < 0) continue;
+    const MergeRule& rule = entry.merge[static_cast<size_t>(rule_of_part[i])];
+    ++matched[static_cast<size_t>(rule_of_part[i])];
+    std::string into;
+    size_t k = 0;
+    for (const char c : rule.into) {
+      if (c == '*' && k < captures[i].size()) {
+        into += captures[i][k++];
+      } else {
+        into += c;
+      }
+    }
+    if (into.find_first_of("*?") == std::string::npos) {
+      if (const auto it = by_name.find(into); it != by_name.end()) {
+        target[i] = static_cast<int>(it->second);
+      }
+    } else {
+      for (size_t j = 0; j < parts.size(); ++j) {
+        if (rule_of_part[j] >= 0) continue;
+        if (GlobMatch(into, parts[j].node_name) || GlobMatch(into, parts[j].mesh_name)) {
+          target[i] = static_cast<int>(j);
+          break;
+        }
+      }
+    }
+    if (target[i] < 0) unresolved[static_cast<size_t>(rule_of_part[i])].push_back(parts[i].name);
+  }
+  for (size_t m = 0; m < entry.merge.size(); ++m) {
+    if (matched[m] == 0) {
+      warnings.push_back(fmt::format(
+          "{}.merge[{}]: 'match' {} matches no part of {} ({} parts; node and mesh names are "
+          "tested)",
+          context, m, QuoteText(entry.merge[m].match, 80), QuoteText(entry.file_text, 80),
+          parts.size()));
+    } else if (!unresolved[m].empty()) {
+      warnings.push_back(fmt::format(
+          "{}.merge[{}]: {} of the {} parts matching {} found no part named by 'into' {} and stay "
+          "on their own: {}",
+          context, m, unresolved[m].size(), matched[m], QuoteText(entry.merge[m].match, 80),
+          QuoteText(entry.merge[m].into, 80), NameList(unresolved[m])));
+    }
+  }
+  return target;
+}
+
+/// Warnings about the loaded scene as a whole: no fruit; classes a colour segmenter cannot tell
+/// apart (every part of one class has a colour another class has too); a one-colour plant.
+void SceneWarnings(const Scene& scene, std::vector<std::string>& warnings) {
+  size_t fruits = 0;
+  std::vector<std::pair<SemanticClass, std::vector<Eigen::Vector3f>>> colors;
+  std::vector<size_t> parts_of;
+  std::vector<const SceneObject*> plant;
+  for (const SceneObject& o : scene.objects) {
+    if (o.semantic_class == SemanticClass::kFruit) ++fruits;
+    if (o.semantic_class == SemanticClass::kBackground) continue;
+    // A textured object counts with its albedo, the texture's mean over it.
+    if (o.semantic_class != SemanticClass::kGround) plant.push_back(&o);
+    auto it = std::find_if(colors.begin(), colors.end(),
+                           [&](const auto& c) { return c.first == o.semantic_class; });
+    if (it == colors.end()) {
+      colors.push_back({o.semantic_class, {}});
+      parts_of.push_back(0);
+      it = std::prev(colors.end());
+    }
+    ++parts_of[static_cast<size_t>(it - colors.begin())];
+    if (std::none_of(it->second.begin(), it->second.end(),
+                     [&](const Eigen::Vector3f& c) { return SameColor(c, o.albedo); })) {
+      it->second.push_back(o.albedo);
+    }
+  }
+  // Class order (fruit first), whatever the order of the objects.
+  std::vector<size_t> order(colors.size());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::sort(order.begin(), order.end(),
+            [&](size_t a, size_t b) { return colors[a].first < colors[b].first; });
+  {
+    decltype(colors) sorted_colors;
+    std::vector<size_t> sorted_parts;
+    for (const size_t k : order) {
+      sorted_colors.push_back(std::move(colors[k]));
+      sorted_parts.push_back(parts_of[k]);
+    }
+    colors = std::move(sorted_colors);
+    parts_of = std::move(sorted_parts);
+  }
+  if (fruits == 0) {
+    warnings.push_back(
+        "no part is of class fruit: the scene has no fruit ground truth (check the class rules "
+        "with 'avp scene check FILE')");
+  }
+  const bool one_color_plant =
+      plant.size() >= 2 && std::all_of(plant.begin(), plant.end(), [&](const SceneObject* o) {
+        return SameColor(o->albedo, plant.front()->albedo);
+      });
+  if (one_color_plant) {
+    std::vector<std::string> names;
+    for (const auto& [c, list] : colors) {
+      if (c != SemanticClass::kGround) names.emplace_back(ToString(c));
+    }
+    warnings.push_back(fmt::format(
+        "the whole plant ({} parts, classes {}) is one colour {}: a colour segmenter cannot find "
+        "fruit in it (give the class rules colours, or check 'materials:')",
+        plant.size(), fmt::join(names, ", "), FormatColor(plant.front()->albedo)));
+  }
+  std::vector<std::pair<SemanticClass, SemanticClass>> reported;
+  for (size_t a = 0; a < colors.size(); ++a) {
+    if (colors[a].second.size() != 1) continue;
+    const Eigen::Vector3f& color = colors[a].second.front();
+    for (size_t b = 0; b < colors.size(); ++b) {
+      if (b == a) continue;
+      const SemanticClass ca = colors[a].first;
+      const SemanticClass cb = colors[b].first;
+      if (one_color_plant && ca != SemanticClass::kGround && cb != SemanticClass::kGround) continue;
+      if (std::find(reported.begin(), reported.end(), std::make_pair(cb, ca)) != reported.end()) {
+        continue;
+      }
+      if (std::none_of(colors[b].second.begin(), colors[b].second.end(),
+                       [&](const Eigen::Vector3f& c) { return SameColor(c, color); })) {
+        continue;
+      }
+      reported.emplace_back(ca, cb);
+      warnings.push_back(fmt::format(
+          "every {} part ({}) is {}, a colour {} parts have too: a colour segmenter cannot tell "
+          "{} from {} (give the class rules colours, or check 'materials:')",
+          ToString(ca), parts_of[a], FormatColor(color), ToString(cb), ToString(ca), ToString(cb)));
+    }
+  }
+}
+
+}  // namespace
+
+Result<Scene> LoadSceneFile(const fs::path& yaml) { return LoadSceneFile(yaml, nullptr); }
+
+Result<Scene> LoadSceneFile(const fs::path& yaml, SceneFileReport* report) {
+  SceneFileReport local_report;
+  SceneFileReport& rep = report != nullptr ? *report : local_report;
+  rep = SceneFileReport();
   AVP_ASSIGN_OR_RETURN(const YAML::Node root, io::LoadYamlFile(yaml));
   const std::string file = yaml.filename().string();
   AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(
@@ -797,7 +1281,7 @@ Result<Scene> LoadSceneFile(const fs::path& yaml) {
   for (size_t i = 0; i < meshes.size(); ++i) {
     const std::string context = fmt::format("{}: meshes[{}]", file, i);
     AVP_ASSIGN_OR_RETURN(const MeshEntry entry, ReadMeshEntry(meshes[i], base_dir, context));
-    AVP_ASSIGN_OR_RETURN(std::vector<ImportedPart> parts, ImportMesh(entry, context));
+    AVP_ASSIGN_OR_RETURN(std::vector<ImportedPart> parts, ImportMesh(entry, context, rep.warnings));
     // The limits hold for all meshes of the scene together, too.
     for (const ImportedPart& part : parts) {
       total_vertices += part.mesh.vertices.size();
@@ -808,36 +1292,261 @@ Result<Scene> LoadSceneFile(const fs::path& yaml) {
     AVP_RETURN_IF_ERROR(MaxMeshFaces().Check(
         fmt::format("{}: triangles of the scene's meshes up to this one", context),
         total_triangles));
-    for (ImportedPart& part : parts) {
-      std::vector<TriangleMesh> pieces;
-      if (part.semantic_class == SemanticClass::kFruit &&
+    ReplacePlaceholderColors(entry, context, parts, rep.warnings);
+
+    // Rules: how many parts each classified, and how many it matches that an earlier one took.
+    for (size_t r = 0; r < entry.rules.size(); ++r) {
+      SceneRuleReport rule_report;
+      rule_report.mesh_entry = i;
+      rule_report.index = r;
+      rule_report.match = entry.rules[r].pattern;
+      rule_report.semantic_class = entry.rules[r].semantic_class;
+      for (const ImportedPart& part : parts) {
+        if (part.rule == static_cast<int>(r)) {
+          ++rule_report.parts;
+        } else if (part.rule >= 0 && part.rule < static_cast<int>(r) &&
+                   (GlobMatch(rule_report.match, part.node_name) ||
+                    GlobMatch(rule_report.match, part.mesh_name) ||
+                    (!part.material.empty() && GlobMatch(rule_report.match, part.material)))) {
+          ++rule_report.shadowed;
+        }
+      }
+      if (rule_report.parts == 0) {
+        rep.warnings.push_back(fmt::format(
+            "{}.classes[{}]: rule {} (class {}) classifies no part of {} ({} parts; node, mesh "
+            "and material names are tested){}",
+            context, r, QuoteText(rule_report.match, 80), ToString(rule_report.semantic_class),
+            QuoteText(entry.file_text, 80), parts.size(),
+            rule_report.shadowed > 0
+                ? fmt::format("; it matches {} parts an earlier rule took", rule_report.shadowed)
+                : std::string()));
+      }
+      rep.rules.push_back(std::move(rule_report));
+    }
+
+    // Part reports (fates are filled in below).
+    const size_t first_report = rep.parts.size();
+    for (const ImportedPart& part : parts) {
+      ScenePartReport pr;
+      pr.name = part.name;
+      pr.mesh_entry = i;
+      pr.file = entry.file_text;
+      pr.material = part.material;
+      pr.semantic_class = part.semantic_class;
+      pr.rule = part.rule;
+      if (part.rule >= 0) pr.rule_match = entry.rules[static_cast<size_t>(part.rule)].pattern;
+      pr.color = part.albedo;
+      pr.color_source = part.color_source;
+      pr.material_color = part.material_color;
+      pr.vertices = part.mesh.vertices.size();
+      pr.triangles = part.mesh.triangles.size();
+      pr.bounds = part.mesh.Bounds();
+      rep.parts.push_back(std::move(pr));
+    }
+
+    // Merge rules by name, then the pieces: a part, or each connected component of a fruit part.
+    std::vector<int> merge_rule_of;
+    const std::vector<int> merge_target =
+        ResolveMergeRules(entry, context, parts, merge_rule_of, rep.warnings);
+    FragmentCounts counts;
+    std::vector<Piece> pieces;
+    std::vector<std::vector<size_t>> pieces_of(parts.size());
+    for (size_t p = 0; p < parts.size(); ++p) {
+      if (merge_target[p] >= 0) continue;
+      std::vector<TriangleMesh> meshes_of_part;
+      if (parts[p].semantic_class == SemanticClass::kFruit &&
           entry.fruit_instances == FruitInstances::kComponents) {
-        pieces = ConnectedComponents(part.mesh);
+        meshes_of_part = ConnectedComponents(parts[p].mesh);
       } else {
-        pieces.push_back(std::move(part.mesh));
+        meshes_of_part.push_back(std::move(parts[p].mesh));
       }
-      // Instance ids are 16-bit: a scene holds at most 65535 objects (a mesh split into
-      // components could otherwise ask for millions).
-      constexpr size_t kMaxObjects = std::numeric_limits<uint16_t>::max();
-      if (last_id + pieces.size() > kMaxObjects) {
-        return ResourceExhaustedError(fmt::format(
-            "{}: mesh '{}' adds {} objects to the {} of the scene; a scene holds at most {} "
-            "(instance ids are 16-bit)",
-            context, entry.file.string(), pieces.size(), scene.objects.size(), kMaxObjects));
-      }
-      for (size_t k = 0; k < pieces.size(); ++k) {
-        SceneObject object;
-        object.name = pieces.size() > 1 ? fmt::format("{}#{}", part.name, k) : part.name;
-        object.semantic_class = part.semantic_class;
-        object.albedo = part.albedo;
-        object.shape = std::move(pieces[k]);
-        // Scene::Add's id (the largest + 1) without its scan over every object: linear time for
-        // a mesh split into tens of thousands of fruits.
-        object.instance_id = ++last_id;
-        scene.objects.push_back(std::move(object));
+      for (size_t k = 0; k < meshes_of_part.size(); ++k) {
+        Piece piece;
+        piece.mesh = std::move(meshes_of_part[k]);
+        piece.part = p;
+        piece.name =
+            meshes_of_part.size() > 1 ? fmt::format("{}#{}", parts[p].name, k) : parts[p].name;
+        pieces_of[p].push_back(pieces.size());
+        pieces.push_back(std::move(piece));
       }
     }
+    // A part merged by name joins the nearest piece of its target part (the target may have been
+    // split into components).
+    for (size_t p = 0; p < parts.size(); ++p) {
+      if (merge_target[p] < 0) continue;
+      const std::vector<size_t>& candidates = pieces_of[static_cast<size_t>(merge_target[p])];
+      const Box3 box = parts[p].mesh.Bounds();
+      size_t best = candidates.front();
+      double best_gap = std::numeric_limits<double>::infinity();
+      for (const size_t c : candidates) {
+        const double gap = BoxGap(box, pieces[c].mesh.Bounds());
+        if (gap < best_gap) {
+          best_gap = gap;
+          best = c;
+        }
+      }
+      const MergeRule& rule = entry.merge[static_cast<size_t>(merge_rule_of[p])];
+      SceneFragmentReport fragment;
+      fragment.name = parts[p].name;
+      fragment.into = pieces[best].name;
+      fragment.reason = fmt::format("merge[{}] {}", merge_rule_of[p], QuoteText(rule.match, 80));
+      fragment.vertices = parts[p].mesh.vertices.size();
+      fragment.volume_cm3 = VolumeCm3(box);
+      fragment.gap_mm = best_gap * 1000.0;
+      rep.parts[first_report + p].fate.push_back(
+          fmt::format("merged into {} (merge[{}])", pieces[best].name, merge_rule_of[p]));
+      rep.parts[first_report + p].semantic_class =
+          parts[static_cast<size_t>(merge_target[p])].semantic_class;
+      // Each part keeps its own colour (per-triangle colours where they differ).
+      pieces[best].mesh.Append(parts[p].mesh, RigidTransform::Identity(),
+                               parts[pieces[best].part].albedo, parts[p].albedo);
+      pieces[best].merged.push_back(parts[p].name);
+      rep.fragments.push_back(std::move(fragment));
+      ++counts.name_merged;
+    }
+    // Fruit pieces under the minimum size join their nearest fruit within reach, or are dropped.
+    std::vector<size_t> fruit_pieces;
+    for (size_t k = 0; k < pieces.size(); ++k) {
+      if (parts[pieces[k].part].semantic_class == SemanticClass::kFruit) fruit_pieces.push_back(k);
+    }
+    const bool size_rule = entry.fruit_min_volume_cm3 > 0.0 || entry.fruit_min_vertices > 0;
+    if (size_rule) {
+      std::vector<size_t> small, anchors;
+      std::vector<Box3> bounds(pieces.size());
+      for (const size_t k : fruit_pieces) {
+        bounds[k] = pieces[k].mesh.Bounds();
+        const bool is_small =
+            VolumeCm3(bounds[k]) < entry.fruit_min_volume_cm3 ||
+            static_cast<int64_t>(pieces[k].mesh.vertices.size()) < entry.fruit_min_vertices;
+        (is_small ? small : anchors).push_back(k);
+      }
+      for (const size_t k : small) {
+        SceneFragmentReport fragment;
+        fragment.name = pieces[k].name;
+        fragment.vertices = pieces[k].mesh.vertices.size();
+        fragment.volume_cm3 = VolumeCm3(bounds[k]);
+        size_t best = 0;
+        double best_gap = std::numeric_limits<double>::infinity();
+        for (const size_t a : anchors) {
+          const double gap = BoxGap(bounds[k], bounds[a]);
+          if (gap < best_gap) {
+            best_gap = gap;
+            best = a;
+          }
+        }
+        pieces[k].removed = true;
+        if (entry.fruit_small_parts == SmallParts::kMerge &&
+            best_gap * 1000.0 <= entry.fruit_merge_reach_mm) {
+          fragment.into = pieces[best].name;
+          fragment.reason = "small";
+          fragment.gap_mm = best_gap * 1000.0;
+          pieces[k].fate = fmt::format("merged into {} (small, {:.1f} mm away)", pieces[best].name,
+                                       fragment.gap_mm);
+          pieces[best].mesh.Append(pieces[k].mesh, RigidTransform::Identity(),
+                                   parts[pieces[best].part].albedo, parts[pieces[k].part].albedo);
+          pieces[best].merged.push_back(pieces[k].name);
+          for (const std::string& inner : pieces[k].merged) pieces[best].merged.push_back(inner);
+          ++counts.small_merged;
+        } else if (entry.fruit_small_parts == SmallParts::kMerge) {
+          fragment.reason = "small, no fruit within reach";
+          pieces[k].fate =
+              fmt::format("dropped (small, no fruit within {} mm)", entry.fruit_merge_reach_mm);
+          ++counts.small_dropped;
+          ++counts.dropped_out_of_reach;
+        } else {
+          fragment.reason = "small";
+          pieces[k].fate = "dropped (small)";
+          ++counts.small_dropped;
+        }
+        rep.fragments.push_back(std::move(fragment));
+      }
+      if (counts.small_merged + counts.small_dropped > 0) {
+        std::vector<std::string> minimum;
+        if (entry.fruit_min_volume_cm3 > 0.0) {
+          minimum.push_back(fmt::format("a bounding box under {} cm3", entry.fruit_min_volume_cm3));
+        }
+        if (entry.fruit_min_vertices > 0) {
+          minimum.push_back(fmt::format("fewer than {} vertices", entry.fruit_min_vertices));
+        }
+        rep.warnings.push_back(fmt::format(
+            "{} ({}): {} fruit fragments under the minimum size ({}): {} joined their nearest "
+            "fruit, {} dropped{}; {} fruits remain",
+            context, QuoteText(entry.file_text, 80), small.size(), fmt::join(minimum, " or "),
+            counts.small_merged, counts.small_dropped,
+            counts.dropped_out_of_reach > 0
+                ? fmt::format(" ({} with no fruit within {} mm)", counts.dropped_out_of_reach,
+                              entry.fruit_merge_reach_mm)
+                : std::string(),
+            anchors.size()));
+      }
+    } else if (fruit_pieces.size() >= 2) {
+      // No size rule: point at fragments far smaller than the largest fruit.
+      std::vector<double> volumes;
+      for (const size_t k : fruit_pieces) volumes.push_back(VolumeCm3(pieces[k].mesh.Bounds()));
+      const double largest = *std::max_element(volumes.begin(), volumes.end());
+      std::vector<std::string> tiny;
+      for (size_t f = 0; f < fruit_pieces.size(); ++f) {
+        if (volumes[f] < kTinyFruitFraction * largest) {
+          tiny.push_back(pieces[fruit_pieces[f]].name);
+        }
+      }
+      if (!tiny.empty()) {
+        rep.warnings.push_back(fmt::format(
+            "{} ({}): {} of its {} fruit instances have a bounding box under 2% of the largest "
+            "fruit's ({:.3g} cm3): {}; if they are fragments of fruit, set fruit_min_volume_cm3 "
+            "(they then join their nearest fruit) or a 'merge' rule",
+            context, QuoteText(entry.file_text, 80), tiny.size(), fruit_pieces.size(), largest,
+            NameList(tiny)));
+      }
+    }
+    // Part reports: what became of each piece.
+    for (size_t p = 0; p < parts.size(); ++p) {
+      for (const size_t k : pieces_of[p]) {
+        rep.parts[first_report + p].fate.push_back(
+            pieces_of[p].size() > 1 ? fmt::format("{}: {}", pieces[k].name, pieces[k].fate)
+                                    : pieces[k].fate);
+      }
+    }
+
+    // Instance ids are 16-bit: a scene holds at most 65535 objects (a mesh split into
+    // components could otherwise ask for millions).
+    size_t kept = 0;
+    for (const Piece& piece : pieces) kept += piece.removed ? 0 : 1;
+    constexpr size_t kMaxObjects = std::numeric_limits<uint16_t>::max();
+    if (last_id + kept > kMaxObjects) {
+      return ResourceExhaustedError(fmt::format(
+          "{}: mesh '{}' adds {} objects to the {} of the scene; a scene holds at most {} "
+          "(instance ids are 16-bit)",
+          context, entry.file.string(), kept, scene.objects.size(), kMaxObjects));
+    }
+    for (Piece& piece : pieces) {
+      if (piece.removed) continue;
+      const ImportedPart& part = parts[piece.part];
+      SceneObject object;
+      object.name = piece.name;
+      object.semantic_class = part.semantic_class;
+      object.albedo = part.albedo;
+      object.shape = std::move(piece.mesh);
+      // Scene::Add's id (the largest + 1) without its scan over every object: linear time for
+      // a mesh split into tens of thousands of fruits.
+      object.instance_id = ++last_id;
+      if (object.semantic_class == SemanticClass::kFruit) {
+        const TriangleMesh& mesh = std::get<TriangleMesh>(object.shape);
+        SceneFruitReport fruit;
+        fruit.instance_id = object.instance_id;
+        fruit.name = object.name;
+        fruit.vertices = mesh.vertices.size();
+        fruit.triangles = mesh.triangles.size();
+        fruit.bounds = mesh.Bounds();
+        fruit.volume_cm3 = VolumeCm3(fruit.bounds);
+        fruit.merged = std::move(piece.merged);
+        rep.fruits.push_back(std::move(fruit));
+      }
+      scene.objects.push_back(std::move(object));
+    }
   }
+  SceneWarnings(scene, rep.warnings);
+  scene.warnings = rep.warnings;
   AVP_RETURN_IF_ERROR(scene.Validate().WithContext(file));
   scene.UpdatePlantBounds();
   return scene;
@@ -917,6 +1626,8 @@ Status SaveSceneFiles(const Scene& scene, const fs::path& dir) {
   out << YAML::Key << "up_axis" << YAML::Value << "z";
   out << YAML::Key << "fruit_instances" << YAML::Value << "objects";
   out << YAML::Key << "default_class" << YAML::Value << "other";
+  // The materials are the objects' own colours: never taken for placeholders.
+  out << YAML::Key << "materials" << YAML::Value << "use";
   out << YAML::Key << "classes" << YAML::Value << YAML::BeginSeq;
   for (const SemanticClass c : classes_used) {
     out << YAML::Flow << YAML::BeginMap;

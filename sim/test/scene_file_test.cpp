@@ -6,10 +6,12 @@
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <avp/sim/mesh_builder.h>
+#include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/scenario.h>
 #include <avp/sim/scene_file.h>
 #include <avp/test/temp_dir_test.h>
@@ -77,6 +79,15 @@ class SceneFileTest : public test::TempDirTest {
     std::map<SemanticClass, int> n;
     for (const SceneObject& o : s.objects) ++n[o.semantic_class];
     return n;
+  }
+
+  static const ScenePartReport& Named(const std::vector<ScenePartReport>& parts,
+                                      const std::string& name) {
+    for (const ScenePartReport& p : parts) {
+      if (p.name == name) return p;
+    }
+    ADD_FAILURE() << "no part " << name;
+    return parts.front();
   }
 
   static const SceneObject& Named(const Scene& s, const std::string& name) {
@@ -454,6 +465,439 @@ TEST(SceneFileExampleTest, ShippedExampleLoads) {
     EXPECT_NEAR(f.center_W.z(), 0.7, 0.1);
   }
   EXPECT_LT(fs::file_size(example.parent_path() / "example_plant.obj"), 200u * 1024u);
+}
+
+// --- Placeholder materials, fruit fragments and merge rules (issue 16) ---
+
+/// A generated plant in plant coordinates: a stem, two leaves, four fruits (icospheres of 25 mm
+/// radius, 42 vertices each) at z = 0.6 m, y = -0.12 .. 0.12 m, each with two calyx fragments
+/// (8 mm x 8 mm x 4 mm boxes, 8 vertices, 0.256 cm3) on its top.
+struct PlantPart {
+  std::string name;
+  TriangleMesh mesh;
+};
+
+constexpr int kFruits = 4;
+
+Eigen::Vector3d FruitCenter(int k) { return {0.0, -0.12 + 0.08 * k, 0.6}; }
+
+std::vector<PlantPart> FragmentedPlant();
+
+/// Bounding box of fruit k (plant coordinates): its sphere alone, or with its calyx fragments.
+Box3 FruitBox(int k, bool with_calyx) {
+  Box3 box;
+  const std::string name = "Fruit" + std::to_string(k + 1);
+  for (const PlantPart& part : FragmentedPlant()) {
+    if (part.name == name || (with_calyx && part.name.rfind(name + "_", 0) == 0)) {
+      box.Extend(part.mesh.Bounds());
+    }
+  }
+  return box;
+}
+
+std::vector<PlantPart> FragmentedPlant() {
+  std::vector<PlantPart> parts;
+  parts.push_back({"Stem", MakeBox(Box3({0.04, -0.005, 0.0}, {0.05, 0.005, 0.8}))});
+  for (int k = 0; k < 2; ++k) {
+    TriangleMesh leaf = MakeQuad(0.04, 0.02);
+    leaf.Transform(RigidTransform(Eigen::Vector3d(0.02, k == 0 ? -0.1 : 0.1, 0.3)));
+    parts.push_back({"Leaf" + std::to_string(k + 1), leaf});
+  }
+  for (int k = 0; k < kFruits; ++k) {
+    const std::string name = "Fruit" + std::to_string(k + 1);
+    parts.push_back({name, Sphere(FruitCenter(k), 0.025)});
+    for (const double dx : {-0.006, 0.006}) {
+      const Eigen::Vector3d c = FruitCenter(k) + Eigen::Vector3d(dx, 0.0, 0.026);
+      parts.push_back({name + (dx < 0 ? "_calyx_a" : "_calyx_b"),
+                       MakeBox(Box3(c - Eigen::Vector3d(0.004, 0.004, 0.002),
+                                    c + Eigen::Vector3d(0.004, 0.004, 0.002)))});
+    }
+  }
+  return parts;
+}
+
+/// The parts as COLLADA (Z_UP, metres): one node and one geometry per part, every geometry bound
+/// to one material named `material` with diffuse colour `rgb`.
+std::string ColladaOf(const std::vector<PlantPart>& parts, const std::string& material,
+                      const Eigen::Vector3f& rgb) {
+  std::string geometries, nodes;
+  for (size_t i = 0; i < parts.size(); ++i) {
+    const TriangleMesh& m = parts[i].mesh;
+    std::string positions, indices;
+    for (const Eigen::Vector3f& v : m.vertices) {
+      positions += fmt::format("{} {} {} ", v.x(), v.y(), v.z());
+    }
+    for (const Eigen::Vector3i& t : m.triangles) {
+      indices += fmt::format("{} {} {} ", t[0], t[1], t[2]);
+    }
+    geometries += fmt::format(
+        R"(<geometry id="g{0}" name="{1}"><mesh><source id="g{0}-pos">)"
+        R"(<float_array id="g{0}-arr" count="{2}">{3}</float_array><technique_common>)"
+        R"(<accessor source="#g{0}-arr" count="{4}" stride="3"><param name="X" type="float"/>)"
+        R"(<param name="Y" type="float"/><param name="Z" type="float"/></accessor>)"
+        R"(</technique_common></source><vertices id="g{0}-vtx"><input semantic="POSITION" )"
+        R"(source="#g{0}-pos"/></vertices><triangles count="{5}" material="mat">)"
+        R"(<input semantic="VERTEX" source="#g{0}-vtx" offset="0"/><p>{6}</p></triangles>)"
+        "</mesh></geometry>\n",
+        i, parts[i].name, 3 * m.vertices.size(), positions, m.vertices.size(), m.triangles.size(),
+        indices);
+    nodes +=
+        fmt::format(R"(<node id="n{0}" name="{1}"><instance_geometry url="#g{0}"><bind_material>)"
+                    R"(<technique_common><instance_material symbol="mat" target="#placeholder"/>)"
+                    "</technique_common></bind_material></instance_geometry></node>\n",
+                    i, parts[i].name);
+  }
+  return fmt::format(
+      R"(<?xml version="1.0" encoding="utf-8"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+<asset><unit name="meter" meter="1"/><up_axis>Z_UP</up_axis></asset>
+<library_effects><effect id="placeholder-fx"><profile_COMMON><technique sid="common"><lambert>
+<diffuse><color>{} {} {} 1</color></diffuse></lambert></technique></profile_COMMON></effect>
+</library_effects>
+<library_materials><material id="placeholder" name="{}"><instance_effect url="#placeholder-fx"/>
+</material></library_materials>
+<library_geometries>
+{}</library_geometries>
+<library_visual_scenes><visual_scene id="Scene" name="Scene">
+{}</visual_scene></library_visual_scenes>
+<scene><instance_visual_scene url="#Scene"/></scene>
+</COLLADA>
+)",
+      rgb.x(), rgb.y(), rgb.z(), material, geometries, nodes);
+}
+
+/// The parts as OBJ + MTL with every fruit part (spheres, calyx fragments and one stray fragment
+/// 0.1 m above the fruits) in one object "Fruits", everything with the grey material "Grey".
+void WriteFragmentedObj(const fs::path& dir) {
+  size_t base = 1;
+  std::string obj = "mtllib plant.mtl\n";
+  TriangleMesh fruits;
+  for (const PlantPart& part : FragmentedPlant()) {
+    if (part.name.rfind("Fruit", 0) == 0) {
+      fruits.Append(part.mesh);
+    } else {
+      obj += ObjObject(part.name, "Grey", part.mesh, base);
+    }
+  }
+  fruits.Append(MakeBox(Box3({-0.003, -0.003, 0.75}, {0.003, 0.003, 0.756})));  // stray
+  obj += ObjObject("Fruits", "Grey", fruits, base);
+  std::ofstream(dir / "plant.obj") << obj;
+  std::ofstream(dir / "plant.mtl") << "newmtl Grey\nKd 0.6 0.6 0.6\n";
+}
+
+const char* kColladaPlantYaml = R"(version: 1
+meshes:
+  - file: plant.dae
+    pose: {xyz: [0.7, 0, 0]}
+    classes:
+      - {match: "Fruit*", class: fruit}
+      - {match: "Leaf*", class: leaf}
+      - {match: "Stem", class: stem}
+      - {match: "Flower*", class: other}
+)";
+
+bool AnyWarningHas(const std::vector<std::string>& warnings,
+                   const std::vector<std::string>& parts) {
+  for (const std::string& w : warnings) {
+    bool all = true;
+    for (const std::string& p : parts) all = all && w.find(p) != std::string::npos;
+    if (all) return true;
+  }
+  return false;
+}
+
+/// Fruit-class pixels of the start view whose colour is red (r > 2 g and r > 2 b), and all
+/// fruit-class pixels.
+std::pair<size_t, size_t> RedFruitPixels(const Scene& scene) {
+  RendererOptions options;
+  options.num_threads = 2;
+  const RgbdRenderer renderer(scene, options);
+  const RenderedFrame f =
+      renderer.Render(CameraIntrinsics::RealSenseD435().Scaled(0.5), scene.X_WC_start);
+  size_t red = 0, fruit = 0;
+  for (int v = 0; v < f.class_ids.height(); ++v) {
+    for (int u = 0; u < f.class_ids.width(); ++u) {
+      if (f.class_ids(u, v) != static_cast<uint8_t>(SemanticClass::kFruit)) continue;
+      ++fruit;
+      const int r = f.rgbd.rgb(u, v, 0), g = f.rgbd.rgb(u, v, 1), b = f.rgbd.rgb(u, v, 2);
+      if (r > 2 * g && r > 2 * b) ++red;
+    }
+  }
+  return {red, fruit};
+}
+
+TEST_F(SceneFileTest, PlaceholderMaterialGivesWayToClassColoursWithAWarning) {
+  Write("plant.dae", ColladaOf(FragmentedPlant(), "Placeholder", {0.6f, 0.6f, 0.6f}));
+  SceneFileReport report;
+  const Result<Scene> r = LoadSceneFile(Write("scene.yaml", kColladaPlantYaml), &report);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->objects.size(), 3u + 3u * kFruits);
+  for (const SceneObject& o : r->objects) {
+    EXPECT_EQ(o.albedo, DefaultClassColor(o.semantic_class)) << o.name;
+  }
+  ASSERT_EQ(report.parts.size(), r->objects.size());
+  for (const ScenePartReport& p : report.parts) {
+    EXPECT_EQ(p.color_source, ColorSource::kPlaceholder) << p.name;
+    EXPECT_EQ(p.material, "Placeholder");
+    EXPECT_TRUE(p.material_color.isApprox(Eigen::Vector3f(0.6f, 0.6f, 0.6f), 1e-6f));
+  }
+  EXPECT_EQ(r->warnings, report.warnings);
+  // One warning naming the material, its colour, and each class with its parts count.
+  EXPECT_TRUE(AnyWarningHas(
+      report.warnings,
+      {"material 'Placeholder' colour [0.6, 0.6, 0.6] looks like a placeholder",
+       "replaced by the class default in fruit (12 parts, now [0.55, 0.05, 0.03]), leaf (2 parts, "
+       "now [0.08, 0.25, 0.05]), stem (1 part, now [0.16, 0.3, 0.07])"}))
+      << testing::PrintToString(report.warnings);
+  // The rule that matches nothing, and the fragments far smaller than the fruits.
+  EXPECT_TRUE(AnyWarningHas(report.warnings, {"classes[3]", "'Flower*'", "classifies no part"}));
+  EXPECT_TRUE(
+      AnyWarningHas(report.warnings, {"8 of its 12 fruit instances", "fruit_min_volume_cm3"}));
+  ASSERT_EQ(report.rules.size(), 4u);
+  EXPECT_EQ(report.rules[0].parts, 12u);
+  EXPECT_EQ(report.rules[1].parts, 2u);
+  EXPECT_EQ(report.rules[2].parts, 1u);
+  EXPECT_EQ(report.rules[3].parts, 0u);
+  // Rendered, the fruit is red where the placeholder grey left none.
+  const auto [red, fruit] = RedFruitPixels(*r);
+  EXPECT_GT(fruit, 200u);
+  EXPECT_GE(red * 100, fruit * 95);
+
+  // materials: use keeps the grey: the whole plant is one colour, and nothing red is rendered.
+  std::string use = kColladaPlantYaml;
+  use.insert(use.find("    classes:"), "    materials: use\n");
+  SceneFileReport use_report;
+  const Result<Scene> u = LoadSceneFile(Write("use.yaml", use), &use_report);
+  ASSERT_TRUE(u.ok()) << u.status().ToString();
+  for (const SceneObject& o : u->objects) {
+    EXPECT_TRUE(o.albedo.isApprox(Eigen::Vector3f(0.6f, 0.6f, 0.6f), 1e-6f)) << o.name;
+  }
+  EXPECT_EQ(use_report.parts.front().color_source, ColorSource::kMaterial);
+  EXPECT_FALSE(AnyWarningHas(use_report.warnings, {"placeholder"}));
+  EXPECT_TRUE(AnyWarningHas(use_report.warnings,
+                            {"the whole plant (15 parts, classes", "one colour [0.6, 0.6, 0.6]"}))
+      << testing::PrintToString(use_report.warnings);
+  const auto [use_red, use_fruit] = RedFruitPixels(*u);
+  EXPECT_EQ(use_fruit, fruit);
+  EXPECT_EQ(use_red, 0u);
+
+  // materials: ignore: class defaults, no placeholder to report.
+  std::string ignore = kColladaPlantYaml;
+  ignore.insert(ignore.find("    classes:"), "    materials: ignore\n");
+  SceneFileReport ignore_report;
+  const Result<Scene> i = LoadSceneFile(Write("ignore.yaml", ignore), &ignore_report);
+  ASSERT_TRUE(i.ok()) << i.status().ToString();
+  EXPECT_EQ(i->objects.front().albedo, DefaultClassColor(i->objects.front().semantic_class));
+  EXPECT_EQ(ignore_report.parts.front().color_source, ColorSource::kClassDefault);
+  EXPECT_FALSE(AnyWarningHas(ignore_report.warnings, {"placeholder"}));
+
+  // A chromatic material is a real colour: kept under auto.
+  Write("plant.dae", ColladaOf(FragmentedPlant(), "Red", {0.7f, 0.1f, 0.05f}));
+  SceneFileReport red_report;
+  const Result<Scene> c = LoadSceneFile(Write("scene.yaml", kColladaPlantYaml), &red_report);
+  ASSERT_TRUE(c.ok()) << c.status().ToString();
+  EXPECT_TRUE(c->objects.front().albedo.isApprox(Eigen::Vector3f(0.7f, 0.1f, 0.05f), 1e-6f));
+  EXPECT_EQ(red_report.parts.front().color_source, ColorSource::kMaterial);
+  // ... but then every class is that one colour.
+  EXPECT_TRUE(AnyWarningHas(red_report.warnings, {"the whole plant", "one colour"}));
+}
+
+TEST_F(SceneFileTest, ClassesSharingAColourAreReported) {
+  Write("plant.dae", ColladaOf(FragmentedPlant(), "Placeholder", {0.6f, 0.6f, 0.6f}));
+  // Fruit and leaf given one colour by their rules; the stem keeps its class colour.
+  const Result<Scene> r = Load(R"(version: 1
+meshes:
+  - file: plant.dae
+    classes:
+      - {match: "Fruit*", class: fruit, color: [0.1, 0.5, 0.1]}
+      - {match: "Leaf*", class: leaf, color: [0.1, 0.5, 0.1]}
+      - {match: "Stem", class: stem}
+)");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_TRUE(
+      AnyWarningHas(r->warnings, {"every fruit part (12) is [0.1, 0.5, 0.1]",
+                                  "a colour leaf parts have too", "cannot tell fruit from leaf"}))
+      << testing::PrintToString(r->warnings);
+  EXPECT_FALSE(AnyWarningHas(r->warnings, {"the whole plant"}));
+  EXPECT_FALSE(AnyWarningHas(r->warnings, {"no part is of class fruit"}));
+  // No fruit rule at all: no fruit part.
+  const Result<Scene> none = Load(R"(version: 1
+meshes: [{file: plant.dae, default_class: leaf}]
+)");
+  ASSERT_TRUE(none.ok()) << none.status().ToString();
+  EXPECT_TRUE(AnyWarningHas(none->warnings, {"no part is of class fruit"}));
+}
+
+TEST_F(SceneFileTest, MergeRulesJoinCalyxPartsToTheirFruitByName) {
+  Write("plant.dae", ColladaOf(FragmentedPlant(), "Placeholder", {0.6f, 0.6f, 0.6f}));
+  std::string yaml = kColladaPlantYaml;
+  yaml += R"(    merge:
+      - {match: "Fruit*_calyx_*", into: "Fruit*"}
+      - {match: "Bud*", into: "Fruit*"}
+)";
+  SceneFileReport report;
+  const Result<Scene> r = LoadSceneFile(Write("scene.yaml", yaml), &report);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  const std::vector<FruitTruth> fruits = r->Fruits();
+  ASSERT_EQ(fruits.size(), static_cast<size_t>(kFruits));
+  for (int k = 0; k < kFruits; ++k) {
+    const std::string name = "plant/Fruit" + std::to_string(k + 1);
+    EXPECT_EQ(fruits[k].name, name);
+    const SceneObject& o = Named(*r, name);
+    EXPECT_EQ(o.num_triangles(), 80u + 2u * 12u);  // the sphere and both calyx boxes
+    // The truth is the box of the sphere and its calyx (which reaches 28 mm above the centre).
+    const Box3 box = FruitBox(k, true);
+    EXPECT_LT((fruits[k].center_W - (box.center() + Eigen::Vector3d(0.7, 0, 0))).norm(), 1e-5);
+    EXPECT_LT((fruits[k].radii - 0.5 * box.size()).norm(), 1e-5);
+    EXPECT_NEAR(box.max().z(), 0.628, 1e-6);
+    ASSERT_EQ(report.fruits[k].merged.size(), 2u);
+    EXPECT_EQ(report.fruits[k].merged[0], name + "_calyx_a");
+    EXPECT_EQ(report.fruits[k].merged[1], name + "_calyx_b");
+  }
+  ASSERT_EQ(report.fragments.size(), 2u * kFruits);
+  EXPECT_EQ(report.fragments[0].into, "plant/Fruit1");
+  EXPECT_THAT(report.fragments[0].reason, HasSubstr("merge[0]"));
+  EXPECT_THAT(Named(report.parts, "plant/Fruit2_calyx_b").fate.front(),
+              HasSubstr("merged into plant/Fruit2 (merge[0])"));
+  EXPECT_TRUE(AnyWarningHas(report.warnings, {"merge[1]", "'Bud*'", "matches no part"}));
+  // The merged fragments are no longer tiny fruits.
+  EXPECT_FALSE(AnyWarningHas(report.warnings, {"fruit_min_volume_cm3"}));
+
+  // A target that does not exist leaves the parts alone, with a warning.
+  std::string missing = kColladaPlantYaml;
+  missing += "    merge: [{match: \"Fruit*_calyx_*\", into: \"Berry*\"}]\n";
+  const Result<Scene> m = Load(missing);
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  EXPECT_EQ(m->Fruits().size(), 3u * kFruits);
+  EXPECT_TRUE(AnyWarningHas(m->warnings, {"merge[0]", "8 of the 8 parts", "'Berry*'"}))
+      << testing::PrintToString(m->warnings);
+}
+
+TEST_F(SceneFileTest, SmallFruitComponentsJoinTheirNearestFruitOrAreDropped) {
+  WriteFragmentedObj(dir_);
+  const std::string base = R"(version: 1
+meshes:
+  - file: plant.obj
+    fruit_instances: components
+    classes: [{match: "Fruits", class: fruit}, {match: "Leaf*", class: leaf},
+              {match: "Stem", class: stem}]
+)";
+  // Without a size rule: four fruits, eight calyx fragments and the stray one are 13 "fruits".
+  const Result<Scene> plain = Load(base);
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  EXPECT_EQ(plain->Fruits().size(), 13u);
+  EXPECT_TRUE(AnyWarningHas(plain->warnings, {"9 of its 13 fruit instances", "under 2%"}))
+      << testing::PrintToString(plain->warnings);
+
+  // Bounding box under 1 cm3: the calyx boxes (0.256 cm3, touching their fruit) merge, the stray
+  // box 0.12 m above every fruit is out of the default 10 mm reach and dropped.
+  SceneFileReport report;
+  const Result<Scene> merged =
+      LoadSceneFile(Write("merge.yaml", base + "    fruit_min_volume_cm3: 1.0\n"), &report);
+  ASSERT_TRUE(merged.ok()) << merged.status().ToString();
+  const std::vector<FruitTruth> fruits = merged->Fruits();
+  ASSERT_EQ(fruits.size(), static_cast<size_t>(kFruits));
+  for (int k = 0; k < kFruits; ++k) {
+    EXPECT_LT((fruits[k].center_W - FruitBox(k, true).center()).norm(), 1e-5) << fruits[k].name;
+    EXPECT_EQ(
+        std::get<TriangleMesh>(merged->FindInstance(fruits[k].instance_id)->shape).num_triangles(),
+        80u + 2u * 12u);
+    EXPECT_EQ(report.fruits[k].merged.size(), 2u);
+  }
+  size_t joined = 0, dropped = 0;
+  for (const SceneFragmentReport& f : report.fragments) {
+    (f.into.empty() ? dropped : joined)++;
+    if (!f.into.empty()) {
+      EXPECT_LT(f.gap_mm, 5.0) << f.name;
+    }
+    EXPECT_NEAR(f.volume_cm3, f.into.empty() ? 0.216 : 0.256, 1e-3) << f.name;
+  }
+  EXPECT_EQ(joined, 8u);
+  EXPECT_EQ(dropped, 1u);
+  EXPECT_TRUE(
+      AnyWarningHas(report.warnings, {"9 fruit fragments", "8 joined their nearest fruit",
+                                      "1 dropped", "no fruit within 10 mm", "4 fruits remain"}))
+      << testing::PrintToString(report.warnings);
+  // The placeholder grey was replaced for the fruit as well.
+  EXPECT_EQ(merged->FindInstance(fruits[0].instance_id)->albedo,
+            DefaultClassColor(SemanticClass::kFruit));
+
+  // A reach of 200 mm takes the stray fragment in too; a vertex minimum does the same as the
+  // volume (boxes have 8 vertices, spheres 42).
+  const Result<Scene> reach = Load(base +
+                                   "    fruit_min_vertices: 20\n"
+                                   "    fruit_merge_reach_mm: 200\n");
+  ASSERT_TRUE(reach.ok()) << reach.status().ToString();
+  ASSERT_EQ(reach->Fruits().size(), static_cast<size_t>(kFruits));
+  size_t triangles = 0;
+  for (const FruitTruth& f : reach->Fruits()) {
+    triangles += reach->FindInstance(f.instance_id)->num_triangles();
+  }
+  EXPECT_EQ(triangles, kFruits * (80u + 2u * 12u) + 12u);
+
+  // Drop mode: the fragments are gone, the fruits are bare spheres.
+  SceneFileReport drop_report;
+  const Result<Scene> drop = LoadSceneFile(
+      Write("drop.yaml", base + "    fruit_min_volume_cm3: 1.0\n    fruit_small_parts: drop\n"),
+      &drop_report);
+  ASSERT_TRUE(drop.ok()) << drop.status().ToString();
+  ASSERT_EQ(drop->Fruits().size(), static_cast<size_t>(kFruits));
+  const std::vector<FruitTruth> bare = drop->Fruits();
+  for (int k = 0; k < kFruits; ++k) {
+    const FruitTruth& f = bare[static_cast<size_t>(k)];
+    EXPECT_EQ(drop->FindInstance(f.instance_id)->num_triangles(), 80u);
+    EXPECT_LT((f.center_W - FruitBox(k, false).center()).norm(), 1e-5);
+    EXPECT_LT((f.radii - 0.5 * FruitBox(k, false).size()).norm(), 1e-5);
+  }
+  EXPECT_EQ(drop_report.fragments.size(), 9u);
+  EXPECT_TRUE(AnyWarningHas(drop_report.warnings, {"0 joined", "9 dropped"}));
+  EXPECT_EQ(Named(drop_report.parts, "plant/Fruits").fate.size(), 13u);
+}
+
+TEST_F(SceneFileTest, FragmentAndMaterialKeysRejectBadValues) {
+  WriteFragmentedObj(dir_);
+  const auto error = [&](const std::string& entry_keys) {
+    const Result<Scene> r = Load("version: 1\nmeshes:\n  - file: plant.obj\n" + entry_keys);
+    EXPECT_FALSE(r.ok()) << entry_keys;
+    return r.status().message();
+  };
+  EXPECT_THAT(error("    materials: maybe\n"),
+              HasSubstr("meshes[0].materials: must be 'auto', 'use' or 'ignore', got 'maybe'"));
+  EXPECT_THAT(error("    fruit_small_parts: melt\n"),
+              HasSubstr("meshes[0].fruit_small_parts: must be 'merge' or 'drop', got 'melt'"));
+  EXPECT_THAT(error("    fruit_min_volume_cm3: -1\n"),
+              HasSubstr("meshes[0].fruit_min_volume_cm3: must be >= 0, got -1"));
+  EXPECT_THAT(error("    fruit_min_vertices: -3\n"),
+              HasSubstr("meshes[0].fruit_min_vertices: must be >= 0, got -3"));
+  EXPECT_THAT(error("    fruit_merge_reach_mm: -2\n"),
+              HasSubstr("meshes[0].fruit_merge_reach_mm: must be >= 0, got -2"));
+  EXPECT_THAT(error("    merge: [{match: \"a*\", into: \"b*\", to: x}]\n"),
+              HasSubstr("meshes[0].merge[0]: unknown key 'to'"));
+  EXPECT_THAT(error("    merge: [{match: \"a*\"}]\n"), HasSubstr("meshes[0].merge[0]"));
+  EXPECT_THAT(error("    merge: {match: a}\n"), HasSubstr("meshes[0].merge: must be a list"));
+  EXPECT_THAT(error("    fruit_min_size: 3\n"), HasSubstr("unknown key 'fruit_min_size'"));
+}
+
+TEST(GlobCaptureTest, StarsCaptureTheShortestText) {
+  std::vector<std::string> c;
+  EXPECT_TRUE(GlobCapture("Fruit*_calyx", "Fruit12_calyx", &c));
+  EXPECT_EQ(c, std::vector<std::string>({"12"}));
+  EXPECT_TRUE(GlobCapture("Fruit*_calyx_*", "Fruit3_calyx_b", &c));
+  EXPECT_EQ(c, std::vector<std::string>({"3", "b"}));
+  EXPECT_TRUE(GlobCapture("*_*", "a_b_c", &c));
+  EXPECT_EQ(c, std::vector<std::string>({"a", "b_c"}));
+  EXPECT_TRUE(GlobCapture("?x*", "axe", &c));
+  EXPECT_EQ(c, std::vector<std::string>({"e"}));
+  EXPECT_FALSE(GlobCapture("Fruit*_calyx", "Fruit12", &c));
+  EXPECT_TRUE(c.empty());
+  EXPECT_TRUE(GlobCapture("*", "", &c));
+  EXPECT_EQ(c, std::vector<std::string>({""}));
+  // Agrees with GlobMatch.
+  for (const char* p : {"a*b*c", "*", "a?c", "**x"}) {
+    for (const char* t : {"abc", "aXbYc", "x", "", "aXXbYYbZ"}) {
+      EXPECT_EQ(GlobCapture(p, t, nullptr), GlobMatch(p, t)) << p << " " << t;
+    }
+  }
 }
 
 TEST(GlobMatchTest, StarsAndQuestionMarks) {

@@ -18,6 +18,8 @@ struct CommandContext {
 /// Each adds its subcommand to `app` with its options; when the subcommand is given, its callback
 /// runs it and sets context.exit_code. One file per command (apps/src/<name>_command.cpp).
 void AddScenesCommand(CLI::App& app, CommandContext& context);
+/// avp scene check FILE: what the loader makes of a scene file (apps/src/scene_command.cpp).
+void AddSceneCommand(CLI::App& app, CommandContext& context);
 void AddRenderCommand(CLI::App& app, CommandContext& context);
 void AddMapCommand(CLI::App& app, CommandContext& context);
 void AddRunCommand(CLI::App& app, CommandContext& context);
