@@ -45,6 +45,7 @@ inline float Wrap01(float x) {
 }  // namespace
 
 Eigen::Vector3f Texture::Sample(const Eigen::Vector2f& st) const {
+  if (image.empty()) return Eigen::Vector3f::Zero();
   if (!st.allFinite()) return MeanColor();
   const int w = image.width();
   const int h = image.height();
