@@ -87,7 +87,7 @@ TEST(RunConfigTest, UnknownKeysAndBadValuesAreNamed) {
   RunConfig c;
   Status s = SetRunConfigKey(c, "map.grid.voxel_sise_m", "0.01");
   EXPECT_THAT(s.message(), HasSubstr("unknown run configuration key 'map.grid.voxel_sise_m' "
-                                     "(known: scenario, scene_file, seed,"));
+                                     "(known: scenario, scene_file, arrangement, seed,"));
   EXPECT_THAT(s.message(), HasSubstr("map, episode, ground_truth, planner, segmenter"));
   s = SetRunConfigKey(c, "planner.option.p_unknown", "0.1");
   EXPECT_THAT(s.message(), HasSubstr("planner.name and planner.options.KEY are known"));
@@ -111,6 +111,21 @@ TEST(RunConfigTest, UnknownKeysAndBadValuesAreNamed) {
   EXPECT_THAT(m, HasSubstr("unknown scenario 'tomato-nowhere' (known: tomato-multiple-clusters"));
   EXPECT_THAT(m, HasSubstr("p_unknown (2) must be in [0, 1)"));
   EXPECT_THAT(m, HasSubstr("unknown segmenter 'magic' (known: oracle, oracle-perfect, color)"));
+}
+
+TEST(RunConfigTest, ArrangementNeedsASceneFileAndAKnownName) {
+  RunConfig c;
+  ASSERT_TRUE(SetRunConfigKey(c, "arrangement", "full-occlusion").ok());
+  EXPECT_THAT(c.Validate(TheRegistries()).message(),
+              HasSubstr("arrangement 'full-occlusion' needs a scene file (scene_file): a scenario "
+                        "('tomato-multiple-clusters') is arranged by its generator"));
+  c.arrangement = "reference";
+  EXPECT_TRUE(c.Validate(TheRegistries()).ok()) << c.Validate(TheRegistries()).ToString();
+  c.scene_file = "plant.yaml";  // not read by Validate
+  c.arrangement = "single-cluster+start-yaw=20";
+  EXPECT_TRUE(c.Validate(TheRegistries()).ok()) << c.Validate(TheRegistries()).ToString();
+  c.arrangement = "sideways";
+  EXPECT_THAT(c.Validate(TheRegistries()).message(), HasSubstr("unknown arrangement 'sideways'"));
 }
 
 TEST(RunConfigTest, DefaultsAreTheModulesOwn) {

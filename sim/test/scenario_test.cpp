@@ -105,8 +105,8 @@ TEST(ScenarioTest, RegisteredScenariosAreBuiltWithTheirNameAndSeed) {
   EXPECT_EQ(scene->seed, 4u);
   EXPECT_EQ(scene->Fruits().size(), 1u);
   EXPECT_EQ(registry.Make("tomato-full-occlusion", 0).status().code(), StatusCode::kNotFound);
-  EXPECT_EQ(LoadScene({"one-sphere", "", 2}, registry)->seed, 2u);
-  EXPECT_THAT(LoadScene({"one-sphere", "x.yaml", 2}, registry).status().message(),
+  EXPECT_EQ(LoadScene({"one-sphere", "", 2, ""}, registry)->seed, 2u);
+  EXPECT_THAT(LoadScene({"one-sphere", "x.yaml", 2, ""}, registry).status().message(),
               HasSubstr("not both"));
 }
 
