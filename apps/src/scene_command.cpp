@@ -103,8 +103,16 @@ std::string Text(const fs::path& file, const sim::Scene& scene,
     line(fmt::format("  {}  [meshes[{}] {}]", p.name, p.mesh_entry, p.file));
     line(fmt::format("      class {} by {}; colour {} from {}", ToString(p.semantic_class),
                      RuleText(p), Color(p.color), ColorSourceText(p)));
+    // A part split into many components: the first few, then a count (--json lists all).
     std::string fate;
-    for (const std::string& f : p.fate) fate += (fate.empty() ? "" : "; ") + f;
+    constexpr size_t kShown = 4;
+    for (size_t k = 0; k < p.fate.size() && k < kShown; ++k) {
+      fate += (fate.empty() ? "" : "; ") + p.fate[k];
+    }
+    if (p.fate.size() > kShown) {
+      fate = fmt::format("{} components: {}; ... and {} more", p.fate.size(), fate,
+                         p.fate.size() - kShown);
+    }
     line(fmt::format("      {} triangles, {} vertices, {}; {}", p.triangles, p.vertices,
                      SizeMm(p.bounds), fate));
   }

@@ -854,6 +854,39 @@ meshes:
   EXPECT_EQ(Named(drop_report.parts, "plant/Fruits").fate.size(), 13u);
 }
 
+TEST_F(SceneFileTest, AMergedPartJoinsTheNearestComponentOfItsTarget) {
+  // "Berries": two spheres in one object (components); "Berries_calyx" sits on the second one.
+  size_t base = 1;
+  TriangleMesh berries = Sphere({0.0, 0.0, 0.5}, 0.02);
+  berries.Append(Sphere({0.0, 0.1, 0.5}, 0.02));
+  std::string obj = ObjObject("Berries", "", berries, base);
+  obj += ObjObject("Berries_calyx", "", MakeBox(Box3({-0.003, 0.097, 0.52}, {0.003, 0.103, 0.524})),
+                   base);
+  Write("berries.obj", obj);
+  SceneFileReport report;
+  const Result<Scene> r = LoadSceneFile(Write("berries.yaml", R"(version: 1
+meshes:
+  - file: berries.obj
+    fruit_instances: components
+    classes: [{match: "Berries*", class: fruit}]
+    merge: [{match: "*_calyx", into: "*"}]
+)"),
+                                        &report);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  const std::vector<FruitTruth> fruits = r->Fruits();
+  ASSERT_EQ(fruits.size(), 2u);
+  EXPECT_EQ(fruits[0].name, "berries/Berries#0");
+  EXPECT_EQ(r->FindInstance(fruits[0].instance_id)->num_triangles(), 80u);
+  EXPECT_EQ(r->FindInstance(fruits[1].instance_id)->num_triangles(), 80u + 12u);
+  EXPECT_NEAR(fruits[1].center_W.y(), 0.1, 1e-6);
+  ASSERT_EQ(report.fragments.size(), 1u);
+  EXPECT_EQ(report.fragments[0].into, "berries/Berries#1");
+  EXPECT_EQ(report.fruits[1].merged, std::vector<std::string>({"berries/Berries_calyx"}));
+  // No material: the class default, and no placeholder warning.
+  EXPECT_EQ(report.parts[0].color_source, ColorSource::kClassDefault);
+  EXPECT_FALSE(AnyWarningHas(report.warnings, {"placeholder"}));
+}
+
 TEST_F(SceneFileTest, FragmentAndMaterialKeysRejectBadValues) {
   WriteFragmentedObj(dir_);
   const auto error = [&](const std::string& entry_keys) {
