@@ -115,6 +115,8 @@ TEST_P(SceneFileFormatTest, BenchMapBuildGtAndCompare) {
     const Result<nlohmann::json> record = io::ReadJsonFile(run / "record.json");
     ASSERT_TRUE(record.ok()) << record.status().ToString();
     EXPECT_EQ((*record)["scenario"], name);
+    EXPECT_EQ((*record)["scene_file"], yaml.string());
+    EXPECT_FALSE(record->contains("arrangement"));
     EXPECT_EQ((*record)["seed"], seed);
     EXPECT_EQ(Lines(run / "metrics.csv").size(), 3u);  // header + 2 views
   }
@@ -191,7 +193,10 @@ TEST_F(SceneFileBenchTest, PaperExpandsToTheFourArrangements) {
   for (const std::string& n : names) {
     ASSERT_EQ(cells.count("plant@" + n), 1u) << n;
     const fs::path run = bench.out_dir / "runs" / ("plant_" + n) / "predefined" / "seed-3";
-    EXPECT_TRUE(fs::exists(run / "record.json")) << run;
+    const Result<nlohmann::json> record = io::ReadJsonFile(run / "record.json");
+    ASSERT_TRUE(record.ok()) << record.status().ToString();
+    EXPECT_EQ((*record)["scenario"], "plant@" + n);
+    EXPECT_EQ((*record)["arrangement"], n);
   }
   // single-cluster keeps the 4 fruit of the upper row (of 7); the others keep all 7. In the
   // first view (the start view), unoriented-start sees no fruit, full-occlusion fewer than the

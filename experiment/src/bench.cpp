@@ -322,17 +322,20 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
   const planning::PlannerEntry* entry = registries.planners.Find(planner);
   const nlohmann::json options = io::OptionsToJson(
       c.planner.options, entry != nullptr ? entry->options.Info() : std::vector<OptionInfo>{});
-  const nlohmann::json rec{{"scenario", j.scenario},
-                           {"planner", j.planner},
-                           {"seed", j.seed},
-                           {"segmenter", c.segmenter.name},
-                           {"views", c.episode.views},
-                           {"planner_options", options},
-                           {"end", std::string(pipeline::ToString(r->episode.end))},
-                           {"end_reason", r->episode.end_reason},
-                           {"episode_seconds", j.episode_s},
-                           {"git_revision", revision},
-                           {"fruits", report::FruitsJson(r->fruits)}};
+  nlohmann::json rec{{"scenario", j.scenario},
+                     {"planner", j.planner},
+                     {"seed", j.seed},
+                     {"segmenter", c.segmenter.name},
+                     {"views", c.episode.views},
+                     {"planner_options", options},
+                     {"end", std::string(pipeline::ToString(r->episode.end))},
+                     {"end_reason", r->episode.end_reason},
+                     {"episode_seconds", j.episode_s},
+                     {"git_revision", revision},
+                     {"fruits", report::FruitsJson(r->fruits)}};
+  // A scene file's entry: the file and the arrangement its scene was made with.
+  if (!c.scene_file.empty()) rec["scene_file"] = c.scene_file.string();
+  if (!c.arrangement.empty()) rec["arrangement"] = c.arrangement;
   if (Status s = io::WriteJsonFile(dir / "record.json", rec); !s.ok()) return fail(s);
   if (Status s = MarkComplete(dir, RunFolderKind(), "avp bench"); !s.ok()) return fail(s);
   // A segmenter that failed (a service that is down) leaves views without segmentation: the
