@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include <avp/apps/map_command.h>
+#include <avp/apps/scene_command.h>
 #include <avp/core/options.h>
 #include <avp/core/rng.h>
 #include <avp/core/segmentation.h>
@@ -122,6 +123,7 @@ Result<MapBuildSummary> RunMapBuild(const MapBuildOptions& options,
   AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out, "map file (--out)",
                                                 options.scene.scene_file, "scene file"));
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
+  LogSceneWarnings(scene);
   if (scene.plant_bounds.IsEmpty()) {
     return InvalidArgumentError(fmt::format("scene '{}' has no plant to map", scene.name));
   }
@@ -232,6 +234,7 @@ Result<MapGtSummary> RunMapGt(const MapGtOptions& options, const sim::ScenarioRe
   AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out, "ground truth file (--out)",
                                                 options.scene.scene_file, "scene file"));
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
+  LogSceneWarnings(scene);
   mapping::GridOptions grid_options;
   grid_options.voxel_size_m = options.voxel_size_m;
   AVP_RETURN_IF_ERROR(grid_options.Validate());
