@@ -10,12 +10,15 @@
 
 #include <avp/apps/scene_command.h>
 #include <avp/sim/mesh_builder.h>
+#include <avp/sim/scenario.h>
+#include <avp/sim/scene_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::apps {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 /// An OBJ object (1-based indices continue from `base`).
 std::string ObjObject(const std::string& name, const sim::TriangleMesh& mesh, size_t& base) {
@@ -152,6 +155,55 @@ TEST_F(SceneCommandTest, ExitCodeIsZeroWithWarningsAndNonZeroWithTheError) {
   EXPECT_NE(b.exit_code, 0);
   EXPECT_THAT(b.output, HasSubstr("meshes[0].materials: must be 'auto', 'use' or 'ignore', got "
                                   "'maybe'"));
+}
+
+TEST_F(SceneCommandTest, APlantBelowTheGroundWarnsAboutTheUpAxis) {
+  // The same plant read as y-up: turned onto its side (file y becomes world z), its fruit at file
+  // y = -0.08 m hang below the ground.
+  const auto yaml = Write("sideways.yaml", R"(version: 1
+ground: true
+meshes:
+  - file: plant.obj
+    up_axis: y
+    pose: {xyz: [0.7, 0, 0]}
+    classes: [{match: "Fruit*", class: fruit}]
+)");
+  const Result<std::string> text = DescribeSceneFile(yaml, false);
+  ASSERT_TRUE(text.ok()) << text.status().ToString();
+  EXPECT_THAT(*text, HasSubstr("below the ground at z = 0.000 m"));
+  EXPECT_THAT(*text, HasSubstr("check the mesh's up axis (up_axis)"));
+  // Upright, no such warning.
+  const Result<std::string> upright = DescribeSceneFile(yaml_, false);
+  ASSERT_TRUE(upright.ok()) << upright.status().ToString();
+  EXPECT_THAT(*upright, Not(HasSubstr("below the")));
+}
+
+TEST_F(SceneCommandTest, ExportWritesAScenarioAsASceneFileThatLoadsBack) {
+  const sim::ScenarioRegistry scenarios = sim::BuiltinScenarios();
+  const Result<std::filesystem::path> yaml =
+      ExportScene(sim::SceneSource{"tomato-single-cluster", {}, 4, {}}, scenarios, dir_ / "export");
+  ASSERT_TRUE(yaml.ok()) << yaml.status().ToString();
+  EXPECT_EQ(yaml->filename(), "tomato-single-cluster.yaml");
+  const Result<sim::Scene> original = sim::MakeScenario("tomato-single-cluster", 4);
+  const Result<sim::Scene> loaded = sim::LoadSceneFile(*yaml);
+  ASSERT_TRUE(original.ok() && loaded.ok()) << loaded.status().ToString();
+  ASSERT_EQ(loaded->Fruits().size(), original->Fruits().size());
+  for (size_t k = 0; k < original->Fruits().size(); ++k) {
+    EXPECT_LT((loaded->Fruits()[k].center_W - original->Fruits()[k].center_W).norm(), 1e-3);
+  }
+  // An arranged scene file is exported with its arrangement baked in, named without '@'.
+  const Result<std::filesystem::path> arranged =
+      ExportScene(sim::SceneSource{{}, *yaml, 0, "unoriented-start"}, scenarios, dir_ / "arranged");
+  ASSERT_TRUE(arranged.ok()) << arranged.status().ToString();
+  EXPECT_EQ(arranged->filename(), "tomato-single-cluster-unoriented-start.yaml");
+  const Result<sim::Scene> moved = sim::LoadSceneFile(*arranged);
+  ASSERT_TRUE(moved.ok()) << moved.status().ToString();
+  EXPECT_NEAR(moved->Fruits()[0].center_W.y() - original->Fruits()[0].center_W.y(), 0.4, 1e-3);
+  // Unknown scenario: the error names it.
+  const Result<std::filesystem::path> bad =
+      ExportScene(sim::SceneSource{"tomatoe", {}, 0, {}}, scenarios, dir_ / "bad");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_THAT(bad.status().message(), HasSubstr("tomatoe"));
 }
 
 }  // namespace

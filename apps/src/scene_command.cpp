@@ -14,6 +14,8 @@
 
 #include <avp/apps/scene_command.h>
 #include <avp/core/semantic_class.h>
+#include <avp/io/file.h>
+#include <avp/sim/scenario.h>
 #include <avp/sim/scene_file.h>
 
 #include "cli_common.h"
@@ -249,6 +251,21 @@ void LogSceneWarnings(const sim::Scene& scene) {
   for (const std::string& w : scene.warnings) spdlog::warn("scene '{}': {}", scene.name, w);
 }
 
+Result<fs::path> ExportScene(const sim::SceneSource& source, const sim::ScenarioRegistry& scenarios,
+                             const fs::path& out_dir) {
+  if (out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
+  if (!source.scene_file.empty()) {
+    AVP_RETURN_IF_ERROR(
+        io::CheckOutputIsNotInput(out_dir, "scene export folder", source.scene_file, "scene file"));
+  }
+  AVP_ASSIGN_OR_RETURN(sim::Scene scene, sim::LoadScene(source, scenarios));
+  LogSceneWarnings(scene);
+  // The arrangement is baked into the exported geometry; the file is named without '@'.
+  std::replace(scene.name.begin(), scene.name.end(), '@', '-');
+  AVP_RETURN_IF_ERROR(sim::SaveSceneFiles(scene, out_dir));
+  return out_dir / (scene.name + ".yaml");
+}
+
 void AddSceneCommand(CLI::App& app, CommandContext& context) {
   CLI::App* scene_cmd =
       app.add_subcommand("scene", "Scene files: check what a scene file's loader makes of it");
@@ -270,6 +287,35 @@ void AddSceneCommand(CLI::App& app, CommandContext& context) {
       const Result<std::string> text = DescribeSceneFile(cli->file, cli->json);
       if (!text.ok()) return Failed("scene check", text.status());
       std::fwrite(text->data(), 1, text->size(), stdout);
+      return 0;
+    });
+  });
+
+  struct ExportCli {
+    sim::SceneSource source;
+    std::string scene_file, out;
+  };
+  auto ex = std::make_shared<ExportCli>();
+  CLI::App* export_cmd = scene_cmd->add_subcommand(
+      "export",
+      "Write a scenario (or an arranged scene file) as a scene file: <name>.yaml + .obj + .mtl in "
+      "world coordinates, one OBJ object per part (open it in a modelling tool, edit it, load it "
+      "back with --scene)");
+  export_cmd->add_option("--scenario", ex->source.scenario,
+                         "Built-in scenario name (see `avp scenes`); default: " +
+                             std::string(sim::DefaultScenarioName()));
+  export_cmd->add_option("--scene", ex->scene_file, "YAML scene file (docs/scene-format.md)");
+  AddArrangementOption(*export_cmd, ex->source.arrangement);
+  AddNumberOption(*export_cmd, "--seed", ex->source.seed, uint64_t{0}, MaxOf<uint64_t>(),
+                  "Seed of the procedural plant");
+  export_cmd->add_option("--out", ex->out, "Output folder")->required();
+  export_cmd->callback([&context, ex] {
+    RunGuarded(context, [&] {
+      sim::SceneSource source = ex->source;
+      source.scene_file = ex->scene_file;
+      const Result<fs::path> yaml = ExportScene(source, context.registries->scenarios, ex->out);
+      if (!yaml.ok()) return Failed("scene export", yaml.status());
+      std::printf("wrote %s\n", yaml->string().c_str());
       return 0;
     });
   });

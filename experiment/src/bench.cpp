@@ -165,6 +165,14 @@ Result<std::vector<std::shared_ptr<const sim::Scene>>> LoadSceneFiles(
   }
   std::vector<Result<sim::Scene>> read(files.size(), InternalError("not read"));
   ParallelFor(files.size(), config.jobs, [&](size_t i) { read[i] = sim::LoadSceneFile(files[i]); });
+  // What the loader warns about (a placeholder material, fruit fragments, a plant under the
+  // ground...), once per file, before hours of episodes (docs/scene-format.md, "Warnings").
+  for (size_t i = 0; i < files.size(); ++i) {
+    if (!read[i].ok()) continue;
+    for (const std::string& w : read[i]->warnings) {
+      std::fprintf(stderr, "warning: scene file '%s': %s\n", files[i].string().c_str(), w.c_str());
+    }
+  }
   std::vector<Result<sim::Scene>> arranged(list.size(), InternalError("not arranged"));
   ParallelFor(list.size(), config.jobs, [&](size_t i) {
     const BenchScenario& b = list[i];

@@ -1142,6 +1142,29 @@ void SceneWarnings(const Scene& scene, std::vector<std::string>& warnings) {
     colors = std::move(sorted_colors);
     parts_of = std::move(sorted_parts);
   }
+  // A plant under the ground (or under the robot base's plane when there is none) is almost
+  // always a wrong up axis, unit or pose.
+  double ground_z = 0.0;
+  for (const SceneObject& o : scene.objects) {
+    if (o.semantic_class == SemanticClass::kGround) ground_z = o.Bounds().max().z();
+  }
+  Box3 plant_box;
+  for (const SceneObject* o : plant) plant_box.Extend(o->Bounds());
+  constexpr double kBelowGroundToleranceM = 0.01;
+  if (!plant_box.IsEmpty() && plant_box.min().z() < ground_z - kBelowGroundToleranceM) {
+    warnings.push_back(fmt::format(
+        "the plant reaches z = {:.3f} m, {:.3f} m below the {} at z = {:.3f} m (its extent is "
+        "{:.3f} x {:.3f} x {:.3f} m in x, y, z): check the mesh's up axis (up_axis), units "
+        "(scale) and pose",
+        plant_box.min().z(), ground_z - plant_box.min().z(),
+        scene.objects.end() != std::find_if(scene.objects.begin(), scene.objects.end(),
+                                            [](const SceneObject& o) {
+                                              return o.semantic_class == SemanticClass::kGround;
+                                            })
+            ? "ground"
+            : "robot base plane",
+        ground_z, plant_box.size().x(), plant_box.size().y(), plant_box.size().z()));
+  }
   if (fruits == 0) {
     warnings.push_back(
         "no part is of class fruit: the scene has no fruit ground truth (check the class rules "

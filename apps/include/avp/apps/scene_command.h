@@ -4,6 +4,7 @@
 #include <string>
 
 #include <avp/core/status.h>
+#include <avp/sim/scenario.h>
 #include <avp/sim/scene.h>
 
 namespace avp::apps {
@@ -19,5 +20,12 @@ Result<std::string> DescribeSceneFile(const std::filesystem::path& file, bool js
 /// Logs each of the scene's warnings (sim::Scene::warnings) with spdlog::warn, for the commands
 /// that load a scene.
 void LogSceneWarnings(const sim::Scene& scene);
+
+/// avp scene export: the scene of `source` (a scenario, or a scene file with its arrangement baked
+/// in) written by sim::SaveSceneFiles into `out_dir`; returns the YAML file's path. Refuses an
+/// output folder that is the input scene file.
+Result<std::filesystem::path> ExportScene(const sim::SceneSource& source,
+                                          const sim::ScenarioRegistry& scenarios,
+                                          const std::filesystem::path& out_dir);
 
 }  // namespace avp::apps
