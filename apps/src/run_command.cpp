@@ -226,8 +226,10 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
   cmd.add_option("--carving", cli.carving, "Free space: projective, raycast or none")
       ->default_str(std::string(mapping::ToString(d.episode.integrator.carving)));
   cmd.add_flag("--no-noise", cli.no_noise, "Noise-free depth");
-  cmd.add_option("--gt", cli.gt,
-                 "Ground truth from an OctoMap .bt instead of the observable fruit surface");
+  cmd.add_option(
+      "--gt", cli.gt,
+      "Ground truth from a map file instead of the observable fruit surface: an OctoMap .bt / .ot "
+      "(its occupied voxels) or a labelled .avpmap / ColorOcTree .ot (its fruit voxels)");
   AddNumberOption(cmd, "--threads", cli.threads, 0, experiment::kMaxThreads,
                   "Threads (0 = all; results do not depend on it)");
   AddKeyValueOption(cmd, "--planner-option", cli.planner_options,

@@ -16,6 +16,7 @@
 #include <avp/core/rng.h>
 #include <avp/core/semantic_class.h>
 #include <avp/eval/ground_truth.h>
+#include <avp/mapping/map_reader.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/segmentation/oracle_segmenter.h>
 #include <avp/sim/rgbd_renderer.h>
@@ -396,10 +397,16 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
 
 Result<GroundTruth> GroundTruthFromOctomapFile(const std::filesystem::path& bt,
                                                const sim::Scene* scene) {
-  AVP_ASSIGN_OR_RETURN(const mapping::VoxelSet set, mapping::ImportOctomapOccupied(bt));
+  // Any map file (mapping::LoadAnyMap): an OctoMap .bt / .ot gives its occupied voxels, a map
+  // that carries classes (.avpmap, a ColorOcTree in avp's class colours) its fruit voxels.
+  AVP_ASSIGN_OR_RETURN(const mapping::LoadedMap loaded, mapping::LoadAnyMap(bt));
+  bool used_labels = false;
+  const mapping::VoxelSet set =
+      mapping::GroundTruthVoxels(loaded, SemanticClass::kFruit, &used_labels);
   GroundTruth gt;
   gt.voxel_size_m = set.resolution_m;
   gt.source = "file:" + bt.string();
+  if (used_labels) gt.source += " (its fruit voxels)";
   if (scene != nullptr) gt.fruits = scene->Fruits();
   std::vector<KeyAndId> pairs;
   pairs.reserve(set.keys.size());

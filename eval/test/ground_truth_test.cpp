@@ -15,6 +15,7 @@
 #include <avp/eval/metrics.h>
 #include <avp/eval/oracle_planner.h>
 #include <avp/mapping/integrator.h>
+#include <avp/mapping/map_file.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/robot/arm_model.h>
@@ -529,6 +530,53 @@ TEST_F(GroundTruthFileTest, TruncatedOctomapGroundTruthIsRefused) {
   EXPECT_EQ(cut.status().code(), StatusCode::kParseError);
   EXPECT_THAT(cut.status().message(), HasSubstr("gt.ot"));
   EXPECT_THAT(cut.status().message(), HasSubstr("truncated"));
+}
+
+TEST_F(GroundTruthFileTest, LabelledMapFilesGiveTheirFruitVoxels) {
+  // A run's map (fruit surface labelled fruit, plus leaf-labelled voxels) as the ground truth of
+  // another run: from map.avpmap and from map.ot, only the fruit voxels count.
+  Result<sim::Scene> scene = sim::MakeScenario("tomato-single-cluster", 2);
+  ASSERT_TRUE(scene.ok());
+  const sim::FruitVoxels surface = sim::VoxelizeFruitSurfaces(*scene, 0.006);
+  mapping::MapOptions options;
+  options.grid.voxel_size_m = 0.006;
+  mapping::SemanticMap map(options);
+  mapping::OccupancyGrid& grid = map.grid();
+  for (const VoxelKey& k : surface.SortedKeys()) {
+    grid.SetLogOdds(k, grid.clamp_max_log_odds());
+    mapping::SemanticCell* c = grid.MutableSemantic(k);
+    c->semantic_class = static_cast<uint8_t>(SemanticClass::kFruit);
+    c->confidence = 0.9f;
+    c->observations = 2;
+  }
+  size_t leaves = 0;
+  for (int x = 0; x < 20; ++x) {
+    const VoxelKey k{x, 500, 100};  // far from every fruit
+    grid.SetLogOdds(k, grid.clamp_max_log_odds());
+    mapping::SemanticCell* c = grid.MutableSemantic(k);
+    c->semantic_class = static_cast<uint8_t>(SemanticClass::kLeaf);
+    c->confidence = 0.9f;
+    c->observations = 2;
+    ++leaves;
+  }
+  const std::filesystem::path avpmap = dir_ / "map.avpmap";
+  const std::filesystem::path ot = dir_ / "map.ot";
+  const std::filesystem::path bt = dir_ / "map.bt";
+  ASSERT_TRUE(mapping::SaveMap(map, avpmap).ok());
+  ASSERT_TRUE(mapping::ExportOctomapColor(map, ot).ok());
+  ASSERT_TRUE(mapping::ExportOctomapBinary(grid, bt).ok());
+  for (const std::filesystem::path& file : {avpmap, ot}) {
+    const Result<GroundTruth> gt = GroundTruthFromOctomapFile(file, &*scene);
+    ASSERT_TRUE(gt.ok()) << file << ": " << gt.status().ToString();
+    EXPECT_EQ(gt->SortedKeys(), surface.SortedKeys()) << file;
+    EXPECT_EQ(gt->source, "file:" + file.string() + " (its fruit voxels)");
+    EXPECT_EQ(gt->fruits.size(), scene->Fruits().size());
+  }
+  // A .bt has no classes: every occupied voxel, the leaves' too.
+  const Result<GroundTruth> all = GroundTruthFromOctomapFile(bt, &*scene);
+  ASSERT_TRUE(all.ok()) << all.status().ToString();
+  EXPECT_EQ(all->voxels.size(), surface.voxels.size() + leaves);
+  EXPECT_EQ(all->source, "file:" + bt.string());
 }
 
 }  // namespace

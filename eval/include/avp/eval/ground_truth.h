@@ -129,13 +129,15 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
                                           const Eigen::VectorXd& q_start, const CameraIntrinsics& K,
                                           const GroundTruthOptions& options);
 
-/// A ground truth read from an OctoMap file (.bt, or .ot): its occupied voxels at the finest
-/// resolution (mapping::ImportOctomapOccupied). With a scene, each voxel goes to the fruit whose
-/// surface is nearest its centre (distance | |p - c| - mean radius |, ties to the smaller id) and
-/// `fruits` / `voxels_per_fruit` are filled; without one (nullptr) every voxel has id 0 and there
-/// are no fruits. The file is checked before and after OctoMap reads it, so a truncated or
-/// corrupt file is an error, never a different ground truth. Errors: those of
-/// ImportOctomapOccupied (NotFound, InvalidArgument, ResourceExhausted, ParseError, OutOfRange).
+/// A ground truth read from a map file (mapping::LoadAnyMap): an OctoMap .bt or .ot gives its
+/// occupied voxels at the finest resolution; a file that carries classes (an .avpmap, a
+/// ColorOcTree in avp's class colours, e.g. a run's map.avpmap / map.ot) gives its occupied
+/// fruit voxels, and `source` says so ("file:PATH (its fruit voxels)"). With a scene, each voxel
+/// goes to the fruit whose surface is nearest its centre (distance | |p - c| - mean radius |, ties
+/// to the smaller id) and `fruits` / `voxels_per_fruit` are filled; without one (nullptr) every
+/// voxel has id 0 and there are no fruits. The file is checked before and after OctoMap reads it,
+/// so a truncated or corrupt file is an error, never a different ground truth. Errors: those of
+/// LoadAnyMap (NotFound, InvalidArgument, ResourceExhausted, ParseError, OutOfRange).
 Result<GroundTruth> GroundTruthFromOctomapFile(const std::filesystem::path& bt,
                                                const sim::Scene* scene);
 
