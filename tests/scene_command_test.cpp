@@ -6,12 +6,12 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
-#include <sys/wait.h>
 
 #include <avp/apps/scene_command.h>
 #include <avp/sim/mesh_builder.h>
 #include <avp/sim/scenario.h>
 #include <avp/sim/scene_file.h>
+#include <avp/test/run_command.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::apps {
@@ -125,23 +125,10 @@ TEST_F(SceneCommandTest, JsonHoldsTheSameReport) {
   EXPECT_EQ(j["warnings"].size(), 2u) << j["warnings"].dump(1);
 }
 
-struct Ran {
-  int exit_code = -1;
-  std::string output;
-};
+using test::Ran;
 
-Ran Avp(const std::string& args) {
-  const std::string command = "'" AVP_BINARY "' " + args + " 2>&1";
-  Ran r;
-  std::FILE* p = ::popen(command.c_str(), "r");
-  if (p == nullptr) return r;
-  char buf[4096];
-  size_t n = 0;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  const int status = ::pclose(p);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+/// Runs the built avp with `args` through the shell, stdout and stderr together.
+Ran Avp(const std::string& args) { return test::RunShell("'" AVP_BINARY "' " + args + " 2>&1"); }
 
 TEST_F(SceneCommandTest, ExitCodeIsZeroWithWarningsAndNonZeroWithTheError) {
   const Ran ok = Avp("scene check '" + yaml_.string() + "'");

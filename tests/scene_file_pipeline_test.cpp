@@ -14,13 +14,13 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <avp/apps/map_command.h>
 #include <avp/experiment/bench.h>
 #include <avp/io/json.h>
 #include <avp/sim/scene_file.h>
 #include <avp/test/plant_mesh_files.h>
+#include <avp/test/run_command.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp {
@@ -280,23 +280,10 @@ TEST_F(SceneFileBenchTest, ConfigPathsAreRelativeToTheConfig) {
 }
 
 #ifdef AVP_BINARY
-struct Ran {
-  int exit_code = -1;
-  std::string output;
-};
+using test::Ran;
 
-Ran Avp(const std::string& args) {
-  const std::string command = "'" AVP_BINARY "' " + args + " 2>&1";
-  Ran r;
-  std::FILE* p = ::popen(command.c_str(), "r");
-  if (p == nullptr) return r;
-  char buf[4096];
-  size_t n = 0;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  const int status = ::pclose(p);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+/// Runs the built avp with `args` through the shell, stdout and stderr together.
+Ran Avp(const std::string& args) { return test::RunShell("'" AVP_BINARY "' " + args + " 2>&1"); }
 
 TEST_F(SceneFileBenchTest, TheCommandLineTakesSceneFilesAndArrangements) {
   const fs::path yaml = Plant();

@@ -10,8 +10,8 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
+#include <avp/test/run_command.h>
 #include <avp/test/temp_dir_test.h>
 
 #ifndef AVP_BINARY
@@ -25,23 +25,11 @@ namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 using ::testing::Not;
 
-struct Ran {
-  int exit_code = -1;
-  std::string output;  ///< stdout and stderr
-};
+using test::Ran;
 
 /// Runs `env avp args` through the shell, stdout and stderr together.
 Ran Avp(const std::string& args, const std::string& env = "") {
-  const std::string command = env + " '" AVP_BINARY "' " + args + " 2>&1";
-  Ran r;
-  std::FILE* p = ::popen(command.c_str(), "r");
-  if (p == nullptr) return r;
-  char buf[4096];
-  size_t n = 0;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  const int status = ::pclose(p);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  return test::RunShell(env + " '" AVP_BINARY "' " + args + " 2>&1");
 }
 
 std::string ReadAll(const fs::path& p) {
