@@ -87,6 +87,9 @@ const std::map<std::string, std::set<std::string>> kAllowed = {
     // the simulator as a ROS 2 robot.
     {"rosmsg", {"core", "rosmsg"}},
     {"ros2", {"core", "rosmsg", "ros2"}},
+    // MCAP recordings: the container links core only; its npm read-back test writes rosmsg
+    // messages.
+    {"mcap", {"core", "rosmsg", "mcap"}},
     {"live",
      {"core", "io", "robot", "segmentation", "mapping", "planning", "pipeline", "rosmsg", "ros2",
       "live"}},
