@@ -467,7 +467,9 @@ Status Writer::WriteChunk() {
   PutBytes(out, chunk_);
   const uint64_t chunk_length = out.size();
   std::map<uint16_t, uint64_t> index_offsets;
-  for (const auto& [channel, entries] : chunk_index_) {
+  for (auto& [channel, entries] : chunk_index_) {
+    std::stable_sort(entries.begin(), entries.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
     index_offsets[channel] = chunk_offset + out.size();
     std::vector<uint8_t> content;
     PutU16(content, channel);
@@ -694,7 +696,8 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
     const uint64_t chunk_start = c.U64("chunk_start_offset");
     const uint64_t chunk_length = c.U64("chunk_length");
     if (!c.ok()) return Bad(where, c);
-    if (chunk_start < 8 || chunk_start + chunk_length > summary_start || chunk_length < 9) {
+    if (chunk_start < 8 || chunk_start > summary_start ||
+        chunk_length > summary_start - chunk_start || chunk_length < 9) {
       return ParseError(
           fmt::format("{}: Chunk Index at offset {} points at bytes {}..{}, outside "
                       "the data section",
