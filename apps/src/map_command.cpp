@@ -19,6 +19,7 @@
 #include <avp/io/json.h>
 #include <avp/mapping/ply_export.h>
 #include <avp/mapping/semantic_map.h>
+#include <avp/report/progress.h>
 #include <avp/sim/ground_truth.h>
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/sensor_noise.h>
@@ -630,15 +631,22 @@ namespace {
 
 int MapBuildAndReport(const MapBuildOptions& options, const sim::ScenarioRegistry& scenarios) {
   MapBuildOptions o = options;
-  o.on_view = [](const MapBuildView& v) {
+  // Each view's line ends with the rate, the time elapsed and the time left (report::Progress's
+  // words).
+  const auto t0 = std::chrono::steady_clock::now();
+  o.on_view = [t0](const MapBuildView& v) {
     const Eigen::Vector3d eye = v.X_WC.translation();
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const std::string progress = report::FormatProgressTimes(
+        static_cast<size_t>(v.index + 1), static_cast<size_t>(std::max(v.views, 0)), elapsed);
     std::printf(
         "view %d/%d  azimuth %6.1f deg  eye (%.3f, %.3f, %.3f)  %zu endpoints, %zu fruit px in "
         "%zu masks -> known %zu, occupied %zu, labelled %zu, instances %zu  (render %.0f ms, "
-        "integrate %.0f ms)\n",
+        "integrate %.0f ms)  %s\n",
         v.index + 1, v.views, v.azimuth_deg, eye.x(), eye.y(), eye.z(), v.stats.endpoints,
         v.fruit_pixels, v.masks, v.known_voxels, v.occupied_voxels, v.labelled_voxels, v.instances,
-        v.render_ms, v.integrate_ms);
+        v.render_ms, v.integrate_ms, progress.c_str());
     std::fflush(stdout);
   };
   const auto result = RunMapBuild(o, scenarios);

@@ -3,6 +3,7 @@
 // The flags `avp run`, `avp live` and `avp sim ros2` share: the run configuration (--config, the
 // shorthands, --*-option, --set) and the per-step progress line.
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -49,5 +50,8 @@ Result<experiment::RunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& c
 
 /// One line per fused view: pose, masks, F1 and fruits (when there is ground truth), stage times.
 void PrintStep(const pipeline::StepRecord& s);
+/// PrintStep's line with `progress` before the problems (avp run: report::FormatProgressTimes, the
+/// rate, the time elapsed and the time left).
+void PrintStepWithProgress(const pipeline::StepRecord& s, std::string_view progress);
 
 }  // namespace avp::apps

@@ -1,4 +1,6 @@
 // avp run: one simulated active-vision episode into a run folder (docs/experiments.md).
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -13,6 +15,7 @@
 #include <avp/experiment/run_folder.h>
 #include <avp/io/options_yaml.h>
 #include <avp/io/yaml.h>
+#include <avp/report/progress.h>
 #include <avp/sim/scenario.h>
 #include <avp/sim/scene_file.h>
 
@@ -107,7 +110,9 @@ Result<experiment::RunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& c
   return c;
 }
 
-void PrintStep(const pipeline::StepRecord& s) {
+void PrintStep(const pipeline::StepRecord& s) { PrintStepWithProgress(s, {}); }
+
+void PrintStepWithProgress(const pipeline::StepRecord& s, std::string_view progress) {
   const Eigen::Vector3d eye = s.X_WC.translation();
   const std::string metrics =
       std::isnan(s.Metric("f1"))
@@ -120,14 +125,14 @@ void PrintStep(const pipeline::StepRecord& s) {
                                    : std::string();
   std::printf(
       "view %d/%d  eye (%.3f, %.3f, %.3f)  %zu masks%s  [segment %.0f ms, integrate %.0f "
-      "ms, plan %.0f ms%s]%s\n",
+      "ms, plan %.0f ms%s]%s%s\n",
       s.view + 1, s.views_total, eye.x(), eye.y(), eye.z(), s.masks, metrics.c_str(),
       s.times.segment_ms, s.times.integrate_ms, s.times.plan_ms,
       s.planned ? fmt::format(", {} of {} candidates reachable", s.candidates_reachable,
                               s.candidates_generated)
                       .c_str()
                 : "",
-      problems.c_str());
+      progress.empty() ? "" : fmt::format("  {}", progress).c_str(), problems.c_str());
   std::fflush(stdout);
 }
 
@@ -185,7 +190,16 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   options.out_dir = cli.out;
   options.force = cli.force;
   if (!cli.config_file.empty()) options.inputs.emplace_back(cli.config_file, "configuration file");
-  options.on_step = PrintStep;
+  // Each view's line ends with the rate, the time elapsed and the time left (report::Progress's
+  // words), so that a long run shows how far it is.
+  const auto t0 = std::chrono::steady_clock::now();
+  options.on_step = [t0](const pipeline::StepRecord& s) {
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    PrintStepWithProgress(
+        s, report::FormatProgressTimes(static_cast<size_t>(s.view + 1),
+                                       static_cast<size_t>(std::max(s.views_total, 0)), elapsed));
+  };
   const Result<experiment::RunSummary> summary =
       experiment::RunToFolder(*config, registries, options);
   if (!summary.ok()) return Failed("run", summary.status());

@@ -25,6 +25,7 @@
 #include <avp/io/options_yaml.h>
 #include <avp/io/yaml.h>
 #include <avp/report/metrics_csv.h>
+#include <avp/report/progress.h>
 #include <avp/report/provenance.h>
 #include <avp/report/run_report.h>
 #include <avp/sim/scene_file.h>
@@ -62,37 +63,6 @@ struct Group {
   const BenchScenario* source = nullptr;
   std::shared_ptr<const sim::Scene> scene;
   Result<eval::GroundTruth> gt = InternalError("not computed");
-};
-
-class ProgressBar {
- public:
-  ProgressBar(bool enabled, size_t total, std::string what)
-      : enabled_(enabled), total_(total), what_(std::move(what)), t0_(Clock::now()) {}
-  void Tick() {
-    const size_t done = ++done_;
-    if (!enabled_) return;
-    std::lock_guard<std::mutex> lock(mu_);
-    const double s = SecondsSince(t0_);
-    const double eta =
-        done > 0 ? s / static_cast<double>(done) * static_cast<double>(total_ - done) : 0.0;
-    constexpr int kWidth = 30;
-    const int filled = static_cast<int>(kWidth * static_cast<double>(done) /
-                                        static_cast<double>(std::max<size_t>(total_, 1)));
-    std::fprintf(stderr, "\r%s [%s%s] %zu/%zu  %.0f s elapsed, ~%.0f s left   ", what_.c_str(),
-                 std::string(static_cast<size_t>(filled), '#').c_str(),
-                 std::string(static_cast<size_t>(kWidth - filled), '.').c_str(), done, total_, s,
-                 eta);
-    if (done == total_) std::fprintf(stderr, "\n");
-    std::fflush(stderr);
-  }
-
- private:
-  bool enabled_;
-  size_t total_;
-  std::string what_;
-  Clock::time_point t0_;
-  std::atomic<size_t> done_{0};
-  std::mutex mu_;
 };
 
 /// The base configuration of every job: one thread inside, the scene from the job's scenario.
@@ -222,21 +192,21 @@ Result<std::vector<Group>> BuildGroups(const BenchConfig& config, const Registri
     }
   }
   std::vector<Status> scene_status(groups.size());
-  ProgressBar bar(config.progress, groups.size(), "ground truth");
+  report::Progress bar(report::ProgressOn(stderr, "ground truth", groups.size(), config.progress));
   ParallelFor(groups.size(), config.jobs, [&](size_t i) {
     Group& g = groups[i];
     if (g.scene == nullptr) {
       Result<sim::Scene> scene = registries.scenarios.Make(g.source->scenario, g.seed);
       if (!scene.ok()) {
         scene_status[i] = scene.status();
-        bar.Tick();
+        bar.Done(fmt::format("{} seed {} failed", g.scenario, g.seed));
         return;
       }
       scene->name = g.scenario;
       g.scene = std::make_shared<const sim::Scene>(std::move(*scene));
     }
     g.gt = GroundTruthFor(JobConfig(config, *g.source, g.seed, ""), *g.scene);
-    bar.Tick();
+    bar.Done(fmt::format("{} seed {} {}", g.scenario, g.seed, g.gt.ok() ? "ok" : "failed"));
   });
   for (size_t i = 0; i < groups.size(); ++i) {
     const Group& g = groups[i];
@@ -673,11 +643,13 @@ Result<BenchSummary> RunBenchInFolder(const BenchConfig& config, const Registrie
   std::vector<report::BenchEpisode> episodes(refs.size());
   WriteFailure failure;
   {
-    ProgressBar bar(config.progress, refs.size(), "episodes");
+    report::Progress bar(report::ProgressOn(stderr, "episodes", refs.size(), config.progress));
     ParallelFor(refs.size(), config.jobs, [&](size_t i) {
       episodes[i] =
           RunJob(config, registries, groups[refs[i].group], refs[i].planner, revision, failure);
-      bar.Tick();
+      const report::BenchEpisode& e = episodes[i];
+      bar.Done(fmt::format("{} {} seed {} {}", e.scenario, e.planner, e.seed,
+                           e.status.ok() ? "ok" : "failed"));
     });
   }
   if (failure.failed()) return failure.first();

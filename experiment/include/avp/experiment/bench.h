@@ -76,7 +76,8 @@ struct BenchConfig {
   bool force = false;
   /// Files the bench reads (its --config): no output may be one of them.
   std::vector<std::pair<std::filesystem::path, std::string>> inputs;
-  /// Progress bars on stderr.
+  /// Progress on stderr (report::Progress): a bar on a terminal, one line per finished job in a
+  /// log or under CI.
   bool progress = true;
 
   /// Every problem at once: empty or unknown scenarios and planners, empty names, bad
