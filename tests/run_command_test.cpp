@@ -326,6 +326,27 @@ TEST_F(RunCommandTest, PlannerOptionsReachThePlannerAndTheRecord) {
   EXPECT_THAT(bench->Validate(registries_).message(), HasSubstr("refine_top (0) must be >= 1"));
 }
 
+TEST_F(RunCommandTest, BenchProgressOffATerminalIsOneLinePerJob) {
+  BenchConfig o;
+  o.scenarios = {"tomato-single-cluster"};
+  o.planners = {"predefined"};
+  o.seeds = {0, 1};
+  o.base.episode.views = 2;
+  o.jobs = 1;
+  o.out_dir = dir_ / "bench-progress";
+  testing::internal::CaptureStderr();  // a file: not a terminal, so lines
+  const auto r = RunBench(o, registries_);
+  const std::string err = testing::internal::GetCapturedStderr();
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_THAT(err, HasSubstr("ground truth 1/2 (50 %) "));
+  EXPECT_THAT(err, HasSubstr(": tomato-single-cluster seed 0 ok\n"));
+  EXPECT_THAT(err, HasSubstr("episodes 1/2 (50 %) "));
+  EXPECT_THAT(err, HasSubstr("episodes 2/2 (100 %) "));
+  EXPECT_THAT(err, HasSubstr(": tomato-single-cluster predefined seed 1 ok\n"));
+  EXPECT_EQ(err.find('\r'), std::string::npos);
+  EXPECT_EQ(err.find('\x1b'), std::string::npos);
+}
+
 TEST_F(RunCommandTest, BenchWritesLongFormatSummaryAndPlots) {
   BenchConfig o;
   o.scenarios = {"tomato-single-cluster"};
