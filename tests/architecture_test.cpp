@@ -89,7 +89,7 @@ const std::map<std::string, std::set<std::string>> kAllowed = {
     {"ros2", {"core", "rosmsg", "ros2"}},
     // MCAP recordings: the container links core only; its npm read-back test writes rosmsg
     // messages.
-    {"mcap", {"core", "rosmsg", "mcap"}},
+    {"mcap", {"core", "io", "rosmsg", "mcap"}},
     {"live",
      {"core", "io", "robot", "segmentation", "mapping", "planning", "pipeline", "rosmsg", "ros2",
       "live"}},

@@ -10,6 +10,8 @@
 
 #include <fmt/format.h>
 
+#include <avp/io/file.h>
+
 namespace avp::mcap {
 namespace {
 
@@ -283,13 +285,23 @@ Status ReadChunk(const Record& r, const std::string& where, const File& file,
   return Status::Ok();
 }
 
-Result<std::vector<uint8_t>> ReadAll(const std::filesystem::path& path) {
+/// The whole file, its size checked against the process-wide max_file_bytes limit
+/// (io::CheckReadableFile) before anything is allocated.
+Result<std::string> ReadAll(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return IoError(fmt::format("{}: cannot open: {}", path.string(), std::strerror(errno)));
-  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
-                             std::istreambuf_iterator<char>());
-  if (in.bad()) return IoError(fmt::format("{}: read failed", path.string()));
+  AVP_ASSIGN_OR_RETURN(const uint64_t size, io::CheckReadableFile(path, "MCAP file"));
+  std::string bytes(size, '\0');
+  in.read(bytes.data(), static_cast<std::streamsize>(size));
+  if (static_cast<uint64_t>(in.gcount()) != size) {
+    return IoError(
+        fmt::format("{}: read failed after {} of {} bytes", path.string(), in.gcount(), size));
+  }
   return bytes;
+}
+
+std::span<const uint8_t> Bytes(const std::string& s) {
+  return {reinterpret_cast<const uint8_t*>(s.data()), s.size()};
 }
 
 Status ReadHeader(std::span<const uint8_t> bytes, const std::string& where, File& file) {
@@ -605,7 +617,8 @@ Status Writer::Close() {
 
 Result<File> ReadIndexed(const std::filesystem::path& path) {
   const std::string where = path.string();
-  AVP_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, ReadAll(path));
+  AVP_ASSIGN_OR_RETURN(const std::string contents, ReadAll(path));
+  const std::span<const uint8_t> bytes = Bytes(contents);
   File file;
   AVP_RETURN_IF_ERROR(ReadHeader(bytes, where, file));
   const size_t n = bytes.size();
@@ -728,7 +741,7 @@ StreamResult ReadStreaming(const std::filesystem::path& path) {
     result.status = read.status();
     return result;
   }
-  const std::vector<uint8_t>& bytes = *read;
+  const std::span<const uint8_t> bytes = Bytes(*read);
   File& file = result.file;
   result.status = ReadHeader(bytes, where, file);
   if (!result.status.ok()) {
