@@ -38,6 +38,7 @@ void RegisterKnownLimits() {
   (void)sim::MaxMeshVertices();
   (void)sim::MaxMeshFaces();
   (void)sim::MaxMeshFileBytes();
+  (void)sim::MaxSceneTexturePixels();
   (void)experiment::MaxBenchEpisodes();
 }
 

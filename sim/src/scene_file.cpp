@@ -57,6 +57,12 @@ const Limit& MaxMeshFileBytes() {
   return limit;
 }
 
+const Limit& MaxSceneTexturePixels() {
+  static const Limit limit("max_scene_texture_pixels", uint64_t{256} << 20, "pixels",
+                           "texture pixels one mesh file of a scene keeps decoded, all images");
+  return limit;
+}
+
 namespace {
 
 namespace fs = std::filesystem;

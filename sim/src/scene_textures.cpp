@@ -15,6 +15,7 @@
 #include <avp/core/text.h>
 #include <avp/io/image_codec.h>
 #include <avp/io/image_limits.h>
+#include <avp/sim/scene_file.h>
 
 namespace avp::sim::internal {
 namespace {
@@ -183,6 +184,19 @@ std::shared_ptr<const Texture> TextureLoader::Load(const std::string& reference,
     Fail(reference, QuoteText(texture->source), valid.message(), part);
     return nullptr;
   }
+  // Each image is bounded by max_image_pixels before it is decoded; the images a mesh file keeps
+  // together by max_scene_texture_pixels (a file may name thousands of images).
+  const uint64_t texels = static_cast<uint64_t>(texture->image.width()) *
+                          static_cast<uint64_t>(texture->image.height());
+  if (const Status budget = MaxSceneTexturePixels().Check(
+          fmt::format("texture pixels of {} with {}", QuoteText(mesh_name),
+                      QuoteText(texture->source)),
+          kept_texels_ + texels);
+      !budget.ok()) {
+    Fail(reference, QuoteText(texture->source), budget.message(), part);
+    return nullptr;
+  }
+  kept_texels_ += texels;
   decoded_.emplace(key, texture);
   return texture;
 }

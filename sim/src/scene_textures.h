@@ -63,6 +63,7 @@ class TextureLoader {
   bool gltf_ = false;
   std::map<std::string, std::shared_ptr<const Texture>> decoded_;  // key: reference + factor
   std::map<std::string, Failure> failures_;                        // key: reference or reason
+  uint64_t kept_texels_ = 0;  // pixels of the decoded_ images (max_scene_texture_pixels)
   std::vector<std::string> failure_order_;
 };
 

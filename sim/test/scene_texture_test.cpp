@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include <avp/core/error.h>
+#include <avp/core/limits.h>
 #include <avp/io/image_codec.h>
 #include <avp/io/png.h>
 #include <avp/sim/mesh_builder.h>
@@ -649,6 +650,29 @@ TEST_F(TexturedSceneFileTest, MissingTextureWarnsAndUsesTheMaterialColour) {
   EXPECT_THAT(w, HasSubstr("textures/missing.png' is not rendered"));
   EXPECT_THAT(w, HasSubstr("does not exist"));
   EXPECT_THAT(w, HasSubstr("1 part ('quad/quad') uses the material colour"));
+}
+
+TEST_F(TexturedSceneFileTest, TexturesPastTheSceneBudgetWarnAndUseTheMaterialColour) {
+  WriteQuadrantPng("quad.png");
+  WriteObj("quad.png", "0.2 0.4 0.6");
+  const uint64_t texels = static_cast<uint64_t>(QuadrantImage().width()) *
+                          static_cast<uint64_t>(QuadrantImage().height());
+  {
+    const ScopedLimit budget(MaxSceneTexturePixels(), texels - 1);
+    const Result<Scene> r = Load("quad.obj");
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    const TriangleMesh& m = std::get<TriangleMesh>(r->objects[0].shape);
+    EXPECT_EQ(m.texture, nullptr);
+    EXPECT_TRUE(r->objects[0].albedo.isApprox(Eigen::Vector3f(0.2f, 0.4f, 0.6f)));
+    const std::string w = TextureWarnings(*r);
+    EXPECT_THAT(w, HasSubstr("max_scene_texture_pixels"));
+    EXPECT_THAT(w, HasSubstr("1 part ('quad/quad') uses the material colour"));
+  }
+  const ScopedLimit exact(MaxSceneTexturePixels(), texels);
+  const Result<Scene> r = Load("quad.obj");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_NE(std::get<TriangleMesh>(r->objects[0].shape).texture, nullptr);
+  EXPECT_EQ(TextureWarnings(*r), "");
 }
 
 TEST_F(TexturedSceneFileTest, CorruptOrOversizedImagesWarnWithoutCrashing) {

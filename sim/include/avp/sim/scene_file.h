@@ -26,6 +26,10 @@ inline constexpr int kSceneFileVersion = 1;
 const Limit& MaxMeshVertices();
 const Limit& MaxMeshFaces();
 const Limit& MaxMeshFileBytes();
+/// Texture pixels one mesh file keeps decoded, over all its images ("max_scene_texture_pixels",
+/// 256 Mi by default, ~768 MB of RGB); each image is also bounded by io::MaxImagePixels(). An
+/// image past it is not used (a warning names it; its parts keep their material colour).
+const Limit& MaxSceneTexturePixels();
 
 /// Loads a scene file. Mesh paths are relative to the YAML file. Node hierarchies are traversed
 /// with their transforms; COLLADA units are applied; each node's mesh becomes one SceneObject
