@@ -180,13 +180,10 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
     std::fputs(io::YamlText(*yaml).c_str(), stdout);
     return 0;
   }
-  // A scene file's warnings (placeholder materials, classes one colour shares ...) before the run.
-  if (!config->scene_file.empty()) {
-    if (const Result<sim::Scene> scene = sim::LoadSceneFile(config->scene_file); scene.ok()) {
-      LogSceneWarnings(*scene);
-    }
-  }
   experiment::RunFolderOptions options;
+  // A scene file's warnings (placeholder materials, classes one colour shares ...) before the run,
+  // from the scene the run loads (not a second load).
+  options.on_scene = [](const sim::Scene& scene) { LogSceneWarnings(scene); };
   options.out_dir = cli.out;
   options.force = cli.force;
   if (!cli.config_file.empty()) options.inputs.emplace_back(cli.config_file, "configuration file");

@@ -202,6 +202,7 @@ Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& regist
   AVP_RETURN_IF_ERROR(CheckOutputsAreNotInputs(config, options));
   AVP_RETURN_IF_ERROR(CheckOutputFolder(options.out_dir, RunFolderKind(), options.force));
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(config, registries));
+  if (options.on_scene) options.on_scene(scene);
   const auto t_gt = Clock::now();
   AVP_ASSIGN_OR_RETURN(const eval::GroundTruth gt, GroundTruthFor(config, scene));
   FolderRun run;

@@ -29,6 +29,9 @@ struct RunFolderOptions {
   std::vector<std::pair<std::filesystem::path, std::string>> inputs;
   /// Called after every step (progress printing); may be empty.
   std::function<void(const pipeline::StepRecord&)> on_step;
+  /// Called once with the scene RunToFolder loaded, before its ground truth and episode (e.g. to
+  /// print the scene file's warnings); may be empty.
+  std::function<void(const sim::Scene&)> on_scene;
 };
 
 struct RunSummary {
