@@ -2,6 +2,8 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
+#include <utility>
 
 #include <fmt/format.h>
 
@@ -70,11 +72,23 @@ Result<Segmentation> CheckedSegmentation(segmentation::Segmenter& segmenter,
   return seg;
 }
 
+/// What one view saw, kept for the observers (StepData).
+struct ViewSeen {
+  std::optional<robot::Observation> observation;
+  std::optional<Segmentation> segmentation;
+  std::optional<planning::PlanResult> plan;
+
+  StepData Data() const {
+    return StepData{observation ? &*observation : nullptr, segmentation ? &*segmentation : nullptr,
+                    plan ? &*plan : nullptr};
+  }
+};
+
 /// Senses at step.X_WC, segments and integrates the view into the map (depth only when
 /// segmentation failed; nothing when the capture failed), recording statuses, counts and times
-/// in `step`.
+/// in `step` and what was seen in `seen`.
 void FuseView(const EpisodeComponents& c, const EpisodeOptions& options,
-              const mapping::Integrator& integrator, int view, StepRecord& step) {
+              const mapping::Integrator& integrator, int view, StepRecord& step, ViewSeen& seen) {
   const int64_t stamp_ns = static_cast<int64_t>(view) * 1'000'000'000;
   auto t0 = Clock::now();
   Result<robot::Observation> obs = c.source->Capture(step.X_WC, stamp_ns);
@@ -91,9 +105,11 @@ void FuseView(const EpisodeComponents& c, const EpisodeOptions& options,
   } else {
     step.segment_status = seg.status();
   }
+  seen.observation = std::move(*obs);
+  if (seg.ok()) seen.segmentation = std::move(*seg);
   t0 = Clock::now();
-  Result<mapping::IntegrationStats> stats =
-      integrator.Integrate(obs->frame, seg.ok() ? &*seg : nullptr, *c.map);
+  Result<mapping::IntegrationStats> stats = integrator.Integrate(
+      seen.observation->frame, seen.segmentation ? &*seen.segmentation : nullptr, *c.map);
   step.times.integrate_ms = MsSince(t0);
   if (stats.ok()) {
     step.integration = *stats;
@@ -228,12 +244,13 @@ std::string MoveToBestCandidate(robot::Arm& arm, const std::vector<planning::Vie
 /// end and its reason in `result`, when the episode ends here (the planner stopped, no valid
 /// candidate, every candidate refused).
 bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidTransform>& fused,
-                 StepRecord& step, EpisodeResult& result) {
+                 StepRecord& step, EpisodeResult& result, ViewSeen& seen) {
   if (next.c.stop.stop_requested()) return Interrupted(result, "stop requested before planning");
   const planning::PlanningRequest req = PlanningRequestAfter(next, view, step, fused);
   auto t0 = Clock::now();
   Rng planner_rng = next.planner_root.Fork(static_cast<uint64_t>(view + 1));
-  const planning::PlanResult plan = PlanOrError(*next.c.planner, req, planner_rng);
+  const planning::PlanResult& plan =
+      seen.plan.emplace(PlanOrError(*next.c.planner, req, planner_rng));
   step.times.plan_ms = MsSince(t0);
   step.planned = true;
   step.plan_status = plan.status;
@@ -384,7 +401,8 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
     step.views_total = options.views;
     step.q = arm.CurrentJoints();
     step.X_WC = arm.CurrentCameraPose();
-    FuseView(c, options, integrator, view, step);
+    ViewSeen seen;
+    FuseView(c, options, integrator, view, step, seen);
     fused.push_back(step.X_WC);
     RecordMapAfterView(map, options.target_class, tally, step);
     if (metrics) {
@@ -402,13 +420,16 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
                               ? step.capture_status.ToString()
                               : step.segment_status.ToString());
     }
-    const bool stop = cancelled ||
-                      SegmenterFault(step, segment_failures_in_a_row, options, result) ||
-                      (view + 1 < options.views && PlanAndMove(next, view, fused, step, result));
+    const bool stop =
+        cancelled || SegmenterFault(step, segment_failures_in_a_row, options, result) ||
+        (view + 1 < options.views && PlanAndMove(next, view, fused, step, result, seen));
     step.times.total_ms = MsSince(t_step);
     result.steps.push_back(step);
+    const StepData data = seen.Data();
     for (EpisodeObserver* o : observers) {
-      if (o != nullptr) o->OnStep(result.steps.back(), map);
+      if (o == nullptr) continue;
+      o->OnView(result.steps.back(), data, map);
+      o->OnStep(result.steps.back(), map);
     }
     if (stop) break;
   }

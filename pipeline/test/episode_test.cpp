@@ -229,6 +229,66 @@ TEST_F(EpisodeTest, NViewsAreNFusedObservationsAndNMinusOneMoves) {
   EXPECT_NEAR(r->steps[0].joint_path_length, 0.1, 1e-12);
 }
 
+/// Keeps what OnView hands over (it is valid only during the call).
+class ViewKeeper final : public EpisodeObserver {
+ public:
+  struct Seen {
+    int view = -1;
+    bool has_observation = false;
+    int64_t stamp_ns = -1;
+    int depth_width = 0;
+    RigidTransform X_WC;
+    int instances = -1;  ///< -1: no segmentation
+    int ranked = -1;     ///< -1: no plan
+    bool on_step_followed = false;
+  };
+  std::vector<Seen> seen;
+  void OnView(const StepRecord& s, const StepData& d, const mapping::SemanticMap&) override {
+    Seen x;
+    x.view = s.view;
+    if (d.observation != nullptr) {
+      x.has_observation = true;
+      x.stamp_ns = d.observation->frame.stamp_ns;
+      x.depth_width = d.observation->frame.depth_m.width();
+      x.X_WC = d.observation->frame.X_WC;
+    }
+    if (d.segmentation != nullptr) x.instances = static_cast<int>(d.segmentation->instances.size());
+    if (d.plan != nullptr) x.ranked = static_cast<int>(d.plan->ranked.size());
+    seen.push_back(x);
+  }
+  void OnStep(const StepRecord& s, const mapping::SemanticMap&) override {
+    ASSERT_FALSE(seen.empty());
+    EXPECT_EQ(seen.back().view, s.view);  // OnView came first, for the same step
+    seen.back().on_step_followed = true;
+  }
+};
+
+TEST_F(EpisodeTest, ObserversSeeEachViewsFrameSegmentationAndPlan) {
+  // View 1's segmentation fails (fused as depth only); view 2's plan has two candidates.
+  segmenter_.fail_frames = {1};
+  planner_.script = {{Home(0.1)}, {Home(0.2), Home(0.25)}, {Home(0.3)}};
+  ViewKeeper keeper;
+  auto r = Run({&keeper});
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(keeper.seen.size(), 4u);
+  for (size_t i = 0; i < 4; ++i) {
+    const ViewKeeper::Seen& x = keeper.seen[i];
+    EXPECT_EQ(x.view, static_cast<int>(i));
+    EXPECT_TRUE(x.on_step_followed);
+    ASSERT_TRUE(x.has_observation);
+    EXPECT_EQ(x.stamp_ns, static_cast<int64_t>(i) * 1'000'000'000);
+    EXPECT_GT(x.depth_width, 0);
+    EXPECT_NEAR((x.X_WC.translation() - r->steps[i].X_WC.translation()).norm(), 0.0, 1e-12);
+  }
+  EXPECT_EQ(keeper.seen[0].instances, 1);
+  EXPECT_EQ(keeper.seen[1].instances, -1);  // the failed segmentation is not handed over
+  EXPECT_EQ(keeper.seen[2].instances, 1);
+  EXPECT_EQ(keeper.seen[0].ranked, 1);
+  EXPECT_EQ(keeper.seen[1].ranked, 2);
+  EXPECT_EQ(keeper.seen[2].ranked, 1);
+  EXPECT_EQ(keeper.seen[3].ranked, -1);  // no plan after the last view
+}
+
 TEST_F(EpisodeTest, UnreachableChosenViewFallsBackToTheNextBestReachableOne) {
   planner_.script = {{OutOfLimits(), OutOfLimits(), Home(0.2)}, {Home(0.3)}, {Home(0.4)}};
   auto r = Run();

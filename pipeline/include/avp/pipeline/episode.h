@@ -134,11 +134,27 @@ struct EpisodeResult {
   int views_fused() const { return static_cast<int>(steps.size()); }
 };
 
+/// What one view saw and what the planner weighed after it, for observers that keep more than
+/// the StepRecord (recordings, reports). Non-owning; valid only during the OnView call.
+struct StepData {
+  /// The capture (the frame with its intrinsics and pose; simulator labels when the source has
+  /// them). Null when the capture failed.
+  const robot::Observation* observation = nullptr;
+  /// The segmenter's answer. Null when the capture or the segmentation failed.
+  const Segmentation* segmentation = nullptr;
+  /// The plan for the next view: every reachable candidate ranked best first, with its gain, cost
+  /// and utility. Null when no plan was made (after the last view, or when the loop stopped).
+  const planning::PlanResult* plan = nullptr;
+};
+
 /// Receives every step as soon as it is complete (before the next one starts), so a long run
 /// writes its results step by step.
 class EpisodeObserver {
  public:
   virtual ~EpisodeObserver() = default;
+  /// Called for every step, just before OnStep, with what the view saw (recordings, reports).
+  virtual void OnView(const StepRecord& /*step*/, const StepData& /*data*/,
+                      const mapping::SemanticMap& /*map*/) {}
   virtual void OnStep(const StepRecord& step, const mapping::SemanticMap& map) = 0;
   virtual void OnEnd(const EpisodeResult& /*result*/, const mapping::SemanticMap& /*map*/) {}
 };
