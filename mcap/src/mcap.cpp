@@ -221,6 +221,44 @@ Result<Message> ParseMessage(const Record& r, const std::string& where) {
   return msg;
 }
 
+/// An Attachment record, its CRC (of every field before it) checked when non-zero.
+Result<Attachment> ParseAttachment(const Record& r, const std::string& where) {
+  Cursor c(r.content, r.offset + 9, "Attachment");
+  Attachment a;
+  a.log_time = c.U64("log_time");
+  a.create_time = c.U64("create_time");
+  a.name = c.String("name");
+  a.media_type = c.String("media_type");
+  const uint64_t size = c.U64("data_size");
+  const auto data = c.Take(size, "data");
+  const size_t crc_at = r.content.size() - c.left();
+  const uint32_t crc = c.U32("crc");
+  if (!c.ok()) return Bad(where, c);
+  const uint32_t computed = Crc32(r.content.first(crc_at));
+  if (crc != 0 && crc != computed) {
+    return ParseError(fmt::format(
+        "{}: CRC mismatch in the attachment '{}' at offset {}: stored {:08x}, computed {:08x}",
+        where, a.name, r.offset, crc, computed));
+  }
+  a.data.assign(data.begin(), data.end());
+  return a;
+}
+
+Result<Metadata> ParseMetadata(const Record& r, const std::string& where) {
+  Cursor c(r.content, r.offset + 9, "Metadata");
+  Metadata md;
+  md.name = c.String("name");
+  const uint32_t map_len = c.U32("metadata");
+  Cursor m(c.Take(map_len, "metadata"), c.offset() - map_len, "Metadata map");
+  while (c.ok() && m.ok() && m.left() > 0) {
+    std::string key = m.String("key");
+    md.metadata[key] = m.String("value");
+  }
+  if (!c.ok()) return Bad(where, c);
+  if (!m.ok()) return Bad(where, m);
+  return md;
+}
+
 /// A chunk's messages (the chunk record `r`), its CRC checked. `where` names the file.
 Status ReadChunk(const Record& r, const std::string& where, const File& file,
                  std::vector<Message>& out, std::vector<Schema>* schemas,
@@ -426,6 +464,54 @@ Result<uint16_t> Writer::AddChannel(uint16_t schema_id, std::string_view topic,
   return channels_.back().id;
 }
 
+Status Writer::WriteAttachment(const Attachment& a) {
+  if (closed_) return Fail("WriteAttachment after Close()");
+  const uint64_t at = offset_;
+  std::vector<uint8_t> content, out;
+  PutU64(content, a.log_time);
+  PutU64(content, a.create_time);
+  PutString(content, a.name);
+  PutString(content, a.media_type);
+  PutU64(content, a.data.size());
+  content.insert(content.end(), a.data.begin(), a.data.end());
+  PutU32(content, Crc32(content));
+  PutRecord(out, Opcode::kAttachment, content);
+  AVP_RETURN_IF_ERROR(WriteRaw(out));
+  std::vector<uint8_t> index;
+  PutU64(index, at);
+  PutU64(index, out.size());
+  PutU64(index, a.log_time);
+  PutU64(index, a.create_time);
+  PutU64(index, a.data.size());
+  PutString(index, a.name);
+  PutString(index, a.media_type);
+  PutRecord(attachment_index_, Opcode::kAttachmentIndex, index);
+  ++stats_.attachment_count;
+  return Status::Ok();
+}
+
+Status Writer::WriteMetadata(const Metadata& md) {
+  if (closed_) return Fail("WriteMetadata after Close()");
+  const uint64_t at = offset_;
+  std::vector<uint8_t> content, map, out;
+  PutString(content, md.name);
+  for (const auto& [k, v] : md.metadata) {
+    PutString(map, k);
+    PutString(map, v);
+  }
+  PutU32(content, static_cast<uint32_t>(map.size()));
+  PutBytes(content, map);
+  PutRecord(out, Opcode::kMetadata, content);
+  AVP_RETURN_IF_ERROR(WriteRaw(out));
+  std::vector<uint8_t> index;
+  PutU64(index, at);
+  PutU64(index, out.size());
+  PutString(index, md.name);
+  PutRecord(metadata_index_, Opcode::kMetadataIndex, index);
+  ++stats_.metadata_count;
+  return Status::Ok();
+}
+
 Status Writer::Write(const Message& m) {
   return Write(m.channel_id, m.sequence, m.log_time, m.publish_time, m.data);
 }
@@ -536,7 +622,8 @@ Status Writer::Close() {
     status = WriteRaw(data_end);
   }
   if (status.ok()) {
-    // The summary: groups of Schema, Channel, Statistics and Chunk Index records.
+    // The summary: groups of Schema, Channel, Statistics, Chunk Index, Attachment Index and
+    // Metadata Index records.
     const uint64_t summary_start = offset_;
     std::vector<uint8_t> summary, offsets;
     auto group = [&](Opcode op, const std::vector<uint8_t>& records) {
@@ -592,6 +679,8 @@ Status Writer::Close() {
     group(Opcode::kChannel, channels);
     group(Opcode::kStatistics, stats);
     group(Opcode::kChunkIndex, chunk_indexes_);
+    group(Opcode::kAttachmentIndex, attachment_index_);
+    group(Opcode::kMetadataIndex, metadata_index_);
     const uint64_t summary_offset_start = summary_start + summary.size();
     std::vector<uint8_t> tail = summary;
     PutBytes(tail, offsets);
@@ -657,7 +746,7 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
                     "computed {:08x}",
                     where, summary_start, summary_crc, Crc32(summary_bytes)));
   }
-  std::vector<Record> chunk_indexes;
+  std::vector<Record> chunk_indexes, other_indexes;
   uint64_t at = summary_start;
   while (at < footer_at) {
     AVP_ASSIGN_OR_RETURN(Record r,
@@ -697,6 +786,10 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
       case Opcode::kChunkIndex:
         chunk_indexes.push_back(r);
         break;
+      case Opcode::kAttachmentIndex:
+      case Opcode::kMetadataIndex:
+        other_indexes.push_back(r);
+        break;
       default:
         break;
     }
@@ -727,6 +820,38 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
     }
     AVP_RETURN_IF_ERROR(ReadChunk(chunk, where, file, file.messages, nullptr, nullptr));
     ++file.chunk_count;
+  }
+  // Attachments and metadata through their indexes (offset and length of each record).
+  for (const Record& r : other_indexes) {
+    const bool attachment = r.op == static_cast<uint8_t>(Opcode::kAttachmentIndex);
+    Cursor c(r.content, r.offset + 9, attachment ? "Attachment Index" : "Metadata Index");
+    const uint64_t record_at = c.U64("offset");
+    const uint64_t length = c.U64("length");
+    if (!c.ok()) return Bad(where, c);
+    if (record_at < 8 || record_at > summary_start || length > summary_start - record_at ||
+        length < 9) {
+      return ParseError(
+          fmt::format("{}: {} at offset {} points at bytes {}..{}, outside the data section", where,
+                      OpcodeName(r.op), r.offset, record_at, record_at + length));
+    }
+    AVP_ASSIGN_OR_RETURN(
+        Record rec,
+        RecordAt(std::span<const uint8_t>(bytes).first(record_at + length), record_at, 0, where));
+    const Opcode want = attachment ? Opcode::kAttachment : Opcode::kMetadata;
+    if (rec.op != static_cast<uint8_t>(want) || rec.end() != record_at + length) {
+      return ParseError(
+          fmt::format("{}: {} at offset {} points at offset {}, which holds a {} "
+                      "record of {} bytes, not a {} of {}",
+                      where, OpcodeName(r.op), r.offset, record_at, OpcodeName(rec.op),
+                      rec.end() - record_at, OpcodeName(static_cast<uint8_t>(want)), length));
+    }
+    if (attachment) {
+      AVP_ASSIGN_OR_RETURN(Attachment a, ParseAttachment(rec, where));
+      file.attachments.push_back(std::move(a));
+    } else {
+      AVP_ASSIGN_OR_RETURN(Metadata md, ParseMetadata(rec, where));
+      file.metadata.push_back(std::move(md));
+    }
   }
   std::stable_sort(file.messages.begin(), file.messages.end(),
                    [](const Message& a, const Message& b) { return a.log_time < b.log_time; });
@@ -790,6 +915,18 @@ StreamResult ReadStreaming(const std::filesystem::path& path) {
         ++file.chunk_count;
         break;
       }
+      case Opcode::kAttachment: {
+        auto a = ParseAttachment(r, where);
+        if (!a.ok()) return fail(a.status());
+        file.attachments.push_back(std::move(*a));
+        break;
+      }
+      case Opcode::kMetadata: {
+        auto md = ParseMetadata(r, where);
+        if (!md.ok()) return fail(md.status());
+        file.metadata.push_back(std::move(*md));
+        break;
+      }
       case Opcode::kDataEnd: {
         Cursor c(r.content, r.offset + 9, "Data End");
         const uint32_t crc = c.U32("data_section_crc");
@@ -827,6 +964,8 @@ StreamResult ReadStreaming(const std::filesystem::path& path) {
   s.schema_count = static_cast<uint16_t>(file.schemas.size());
   s.channel_count = static_cast<uint32_t>(file.channels.size());
   s.chunk_count = file.chunk_count;
+  s.attachment_count = static_cast<uint32_t>(file.attachments.size());
+  s.metadata_count = static_cast<uint32_t>(file.metadata.size());
   for (size_t i = 0; i < file.messages.size(); ++i) {
     const Message& m = file.messages[i];
     s.message_start_time = i == 0 ? m.log_time : std::min(s.message_start_time, m.log_time);

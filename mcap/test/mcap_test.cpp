@@ -257,6 +257,71 @@ TEST_F(McapTest, FlushWritesTheChunkSoAnUnclosedFileKeepsIt) {
   EXPECT_EQ(ReadIndexed(path).value().messages.size(), 1u);
 }
 
+TEST_F(McapTest, AttachmentsAndMetadataRoundTrip) {
+  const auto path = dir_ / "am.mcap";
+  auto w = Writer::Open(path, {.chunk_size = 256}).value();
+  const uint16_t sc = w->AddSchema("std_msgs/msg/String", "ros2msg", "string data\n").value();
+  const uint16_t ch = w->AddChannel(sc, "/a", "cdr").value();
+  const Metadata avp{"avp", {{"command", "avp run"}, {"seed", "7"}, {"empty", ""}}};
+  const Metadata other{"other", {}};
+  ASSERT_TRUE(w->WriteMetadata(avp).ok());
+  Attachment gt{1'700'000'000'000'000'001ull, 42, "ground_truth.json", "application/json",
+                R"({"fruits": [1, 2, 3]})"};
+  Attachment binary{5, 6, "bytes.bin", "application/octet-stream", std::string("\0\x01\xff", 3)};
+  ASSERT_TRUE(w->WriteAttachment(gt).ok());
+  std::vector<Message> written;
+  for (uint32_t i = 0; i < 12; ++i) {
+    Message m{ch, i, 100 + i, 100 + i, std::vector<uint8_t>(60, static_cast<uint8_t>(i))};
+    ASSERT_TRUE(w->Write(m).ok());
+    written.push_back(m);
+    if (i == 5) {
+      ASSERT_TRUE(w->WriteAttachment(binary).ok());  // between chunks
+      ASSERT_TRUE(w->WriteMetadata(other).ok());
+    }
+  }
+  ASSERT_TRUE(w->Close().ok());
+  EXPECT_EQ(w->statistics().attachment_count, 2u);
+  EXPECT_EQ(w->statistics().metadata_count, 2u);
+
+  const File indexed = ReadIndexed(path).value();
+  EXPECT_EQ(indexed.attachments, (std::vector<Attachment>{gt, binary}));
+  EXPECT_EQ(indexed.metadata, (std::vector<Metadata>{avp, other}));
+  EXPECT_EQ(indexed.messages, written);
+  EXPECT_EQ(indexed.statistics.attachment_count, 2u);
+  EXPECT_EQ(indexed.statistics.metadata_count, 2u);
+  EXPECT_GT(indexed.chunk_count, 1u);
+
+  const StreamResult streamed = ReadStreaming(path);
+  ASSERT_TRUE(streamed.status.ok()) << streamed.status.ToString();
+  EXPECT_EQ(streamed.file.attachments, indexed.attachments);
+  EXPECT_EQ(streamed.file.metadata, indexed.metadata);
+  EXPECT_EQ(streamed.file.messages, written);
+  EXPECT_EQ(streamed.file.statistics, indexed.statistics);
+}
+
+TEST_F(McapTest, AttachmentCrcMismatchNamesTheAttachmentAndOffset) {
+  const auto path = dir_ / "ac.mcap";
+  auto w = Writer::Open(path).value();
+  ASSERT_TRUE(w->WriteAttachment({1, 2, "gt.json", "application/json", "{\"abcdefgh\": 1}"}).ok());
+  ASSERT_TRUE(w->Close().ok());
+  std::vector<uint8_t> bytes = Slurp(path);
+  const std::string needle = "abcdefgh";
+  auto it = std::search(bytes.begin(), bytes.end(), needle.begin(), needle.end());
+  ASSERT_NE(it, bytes.end());
+  *it = 'X';
+  Spit(path, bytes);
+  // The attachment record starts right after the magic and the Header record.
+  const std::string offset = std::to_string(8 + 9 + 4 + 4 + 4 + 3);
+  const Status indexed = ReadIndexed(path).status();
+  EXPECT_THAT(indexed.message(),
+              HasSubstr("CRC mismatch in the attachment 'gt.json' at offset " + offset));
+  EXPECT_THAT(indexed.message(), HasSubstr(path.string()));
+  const StreamResult streamed = ReadStreaming(path);
+  EXPECT_THAT(streamed.status.message(),
+              HasSubstr("CRC mismatch in the attachment 'gt.json' at offset " + offset));
+  EXPECT_TRUE(streamed.file.attachments.empty());
+}
+
 TEST_F(McapTest, ErrorsNameTheFileAndTheValue) {
   const auto path = dir_ / "x.mcap";
   auto w = Writer::Open(path).value();

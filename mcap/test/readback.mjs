@@ -173,6 +173,34 @@ for (const m of expected.messages) perChannel.set(m.channel_id, (perChannel.get(
 for (const [id, count] of perChannel) {
   eq(stats?.channelMessageCounts.get(id), BigInt(count), `statistics count of channel ${id}`);
 }
+// Attachments and metadata through their summary indexes; the attachment's CRC validated.
+eq(stats?.attachmentCount, expected.statistics.attachment_count, "statistics attachment count");
+eq(stats?.metadataCount, expected.statistics.metadata_count, "statistics metadata count");
+eq(indexed.attachmentIndexes.length, expected.attachments.length, "attachment index count");
+eq(indexed.metadataIndexes.length, expected.metadata.length, "metadata index count");
+const attachments = [];
+for await (const a of indexed.readAttachments({ validateCrcs: true })) attachments.push(a);
+eq(attachments.length, expected.attachments.length, "attachments read");
+expected.attachments.forEach((e, i) => {
+  const a = attachments[i];
+  if (!a) return;
+  eq(a.name, e.name, `attachment ${i} name`);
+  eq(a.mediaType, e.media_type, `attachment ${i} media type`);
+  eq(a.logTime, BigInt(e.log_time), `attachment ${i} log time`);
+  eq(a.createTime, BigInt(e.create_time), `attachment ${i} create time`);
+  eq(textDecoder.decode(a.data), e.data, `attachment ${i} data`);
+});
+const metadata = [];
+for await (const m of indexed.readMetadata()) metadata.push(m);
+eq(metadata.length, expected.metadata.length, "metadata records read");
+expected.metadata.forEach((e, i) => {
+  const m = metadata[i];
+  if (!m) return;
+  eq(m.name, e.name, `metadata ${i} name`);
+  const d = diff(e.metadata, Object.fromEntries(m.metadata), `metadata ${i}`);
+  check(d === undefined, d);
+});
+
 const indexedMessages = [];
 for await (const m of indexed.readMessages({ validateCrcs: true })) indexedMessages.push(m);
 // The indexed reader yields log-time order; the sidecar is in write order with equal log times
@@ -186,6 +214,8 @@ stream.append(bytes);
 const sSchemas = new Map();
 const sChannels = new Map();
 const sMessages = [];
+const sAttachments = [];
+const sMetadata = [];
 let dataEnd;
 let footer;
 for (let r; (r = stream.nextRecord()); ) {
@@ -197,6 +227,10 @@ for (let r; (r = stream.nextRecord()); ) {
     sChannels.set(r.id, r);
   } else if (r.type === "Message") {
     sMessages.push(r);
+  } else if (r.type === "Attachment") {
+    sAttachments.push(r);
+  } else if (r.type === "Metadata") {
+    sMetadata.push(r);
   } else if (r.type === "DataEnd") {
     dataEnd = r;
   } else if (r.type === "Footer") {
@@ -206,6 +240,10 @@ for (let r; (r = stream.nextRecord()); ) {
 check(stream.done(), "streaming: the reader did not reach the end magic");
 checkSchemasAndChannels(sSchemas, sChannels, "streaming");
 checkMessages(sMessages, sChannels, "streaming");
+eq(sAttachments.map((a) => a.name).join(","), expected.attachments.map((a) => a.name).join(","),
+   "streaming attachments");
+eq(sMetadata.map((m) => m.name).join(","), expected.metadata.map((m) => m.name).join(","),
+   "streaming metadata");
 
 // ---- The CRCs the npm readers leave unchecked ----------------------------------------------------
 check(dataEnd !== undefined && footer !== undefined, "streaming: no Data End or Footer record");
@@ -240,5 +278,6 @@ if (failures > 0) {
   process.exit(1);
 }
 console.log(`mcap_npm_readback: ${expected.messages.length} messages on ${expected.channels.length} ` +
-            `channels in ${expected.statistics.chunk_count} chunks read back with @mcap/core ` +
+            `channels in ${expected.statistics.chunk_count} chunks, ${attachments.length} ` +
+            `attachment(s) and ${metadata.length} metadata record(s) read back with @mcap/core ` +
             `(indexed and streaming, CRCs checked) and decoded with @foxglove/rosmsg2-serialization`);

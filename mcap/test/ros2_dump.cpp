@@ -132,6 +132,26 @@ int main(int argc, char** argv) {
                    {"channels", json::array()},
                    {"messages", json::array()}};
   Out out{*writer, expected};
+  // One Metadata record and one Attachment (as an avp recording has: "avp" and ground_truth.json).
+  const avp::mcap::Metadata metadata{
+      "avp", {{"command", "avp run"}, {"scene", "tomato_plant"}, {"seed", "7"}, {"note", ""}}};
+  if (const avp::Status s = writer->WriteMetadata(metadata); !s.ok()) {
+    std::fprintf(stderr, "%s\n", s.ToString().c_str());
+    return 1;
+  }
+  expected["metadata"] = json::array({{{"name", metadata.name}, {"metadata", metadata.metadata}}});
+  const avp::mcap::Attachment attachment{1'700'000'000'000'000'000ull, 1'700'000'000'000'000'002ull,
+                                         "ground_truth.json", "application/json",
+                                         R"({"fruits": [{"id": 1, "voxels": 42}]})"};
+  if (const avp::Status s = writer->WriteAttachment(attachment); !s.ok()) {
+    std::fprintf(stderr, "%s\n", s.ToString().c_str());
+    return 1;
+  }
+  expected["attachments"] = json::array({{{"name", attachment.name},
+                                          {"media_type", attachment.media_type},
+                                          {"log_time", std::to_string(attachment.log_time)},
+                                          {"create_time", std::to_string(attachment.create_time)},
+                                          {"data", attachment.data}}});
   const uint16_t image = out.Channel<rm::Image>("/camera/camera/color/image_raw");
   const uint16_t info = out.Channel<rm::CameraInfo>("/camera/camera/color/camera_info");
   const uint16_t tf = out.Channel<rm::TFMessage>("/tf");
@@ -191,6 +211,8 @@ int main(int argc, char** argv) {
   const auto& st = writer->statistics();
   expected["statistics"] = {{"message_count", st.message_count},
                             {"chunk_count", st.chunk_count},
+                            {"attachment_count", st.attachment_count},
+                            {"metadata_count", st.metadata_count},
                             {"message_start_time", std::to_string(st.message_start_time)},
                             {"message_end_time", std::to_string(st.message_end_time)}};
   std::ofstream(dir / "expected.json") << expected.dump(1) << "\n";

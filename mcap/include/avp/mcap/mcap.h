@@ -7,11 +7,14 @@
 //
 // Writer: messages go into uncompressed chunks (a chunk is written once it holds chunk_size bytes,
 // each followed by its Message Index records), so a long run writes step by step and a crash loses
-// at most the open chunk; Close() writes Data End (the data section's CRC-32), the summary (Schema,
-// Channel, Statistics, Chunk Index records, each group found through a Summary Offset record), the
-// Footer (the summary's CRC-32) and the closing magic.
+// at most the open chunk. Attachments (files, e.g. ground_truth.json) and Metadata records (named
+// string maps) go into the data section between the chunks. Close() writes Data End (the data
+// section's CRC-32), the summary (Schema, Channel, Statistics, Chunk Index, Attachment Index and
+// Metadata Index records, each group found through a Summary Offset record), the Footer (the
+// summary's CRC-32) and the closing magic.
 //
-// Reader: ReadIndexed goes Footer -> summary -> chunk indexes -> chunks; ReadStreaming walks the
+// Reader: ReadIndexed goes Footer -> summary -> chunk / attachment / metadata indexes -> records;
+// ReadStreaming walks the
 // records from the start. Both check every CRC. A truncated or corrupt file is an error naming the
 // file and the byte offset; ReadStreaming also returns what came before the damage (the messages
 // of the intact chunks), so a replay can use it.
@@ -81,6 +84,24 @@ struct Message {
   friend bool operator==(const Message&, const Message&) = default;
 };
 
+/// An Attachment record: a file stored beside the messages (e.g. ground_truth.json), outside the
+/// chunks, with its own CRC-32 (of every field before it).
+struct Attachment {
+  uint64_t log_time = 0;     ///< ns since the epoch
+  uint64_t create_time = 0;  ///< ns since the epoch
+  std::string name;          ///< "ground_truth.json"
+  std::string media_type;    ///< "application/json"
+  std::string data;          ///< the bytes
+  friend bool operator==(const Attachment&, const Attachment&) = default;
+};
+
+/// A Metadata record: a named string -> string map (e.g. "avp": command, revision, scene, ...).
+struct Metadata {
+  std::string name;
+  std::map<std::string, std::string> metadata;
+  friend bool operator==(const Metadata&, const Metadata&) = default;
+};
+
 struct Statistics {
   uint64_t message_count = 0;
   uint16_t schema_count = 0;
@@ -123,6 +144,11 @@ class Writer {
   Result<uint16_t> AddChannel(uint16_t schema_id, std::string_view topic,
                               std::string_view message_encoding,
                               std::map<std::string, std::string> metadata = {});
+  /// Writes an Attachment record (in the data section, outside the chunks; indexed in the
+  /// summary by an Attachment Index record).
+  Status WriteAttachment(const Attachment& attachment);
+  /// Writes a Metadata record (indexed in the summary by a Metadata Index record).
+  Status WriteMetadata(const Metadata& metadata);
   /// Appends a message to the open chunk; writes the chunk when it is full.
   Status Write(const Message& message);
   Status Write(uint16_t channel_id, uint32_t sequence, uint64_t log_time, uint64_t publish_time,
@@ -154,7 +180,9 @@ class Writer {
   std::vector<uint8_t> chunk_;
   uint64_t chunk_start_ = 0, chunk_end_ = 0;
   std::map<uint16_t, std::vector<std::pair<uint64_t, uint64_t>>> chunk_index_;  // log time, offset
-  std::vector<uint8_t> chunk_indexes_;  // Chunk Index records for the summary
+  std::vector<uint8_t> chunk_indexes_;     // Chunk Index records for the summary
+  std::vector<uint8_t> attachment_index_;  // Attachment Index records for the summary
+  std::vector<uint8_t> metadata_index_;    // Metadata Index records for the summary
 };
 
 /// What a reader found.
@@ -163,13 +191,15 @@ struct File {
   std::string library;
   std::vector<Schema> schemas;
   std::vector<Channel> channels;
-  std::vector<Message> messages;  ///< file order (streaming) or log-time order (indexed)
-  Statistics statistics;          ///< from the summary (indexed); counted (streaming)
-  uint32_t chunk_count = 0;       ///< chunks read
+  std::vector<Message> messages;        ///< file order (streaming) or log-time order (indexed)
+  std::vector<Attachment> attachments;  ///< file order (indexed: through the Attachment Indexes)
+  std::vector<Metadata> metadata;       ///< file order (indexed: through the Metadata Indexes)
+  Statistics statistics;                ///< from the summary (indexed); counted (streaming)
+  uint32_t chunk_count = 0;             ///< chunks read
 };
 
-/// Reads through the Footer, the summary and its chunk indexes, checking the summary's and each
-/// chunk's CRC. Errors name the file and the byte offset.
+/// Reads through the Footer, the summary and its chunk, attachment and metadata indexes, checking
+/// the summary's, each chunk's and each attachment's CRC. Errors name the file and the byte offset.
 Result<File> ReadIndexed(const std::filesystem::path& path);
 
 /// What ReadStreaming returns: the records before any damage, and the damage (OK when none).
@@ -179,8 +209,8 @@ struct StreamResult {
   uint64_t intact_bytes = 0;  ///< bytes read before the damage (the whole file when OK)
 };
 
-/// Reads record by record from the start, checking each chunk's CRC and the data section's CRC.
-/// Messages of a chunk are returned only when the whole chunk is intact.
+/// Reads record by record from the start, checking each chunk's and attachment's CRC and the data
+/// section's CRC. Messages of a chunk are returned only when the whole chunk is intact.
 StreamResult ReadStreaming(const std::filesystem::path& path);
 
 }  // namespace avp::mcap
