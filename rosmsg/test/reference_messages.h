@@ -37,6 +37,11 @@ inline std::vector<Duration> References() {
   return {Duration{}, Duration{-2, 300'000'000}, Duration{3600, 5}};
 }
 template <>
+inline std::vector<String> References() {
+  return {String{}, String{"{\"view\": 3, \"X_WC\": [1, 0.5, -2e-17]}"},
+          String{"tomate \u00e0 l'ancienne \u2014 \U0001F345"}, String{std::string(1001, 'x')}};
+}
+template <>
 inline std::vector<Header> References() {
   return {Header{}, H(1'700'000'000, 123'456'789, "camera_color_optical_frame"), H(1, 2, "ü"),
           H(-5, 0, "frame/with/slashes_0123456789")};

@@ -19,6 +19,8 @@ TEST(RosmsgTypeHashTest, MatchesJazzy) {
             "RIHS01_6963084842a9b04494d6b2941d11444708d892da2f4b09843b9c43f42a7f6881");
   EXPECT_EQ(TypeHash<Quaternion>(),
             "RIHS01_8a765f66778c8ff7c8ab94afcc590a2ed5325a1d9a076ffff38fbce36f458684");
+  EXPECT_EQ(TypeHash<String>(),
+            "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18");
   // With referenced types (sorted by name) and fixed-size arrays:
   EXPECT_EQ(TypeHash<Header>(),
             "RIHS01_f49fb3ae2cf070f793645ff749683ac6b06203e41c891e17701b1cb597ce6a01");

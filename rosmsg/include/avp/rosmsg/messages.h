@@ -61,6 +61,12 @@ struct Header {
   friend bool operator==(const Header&, const Header&) = default;
 };
 
+/// std_msgs/String: one UTF-8 string (avp's recordings carry JSON in it).
+struct String {
+  std::string data;
+  friend bool operator==(const String&, const String&) = default;
+};
+
 struct ColorRGBA {
   float r = 0, g = 0, b = 0, a = 0;
   friend bool operator==(const ColorRGBA&, const ColorRGBA&) = default;
@@ -378,6 +384,16 @@ struct MessageTraits<Header> {
   static void VisitFields(V& v, M& m) {
     v("stamp", m.stamp);
     v("frame_id", m.frame_id);
+  }
+};
+
+template <>
+struct MessageTraits<String> {
+  AVP_ROSMSG_NAMES(std_msgs, String);
+  static constexpr std::string_view kMsg = "string data\n";
+  template <class V, class M>
+  static void VisitFields(V& v, M& m) {
+    v("data", m.data);
   }
 };
 
@@ -792,7 +808,7 @@ struct MessageTraits<ParticipantEntitiesInfo> {
 /// Calls X(Type) for every message type above (explicit instantiations, tests).
 // clang-format off
 #define AVP_ROSMSG_FOR_EACH_TYPE(X)                                                               \
-  X(Time) X(Duration) X(Header) X(ColorRGBA) X(Point) X(Vector3) X(Quaternion) X(Pose)            \
+  X(Time) X(Duration) X(Header) X(String) X(ColorRGBA) X(Point) X(Vector3) X(Quaternion) X(Pose)            \
   X(PoseStamped) X(PoseArray) X(Transform) X(TransformStamped) X(TFMessage) X(Image)              \
   X(CompressedImage) X(RegionOfInterest) X(CameraInfo) X(JointState) X(PointField)                \
   X(PointCloud2) X(JointTrajectoryPoint) X(JointTrajectory) X(UVCoordinate) X(MeshFile)           \
