@@ -76,9 +76,13 @@ const std::map<std::string, std::set<std::string>> kAllowed = {
     {"pipeline", {"core", "io", "robot", "segmentation", "mapping", "planning", "pipeline"}},
     {"eval", {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "eval"}},
     {"report", {"core", "io", "mapping", "pipeline", "eval", "report"}},
+    // Episodes as MCAP recordings (the recorder; the replay's bag reader).
+    {"recording",
+     {"core", "io", "robot", "mapping", "segmentation", "planning", "pipeline", "rosmsg", "mcap",
+      "recording"}},
     {"experiment",
      {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "pipeline", "eval",
-      "report", "experiment"}},
+      "report", "mcap", "recording", "experiment"}},
     // Zero-shot segmentation backends (ONNX Runtime) and the segmentation service (gRPC): both
     // implement segmentation's Segmenter and are registered with it by apps/.
     {"zsl", {"core", "io", "segmentation", "zsl"}},

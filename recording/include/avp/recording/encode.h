@@ -1,0 +1,78 @@
+#pragma once
+
+// What McapRecorder writes for one fused view, as functions: the ROS 2 messages of the layout
+// (layout.h) built from avp's frames, segmentations and plans, and the exact JSON of the
+// segmentation and of the step, with their inverses for the replay.
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <avp/core/image.h>
+#include <avp/core/rgbd_frame.h>
+#include <avp/core/segmentation.h>
+#include <avp/core/status.h>
+#include <avp/core/transform.h>
+#include <avp/pipeline/episode.h>
+#include <avp/planning/view_planner.h>
+#include <avp/rosmsg/messages.h>
+
+namespace avp::recording {
+
+/// rgb8 colour, step 3·width.
+rosmsg::Image ColorImageMsg(const ImageRgb8& rgb, const rosmsg::Header& header);
+/// 32FC1 depth in metres (little-endian floats, bit-exact), step 4·width.
+rosmsg::Image DepthImageMsg(const DepthImage& depth_m, const rosmsg::Header& header);
+/// A uint16 image (instance ids: mono16 or 16UC1), little-endian, step 2·width.
+rosmsg::Image U16ImageMsg(const InstanceImage& image, std::string_view encoding,
+                          const rosmsg::Header& header);
+/// mono8 (class ids), step width.
+rosmsg::Image ClassImageMsg(const ClassImage& image, const rosmsg::Header& header);
+/// K as CameraInfo (plumb_bob, zero distortion, P = [K | 0]).
+rosmsg::CameraInfo CameraInfoMsg(const CameraIntrinsics& K, const rosmsg::Header& header);
+
+/// An image message back as avp images: rgb8 (or bgr8), 32FC1 metres (or 16UC1 / mono16
+/// millimetres, 0 = no return), 16UC1 / mono16 ids, mono8 classes. InvalidArgument naming the
+/// encoding, the size and the data length when they do not agree.
+Result<ImageRgb8> ColorFromMsg(const rosmsg::Image& msg);
+Result<DepthImage> DepthFromMsg(const rosmsg::Image& msg);
+Result<InstanceImage> U16FromMsg(const rosmsg::Image& msg);
+Result<ClassImage> ClassFromMsg(const rosmsg::Image& msg);
+
+/// 0 = no instance, i + 1 = instance i; where masks overlap the higher confidence wins (equal:
+/// the earlier instance).
+InstanceImage InstanceIdImage(const Segmentation& segmentation);
+
+/// {"width", "height", "instances": [{"class", "label", "score", "mask_score", "box": [x0, y0, x1,
+/// y1] | null, "mask": {"size": [height, width], "counts": [COCO RLE, column-major]}}], "timings":
+/// [{"stage", "ms"}]}; floats exact (they round-trip through JSON's doubles).
+nlohmann::json InstancesToJson(const Segmentation& segmentation);
+/// The inverse: masks are 255 where set. Errors name the field and the instance.
+Result<Segmentation> InstancesFromJson(const nlohmann::json& j);
+
+/// A pose as 12 numbers, the 3x4 [R | p] row-major (doubles exact in JSON).
+nlohmann::json PoseToJson(const RigidTransform& X);
+/// The inverse; InvalidArgument unless 12 finite numbers with R a rotation (1e-6).
+Result<RigidTransform> PoseFromJson(const nlohmann::json& j);
+
+/// The step as /avp/step carries it: {"view", "views_total", "stamp_ns", "X_WC" (PoseToJson), "q",
+/// "capture_status", "segment_status", "integrate_status", "plan_status", "move_status" ("" when
+/// OK), "masks", "integration": {...}, "known_voxels", "occupied_voxels", "target_voxels",
+/// "instances", "known_delta", "target_delta", "metrics": [[name, value|null]], "planned",
+/// "candidates_generated", "candidates_reachable", "candidates": every ranked candidate of `plan`
+/// (the step's top candidates when there is no plan) [{"rank", "X_WC", "q", "reachable", "gain",
+/// "cost", "utility", "source"}], "chosen_rank", "refused_moves", "joint_path_length", "times":
+/// {stage: ms}}.
+nlohmann::json StepToJson(const pipeline::StepRecord& step, const planning::PlanResult* plan,
+                          int64_t stamp_ns);
+
+/// The candidates as markers in `header`'s frame: a DELETEALL, then one arrow per candidate along
+/// its optical axis coloured by utility (viridis from the lowest to the highest), the chosen one
+/// (rank `chosen_rank`, -1: none) magenta and longer with a text (rank, utility, gain, cost).
+rosmsg::MarkerArray CandidateMarkers(const std::vector<planning::ViewCandidate>& ranked,
+                                     int chosen_rank, int view, const rosmsg::Header& header);
+
+}  // namespace avp::recording

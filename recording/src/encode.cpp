@@ -1,0 +1,448 @@
+#include "avp/recording/encode.h"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <optional>
+
+#include <fmt/format.h>
+
+#include <avp/io/mask_codec.h>
+#include <avp/recording/layout.h>
+#include <avp/rosmsg/convert.h>
+
+namespace avp::recording {
+namespace {
+
+using nlohmann::json;
+
+template <class T>
+rosmsg::Image RawImage(const Image<T, 1>& image, std::string_view encoding,
+                       const rosmsg::Header& header, int channels_bytes) {
+  rosmsg::Image m;
+  m.header = header;
+  m.height = static_cast<uint32_t>(image.height());
+  m.width = static_cast<uint32_t>(image.width());
+  m.encoding = std::string(encoding);
+  m.is_bigendian = 0;
+  m.step = static_cast<uint32_t>(image.width() * channels_bytes);
+  const auto data = image.data();
+  m.data.resize(data.size_bytes());
+  // avp runs on little-endian hosts (as the CDR writer); copy the values' bytes as they are.
+  static_assert(std::endian::native == std::endian::little);
+  std::memcpy(m.data.data(), data.data(), data.size_bytes());
+  return m;
+}
+
+Status CheckImage(const rosmsg::Image& msg, std::string_view want, uint32_t bytes_per_pixel) {
+  const uint64_t row = static_cast<uint64_t>(msg.width) * bytes_per_pixel;
+  if (msg.step < row || static_cast<uint64_t>(msg.step) * msg.height != msg.data.size() ||
+      msg.width > static_cast<uint32_t>(std::numeric_limits<int>::max()) ||
+      msg.height > static_cast<uint32_t>(std::numeric_limits<int>::max())) {
+    return InvalidArgumentError(fmt::format(
+        "{} image {}x{} ({}): step {} and {} data bytes do not agree with {} bytes per pixel", want,
+        msg.width, msg.height, msg.encoding, msg.step, msg.data.size(), bytes_per_pixel));
+  }
+  if (msg.is_bigendian != 0 && bytes_per_pixel > 1) {
+    return InvalidArgumentError(
+        fmt::format("{} image ({}): big-endian data is not supported", want, msg.encoding));
+  }
+  return Status::Ok();
+}
+
+template <class T>
+T LoadLe(const uint8_t* p) {
+  T v;
+  std::memcpy(&v, p, sizeof(T));
+  return v;
+}
+
+rosmsg::ColorRGBA Rgba(double r, double g, double b, double a = 1.0) {
+  return {static_cast<float>(r), static_cast<float>(g), static_cast<float>(b),
+          static_cast<float>(a)};
+}
+
+/// Viridis at t in [0, 1] (five-stop piecewise-linear approximation).
+rosmsg::ColorRGBA Viridis(double t) {
+  static constexpr std::array<std::array<double, 3>, 5> kStops = {{{0.267, 0.005, 0.329},
+                                                                   {0.229, 0.322, 0.546},
+                                                                   {0.128, 0.567, 0.551},
+                                                                   {0.369, 0.789, 0.383},
+                                                                   {0.993, 0.906, 0.144}}};
+  t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, 1.0) * 4.0;
+  const size_t i = std::min<size_t>(static_cast<size_t>(t), 3);
+  const double f = t - static_cast<double>(i);
+  const auto& a = kStops[i];
+  const auto& b = kStops[i + 1];
+  return Rgba(a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]));
+}
+
+json StatusText(const Status& s) { return s.ok() ? std::string() : s.ToString(); }
+json Number(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+json Vector(const Eigen::VectorXd& v) {
+  json a = json::array();
+  for (Eigen::Index i = 0; i < v.size(); ++i) a.push_back(Number(v[i]));
+  return a;
+}
+
+Status Field(const json& j, const char* key, const std::string& where) {
+  if (!j.is_object() || !j.contains(key)) {
+    return InvalidArgumentError(fmt::format("{}: '{}' is missing", where, key));
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+rosmsg::Image ColorImageMsg(const ImageRgb8& rgb, const rosmsg::Header& header) {
+  rosmsg::Image m;
+  m.header = header;
+  m.height = static_cast<uint32_t>(rgb.height());
+  m.width = static_cast<uint32_t>(rgb.width());
+  m.encoding = std::string(kColorEncoding);
+  m.step = static_cast<uint32_t>(rgb.width() * 3);
+  m.data.assign(rgb.data().begin(), rgb.data().end());
+  return m;
+}
+
+rosmsg::Image DepthImageMsg(const DepthImage& depth_m, const rosmsg::Header& header) {
+  return RawImage(depth_m, kDepthEncoding, header, 4);
+}
+
+rosmsg::Image U16ImageMsg(const InstanceImage& image, std::string_view encoding,
+                          const rosmsg::Header& header) {
+  return RawImage(image, encoding, header, 2);
+}
+
+rosmsg::Image ClassImageMsg(const ClassImage& image, const rosmsg::Header& header) {
+  return RawImage(image, kSimClassEncoding, header, 1);
+}
+
+rosmsg::CameraInfo CameraInfoMsg(const CameraIntrinsics& K, const rosmsg::Header& header) {
+  rosmsg::CameraInfo m;
+  m.header = header;
+  m.width = static_cast<uint32_t>(K.width);
+  m.height = static_cast<uint32_t>(K.height);
+  m.distortion_model = "plumb_bob";
+  m.d = {0.0, 0.0, 0.0, 0.0, 0.0};
+  m.k = {K.fx, 0.0, K.cx, 0.0, K.fy, K.cy, 0.0, 0.0, 1.0};
+  m.r = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+  m.p = {K.fx, 0.0, K.cx, 0.0, 0.0, K.fy, K.cy, 0.0, 0.0, 0.0, 1.0, 0.0};
+  return m;
+}
+
+Result<ImageRgb8> ColorFromMsg(const rosmsg::Image& msg) {
+  const bool bgr = msg.encoding == "bgr8";
+  if (msg.encoding != "rgb8" && !bgr) {
+    return InvalidArgumentError(
+        fmt::format("colour image: encoding '{}' is not supported (rgb8, bgr8)", msg.encoding));
+  }
+  AVP_RETURN_IF_ERROR(CheckImage(msg, "colour", 3));
+  ImageRgb8 out(static_cast<int>(msg.width), static_cast<int>(msg.height));
+  for (uint32_t v = 0; v < msg.height; ++v) {
+    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
+    for (uint32_t u = 0; u < msg.width; ++u) {
+      for (int c = 0; c < 3; ++c) {
+        out.at(static_cast<int>(u), static_cast<int>(v), c) = row[u * 3 + (bgr ? 2 - c : c)];
+      }
+    }
+  }
+  return out;
+}
+
+Result<DepthImage> DepthFromMsg(const rosmsg::Image& msg) {
+  const bool metres = msg.encoding == "32FC1";
+  const bool mm = msg.encoding == "16UC1" || msg.encoding == "mono16";
+  if (!metres && !mm) {
+    return InvalidArgumentError(
+        fmt::format("depth image: encoding '{}' is not supported (32FC1 metres, 16UC1 millimetres)",
+                    msg.encoding));
+  }
+  AVP_RETURN_IF_ERROR(CheckImage(msg, "depth", metres ? 4 : 2));
+  DepthImage out(static_cast<int>(msg.width), static_cast<int>(msg.height));
+  for (uint32_t v = 0; v < msg.height; ++v) {
+    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
+    for (uint32_t u = 0; u < msg.width; ++u) {
+      out.at(static_cast<int>(u), static_cast<int>(v)) =
+          metres ? LoadLe<float>(row + 4 * u)
+                 : static_cast<float>(LoadLe<uint16_t>(row + 2 * u)) * 0.001f;
+    }
+  }
+  return out;
+}
+
+Result<InstanceImage> U16FromMsg(const rosmsg::Image& msg) {
+  if (msg.encoding != "16UC1" && msg.encoding != "mono16") {
+    return InvalidArgumentError(fmt::format(
+        "instance image: encoding '{}' is not supported (16UC1, mono16)", msg.encoding));
+  }
+  AVP_RETURN_IF_ERROR(CheckImage(msg, "instance", 2));
+  InstanceImage out(static_cast<int>(msg.width), static_cast<int>(msg.height));
+  for (uint32_t v = 0; v < msg.height; ++v) {
+    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
+    for (uint32_t u = 0; u < msg.width; ++u) {
+      out.at(static_cast<int>(u), static_cast<int>(v)) = LoadLe<uint16_t>(row + 2 * u);
+    }
+  }
+  return out;
+}
+
+Result<ClassImage> ClassFromMsg(const rosmsg::Image& msg) {
+  if (msg.encoding != "mono8" && msg.encoding != "8UC1") {
+    return InvalidArgumentError(
+        fmt::format("class image: encoding '{}' is not supported (mono8, 8UC1)", msg.encoding));
+  }
+  AVP_RETURN_IF_ERROR(CheckImage(msg, "class", 1));
+  ClassImage out(static_cast<int>(msg.width), static_cast<int>(msg.height));
+  for (uint32_t v = 0; v < msg.height; ++v) {
+    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
+    for (uint32_t u = 0; u < msg.width; ++u)
+      out.at(static_cast<int>(u), static_cast<int>(v)) = row[u];
+  }
+  return out;
+}
+
+InstanceImage InstanceIdImage(const Segmentation& s) {
+  InstanceImage ids(s.width, s.height, 0);
+  std::vector<float> best(ids.num_pixels(), -std::numeric_limits<float>::infinity());
+  const size_t n = std::min<size_t>(s.instances.size(), 0xFFFE);
+  for (size_t i = 0; i < n; ++i) {
+    const InstanceMask& m = s.instances[i];
+    if (!m.mask.SameSizeAs(ids)) continue;
+    const auto mask = m.mask.data();
+    auto out = ids.data();
+    for (size_t p = 0; p < mask.size(); ++p) {
+      if (mask[p] != 0 && m.confidence > best[p]) {
+        best[p] = m.confidence;
+        out[p] = static_cast<uint16_t>(i + 1);
+      }
+    }
+  }
+  return ids;
+}
+
+json InstancesToJson(const Segmentation& s) {
+  json instances = json::array();
+  for (const InstanceMask& m : s.instances) {
+    json box = nullptr;
+    if (m.box) box = {m.box->x0, m.box->y0, m.box->x1, m.box->y1};
+    instances.push_back(
+        {{"class", std::string(ToString(m.semantic_class))},
+         {"label", m.label},
+         {"score", m.confidence},
+         {"mask_score", m.mask_score},
+         {"box", box},
+         {"mask",
+          {{"size", {m.mask.height(), m.mask.width()}}, {"counts", io::MaskToRle(m.mask)}}}});
+  }
+  json timings = json::array();
+  for (const StageTiming& t : s.timings) timings.push_back({{"stage", t.stage}, {"ms", t.ms}});
+  return {{"width", s.width}, {"height", s.height}, {"instances", instances}, {"timings", timings}};
+}
+
+Result<Segmentation> InstancesFromJson(const json& j) {
+  const std::string where = "instances JSON";
+  AVP_RETURN_IF_ERROR(Field(j, "width", where));
+  AVP_RETURN_IF_ERROR(Field(j, "height", where));
+  AVP_RETURN_IF_ERROR(Field(j, "instances", where));
+  try {
+    Segmentation s;
+    s.width = j.at("width").get<int>();
+    s.height = j.at("height").get<int>();
+    const json& list = j.at("instances");
+    if (!list.is_array()) return InvalidArgumentError(where + ": 'instances' is not an array");
+    for (size_t i = 0; i < list.size(); ++i) {
+      const json& e = list[i];
+      const std::string at = fmt::format("{}: instance {}", where, i);
+      for (const char* key : {"class", "score", "mask"}) AVP_RETURN_IF_ERROR(Field(e, key, at));
+      InstanceMask m;
+      const std::string cls = e.at("class").get<std::string>();
+      const std::optional<SemanticClass> c = SemanticClassFromString(cls);
+      if (!c) return InvalidArgumentError(fmt::format("{}: unknown class '{}'", at, cls));
+      m.semantic_class = *c;
+      m.confidence = e.at("score").get<float>();
+      m.label = e.value("label", std::string());
+      m.mask_score = e.value("mask_score", -1.0f);
+      if (e.contains("box") && !e.at("box").is_null()) {
+        const auto b = e.at("box").get<std::vector<float>>();
+        if (b.size() != 4) {
+          return InvalidArgumentError(fmt::format("{}: 'box' has {} numbers, not 4", at, b.size()));
+        }
+        m.box = PixelBox{b[0], b[1], b[2], b[3]};
+      }
+      const json& mask = e.at("mask");
+      AVP_RETURN_IF_ERROR(Field(mask, "size", at + " mask"));
+      AVP_RETURN_IF_ERROR(Field(mask, "counts", at + " mask"));
+      const auto size = mask.at("size").get<std::vector<int>>();
+      if (size.size() != 2) {
+        return InvalidArgumentError(fmt::format("{}: mask 'size' is not [height, width]", at));
+      }
+      const auto counts = mask.at("counts").get<std::vector<uint32_t>>();
+      Result<MaskImage> bits = io::RleToMask(counts, size[1], size[0]);
+      if (!bits.ok()) return bits.status().WithContext(at);
+      m.mask = std::move(*bits);
+      s.instances.push_back(std::move(m));
+    }
+    if (j.contains("timings") && j.at("timings").is_array()) {
+      for (const json& t : j.at("timings")) {
+        s.timings.push_back({t.value("stage", std::string()), t.value("ms", 0.0)});
+      }
+    }
+    return s;
+  } catch (const json::exception& e) {
+    return InvalidArgumentError(fmt::format("{}: {}", where, e.what()));
+  }
+}
+
+json PoseToJson(const RigidTransform& X) {
+  const Eigen::Matrix3d& R = X.rotation();
+  const Eigen::Vector3d& p = X.translation();
+  return json::array({R(0, 0), R(0, 1), R(0, 2), p.x(), R(1, 0), R(1, 1), R(1, 2), p.y(), R(2, 0),
+                      R(2, 1), R(2, 2), p.z()});
+}
+
+Result<RigidTransform> PoseFromJson(const json& j) {
+  if (!j.is_array() || j.size() != 12) {
+    return InvalidArgumentError(
+        fmt::format("pose: expected 12 numbers (3x4 row-major), got {}", j.dump()));
+  }
+  double v[12];
+  for (size_t i = 0; i < 12; ++i) {
+    if (!j[i].is_number() || !std::isfinite(j[i].get<double>())) {
+      return InvalidArgumentError(
+          fmt::format("pose: element {} ({}) is not a finite number", i, j[i].dump()));
+    }
+    v[i] = j[i].get<double>();
+  }
+  Eigen::Matrix3d R;
+  R << v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10];
+  if (!IsRotationMatrix(R, 1e-6)) {
+    return InvalidArgumentError(fmt::format("pose: {} is not a rotation", j.dump()));
+  }
+  return RigidTransform(R, Eigen::Vector3d(v[3], v[7], v[11]));
+}
+
+json StepToJson(const pipeline::StepRecord& s, const planning::PlanResult* plan, int64_t stamp_ns) {
+  json metrics = json::array();
+  for (const auto& [name, value] : s.metrics) metrics.push_back({name, Number(value)});
+  const std::vector<planning::ViewCandidate>& ranked =
+      plan != nullptr ? plan->ranked : s.top_candidates;
+  json candidates = json::array();
+  for (size_t i = 0; i < ranked.size(); ++i) {
+    const planning::ViewCandidate& c = ranked[i];
+    candidates.push_back({{"rank", i},
+                          {"X_WC", PoseToJson(c.X_WC)},
+                          {"q", Vector(c.q)},
+                          {"reachable", c.reachable},
+                          {"gain", Number(c.gain)},
+                          {"cost", Number(c.cost)},
+                          {"utility", Number(c.utility)},
+                          {"source", c.source}});
+  }
+  const mapping::IntegrationStats& in = s.integration;
+  return {{"view", s.view},
+          {"views_total", s.views_total},
+          {"stamp_ns", stamp_ns},
+          {"X_WC", PoseToJson(s.X_WC)},
+          {"q", Vector(s.q)},
+          {"capture_status", StatusText(s.capture_status)},
+          {"segment_status", StatusText(s.segment_status)},
+          {"integrate_status", StatusText(s.integrate_status)},
+          {"plan_status", StatusText(s.plan_status)},
+          {"move_status", StatusText(s.move_status)},
+          {"masks", s.masks},
+          {"integration",
+           {{"pixels", in.pixels},
+            {"invalid_depth", in.invalid_depth},
+            {"beyond_max_range", in.beyond_max_range},
+            {"rejected_points", in.rejected_points},
+            {"endpoints", in.endpoints},
+            {"occupied_updates", in.occupied_updates},
+            {"free_updates", in.free_updates},
+            {"masked_endpoints", in.masked_endpoints}}},
+          {"known_voxels", s.known_voxels},
+          {"occupied_voxels", s.occupied_voxels},
+          {"target_voxels", s.target_voxels},
+          {"instances", s.instances},
+          {"known_delta", s.known_delta},
+          {"target_delta", s.target_delta},
+          {"metrics", metrics},
+          {"planned", s.planned},
+          {"plan_stop", plan != nullptr && plan->stop},
+          {"plan_stop_reason", plan != nullptr ? plan->stop_reason : std::string()},
+          {"candidates_generated", s.candidates_generated},
+          {"candidates_reachable", s.candidates_reachable},
+          {"candidates", candidates},
+          {"chosen_rank", s.chosen_rank},
+          {"refused_moves", s.refused_moves},
+          {"joint_path_length", Number(s.joint_path_length)},
+          {"times",
+           {{"capture_ms", s.times.capture_ms},
+            {"segment_ms", s.times.segment_ms},
+            {"integrate_ms", s.times.integrate_ms},
+            {"metrics_ms", s.times.metrics_ms},
+            {"plan_ms", s.times.plan_ms},
+            {"move_ms", s.times.move_ms},
+            {"total_ms", s.times.total_ms}}}};
+}
+
+rosmsg::MarkerArray CandidateMarkers(const std::vector<planning::ViewCandidate>& ranked,
+                                     int chosen_rank, int view, const rosmsg::Header& header) {
+  rosmsg::MarkerArray out;
+  rosmsg::Marker clear;
+  clear.header = header;
+  clear.action = rosmsg::Marker::kDeleteAll;
+  clear.pose.orientation.w = 1.0;
+  out.markers.push_back(clear);
+  if (ranked.empty()) return out;
+  double lo = ranked.front().utility, hi = lo;
+  for (const planning::ViewCandidate& c : ranked) {
+    if (!std::isfinite(c.utility)) continue;
+    lo = std::min(lo, c.utility);
+    hi = std::max(hi, c.utility);
+  }
+  for (size_t i = 0; i < ranked.size(); ++i) {
+    const planning::ViewCandidate& c = ranked[i];
+    const bool chosen = static_cast<int>(i) == chosen_rank;
+    rosmsg::Marker m;
+    m.header = header;
+    m.ns = chosen ? "chosen" : "candidates";
+    m.id = static_cast<int32_t>(i);
+    m.type = rosmsg::Marker::kArrow;
+    m.action = rosmsg::Marker::kAdd;
+    m.pose.orientation.w = 1.0;
+    m.scale = chosen ? rosmsg::Vector3{0.015, 0.03, 0.04} : rosmsg::Vector3{0.008, 0.016, 0.024};
+    const double t = hi > lo ? (c.utility - lo) / (hi - lo) : 1.0;
+    m.color = chosen ? Rgba(1.0, 0.1, 0.6) : Viridis(t);
+    const Eigen::Vector3d a = c.X_WC.translation();
+    const Eigen::Vector3d b = a + (chosen ? 0.15 : 0.08) * c.X_WC.rotation().col(2);
+    m.points.push_back(rosmsg::ToPointMsg(a));
+    m.points.push_back(rosmsg::ToPointMsg(b));
+    out.markers.push_back(std::move(m));
+  }
+  if (chosen_rank >= 0 && static_cast<size_t>(chosen_rank) < ranked.size()) {
+    const planning::ViewCandidate& c = ranked[static_cast<size_t>(chosen_rank)];
+    rosmsg::Marker text;
+    text.header = header;
+    text.ns = "chosen_text";
+    text.id = 0;
+    text.type = rosmsg::Marker::kTextViewFacing;
+    text.action = rosmsg::Marker::kAdd;
+    const Eigen::Vector3d p = c.X_WC.translation();
+    text.pose.position = {p.x(), p.y(), p.z() + 0.06};
+    text.pose.orientation.w = 1.0;
+    text.scale = {0.0, 0.0, 0.03};
+    text.color = Rgba(1, 1, 1, 1);
+    text.text = fmt::format(
+        "after view {}: rank {} of {}, utility {:.3g}, gain {:.3g}, cost {:.3g} "
+        "rad [{}]",
+        view + 1, chosen_rank, ranked.size(), c.utility, c.gain, c.cost, c.source);
+    out.markers.push_back(std::move(text));
+  }
+  return out;
+}
+
+}  // namespace avp::recording

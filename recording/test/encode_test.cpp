@@ -1,0 +1,193 @@
+// The messages and JSON of a recorded view round-trip exactly: images (bit-exact floats), the
+// segmentation (COCO RLE masks, float scores and boxes), poses (12 doubles), and the instance id
+// image's overlap rule.
+#include "avp/recording/encode.h"
+
+#include <cmath>
+#include <limits>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <avp/recording/layout.h>
+
+namespace avp::recording {
+namespace {
+
+using ::testing::HasSubstr;
+
+const rosmsg::Header kHeader{rosmsg::Time{3, 5}, "camera_color_optical_frame"};
+
+TEST(RecordingEncodeTest, ImagesRoundTripBitExact) {
+  ImageRgb8 rgb(5, 3);
+  for (size_t i = 0; i < rgb.data().size(); ++i) rgb.data()[i] = static_cast<uint8_t>(i * 7);
+  const rosmsg::Image c = ColorImageMsg(rgb, kHeader);
+  EXPECT_EQ(c.encoding, "rgb8");
+  EXPECT_EQ(c.step, 15u);
+  EXPECT_EQ(c.header.frame_id, "camera_color_optical_frame");
+  EXPECT_EQ(ColorFromMsg(rosmsg::Decode<rosmsg::Image>(rosmsg::Encode(c)).value()).value(), rgb);
+
+  DepthImage depth(4, 2, 0.0f);
+  depth.at(0, 0) = 0.123456789f;
+  depth.at(1, 0) = std::nextafter(1.0f, 2.0f);
+  depth.at(2, 1) = std::numeric_limits<float>::quiet_NaN();
+  depth.at(3, 1) = 2.5f;
+  const rosmsg::Image d = DepthImageMsg(depth, kHeader);
+  EXPECT_EQ(d.encoding, "32FC1");
+  EXPECT_EQ(d.step, 16u);
+  const DepthImage back = DepthFromMsg(d).value();
+  for (int v = 0; v < 2; ++v) {
+    for (int u = 0; u < 4; ++u) {
+      const float a = depth.at(u, v), b = back.at(u, v);
+      EXPECT_TRUE((std::isnan(a) && std::isnan(b)) || a == b) << u << "," << v;
+    }
+  }
+  // RealSense 16UC1 millimetres.
+  rosmsg::Image mm = U16ImageMsg(InstanceImage(2, 1, 1500), "16UC1", kHeader);
+  EXPECT_FLOAT_EQ(DepthFromMsg(mm).value().at(1, 0), 1.5f);
+
+  InstanceImage ids(3, 2, 0);
+  ids.at(2, 1) = 65535;
+  ids.at(0, 0) = 258;
+  const rosmsg::Image i = U16ImageMsg(ids, kInstanceImageEncoding, kHeader);
+  EXPECT_EQ(i.encoding, "mono16");
+  EXPECT_EQ(i.data[0], 2);  // little-endian 258
+  EXPECT_EQ(i.data[1], 1);
+  EXPECT_EQ(U16FromMsg(i).value(), ids);
+  ClassImage classes(3, 1, 2);
+  EXPECT_EQ(ClassFromMsg(ClassImageMsg(classes, kHeader)).value(), classes);
+
+  rosmsg::Image bad = c;
+  bad.data.pop_back();
+  EXPECT_THAT(ColorFromMsg(bad).status().message(),
+              HasSubstr("colour image 5x3 (rgb8): step 15 and 44 data bytes"));
+  bad.encoding = "yuv422";
+  EXPECT_THAT(ColorFromMsg(bad).status().message(), HasSubstr("'yuv422' is not supported"));
+}
+
+TEST(RecordingEncodeTest, CameraInfoHoldsK) {
+  const CameraIntrinsics K = CameraIntrinsics::FromHorizontalFov(64, 48, 60.0);
+  const rosmsg::CameraInfo m = CameraInfoMsg(K, kHeader);
+  EXPECT_EQ(m.width, 64u);
+  EXPECT_EQ(m.height, 48u);
+  EXPECT_EQ(m.k[0], K.fx);
+  EXPECT_EQ(m.k[2], K.cx);
+  EXPECT_EQ(m.k[4], K.fy);
+  EXPECT_EQ(m.k[5], K.cy);
+  EXPECT_EQ(m.p[0], K.fx);
+  EXPECT_EQ(m.p[10], 1.0);
+}
+
+Segmentation TwoOverlapping() {
+  Segmentation s;
+  s.width = 6;
+  s.height = 4;
+  InstanceMask a;
+  a.mask = MaskImage(6, 4, 0);
+  for (int u = 0; u < 4; ++u) a.mask.at(u, 1) = 1;
+  a.confidence = 0.3f;
+  a.label = "tomato";
+  a.box = PixelBox{0.25f, 1.0f, 4.0f, 2.0f};
+  InstanceMask b;
+  b.mask = MaskImage(6, 4, 0);
+  for (int u = 2; u < 6; ++u) b.mask.at(u, 1) = 255;
+  b.mask.at(5, 3) = 1;
+  b.confidence = 0.7000001f;
+  b.semantic_class = SemanticClass::kLeaf;
+  b.label = "leaf \u00e9";
+  b.mask_score = 0.91f;
+  InstanceMask c;  // same score as a: a (earlier) keeps the overlap
+  c.mask = MaskImage(6, 4, 0);
+  c.mask.at(0, 1) = 1;
+  c.mask.at(0, 0) = 1;
+  c.confidence = 0.3f;
+  s.instances = {a, b, c};
+  s.timings = {{"detector", 12.5}};
+  return s;
+}
+
+TEST(RecordingEncodeTest, InstanceIdImageHigherScoreWins) {
+  const InstanceImage ids = InstanceIdImage(TwoOverlapping());
+  EXPECT_EQ(ids.at(0, 1), 1);  // a and c (equal scores): a
+  EXPECT_EQ(ids.at(0, 0), 3);
+  EXPECT_EQ(ids.at(1, 1), 1);
+  EXPECT_EQ(ids.at(2, 1), 2);  // a and b: b (0.7 > 0.3)
+  EXPECT_EQ(ids.at(5, 1), 2);
+  EXPECT_EQ(ids.at(5, 3), 2);
+  EXPECT_EQ(ids.at(4, 3), 0);
+}
+
+TEST(RecordingEncodeTest, InstancesJsonRoundTripsExactly) {
+  const Segmentation s = TwoOverlapping();
+  const std::string text = InstancesToJson(s).dump();
+  const Segmentation back = InstancesFromJson(nlohmann::json::parse(text)).value();
+  EXPECT_EQ(back.width, 6);
+  EXPECT_EQ(back.height, 4);
+  ASSERT_EQ(back.instances.size(), 3u);
+  for (size_t i = 0; i < 3; ++i) {
+    const InstanceMask& a = s.instances[i];
+    const InstanceMask& b = back.instances[i];
+    EXPECT_EQ(b.semantic_class, a.semantic_class);
+    EXPECT_EQ(b.confidence, a.confidence);  // exact
+    EXPECT_EQ(b.mask_score, a.mask_score);
+    EXPECT_EQ(b.label, a.label);
+    EXPECT_EQ(b.box, a.box);
+    for (int v = 0; v < 4; ++v) {
+      for (int u = 0; u < 6; ++u) EXPECT_EQ(b.mask.at(u, v) != 0, a.mask.at(u, v) != 0);
+    }
+  }
+  ASSERT_EQ(back.timings.size(), 1u);
+  EXPECT_EQ(back.timings[0].ms, 12.5);
+  // COCO RLE, column-major: column 0 of a is rows 0..3 = [0, 1, 0, 0] -> counts start 1, 1.
+  const auto j = InstancesToJson(s);
+  EXPECT_EQ(j["instances"][0]["mask"]["size"], nlohmann::json::array({4, 6}));
+  EXPECT_EQ(j["instances"][0]["mask"]["counts"][0], 1);
+  EXPECT_EQ(j["instances"][0]["mask"]["counts"][1], 1);
+
+  nlohmann::json broken = j;
+  broken["instances"][1]["class"] = "banana";
+  EXPECT_THAT(InstancesFromJson(broken).status().message(),
+              HasSubstr("instance 1: unknown class 'banana'"));
+  broken = j;
+  broken["instances"][0]["mask"]["counts"] = {1, 2};
+  EXPECT_THAT(InstancesFromJson(broken).status().message(), HasSubstr("instance 0"));
+}
+
+TEST(RecordingEncodeTest, PoseJsonIsExact) {
+  const RigidTransform X =
+      RigidTransform::FromRpy(0.1234567890123, -1.1, 2.9, Eigen::Vector3d(0.1 + 0.2, -1e-17, 3.0));
+  const nlohmann::json j = PoseToJson(X);
+  ASSERT_EQ(j.size(), 12u);
+  const RigidTransform back = PoseFromJson(nlohmann::json::parse(j.dump())).value();
+  EXPECT_EQ(back.rotation(), X.rotation());  // bit-exact
+  EXPECT_EQ(back.translation(), X.translation());
+  EXPECT_THAT(PoseFromJson(nlohmann::json::array({1, 2})).status().message(),
+              HasSubstr("expected 12 numbers"));
+  nlohmann::json skew = j;
+  skew[0] = 2.0;
+  EXPECT_THAT(PoseFromJson(skew).status().message(), HasSubstr("is not a rotation"));
+}
+
+TEST(RecordingEncodeTest, CandidateMarkersMarkTheChosenOne) {
+  std::vector<planning::ViewCandidate> ranked(3);
+  for (int i = 0; i < 3; ++i) {
+    ranked[i].X_WC = RigidTransform(Eigen::Vector3d(0.1 * i, 0.0, 0.5));
+    ranked[i].utility = 3.0 - i;
+    ranked[i].reachable = true;
+    ranked[i].source = "frontier";
+  }
+  const rosmsg::MarkerArray m = CandidateMarkers(ranked, 1, 2, {{}, "base"});
+  ASSERT_EQ(m.markers.size(), 5u);  // DELETEALL, 3 arrows, the chosen one's text
+  EXPECT_EQ(m.markers[0].action, rosmsg::Marker::kDeleteAll);
+  EXPECT_EQ(m.markers[1].ns, "candidates");
+  EXPECT_EQ(m.markers[2].ns, "chosen");
+  EXPECT_EQ(m.markers[2].points.size(), 2u);
+  EXPECT_DOUBLE_EQ(m.markers[2].points[1].z, 0.65);  // 0.15 along +z of the optical frame
+  EXPECT_THAT(m.markers[4].text, HasSubstr("after view 3: rank 1 of 3, utility 2"));
+  // Best utility is viridis' yellow end, the worst its purple end.
+  EXPECT_GT(m.markers[1].color.r, 0.9f);
+  EXPECT_LT(m.markers[3].color.r, 0.3f);
+}
+
+}  // namespace
+}  // namespace avp::recording
