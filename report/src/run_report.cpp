@@ -23,6 +23,7 @@ json StepJson(const pipeline::StepRecord& s) {
          {"X_WC", io::ToJson(s.X_WC)},
          {"masks", s.masks},
          {"known_voxels", s.known_voxels},
+         {"occupied_voxels", s.occupied_voxels},
          {"target_voxels", s.target_voxels},
          {"instances", s.instances},
          {"metrics", metrics},
