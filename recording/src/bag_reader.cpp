@@ -1,0 +1,809 @@
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <set>
+#include <utility>
+
+#include <fmt/format.h>
+
+#include <avp/core/text.h>
+#include <avp/io/mask_codec.h>
+#include <avp/mcap/mcap.h>
+#include <avp/recording/bag_reader.h>
+#include <avp/recording/encode.h>
+#include <avp/recording/layout.h>
+#include <avp/rosmsg/convert.h>
+
+namespace avp::recording {
+
+namespace {
+
+constexpr uint32_t kMaxImageSide = 16384;
+
+std::string Stamp(int64_t ns) {
+  const int64_t s = ns >= 0 ? ns / 1'000'000'000 : -((-ns + 999'999'999) / 1'000'000'000);
+  return fmt::format("{}.{:09d}", s, ns - s * 1'000'000'000);
+}
+
+/// An image's size, step and data length for `bytes_per_pixel`.
+Status CheckLayout(const rosmsg::Image& msg, std::string_view topic, int bytes_per_pixel) {
+  if (msg.width == 0 || msg.height == 0 || msg.width > kMaxImageSide ||
+      msg.height > kMaxImageSide) {
+    return InvalidArgumentError(fmt::format("{}: image size {}x{} is out of range (1..{})", topic,
+                                            msg.width, msg.height, kMaxImageSide));
+  }
+  const uint64_t row = uint64_t{msg.width} * static_cast<uint64_t>(bytes_per_pixel);
+  if (msg.step < row) {
+    return InvalidArgumentError(
+        fmt::format("{}: step {} is shorter than a row of {} '{}' pixels ({} bytes)", topic,
+                    msg.step, msg.width, EscapeText(msg.encoding), row));
+  }
+  const uint64_t expected = uint64_t{msg.step} * msg.height;
+  if (msg.data.size() != expected) {
+    return InvalidArgumentError(fmt::format("{}: data holds {} bytes, but step {} x height {} = {}",
+                                            topic, msg.data.size(), msg.step, msg.height,
+                                            expected));
+  }
+  return Status::Ok();
+}
+
+uint16_t U16(const uint8_t* p, bool big) {
+  return big ? static_cast<uint16_t>((p[0] << 8) | p[1])
+             : static_cast<uint16_t>(p[0] | (p[1] << 8));
+}
+
+RigidTransform Interpolate(const RigidTransform& a, const RigidTransform& b, double t) {
+  const Eigen::Quaterniond qa = a.quaternion();
+  const Eigen::Quaterniond qb = b.quaternion();
+  const Eigen::Vector3d p = (1.0 - t) * a.translation() + t * b.translation();
+  return RigidTransform(qa.slerp(t, qb).normalized(), p);
+}
+
+}  // namespace
+
+// ---- Images, CameraInfo -------------------------------------------------------------------------
+
+Result<ImageRgb8> ColorFromImageMsg(const rosmsg::Image& msg, std::string_view topic) {
+  int bpp = 0;
+  int r = 0, g = 1, b = 2;
+  if (msg.encoding == "rgb8") {
+    bpp = 3;
+  } else if (msg.encoding == "bgr8") {
+    bpp = 3;
+    r = 2;
+    b = 0;
+  } else if (msg.encoding == "rgba8") {
+    bpp = 4;
+  } else if (msg.encoding == "bgra8") {
+    bpp = 4;
+    r = 2;
+    b = 0;
+  } else if (msg.encoding == "mono8") {
+    bpp = 1;
+    r = g = b = 0;
+  } else {
+    return InvalidArgumentError(
+        fmt::format("{}: colour encoding {} is not supported (rgb8, bgr8, rgba8, bgra8, mono8)",
+                    topic, QuoteText(msg.encoding)));
+  }
+  AVP_RETURN_IF_ERROR(CheckLayout(msg, topic, bpp));
+  const int w = static_cast<int>(msg.width);
+  const int h = static_cast<int>(msg.height);
+  ImageRgb8 out(w, h);
+  for (int v = 0; v < h; ++v) {
+    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
+    for (int u = 0; u < w; ++u) {
+      const uint8_t* p = row + static_cast<size_t>(bpp) * u;
+      out.at(u, v, 0) = p[r];
+      out.at(u, v, 1) = p[g];
+      out.at(u, v, 2) = p[b];
+    }
+  }
+  return out;
+}
+
+Result<DepthImage> DepthFromImageMsg(const rosmsg::Image& msg, std::string_view topic) {
+  const bool mm = msg.encoding == "16UC1" || msg.encoding == "mono16";
+  if (!mm && msg.encoding != "32FC1") {
+    return InvalidArgumentError(fmt::format(
+        "{}: depth encoding {} is not supported (32FC1 in metres, 16UC1 in millimetres)", topic,
+        QuoteText(msg.encoding)));
+  }
+  AVP_RETURN_IF_ERROR(CheckLayout(msg, topic, mm ? 2 : 4));
+  const int w = static_cast<int>(msg.width);
+  const int h = static_cast<int>(msg.height);
+  DepthImage out(w, h);
+  const bool big = msg.is_bigendian != 0;
+  for (int v = 0; v < h; ++v) {
+    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
+    for (int u = 0; u < w; ++u) {
+      if (mm) {
+        out.at(u, v) = static_cast<float>(U16(row + 2 * u, big)) * 0.001f;
+        continue;
+      }
+      uint8_t bytes[4];
+      std::memcpy(bytes, row + 4 * u, 4);
+      if (big) {
+        std::swap(bytes[0], bytes[3]);
+        std::swap(bytes[1], bytes[2]);
+      }
+      float z;
+      std::memcpy(&z, bytes, 4);
+      if (std::isfinite(z) && (z < 0.0f || (z != 0.0f && !std::isnormal(z)))) {
+        return InvalidArgumentError(fmt::format(
+            "{}: depth {} m at pixel ({}, {}) (stamp {}): a 32FC1 depth must be >= 0 (NaN or "
+            "inf: no return)",
+            topic, z, u, v, Stamp(msg.header.stamp.ToNanoseconds())));
+      }
+      out.at(u, v) = z;
+    }
+  }
+  return out;
+}
+
+Result<CameraIntrinsics> IntrinsicsFromCameraInfoMsg(const rosmsg::CameraInfo& info,
+                                                     double min_depth_m, double max_depth_m) {
+  if (info.width == 0 || info.height == 0 || info.width > kMaxImageSide ||
+      info.height > kMaxImageSide) {
+    return InvalidArgumentError(
+        fmt::format("CameraInfo (frame {}): size {}x{} is out of range (1..{})",
+                    QuoteText(info.header.frame_id), info.width, info.height, kMaxImageSide));
+  }
+  CameraIntrinsics K;
+  K.width = static_cast<int>(info.width);
+  K.height = static_cast<int>(info.height);
+  K.fx = info.k[0];
+  K.fy = info.k[4];
+  K.cx = info.k[2];
+  K.cy = info.k[5];
+  K.min_depth_m = min_depth_m;
+  K.max_depth_m = max_depth_m;
+  if (Status s = K.Validate(); !s.ok()) {
+    return InvalidArgumentError(fmt::format("CameraInfo (frame {}) gives invalid intrinsics: {}",
+                                            QuoteText(info.header.frame_id), s.message()));
+  }
+  if (info.binning_x > 1 || info.binning_y > 1 || info.roi.width != 0 || info.roi.height != 0) {
+    return InvalidArgumentError(fmt::format(
+        "CameraInfo (frame {}): binning {}x{} or a region of interest {}x{} is not supported",
+        QuoteText(info.header.frame_id), info.binning_x, info.binning_y, info.roi.width,
+        info.roi.height));
+  }
+  return K;
+}
+
+// ---- TF -----------------------------------------------------------------------------------------
+
+Status TfTree::Add(const rosmsg::TransformStamped& t, bool is_static) {
+  const std::string& parent = t.header.frame_id;
+  const std::string& child = t.child_frame_id;
+  const int64_t stamp_ns = t.header.stamp.ToNanoseconds();
+  if (parent.empty() || child.empty() || parent == child) {
+    return InvalidArgumentError(
+        fmt::format("transform {} -> {} at {}: frames must be non-empty and differ",
+                    QuoteText(parent), QuoteText(child), Stamp(stamp_ns)));
+  }
+  const rosmsg::Quaternion& q = t.transform.rotation;
+  const double norm = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+  if (!std::isfinite(norm) || std::abs(norm - 1.0) > 1e-3) {
+    return InvalidArgumentError(fmt::format(
+        "transform {} -> {} at {}: the quaternion ({}, {}, {}, {}) has norm {}, not 1",
+        QuoteText(parent), QuoteText(child), Stamp(stamp_ns), q.x, q.y, q.z, q.w, norm));
+  }
+  Result<RigidTransform> X = rosmsg::FromTransformMsg(t.transform);
+  if (!X.ok()) {
+    return X.status().WithContext(fmt::format("transform {} -> {} at {}", QuoteText(parent),
+                                              QuoteText(child), Stamp(stamp_ns)));
+  }
+  auto [it, inserted] = edges_.try_emplace(child);
+  Edge& edge = it->second;
+  if (inserted) {
+    edge.parent = parent;
+    edge.is_static = is_static;
+  } else if (edge.parent != parent) {
+    return InvalidArgumentError(
+        fmt::format("frame {} already has parent {}; refusing {} as its parent", QuoteText(child),
+                    QuoteText(edge.parent), QuoteText(parent)));
+  }
+  if (is_static || edge.is_static) {
+    edge.is_static = true;
+    edge.samples.assign(1, Sample{stamp_ns, *X});
+    return Status::Ok();
+  }
+  std::vector<Sample>& samples = edge.samples;
+  if (samples.empty() || stamp_ns >= samples.back().stamp_ns) {
+    samples.push_back(Sample{stamp_ns, *X});
+  } else {  // out of order (two publishers): in place
+    auto pos = std::upper_bound(samples.begin(), samples.end(), stamp_ns,
+                                [](int64_t when, const Sample& x) { return when < x.stamp_ns; });
+    samples.insert(pos, Sample{stamp_ns, *X});
+  }
+  return Status::Ok();
+}
+
+std::vector<std::string> TfTree::Frames() const {
+  std::set<std::string> frames;
+  for (const auto& [child, edge] : edges_) {
+    frames.insert(child);
+    frames.insert(edge.parent);
+  }
+  return {frames.begin(), frames.end()};
+}
+
+std::vector<std::string> TfTree::ChainToRoot(const std::string& frame) const {
+  std::vector<std::string> chain{frame};  // frame, its parent, ..., the root
+  for (size_t guard = 0; guard <= edges_.size(); ++guard) {
+    auto it = edges_.find(chain.back());
+    if (it == edges_.end()) break;
+    chain.push_back(it->second.parent);
+  }
+  return chain;
+}
+
+Result<RigidTransform> TfTree::EdgeAt(const std::string& child, const Edge& edge, int64_t stamp_ns,
+                                      int64_t tolerance_ns) const {
+  const std::vector<Sample>& s = edge.samples;
+  if (edge.is_static) return s.front().X_PC;
+  auto hi = std::lower_bound(s.begin(), s.end(), stamp_ns,
+                             [](const Sample& x, int64_t t) { return x.stamp_ns < t; });
+  if (hi != s.end() && hi->stamp_ns == stamp_ns) return hi->X_PC;
+  if (hi == s.begin() || hi == s.end()) {
+    const Sample& nearest = hi == s.end() ? s.back() : s.front();
+    const int64_t gap =
+        nearest.stamp_ns > stamp_ns ? nearest.stamp_ns - stamp_ns : stamp_ns - nearest.stamp_ns;
+    if (gap <= tolerance_ns) return nearest.X_PC;
+    return OutOfRangeError(fmt::format(
+        "transform {} -> {} at {}: the nearest sample is {:.1f} ms {} ({}), beyond the tolerance "
+        "of {:.1f} ms",
+        QuoteText(edge.parent), QuoteText(child), Stamp(stamp_ns), static_cast<double>(gap) / 1e6,
+        hi == s.end() ? "earlier" : "later", Stamp(nearest.stamp_ns),
+        static_cast<double>(tolerance_ns) / 1e6));
+  }
+  auto lo = hi - 1;
+  if (lo->X_PC.translation() == hi->X_PC.translation() &&
+      lo->X_PC.rotation() == hi->X_PC.rotation()) {
+    return lo->X_PC;  // at rest: exactly
+  }
+  const double t = static_cast<double>(stamp_ns - lo->stamp_ns) /
+                   static_cast<double>(hi->stamp_ns - lo->stamp_ns);
+  return Interpolate(lo->X_PC, hi->X_PC, t);
+}
+
+Result<RigidTransform> TfTree::Lookup(const std::string& target, const std::string& source,
+                                      int64_t stamp_ns, int64_t tolerance_ns) const {
+  if (target == source) return RigidTransform::Identity();
+  const std::vector<std::string> frames = Frames();
+  for (const std::string& f : {target, source}) {
+    if (!std::binary_search(frames.begin(), frames.end(), f)) {
+      return NotFoundError(
+          fmt::format("frame {} is not in the bag's transforms (frames: {})", QuoteText(f),
+                      EscapeText(fmt::format("{}", fmt::join(frames, ", ")), 400)));
+    }
+  }
+  const std::vector<std::string> up_s = ChainToRoot(source);
+  const std::vector<std::string> up_t = ChainToRoot(target);
+  if (up_s.back() != up_t.back()) {
+    return NotFoundError(fmt::format(
+        "frames {} and {} are not connected in the bag's transforms: their trees have roots {} "
+        "and {}",
+        QuoteText(target), QuoteText(source), QuoteText(up_t.back()), QuoteText(up_s.back())));
+  }
+  size_t common = 0;
+  while (common < up_s.size() && common < up_t.size() &&
+         up_s[up_s.size() - 1 - common] == up_t[up_t.size() - 1 - common]) {
+    ++common;
+  }
+  // up_x[0 .. size - common - 1] are the frames below the lowest common ancestor.
+  RigidTransform X_AS;
+  for (size_t i = up_s.size() - common; i-- > 0;) {
+    const Edge& e = edges_.find(up_s[i])->second;
+    AVP_ASSIGN_OR_RETURN(const RigidTransform X_PC, EdgeAt(up_s[i], e, stamp_ns, tolerance_ns));
+    X_AS = X_AS * X_PC;
+  }
+  RigidTransform X_AT;
+  for (size_t i = up_t.size() - common; i-- > 0;) {
+    const Edge& e = edges_.find(up_t[i])->second;
+    AVP_ASSIGN_OR_RETURN(const RigidTransform X_PC, EdgeAt(up_t[i], e, stamp_ns, tolerance_ns));
+    X_AT = X_AT * X_PC;
+  }
+  return X_AT.inverse() * X_AS;
+}
+
+// ---- Options ------------------------------------------------------------------------------------
+
+const OptionTable<BagReadOptions>& BagReadOptionTable() {
+  static const auto* table = [] {
+    using O = BagReadOptions;
+    auto* t = new OptionTable<O>("bag option");
+    t->Text("color_topic", &O::color_topic, "colour image (rgb8, bgr8, rgba8, bgra8, mono8)");
+    t->Text("depth_topic", &O::depth_topic, "depth aligned to colour (32FC1 m, 16UC1 mm)");
+    t->Text("camera_info_topic", &O::camera_info_topic, "the colour camera's CameraInfo");
+    t->Text("tf_topic", &O::tf_topic, "dynamic transforms (tf2_msgs/TFMessage)");
+    t->Text("tf_static_topic", &O::tf_static_topic, "static transforms (tf2_msgs/TFMessage)");
+    t->Text("base_frame", &O::base_frame, "the map's frame: the arm's base");
+    t->Text("camera_frame", &O::camera_frame,
+            "the camera's optical frame (empty: the colour image's frame_id)");
+    t->Text("labels_prefix", &O::labels_prefix,
+            "simulator label images PREFIX/instance, PREFIX/class (empty: none)");
+    t->Real("max_pair_skew_ms", &O::max_pair_skew_ms, "ms", ValueRange::Closed(0, 1000),
+            "colour and depth stamps may differ by this much");
+    t->Real("tf_tolerance_ms", &O::tf_tolerance_ms, "ms", ValueRange::Closed(0, 10000),
+            "outside a TF edge's samples, its nearest one within this much is used");
+    t->Real("frame_rate_hz", &O::frame_rate_hz, "Hz", ValueRange::Closed(0, 1000),
+            "real bags: fuse at most this many frames per second of bag time (0: every pair)");
+    t->Integer("max_views", &O::max_views, "", ValueRange::Closed(0, 1000000),
+               "fuse at most this many views (0: all)");
+    t->Flag("as_robot_bag", &O::as_robot_bag,
+            "read an avp recording like a robot's bag (images, CameraInfo, TF; no /avp/step)");
+    t->AddRule([](const O& o, std::vector<std::string>& errors) {
+      for (const auto& [key, value] : {std::pair{"color_topic", &o.color_topic},
+                                       {"depth_topic", &o.depth_topic},
+                                       {"camera_info_topic", &o.camera_info_topic},
+                                       {"base_frame", &o.base_frame}}) {
+        if (value->empty()) errors.push_back(fmt::format("{} is empty", key));
+      }
+      if (!(o.min_depth_m > 0.0) || !(o.max_depth_m > o.min_depth_m) ||
+          !std::isfinite(o.max_depth_m)) {
+        errors.push_back(fmt::format("depth range [{}, {}] m must satisfy 0 < min < max",
+                                     o.min_depth_m, o.max_depth_m));
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
+// ---- Reading ------------------------------------------------------------------------------------
+
+namespace {
+
+constexpr size_t kMaxSkippedKept = 10;
+
+/// The messages of one topic, by log time.
+struct TopicMessages {
+  std::string schema;
+  std::vector<const mcap::Message*> messages;
+  /// The message logged at exactly `t`, or null.
+  const mcap::Message* At(uint64_t t) const {
+    auto it = std::lower_bound(messages.begin(), messages.end(), t,
+                               [](const mcap::Message* m, uint64_t x) { return m->log_time < x; });
+    return it != messages.end() && (*it)->log_time == t ? *it : nullptr;
+  }
+};
+
+class Reader {
+ public:
+  Reader(const BagReadOptions& options, Bag& bag) : o_(options), bag_(bag) {}
+
+  void Skip(std::string why) {
+    if (bag_.skipped.size() < kMaxSkippedKept) bag_.skipped.push_back(std::move(why));
+    ++bag_.skipped_count;
+  }
+
+  Status Index(const mcap::File& file) {
+    std::map<uint16_t, std::string> schema_names;
+    for (const mcap::Schema& s : file.schemas) schema_names[s.id] = s.name;
+    std::map<uint16_t, const mcap::Channel*> channels;
+    for (const mcap::Channel& c : file.channels) channels[c.id] = &c;
+    for (const mcap::Message& m : file.messages) {
+      auto c = channels.find(m.channel_id);
+      if (c == channels.end()) continue;  // the reader refuses these; defensive
+      TopicMessages& t = topics_[c->second->topic];
+      if (t.messages.empty()) {
+        auto s = schema_names.find(c->second->schema_id);
+        t.schema = s == schema_names.end() ? std::string() : s->second;
+        if (c->second->message_encoding != "cdr") {
+          return InvalidArgumentError(fmt::format(
+              "{}: topic {} has message encoding {}, not cdr (a ROS 2 bag)", bag_.path.string(),
+              QuoteText(c->second->topic), QuoteText(c->second->message_encoding)));
+        }
+      }
+      t.messages.push_back(&m);
+    }
+    for (auto& [topic, t] : topics_) {
+      std::stable_sort(
+          t.messages.begin(), t.messages.end(),
+          [](const mcap::Message* a, const mcap::Message* b) { return a->log_time < b->log_time; });
+      bag_.topic_messages[topic] = t.messages.size();
+    }
+    return Status::Ok();
+  }
+
+  std::string TopicList() const {
+    std::vector<std::string> names;
+    for (const auto& [topic, t] : topics_) {
+      names.push_back(
+          fmt::format("{} ({}, {})", topic, t.schema.empty() ? "?" : t.schema, t.messages.size()));
+    }
+    return EscapeText(fmt::format("{}", fmt::join(names, ", ")), 800);
+  }
+
+  /// The topic's messages, checking its type; NotFound listing the bag's topics.
+  Result<const TopicMessages*> Topic(const std::string& topic, std::string_view type,
+                                     bool required) {
+    auto it = topics_.find(topic);
+    if (it == topics_.end() || it->second.messages.empty()) {
+      if (!required) return static_cast<const TopicMessages*>(nullptr);
+      return NotFoundError(fmt::format("{}: no messages on {} (the bag's topics: {}){}",
+                                       bag_.path.string(), QuoteText(topic), TopicList(),
+                                       bag_.damage.ok() ? "" : " in the intact part"));
+    }
+    if (it->second.schema != type) {
+      return InvalidArgumentError(fmt::format("{}: topic {} carries {}, not {}", bag_.path.string(),
+                                              QuoteText(topic), QuoteText(it->second.schema),
+                                              type));
+    }
+    return &it->second;
+  }
+
+  /// Both TF topics into the tree; bad transforms are skipped and noted.
+  Status ReadTf() {
+    for (const auto& [topic, is_static] :
+         {std::pair{o_.tf_static_topic, true}, std::pair{o_.tf_topic, false}}) {
+      if (topic.empty()) continue;
+      AVP_ASSIGN_OR_RETURN(const TopicMessages* t,
+                           Topic(topic, "tf2_msgs/msg/TFMessage", /*required=*/false));
+      if (t == nullptr) continue;
+      for (const mcap::Message* m : t->messages) {
+        Result<rosmsg::TFMessage> tf = rosmsg::Decode<rosmsg::TFMessage>(m->data);
+        if (!tf.ok()) {
+          Skip(fmt::format("{} message at {}: {}", topic, Stamp(static_cast<int64_t>(m->log_time)),
+                           tf.status().message()));
+          continue;
+        }
+        for (const rosmsg::TransformStamped& x : tf->transforms) {
+          if (Status s = tf_.Add(x, is_static); !s.ok())
+            Skip(fmt::format("{}: {}", topic, s.message()));
+        }
+      }
+    }
+    return Status::Ok();
+  }
+
+  Result<RigidTransform> CameraPose(const std::string& camera_frame, int64_t stamp_ns) const {
+    if (tf_.empty()) {
+      return NotFoundError(fmt::format("no transforms on {} or {}", QuoteText(o_.tf_topic),
+                                       QuoteText(o_.tf_static_topic)));
+    }
+    return tf_.Lookup(o_.base_frame, camera_frame, stamp_ns,
+                      static_cast<int64_t>(std::llround(o_.tf_tolerance_ms * 1e6)));
+  }
+
+  /// The CameraInfo nearest in time to `stamp_ns` (the latest at or before it, else the first
+  /// after it) as intrinsics.
+  Result<CameraIntrinsics> Intrinsics(const TopicMessages& infos, int64_t stamp_ns) {
+    // Decoded once; CameraInfo messages are small.
+    if (infos_.empty()) {
+      for (const mcap::Message* m : infos.messages) {
+        Result<rosmsg::CameraInfo> info = rosmsg::Decode<rosmsg::CameraInfo>(m->data);
+        if (!info.ok()) {
+          Skip(fmt::format("{} at {}: {}", o_.camera_info_topic,
+                           Stamp(static_cast<int64_t>(m->log_time)), info.status().message()));
+          continue;
+        }
+        infos_.emplace_back(info->header.stamp.ToNanoseconds(), std::move(*info));
+      }
+      std::stable_sort(infos_.begin(), infos_.end(),
+                       [](const auto& a, const auto& b) { return a.first < b.first; });
+    }
+    if (infos_.empty()) {
+      return InvalidArgumentError(fmt::format("{}: no CameraInfo on {} could be decoded",
+                                              bag_.path.string(), QuoteText(o_.camera_info_topic)));
+    }
+    auto it = std::upper_bound(infos_.begin(), infos_.end(), stamp_ns,
+                               [](int64_t t, const auto& x) { return t < x.first; });
+    const rosmsg::CameraInfo& info = it == infos_.begin() ? it->second : std::prev(it)->second;
+    return IntrinsicsFromCameraInfoMsg(info, o_.min_depth_m, o_.max_depth_m);
+  }
+
+  /// Simulator labels at log time `t` (both images), when the bag has them.
+  Result<std::optional<SimulatorLabels>> Labels(uint64_t t, int width, int height) {
+    if (o_.labels_prefix.empty()) return std::optional<SimulatorLabels>();
+    const std::string inst_topic = o_.labels_prefix + "/instance";
+    const std::string class_topic = o_.labels_prefix + "/class";
+    AVP_ASSIGN_OR_RETURN(const TopicMessages* inst,
+                         Topic(inst_topic, "sensor_msgs/msg/Image", /*required=*/false));
+    AVP_ASSIGN_OR_RETURN(const TopicMessages* cls,
+                         Topic(class_topic, "sensor_msgs/msg/Image", /*required=*/false));
+    if (inst == nullptr || cls == nullptr) return std::optional<SimulatorLabels>();
+    const mcap::Message* mi = inst->At(t);
+    const mcap::Message* mc = cls->At(t);
+    if (mi == nullptr || mc == nullptr) return std::optional<SimulatorLabels>();
+    AVP_ASSIGN_OR_RETURN(const rosmsg::Image i, rosmsg::Decode<rosmsg::Image>(mi->data));
+    AVP_ASSIGN_OR_RETURN(const rosmsg::Image c, rosmsg::Decode<rosmsg::Image>(mc->data));
+    if (i.encoding != "16UC1" && i.encoding != "mono16") {
+      return InvalidArgumentError(fmt::format("{}: encoding {} (16UC1 or mono16 instance ids)",
+                                              inst_topic, QuoteText(i.encoding)));
+    }
+    if (c.encoding != "mono8" && c.encoding != "8UC1") {
+      return InvalidArgumentError(
+          fmt::format("{}: encoding {} (mono8 classes)", class_topic, QuoteText(c.encoding)));
+    }
+    AVP_RETURN_IF_ERROR(CheckLayout(i, inst_topic, 2));
+    AVP_RETURN_IF_ERROR(CheckLayout(c, class_topic, 1));
+    if (static_cast<int>(i.width) != width || static_cast<int>(i.height) != height ||
+        static_cast<int>(c.width) != width || static_cast<int>(c.height) != height) {
+      return InvalidArgumentError(
+          fmt::format("label images {}x{} and {}x{} do not match the {}x{} colour image", i.width,
+                      i.height, c.width, c.height, width, height));
+    }
+    SimulatorLabels labels;
+    labels.instance_ids = InstanceImage(width, height);
+    labels.class_ids = ClassImage(width, height);
+    for (int v = 0; v < height; ++v) {
+      const uint8_t* ri = i.data.data() + static_cast<size_t>(v) * i.step;
+      const uint8_t* rc = c.data.data() + static_cast<size_t>(v) * c.step;
+      for (int u = 0; u < width; ++u) {
+        labels.instance_ids.at(u, v) = U16(ri + 2 * u, i.is_bigendian != 0);
+        labels.class_ids.at(u, v) = rc[u];
+      }
+    }
+    return std::optional<SimulatorLabels>(std::move(labels));
+  }
+
+  /// Colour + depth + intrinsics of one frame, `color` and `depth` already decoded.
+  Result<RgbdFrame> Frame(const rosmsg::Image& color, const rosmsg::Image& depth,
+                          const TopicMessages& infos) {
+    RgbdFrame frame;
+    AVP_ASSIGN_OR_RETURN(frame.rgb, ColorFromImageMsg(color, o_.color_topic));
+    AVP_ASSIGN_OR_RETURN(frame.depth_m, DepthFromImageMsg(depth, o_.depth_topic));
+    frame.stamp_ns = color.header.stamp.ToNanoseconds();
+    AVP_ASSIGN_OR_RETURN(frame.K, Intrinsics(infos, frame.stamp_ns));
+    if (!frame.depth_m.SameSizeAs(frame.rgb) || frame.K.width != frame.rgb.width() ||
+        frame.K.height != frame.rgb.height()) {
+      return InvalidArgumentError(fmt::format(
+          "colour {}x{}, depth {}x{} and CameraInfo {}x{} differ in size (depth must be aligned "
+          "to colour)",
+          frame.rgb.width(), frame.rgb.height(), frame.depth_m.width(), frame.depth_m.height(),
+          frame.K.width, frame.K.height));
+    }
+    frame.frame_id = o_.camera_frame.empty() ? color.header.frame_id : o_.camera_frame;
+    return frame;
+  }
+
+  Status ReadAvpSteps(const TopicMessages& steps) {
+    AVP_ASSIGN_OR_RETURN(const TopicMessages* color,
+                         Topic(o_.color_topic, "sensor_msgs/msg/Image", true));
+    AVP_ASSIGN_OR_RETURN(const TopicMessages* depth,
+                         Topic(o_.depth_topic, "sensor_msgs/msg/Image", true));
+    AVP_ASSIGN_OR_RETURN(const TopicMessages* infos,
+                         Topic(o_.camera_info_topic, "sensor_msgs/msg/CameraInfo", true));
+    AVP_ASSIGN_OR_RETURN(const TopicMessages* instances,
+                         Topic(std::string(kInstancesTopic), "std_msgs/msg/String", false));
+    for (const mcap::Message* m : steps.messages) {
+      if (o_.max_views > 0 && static_cast<int>(bag_.views.size()) >= o_.max_views) break;
+      Result<BagView> view = AvpStep(*m, *color, *depth, *infos, instances);
+      if (!view.ok()) {
+        Skip(fmt::format("step at {}: {}", Stamp(static_cast<int64_t>(m->log_time)),
+                         view.status().message()));
+        continue;
+      }
+      bag_.views.push_back(std::move(*view));
+    }
+    return Status::Ok();
+  }
+
+  Result<BagView> AvpStep(const mcap::Message& m, const TopicMessages& colors,
+                          const TopicMessages& depths, const TopicMessages& infos,
+                          const TopicMessages* instances) {
+    AVP_ASSIGN_OR_RETURN(const rosmsg::String text, rosmsg::Decode<rosmsg::String>(m.data));
+    BagView view;
+    try {
+      view.step = nlohmann::json::parse(text.data);
+    } catch (const nlohmann::json::parse_error& e) {
+      return InvalidArgumentError(
+          fmt::format("{}: malformed JSON: {}", kStepTopic, EscapeText(e.what(), 200)));
+    }
+    if (!view.step.is_object()) {
+      return InvalidArgumentError(fmt::format("{}: not a JSON object", kStepTopic));
+    }
+    if (auto v = view.step.find("view"); v != view.step.end() && v->is_number_integer()) {
+      view.index = v->get<int>();
+    } else {
+      view.index = static_cast<int>(bag_.views.size());
+    }
+    const uint64_t t = m.log_time;
+    const mcap::Message* mc = colors.At(t);
+    const mcap::Message* md = depths.At(t);
+    if (mc == nullptr || md == nullptr) {
+      return NotFoundError(fmt::format("no {} image logged at the step's time",
+                                       mc == nullptr ? o_.color_topic : o_.depth_topic));
+    }
+    AVP_ASSIGN_OR_RETURN(const rosmsg::Image color, rosmsg::Decode<rosmsg::Image>(mc->data));
+    AVP_ASSIGN_OR_RETURN(const rosmsg::Image depth, rosmsg::Decode<rosmsg::Image>(md->data));
+    AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(color, depth, infos));
+    RgbdFrame& frame = view.observation.frame;
+    // The exact pose from the step (TF's quaternion does not round-trip bit for bit). The step's
+    // pose is the arm's; the frame's (TF) is what was fused: they agree in simulation, while a
+    // live robot's camera pose comes from its TF, so a TF pose that differs is used instead.
+    Result<RigidTransform> tf_pose = CameraPose(frame.frame_id, frame.stamp_ns);
+    if (auto x = view.step.find("X_WC"); x != view.step.end()) {
+      Result<RigidTransform> step_pose = PoseFromJson(*x);
+      if (!step_pose.ok())
+        return step_pose.status().WithContext(std::string(kStepTopic) + ": X_WC");
+      frame.X_WC = *step_pose;
+      if (tf_pose.ok() && !tf_pose->IsNearlyEqualTo(*step_pose, 1e-6, 1e-6)) frame.X_WC = *tf_pose;
+    } else if (tf_pose.ok()) {
+      frame.X_WC = *tf_pose;
+    } else {
+      return tf_pose.status();
+    }
+    if (auto q = view.step.find("q"); q != view.step.end() && q->is_array()) {
+      view.q.resize(static_cast<Eigen::Index>(q->size()));
+      for (size_t i = 0; i < q->size(); ++i) {
+        if (!(*q)[i].is_number()) {
+          return InvalidArgumentError(fmt::format("{}: q[{}] is {}, not a number", kStepTopic, i,
+                                                  EscapeText((*q)[i].dump())));
+        }
+        view.q[static_cast<Eigen::Index>(i)] = (*q)[i].get<double>();
+      }
+    }
+    AVP_ASSIGN_OR_RETURN(view.observation.labels, Labels(t, frame.rgb.width(), frame.rgb.height()));
+    if (instances != nullptr) {
+      if (const mcap::Message* mi = instances->At(t); mi != nullptr) {
+        AVP_ASSIGN_OR_RETURN(const rosmsg::String s, rosmsg::Decode<rosmsg::String>(mi->data));
+        nlohmann::json j;
+        try {
+          j = nlohmann::json::parse(s.data);
+        } catch (const nlohmann::json::parse_error& e) {
+          return InvalidArgumentError(
+              fmt::format("{}: malformed JSON: {}", kInstancesTopic, EscapeText(e.what(), 200)));
+        }
+        Result<Segmentation> seg = InstancesFromJson(j);
+        if (!seg.ok()) return seg.status().WithContext(std::string(kInstancesTopic));
+        AVP_RETURN_IF_ERROR(seg->ValidateFor(frame.rgb.width(), frame.rgb.height()));
+        view.segmentation = std::move(*seg);
+      }
+    }
+    return view;
+  }
+
+  Status ReadRobotBag() {
+    AVP_ASSIGN_OR_RETURN(const TopicMessages* colors,
+                         Topic(o_.color_topic, "sensor_msgs/msg/Image", true));
+    AVP_ASSIGN_OR_RETURN(const TopicMessages* depths,
+                         Topic(o_.depth_topic, "sensor_msgs/msg/Image", true));
+    AVP_ASSIGN_OR_RETURN(const TopicMessages* infos,
+                         Topic(o_.camera_info_topic, "sensor_msgs/msg/CameraInfo", true));
+    // Stamps first (each image decoded once here, and again only when it is used).
+    auto stamps = [&](const TopicMessages& t, const std::string& topic) {
+      std::vector<std::pair<int64_t, const mcap::Message*>> out;
+      for (const mcap::Message* m : t.messages) {
+        Result<rosmsg::Image> image = rosmsg::Decode<rosmsg::Image>(m->data);
+        if (!image.ok()) {
+          Skip(fmt::format("{} at {}: {}", topic, Stamp(static_cast<int64_t>(m->log_time)),
+                           image.status().message()));
+          continue;
+        }
+        out.emplace_back(image->header.stamp.ToNanoseconds(), m);
+      }
+      std::stable_sort(out.begin(), out.end(),
+                       [](const auto& a, const auto& b) { return a.first < b.first; });
+      return out;
+    };
+    const auto color_stamps = stamps(*colors, o_.color_topic);
+    const auto depth_stamps = stamps(*depths, o_.depth_topic);
+    const auto skew_ns = static_cast<int64_t>(std::llround(o_.max_pair_skew_ms * 1e6));
+    const int64_t period_ns =
+        o_.frame_rate_hz > 0.0 ? static_cast<int64_t>(std::llround(1e9 / o_.frame_rate_hz)) : 0;
+    // Thinning: the first pair at or after each instant first + k / rate, or up to 1 % of a
+    // period before it (a 30 Hz camera's 30th frame is stamped 10 ns short of 1 s).
+    std::optional<int64_t> first_stamp;
+    int64_t next_ns = 0;
+    const int64_t early_ns = period_ns / 100;
+    int pair_index = 0;
+    for (const auto& [stamp, mc] : color_stamps) {
+      auto it = std::lower_bound(depth_stamps.begin(), depth_stamps.end(), stamp,
+                                 [](const auto& x, int64_t t) { return x.first < t; });
+      const mcap::Message* md = nullptr;
+      int64_t best = std::numeric_limits<int64_t>::max();
+      for (auto c : {it, it == depth_stamps.begin() ? it : std::prev(it)}) {
+        if (c == depth_stamps.end()) continue;
+        const int64_t d = std::abs(c->first - stamp);
+        if (d < best) {
+          best = d;
+          md = c->second;
+        }
+      }
+      if (md == nullptr || best > skew_ns) continue;
+      const int index = pair_index++;
+      ++bag_.pairs;
+      if ((first_stamp && stamp < next_ns - early_ns) ||
+          (o_.max_views > 0 && static_cast<int>(bag_.views.size()) >= o_.max_views)) {
+        ++bag_.pairs_thinned;
+        continue;
+      }
+      Result<BagView> view = RobotView(index, *mc, *md, *infos);
+      if (!view.ok()) {
+        Skip(fmt::format("frame at {}: {}", Stamp(stamp), view.status().message()));
+        continue;
+      }
+      if (period_ns > 0) {
+        if (!first_stamp) first_stamp = stamp;
+        next_ns = *first_stamp + ((stamp - *first_stamp + early_ns) / period_ns + 1) * period_ns;
+      }
+      bag_.views.push_back(std::move(*view));
+    }
+    if (bag_.pairs == 0) {
+      return NotFoundError(fmt::format(
+          "{}: no colour image on {} has a depth image on {} within {} ms ({} colour, {} depth "
+          "images)",
+          bag_.path.string(), QuoteText(o_.color_topic), QuoteText(o_.depth_topic),
+          o_.max_pair_skew_ms, color_stamps.size(), depth_stamps.size()));
+    }
+    return Status::Ok();
+  }
+
+  Result<BagView> RobotView(int index, const mcap::Message& mc, const mcap::Message& md,
+                            const TopicMessages& infos) {
+    BagView view;
+    view.index = index;
+    AVP_ASSIGN_OR_RETURN(const rosmsg::Image color, rosmsg::Decode<rosmsg::Image>(mc.data));
+    AVP_ASSIGN_OR_RETURN(const rosmsg::Image depth, rosmsg::Decode<rosmsg::Image>(md.data));
+    AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(color, depth, infos));
+    RgbdFrame& frame = view.observation.frame;
+    if (frame.frame_id.empty()) {
+      return InvalidArgumentError(fmt::format(
+          "{}: the image has no frame_id; give the camera frame (camera_frame)", o_.color_topic));
+    }
+    AVP_ASSIGN_OR_RETURN(frame.X_WC, CameraPose(frame.frame_id, frame.stamp_ns));
+    AVP_ASSIGN_OR_RETURN(view.observation.labels,
+                         Labels(mc.log_time, frame.rgb.width(), frame.rgb.height()));
+    return view;
+  }
+
+  const BagReadOptions& o_;
+  Bag& bag_;
+  std::map<std::string, TopicMessages> topics_;
+  TfTree tf_;
+  std::vector<std::pair<int64_t, rosmsg::CameraInfo>> infos_;
+};
+
+}  // namespace
+
+Result<Bag> ReadBag(const std::filesystem::path& path, const BagReadOptions& options) {
+  AVP_RETURN_IF_ERROR(BagReadOptionTable().Validate(options));
+  Bag bag;
+  bag.path = path;
+  mcap::StreamResult stream = mcap::ReadStreaming(path);
+  if (!stream.status.ok() && stream.file.messages.empty()) {
+    return stream.status;
+  }
+  bag.damage = stream.status;
+  bag.intact_bytes = stream.intact_bytes;
+  std::error_code ec;
+  bag.file_bytes = std::filesystem::file_size(path, ec);
+  for (const mcap::Metadata& m : stream.file.metadata) {
+    if (m.name == kMetadataName) bag.avp_metadata = m.metadata;
+  }
+  for (const mcap::Attachment& a : stream.file.attachments) {
+    if (a.name != kGroundTruthAttachment) continue;
+    try {
+      bag.ground_truth = nlohmann::json::parse(a.data);
+    } catch (const nlohmann::json::parse_error& e) {
+      return InvalidArgumentError(fmt::format("{}: attachment {}: malformed JSON: {}",
+                                              path.string(), kGroundTruthAttachment,
+                                              EscapeText(e.what(), 200)));
+    }
+  }
+  Reader reader(options, bag);
+  AVP_RETURN_IF_ERROR(reader.Index(stream.file));
+  AVP_RETURN_IF_ERROR(reader.ReadTf());
+  AVP_ASSIGN_OR_RETURN(const TopicMessages* steps,
+                       reader.Topic(std::string(kStepTopic), "std_msgs/msg/String", false));
+  if (steps != nullptr && !options.as_robot_bag) {
+    bag.avp_recording = true;
+    AVP_RETURN_IF_ERROR(reader.ReadAvpSteps(*steps));
+  } else {
+    AVP_RETURN_IF_ERROR(reader.ReadRobotBag());
+  }
+  if (bag.views.empty()) {
+    std::string why = bag.skipped.empty() ? std::string("nothing to fuse") : bag.skipped.front();
+    return InvalidArgumentError(fmt::format("{}: no view could be read{}: {}", path.string(),
+                                            bag.damage.ok() ? "" : " (the file is damaged)", why));
+  }
+  return bag;
+}
+
+}  // namespace avp::recording

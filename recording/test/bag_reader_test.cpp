@@ -1,0 +1,409 @@
+// Reading a real robot's bag: a synthetic rosbag2 MCAP as the RealSense driver and a robot write
+// it (30 Hz bgr8 colour and 16UC1 millimetre depth on the driver's topics, CameraInfo, a /tf arm
+// joint moving under a /tf_static chain), thinned to 1 frame per second by default, the camera
+// pose from TF at the image stamp; topics and frames by option; damaged files and bad messages.
+#include "avp/recording/bag_reader.h"
+
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <avp/mcap/mcap.h>
+#include <avp/rosmsg/convert.h>
+#include <avp/test/temp_dir_test.h>
+
+namespace avp::recording {
+namespace {
+
+using ::testing::HasSubstr;
+
+constexpr int kW = 8;
+constexpr int kH = 6;
+constexpr int64_t kT0 = 1'700'000'000'000'000'000;  // the bag's first stamp, ns
+constexpr int64_t kFrameNs = 33'333'333;            // 30 Hz
+
+/// The arm joint: link1 in base, translating along x at 0.1 m/s and turning about z at 0.2 rad/s.
+RigidTransform Link1At(int64_t t_ns) {
+  const double t = static_cast<double>(t_ns - kT0) * 1e-9;
+  return RigidTransform::FromRpy(0.0, 0.0, 0.2 * t, Eigen::Vector3d(0.1 * t, 0.0, 0.3));
+}
+const RigidTransform kBaseToArm = RigidTransform::FromRpy(0.0, 0.0, 0.0, {0.0, 0.0, 0.1});
+const RigidTransform kLinkToOptical =
+    RigidTransform::FromRpy(-M_PI / 2, 0.0, -M_PI / 2, {0.05, 0.0, 0.02});
+
+/// X_WC at `t_ns`: base -> arm (static) -> link1 (dynamic) -> optical (static).
+RigidTransform ExpectedPose(int64_t t_ns) { return kBaseToArm * Link1At(t_ns) * kLinkToOptical; }
+
+rosmsg::TransformStamped Tf(const std::string& parent, const std::string& child,
+                            const RigidTransform& X, int64_t t_ns) {
+  rosmsg::TransformStamped t;
+  t.header = {rosmsg::ToTimeMsg(t_ns), parent};
+  t.child_frame_id = child;
+  t.transform = rosmsg::ToTransformMsg(X);
+  return t;
+}
+
+struct BagSpec {
+  double seconds = 3.0;
+  std::string color_encoding = "bgr8";
+  std::string depth_encoding = "16UC1";
+  int64_t depth_offset_ns = 1'000'000;  // depth stamped 1 ms after colour
+  bool with_tf = true;
+  bool with_camera_info = true;
+  /// Frame index whose colour image is broken (its data one byte short), or -1.
+  int broken_color = -1;
+};
+
+/// Colour of pixel (u, v) of frame i, as RGB.
+std::array<uint8_t, 3> Rgb(int i, int u, int v) {
+  return {static_cast<uint8_t>(10 * u + i), static_cast<uint8_t>(20 * v), static_cast<uint8_t>(i)};
+}
+uint16_t DepthMm(int i, int u, int v) { return static_cast<uint16_t>(500 + 10 * i + u + 3 * v); }
+
+class BagReaderTest : public test::TempDirTest {
+ protected:
+  template <class T>
+  void Put(mcap::Writer& w, uint16_t channel, int64_t t, const T& msg) {
+    const std::vector<uint8_t> bytes = rosmsg::Encode(msg);
+    ASSERT_TRUE(
+        w.Write(channel, seq_++, static_cast<uint64_t>(t), static_cast<uint64_t>(t), bytes).ok());
+  }
+
+  template <class T>
+  uint16_t Channel(mcap::Writer& w, const std::string& topic) {
+    const uint16_t schema =
+        w.AddSchema(rosmsg::MessageTraits<T>::kRosName, "ros2msg", rosmsg::Definition<T>()).value();
+    return w
+        .AddChannel(schema, topic, "cdr", {{"offered_qos_profiles", mcap::OfferedQosProfiles()}})
+        .value();
+  }
+
+  std::filesystem::path WriteBag(const BagSpec& spec, const std::string& name = "robot.mcap") {
+    const std::filesystem::path path = dir_ / name;
+    auto w = mcap::Writer::Open(path, {.chunk_size = 64 * 1024}).value();
+    const uint16_t color = Channel<rosmsg::Image>(*w, "/camera/camera/color/image_raw");
+    const uint16_t depth =
+        Channel<rosmsg::Image>(*w, "/camera/camera/aligned_depth_to_color/image_raw");
+    const uint16_t info = Channel<rosmsg::CameraInfo>(*w, "/camera/camera/color/camera_info");
+    const uint16_t tf = Channel<rosmsg::TFMessage>(*w, "/tf");
+    const uint16_t tf_static = Channel<rosmsg::TFMessage>(*w, "/tf_static");
+    if (spec.with_tf) {
+      rosmsg::TFMessage s;
+      s.transforms.push_back(Tf("igus_rebel_base_link", "arm_mount", kBaseToArm, kT0));
+      s.transforms.push_back(Tf("link1", "camera_color_optical_frame", kLinkToOptical, kT0));
+      Put(*w, tf_static, kT0, s);
+    }
+    const auto frames = static_cast<int>(std::lround(spec.seconds * 30));
+    // /tf at 100 Hz from 20 ms before the first image to 20 ms after the last.
+    for (int64_t t = kT0 - 20'000'000; spec.with_tf && t <= kT0 + frames * kFrameNs + 20'000'000;
+         t += 10'000'000) {
+      Put(*w, tf, t, rosmsg::TFMessage{{Tf("arm_mount", "link1", Link1At(t), t)}});
+    }
+    for (int i = 0; i < frames; ++i) {
+      const int64_t t = kT0 + i * kFrameNs;
+      rosmsg::Image c;
+      c.header = {rosmsg::ToTimeMsg(t), "camera_color_optical_frame"};
+      c.width = kW;
+      c.height = kH;
+      c.encoding = spec.color_encoding;
+      c.step = 3 * kW;
+      for (int v = 0; v < kH; ++v) {
+        for (int u = 0; u < kW; ++u) {
+          const auto rgb = Rgb(i, u, v);
+          if (spec.color_encoding == "bgr8") {
+            c.data.insert(c.data.end(), {rgb[2], rgb[1], rgb[0]});
+          } else {
+            c.data.insert(c.data.end(), {rgb[0], rgb[1], rgb[2]});
+          }
+        }
+      }
+      if (i == spec.broken_color) c.data.pop_back();
+      rosmsg::Image d;
+      d.header = {rosmsg::ToTimeMsg(t + spec.depth_offset_ns), "camera_color_optical_frame"};
+      d.width = kW;
+      d.height = kH;
+      d.encoding = spec.depth_encoding;
+      d.step = 2 * kW;
+      for (int v = 0; v < kH; ++v) {
+        for (int u = 0; u < kW; ++u) {
+          const uint16_t mm = DepthMm(i, u, v);
+          d.data.insert(d.data.end(),
+                        {static_cast<uint8_t>(mm & 0xff), static_cast<uint8_t>(mm >> 8)});
+        }
+      }
+      rosmsg::CameraInfo k;
+      k.header = c.header;
+      k.width = kW;
+      k.height = kH;
+      k.distortion_model = "plumb_bob";
+      k.d = {0, 0, 0, 0, 0};
+      k.k = {6.0, 0, 3.5, 0, 6.5, 2.5, 0, 0, 1};
+      Put(*w, color, t, c);
+      Put(*w, depth, t + spec.depth_offset_ns, d);
+      if (spec.with_camera_info) Put(*w, info, t, k);
+    }
+    EXPECT_TRUE(w->Close().ok());
+    return path;
+  }
+
+  uint32_t seq_ = 0;
+};
+
+void ExpectView(const BagView& view, int frame) {
+  const RgbdFrame& f = view.observation.frame;
+  EXPECT_EQ(view.index, frame);
+  EXPECT_EQ(f.stamp_ns, kT0 + frame * kFrameNs);
+  EXPECT_EQ(f.frame_id, "camera_color_optical_frame");
+  ASSERT_EQ(f.rgb.width(), kW);
+  ASSERT_EQ(f.rgb.height(), kH);
+  for (int v = 0; v < kH; ++v) {
+    for (int u = 0; u < kW; ++u) {
+      const auto rgb = Rgb(frame, u, v);
+      for (int ch = 0; ch < 3; ++ch) ASSERT_EQ(f.rgb.at(u, v, ch), rgb[ch]) << u << "," << v;
+      ASSERT_EQ(f.depth_m.at(u, v), static_cast<float>(DepthMm(frame, u, v)) * 0.001f);
+    }
+  }
+  EXPECT_EQ(f.K.width, kW);
+  EXPECT_EQ(f.K.fx, 6.0);
+  EXPECT_EQ(f.K.fy, 6.5);
+  EXPECT_EQ(f.K.cx, 3.5);
+  EXPECT_EQ(f.K.cy, 2.5);
+  // The stamp falls between two 100 Hz /tf samples: interpolated, so within rounding of the
+  // analytic pose.
+  const RigidTransform expected = ExpectedPose(f.stamp_ns);
+  EXPECT_LT(f.X_WC.TranslationDistanceTo(expected), 1e-9) << f.X_WC << " vs " << expected;
+  EXPECT_LT(f.X_WC.AngleTo(expected), 1e-9);
+  EXPECT_FALSE(view.observation.labels.has_value());
+  EXPECT_FALSE(view.segmentation.has_value());
+}
+
+TEST_F(BagReaderTest, RealSenseBagAtOneFramePerSecondWithPoseFromTf) {
+  const auto path = WriteBag({});
+  Result<Bag> bag = ReadBag(path);
+  ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+  EXPECT_FALSE(bag->avp_recording);
+  EXPECT_TRUE(bag->damage.ok());
+  EXPECT_EQ(bag->pairs, 90u);
+  EXPECT_EQ(bag->pairs_thinned, 87u);
+  EXPECT_EQ(bag->skipped_count, 0u) << (bag->skipped.empty() ? "" : bag->skipped[0]);
+  ASSERT_EQ(bag->views.size(), 3u);  // t = 0, 1, 2 s: frames 0, 30, 60
+  ExpectView(bag->views[0], 0);
+  ExpectView(bag->views[1], 30);
+  ExpectView(bag->views[2], 60);
+  EXPECT_EQ(bag->topic_messages.at("/camera/camera/color/image_raw"), 90u);
+}
+
+TEST_F(BagReaderTest, FrameRateAndMaxViews) {
+  const auto path = WriteBag({.seconds = 1.0});
+  BagReadOptions every;
+  every.frame_rate_hz = 0.0;
+  Result<Bag> all = ReadBag(path, every);
+  ASSERT_TRUE(all.ok()) << all.status().ToString();
+  ASSERT_EQ(all->views.size(), 30u);
+  ExpectView(all->views[17], 17);
+  BagReadOptions ten;
+  ten.frame_rate_hz = 10.0;  // every 100 ms: frames 0, 3, 6, ... (a frame is 33.3 ms)
+  Result<Bag> tenth = ReadBag(path, ten);
+  ASSERT_TRUE(tenth.ok());
+  ASSERT_EQ(tenth->views.size(), 10u);
+  EXPECT_EQ(tenth->views[1].index, 3);
+  BagReadOptions five = every;
+  five.max_views = 5;
+  Result<Bag> first5 = ReadBag(path, five);
+  ASSERT_TRUE(first5.ok());
+  ASSERT_EQ(first5->views.size(), 5u);
+  EXPECT_EQ(first5->pairs_thinned, 25u);
+}
+
+TEST_F(BagReaderTest, TopicAndFrameNamesAreOptions) {
+  const auto path = WriteBag({.seconds = 1.0});
+  BagReadOptions o;
+  o.camera_frame = "link1";  // the pose of link1 instead of the optical frame
+  Result<Bag> bag = ReadBag(path, o);
+  ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+  EXPECT_LT(bag->views[0].observation.frame.X_WC.TranslationDistanceTo(kBaseToArm * Link1At(kT0)),
+            1e-12);
+  o = {};
+  o.base_frame = "arm_mount";
+  bag = ReadBag(path, o);
+  ASSERT_TRUE(bag.ok());
+  EXPECT_LT(
+      bag->views[0].observation.frame.X_WC.TranslationDistanceTo(Link1At(kT0) * kLinkToOptical),
+      1e-12);
+  o = {};
+  o.color_topic = "/color";
+  bag = ReadBag(path, o);
+  ASSERT_FALSE(bag.ok());
+  EXPECT_THAT(bag.status().message(), HasSubstr("no messages on '/color' (the bag's topics: "));
+  EXPECT_THAT(bag.status().message(),
+              HasSubstr("/camera/camera/color/image_raw (sensor_msgs/msg/Image, 30)"));
+  o = {};
+  o.depth_topic = "/camera/camera/color/camera_info";
+  bag = ReadBag(path, o);
+  ASSERT_FALSE(bag.ok());
+  EXPECT_THAT(bag.status().message(),
+              HasSubstr("carries 'sensor_msgs/msg/CameraInfo', not sensor_msgs/msg/Image"));
+}
+
+TEST_F(BagReaderTest, MissingTransformsAndCameraInfoAreErrorsNamingThem) {
+  Result<Bag> bag = ReadBag(WriteBag({.seconds = 1.0, .with_tf = false}, "notf.mcap"));
+  ASSERT_FALSE(bag.ok());
+  EXPECT_THAT(bag.status().message(), HasSubstr("no view could be read"));
+  EXPECT_THAT(bag.status().message(), HasSubstr("no transforms on '/tf' or '/tf_static'"));
+
+  BagReadOptions o;
+  o.base_frame = "world";
+  bag = ReadBag(WriteBag({.seconds = 1.0}), o);
+  ASSERT_FALSE(bag.ok());
+  EXPECT_THAT(bag.status().message(),
+              HasSubstr("frame 'world' is not in the bag's transforms (frames: arm_mount, "
+                        "camera_color_optical_frame, igus_rebel_base_link, link1)"));
+
+  bag = ReadBag(WriteBag({.seconds = 1.0, .with_camera_info = false}, "noinfo.mcap"));
+  ASSERT_FALSE(bag.ok());
+  EXPECT_THAT(bag.status().message(),
+              HasSubstr("no messages on '/camera/camera/color/camera_info'"));
+}
+
+TEST_F(BagReaderTest, TransformOutsideItsSamplesBeyondTheToleranceIsAnError) {
+  const auto path = WriteBag({.seconds = 1.0});
+  BagReadOptions o;
+  o.tf_tolerance_ms = 0.0;
+  o.frame_rate_hz = 0.0;
+  Result<Bag> bag = ReadBag(path, o);
+  ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+  EXPECT_EQ(bag->views.size(), 30u);  // /tf covers every image
+  // The tree at a stamp 30 ms after the last /tf sample.
+  TfTree tree;
+  ASSERT_TRUE(tree.Add(Tf("a", "b", RigidTransform::Identity(), 0), false).ok());
+  ASSERT_TRUE(tree.Add(Tf("a", "b", RigidTransform(Eigen::Vector3d(1, 0, 0)), 10), false).ok());
+  Result<RigidTransform> mid = tree.Lookup("a", "b", 5, 0);
+  ASSERT_TRUE(mid.ok());
+  EXPECT_DOUBLE_EQ(mid->translation().x(), 0.5);
+  EXPECT_TRUE(tree.Lookup("a", "b", 40, 30).ok());
+  Result<RigidTransform> late = tree.Lookup("a", "b", 40'000'010, 20'000'000);
+  ASSERT_FALSE(late.ok());
+  EXPECT_THAT(late.status().message(),
+              HasSubstr("the nearest sample is 40.0 ms earlier (0.000000010), beyond the "
+                        "tolerance of 20.0 ms"));
+  EXPECT_THAT(tree.Add(Tf("c", "b", RigidTransform::Identity(), 0), false).message(),
+              HasSubstr("frame 'b' already has parent 'a'; refusing 'c'"));
+  rosmsg::TransformStamped bad = Tf("a", "d", RigidTransform::Identity(), 0);
+  bad.transform.rotation = {0, 0, 0, 0};
+  EXPECT_THAT(tree.Add(bad, false).message(), HasSubstr("the quaternion (0, 0, 0, 0) has norm 0"));
+}
+
+TEST_F(BagReaderTest, BadImagesAreSkippedNamingTheValue) {
+  Result<Bag> bag = ReadBag(WriteBag({.seconds = 1.0, .broken_color = 0}));
+  ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+  // Frame 0 is broken: the first usable pair is frame 1, then frames >= 1 s later (none in 1 s).
+  ASSERT_EQ(bag->views.size(), 1u);
+  EXPECT_EQ(bag->views[0].index, 1);
+  ASSERT_EQ(bag->skipped_count, 1u) << ::testing::PrintToString(bag->skipped);
+  EXPECT_THAT(bag->skipped[0], HasSubstr("/camera/camera/color/image_raw: data holds 143 bytes, "
+                                         "but step 24 x height 6 = 144"));
+
+  bag = ReadBag(WriteBag({.seconds = 0.2, .color_encoding = "yuv422"}, "yuv.mcap"));
+  ASSERT_FALSE(bag.ok());
+  EXPECT_THAT(bag.status().message(),
+              HasSubstr("colour encoding 'yuv422' is not supported (rgb8, bgr8, rgba8, bgra8, "
+                        "mono8)"));
+
+  bag = ReadBag(WriteBag({.seconds = 0.2, .depth_offset_ns = 20'000'000}, "skew.mcap"));
+  ASSERT_FALSE(bag.ok());
+  EXPECT_THAT(bag.status().message(),
+              HasSubstr("no colour image on '/camera/camera/color/image_raw' has a depth image "
+                        "on '/camera/camera/aligned_depth_to_color/image_raw' within 5 ms (6 "
+                        "colour, 6 depth images)"));
+}
+
+TEST(BagImageTest, EncodingsAndBadValues) {
+  rosmsg::Image m;
+  m.width = 2;
+  m.height = 1;
+  m.encoding = "bgra8";
+  m.step = 8;
+  m.data = {1, 2, 3, 4, 5, 6, 7, 8};
+  ImageRgb8 c = ColorFromImageMsg(m, "/c").value();
+  EXPECT_EQ(c.at(0, 0, 0), 3);
+  EXPECT_EQ(c.at(0, 0, 2), 1);
+  EXPECT_EQ(c.at(1, 0, 1), 6);
+  m.encoding = "mono8";
+  m.step = 2;
+  m.data = {9, 200};
+  c = ColorFromImageMsg(m, "/c").value();
+  EXPECT_EQ(c.at(1, 0, 0), 200);
+  EXPECT_EQ(c.at(1, 0, 2), 200);
+
+  rosmsg::Image d;
+  d.width = 3;
+  d.height = 1;
+  d.encoding = "32FC1";
+  d.step = 12;
+  const float values[3] = {1.25f, std::numeric_limits<float>::quiet_NaN(), -0.5f};
+  d.data.resize(12);
+  std::memcpy(d.data.data(), values, 12);
+  Result<DepthImage> depth = DepthFromImageMsg(d, "/d");
+  ASSERT_FALSE(depth.ok());
+  EXPECT_THAT(depth.status().message(),
+              HasSubstr("/d: depth -0.5 m at pixel (2, 0) (stamp 0.000000000): a 32FC1 depth "
+                        "must be >= 0"));
+  std::memset(d.data.data() + 8, 0, 4);
+  depth = DepthFromImageMsg(d, "/d");
+  ASSERT_TRUE(depth.ok());
+  EXPECT_EQ(depth->at(0, 0), 1.25f);
+  EXPECT_TRUE(std::isnan(depth->at(1, 0)));  // no return (REP 118), as recorded
+  d.is_bigendian = 1;
+  d.encoding = "16UC1";
+  d.step = 6;
+  d.data = {0x01, 0x02, 0, 0, 0xff, 0xff};
+  depth = DepthFromImageMsg(d, "/d");
+  ASSERT_TRUE(depth.ok());
+  EXPECT_EQ(depth->at(0, 0), 258 * 0.001f);
+  EXPECT_EQ(depth->at(2, 0), 65535 * 0.001f);
+  d.encoding = "rgb8";
+  EXPECT_THAT(DepthFromImageMsg(d, "/d").status().message(),
+              HasSubstr("depth encoding 'rgb8' is not supported"));
+  d.encoding = "16UC1";
+  d.width = 20000;
+  EXPECT_THAT(DepthFromImageMsg(d, "/d").status().message(),
+              HasSubstr("image size 20000x1 is out of range"));
+
+  rosmsg::CameraInfo info;
+  info.width = 4;
+  info.height = 3;
+  info.k = {0, 0, 2, 0, 5, 1, 0, 0, 1};
+  EXPECT_THAT(IntrinsicsFromCameraInfoMsg(info, 0.1, 3.0).status().message(),
+              HasSubstr("gives invalid intrinsics"));
+}
+
+TEST_F(BagReaderTest, TruncatedBagKeepsTheIntactFramesAndNamesTheOffset) {
+  const auto path = WriteBag({});
+  const auto size = std::filesystem::file_size(path);
+  std::filesystem::resize_file(path, size * 6 / 10);
+  Result<Bag> bag = ReadBag(path);
+  ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+  EXPECT_FALSE(bag->damage.ok());
+  EXPECT_THAT(bag->damage.message(), HasSubstr("at offset"));
+  EXPECT_GT(bag->intact_bytes, 0u);
+  EXPECT_LT(bag->intact_bytes, size * 6 / 10 + 1);
+  // 1.8 s of 3 s survive at most: frames 0 and 30.
+  ASSERT_GE(bag->views.size(), 1u);
+  ASSERT_LE(bag->views.size(), 2u);
+  ExpectView(bag->views[0], 0);
+
+  std::filesystem::resize_file(path, 40);  // inside the first records
+  bag = ReadBag(path);
+  ASSERT_FALSE(bag.ok());
+  EXPECT_THAT(bag.status().message(), HasSubstr("offset"));
+}
+
+}  // namespace
+}  // namespace avp::recording
