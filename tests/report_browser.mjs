@@ -74,16 +74,22 @@ function check(ok, what) {
 const kCamera = ["camera.width=160", "camera.height=120", "camera.fx=154", "camera.fy=154",
                  "camera.cx=79.5", "camera.cy=59.5"].flatMap((kv) => ["--set", kv]);
 const folder = join(outDir, page);
+rmSync(folder, { recursive: true, force: true });  // a fresh folder each time
 const t0 = Date.now();
+function runAvp(args) {
+  try {
+    execFileSync(avp, args, { stdio: ["ignore", "ignore", "inherit"], timeout: 60000 });
+  } catch (e) {
+    console.error(`report_browser: ${avp} ${args.join(" ")} failed (${e.status ?? e.signal})`);
+    process.exit(1);
+  }
+}
 if (page === "run") {
-  execFileSync(avp, ["run", "--scenario", "tomato-multiple-clusters", "--seed", "0", "--views",
-                     "3", ...kCamera, "--out", folder, "--force"],
-               { stdio: ["ignore", "ignore", "inherit"], timeout: 60000 });
+  runAvp(["run", "--scenario", "tomato-multiple-clusters", "--seed", "0", "--views",
+          "3", ...kCamera, "--out", folder]);
 } else {
-  execFileSync(avp, ["bench", "--scenarios", "tomato-multiple-clusters", "--planners",
-                     "avp-nbv,predefined", "--seeds", "2", "--views", "3", ...kCamera, "--out",
-                     folder, "--force"],
-               { stdio: ["ignore", "ignore", "inherit"], timeout: 60000 });
+  runAvp(["bench", "--scenarios", "tomato-multiple-clusters", "--planners", "avp-nbv,predefined",
+          "--seeds", "2", "--views", "3", ...kCamera, "--out", folder]);
 }
 const report = join(folder, "report.html");
 console.log(`report_browser: ${page} folder written in ${((Date.now() - t0) / 1000).toFixed(1)} s: ` +

@@ -9,7 +9,8 @@
 // expected.voxels and drawn.frustums == expected.frustums; the WebGL canvas (made with
 // preserveDrawingBuffer) is read back and must not be blank; setStep(0) must show one frustum,
 // a different voxel count and different pixels. Bench page (window.avpBenchReport): ready, at
-// least one scenario and one plot, the plots' elements are in the page.
+// least one scenario and one plot, the plots' elements are in the page, and where the page gives
+// expected {scenarios, plots, series, points[]} from its data, what it drew equals it.
 
 const kVerdictId = "avp-selftest";
 const kPollMs = 50;
@@ -204,6 +205,29 @@ async function testBench(api, verdict, fail) {
   if (!(verdict.plots >= 1)) fail(`plots is ${text(api.plots)}, expected at least 1`);
   if (verdict.svg + verdict.canvases.length === 0) fail("no plot (svg or canvas) in the page");
   if (verdict.canvases.some((n) => n < kMinDrawnPixels)) fail("a blank plot canvas");
+  // What the page says it should draw (from its data) against what it drew, where it says.
+  const expected = api.expected;
+  if (expected && typeof expected === "object") {
+    verdict.expected = expected;
+    if (expected.scenarios !== undefined && verdict.scenarios !== count(expected.scenarios)) {
+      fail(`scenarios drawn ${verdict.scenarios}, expected ${text(expected.scenarios)}`);
+    }
+    if (expected.plots !== undefined && verdict.plots !== count(expected.plots)) {
+      fail(`plots drawn ${verdict.plots}, expected ${text(expected.plots)}`);
+    }
+    if (Array.isArray(api.plots)) {
+      api.plots.forEach((plot, i) => {
+        const name = `plot ${i} (${plot.scenario} ${plot.metric})`;
+        if (Array.isArray(expected.points) && plot.points !== expected.points[i]) {
+          fail(`${name} draws ${plot.points} points, expected ${expected.points[i]}`);
+        }
+        if (typeof expected.series === "number" && plot.series !== expected.series) {
+          fail(`${name} draws ${plot.series} series, expected ${expected.series}`);
+        }
+        if (!(plot.points >= 1)) fail(`${name} draws no point`);
+      });
+    }
+  }
 }
 
 function writeVerdict(verdict) {
