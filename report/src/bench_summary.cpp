@@ -12,79 +12,25 @@
 #include <avp/report/bench_summary.h>
 #include <avp/report/svg_plot.h>
 
+#include "bench_aggregates.h"
+
 namespace avp::report {
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Key {
-  std::string scenario, planner;
-  bool operator<(const Key& o) const {
-    return std::tie(scenario, planner) < std::tie(o.scenario, o.planner);
-  }
-};
-
-/// Every successful episode's metrics per (scenario, planner), metric and view.
-struct Aggregates {
-  /// values[key][metric][view] -> samples over seeds
-  std::map<Key, std::map<std::string, std::vector<std::vector<double>>>> values;
-  std::map<Key, std::vector<double>> plan_ms, episode_s;
-  std::map<Key, size_t> failed;
-  size_t failed_total = 0;
-  std::vector<std::string> metric_order;
-
-  eval::Summary Stat(const Key& key, const std::string& metric, int view) const {
-    auto it = values.find(key);
-    if (it == values.end()) return eval::Summary{};
-    auto m = it->second.find(metric);
-    if (m == it->second.end()) return eval::Summary{};
-    return eval::Summarize(m->second[static_cast<size_t>(view)]);
-  }
-};
+using internal::Aggregate;
+using internal::Ci;
+using internal::MeanOf;
+using Aggregates = internal::BenchAggregates;
+using Key = internal::BenchKey;
 
 /// printf's "%.9g" (summary.csv's number format).
 std::string FormatG9(double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.9g", v);
   return buf;
-}
-
-double MeanOf(const std::vector<double>& xs) {
-  double s = 0.0;
-  for (double x : xs) s += x;
-  return xs.empty() ? 0.0 : s / static_cast<double>(xs.size());
-}
-
-/// No interval (one seed) reads 0, as in summary.csv.
-double Ci(double c) { return std::isfinite(c) ? c : 0.0; }
-
-/// An episode that ended early keeps its last map, so its last metrics carry on to the remaining
-/// views.
-Aggregates Aggregate(const std::vector<BenchEpisode>& episodes, int views) {
-  Aggregates a;
-  for (const BenchEpisode& j : episodes) {
-    const Key key{j.scenario, j.planner};
-    if (!j.status.ok() || j.metrics.empty()) {
-      ++a.failed[key];
-      ++a.failed_total;
-      continue;
-    }
-    if (a.metric_order.empty()) {
-      for (const auto& [name, v] : j.metrics.front()) a.metric_order.push_back(name);
-    }
-    for (int v = 0; v < views; ++v) {
-      const auto& row = j.metrics[std::min<size_t>(static_cast<size_t>(v), j.metrics.size() - 1)];
-      for (const auto& [name, value] : row) {
-        auto& per_view = a.values[key][name];
-        per_view.resize(static_cast<size_t>(views));
-        if (std::isfinite(value)) per_view[static_cast<size_t>(v)].push_back(value);
-      }
-    }
-    a.plan_ms[key].insert(a.plan_ms[key].end(), j.plan_ms.begin(), j.plan_ms.end());
-    a.episode_s[key].push_back(j.episode_s);
-  }
-  return a;
 }
 
 std::string SummaryCsv(const Aggregates& a, const BenchDescription& bench) {

@@ -123,6 +123,8 @@ function metricPlot(container, data, scenario, metric) {
     yLabel: `${metricLabel(metric)} (mean ± 95 % CI)`,
     yMin: frac ? 0 : undefined,
     yMax: frac ? 1 : undefined,
+    // As the SVG plots: a fraction's axis is [0, 1]; a CI band past it is clipped.
+    yFixed: frac,
     width: 420,
     height: 300,
     series,

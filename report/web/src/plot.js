@@ -108,7 +108,8 @@ function checkSpec(spec) {
  * {svg, root, stats(), setHidden(name, hidden), hoverAt(x)}.
  *
  * spec: {title, xLabel, yLabel, series: [{name, x, y, band | lo+hi, color}], xMin, xMax, yMin,
- * yMax (default: from the data, bands included), integerX (x ticks at whole numbers, default
+ * yMax (default: from the data, bands included; the range is widened to include them unless
+ * yFixed: true, which keeps exactly [yMin, yMax] and clips the rest), integerX (x ticks at whole numbers, default
  * true), width (default 640), height (default 360), format(v) for hover values}.
  */
 export function linePlot(container, spec) {
@@ -139,11 +140,18 @@ export function linePlot(container, spec) {
   if (!finite(ylo)) [ylo, yhi] = [0, 1];
   if (finite(spec.xMin)) xlo = spec.xMin;
   if (finite(spec.xMax)) xhi = spec.xMax;
-  if (finite(spec.yMin)) ylo = Math.min(spec.yMin, ylo);
-  if (finite(spec.yMax)) yhi = Math.max(spec.yMax, yhi);
+  // yFixed: exactly [yMin, yMax], what lies outside clipped (a fraction's CI past 0 or 1).
+  const fixedY = spec.yFixed === true && finite(spec.yMin) && finite(spec.yMax) &&
+    spec.yMax > spec.yMin;
+  if (fixedY) {
+    [ylo, yhi] = [spec.yMin, spec.yMax];
+  } else {
+    if (finite(spec.yMin)) ylo = Math.min(spec.yMin, ylo);
+    if (finite(spec.yMax)) yhi = Math.max(spec.yMax, yhi);
+  }
   if (xhi === xlo) [xlo, xhi] = [xlo - 0.5, xhi + 0.5];
   const yTicks = niceTicks(ylo, yhi, 5);
-  if (yTicks.length) {
+  if (yTicks.length && !fixedY) {
     ylo = Math.min(ylo, yTicks[0]);
     yhi = Math.max(yhi, yTicks[yTicks.length - 1]);
   }
@@ -198,7 +206,8 @@ export function linePlot(container, spec) {
   // Bands first, then lines and markers (so every line is above every band).
   const clipId = `avp-clip-${Math.random().toString(36).slice(2)}`;
   const clip = el('clipPath', { id: clipId }, el('defs', {}, svg));
-  el('rect', { x: m.left, y: m.top, width: pw, height: ph }, clip);
+  // A little past the frame, so a line at the range's end is drawn whole.
+  el('rect', { x: m.left - 3, y: m.top - 3, width: pw + 6, height: ph + 6 }, clip);
   const bandLayer = el('g', { class: 'bands', 'clip-path': `url(#${clipId})` }, svg);
   const lineLayer = el('g', { class: 'lines', 'clip-path': `url(#${clipId})` }, svg);
   let bandCount = 0;
