@@ -120,6 +120,7 @@ void PrintBench(const experiment::BenchConfig& bench, const experiment::BenchSum
   }
   std::printf("wrote %s and the per-run records under %s\n", s.files.front().string().c_str(),
               (bench.out_dir / "runs").string().c_str());
+  if (!s.report_html.empty()) std::printf("report: %s\n", s.report_html.string().c_str());
 }
 
 int Bench(const CLI::App& cmd, const BenchCli& cli, const experiment::Registries& registries) {

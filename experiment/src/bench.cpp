@@ -23,6 +23,7 @@
 #include <avp/io/json.h>
 #include <avp/io/options_yaml.h>
 #include <avp/io/yaml.h>
+#include <avp/report/bench_html.h>
 #include <avp/report/metrics_csv.h>
 #include <avp/report/progress.h>
 #include <avp/report/provenance.h>
@@ -256,8 +257,7 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
     return j;
   }
   const RunConfig c = JobConfig(config, *g.source, g.seed, planner);
-  const fs::path dir = config.out_dir / "runs" / report::SafeFileName(j.scenario) /
-                       report::SafeFileName(j.planner) / fmt::format("seed-{}", j.seed);
+  const fs::path dir = config.out_dir / report::BenchRunFolder(j.scenario, j.planner, j.seed);
   const auto fail = [&](const Status& s) {
     failure.Set(s);
     MarkFailed(dir, RunFolderKind(), "avp bench", s);
@@ -601,8 +601,8 @@ Status CheckBenchOutputs(const BenchConfig& config, const std::vector<BenchScena
   }
   for (const auto& [input, what] : inputs) {
     AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(config.out_dir, "bench folder", input, what));
-    for (const char* name :
-         {"summary.md", "summary.csv", "fruits_by_visibility.csv", "avp-state.json"}) {
+    for (const char* name : {"summary.md", "summary.csv", "fruits_by_visibility.csv", "report.html",
+                             "avp-state.json"}) {
       AVP_RETURN_IF_ERROR(
           io::CheckOutputIsNotInput(config.out_dir / name, "bench output", input, what));
     }
@@ -652,13 +652,19 @@ Result<BenchSummary> RunBenchInFolder(const BenchConfig& config, const Registrie
     });
   }
   if (failure.failed()) return failure.first();
-  AVP_ASSIGN_OR_RETURN(
-      report::BenchTables tables,
-      report::WriteBenchSummary(config.out_dir, Describe(config, list, groups, revision), episodes,
-                                SecondsSince(t0)));
+  const report::BenchDescription description = Describe(config, list, groups, revision);
+  const double seconds = SecondsSince(t0);
+  AVP_ASSIGN_OR_RETURN(report::BenchTables tables,
+                       report::WriteBenchSummary(config.out_dir, description, episodes, seconds));
+  // report.html: the same numbers as the summary, with per-scenario plots and links to the runs.
+  const fs::path html = config.out_dir / "report.html";
+  AVP_RETURN_IF_ERROR(report::WriteBenchReportHtml(
+      html, report::BenchReportJson(description, episodes, seconds, config.out_dir)));
   BenchSummary summary;
   summary.cells = std::move(tables.cells);
   summary.files = std::move(tables.files);
+  summary.files.push_back(html);
+  summary.report_html = html;
   summary.episodes = episodes.size();
   summary.failed = tables.failed;
   return summary;

@@ -97,8 +97,10 @@ Result<BenchConfig> LoadBenchConfig(const std::filesystem::path& yaml);
 
 struct BenchSummary {
   std::vector<report::BenchCell> cells;
-  /// summary.md first, then summary.csv and the plots.
+  /// summary.md first, then summary.csv, the plots and report.html.
   std::vector<std::filesystem::path> files;
+  /// The bench's report.html (docs/report.md, "Bench report").
+  std::filesystem::path report_html;
   size_t episodes = 0, failed = 0;
   double seconds = 0.0;
 };
@@ -106,10 +108,11 @@ struct BenchSummary {
 /// Runs the bench: each scene file read once (and arranged once per arrangement), each
 /// (scenario, seed) scene and ground truth once, shared by the planners;
 /// per-run metrics.csv and record.json under runs/<scenario>/<planner>/seed-<n>/, then the
-/// summary (report::WriteBenchSummary). The bench folder and each per-run folder have the run
-/// folder's lifecycle (avp-state.json, output_folder.h): a folder holding results is refused
-/// unless config.force. A result that cannot be written stops the bench (the running episodes
-/// are asked to stop, no new one starts) with IoError naming the file.
+/// summary (report::WriteBenchSummary) and report.html beside it (report::WriteBenchReportHtml).
+/// The bench folder and each per-run folder have the run folder's lifecycle (avp-state.json,
+/// output_folder.h): a folder holding results is refused unless config.force. A result that cannot
+/// be written stops the bench (the running episodes are asked to stop, no new one starts) with
+/// IoError naming the file.
 Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& registries);
 
 }  // namespace avp::experiment

@@ -1,0 +1,137 @@
+// `avp bench` writes report.html beside summary.md (experiment::RunBench): a tiny real bench, 2
+// scenarios x 2 planners x 2 seeds x 3 views, whose page data carries exactly summary.csv's and
+// fruits_by_visibility.csv's numbers and links every episode's run folder.
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <avp/experiment/bench.h>
+#include <avp/report/bench_html.h>
+#include <avp/test/temp_dir_test.h>
+
+namespace avp::experiment {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::Contains;
+
+std::vector<std::vector<std::string>> CsvRows(const fs::path& p) {
+  std::vector<std::vector<std::string>> rows;
+  std::ifstream in(p);
+  std::string line;
+  std::getline(in, line);  // header
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+    rows.push_back(cells);
+  }
+  return rows;
+}
+
+/// summary.csv's number format.
+std::string G9(const nlohmann::json& v) {
+  if (v.is_null()) return "nan";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.9g", v.get<double>());
+  return buf;
+}
+
+class BenchReportTest : public test::TempDirTest {
+ protected:
+  const Registries registries_ = BuiltinRegistries();
+};
+
+TEST_F(BenchReportTest, ReportDataEqualsTheSummaryAndLinksEveryRun) {
+  BenchConfig o;
+  o.scenarios = {"tomato-single-cluster", "tomato-full-occlusion"};
+  o.planners = {"random", "predefined"};
+  o.seeds = {0, 1};
+  o.base.episode.views = 3;
+  o.out_dir = dir_ / "bench";
+  o.progress = false;
+  const Result<BenchSummary> r = RunBench(o, registries_);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->failed, 0u);
+  EXPECT_EQ(r->report_html, o.out_dir / "report.html");
+  EXPECT_THAT(r->files, Contains(o.out_dir / "report.html"));
+  const Result<nlohmann::json> data = report::ReadBenchReportData(r->report_html);
+  ASSERT_TRUE(data.ok()) << data.status().ToString();
+  EXPECT_EQ((*data)["bench"]["views"], 3);
+  EXPECT_EQ((*data)["bench"]["seeds"], 2);
+  EXPECT_EQ((*data)["bench"]["episodes"], 8);
+  ASSERT_EQ((*data)["scenarios"].size(), 2u);
+
+  std::map<std::pair<std::string, std::string>, const nlohmann::json*> planners;
+  for (const nlohmann::json& s : (*data)["scenarios"]) {
+    ASSERT_EQ(s["planners"].size(), 2u);
+    for (const nlohmann::json& p : s["planners"]) {
+      planners[{s["name"].get<std::string>(), p["name"].get<std::string>()}] = &p;
+      EXPECT_EQ(p["n"], 2);
+      // Every episode links its run folder, which holds its record and metrics.
+      ASSERT_EQ(p["runs"].size(), 2u);
+      for (const nlohmann::json& run : p["runs"]) {
+        EXPECT_TRUE(run["ok"].get<bool>());
+        const fs::path folder = o.out_dir / run["folder"].get<std::string>();
+        EXPECT_TRUE(fs::is_regular_file(folder / "record.json")) << folder;
+        EXPECT_THAT(run["files"], Contains("record.json"));
+        EXPECT_THAT(run["files"], Contains("metrics.csv"));
+      }
+    }
+  }
+
+  // summary.csv: scenario,planner,segmenter,view,metric,mean,ci95,n; every row is in the page.
+  size_t rows = 0;
+  for (const std::vector<std::string>& c : CsvRows(o.out_dir / "summary.csv")) {
+    ASSERT_EQ(c.size(), 8u);
+    const nlohmann::json& pv = (*planners.at({c[0], c[1]}))["per_view"];
+    ASSERT_TRUE(pv.contains(c[4])) << c[4];
+    const size_t v = std::stoul(c[3]) - 1;
+    EXPECT_EQ(G9(pv[c[4]]["mean"][v]), c[5]) << c[0] << " " << c[1] << " " << c[4] << " " << c[3];
+    EXPECT_EQ(G9(pv[c[4]]["ci95"][v]), c[6]) << c[0] << " " << c[1] << " " << c[4] << " " << c[3];
+    EXPECT_EQ(std::to_string(pv[c[4]]["n"][v].get<size_t>()), c[7]);
+    ++rows;
+  }
+  // 4 (scenario, planner) x the metrics x 3 views.
+  EXPECT_EQ(rows, 4u * (*data)["metrics"].size() * 3u);
+  EXPECT_GT(rows, 4u * 3u * 10u);
+
+  // fruits_by_visibility.csv, bin by bin.
+  std::map<std::pair<std::string, std::string>, size_t> next_bin;
+  size_t bins = 0;
+  for (const std::vector<std::string>& c : CsvRows(o.out_dir / "fruits_by_visibility.csv")) {
+    ASSERT_EQ(c.size(), 10u);
+    const nlohmann::json& b =
+        (*planners.at({c[0], c[1]}))["visibility_bins"][next_bin[{c[0], c[1]}]++];
+    EXPECT_EQ(G9(b["lo"]), c[3]);
+    EXPECT_EQ(G9(b["hi"]), c[4]);
+    EXPECT_EQ(std::to_string(b["fruits"].get<size_t>()), c[5]);
+    EXPECT_EQ(std::to_string(b["found"].get<size_t>()), c[6]);
+    EXPECT_EQ(G9(b["fraction"]), c[7]);
+    EXPECT_EQ(G9(b["ci_lo"]), c[8]);
+    EXPECT_EQ(G9(b["ci_hi"]), c[9]);
+    ++bins;
+  }
+  EXPECT_EQ(bins, 16u);
+
+  // The final-view table (summary.md and the console) from the same numbers.
+  ASSERT_EQ(r->cells.size(), 4u);
+  for (const report::BenchCell& cell : r->cells) {
+    const nlohmann::json& f = (*planners.at({cell.scenario, cell.planner}))["final"];
+    EXPECT_DOUBLE_EQ(f["f1"]["mean"].get<double>(), cell.final_f1_mean);
+    EXPECT_DOUBLE_EQ(f["f1"]["ci95"].get<double>(), cell.final_f1_ci95);
+    EXPECT_DOUBLE_EQ(f["fruits_found_fraction"]["mean"].get<double>(), cell.final_found_mean);
+    EXPECT_DOUBLE_EQ(f["fruits_found_fraction"]["ci95"].get<double>(), cell.final_found_ci95);
+    EXPECT_DOUBLE_EQ(f["plan_ms_mean"].get<double>(), cell.plan_ms_mean);
+  }
+}
+
+}  // namespace
+}  // namespace avp::experiment
