@@ -75,8 +75,8 @@ const OutputFolderKind& RunFolderKind() {
   static const OutputFolderKind kind{
       "run", [](const std::string& name) {
         static const std::vector<std::string> files = {
-            std::string(kStateFileName), "record.json", "metrics.csv", "map.avpmap", "map.ot",
-            "fruit_voxels.ply",          "metrics.svg"};
+            std::string(kStateFileName), "record.json", "metrics.csv",  "map.avpmap", "map.ot",
+            "fruit_voxels.ply",          "metrics.svg", "episode.mcap", "report.html"};
         return std::find(files.begin(), files.end(), name) != files.end() || IsTempOf(name, files);
       }};
   return kind;

@@ -30,7 +30,7 @@ struct OutputFolderKind {
   std::function<bool(const std::string& name)> owns;
 };
 
-/// A run folder: record.json, metrics.csv, map.ot, fruit_voxels.ply, metrics.svg.
+/// A run folder: record.json, metrics.csv, map.ot, fruit_voxels.ply, metrics.svg, report.html.
 const OutputFolderKind& RunFolderKind();
 /// A bench folder: summary.md, summary.csv, f1_*.svg, fruits_*.svg, runs/.
 const OutputFolderKind& BenchFolderKind();
