@@ -20,6 +20,7 @@ struct BenchCli {
   std::string config, scenarios, planners, seeds, segmenter, out = "out/bench";
   int views = 0, jobs = 0;
   bool force = false;
+  bool record = false;
   std::vector<std::string> planner_options, set;
 };
 
@@ -101,6 +102,7 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   b.jobs = cli.jobs;
   b.out_dir = cli.out;
   b.force = cli.force;
+  b.record = cli.record;
   if (!cli.config.empty()) b.inputs.emplace_back(cli.config, "bench configuration file");
   return b;
 }
@@ -167,6 +169,9 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
   cmd->add_option("--out", cli->out, "Output folder")->default_str(cli->out);
   cmd->add_flag("--force", cli->force,
                 "Replace the results an earlier bench left in --out (only an avp bench folder)");
+  cmd->add_flag("--record", cli->record,
+                "Record every episode as MCAP: runs/<scenario>/<planner>/seed-<n>/episode.mcap "
+                "(docs/recording.md)");
   cmd->callback([cli, cmd, &context] {
     RunGuarded(context, [&] { return Bench(*cmd, *cli, *context.registries); });
   });

@@ -151,6 +151,9 @@ int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& 
   experiment::RunFolderOptions folder;
   folder.out_dir = cli.run.out;
   folder.force = cli.run.force;
+  folder.record = cmd.count("--record") > 0;
+  folder.record_path = cli.run.record_file;
+  folder.record_base_frame = options->camera.base_frame;
   if (!cli.run.config_file.empty()) {
     folder.inputs.emplace_back(cli.run.config_file, "configuration file");
   }
@@ -191,6 +194,7 @@ void AddLiveCommand(CLI::App& app, CommandContext& context) {
   AddRunOptions(*cmd, cli->run);
   cmd->get_option("--out")->default_str("out/live");
   cli->run.out = "out/live";
+  AddRecordOption(*cmd, cli->run);
   AddKeyValueOption(*cmd, "--live-option", cli->live_options,
                     "A key of the config's live: section (repeatable), e.g. "
                     "camera.color_topic=/cam/color/image_raw, arm.trajectory_topic=, distro=jazzy");

@@ -28,7 +28,13 @@ struct RunCli {
   double voxel_size_m = 0.0;
   bool no_noise = false, oracle_regret = false, force = false;
   std::vector<std::string> planner_options, segmenter_options, map_options, set;
+  /// --record [FILE] (avp run, avp live; given: the command's count("--record")): its file, empty
+  /// for RUN_DIR/episode.mcap.
+  std::string record_file;
 };
+
+/// Adds --record [FILE] (an MCAP recording of the episode, docs/recording.md) to `cmd`.
+void AddRecordOption(CLI::App& cmd, RunCli& cli);
 
 /// Adds the run configuration's flags to `cmd`.
 void AddRunOptions(CLI::App& cmd, RunCli& cli);

@@ -186,6 +186,8 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   options.on_scene = [](const sim::Scene& scene) { LogSceneWarnings(scene); };
   options.out_dir = cli.out;
   options.force = cli.force;
+  options.record = cmd.count("--record") > 0;
+  options.record_path = cli.record_file;
   if (!cli.config_file.empty()) options.inputs.emplace_back(cli.config_file, "configuration file");
   // Each view's line ends with the rate, the time elapsed and the time left (report::Progress's
   // words), so that a long run shows how far it is.
@@ -259,11 +261,21 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
                "Replace the results an earlier run left in --out (only an avp run folder)");
 }
 
+void AddRecordOption(CLI::App& cmd, RunCli& cli) {
+  cmd.add_option("--record", cli.record_file,
+                 "Record the episode as MCAP (ros2 profile; Foxglove, ros2 bag): every view's "
+                 "images, masks, TF, joints, candidates, map and step; FILE defaults to "
+                 "RUN_DIR/episode.mcap (docs/recording.md)")
+      ->expected(0, 1)
+      ->type_name("[FILE]");
+}
+
 void AddRunCommand(CLI::App& app, CommandContext& context) {
   auto cli = std::make_shared<RunCli>();
   CLI::App* cmd = app.add_subcommand(
       "run", "One simulated active-vision episode into a run folder (docs/experiments.md)");
   AddRunOptions(*cmd, *cli);
+  AddRecordOption(*cmd, *cli);
   cmd->callback([cli, cmd, &context] {
     RunGuarded(context, [&] { return Run(*cmd, *cli, *context.registries); });
   });

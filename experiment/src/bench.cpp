@@ -17,6 +17,7 @@
 #include <avp/core/parallel.h>
 #include <avp/core/text.h>
 #include <avp/experiment/bench.h>
+#include <avp/experiment/episode_recording.h>
 #include <avp/experiment/episode_runner.h>
 #include <avp/experiment/output_folder.h>
 #include <avp/io/file.h>
@@ -276,12 +277,25 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
       report::MetricsCsvWriter::Open(dir / "metrics.csv");
   if (!csv.ok()) return fail(csv.status());
   (*csv)->StopOnError(failure.stop());
-  const std::vector<pipeline::EpisodeObserver*> observers = {csv->get()};
+  std::vector<pipeline::EpisodeObserver*> observers = {csv->get()};
+  std::unique_ptr<recording::McapRecorder> recorder;
+  if (config.record) {
+    Result<std::unique_ptr<recording::McapRecorder>> opened =
+        OpenEpisodeRecording(dir / "episode.mcap", c, registries,
+                             {.command = "avp bench", .scene = j.scenario, .gt = &*g.gt});
+    if (!opened.ok()) return fail(opened.status());
+    recorder = std::move(*opened);
+    recorder->StopOnError(failure.stop());
+    observers.push_back(recorder.get());
+  }
   const auto te = Clock::now();
   Result<RunResult> r = RunEpisodeOnScene(c, registries, *g.scene, *g.gt, observers, nullptr,
                                           failure.stop().get_token());
   j.episode_s = SecondsSince(te);
   if (Status s = (*csv)->Close(); !s.ok()) return fail(s);
+  if (recorder != nullptr) {
+    if (Status s = recorder->Close(); !s.ok()) return fail(s);
+  }
   if (!r.ok()) {
     MarkFailed(dir, RunFolderKind(), "avp bench", r.status());
     j.status = r.status();

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/experiment/episode_recording.h>
 #include <avp/experiment/output_folder.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
@@ -159,6 +160,10 @@ Result<RunSummary> WriteRunFolder(const RunConfig& config, const Registries& reg
   std::unique_ptr<mapping::SemanticMap> map;
   AVP_ASSIGN_OR_RETURN(RunResult result, run.run(all, &map, write_failed.get_token()));
   AVP_RETURN_IF_ERROR(csv->Close());
+    if (options.record && !options.record_path.empty()) {
+      AVP_RETURN_IF_ERROR(
+          io::CheckOutputIsNotInput(options.record_path, "recording (--record)", input, what));
+    }
   result.gt_ms = run.gt_seconds * 1e3;
   summary.files.push_back(csv_path);
   if (map == nullptr) return InternalError("RunEpisodeToFolder: the episode returned no map");
@@ -184,11 +189,26 @@ Result<RunSummary> RunEpisodeToFolder(const RunConfig& config, const Registries&
   AVP_RETURN_IF_ERROR(CheckOutputsAreNotInputs(config, options));
   AVP_RETURN_IF_ERROR(PrepareOutputFolder(options.out_dir, RunFolderKind(), options.force));
   AVP_RETURN_IF_ERROR(MarkInProgress(options.out_dir, RunFolderKind(), run.command));
+  // --record: the episode as MCAP, a chunk per view; a write error stops the episode as above.
+  std::unique_ptr<recording::McapRecorder> recorder;
+  const fs::path mcap_path =
+      options.record_path.empty() ? options.out_dir / "episode.mcap" : options.record_path;
+  if (options.record) {
+    AVP_ASSIGN_OR_RETURN(recorder, OpenEpisodeRecording(mcap_path, config, registries,
+                                                        {.command = run.command,
+                                                         .scene = run.scene_name,
+                                                         .base_frame = options.record_base_frame,
+                                                         .gt = run.gt}));
+    recorder->StopOnError(write_failed);
+    all.push_back(recorder.get());
+  }
   Result<RunSummary> summary = WriteRunFolder(config, registries, options, run, observers);
   if (!summary.ok()) {
     MarkFailed(options.out_dir, RunFolderKind(), run.command, summary.status());
+  if (recorder != nullptr) AVP_RETURN_IF_ERROR(recorder->Close());
     return summary.status();
   }
+  if (recorder != nullptr) summary.files.push_back(mcap_path);
   AVP_RETURN_IF_ERROR(MarkComplete(options.out_dir, RunFolderKind(), run.command));
   summary->seconds = SecondsSince(t0);
   return summary;

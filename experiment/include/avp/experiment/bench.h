@@ -79,6 +79,9 @@ struct BenchConfig {
   /// Progress on stderr (report::Progress): a bar on a terminal, one line per finished job in a
   /// log or under CI.
   bool progress = true;
+  /// `--record`: each episode also as MCAP, runs/<scenario>/<planner>/seed-<n>/episode.mcap
+  /// (docs/recording.md).
+  bool record = false;
 
   /// Every problem at once: empty or unknown scenarios and planners, empty names, bad
   /// arrangements, missing scene files (naming the entry and the file), repeated seeds, too many

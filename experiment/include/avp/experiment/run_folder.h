@@ -32,6 +32,13 @@ struct RunFolderOptions {
   /// Called once with the scene RunToFolder loaded, before its ground truth and episode (e.g. to
   /// print the scene file's warnings); may be empty.
   std::function<void(const sim::Scene&)> on_scene;
+  /// Record the episode as MCAP (`--record`, docs/recording.md): every fused view's topics into
+  /// `record_path`, or out_dir/episode.mcap when it is empty. A write error stops the episode and
+  /// is the run's error, naming the file.
+  bool record = false;
+  std::filesystem::path record_path;
+  /// The frame the recording's TF and markers are in (`avp live`: its base frame).
+  std::string record_base_frame = "igus_rebel_base_link";
 };
 
 struct RunSummary {
