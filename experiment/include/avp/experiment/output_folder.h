@@ -32,7 +32,7 @@ struct OutputFolderKind {
 
 /// A run folder: record.json, metrics.csv, map.ot, fruit_voxels.ply, metrics.svg, report.html.
 const OutputFolderKind& RunFolderKind();
-/// A bench folder: summary.md, summary.csv, f1_*.svg, fruits_*.svg, runs/.
+/// A bench folder: summary.md, summary.csv, f1_*.svg, fruits_*.svg, report.html, runs/.
 const OutputFolderKind& BenchFolderKind();
 
 /// What avp-state.json says.
