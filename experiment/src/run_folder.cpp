@@ -12,6 +12,7 @@
 #include <avp/mapping/ply_export.h>
 #include <avp/report/metrics_csv.h>
 #include <avp/report/provenance.h>
+#include <avp/report/run_html.h>
 #include <avp/report/run_report.h>
 #include <avp/report/svg_plot.h>
 
@@ -72,6 +73,32 @@ Status WriteMapAndPlot(const RunConfig& config, const FolderRun& run, const RunR
   return Status::Ok();
 }
 
+/// report.html: the episode in 3D, step by step (report/run_html.h, docs/report.md).
+Status WriteRunReport(const RunConfig& config, const FolderRun& run, const RunResult& result,
+                      const report::RunReportCollector& collector, const fs::path& path) {
+  report::RunReportInfo info;
+  info.title = fmt::format("{} — {} / {} (seed {})", run.scene_name, config.planner.name,
+                           config.segmenter.name, config.seed);
+  const pipeline::EpisodeResult& e = result.episode;
+  info.facts = {{"command", run.command},
+                {"scene", run.scene_name},
+                {"planner", config.planner.name},
+                {"segmenter", config.segmenter.name},
+                {"seed", std::to_string(config.seed)},
+                {"views", fmt::format("{} of {}", e.views_fused(), config.episode.views)},
+                {"end", e.end_reason.empty()
+                            ? std::string(pipeline::ToString(e.end))
+                            : fmt::format("{} ({})", pipeline::ToString(e.end), e.end_reason)}};
+  if (run.gt != nullptr) {
+    info.facts.emplace_back("F1", fmt::format("{:.3f}", result.final_metrics.exact.f1));
+    info.facts.emplace_back("fruits found",
+                            fmt::format("{} of {}", result.final_metrics.fruits.found,
+                                        result.final_metrics.fruits.total));
+  }
+  info.fruits = run.gt != nullptr ? report::FruitsJson(result.fruits) : json(nullptr);
+  return report::WriteRunReportHtml(path, collector, info);
+}
+
 Result<json> RecordJson(const RunConfig& config, const Registries& registries, const FolderRun& run,
                         const RunResult& result) {
   AVP_ASSIGN_OR_RETURN(json config_json, RunConfigJson(config, registries));
@@ -121,7 +148,7 @@ namespace {
 /// Every file a run folder holds.
 constexpr std::string_view kRunOutputs[] = {kStateFileName, "record.json", "metrics.csv",
                                             "map.avpmap",   "map.ot",      "fruit_voxels.ply",
-                                            "metrics.svg"};
+                                            "metrics.svg",  "report.html", "episode.mcap"};
 
 /// Outputs never overwrite inputs: the folder and each of its files against the scene file, the
 /// ground truth file and options.inputs.
@@ -133,6 +160,10 @@ Status CheckOutputsAreNotInputs(const RunConfig& config, const RunFolderOptions&
   }
   for (const auto& [input, what] : inputs) {
     AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out_dir, "run folder", input, what));
+    if (options.record && !options.record_path.empty()) {
+      AVP_RETURN_IF_ERROR(
+          io::CheckOutputIsNotInput(options.record_path, "recording (--record)", input, what));
+    }
     for (const std::string_view name : kRunOutputs) {
       AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out_dir / std::string(name),
                                                     "run folder output", input, what));
@@ -155,19 +186,34 @@ Result<RunSummary> WriteRunFolder(const RunConfig& config, const Registries& reg
   std::stop_source write_failed;
   csv->StopOnError(write_failed);
   ProgressObserver progress(options);
-  std::vector<pipeline::EpisodeObserver*> all = {csv.get(), &progress};
+  report::RunReportCollector report_data;
+  std::vector<pipeline::EpisodeObserver*> all = {csv.get(), &progress, &report_data};
   all.insert(all.end(), observers.begin(), observers.end());
+  // --record: the episode as MCAP, a chunk per view; a write error stops the episode as above.
+  std::unique_ptr<recording::McapRecorder> recorder;
+  const fs::path mcap_path =
+      options.record_path.empty() ? options.out_dir / "episode.mcap" : options.record_path;
+  if (options.record) {
+    AVP_ASSIGN_OR_RETURN(recorder, OpenEpisodeRecording(mcap_path, config, registries,
+                                                        {.command = run.command,
+                                                         .scene = run.scene_name,
+                                                         .base_frame = options.record_base_frame,
+                                                         .gt = run.gt}));
+    recorder->StopOnError(write_failed);
+    all.push_back(recorder.get());
+  }
   std::unique_ptr<mapping::SemanticMap> map;
   AVP_ASSIGN_OR_RETURN(RunResult result, run.run(all, &map, write_failed.get_token()));
   AVP_RETURN_IF_ERROR(csv->Close());
-    if (options.record && !options.record_path.empty()) {
-      AVP_RETURN_IF_ERROR(
-          io::CheckOutputIsNotInput(options.record_path, "recording (--record)", input, what));
-    }
+  if (recorder != nullptr) AVP_RETURN_IF_ERROR(recorder->Close());
   result.gt_ms = run.gt_seconds * 1e3;
   summary.files.push_back(csv_path);
+  if (recorder != nullptr) summary.files.push_back(mcap_path);
   if (map == nullptr) return InternalError("RunEpisodeToFolder: the episode returned no map");
   AVP_RETURN_IF_ERROR(WriteMapAndPlot(config, run, result, *map, options.out_dir, summary.files));
+  const fs::path report_path = options.out_dir / "report.html";
+  AVP_RETURN_IF_ERROR(WriteRunReport(config, run, result, report_data, report_path));
+  summary.files.push_back(report_path);
 
   AVP_ASSIGN_OR_RETURN(const json record, RecordJson(config, registries, run, result));
   const fs::path record_path = options.out_dir / "record.json";
@@ -189,26 +235,11 @@ Result<RunSummary> RunEpisodeToFolder(const RunConfig& config, const Registries&
   AVP_RETURN_IF_ERROR(CheckOutputsAreNotInputs(config, options));
   AVP_RETURN_IF_ERROR(PrepareOutputFolder(options.out_dir, RunFolderKind(), options.force));
   AVP_RETURN_IF_ERROR(MarkInProgress(options.out_dir, RunFolderKind(), run.command));
-  // --record: the episode as MCAP, a chunk per view; a write error stops the episode as above.
-  std::unique_ptr<recording::McapRecorder> recorder;
-  const fs::path mcap_path =
-      options.record_path.empty() ? options.out_dir / "episode.mcap" : options.record_path;
-  if (options.record) {
-    AVP_ASSIGN_OR_RETURN(recorder, OpenEpisodeRecording(mcap_path, config, registries,
-                                                        {.command = run.command,
-                                                         .scene = run.scene_name,
-                                                         .base_frame = options.record_base_frame,
-                                                         .gt = run.gt}));
-    recorder->StopOnError(write_failed);
-    all.push_back(recorder.get());
-  }
   Result<RunSummary> summary = WriteRunFolder(config, registries, options, run, observers);
   if (!summary.ok()) {
     MarkFailed(options.out_dir, RunFolderKind(), run.command, summary.status());
-  if (recorder != nullptr) AVP_RETURN_IF_ERROR(recorder->Close());
     return summary.status();
   }
-  if (recorder != nullptr) summary.files.push_back(mcap_path);
   AVP_RETURN_IF_ERROR(MarkComplete(options.out_dir, RunFolderKind(), run.command));
   summary->seconds = SecondsSince(t0);
   return summary;

@@ -44,7 +44,8 @@ struct RunFolderOptions {
 struct RunSummary {
   RunResult result;
   std::string scene_name;
-  /// record.json first, then metrics.csv, map.avpmap, map.ot, fruit_voxels.ply, metrics.svg.
+  /// record.json first, then metrics.csv, map.avpmap, map.ot, fruit_voxels.ply, metrics.svg,
+  /// report.html.
   std::vector<std::filesystem::path> files;
   double seconds = 0.0;
 };
@@ -59,6 +60,9 @@ struct RunSummary {
 ///   map.ot            the final map as an OctoMap ColorOcTree (octovis)
 ///   fruit_voxels.ply  the final fruit voxels with class, confidence, instance
 ///   metrics.svg       F1 (exact and one-voxel tolerance) and fruits found per view
+///   report.html       the episode in 3D, step by step: the map, the ground-truth fruit, each
+///                     view's frustum, masks and candidates, the curves (one file, offline;
+///                     docs/report.md)
 Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& registries,
                                const RunFolderOptions& options);
 
