@@ -32,8 +32,9 @@ int main(int argc, char** argv) {
   avp::apps::CommandContext context{&registries, 0};
   for (const auto add :
        {avp::apps::AddScenesCommand, avp::apps::AddSceneCommand, avp::apps::AddRenderCommand,
-        avp::apps::AddMapCommand, avp::apps::AddRunCommand, avp::apps::AddBenchCommand,
-        avp::apps::AddServeCommand, avp::apps::AddSegmentCommand, avp::apps::AddLimitsCommand}) {
+        avp::apps::AddMapCommand, avp::apps::AddRunCommand, avp::apps::AddReplayCommand,
+        avp::apps::AddBenchCommand, avp::apps::AddServeCommand, avp::apps::AddSegmentCommand,
+        avp::apps::AddLimitsCommand}) {
     add(app, context);
   }
 #ifdef AVP_WITH_ROS2

@@ -23,6 +23,43 @@ Eigen::VectorXd StartJoints(const sim::Scene& scene, const robot::ArmModel& arm)
       scene.start_joints_rad.data(), static_cast<Eigen::Index>(scene.start_joints_rad.size()));
 }
 
+std::unordered_map<uint16_t, double> VisibleFractions(const robot::Observation& obs,
+                                                      const std::vector<sim::FruitTruth>& fruits,
+                                                      double max_range_m) {
+  if (!obs.labels.has_value()) return {};
+  std::unordered_map<uint16_t, GroundTruthFruit> truth;
+  for (const sim::FruitTruth& f : fruits) {
+    truth[f.instance_id] = {f.instance_id, f.center_W, f.mean_radius_m()};
+  }
+  const SimulatorLabels& labels = *obs.labels;
+  const RgbdFrame& frame = obs.frame;
+  const CameraIntrinsics& K = frame.K;
+  const auto fruit = static_cast<uint8_t>(SemanticClass::kFruit);
+  std::unordered_map<uint16_t, size_t> pixels;
+  const int w = std::min(labels.instance_ids.width(), frame.depth_m.width());
+  const int h = std::min(labels.instance_ids.height(), frame.depth_m.height());
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      if (labels.class_ids.at(u, v) != fruit) continue;
+      const uint16_t id = labels.instance_ids.at(u, v);
+      if (truth.count(id) == 0) continue;
+      const float d = frame.depth_m.at(u, v);
+      if (std::isfinite(d) && d > 0.0f) {
+        const Eigen::Vector3d p_C((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
+        if (p_C.norm() > max_range_m) continue;
+      }
+      ++pixels[id];
+    }
+  }
+  std::unordered_map<uint16_t, double> out;
+  for (const auto& [id, n] : pixels) {
+    const std::optional<double> area =
+        segmentation::ExpectedFruitAreaPx(K, frame.X_WC, truth.at(id));
+    out[id] = area ? std::clamp(static_cast<double>(n) / *area, 0.0, 1.0) : 1.0;
+  }
+  return out;
+}
+
 namespace {
 
 /// The detector model the oracle planners expect: the oracle segmenter's own options, or the
@@ -56,11 +93,7 @@ class VisibilityProbe final : public robot::RgbdSource {
  public:
   VisibilityProbe(robot::RgbdSource& inner, const std::vector<sim::FruitTruth>& fruits,
                   double max_range_m)
-      : inner_(inner), max_range_m_(max_range_m) {
-    for (const sim::FruitTruth& f : fruits) {
-      truth_[f.instance_id] = {f.instance_id, f.center_W, f.mean_radius_m()};
-    }
-  }
+      : inner_(inner), truth_(fruits), max_range_m_(max_range_m) {}
 
   Result<robot::Observation> Capture(const RigidTransform& X_WC, int64_t stamp_ns) override {
     Result<robot::Observation> obs = inner_.Capture(X_WC, stamp_ns);
@@ -78,38 +111,12 @@ class VisibilityProbe final : public robot::RgbdSource {
 
  private:
   std::unordered_map<uint16_t, double> Fractions(const robot::Observation& obs) const {
-    const SimulatorLabels& labels = *obs.labels;
-    const RgbdFrame& frame = obs.frame;
-    const CameraIntrinsics& K = frame.K;
-    const auto fruit = static_cast<uint8_t>(SemanticClass::kFruit);
-    std::unordered_map<uint16_t, size_t> pixels;
-    const int w = std::min(labels.instance_ids.width(), frame.depth_m.width());
-    const int h = std::min(labels.instance_ids.height(), frame.depth_m.height());
-    for (int v = 0; v < h; ++v) {
-      for (int u = 0; u < w; ++u) {
-        if (labels.class_ids.at(u, v) != fruit) continue;
-        const uint16_t id = labels.instance_ids.at(u, v);
-        if (truth_.count(id) == 0) continue;
-        const float d = frame.depth_m.at(u, v);
-        if (std::isfinite(d) && d > 0.0f) {
-          const Eigen::Vector3d p_C((u - K.cx) / K.fx * d, (v - K.cy) / K.fy * d, d);
-          if (p_C.norm() > max_range_m_) continue;
-        }
-        ++pixels[id];
-      }
-    }
-    std::unordered_map<uint16_t, double> out;
-    for (const auto& [id, n] : pixels) {
-      const std::optional<double> area =
-          segmentation::ExpectedFruitAreaPx(K, frame.X_WC, truth_.at(id));
-      out[id] = area ? std::clamp(static_cast<double>(n) / *area, 0.0, 1.0) : 1.0;
-    }
-    return out;
+    return VisibleFractions(obs, truth_, max_range_m_);
   }
 
   robot::RgbdSource& inner_;
+  const std::vector<sim::FruitTruth>& truth_;
   double max_range_m_;
-  std::unordered_map<uint16_t, GroundTruthFruit> truth_;
   std::optional<std::unordered_map<uint16_t, double>> last_;
 };
 

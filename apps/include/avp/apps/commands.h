@@ -24,6 +24,9 @@ void AddRenderCommand(CLI::App& app, CommandContext& context);
 void AddMapCommand(CLI::App& app, CommandContext& context);
 void AddRunCommand(CLI::App& app, CommandContext& context);
 void AddBenchCommand(CLI::App& app, CommandContext& context);
+/// avp replay BAG: segmentation, mapping and evaluation over an MCAP recording
+/// (apps/src/replay_command.cpp).
+void AddReplayCommand(CLI::App& app, CommandContext& context);
 void AddServeCommand(CLI::App& app, CommandContext& context);
 void AddSegmentCommand(CLI::App& app, CommandContext& context);
 /// avp limits: every process-wide limit (name, value, default, unit, what it bounds).

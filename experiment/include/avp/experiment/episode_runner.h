@@ -2,6 +2,7 @@
 
 #include <memory>
 #include <stop_token>
+#include <unordered_map>
 #include <vector>
 
 #include <avp/core/box.h>
@@ -69,6 +70,16 @@ Result<RunResult> RunEpisodeWithRobot(const RunConfig& config, const Registries&
                                       const EpisodeTruth& truth,
                                       const std::vector<pipeline::EpisodeObserver*>& observers = {},
                                       std::unique_ptr<mapping::SemanticMap>* map_out = nullptr);
+
+/// Each fruit's visible fraction in a capture, from its simulator labels: the fruit's pixels
+/// (instance id, class fruit) over segmentation::ExpectedFruitAreaPx at the frame's camera,
+/// clamped to [0, 1] (1 when the area is undefined), as eval::GroundTruth::best_visible_fraction
+/// counts them: a pixel with a valid depth farther than max_range_m from the camera does not
+/// count; one whose depth the sensor model dropped does (the labels are ground truth). Empty
+/// without labels. What RunEpisodeWithRobot's per-fruit results (and `avp replay`'s) count.
+std::unordered_map<uint16_t, double> VisibleFractions(const robot::Observation& obs,
+                                                      const std::vector<sim::FruitTruth>& fruits,
+                                                      double max_range_m);
 
 /// The scene's start joints, or the arm's home when the scene names none.
 Eigen::VectorXd StartJoints(const sim::Scene& scene, const robot::ArmModel& arm);

@@ -1,0 +1,173 @@
+// avp replay BAG: segmentation, mapping and evaluation over an MCAP recording (avp's own or a
+// robot's rosbag2) into a run folder (docs/recording.md "Replay").
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <avp/apps/commands.h>
+#include <avp/experiment/replay.h>
+#include <avp/experiment/run_config.h>
+#include <avp/io/yaml.h>
+#include <avp/report/progress.h>
+
+#include "cli_common.h"
+
+namespace avp::apps {
+
+namespace {
+
+struct ReplayCli {
+  std::string bag;
+  std::string out = "out/replay";
+  bool force = false;
+  std::string segmenter;
+  std::string config_file;
+  std::vector<std::string> set;
+  recording::BagReadOptions bag_options;
+  std::vector<std::string> bag_option_items;
+};
+
+/// The bag's run configuration, then --config, then --set (ReplayToFolder validates it).
+Result<experiment::RunConfig> ResolveReplayConfig(const recording::Bag& bag, const ReplayCli& cli) {
+  AVP_ASSIGN_OR_RETURN(experiment::RunConfig config, experiment::BagRunConfig(bag));
+  if (!cli.config_file.empty()) {
+    AVP_ASSIGN_OR_RETURN(const YAML::Node root, io::LoadYamlFile(cli.config_file));
+    AVP_RETURN_IF_ERROR(experiment::ReadRunConfigYaml(root, cli.config_file, config));
+  }
+  AVP_ASSIGN_OR_RETURN(const OptionValues values, ParseKeyValues(cli.set, "--set item"));
+  for (const auto& [key, value] : values) {
+    AVP_RETURN_IF_ERROR(experiment::SetRunConfigKey(config, key, value));
+  }
+  return config;
+}
+
+int Replay(const ReplayCli& cli_in, const experiment::Registries& registries) {
+  ReplayCli cli = cli_in;
+  {
+    Result<OptionValues> items = ParseKeyValues(cli.bag_option_items, "--bag-option item");
+    if (!items.ok()) return Failed("replay", items.status());
+    if (Status s = recording::BagReadOptionTable().SetAll(cli.bag_options, *items); !s.ok()) {
+      return Failed("replay", s);
+    }
+  }
+  const Result<recording::Bag> bag = recording::ReadBag(cli.bag, cli.bag_options);
+  if (!bag.ok()) return Failed("replay", bag.status());
+  if (!bag->damage.ok()) {
+    spdlog::error("{}", bag->damage.ToString());
+    spdlog::warn("replaying the {} intact view(s) before the damage ({} of {} bytes intact)",
+                 bag->views.size(), bag->intact_bytes, bag->file_bytes);
+  }
+  for (const std::string& s : bag->skipped) spdlog::warn("skipped: {}", s);
+  if (bag->skipped_count > bag->skipped.size()) {
+    spdlog::warn("... {} more skipped", bag->skipped_count - bag->skipped.size());
+  }
+  std::printf("%s: %s, %zu view(s)%s\n", cli.bag.c_str(),
+              bag->avp_recording ? "avp recording" : "robot bag", bag->views.size(),
+              bag->avp_recording
+                  ? ""
+                  : fmt::format(" of {} colour/depth pairs ({} left out by --fps / --max-views)",
+                                bag->pairs, bag->pairs_thinned)
+                        .c_str());
+  const Result<experiment::RunConfig> config = ResolveReplayConfig(*bag, cli);
+  if (!config.ok()) return Failed("replay", config.status());
+
+  experiment::ReplayOptions options;
+  options.segmenter = cli.segmenter;
+  options.folder.out_dir = cli.out;
+  options.folder.force = cli.force;
+  if (!cli.config_file.empty()) {
+    options.folder.inputs.emplace_back(cli.config_file, "configuration file");
+  }
+  report::Progress progress(report::ProgressOn(stderr, "views", bag->views.size()));
+  options.folder.on_step = [&progress](const pipeline::StepRecord& s) {
+    const double f1 = s.Metric("f1");
+    progress.Done(std::isnan(f1)
+                      ? fmt::format("view {}: {} masks, {} occupied voxels", s.view + 1, s.masks,
+                                    s.occupied_voxels)
+                      : fmt::format("view {}: F1 {:.3f}, fruits {:.0f}/{:.0f}", s.view + 1, f1,
+                                    s.Metric("fruits_found"), s.Metric("fruits_total")));
+  };
+  const Result<experiment::ReplaySummary> summary =
+      experiment::ReplayToFolder(*bag, *config, registries, options);
+  progress.Finish();
+  if (!summary.ok()) return Failed("replay", summary.status());
+  for (const std::string& n : summary->notes) spdlog::warn("{}", n);
+  const experiment::RunResult& r = summary->run.result;
+  std::printf("replayed %d view(s) with %s masks in %.1f s (%s%s%s)", r.episode.views_fused(),
+              summary->segmenter.c_str(), summary->run.seconds,
+              std::string(pipeline::ToString(r.episode.end)).c_str(),
+              r.episode.end_reason.empty() ? "" : ": ", r.episode.end_reason.c_str());
+  if (summary->run.result.gt_voxels > 0 || !r.fruits.empty()) {
+    std::printf("; final F1 %.3f, fruits found %zu/%zu", r.final_metrics.exact.f1,
+                r.final_metrics.fruits.found, r.final_metrics.fruits.total);
+  }
+  std::printf("\n");
+  if (summary->metrics_compared > 0) {
+    if (summary->metrics_differ == 0) {
+      std::printf("metrics identical to the recording's at all %zu views\n",
+                  summary->metrics_compared);
+    } else {
+      std::printf("metrics differ from the recording's at %zu of %zu views (first: %s)\n",
+                  summary->metrics_differ, summary->metrics_compared,
+                  summary->first_difference.c_str());
+    }
+  }
+  std::printf("wrote %zu files to %s:\n", summary->run.files.size(), cli.out.c_str());
+  for (const auto& f : summary->run.files) std::printf("  %s\n", f.string().c_str());
+  if (!bag->damage.ok()) {
+    return Failed("replay", bag->damage.WithContext(fmt::format(
+                                "the recording is damaged; its {} intact view(s) were replayed "
+                                "into {}",
+                                bag->views.size(), cli.out)));
+  }
+  return 0;
+}
+
+}  // namespace
+
+void AddReplayCommand(CLI::App& app, CommandContext& context) {
+  auto cli = std::make_shared<ReplayCli>();
+  CLI::App* cmd = app.add_subcommand(
+      "replay",
+      "Segmentation, mapping and evaluation over an MCAP recording: avp's own (avp run --record) "
+      "or a robot's rosbag2 (docs/recording.md)");
+  cmd->add_option("bag", cli->bag, "The MCAP file")->required();
+  cmd->add_option("--out", cli->out, "Run folder")->default_str(cli->out);
+  cmd->add_flag("--force", cli->force,
+                "Replace the results an earlier run left in --out (only an avp run folder)");
+  cmd->add_option("--segmenter", cli->segmenter,
+                  "'recorded' (the recording's masks: the default when every view has them) or a "
+                  "segmenter (`avp run --segmenter help`); the oracle needs the simulator labels "
+                  "an avp recording carries");
+  cmd->add_option("--config", cli->config_file,
+                  "Run configuration YAML over the recording's (map, integrator, camera range, "
+                  "segmenter options)");
+  AddKeyValueOption(*cmd, "--set", cli->set,
+                    "Any key of the run configuration over the recording's (repeatable)");
+  recording::BagReadOptions& b = cli->bag_options;
+  cmd->add_option("--color-topic", b.color_topic, "Colour images")->default_str(b.color_topic);
+  cmd->add_option("--depth-topic", b.depth_topic, "Depth aligned to colour (32FC1 m, 16UC1 mm)")
+      ->default_str(b.depth_topic);
+  cmd->add_option("--camera-info-topic", b.camera_info_topic, "CameraInfo of the colour camera")
+      ->default_str(b.camera_info_topic);
+  cmd->add_option("--base-frame", b.base_frame, "The map's frame (the arm's base)")
+      ->default_str(b.base_frame);
+  cmd->add_option("--camera-frame", b.camera_frame,
+                  "The camera's optical frame ('': the colour image's frame_id)")
+      ->default_str(b.camera_frame);
+  AddNumberOption(*cmd, "--fps", b.frame_rate_hz, 0.0, 1000.0,
+                  "Robot bags: fuse at most this many frames per second of bag time (0: all)");
+  AddNumberOption(*cmd, "--max-views", b.max_views, 0, 1000000, "At most this many views (0: all)");
+  AddKeyValueOption(*cmd, "--bag-option", cli->bag_option_items,
+                    "Any bag option (repeatable): tf_topic, tf_static_topic, labels_prefix, "
+                    "max_pair_skew_ms, tf_tolerance_ms, as_robot_bag, ...");
+  cmd->callback(
+      [cli, &context] { RunGuarded(context, [&] { return Replay(*cli, *context.registries); }); });
+}
+
+}  // namespace avp::apps

@@ -1,0 +1,285 @@
+// avp replay: a recorded `avp run` replayed equals the original (every metric of every view, the
+// per-fruit results, the map voxel for voxel: map.ot byte for byte, map.avpmap byte for byte but
+// its note); the oracle segmenter rerun on the recorded labels gives the same masks; the recording
+// read as a robot's bag (images, CameraInfo, TF only); truncated and corrupt recordings replay
+// their intact views and name the offset; the avp replay command end to end.
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <unistd.h>
+
+#include <avp/experiment/replay.h>
+#include <avp/experiment/run_folder.h>
+#include <avp/io/json.h>
+#include <avp/mapping/map_file.h>
+#include <avp/recording/bag_reader.h>
+#include <avp/test/run_command.h>
+
+namespace avp {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using ::testing::HasSubstr;
+
+const experiment::Registries& Registries() {
+  static const auto* registries = new experiment::Registries(experiment::BuiltinRegistries());
+  return *registries;
+}
+
+std::string ReadText(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+/// metrics.csv without the time columns (capture_ms ... step_ms): what a replay must reproduce.
+std::vector<std::string> CsvWithoutTimes(const fs::path& p) {
+  std::istringstream in(ReadText(p));
+  std::vector<std::string> rows;
+  std::vector<size_t> drop;
+  for (std::string line; std::getline(in, line);) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+    if (rows.empty()) {
+      for (size_t i = 0; i < cells.size(); ++i) {
+        if (cells[i].ends_with("_ms")) drop.push_back(i);
+      }
+      EXPECT_EQ(drop.size(), 7u) << line;
+    }
+    std::string kept;
+    for (size_t i = 0; i < cells.size(); ++i) {
+      if (std::find(drop.begin(), drop.end(), i) == drop.end()) kept += cells[i] + ",";
+    }
+    rows.push_back(kept);
+  }
+  return rows;
+}
+
+/// The map file's bytes once saved with a fixed note (the note names the command).
+std::string MapBytes(const fs::path& avpmap, const fs::path& scratch) {
+  Result<mapping::SemanticMap> map = mapping::LoadMap(avpmap);
+  EXPECT_TRUE(map.ok()) << map.status().ToString();
+  if (!map.ok()) return {};
+  EXPECT_TRUE(mapping::SaveMap(*map, scratch, {.note = "same"}).ok());
+  return ReadText(scratch);
+}
+
+class ReplayTest : public ::testing::Test {
+ protected:
+  /// One recorded episode for the suite: tomato-multiple-clusters, avp-nbv, oracle, 3 views.
+  static void SetUpTestSuite() {
+    dir_ = new fs::path(fs::path(::testing::TempDir()) /
+                        ("avp_replay_test_" + std::to_string(::getpid())));
+    fs::remove_all(*dir_);
+    experiment::RunConfig c;
+    c.scenario = "tomato-multiple-clusters";
+    c.seed = 5;
+    c.episode.views = 3;
+    c.threads = 2;
+    experiment::RunFolderOptions o;
+    o.out_dir = *dir_ / "run";
+    o.record = true;
+    Result<experiment::RunSummary> run = experiment::RunToFolder(c, Registries(), o);
+    ASSERT_TRUE(run.ok()) << run.status().ToString();
+    ASSERT_EQ(run->result.episode.views_fused(), 3);
+  }
+  static void TearDownTestSuite() {
+    std::error_code ec;
+    fs::remove_all(*dir_, ec);
+    delete dir_;
+  }
+  static fs::path Run() { return *dir_ / "run"; }
+  static fs::path Bag() { return Run() / "episode.mcap"; }
+
+  /// Replays `bag` (read with `bag_options`) into dir_/name.
+  static Result<experiment::ReplaySummary> Replay(const fs::path& bag, const std::string& name,
+                                                  const std::string& segmenter = {},
+                                                  recording::BagReadOptions bag_options = {}) {
+    AVP_ASSIGN_OR_RETURN(const recording::Bag b, recording::ReadBag(bag, bag_options));
+    AVP_ASSIGN_OR_RETURN(const experiment::RunConfig config, experiment::BagRunConfig(b));
+    experiment::ReplayOptions o;
+    o.segmenter = segmenter;
+    o.folder.out_dir = *dir_ / name;
+    return experiment::ReplayToFolder(b, config, Registries(), o);
+  }
+
+  /// The replay folder `name` equals the recorded run: metrics, fruits, map.
+  static void ExpectSameAsRun(const std::string& name) {
+    const fs::path out = *dir_ / name;
+    const json a = io::ReadJsonFile(Run() / "record.json").value();
+    const json b = io::ReadJsonFile(out / "record.json").value();
+    EXPECT_EQ(b["avp"], "avp replay");
+    EXPECT_EQ(a["final_metrics"], b["final_metrics"]);
+    EXPECT_EQ(a["fruits"], b["fruits"]);
+    EXPECT_EQ(a["config"], b["config"]);
+    ASSERT_EQ(a["steps"].size(), b["steps"].size());
+    for (size_t i = 0; i < a["steps"].size(); ++i) {
+      for (const char* key : {"metrics", "known_voxels", "occupied_voxels", "target_voxels",
+                              "instances", "masks", "integration", "chosen_rank", "candidates"}) {
+        if (a["steps"][i].contains(key)) {
+          EXPECT_EQ(a["steps"][i][key], b["steps"][i][key]) << "step " << i << " " << key;
+        }
+      }
+    }
+    EXPECT_EQ(CsvWithoutTimes(Run() / "metrics.csv"), CsvWithoutTimes(out / "metrics.csv"));
+    EXPECT_EQ(ReadText(Run() / "map.ot"), ReadText(out / "map.ot"));
+    const std::string original = MapBytes(Run() / "map.avpmap", *dir_ / (name + "_a.avpmap"));
+    EXPECT_GT(original.size(), 100000u);
+    EXPECT_TRUE(original == MapBytes(out / "map.avpmap", *dir_ / (name + "_b.avpmap")));
+  }
+
+  static fs::path* dir_;
+};
+fs::path* ReplayTest::dir_ = nullptr;
+
+TEST_F(ReplayTest, RecordedMasksRebuildTheSameMapAndMetrics) {
+  Result<experiment::ReplaySummary> r = Replay(Bag(), "replay");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->segmenter, "recorded");
+  EXPECT_EQ(r->views, 3u);
+  EXPECT_EQ(r->metrics_compared, 3u);
+  EXPECT_EQ(r->metrics_differ, 0u) << r->first_difference;
+  EXPECT_TRUE(r->notes.empty());
+  EXPECT_EQ(r->run.result.episode.end, pipeline::EpisodeEnd::kBudgetReached);
+  EXPECT_GT(r->run.result.final_metrics.exact.f1, 0.2);
+  ExpectSameAsRun("replay");
+  const json record = io::ReadJsonFile(*dir_ / "replay" / "record.json").value();
+  EXPECT_EQ(record["replay"]["segmenter"], "recorded");
+  EXPECT_EQ(record["replay"]["damage"], nullptr);
+  EXPECT_EQ(record["replay"]["recorded_with"]["planner"], "avp-nbv");
+}
+
+TEST_F(ReplayTest, TheOracleRerunOnTheRecordedLabelsGivesTheSameMasks) {
+  Result<experiment::ReplaySummary> r = Replay(Bag(), "oracle", "oracle");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->segmenter, "oracle");
+  EXPECT_EQ(r->metrics_differ, 0u) << r->first_difference;
+  ExpectSameAsRun("oracle");
+}
+
+TEST_F(ReplayTest, ReadAsARobotBagThePosesComeFromTf) {
+  recording::BagReadOptions o;
+  o.as_robot_bag = true;
+  o.frame_rate_hz = 0.0;
+  Result<experiment::ReplaySummary> r = Replay(Bag(), "robot", "oracle", o);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->views, 3u);
+  EXPECT_EQ(r->metrics_compared, 0u);  // a robot's bag has no recorded metrics
+  // TF's quaternion rounds the pose in its last bits: the map is the same within a few voxels.
+  const json a = io::ReadJsonFile(Run() / "record.json").value();
+  const json b = io::ReadJsonFile(*dir_ / "robot" / "record.json").value();
+  EXPECT_NEAR(a["final_metrics"]["f1"].get<double>(), b["final_metrics"]["f1"].get<double>(), 0.01);
+  EXPECT_EQ(a["final_metrics"]["fruits_found"], b["final_metrics"]["fruits_found"]);
+  EXPECT_NEAR(a["steps"][2]["occupied_voxels"].get<double>(),
+              b["steps"][2]["occupied_voxels"].get<double>(),
+              0.01 * a["steps"][2]["occupied_voxels"].get<double>());
+}
+
+TEST_F(ReplayTest, TheOracleNeedsLabels) {
+  recording::BagReadOptions o;
+  o.labels_prefix = "";  // as a real robot's bag: no label images
+  Result<experiment::ReplaySummary> r = Replay(Bag(), "nolabels", "oracle", o);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(),
+              HasSubstr("the 'oracle' segmenter needs the simulator's label images "
+                        "(/avp/sim/instance, /avp/sim/class), and view 0 has none"));
+  recording::BagReadOptions robot;
+  robot.as_robot_bag = true;
+  r = Replay(Bag(), "recorded-robot", "recorded", robot);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("view 0 has no recorded masks"));
+}
+
+TEST_F(ReplayTest, TruncatedRecordingReplaysItsIntactViewsAndNamesTheOffset) {
+  const fs::path cut = *dir_ / "cut.mcap";
+  fs::copy_file(Bag(), cut, fs::copy_options::overwrite_existing);
+  const auto size = fs::file_size(cut);
+  fs::resize_file(cut, size * 75 / 100);
+  Result<recording::Bag> bag = recording::ReadBag(cut);
+  ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+  EXPECT_FALSE(bag->damage.ok());
+  EXPECT_THAT(bag->damage.message(), HasSubstr("offset"));
+  ASSERT_GE(bag->views.size(), 1u);
+  ASSERT_LT(bag->views.size(), 3u);
+  Result<experiment::ReplaySummary> r = Replay(cut, "cut");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->run.result.episode.end, pipeline::EpisodeEnd::kInterrupted);
+  EXPECT_THAT(r->run.result.episode.end_reason, HasSubstr("the recording is damaged"));
+  EXPECT_THAT(r->run.result.episode.end_reason, HasSubstr("offset"));
+  EXPECT_EQ(r->metrics_differ, 0u) << r->first_difference;
+  // The intact views' rows equal the original's first rows.
+  const auto original = CsvWithoutTimes(Run() / "metrics.csv");
+  const auto replayed = CsvWithoutTimes(*dir_ / "cut" / "metrics.csv");
+  ASSERT_EQ(replayed.size(), bag->views.size() + 1);
+  for (size_t i = 0; i < replayed.size(); ++i) EXPECT_EQ(replayed[i], original[i]) << i;
+}
+
+TEST_F(ReplayTest, CorruptChunkReplaysTheViewsBeforeIt) {
+  const fs::path bad = *dir_ / "corrupt.mcap";
+  fs::copy_file(Bag(), bad, fs::copy_options::overwrite_existing);
+  std::string bytes = ReadText(bad);
+  // A byte in the middle of the file (inside a later view's chunk: the recorder writes a chunk
+  // per view).
+  bytes[bytes.size() * 70 / 100] ^= 0x5a;
+  std::ofstream(bad, std::ios::binary) << bytes;
+  Result<recording::Bag> bag = recording::ReadBag(bad);
+  ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+  EXPECT_THAT(bag->damage.message(), HasSubstr("CRC mismatch"));
+  EXPECT_THAT(bag->damage.message(), HasSubstr("offset"));
+  EXPECT_LT(bag->views.size(), 3u);
+}
+
+TEST_F(ReplayTest, NotAnMcapFileIsAClearError) {
+  const fs::path junk = *dir_ / "junk.mcap";
+  std::ofstream(junk) << "not an mcap file at all";
+  Result<recording::Bag> bag = recording::ReadBag(junk);
+  ASSERT_FALSE(bag.ok());
+  EXPECT_THAT(bag.status().message(), HasSubstr("junk.mcap"));
+  EXPECT_FALSE(recording::ReadBag(*dir_ / "missing.mcap").ok());
+}
+
+#ifdef AVP_BINARY
+TEST_F(ReplayTest, CommandEndToEnd) {
+  const std::string avp = AVP_BINARY;
+  const fs::path out = *dir_ / "cli";
+  test::Ran r =
+      test::RunShell(avp + " replay " + Bag().string() + " --out " + out.string() + " 2>&1");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("avp recording, 3 view(s)"));
+  EXPECT_THAT(r.output, HasSubstr("replayed 3 view(s) with recorded masks"));
+  EXPECT_THAT(r.output, HasSubstr("metrics identical to the recording's at all 3 views"));
+  // Progress off a terminal: one plain line per view.
+  EXPECT_THAT(r.output, HasSubstr("views 3/3 (100 %)"));
+  ExpectSameAsRun("cli");
+
+  // A damaged recording: exit code 1, the offset named, the intact views written.
+  const fs::path cut = *dir_ / "cli_cut.mcap";
+  fs::copy_file(Bag(), cut, fs::copy_options::overwrite_existing);
+  fs::resize_file(cut, fs::file_size(cut) * 75 / 100);
+  r = test::RunShell(avp + " replay " + cut.string() + " --out " + (*dir_ / "cli_cut").string() +
+                     " 2>&1");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("offset"));
+  EXPECT_THAT(r.output, HasSubstr("intact view(s) were replayed"));
+  EXPECT_TRUE(fs::exists(*dir_ / "cli_cut" / "map.avpmap"));
+
+  // Unknown topic: the error lists the bag's topics.
+  r = test::RunShell(avp + " replay " + Bag().string() + " --out " + (*dir_ / "x").string() +
+                     " --color-topic /nope 2>&1");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("no messages on '/nope' (the bag's topics: "));
+}
+#endif
+
+}  // namespace
+}  // namespace avp
