@@ -1,6 +1,7 @@
 // report.html of a run folder (report/run_html.h): the data the page embeds against the run's
 // own record (voxels per step, frustums, candidates, fruit found and missed) and the final map
 // file, the page's size on the demo's episode, base64 and the page's escaping.
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <map>
@@ -10,11 +11,13 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/experiment/episode_runner.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/file.h>
 #include <avp/io/json.h>
 #include <avp/mapping/map_file.h>
 #include <avp/report/run_html.h>
+#include <avp/report/run_report.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::report {
@@ -183,6 +186,21 @@ TEST_F(RunReportTest, ThePageHoldsWhatTheRunRecorded) {
   EXPECT_EQ(page.find("<link"), std::string::npos);
 }
 
+/// Times the collector's OnView (what the report adds to each step).
+class TimedCollector final : public pipeline::EpisodeObserver {
+ public:
+  void OnView(const pipeline::StepRecord& step, const pipeline::StepData& data,
+              const mapping::SemanticMap& map) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    collector.OnView(step, data, map);
+    ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  void OnStep(const pipeline::StepRecord&, const mapping::SemanticMap&) override {}
+  RunReportCollector collector;
+  std::vector<double> ms;
+};
+
 TEST_F(RunReportTest, TheDemosEpisodeFitsInTenMegabytes) {
   // make demo's first run: tomato-full-occlusion, avp-nbv, oracle masks, 8 views, seed 0.
   experiment::RunConfig c;
@@ -190,12 +208,20 @@ TEST_F(RunReportTest, TheDemosEpisodeFitsInTenMegabytes) {
   c.seed = 0;
   c.episode.views = 8;
   c.threads = 2;
-  experiment::RunFolderOptions o;
-  o.out_dir = dir_ / "demo";
-  auto r = experiment::RunToFolder(c, registries_, o);
+  auto scene = experiment::LoadScene(c, registries_);
+  ASSERT_TRUE(scene.ok()) << scene.status().ToString();
+  auto gt = experiment::GroundTruthFor(c, *scene);
+  ASSERT_TRUE(gt.ok()) << gt.status().ToString();
+  TimedCollector timed;
+  auto r = experiment::RunEpisodeOnScene(c, registries_, *scene, *gt, {&timed});
   ASSERT_TRUE(r.ok()) << r.status().ToString();
-  const uintmax_t bytes = fs::file_size(o.out_dir / "report.html");
-  auto data = ReadRunReportData(o.out_dir / "report.html");
+  RunReportInfo info;
+  info.title = "demo";
+  info.fruits = FruitsJson(r->fruits);
+  const fs::path html = dir_ / "report.html";
+  ASSERT_TRUE(WriteRunReportHtml(html, timed.collector, info).ok());
+  const uintmax_t bytes = fs::file_size(html);
+  auto data = ReadRunReportData(html);
   ASSERT_TRUE(data.ok());
   size_t voxel_b64 = 0, image_b64 = 0, candidates = 0;
   for (const json& s : (*data)["steps"]) {
@@ -204,12 +230,18 @@ TEST_F(RunReportTest, TheDemosEpisodeFitsInTenMegabytes) {
     if (s["image"].is_object()) image_b64 += s["image"]["jpeg"].get<std::string>().size();
     if (s["plan"].is_object()) candidates += s["plan"]["kept"].get<size_t>();
   }
+  double step_ms = 0.0, report_ms = 0.0;
+  for (const auto& s : r->episode.steps) step_ms += s.times.total_ms;
+  for (const double ms : timed.ms) report_ms += ms;
   std::printf(
       "report.html of the demo episode: %ju bytes (%zu views, %ju final occupied voxels; voxel "
-      "changes %zu bytes base64, mask pictures %zu bytes base64, %zu candidates)\n",
+      "changes %zu bytes base64, mask pictures %zu bytes base64, %zu candidates); collecting: "
+      "%.1f ms per view (%.1f %% of the step's %.1f ms)\n",
       bytes, (*data)["steps"].size(), (*data)["expected"]["voxels"].get<uintmax_t>(), voxel_b64,
-      image_b64, candidates);
+      image_b64, candidates, report_ms / timed.ms.size(), 100.0 * report_ms / step_ms,
+      step_ms / timed.ms.size());
   EXPECT_EQ((*data)["steps"].size(), 8u);
+  EXPECT_EQ((*data)["expected"]["voxels"].get<size_t>(), r->episode.steps.back().occupied_voxels);
   EXPECT_GT((*data)["expected"]["voxels"].get<size_t>(), 10000u);
   EXPECT_LE(bytes, 10u * 1000 * 1000);
 }

@@ -299,8 +299,12 @@ void RunReportCollector::OnView(const pipeline::StepRecord& step, const pipeline
   const float occupied = grid.occupied_log_odds();
   std::unordered_map<VoxelKey, uint32_t, VoxelKeyHash> now;
   now.reserve(occupied_.size() + 4096);
-  grid.ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
-    if (log_odds >= occupied) now.emplace(k, PackCell(grid.Semantic(k)));
+  // Block by block: the semantic cell is the block's own (no lookup per voxel).
+  grid.ForEachBlock([&](const mapping::OccupancyBlock& b) {
+    b.known.ForEachSet([&](int i) {
+      if (b.log_odds[i] < occupied) return;
+      now.emplace(mapping::KeyOf(b.key, i), PackCell(b.semantics ? &(*b.semantics)[i] : nullptr));
+    });
   });
   Step s;
   for (const auto& [k, v] : now) {
