@@ -61,6 +61,11 @@ table.avp tr.chosen { background: #ffe6f7; font-weight: 600; }
   display: flex; flex-wrap: wrap; gap: 16px; }
 #avp-bottom > div { flex: 1 1 560px; min-width: 0; }
 #avp-bottom svg { max-width: 100%; height: auto; }
+@media (max-width: 1000px) {
+  #avp-report { grid-template-columns: minmax(0, 1fr); grid-template-rows: auto minmax(360px, 60vh)
+    auto auto; }
+  #avp-head, #avp-bottom { grid-column: 1; }
+}
 .avp-error { color: #b00; font-weight: 600; }
 .avp-muted { color: #777; }
 `;
@@ -401,8 +406,10 @@ function build(data) {
       }
       item("#bbbbbb", "unlabelled");
     }
-    item("#12a012", `found fruit (${found})`);
-    item("#e01010", `missed fruit (${missed})`);
+    if (found + missed > 0) {
+      item("#12a012", `found fruit (${found})`);
+      item("#e01010", `missed fruit (${missed})`);
+    }
   };
 
   const drawCandidates = (s) => {
