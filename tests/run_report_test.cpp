@@ -246,6 +246,66 @@ TEST_F(RunReportTest, TheDemosEpisodeFitsInTenMegabytes) {
   EXPECT_LE(bytes, 10u * 1000 * 1000);
 }
 
+TEST(RunReportCollector, KeepsEachViewsChangesAndAViewWithoutACapture) {
+  // Two views on a hand-made map: what was added, relabelled and freed, with no capture, no
+  // segmentation and no plan (a live view whose camera failed).
+  mapping::SemanticMap map;
+  mapping::OccupancyGrid& grid = map.grid();
+  const float hit = grid.clamp_max_log_odds();
+  const float free = grid.clamp_min_log_odds();
+  for (int x = 0; x < 3; ++x) ASSERT_TRUE(grid.SetLogOdds({x - 1, 2, 100}, hit));
+  ASSERT_TRUE(grid.SetLogOdds({5, 5, 5}, free));  // known, not occupied
+  mapping::SemanticCell* fruit = grid.MutableSemantic({0, 2, 100});
+  ASSERT_NE(fruit, nullptr);
+  fruit->semantic_class = static_cast<uint8_t>(SemanticClass::kFruit);
+  fruit->instance_id = 7;
+  fruit->confidence = 0.5f;
+  RunReportCollector collector;
+  pipeline::StepRecord step;
+  step.X_WC = RigidTransform(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.1, 0.2, 0.3));
+  step.capture_status = UnavailableError("camera gone");
+  collector.OnView(step, pipeline::StepData{}, map);
+  // View 2: one voxel freed, one added, the fruit voxel's confidence changed.
+  ASSERT_TRUE(grid.SetLogOdds({-1, 2, 100}, free));
+  ASSERT_TRUE(grid.SetLogOdds({1, 3, 101}, hit));
+  fruit = grid.MutableSemantic({0, 2, 100});
+  fruit->confidence = 1.0f;
+  step.view = 1;
+  collector.OnView(step, pipeline::StepData{}, map);
+  EXPECT_EQ(collector.OccupiedVoxelsPerStep(), (std::vector<size_t>{3, 3}));
+
+  auto data = collector.Data(RunReportInfo{});
+  ASSERT_TRUE(data.ok()) << data.status().ToString();
+  EXPECT_EQ((*data)["origin_key"], json::array({-1, 2, 100}));
+  EXPECT_TRUE((*data)["fruits"].is_null());
+  const json& steps = (*data)["steps"];
+  ASSERT_EQ(steps.size(), 2u);
+  EXPECT_TRUE(steps[0]["camera"]["K"].is_null());
+  EXPECT_TRUE(steps[0]["image"].is_null());
+  EXPECT_TRUE(steps[0]["plan"].is_null());
+  EXPECT_EQ(steps[0]["errors"]["capture"], "Unavailable: camera gone");
+  EXPECT_EQ(steps[0]["camera"]["X_WC"],
+            json::array({1.0, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 0.2, 0.0, 0.0, 1.0, 0.3}));
+  EXPECT_EQ(steps[0]["voxels"]["set"], 3);
+  EXPECT_EQ(steps[0]["voxels"]["removed"], 0);
+  EXPECT_EQ(steps[1]["voxels"]["set"], 2);  // the new voxel and the fruit's confidence
+  EXPECT_EQ(steps[1]["voxels"]["removed"], 1);
+  std::map<Key, Cell> state;
+  Apply(steps[0]["voxels"], (*data)["origin_key"], state);
+  ASSERT_EQ(state.size(), 3u);
+  EXPECT_EQ(state[Key(0, 2, 100)].cls, static_cast<int>(SemanticClass::kFruit));
+  EXPECT_EQ(state[Key(0, 2, 100)].instance, 7);
+  EXPECT_EQ(state[Key(0, 2, 100)].confidence, 128);  // round(0.5 * 255)
+  EXPECT_EQ(state[Key(1, 2, 100)].cls, 0);
+  Apply(steps[1]["voxels"], (*data)["origin_key"], state);
+  ASSERT_EQ(state.size(), 3u);
+  EXPECT_EQ(state.count(Key(-1, 2, 100)), 0u);
+  EXPECT_EQ(state.count(Key(1, 3, 101)), 1u);
+  EXPECT_EQ(state[Key(0, 2, 100)].confidence, 255);
+  EXPECT_EQ((*data)["expected"]["voxels"], 3);
+  EXPECT_EQ((*data)["expected"]["frustums"], 2);
+}
+
 TEST(RunReportHtml, Base64RoundTripsAndNamesABadCharacter) {
   std::string all;
   for (int i = 0; i < 256; ++i) all.push_back(static_cast<char>(i));
