@@ -73,6 +73,7 @@ int Replay(const ReplayCli& cli_in, const experiment::Registries& registries) {
                   : fmt::format(" of {} colour/depth pairs ({} left out by --fps / --max-views)",
                                 bag->pairs, bag->pairs_thinned)
                         .c_str());
+  std::fflush(stdout);  // before the progress lines on stderr
   const Result<experiment::RunConfig> config = ResolveReplayConfig(*bag, cli);
   if (!config.ok()) return Failed("replay", config.status());
 
