@@ -334,6 +334,8 @@ const OptionTable<BagReadOptions>& BagReadOptionTable() {
             "real bags: fuse at most this many frames per second of bag time (0: every pair)");
     t->Integer("max_views", &O::max_views, "", ValueRange::Closed(0, 1000000),
                "fuse at most this many views (0: all)");
+    t->Real("max_decoded_mb", &O::max_decoded_mb, "MB", ValueRange::Above(0),
+            "the views are decoded in memory: at most this much");
     t->Flag("as_robot_bag", &O::as_robot_bag,
             "read an avp recording like a robot's bag (images, CameraInfo, TF; no /avp/step)");
     t->AddRule([](const O& o, std::vector<std::string>& errors) {
@@ -375,6 +377,25 @@ struct TopicMessages {
 class Reader {
  public:
   Reader(const BagReadOptions& options, Bag& bag) : o_(options), bag_(bag) {}
+
+  /// Keeps `view`, unless the views would then hold more than max_decoded_mb.
+  Status Keep(BagView view) {
+    const RgbdFrame& f = view.observation.frame;
+    decoded_bytes_ += f.rgb.data().size() + f.depth_m.data().size() * sizeof(float) +
+                      (view.observation.labels ? f.rgb.data().size() : 0);
+    if (view.segmentation) {
+      for (const InstanceMask& m : view.segmentation->instances)
+        decoded_bytes_ += m.mask.data().size();
+    }
+    if (static_cast<double>(decoded_bytes_) > o_.max_decoded_mb * 1e6) {
+      return ResourceExhaustedError(fmt::format(
+          "{}: the views to fuse need more than max_decoded_mb = {} MB decoded (at view {}, stamp "
+          "{}): fuse fewer frames (--fps, --max-views) or raise the limit",
+          bag_.path.string(), o_.max_decoded_mb, bag_.views.size() + 1, Stamp(f.stamp_ns)));
+    }
+    bag_.views.push_back(std::move(view));
+    return Status::Ok();
+  }
 
   void Skip(std::string why) {
     if (bag_.skipped.size() < kMaxSkippedKept) bag_.skipped.push_back(std::move(why));
@@ -579,7 +600,7 @@ class Reader {
                          view.status().message()));
         continue;
       }
-      bag_.views.push_back(std::move(*view));
+      AVP_RETURN_IF_ERROR(Keep(std::move(*view)));
     }
     return Status::Ok();
   }
@@ -723,7 +744,7 @@ class Reader {
         if (!first_stamp) first_stamp = stamp;
         next_ns = *first_stamp + ((stamp - *first_stamp + early_ns) / period_ns + 1) * period_ns;
       }
-      bag_.views.push_back(std::move(*view));
+      AVP_RETURN_IF_ERROR(Keep(std::move(*view)));
     }
     if (bag_.pairs == 0) {
       return NotFoundError(fmt::format(
@@ -758,6 +779,7 @@ class Reader {
   std::map<std::string, TopicMessages> topics_;
   TfTree tf_;
   std::vector<std::pair<int64_t, rosmsg::CameraInfo>> infos_;
+  uint64_t decoded_bytes_ = 0;
 };
 
 }  // namespace

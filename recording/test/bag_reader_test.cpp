@@ -214,6 +214,13 @@ TEST_F(BagReaderTest, FrameRateAndMaxViews) {
   ASSERT_TRUE(tenth.ok());
   ASSERT_EQ(tenth->views.size(), 10u);
   EXPECT_EQ(tenth->views[1].index, 3);
+  BagReadOptions small = every;
+  small.max_decoded_mb = 0.005;  // 8 x 6 pixels: 336 bytes a view, 14 views
+  Result<Bag> too_many = ReadBag(path, small);
+  ASSERT_FALSE(too_many.ok());
+  EXPECT_THAT(too_many.status().message(),
+              HasSubstr("the views to fuse need more than max_decoded_mb = 0.005 MB decoded (at "
+                        "view 15, stamp 1700000000.466666662)"));
   BagReadOptions five = every;
   five.max_views = 5;
   Result<Bag> first5 = ReadBag(path, five);

@@ -52,6 +52,10 @@ struct BagReadOptions {
   double frame_rate_hz = 1.0;
   /// At most this many views (0 = all).
   int max_views = 0;
+  /// The views to fuse are decoded in memory (colour, depth, labels, masks: about 3.7 MB per
+  /// 640 x 480 view): at most this many megabytes, else ResourceExhausted (a long 30 Hz bag with
+  /// frame_rate_hz = 0 would fill the memory).
+  double max_decoded_mb = 4096.0;
   /// Ignore the bag's /avp/step messages and read it like a real robot's bag (colour, depth,
   /// CameraInfo and TF only).
   bool as_robot_bag = false;
