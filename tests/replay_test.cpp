@@ -21,7 +21,10 @@
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
 #include <avp/mapping/map_file.h>
+#include <avp/mcap/mcap.h>
 #include <avp/recording/bag_reader.h>
+#include <avp/recording/layout.h>
+#include <avp/rosmsg/messages.h>
 #include <avp/test/run_command.h>
 
 namespace avp {
@@ -237,6 +240,68 @@ TEST_F(ReplayTest, CorruptChunkReplaysTheViewsBeforeIt) {
   EXPECT_THAT(bag->damage.message(), HasSubstr("CRC mismatch"));
   EXPECT_THAT(bag->damage.message(), HasSubstr("offset"));
   EXPECT_LT(bag->views.size(), 3u);
+}
+
+TEST_F(ReplayTest, BadStepOrMasksSkipTheViewNamingTheValue) {
+  const mcap::File file = mcap::ReadIndexed(Bag()).value();
+  uint16_t step_channel = 0, instances_channel = 0;
+  for (const mcap::Channel& c : file.channels) {
+    if (c.topic == recording::kStepTopic) step_channel = c.id;
+    if (c.topic == recording::kInstancesTopic) instances_channel = c.id;
+  }
+  const uint64_t view1 = 1'000'000'000;  // simulation stamps: view x 1 s
+  struct Case {
+    uint16_t channel;
+    std::string text;
+    std::string expected;
+  };
+  const json step1 = [&] {
+    for (const mcap::Message& m : file.messages) {
+      if (m.channel_id == step_channel && m.log_time == view1) {
+        return json::parse(rosmsg::Decode<rosmsg::String>(m.data).value().data);
+      }
+    }
+    return json();
+  }();
+  ASSERT_TRUE(step1.is_object());
+  json bad_pose = step1;
+  bad_pose["X_WC"][0] = 3.0;
+  json short_pose = step1;
+  short_pose["X_WC"].erase(0);
+  const std::vector<Case> cases = {
+      {step_channel, "{not json", "/avp/step: malformed JSON"},
+      {step_channel, bad_pose.dump(), "/avp/step: X_WC"},
+      {step_channel, short_pose.dump(), "/avp/step: X_WC"},
+      {instances_channel, R"({"width": 640, "height": 480, "instances": [{"class": "fruit"}]})",
+       "/avp/segmentation/instances"},
+      {instances_channel, R"({"width": 1, "height": 1, "instances": []})",
+       "/avp/segmentation/instances"},
+  };
+  for (const Case& c : cases) {
+    const fs::path path = *dir_ / "bad_step.mcap";
+    auto w = mcap::Writer::Open(path).value();
+    for (const mcap::Schema& s : file.schemas) {
+      ASSERT_TRUE(w->AddSchema(s.name, s.encoding, s.data).ok());
+    }
+    for (const mcap::Channel& ch : file.channels) {
+      ASSERT_TRUE(w->AddChannel(ch.schema_id, ch.topic, ch.message_encoding, ch.metadata).ok());
+    }
+    for (const mcap::Attachment& a : file.attachments) ASSERT_TRUE(w->WriteAttachment(a).ok());
+    for (const mcap::Metadata& m : file.metadata) ASSERT_TRUE(w->WriteMetadata(m).ok());
+    for (mcap::Message m : file.messages) {
+      if (m.channel_id == c.channel && m.log_time == view1) {
+        m.data = rosmsg::Encode(rosmsg::String{c.text});
+      }
+      ASSERT_TRUE(w->Write(m).ok());
+    }
+    ASSERT_TRUE(w->Close().ok());
+    Result<recording::Bag> bag = recording::ReadBag(path);
+    ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+    ASSERT_EQ(bag->views.size(), 2u) << c.text;
+    EXPECT_EQ(bag->views[1].index, 2);
+    ASSERT_EQ(bag->skipped_count, 1u);
+    EXPECT_THAT(bag->skipped[0], HasSubstr("step at 1.000000000: " + c.expected)) << c.text;
+  }
 }
 
 TEST_F(ReplayTest, NotAnMcapFileIsAClearError) {

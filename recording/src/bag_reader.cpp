@@ -673,7 +673,9 @@ class Reader {
         }
         Result<Segmentation> seg = InstancesFromJson(j);
         if (!seg.ok()) return seg.status().WithContext(std::string(kInstancesTopic));
-        AVP_RETURN_IF_ERROR(seg->ValidateFor(frame.rgb.width(), frame.rgb.height()));
+        if (Status v = seg->ValidateFor(frame.rgb.width(), frame.rgb.height()); !v.ok()) {
+          return v.WithContext(std::string(kInstancesTopic));
+        }
         view.segmentation = std::move(*seg);
       }
     }
