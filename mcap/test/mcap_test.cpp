@@ -62,6 +62,25 @@ TEST(McapCrcTest, KnownValue) {
   EXPECT_EQ(Crc32({reinterpret_cast<const uint8_t*>(s.data()) + 4, 5}, part), 0xCBF43926u);
 }
 
+TEST(McapCrcTest, SlicedEqualsBitwiseAtEveryLengthAndSplit) {
+  std::vector<uint8_t> bytes(300);
+  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<uint8_t>(i * 131 + 7);
+  const auto bitwise = [](std::span<const uint8_t> b) {
+    uint32_t c = 0xFFFFFFFFu;
+    for (uint8_t x : b) {
+      c ^= x;
+      for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+    }
+    return ~c;
+  };
+  for (size_t n = 0; n <= bytes.size(); ++n) {
+    const std::span<const uint8_t> b(bytes.data(), n);
+    ASSERT_EQ(Crc32(b), bitwise(b)) << n;
+    const size_t half = n / 3;
+    ASSERT_EQ(Crc32(b.subspan(half), Crc32(b.first(half))), bitwise(b)) << n;
+  }
+}
+
 TEST_F(McapTest, RoundTripIndexedAndStreaming) {
   const auto path = dir_ / "a.mcap";
   const std::vector<Message> written = WriteSample(path);
