@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 
 #include <avp/io/mask_codec.h>
+#include <avp/mapping/octomap_io.h>
 #include <avp/recording/layout.h>
 #include <avp/rosmsg/convert.h>
 
@@ -95,7 +96,173 @@ Status Field(const json& j, const char* key, const std::string& where) {
   return Status::Ok();
 }
 
+/// OctoMap's float log-odds of a probability (octomap::logodds).
+float OctomapLogOdds(double p) { return static_cast<float>(std::log(p / (1.0 - p))); }
+
+/// 3 bits per level, z y x, the most significant level first: sorted codes are OcTree's
+/// depth-first child order (child index = x | y << 1 | z << 2 at each level).
+uint64_t Interleave(uint32_t x, uint32_t y, uint32_t z, int bits) {
+  uint64_t code = 0;
+  for (int b = bits - 1; b >= 0; --b) {
+    code = (code << 3) | (((z >> b) & 1u) << 2) | (((y >> b) & 1u) << 1) | ((x >> b) & 1u);
+  }
+  return code;
+}
+
+/// Writes OcTree::writeBinaryNode's bytes, depth first, from the grid's blocks sorted by their
+/// Morton code: an 8^3 block is the subtree of a depth-13 node; each node's 2 bytes hold 2 bits
+/// per child (0 absent, 1 free leaf, 2 occupied leaf, 3 inner) and come before its children's.
+class BinaryTreeWriter {
+ public:
+  /// A block as masks in Morton order: bit m of `known` / `occupied` is the voxel of local Morton
+  /// code m (8 consecutive codes are the 8 children of a depth-15 node).
+  struct Block {
+    uint64_t code = 0;  ///< 13-level Morton code of the block
+    std::array<uint8_t, 64> known{}, occupied{};
+  };
+  explicit BinaryTreeWriter(const std::vector<Block>& blocks) : blocks_(blocks) {}
+  std::string Write() {
+    if (!blocks_.empty()) Emit(0, blocks_.size(), 0);
+    return std::move(out_);
+  }
+
+ private:
+  static constexpr int kInner = 3, kFree = 1, kOccupied = 2, kAbsent = 0;
+
+  /// The node's 2 bytes at `at`, or, at depths 1..15 when its 8 children are equal leaves, the
+  /// leaf it collapses to (OcTree::prune), its bytes dropped.
+  int Close(size_t at, const std::array<int, 8>& kind, int depth) {
+    if (depth >= 1 && (kind[0] == kFree || kind[0] == kOccupied) &&
+        std::all_of(kind.begin(), kind.end(), [&](int k) { return k == kind[0]; })) {
+      out_.resize(at);
+      return kind[0];
+    }
+    uint8_t bytes[2] = {0, 0};
+    for (int c = 0; c < 8; ++c) {
+      bytes[c / 4] =
+          static_cast<uint8_t>(bytes[c / 4] | (kind[static_cast<size_t>(c)] << (2 * (c % 4))));
+    }
+    out_[at] = static_cast<char>(bytes[0]);
+    out_[at + 1] = static_cast<char>(bytes[1]);
+    return kInner;
+  }
+  /// Emits a child and returns its kind; a leaf leaves no bytes.
+  template <class F>
+  int Child(F&& emit) {
+    const size_t before = out_.size();
+    const int k = emit();
+    if (k != kInner) out_.resize(before);
+    return k;
+  }
+
+  /// Depths 0..12: blocks [lo, hi) share the code's levels above `depth`.
+  int Emit(size_t lo, size_t hi, int depth) {
+    if (depth == 13) return EmitBlock(blocks_[lo]);
+    const size_t at = out_.size();
+    out_.append(2, '\0');
+    std::array<int, 8> kind{};
+    const int shift = 3 * (12 - depth);
+    for (size_t i = lo; i < hi;) {
+      const auto child = static_cast<size_t>((blocks_[i].code >> shift) & 7u);
+      size_t j = i + 1;
+      while (j < hi && static_cast<size_t>((blocks_[j].code >> shift) & 7u) == child) ++j;
+      kind[child] = Child([&] { return Emit(i, j, depth + 1); });
+      i = j;
+    }
+    return Close(at, kind, depth);
+  }
+
+  /// Depth 13 (the block), 14 (8 groups of 64 voxels), 15 (8 voxels: one mask byte).
+  int EmitBlock(const Block& b) {
+    const size_t at = out_.size();
+    out_.append(2, '\0');
+    std::array<int, 8> kind{};
+    for (int s = 0; s < 8; ++s) {
+      bool any = false;
+      for (int g = 0; g < 8; ++g) any = any || b.known[static_cast<size_t>(8 * s + g)] != 0;
+      if (any) kind[static_cast<size_t>(s)] = Child([&] { return EmitSub(b, s); });
+    }
+    return Close(at, kind, 13);
+  }
+  int EmitSub(const Block& b, int s) {
+    const size_t at = out_.size();
+    out_.append(2, '\0');
+    std::array<int, 8> kind{};
+    for (int g = 0; g < 8; ++g) {
+      const auto m = static_cast<size_t>(8 * s + g);
+      if (b.known[m] != 0) kind[static_cast<size_t>(g)] = Child([&] { return EmitGroup(b, m); });
+    }
+    return Close(at, kind, 14);
+  }
+  int EmitGroup(const Block& b, size_t m) {
+    const size_t at = out_.size();
+    out_.append(2, '\0');
+    std::array<int, 8> kind{};
+    for (int v = 0; v < 8; ++v) {
+      if (((b.known[m] >> v) & 1u) == 0) continue;
+      kind[static_cast<size_t>(v)] = ((b.occupied[m] >> v) & 1u) != 0 ? kOccupied : kFree;
+    }
+    return Close(at, kind, 15);
+  }
+
+  const std::vector<Block>& blocks_;
+  std::string out_;
+};
+
 }  // namespace
+
+Result<std::string> OctomapBinaryTree(const mapping::OccupancyGrid& grid) {
+  const mapping::SensorModel& sensor = grid.sensor_model();
+  // OcTree's settings (ConfigureTree): values clamped on insertion, then maximum likelihood.
+  const float clamp_min = OctomapLogOdds(sensor.clamp_min);
+  const float clamp_max = OctomapLogOdds(sensor.clamp_max);
+  const float threshold = OctomapLogOdds(sensor.occupied_threshold);
+  // Local index (x | y << 3 | z << 6) of each 3-level Morton code within a block.
+  static const std::array<uint16_t, mapping::kBlockVoxels> kLocalOfMorton = [] {
+    std::array<uint16_t, mapping::kBlockVoxels> t{};
+    for (uint32_t i = 0; i < mapping::kBlockVoxels; ++i) {
+      t[Interleave(i & 7u, (i >> 3) & 7u, (i >> 6) & 7u, 3)] = static_cast<uint16_t>(i);
+    }
+    return t;
+  }();
+  constexpr int32_t kBlockMin = mapping::kOctomapMinKey >> mapping::kBlockShift;
+  constexpr int32_t kBlockMax = mapping::kOctomapMaxKey >> mapping::kBlockShift;
+  std::vector<BinaryTreeWriter::Block> blocks;
+  blocks.reserve(grid.num_blocks());
+  Status outside = Status::Ok();
+  grid.ForEachBlock([&](const mapping::OccupancyBlock& b) {
+    if (!b.known.any()) return;
+    const mapping::BlockKey& k = b.key;
+    if (k.x < kBlockMin || k.x > kBlockMax || k.y < kBlockMin || k.y > kBlockMax ||
+        k.z < kBlockMin || k.z > kBlockMax) {
+      if (outside.ok()) {
+        outside = OutOfRangeError(fmt::format(
+            "the map has voxels outside OctoMap's 16-bit key range (block {} {} {}): it "
+            "cannot be written as an OctoMap",
+            k.x, k.y, k.z));
+      }
+      return;
+    }
+    const auto off = static_cast<uint32_t>(-kBlockMin);
+    BinaryTreeWriter::Block& out = blocks.emplace_back();
+    out.code = Interleave(static_cast<uint32_t>(k.x) + off, static_cast<uint32_t>(k.y) + off,
+                          static_cast<uint32_t>(k.z) + off, 16 - mapping::kBlockShift);
+    for (size_t m = 0; m < static_cast<size_t>(mapping::kBlockVoxels); ++m) {
+      const int i = kLocalOfMorton[m];
+      if (!b.known.test(i)) continue;
+      const float v = std::min(std::max(b.log_odds[static_cast<size_t>(i)], clamp_min), clamp_max);
+      const float ml = v >= threshold ? clamp_max : clamp_min;
+      out.known[m / 8] = static_cast<uint8_t>(out.known[m / 8] | (1u << (m % 8)));
+      if (ml >= threshold) {
+        out.occupied[m / 8] = static_cast<uint8_t>(out.occupied[m / 8] | (1u << (m % 8)));
+      }
+    }
+  });
+  AVP_RETURN_IF_ERROR(outside);
+  std::sort(blocks.begin(), blocks.end(),
+            [](const auto& a, const auto& b) { return a.code < b.code; });
+  return BinaryTreeWriter(blocks).Write();
+}
 
 rosmsg::Image ColorImageMsg(const ImageRgb8& rgb, const rosmsg::Header& header) {
   rosmsg::Image m;

@@ -2,7 +2,6 @@
 
 #include <fmt/format.h>
 
-#include <avp/mapping/octomap_io.h>
 #include <avp/recording/encode.h>
 #include <avp/rosmsg/convert.h>
 #include <avp/rosmsg/messages.h>
@@ -143,14 +142,14 @@ Status McapRecorder::WriteView(const pipeline::StepRecord& step, const pipeline:
   AVP_RETURN_IF_ERROR(Publish(channel(kCandidatesTopic), t,
                               CandidateMarkers(ranked, step.chosen_rank, step.view, base)));
 
-  AVP_ASSIGN_OR_RETURN(const mapping::OctomapBinaryData tree,
-                       mapping::OctomapBinaryMessageData(map.grid()));
+  // liboctomap's bytes, built straight from the grid (OctomapBinaryTree: several times faster).
+  AVP_ASSIGN_OR_RETURN(const std::string tree, OctomapBinaryTree(map.grid()));
   rosmsg::Octomap octomap;
   octomap.header = base;
   octomap.binary = true;
-  octomap.id = tree.id;
-  octomap.resolution = tree.resolution_m;
-  octomap.data.assign(tree.data.begin(), tree.data.end());
+  octomap.id = "OcTree";
+  octomap.resolution = map.grid().voxel_size_m();
+  octomap.data.assign(tree.begin(), tree.end());
   AVP_RETURN_IF_ERROR(Publish(channel(kMapTopic), t, octomap));
 
   AVP_RETURN_IF_ERROR(

@@ -9,6 +9,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/core/rng.h>
+#include <avp/mapping/octomap_io.h>
 #include <avp/recording/layout.h>
 
 namespace avp::recording {
@@ -187,6 +189,59 @@ TEST(RecordingEncodeTest, CandidateMarkersMarkTheChosenOne) {
   // Best utility is viridis' yellow end, the worst its purple end.
   EXPECT_GT(m.markers[1].color.r, 0.9f);
   EXPECT_LT(m.markers[3].color.r, 0.3f);
+}
+
+/// OctomapBinaryTree equals liboctomap's bytes (mapping::OctomapBinaryMessageData).
+void ExpectSameAsLiboctomap(const mapping::OccupancyGrid& grid) {
+  const std::string ours = OctomapBinaryTree(grid).value();
+  const mapping::OctomapBinaryData theirs = mapping::OctomapBinaryMessageData(grid).value();
+  EXPECT_EQ(ours.size(), theirs.data.size());
+  EXPECT_TRUE(ours == theirs.data);
+}
+
+TEST(RecordingOctomapTest, BinaryTreeEqualsLiboctomapByteForByte) {
+  mapping::OccupancyGrid grid;
+  ExpectSameAsLiboctomap(grid);  // empty: no root, no bytes
+  const float occ = grid.sensor_model().clamp_max_log_odds();
+  const float fre = grid.sensor_model().clamp_min_log_odds();
+  // One voxel, then a full 8^3 block of occupied voxels (pruned to one depth-13 leaf), a full
+  // 16^3 region of free voxels (pruned to a depth-12 leaf), voxels either side of 0 (keys
+  // 32767 / 32768 in OctoMap's terms), values beyond the clamps and exactly at the threshold.
+  ASSERT_TRUE(grid.SetLogOdds({1, 2, 3}, 0.9f));
+  ExpectSameAsLiboctomap(grid);
+  for (int x = 16; x < 24; ++x)
+    for (int y = 0; y < 8; ++y)
+      for (int z = 8; z < 16; ++z) ASSERT_TRUE(grid.SetLogOdds({x, y, z}, occ));
+  for (int x = -32; x < -16; ++x)
+    for (int y = -16; y < 0; ++y)
+      for (int z = 0; z < 16; ++z) ASSERT_TRUE(grid.SetLogOdds({x, y, z}, fre));
+  ASSERT_TRUE(grid.SetLogOdds({-1, -1, -1}, 10.0f));
+  ASSERT_TRUE(grid.SetLogOdds({0, -1, 0}, -10.0f));
+  ASSERT_TRUE(grid.SetLogOdds({5, 5, 5}, grid.occupied_log_odds()));
+  ExpectSameAsLiboctomap(grid);
+  // A region that is all occupied but one free voxel does not collapse.
+  for (int x = 40; x < 48; ++x)
+    for (int y = 40; y < 48; ++y)
+      for (int z = 40; z < 48; ++z) ASSERT_TRUE(grid.SetLogOdds({x, y, z}, occ));
+  ASSERT_TRUE(grid.SetLogOdds({44, 41, 47}, fre));
+  ExpectSameAsLiboctomap(grid);
+  // Random voxels of random values in a 64^3 region around the origin.
+  Rng rng(17);
+  for (int i = 0; i < 20000; ++i) {
+    const VoxelKey k{static_cast<int32_t>(rng.UniformInt(-32, 31)),
+                     static_cast<int32_t>(rng.UniformInt(-32, 31)),
+                     static_cast<int32_t>(rng.UniformInt(-32, 31))};
+    ASSERT_TRUE(grid.SetLogOdds(k, static_cast<float>(rng.Uniform(-3.0, 3.0))));
+  }
+  ExpectSameAsLiboctomap(grid);
+}
+
+TEST(RecordingOctomapTest, KeysOutsideOctomapAreAnError) {
+  mapping::OccupancyGrid grid;
+  ASSERT_TRUE(grid.SetLogOdds({40000, 0, 0}, 1.0f));
+  EXPECT_EQ(OctomapBinaryTree(grid).status().code(), StatusCode::kOutOfRange);
+  EXPECT_THAT(OctomapBinaryTree(grid).status().message(),
+              HasSubstr("outside OctoMap's 16-bit key range"));
 }
 
 }  // namespace

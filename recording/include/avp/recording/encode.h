@@ -16,6 +16,7 @@
 #include <avp/core/segmentation.h>
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
+#include <avp/mapping/voxel_grid.h>
 #include <avp/pipeline/episode.h>
 #include <avp/planning/view_planner.h>
 #include <avp/rosmsg/messages.h>
@@ -68,6 +69,12 @@ Result<RigidTransform> PoseFromJson(const nlohmann::json& j);
 /// {stage: ms}}.
 nlohmann::json StepToJson(const pipeline::StepRecord& step, const planning::PlanResult* plan,
                           int64_t stamp_ns);
+
+/// The grid as octomap_msgs/Octomap's binary data: byte for byte what liboctomap writes for it
+/// (mapping::OctomapBinaryMessageData: an OcTree of every known voxel, maximum likelihood,
+/// pruned, OcTree::writeBinaryData), built straight from the grid's 8^3 blocks without a tree,
+/// several times faster. OutOfRange naming the first voxel outside OctoMap's 16-bit keys.
+Result<std::string> OctomapBinaryTree(const mapping::OccupancyGrid& grid);
 
 /// The candidates as markers in `header`'s frame: a DELETEALL, then one arrow per candidate along
 /// its optical axis coloured by utility (viridis from the lowest to the highest), the chosen one
