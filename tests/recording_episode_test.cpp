@@ -139,6 +139,7 @@ TEST_F(RecordingTest, EveryTopicEqualsWhatTheEpisodeSaw) {
     ASSERT_NE(ch, f.channels.end());
     EXPECT_EQ(ch->message_encoding, "cdr");
     EXPECT_THAT(ch->metadata.at("offered_qos_profiles"), HasSubstr("reliability: 1"));
+    EXPECT_EQ(ch->metadata.at("topic_type_hash"), rosmsg::TypeHashOf(type).value());
     EXPECT_EQ(f.schemas.at(ch->schema_id - 1).name, type);
     EXPECT_EQ(f.schemas.at(ch->schema_id - 1).encoding, "ros2msg");
     EXPECT_EQ(f.statistics.channel_message_counts.at(ch->id), views);

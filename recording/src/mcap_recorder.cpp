@@ -68,9 +68,11 @@ Status McapRecorder::AddChannels() {
       AVP_ASSIGN_OR_RETURN(const uint16_t id, writer_->AddSchema(t.type, "ros2msg", t.schema));
       it = schemas.emplace(t.type, id).first;
     }
-    AVP_ASSIGN_OR_RETURN(
-        const uint16_t channel,
-        writer_->AddChannel(it->second, t.topic, "cdr", {{"offered_qos_profiles", qos}}));
+    // As rosbag2 (Jazzy) writes them: the QoS offered and the type's REP-2011 hash.
+    AVP_ASSIGN_OR_RETURN(const std::string hash, rosmsg::TypeHashOf(t.type));
+    AVP_ASSIGN_OR_RETURN(const uint16_t channel, writer_->AddChannel(it->second, t.topic, "cdr",
+                                                                     {{"offered_qos_profiles", qos},
+                                                                      {"topic_type_hash", hash}}));
     channels_.emplace(std::string(t.topic), channel);
   }
   return Status::Ok();

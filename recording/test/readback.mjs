@@ -103,6 +103,8 @@ for (const [id, ch] of indexed.channelsById) {
   const qos = ch.metadata.get("offered_qos_profiles") ?? "";
   check(/^- history: 1\n  depth: 10\n  reliability: 1\n  durability: 2\n/.test(qos),
         `${ch.topic} offered_qos_profiles: ${JSON.stringify(qos)}`);
+  check(/^RIHS01_[0-9a-f]{64}$/.test(ch.metadata.get("topic_type_hash") ?? ""),
+        `${ch.topic} topic_type_hash`);
   readers.set(id, new MessageReader(parse(textDecoder.decode(schema.data), { ros2: true })));
   topicOf.set(id, ch.topic);
 }

@@ -2,7 +2,8 @@
 
 // The topics, types and records of avp's own MCAP recordings (`avp run --record`, `avp live
 // --record`, `avp bench --record`): what recording::McapRecorder writes and what the replay reads.
-// Profile `ros2`: `ros2msg` schemas, `cdr` payloads, `offered_qos_profiles` per channel. Every
+// Profile `ros2`: `ros2msg` schemas, `cdr` payloads, `offered_qos_profiles` and `topic_type_hash`
+// (Jazzy's RIHS01 type hash) per channel, as rosbag2 writes them. Every
 // message of a fused view has log_time = publish_time = header stamp = the capture's stamp_ns.
 // docs/recording.md has the table.
 
