@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
+#include <avp/core/transform.h>
 #include <avp/experiment/replay.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
@@ -313,6 +314,131 @@ TEST_F(ReplayTest, NotAnMcapFileIsAClearError) {
   EXPECT_FALSE(recording::ReadBag(*dir_ / "missing.mcap").ok());
 }
 
+/// A robot's bag as the RealSense driver and a robot write it: 3 s at 30 Hz of 64 x 48 bgr8
+/// colour (a red disc on green) and 16UC1 depth (a wall 0.6 m in front of the camera), CameraInfo,
+/// /tf_static base -> mount and link -> optical frame, /tf mount -> link at 100 Hz (the arm
+/// turning slowly). Returns the path.
+fs::path WriteRobotBag(const fs::path& path) {
+  auto w = mcap::Writer::Open(path).value();
+  auto channel = [&](std::string_view type, std::string_view def, const std::string& topic) {
+    const uint16_t schema = w->AddSchema(type, "ros2msg", def).value();
+    return w
+        ->AddChannel(schema, topic, "cdr", {{"offered_qos_profiles", mcap::OfferedQosProfiles()}})
+        .value();
+  };
+  using rosmsg::Image, rosmsg::CameraInfo, rosmsg::TFMessage;
+  const uint16_t color = channel(rosmsg::MessageTraits<Image>::kRosName,
+                                 rosmsg::Definition<Image>(), "/camera/camera/color/image_raw");
+  const uint16_t depth =
+      channel(rosmsg::MessageTraits<Image>::kRosName, rosmsg::Definition<Image>(),
+              "/camera/camera/aligned_depth_to_color/image_raw");
+  const uint16_t info =
+      channel(rosmsg::MessageTraits<CameraInfo>::kRosName, rosmsg::Definition<CameraInfo>(),
+              "/camera/camera/color/camera_info");
+  const uint16_t tf =
+      channel(rosmsg::MessageTraits<TFMessage>::kRosName, rosmsg::Definition<TFMessage>(), "/tf");
+  const uint16_t tf_static = channel(rosmsg::MessageTraits<TFMessage>::kRosName,
+                                     rosmsg::Definition<TFMessage>(), "/tf_static");
+  const int64_t t0 = 1'700'000'000'000'000'000;
+  uint32_t seq = 0;
+  auto put = [&](uint16_t ch, int64_t t, const std::vector<uint8_t>& bytes) {
+    ASSERT_TRUE(
+        w->Write(ch, seq++, static_cast<uint64_t>(t), static_cast<uint64_t>(t), bytes).ok());
+  };
+  auto edge = [](const std::string& parent, const std::string& child, const RigidTransform& X,
+                 int64_t t) {
+    rosmsg::TransformStamped e;
+    e.header = {rosmsg::Time::FromNanoseconds(t), parent};
+    e.child_frame_id = child;
+    e.transform.translation = {X.translation().x(), X.translation().y(), X.translation().z()};
+    const Eigen::Quaterniond q = X.quaternion();
+    e.transform.rotation = {q.x(), q.y(), q.z(), q.w()};
+    return e;
+  };
+  // The optical frame looks along +x of the link (z forward, x right, y down).
+  const RigidTransform link_to_optical =
+      RigidTransform::LookAt({0, 0, 0}, {1, 0, 0}, Eigen::Vector3d::UnitZ());
+  put(tf_static, t0,
+      rosmsg::Encode(TFMessage{
+          {edge("igus_rebel_base_link", "mount", RigidTransform(Eigen::Vector3d(0, 0, 0.4)), t0),
+           edge("link", "camera_color_optical_frame", link_to_optical, t0)}}));
+  for (int64_t t = t0 - 20'000'000; t <= t0 + 3'100'000'000; t += 10'000'000) {
+    const double s = static_cast<double>(t - t0) * 1e-9;
+    put(tf, t,
+        rosmsg::Encode(TFMessage{
+            {edge("mount", "link", RigidTransform::FromRpy(0, 0, 0.05 * s, {0, 0, 0}), t)}}));
+  }
+  constexpr int kW = 64, kH = 48;
+  for (int64_t i = 0; i < 90; ++i) {
+    const int64_t t = t0 + i * int64_t{33'333'333};
+    Image c;
+    c.header = {rosmsg::Time::FromNanoseconds(t), "camera_color_optical_frame"};
+    c.width = kW;
+    c.height = kH;
+    c.encoding = "bgr8";
+    c.step = 3 * kW;
+    Image d = c;
+    d.encoding = "16UC1";
+    d.step = 2 * kW;
+    for (int v = 0; v < kH; ++v) {
+      for (int u = 0; u < kW; ++u) {
+        const bool disc = (u - 32) * (u - 32) + (v - 24) * (v - 24) < 100;
+        c.data.insert(c.data.end(),
+                      {static_cast<uint8_t>(disc ? 30 : 40), static_cast<uint8_t>(disc ? 20 : 160),
+                       static_cast<uint8_t>(disc ? 210 : 40)});
+        d.data.insert(d.data.end(),
+                      {static_cast<uint8_t>(600 & 0xff), static_cast<uint8_t>(600 >> 8)});
+      }
+    }
+    CameraInfo k;
+    k.header = c.header;
+    k.width = kW;
+    k.height = kH;
+    k.k = {50.0, 0, 31.5, 0, 50.0, 23.5, 0, 0, 1};
+    put(color, t, rosmsg::Encode(c));
+    put(depth, t, rosmsg::Encode(d));
+    put(info, t, rosmsg::Encode(k));
+  }
+  EXPECT_TRUE(w->Close().ok());
+  return path;
+}
+
+TEST_F(ReplayTest, ARobotsBagIntoARunFolder) {
+  const fs::path bag = WriteRobotBag(*dir_ / "robot.mcap");
+  Result<recording::Bag> b = recording::ReadBag(bag);
+  ASSERT_TRUE(b.ok()) << b.status().ToString();
+  EXPECT_FALSE(b->avp_recording);
+  EXPECT_EQ(b->pairs, 90u);
+  ASSERT_EQ(b->views.size(), 3u);  // 1 frame per second of bag time
+  experiment::RunConfig config = experiment::BagRunConfig(*b).value();
+  experiment::ReplayOptions o;
+  o.folder.out_dir = *dir_ / "robot_default";
+  // The configuration's default segmenter is the oracle: refused on a robot's bag.
+  Result<experiment::ReplaySummary> r = experiment::ReplayToFolder(*b, config, Registries(), o);
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("a real robot's bag never has them"));
+  o.segmenter = "color";
+  o.folder.out_dir = *dir_ / "robot_color";
+  r = experiment::ReplayToFolder(*b, config, Registries(), o);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->segmenter, "color");
+  EXPECT_EQ(r->metrics_compared, 0u);
+  const json record = io::ReadJsonFile(o.folder.out_dir / "record.json").value();
+  EXPECT_EQ(record["final_metrics"], nullptr);  // no ground truth
+  EXPECT_EQ(record["replay"]["pairs"], 90);
+  EXPECT_EQ(record["replay"]["pairs_thinned"], 87);
+  ASSERT_EQ(record["steps"].size(), 3u);
+  for (const json& step : record["steps"]) {
+    EXPECT_GT(step["occupied_voxels"].get<int>(), 100) << step.dump();  // the wall
+    EXPECT_GE(step["masks"].get<int>(), 1) << step.dump();              // the red disc
+  }
+  // The wall is 0.6 m along the camera's axis, which turns about the mount (0.4 m up) at
+  // 0.05 rad/s: at t = 2 s the camera looks 0.1 rad to the left.
+  Result<mapping::SemanticMap> map = mapping::LoadMap(o.folder.out_dir / "map.avpmap");
+  ASSERT_TRUE(map.ok()) << map.status().ToString();
+  EXPECT_GT(map->grid().CountOccupiedVoxels(), 300u);
+}
+
 #ifdef AVP_BINARY
 TEST_F(ReplayTest, CommandEndToEnd) {
   const std::string avp = AVP_BINARY;
@@ -339,6 +465,15 @@ TEST_F(ReplayTest, CommandEndToEnd) {
   EXPECT_TRUE(fs::exists(*dir_ / "cli_cut" / "map.avpmap"));
 
   // Unknown topic: the error lists the bag's topics.
+  // A robot's bag with the RealSense names: --segmenter color.
+  const fs::path robot = WriteRobotBag(*dir_ / "cli_robot.mcap");
+  r = test::RunShell(avp + " replay " + robot.string() + " --segmenter color --fps 2 --out " +
+                     (*dir_ / "cli_robot").string() + " 2>&1");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("robot bag, 6 view(s) of 90 colour/depth pairs (84 left out"));
+  EXPECT_THAT(r.output, HasSubstr("replayed 6 view(s) with color masks"));
+  EXPECT_TRUE(fs::exists(*dir_ / "cli_robot" / "map.ot"));
+
   r = test::RunShell(avp + " replay " + Bag().string() + " --out " + (*dir_ / "x").string() +
                      " --color-topic /nope 2>&1");
   EXPECT_EQ(r.exit_code, 1) << r.output;
