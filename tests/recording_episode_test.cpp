@@ -15,6 +15,7 @@
 #include <sys/resource.h>
 
 #include <avp/eval/ground_truth_io.h>
+#include <avp/experiment/bench.h>
 #include <avp/experiment/episode_recording.h>
 #include <avp/experiment/episode_runner.h>
 #include <avp/experiment/run_folder.h>
@@ -337,6 +338,34 @@ TEST_F(RecordingTest, RunFolderRecordsAndAWriteErrorStopsTheRunNamingTheFile) {
   const mcap::StreamResult cut = mcap::ReadStreaming(options.out_dir / "episode.mcap");
   EXPECT_FALSE(cut.status.ok());
   EXPECT_EQ(cut.file.metadata.size(), 1u);
+}
+
+TEST_F(RecordingTest, BenchRecordsEveryEpisodeInItsRunFolder) {
+  experiment::BenchConfig bench;
+  bench.scenarios = {"tomato-single-cluster"};
+  bench.planners = {"predefined", "random"};
+  bench.seeds = {5};
+  bench.base.episode.views = 2;
+  bench.jobs = 2;
+  bench.progress = false;
+  bench.record = true;
+  bench.out_dir = dir_ / "bench";
+  const auto summary = experiment::RunBench(bench, Registries());
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  for (const std::string planner : {"predefined", "random"}) {
+    SCOPED_TRACE(planner);
+    const fs::path path =
+        bench.out_dir / "runs" / "tomato-single-cluster" / planner / "seed-5" / "episode.mcap";
+    const mcap::File f = mcap::ReadIndexed(path).value();
+    EXPECT_EQ(On(f, rec::kStepTopic).size(), 2u);
+    EXPECT_EQ(On(f, rec::kColorTopic).size(), 2u);
+    ASSERT_EQ(f.metadata.size(), 1u);
+    EXPECT_EQ(f.metadata[0].metadata.at("command"), "avp bench");
+    EXPECT_EQ(f.metadata[0].metadata.at("planner"), planner);
+    EXPECT_EQ(f.metadata[0].metadata.at("seed"), "5");
+    ASSERT_EQ(f.attachments.size(), 1u);
+    EXPECT_EQ(f.attachments[0].name, "ground_truth.json");
+  }
 }
 
 }  // namespace
