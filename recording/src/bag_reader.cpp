@@ -54,6 +54,11 @@ uint16_t U16(const uint8_t* p, bool big) {
              : static_cast<uint16_t>(p[0] | (p[1] << 8));
 }
 
+/// A frame name as tf2 keys it: without a leading '/' (ROS 1 bags and old drivers write one).
+std::string FrameName(std::string_view name) {
+  return std::string(!name.empty() && name.front() == '/' ? name.substr(1) : name);
+}
+
 RigidTransform Interpolate(const RigidTransform& a, const RigidTransform& b, double t) {
   const Eigen::Quaterniond qa = a.quaternion();
   const Eigen::Quaterniond qb = b.quaternion();
@@ -176,8 +181,8 @@ Result<CameraIntrinsics> IntrinsicsFromCameraInfoMsg(const rosmsg::CameraInfo& i
 // ---- TF -----------------------------------------------------------------------------------------
 
 Status TfTree::Add(const rosmsg::TransformStamped& t, bool is_static) {
-  const std::string& parent = t.header.frame_id;
-  const std::string& child = t.child_frame_id;
+  const std::string parent = FrameName(t.header.frame_id);
+  const std::string child = FrameName(t.child_frame_id);
   const int64_t stamp_ns = t.header.stamp.ToNanoseconds();
   if (parent.empty() || child.empty() || parent == child) {
     return InvalidArgumentError(
@@ -270,8 +275,11 @@ Result<RigidTransform> TfTree::EdgeAt(const std::string& child, const Edge& edge
   return Interpolate(lo->X_PC, hi->X_PC, t);
 }
 
-Result<RigidTransform> TfTree::Lookup(const std::string& target, const std::string& source,
-                                      int64_t stamp_ns, int64_t tolerance_ns) const {
+Result<RigidTransform> TfTree::Lookup(const std::string& target_frame,
+                                      const std::string& source_frame, int64_t stamp_ns,
+                                      int64_t tolerance_ns) const {
+  const std::string target = FrameName(target_frame);
+  const std::string source = FrameName(source_frame);
   if (target == source) return RigidTransform::Identity();
   const std::vector<std::string> frames = Frames();
   for (const std::string& f : {target, source}) {

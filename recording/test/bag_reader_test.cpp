@@ -293,7 +293,7 @@ TEST_F(BagReaderTest, TransformOutsideItsSamplesBeyondTheToleranceIsAnError) {
   TfTree tree;
   ASSERT_TRUE(tree.Add(Tf("a", "b", RigidTransform::Identity(), 0), false).ok());
   ASSERT_TRUE(tree.Add(Tf("a", "b", RigidTransform(Eigen::Vector3d(1, 0, 0)), 10), false).ok());
-  Result<RigidTransform> mid = tree.Lookup("a", "b", 5, 0);
+  Result<RigidTransform> mid = tree.Lookup("/a", "b", 5, 0);  // a leading '/' as tf2: ignored
   ASSERT_TRUE(mid.ok());
   EXPECT_DOUBLE_EQ(mid->translation().x(), 0.5);
   EXPECT_TRUE(tree.Lookup("a", "b", 40, 30).ok());

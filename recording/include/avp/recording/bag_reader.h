@@ -142,6 +142,7 @@ Result<CameraIntrinsics> IntrinsicsFromCameraInfoMsg(const rosmsg::CameraInfo& i
 /// parent -> child keeps all its samples; a static edge holds at every time.
 class TfTree {
  public:
+  /// Frame names are kept without a leading '/' (as tf2 does), in Add and in Lookup.
   /// Adds one TransformStamped. InvalidArgument naming the frames and values: an empty frame,
   /// parent == child, a non-finite value, a quaternion whose norm is not 1 (within 1e-3), a child
   /// that already has another parent.
