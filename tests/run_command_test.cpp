@@ -8,6 +8,7 @@
 #include <map>
 #include <sstream>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <sys/resource.h>
@@ -423,6 +424,47 @@ TEST_F(RunCommandTest, BenchWritesLongFormatSummaryAndPlots) {
   EXPECT_EQ(binned_found, found_of);
   EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
               HasSubstr("Fruits found at the final view by best visible fraction"));
+}
+
+// `avp bench --oracle-regret`: each run's record.json holds its plans' regret, and summary.csv /
+// summary.md carry exactly those numbers per view and pooled.
+TEST_F(RunCommandTest, BenchOracleRegretIsSummarisedPerScenario) {
+  BenchConfig o;
+  o.scenarios = {"tomato-single-cluster"};
+  o.planners = {"avp-nbv"};
+  o.seeds = {0};
+  o.base.episode.views = 3;
+  o.base.oracle_regret = true;
+  o.out_dir = dir_ / "bench-regret";
+  o.progress = false;
+  auto r = RunBench(o, registries_);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->failed, 0u);
+  auto rec = io::ReadJsonFile(o.out_dir / "runs" / "tomato-single-cluster" / "avp-nbv" / "seed-0" /
+                              "record.json");
+  ASSERT_TRUE(rec.ok()) << rec.status().ToString();
+  const auto& steps = (*rec)["oracle_regret"];
+  ASSERT_EQ(steps.size(), 2u);  // two plans choose views 2 and 3
+  double sum = 0.0;
+  for (const auto& step : steps) {
+    const double regret = step["regret"].get<double>();
+    EXPECT_GE(regret, 0.0);
+    EXPECT_LE(regret, 1.0);
+    EXPECT_GE(step["chosen_true_rank"].get<int>(), 1);
+    EXPECT_GT(step["candidates"].get<int>(), 10);
+    sum += regret;
+  }
+  const std::string csv = ReadAll(o.out_dir / "summary.csv");
+  EXPECT_THAT(csv, HasSubstr(fmt::format(
+                       "tomato-single-cluster,avp-nbv,oracle,2,oracle_regret,{:.9g},0,1\n",
+                       steps[0]["regret"].get<double>())));
+  EXPECT_THAT(csv, HasSubstr(fmt::format(
+                       "tomato-single-cluster,avp-nbv,oracle,0,oracle_regret,{:.9g},", sum / 2.0)));
+  EXPECT_THAT(csv, HasSubstr(fmt::format(
+                       "tomato-single-cluster,avp-nbv,oracle,3,oracle_chosen_rank,{},0,1\n",
+                       steps[1]["chosen_true_rank"].get<int>())));
+  EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
+              HasSubstr(fmt::format("| avp-nbv | 2 | {:.3f} ± ", sum / 2.0)));
 }
 
 TEST_F(RunCommandTest, BenchConfigFileAndErrors) {

@@ -20,7 +20,7 @@ struct BenchCli {
   std::string config, scenarios, planners, seeds, segmenter, out = "out/bench";
   int views = 0, jobs = 0;
   bool force = false;
-  bool record = false;
+  bool record = false, oracle_regret = false;
   std::vector<std::string> planner_options, set;
 };
 
@@ -103,6 +103,7 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   b.out_dir = cli.out;
   b.force = cli.force;
   b.record = cli.record;
+  if (cli.oracle_regret) b.base.oracle_regret = true;
   if (!cli.config.empty()) b.inputs.emplace_back(cli.config, "bench configuration file");
   return b;
 }
@@ -172,6 +173,10 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
   cmd->add_flag("--record", cli->record,
                 "Record every episode as MCAP: runs/<scenario>/<planner>/seed-<n>/episode.mcap "
                 "(docs/recording.md)");
+  cmd->add_flag("--oracle-regret", cli->oracle_regret,
+                "Measure each plan step's regret and rank correlation with the truth (summary.csv "
+                "and summary.md per scenario, record.json per run; the episodes are unchanged, "
+                "plans take longer)");
   cmd->callback([cli, cmd, &context] {
     RunGuarded(context, [&] { return Bench(*cmd, *cli, *context.registries); });
   });

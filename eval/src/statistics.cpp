@@ -57,6 +57,21 @@ double StudentT975(size_t dof) {
   return 1.96;
 }
 
+double Median(std::span<const double> values) {
+  std::vector<double> v;
+  v.reserve(values.size());
+  for (double x : values) {
+    if (std::isfinite(x)) v.push_back(x);
+  }
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  const size_t mid = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
+  if (v.size() % 2 == 1) return v[mid];
+  const double upper = v[mid];
+  const double lower = *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid));
+  return 0.5 * (lower + upper);
+}
+
 Summary Summarize(std::span<const double> values) {
   Summary s;
   double sum = 0.0;

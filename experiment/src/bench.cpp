@@ -310,6 +310,13 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
                         .episode_visible_fraction = f.episode_visible_fraction,
                         .found = f.found});
   }
+  for (const eval::StepRegret& step : r->regret) {
+    j.regret.push_back({.step = step.step,
+                        .candidates = step.candidates,
+                        .regret = step.regret,
+                        .chosen_true_rank = step.chosen_true_rank,
+                        .rank_correlation = step.rank_correlation});
+  }
   const planning::PlannerEntry* entry = registries.planners.Find(planner);
   const nlohmann::json options = io::OptionsToJson(
       c.planner.options, entry != nullptr ? entry->options.Info() : std::vector<OptionInfo>{});
@@ -325,6 +332,7 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
                      {"git_revision", revision},
                      {"fruits", report::FruitsJson(r->fruits)}};
   // A scene file's entry: the file and the arrangement its scene was made with.
+  if (c.oracle_regret) rec["oracle_regret"] = report::RegretJson(r->regret);
   if (!c.scene_file.empty()) rec["scene_file"] = c.scene_file.string();
   if (!c.arrangement.empty()) rec["arrangement"] = c.arrangement;
   if (Status s = io::WriteJsonFile(dir / "record.json", rec); !s.ok()) return fail(s);

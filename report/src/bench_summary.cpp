@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -47,6 +48,79 @@ std::string SummaryCsv(const Aggregates& a, const BenchDescription& bench) {
     }
   }
   return csv;
+}
+
+/// The metrics of the regret probe in summary.csv, in this order.
+constexpr std::array<const char*, 3> kRegretMetrics = {"oracle_regret", "oracle_rank_correlation",
+                                                       "oracle_chosen_rank"};
+
+double RegretValue(const BenchRegret& r, size_t metric) {
+  switch (metric) {
+    case 0:
+      return r.regret;
+    case 1:
+      return r.rank_correlation;
+    default:
+      return static_cast<double>(r.chosen_true_rank);
+  }
+}
+
+/// summary.csv's rows of the regret probe: per view a plan chose (2 .. views), then pooled over
+/// every plan step at view 0. None when no episode measured its regret.
+std::string RegretCsv(const std::vector<BenchEpisode>& episodes, const BenchDescription& bench) {
+  std::string csv;
+  for (const std::string& s : bench.scenarios) {
+    for (const std::string& p : bench.planners) {
+      // samples[metric][view], view 0 pooled
+      std::vector<std::vector<std::vector<double>>> samples(
+          kRegretMetrics.size(),
+          std::vector<std::vector<double>>(static_cast<size_t>(std::max(bench.views, 1)) + 1));
+      bool any = false;
+      for (const BenchEpisode& e : episodes) {
+        if (e.scenario != s || e.planner != p || !e.status.ok() || e.metrics.empty()) continue;
+        for (const BenchRegret& r : e.regret) {
+          const int view = r.step + 2;
+          if (view < 2 || view > bench.views) continue;
+          any = true;
+          for (size_t m = 0; m < kRegretMetrics.size(); ++m) {
+            samples[m][static_cast<size_t>(view)].push_back(RegretValue(r, m));
+            samples[m][0].push_back(RegretValue(r, m));
+          }
+        }
+      }
+      if (!any) continue;
+      for (size_t m = 0; m < kRegretMetrics.size(); ++m) {
+        for (int v = 0; v <= bench.views; ++v) {
+          if (v == 1) continue;
+          const eval::Summary st = eval::Summarize(samples[m][static_cast<size_t>(v)]);
+          csv += fmt::format("{},{},{},{},{},{},{},{}\n", s, p, bench.segmenter, v,
+                             kRegretMetrics[m], FormatG9(st.mean), FormatG9(Ci(st.ci95)), st.n);
+        }
+      }
+    }
+  }
+  return csv;
+}
+
+/// The regret table of one scenario (empty when no planner's regret was measured).
+std::string RegretTable(const std::vector<BenchEpisode>& episodes, const BenchDescription& bench,
+                        const std::string& scenario) {
+  std::string rows;
+  for (const std::string& p : bench.planners) {
+    const RegretSummary r = SummarizeRegret(episodes, scenario, p);
+    if (r.plans == 0) continue;
+    rows += fmt::format(
+        "| {} | {} | {:.3f} ± {:.3f} | {} / {} | {:.0f} | {:.3f} | {:.3f} ± {:.3f} |\n", p, r.plans,
+        r.regret_mean, r.regret_ci95, r.best_chosen, r.plans, r.chosen_rank_median,
+        r.rank_correlation_median, r.rank_correlation_mean, r.rank_correlation_ci95);
+  }
+  if (rows.empty()) return "";
+  return "\nOracle regret of each plan step (`--oracle-regret`; every seed's plans pooled): regret "
+         "= 1 − the choice's true gain / the best candidate's, the choice's rank by the truth, "
+         "and Spearman's correlation of the planner's gain with the true gain over the "
+         "candidates:\n\n| planner | plans | regret | truly best chosen | median true rank | "
+         "median rank corr. | rank corr. |\n|---|---|---|---|---|---|---|\n" +
+         rows;
 }
 
 std::string MarkdownHeader(const BenchDescription& bench, double seconds) {
@@ -285,6 +359,35 @@ std::vector<VisibilityBin> FoundByVisibility(const std::vector<BenchEpisode>& ep
   return bins;
 }
 
+RegretSummary SummarizeRegret(const std::vector<BenchEpisode>& episodes,
+                              const std::string& scenario, const std::string& planner) {
+  std::vector<double> regret, rank, correlation;
+  RegretSummary out;
+  for (const BenchEpisode& e : episodes) {
+    if (e.scenario != scenario || e.planner != planner || !e.status.ok() || e.metrics.empty()) {
+      continue;
+    }
+    for (const BenchRegret& r : e.regret) {
+      ++out.plans;
+      if (std::isfinite(r.regret)) regret.push_back(r.regret);
+      rank.push_back(static_cast<double>(r.chosen_true_rank));
+      out.best_chosen += r.chosen_true_rank == 1 ? 1 : 0;
+      if (std::isfinite(r.rank_correlation)) correlation.push_back(r.rank_correlation);
+    }
+  }
+  if (out.plans == 0) return out;
+  const eval::Summary rs = eval::Summarize(regret);
+  out.regret_mean = rs.mean;
+  out.regret_ci95 = Ci(rs.ci95);
+  out.chosen_rank_median = eval::Median(rank);
+  out.correlated = correlation.size();
+  const eval::Summary cs = eval::Summarize(correlation);
+  out.rank_correlation_mean = cs.mean;
+  out.rank_correlation_ci95 = Ci(cs.ci95);
+  out.rank_correlation_median = eval::Median(correlation);
+  return out;
+}
+
 std::string SafeFileName(std::string s) {
   for (char& c : s) {
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.')) c = '_';
@@ -298,7 +401,8 @@ Result<BenchTables> WriteBenchSummary(const fs::path& out_dir, const BenchDescri
   BenchTables tables;
   tables.failed = a.failed_total;
   const fs::path csv_path = out_dir / "summary.csv";
-  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(csv_path, SummaryCsv(a, bench)));
+  AVP_RETURN_IF_ERROR(
+      io::WriteFileAtomic(csv_path, SummaryCsv(a, bench) + RegretCsv(episodes, bench)));
   const fs::path visibility_csv = out_dir / "fruits_by_visibility.csv";
   AVP_RETURN_IF_ERROR(io::WriteFileAtomic(visibility_csv, VisibilityCsv(episodes, bench)));
   std::vector<fs::path> plots;
@@ -308,6 +412,7 @@ Result<BenchTables> WriteBenchSummary(const fs::path& out_dir, const BenchDescri
     md += VisibilityLine(bench, s);
     md += VisibilityTable(episodes, bench, s);
     md += F1PerViewTable(a, bench, s);
+    md += RegretTable(episodes, bench, s);
     AVP_RETURN_IF_ERROR(WriteScenarioPlots(out_dir, a, bench, s, plots));
   }
   const fs::path md_path = out_dir / "summary.md";

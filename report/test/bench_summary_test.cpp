@@ -19,6 +19,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 std::string ReadAll(const fs::path& p) {
   std::ifstream in(p);
@@ -133,6 +134,59 @@ TEST_F(BenchSummaryFilesTest, WritesTheVisibilityCsvAndTable) {
   EXPECT_THAT(md, HasSubstr("| b | – | – | – | 1 / 1 = 1.00 [0.21, 1.00] |"));
   ASSERT_GE(t->files.size(), 3u);
   EXPECT_EQ(t->files[2], dir_ / "fruits_by_visibility.csv");
+}
+
+/// Regret per plan step: pooled per (scenario, planner), per view in summary.csv, a table in
+/// summary.md; planners without measurements have no rows.
+TEST_F(BenchSummaryFilesTest, WritesTheRegretOfEachPlanStep) {
+  BenchDescription d;
+  d.scenarios = {"s"};
+  d.planners = {"a", "b"};
+  d.seeds = 2;
+  d.views = 3;
+  d.segmenter = "oracle";
+  d.voxel_size_m = 0.005;
+  const auto nan = std::nan("");
+  auto episode = [&](const std::string& planner, uint64_t seed, std::vector<BenchRegret> regret) {
+    BenchEpisode e = Episode(planner, seed, {});
+    e.metrics.resize(3, e.metrics.front());
+    e.regret = std::move(regret);
+    return e;
+  };
+  const std::vector<BenchEpisode> episodes = {
+      episode("a", 0,
+              {{.step = 0, .regret = 0.0, .chosen_true_rank = 1, .rank_correlation = 0.5},
+               {.step = 1, .regret = 0.5, .chosen_true_rank = 4, .rank_correlation = 0.1}}),
+      episode("a", 1,
+              {{.step = 0, .regret = 0.2, .chosen_true_rank = 2, .rank_correlation = nan},
+               {.step = 1, .regret = 0.1, .chosen_true_rank = 3, .rank_correlation = 0.3}}),
+      episode("b", 0, {}),
+  };
+  const RegretSummary r = SummarizeRegret(episodes, "s", "a");
+  EXPECT_EQ(r.plans, 4u);
+  EXPECT_DOUBLE_EQ(r.regret_mean, 0.2);
+  EXPECT_EQ(r.best_chosen, 1u);
+  EXPECT_DOUBLE_EQ(r.chosen_rank_median, 2.5);
+  EXPECT_EQ(r.correlated, 3u);  // the NaN left out
+  EXPECT_DOUBLE_EQ(r.rank_correlation_median, 0.3);
+  EXPECT_NEAR(r.rank_correlation_mean, 0.3, 1e-12);
+  EXPECT_EQ(SummarizeRegret(episodes, "s", "b").plans, 0u);
+
+  auto t = WriteBenchSummary(dir_, d, episodes, 1.0);
+  ASSERT_TRUE(t.ok()) << t.status().ToString();
+  const std::string csv = ReadAll(dir_ / "summary.csv");
+  // view 0: every plan pooled; views 2 and 3: the plans that chose them.
+  EXPECT_THAT(csv, HasSubstr("s,a,oracle,0,oracle_regret,0.2,"));
+  EXPECT_THAT(csv, HasSubstr("s,a,oracle,2,oracle_regret,0.1,1.2706205,2\n"));
+  EXPECT_THAT(csv, HasSubstr("s,a,oracle,3,oracle_regret,0.3,2.541241,2\n"));
+  EXPECT_THAT(csv, HasSubstr("s,a,oracle,2,oracle_rank_correlation,0.5,0,1\n"));
+  EXPECT_THAT(csv, HasSubstr("s,a,oracle,0,oracle_chosen_rank,2.5,"));
+  EXPECT_THAT(csv, Not(HasSubstr("s,b,oracle,0,oracle_regret")));
+  EXPECT_THAT(csv, Not(HasSubstr(",1,oracle_regret")));
+  const std::string md = ReadAll(dir_ / "summary.md");
+  EXPECT_THAT(md, HasSubstr("| a | 4 | 0.200 ± "));
+  EXPECT_THAT(md, HasSubstr(" | 1 / 4 | 2 | 0.300 | 0.300 ± "));
+  EXPECT_THAT(md, Not(HasSubstr("| b | 0 |")));
 }
 
 }  // namespace

@@ -23,6 +23,10 @@ struct Summary {
 /// Summarises `values` (see Summary). Two passes (mean, then squared deviations), in order.
 Summary Summarize(std::span<const double> values);
 
+/// The median of the finite values (the mean of the middle two for an even count); NaN when
+/// there are none.
+double Median(std::span<const double> values);
+
 /// The two-sided 95 % quantile of Student's t, t(0.975, dof): exact to 1e-6 for dof = 1..30 (a
 /// table), 1.96 (the normal quantile) beyond; NaN for dof = 0.
 double StudentT975(size_t dof);

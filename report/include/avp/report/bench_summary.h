@@ -24,6 +24,17 @@ struct BenchFruit {
   bool found = false;  ///< at the final view
 };
 
+/// One plan step of a bench episode measured with the truth (eval::StepRegret, `avp bench
+/// --oracle-regret`).
+struct BenchRegret {
+  int step = 0;  ///< plan call, from 0: it chose fused view step + 2 (1-based)
+  size_t candidates = 0;
+  double regret = std::numeric_limits<double>::quiet_NaN();
+  size_t chosen_true_rank = 1;
+  /// Spearman's correlation of the planner's gain with the true gain; NaN when undefined.
+  double rank_correlation = std::numeric_limits<double>::quiet_NaN();
+};
+
 /// One episode of a bench as its summary needs it.
 struct BenchEpisode {
   std::string scenario, planner;
@@ -36,7 +47,28 @@ struct BenchEpisode {
   double episode_s = 0.0;
   /// Every ground-truth fruit of the episode (empty for a ground truth without fruits).
   std::vector<BenchFruit> fruits;
+  /// Per plan step with the run configuration's oracle_regret (empty otherwise).
+  std::vector<BenchRegret> regret;
 };
+
+/// The regret of one (scenario, planner) over every plan step of its successful episodes, all
+/// seeds pooled (`avp bench --oracle-regret`; docs/experiments.md).
+struct RegretSummary {
+  size_t plans = 0;
+  double regret_mean = std::numeric_limits<double>::quiet_NaN(), regret_ci95 = 0.0;
+  /// Plans whose choice was the truly best candidate (chosen_true_rank 1).
+  size_t best_chosen = 0;
+  double chosen_rank_median = std::numeric_limits<double>::quiet_NaN();
+  /// Over the plans where the correlation is defined (`correlated` of them).
+  size_t correlated = 0;
+  double rank_correlation_median = std::numeric_limits<double>::quiet_NaN();
+  double rank_correlation_mean = std::numeric_limits<double>::quiet_NaN();
+  double rank_correlation_ci95 = 0.0;
+};
+
+/// RegretSummary of (scenario, planner); plans = 0 when no episode measured its regret.
+RegretSummary SummarizeRegret(const std::vector<BenchEpisode>& episodes,
+                              const std::string& scenario, const std::string& planner);
 
 /// Fruits of one visibility bin, [lo, hi) (the last bin includes hi = 1): the bins' edges are
 /// 0, eval::kVisibleFractionLevels and 1.
@@ -108,9 +140,12 @@ struct BenchTables {
 
 /// Writes the bench's summary into `out_dir` (docs/experiments.md): summary.csv (long format:
 /// scenario, planner, segmenter, view, metric, mean, ci95, n; an episode that ended early keeps
-/// its last metrics for the remaining views), fruits_by_visibility.csv (FoundByVisibility per
-/// scenario, planner and bin), summary.md (the final view per planner, how hidden the fruits are,
-/// the fraction found per visibility bin, F1 per view), and per scenario f1_<s>.svg and
+/// its last metrics for the remaining views; with regret measured, also the metrics
+/// oracle_regret, oracle_rank_correlation and oracle_chosen_rank at the view each plan chose, and
+/// per (scenario, planner) the same three pooled over every plan at view 0),
+/// fruits_by_visibility.csv (FoundByVisibility per scenario, planner and bin), summary.md (the
+/// final view per planner, how hidden the fruits are, the fraction found per visibility bin, F1
+/// per view, the regret table when measured), and per scenario f1_<s>.svg and
 /// fruits_<s>.svg (mean +- 95 % CI per planner, the paper's Fig. 3). `seconds` is the bench's wall
 /// time so far.
 Result<BenchTables> WriteBenchSummary(const std::filesystem::path& out_dir,
