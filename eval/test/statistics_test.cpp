@@ -89,6 +89,15 @@ TEST(StatisticsTest, EdgeCases) {
 }
 
 }  // namespace
+TEST(StatisticsTest, MedianOfOddEvenAndNonFiniteSamples) {
+  EXPECT_DOUBLE_EQ(Median(std::vector<double>{3.0, 1.0, 2.0}), 2.0);
+  EXPECT_DOUBLE_EQ(Median(std::vector<double>{4.0, 1.0, 3.0, 2.0}), 2.5);
+  const double nan = std::nan("");
+  EXPECT_DOUBLE_EQ(Median(std::vector<double>{nan, 5.0, INFINITY, -1.0}), 2.0);
+  EXPECT_TRUE(std::isnan(Median(std::vector<double>{})));
+  EXPECT_TRUE(std::isnan(Median(std::vector<double>{nan})));
+}
+
 TEST(SpearmanTest, RanksWithTiesAndDegenerateSamples) {
   const std::vector<double> a = {1.0, 2.0, 3.0, 4.0, 5.0};
   EXPECT_DOUBLE_EQ(SpearmanRankCorrelation(a, std::vector<double>{10, 20, 30, 40, 50}), 1.0);
