@@ -464,13 +464,16 @@ TEST_F(RunCommandTest, BenchOracleRegretIsSummarisedPerScenario) {
                        "tomato-single-cluster,avp-nbv,oracle,3,oracle_chosen_rank,{},0,1\n",
                        steps[1]["chosen_true_rank"].get<int>())));
   EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
-              HasSubstr(fmt::format("| avp-nbv | 2 | {:.3f} ± ", sum / 2.0)));
+              HasSubstr(fmt::format("| avp-nbv | 2 | {:.0f} | {:.3f} ± ",
+                                    0.5 * (steps[0]["candidates"].get<double>() +
+                                           steps[1]["candidates"].get<double>()),
+                                    sum / 2.0)));
 }
 
 TEST_F(RunCommandTest, BenchConfigFileAndErrors) {
   auto paper = LoadBenchConfig(fs::path(AVP_CONFIG_DIR) / "experiments" / "paper.yaml");
   ASSERT_TRUE(paper.ok()) << paper.status().ToString();
-  EXPECT_EQ(paper->scenarios.size(), 5u);
+  EXPECT_EQ(paper->scenarios.size(), 7u);  // four tomato, three espalier
   EXPECT_EQ(paper->seeds.size(), 10u);
   EXPECT_EQ(paper->base.episode.views, 8);
   EXPECT_EQ(paper->base.segmenter.name, "oracle");

@@ -109,17 +109,21 @@ std::string RegretTable(const std::vector<BenchEpisode>& episodes, const BenchDe
   for (const std::string& p : bench.planners) {
     const RegretSummary r = SummarizeRegret(episodes, scenario, p);
     if (r.plans == 0) continue;
-    rows += fmt::format(
-        "| {} | {} | {:.3f} ± {:.3f} | {} / {} | {:.0f} | {:.3f} | {:.3f} ± {:.3f} |\n", p, r.plans,
-        r.regret_mean, r.regret_ci95, r.best_chosen, r.plans, r.chosen_rank_median,
-        r.rank_correlation_median, r.rank_correlation_mean, r.rank_correlation_ci95);
+    const std::string correlation =
+        r.correlated == 0 ? "– | –"
+                          : fmt::format("{:.3f} | {:.3f} ± {:.3f}", r.rank_correlation_median,
+                                        r.rank_correlation_mean, r.rank_correlation_ci95);
+    rows += fmt::format("| {} | {} | {:.0f} | {:.3f} ± {:.3f} | {} / {} | {:.0f} | {} |\n", p,
+                        r.plans, r.candidates_median, r.regret_mean, r.regret_ci95, r.best_chosen,
+                        r.plans, r.chosen_rank_median, correlation);
   }
   if (rows.empty()) return "";
   return "\nOracle regret of each plan step (`--oracle-regret`; every seed's plans pooled): regret "
          "= 1 − the choice's true gain / the best candidate's, the choice's rank by the truth, "
          "and Spearman's correlation of the planner's gain with the true gain over the "
-         "candidates:\n\n| planner | plans | regret | truly best chosen | median true rank | "
-         "median rank corr. | rank corr. |\n|---|---|---|---|---|---|---|\n" +
+         "candidates (a planner with one candidate has no regret by definition):\n\n| planner | "
+         "plans | candidates (median) | regret | truly best chosen | median true rank | median "
+         "rank corr. | rank corr. |\n|---|---|---|---|---|---|---|---|\n" +
          rows;
 }
 
@@ -361,7 +365,7 @@ std::vector<VisibilityBin> FoundByVisibility(const std::vector<BenchEpisode>& ep
 
 RegretSummary SummarizeRegret(const std::vector<BenchEpisode>& episodes,
                               const std::string& scenario, const std::string& planner) {
-  std::vector<double> regret, rank, correlation;
+  std::vector<double> regret, rank, correlation, candidates;
   RegretSummary out;
   for (const BenchEpisode& e : episodes) {
     if (e.scenario != scenario || e.planner != planner || !e.status.ok() || e.metrics.empty()) {
@@ -371,6 +375,7 @@ RegretSummary SummarizeRegret(const std::vector<BenchEpisode>& episodes,
       ++out.plans;
       if (std::isfinite(r.regret)) regret.push_back(r.regret);
       rank.push_back(static_cast<double>(r.chosen_true_rank));
+      candidates.push_back(static_cast<double>(r.candidates));
       out.best_chosen += r.chosen_true_rank == 1 ? 1 : 0;
       if (std::isfinite(r.rank_correlation)) correlation.push_back(r.rank_correlation);
     }
@@ -380,6 +385,7 @@ RegretSummary SummarizeRegret(const std::vector<BenchEpisode>& episodes,
   out.regret_mean = rs.mean;
   out.regret_ci95 = Ci(rs.ci95);
   out.chosen_rank_median = eval::Median(rank);
+  out.candidates_median = eval::Median(candidates);
   out.correlated = correlation.size();
   const eval::Summary cs = eval::Summarize(correlation);
   out.rank_correlation_mean = cs.mean;

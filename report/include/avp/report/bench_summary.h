@@ -55,6 +55,9 @@ struct BenchEpisode {
 /// seeds pooled (`avp bench --oracle-regret`; docs/experiments.md).
 struct RegretSummary {
   size_t plans = 0;
+  /// The median number of ranked candidates a plan had (1 for the predefined planner: its
+  /// regret is 0 by definition, and its rank correlation undefined).
+  double candidates_median = std::numeric_limits<double>::quiet_NaN();
   double regret_mean = std::numeric_limits<double>::quiet_NaN(), regret_ci95 = 0.0;
   /// Plans whose choice was the truly best candidate (chosen_true_rank 1).
   size_t best_chosen = 0;
