@@ -117,10 +117,12 @@ struct GainParams {
         w_predicted_target(o.w_predicted_target),
         p_unknown_outside_roi(
             OcclusionPerVoxel(o.p_unknown_outside_roi, voxel_size_m, o.occlusion_voxel_size_m)),
+        surface_gain(o.surface_gain),
         min_range2(o.min_gain_range_m * o.min_gain_range_m),
         range_ref(o.range_weight_ref_m),
         range_ref2(o.range_weight_ref_m * o.range_weight_ref_m) {}
   double w_target_entropy, w_unknown_near_target, w_predicted_target, p_unknown_outside_roi;
+  bool surface_gain;
   double min_range2, range_ref, range_ref2;
 };
 
@@ -184,8 +186,9 @@ bool ClipRayToRoi(const Eigen::Vector3d& from, const Eigen::Vector3d& to, const 
       }
       if (v.predicted_target) {
         w = o.w_predicted_target;
-      } else if (v.near_target) {
-        w = o.w_unknown_near_target;
+      } else {
+        if (v.near_target) w = o.w_unknown_near_target;
+        if (o.surface_gain) w *= occlusion;
       }
       if (w > 0.0) gain += p_vis * w * RangeWeight(k, voxel_size_m, eye, o);
       p_vis *= 1.0 - occlusion;
@@ -239,6 +242,8 @@ const OptionTable<AvpNbvOptions>& AvpNbvOptionTable() {
     t->Real("diversity_m", &O::diversity_m, "m", weight, "distance at which diversity saturates");
     t->Real("min_gain_bits", &O::min_gain_bits, "bits", weight,
             "stop when the best expected gain is below this (0: never)");
+    t->Flag("surface_gain", &O::surface_gain,
+            "an unknown voxel counts its weight times the chance the ray ends there");
     t->Nested("candidates", &O::candidates, ShellCandidateOptionTable());
     t->Nested("grid", &O::grid, GainGridOptionTable());
     t->AddRule([](const O& o, std::vector<std::string>& problems) {

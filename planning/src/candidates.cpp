@@ -64,10 +64,33 @@ std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const G
 
 }  // namespace
 
+std::vector<Eigen::Vector3d> CoreTargets(const Box3& roi, double spacing_m, int max_points) {
+  const Eigen::Vector3d c = roi.center();
+  const double hx = 0.5 * (roi.max().x() - roi.min().x());
+  const double hy = 0.5 * (roi.max().y() - roi.min().y());
+  // The medial axis runs along the long side, over its length minus the short side's.
+  const double half_axis = std::abs(hx - hy);
+  if (!(spacing_m > 0.0) || !(half_axis > 0.0) || max_points <= 1) return {c};
+  const Eigen::Vector3d u = hx >= hy ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  const int n = std::min(max_points, 1 + static_cast<int>(std::floor(2.0 * half_axis / spacing_m)));
+  if (n <= 1) return {c};
+  std::vector<Eigen::Vector3d> out;
+  for (int i = 0; i < n; ++i) {
+    const double t = -half_axis + 2.0 * half_axis * static_cast<double>(i) / (n - 1);
+    out.push_back(c + t * u);
+  }
+  return out;
+}
+
 std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const GainGrid& grid,
                                         const ShellCandidateOptions& options) {
   std::vector<ViewTarget> targets;
   const int max_targets = std::max(1, options.max_targets);
+  // The core's points are always targets (a third of the budget at most); fruit and frontiers
+  // share the rest as with the ROI centre alone.
+  const std::vector<Eigen::Vector3d> core =
+      CoreTargets(request.roi, options.core_target_spacing_m, std::max(1, max_targets / 3));
+  const int extra_core = static_cast<int>(core.size()) - 1;
   // Fruit instances, largest first (ties by id: Instances() is in id order).
   std::vector<mapping::InstanceInfo> instances;
   for (const mapping::InstanceInfo& info : request.map->Instances()) {
@@ -77,16 +100,17 @@ std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const Ga
                    [](const mapping::InstanceInfo& a, const mapping::InstanceInfo& b) {
                      return a.voxels > b.voxels;
                    });
-  const int fruit_budget = std::max(0, max_targets - 4);
+  const int fruit_budget = std::max(0, max_targets - 4 - extra_core);
   for (const mapping::InstanceInfo& info : instances) {
     if (static_cast<int>(targets.size()) >= fruit_budget) break;
     targets.push_back({info.centroid_W, "fruit-shell", static_cast<double>(info.voxels)});
   }
-  const int frontier_budget = std::max(0, max_targets - 1 - static_cast<int>(targets.size()));
+  const int frontier_budget =
+      std::max(0, max_targets - static_cast<int>(core.size()) - static_cast<int>(targets.size()));
   for (const ViewTarget& t : FrontierClusters(request, grid, frontier_budget)) {
     targets.push_back(t);
   }
-  targets.push_back({request.roi.center(), "roi", 1.0});
+  for (const Eigen::Vector3d& p : core) targets.push_back({p, "roi", 1.0});
   return targets;
 }
 
@@ -185,6 +209,8 @@ const OptionTable<ShellCandidateOptions>& ShellCandidateOptionTable() {
             "no eye this close to a known occupied voxel");
     t->Real("plant_core_radius_m", &O::plant_core_radius_m, "m", ValueRange::HalfOpen(0, 2),
             "within this of the plant's core an eye must be in known free space (0: off)");
+    t->Real("core_target_spacing_m", &O::core_target_spacing_m, "m", ValueRange::Closed(0, 10),
+            "targets along the core of a long ROI at least this far apart (0: the ROI centre)");
     t->Integer("ik_restarts", &O::ik_restarts, "", ValueRange::Closed(0, 32),
                "IK restarts per candidate after the attempt from the current joints");
     t->Threads("num_threads", &O::num_threads);

@@ -173,6 +173,31 @@ TEST(PlantCoreDistanceTest, AxisForSquareRoisMidPlaneForLongOnes) {
   EXPECT_NEAR(PlantCoreDistance({1.0, 1.2, 0.5}, wall), 0.5, 1e-12);
 }
 
+TEST(CoreTargetsTest, PointsAlongTheCoreOfALongRoiTheCentreOfASquareOne) {
+  const Box3 square(Eigen::Vector3d(0, -0.5, 0), Eigen::Vector3d(1, 0.5, 1));
+  for (double spacing : {0.0, 0.3}) {
+    const auto c = CoreTargets(square, spacing, 4);
+    ASSERT_EQ(c.size(), 1u);
+    EXPECT_TRUE(c[0].isApprox(Eigen::Vector3d(0.5, 0.0, 0.5)));
+  }
+  // Almost square (the axis 0.1 m long): shorter than the spacing, the centre alone.
+  const Box3 almost(Eigen::Vector3d(0, -0.5, 0), Eigen::Vector3d(0.9, 0.5, 1));
+  EXPECT_EQ(CoreTargets(almost, 0.3, 4).size(), 1u);
+  // The wall above: core segment x = 0.7, y in [-0.8, 0.8] (1.6 m), at mid-height.
+  const Box3 wall(Eigen::Vector3d(0.5, -1, 0), Eigen::Vector3d(0.9, 1, 1));
+  const auto w = CoreTargets(wall, 0.5, 8);  // 1 + floor(1.6 / 0.5) = 4, 0.533 m apart
+  ASSERT_EQ(w.size(), 4u);
+  for (size_t i = 0; i < w.size(); ++i) {
+    EXPECT_NEAR(w[i].x(), 0.7, 1e-12);
+    EXPECT_NEAR(w[i].z(), 0.5, 1e-12);
+    EXPECT_NEAR(w[i].y(), -0.8 + 1.6 * static_cast<double>(i) / 3.0, 1e-12);
+    EXPECT_NEAR(PlantCoreDistance(w[i], wall), 0.0, 1e-12);
+  }
+  EXPECT_EQ(CoreTargets(wall, 0.5, 3).size(), 3u);     // capped
+  EXPECT_EQ(CoreTargets(wall, 0.15, 30).size(), 11u);  // 1 + floor(10.7)
+  EXPECT_EQ(CoreTargets(wall, 0.0, 8).size(), 1u);     // off
+}
+
 TEST(AvpRayGainTest, FastEvaluatorEqualsTheReferenceOnRandomRays) {
   mapping::SemanticMap map = MakeMap(0.008);
   Rng rng(5);
@@ -460,7 +485,7 @@ TEST(AvpNbvOptionTest, SetsFieldsByNameAndNamesBadKeysAndValues) {
   EXPECT_EQ(o.candidates.radii_m, (std::vector<double>{0.3, 0.5}));
   // Every key of the options before the table (docs/planning.md) is still there, and settable.
   const std::vector<std::string> keys = table.Keys();
-  EXPECT_EQ(keys.size(), 29u);
+  EXPECT_EQ(keys.size(), 31u);
   for (const std::string& k : keys) {
     AvpNbvOptions x;
     const bool ok =

@@ -73,6 +73,11 @@ struct AvpNbvOptions {
   double w_diversity = 0.5;
   double diversity_m = 0.2;
   double min_gain_bits = 0.0;
+  /// What an unknown voxel is worth to a ray: off (the default), its weight w whatever follows
+  /// (a long unobserved path adds up); on, w times the probability that the ray ends there (its
+  /// occlusion probability), as a ray shows one surface: the sum along a ray is bounded by the
+  /// largest weight. Voxels on a detected fruit's predicted surface count w fully either way.
+  bool surface_gain = false;
   /// Threads over candidates (0 = all hardware threads). Results do not depend on it. An
   /// execution setting (PlannerContext::threads), not part of the table.
   int num_threads = 0;

@@ -31,6 +31,11 @@ struct ShellCandidateOptions {
   /// the foliage is) a camera must sit in known free space: the planner never puts the camera
   /// into unmapped foliage. 0 turns the rule off.
   double plant_core_radius_m = 0.25;
+  /// Targets along the plant's core (PlantCoreDistance's medial axis at the ROI's mid-height)
+  /// at least this far apart (metres): one at the ROI centre for a square ROI, several along a
+  /// long one (a row or an espalier wall), so candidates cover a wide plant. 0: the ROI centre
+  /// only.
+  double core_target_spacing_m = 0.0;
   /// IK restarts per candidate after the attempt from the current joints.
   int ik_restarts = 1;
   /// Threads for the IK checks (0 = all hardware threads); the result does not depend on it.
@@ -53,7 +58,15 @@ struct ViewTarget {
 
 /// Targets for the shell generator: the centroids of the map's target-class instances (largest
 /// first), centres of frontier clusters inside the ROI (unknown voxels next to free ones), and
-/// the ROI centre; at most options.max_targets.
+/// the plant's core: the ROI centre, or with core_target_spacing_m points along the core of a
+/// long ROI (CoreTargets); at most options.max_targets (the core's points are always kept).
+/// Points along the plant's core at the ROI's mid-height: the medial axis of the ROI's footprint
+/// (PlantCoreDistance: the vertical axis of a square ROI, a segment along the long side of a
+/// long one) evenly, ends included, 1 + floor(axis length / spacing_m) of them (at least
+/// spacing_m apart), at most max_points; the ROI centre alone when the axis is shorter than
+/// spacing_m or spacing_m is 0.
+std::vector<Eigen::Vector3d> CoreTargets(const Box3& roi, double spacing_m, int max_points);
+
 std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const GainGrid& grid,
                                         const ShellCandidateOptions& options);
 
