@@ -9,30 +9,14 @@
 #include <avp/live/ros2_rgbd_source.h>
 #include <avp/live/rviz_publisher.h>
 #include <avp/mapping/octomap_io.h>
+#include <avp/rosmsg/convert.h>
 
 namespace avp::live {
 
 namespace {
 
-rosmsg::ColorRGBA Rgba(double r, double g, double b, double a = 1.0) {
-  return {static_cast<float>(r), static_cast<float>(g), static_cast<float>(b),
-          static_cast<float>(a)};
-}
-
-/// Viridis at t in [0, 1] (five-stop piecewise-linear approximation).
-rosmsg::ColorRGBA Viridis(double t) {
-  static constexpr std::array<std::array<double, 3>, 5> kStops = {{{0.267, 0.005, 0.329},
-                                                                   {0.229, 0.322, 0.546},
-                                                                   {0.128, 0.567, 0.551},
-                                                                   {0.369, 0.789, 0.383},
-                                                                   {0.993, 0.906, 0.144}}};
-  t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, 1.0) * 4.0;
-  const size_t i = std::min<size_t>(static_cast<size_t>(t), 3);
-  const double f = t - static_cast<double>(i);
-  const auto& a = kStops[i];
-  const auto& b = kStops[i + 1];
-  return Rgba(a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]));
-}
+using rosmsg::Rgba;
+using rosmsg::Viridis;
 
 /// A distinct colour per instance id (golden-angle hue).
 rosmsg::ColorRGBA InstanceColor(uint16_t id) {

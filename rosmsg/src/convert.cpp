@@ -1,5 +1,7 @@
 #include "avp/rosmsg/convert.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -57,5 +59,24 @@ Point ToPointMsg(const Eigen::Vector3d& p) { return Point{p.x(), p.y(), p.z()}; 
 Eigen::Vector3d FromPointMsg(const Point& p) { return {p.x, p.y, p.z}; }
 Vector3 ToVector3Msg(const Eigen::Vector3d& v) { return Vector3{v.x(), v.y(), v.z()}; }
 Eigen::Vector3d FromVector3Msg(const Vector3& v) { return {v.x, v.y, v.z}; }
+
+ColorRGBA Rgba(double r, double g, double b, double a) {
+  return {static_cast<float>(r), static_cast<float>(g), static_cast<float>(b),
+          static_cast<float>(a)};
+}
+
+ColorRGBA Viridis(double t) {
+  static constexpr std::array<std::array<double, 3>, 5> kStops = {{{0.267, 0.005, 0.329},
+                                                                   {0.229, 0.322, 0.546},
+                                                                   {0.128, 0.567, 0.551},
+                                                                   {0.369, 0.789, 0.383},
+                                                                   {0.993, 0.906, 0.144}}};
+  t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, 1.0) * 4.0;
+  const size_t i = std::min<size_t>(static_cast<size_t>(t), 3);
+  const double f = t - static_cast<double>(i);
+  const auto& a = kStops[i];
+  const auto& b = kStops[i + 1];
+  return Rgba(a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]));
+}
 
 }  // namespace avp::rosmsg

@@ -43,5 +43,18 @@ TEST(RosmsgConvertTest, Stamps) {
   EXPECT_EQ(FromVector3Msg(ToVector3Msg(Eigen::Vector3d(4, 5, 6))), Eigen::Vector3d(4, 5, 6));
 }
 
+TEST(RosmsgConvertTest, ViridisRunsFromItsFirstToItsLastStop) {
+  EXPECT_EQ(Viridis(0.0), Rgba(0.267, 0.005, 0.329));
+  EXPECT_EQ(Viridis(1.0), Rgba(0.993, 0.906, 0.144));
+  EXPECT_EQ(Viridis(0.25), Rgba(0.229, 0.322, 0.546));
+  EXPECT_EQ(Viridis(-3.0), Viridis(0.0));  // clamped
+  EXPECT_EQ(Viridis(7.0), Viridis(1.0));
+  EXPECT_EQ(Viridis(std::nan("")), Viridis(0.0));
+  const ColorRGBA mid = Viridis(0.125);  // halfway between the first two stops
+  EXPECT_FLOAT_EQ(mid.r, static_cast<float>(0.5 * (0.267 + 0.229)));
+  EXPECT_FLOAT_EQ(mid.b, static_cast<float>(0.5 * (0.329 + 0.546)));
+  EXPECT_FLOAT_EQ(mid.a, 1.0f);
+}
+
 }  // namespace
 }  // namespace avp::rosmsg

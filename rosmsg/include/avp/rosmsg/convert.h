@@ -35,4 +35,10 @@ Quaternion ToQuaternionMsg(const Eigen::Matrix3d& R);
 inline Time ToTimeMsg(int64_t stamp_ns) { return Time::FromNanoseconds(stamp_ns); }
 inline int64_t FromTimeMsg(const Time& t) { return t.ToNanoseconds(); }
 
+/// A marker colour from doubles in [0, 1].
+ColorRGBA Rgba(double r, double g, double b, double a = 1.0);
+/// Viridis at t in [0, 1] (five-stop piecewise-linear approximation; NaN reads 0, t is clamped):
+/// the colour scale of utilities and confidences in RViz markers and recordings.
+ColorRGBA Viridis(double t);
+
 }  // namespace avp::rosmsg
