@@ -32,21 +32,8 @@ double MsSince(Clock::time_point t0) {
 }
 
 // The map's counts as pipeline::RunEpisode records them.
-size_t CountTargetVoxels(const mapping::OccupancyGrid& grid, SemanticClass target) {
-  size_t n = 0;
-  grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& cell) {
-    if (cell.cls() == target && grid.State(k) == mapping::VoxelState::kOccupied) ++n;
-  });
-  return n;
-}
-
-size_t CountTargetInstances(const mapping::SemanticMap& map, SemanticClass target) {
-  size_t n = 0;
-  for (const mapping::InstanceInfo& info : map.Instances()) {
-    if (info.semantic_class == target) ++n;
-  }
-  return n;
-}
+using pipeline::CountTargetInstances;
+using pipeline::CountTargetVoxels;
 
 bool SameValue(double a, double b) {
   return (std::isnan(a) && std::isnan(b)) ||

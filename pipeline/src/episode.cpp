@@ -20,6 +20,8 @@ double MsSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+}  // namespace
+
 size_t CountTargetVoxels(const mapping::OccupancyGrid& grid, SemanticClass target) {
   size_t n = 0;
   grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& cell) {
@@ -35,6 +37,8 @@ size_t CountTargetInstances(const mapping::SemanticMap& map, SemanticClass targe
   }
   return n;
 }
+
+namespace {
 
 // ---- Stages of RunEpisode -----------------------------------------------------------------------
 

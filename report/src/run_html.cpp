@@ -11,6 +11,7 @@
 #include <avp/io/image_codec.h>
 #include <avp/io/overlay.h>
 #include <avp/report/run_html.h>
+#include <avp/report/svg_plot.h>
 #include <avp/report/web_assets.h>
 
 namespace avp::report {
@@ -199,29 +200,6 @@ std::string EscapeScript(std::string_view text) {
       ++i;
     } else {
       out.push_back(text[i]);
-    }
-  }
-  return out;
-}
-
-std::string EscapeHtml(std::string_view text) {
-  std::string out;
-  for (const char c : text) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out.push_back(c);
     }
   }
   return out;
@@ -438,7 +416,7 @@ std::string RunReportHtml(const json& data, std::string_view viewer_js, std::str
   html += "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n";
   html += "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n";
   html += "<meta name=\"generator\" content=\"avp run report\">\n";
-  html += "<title>" + EscapeHtml(title) + " — avp run report</title>\n";
+  html += "<title>" + EscapeXml(title) + " — avp run report</title>\n";
   html += "</head>\n<body>\n<div id=\"avp-report\"></div>\n";
   html += "<noscript>This report needs JavaScript (its 3D view is drawn with WebGL).</noscript>\n";
   html += fmt::format("<script type=\"application/json\" id=\"{}\">", kDataId);

@@ -176,6 +176,11 @@ struct EpisodeComponents {
   std::stop_token stop;
 };
 
+/// Occupied voxels of the target class in the grid (StepRecord::target_voxels).
+size_t CountTargetVoxels(const mapping::OccupancyGrid& grid, SemanticClass target);
+/// Instances of the target class in the map (StepRecord::instances).
+size_t CountTargetInstances(const mapping::SemanticMap& map, SemanticClass target);
+
 /// The active-vision loop: for each view, capture at the arm's current pose, segment, integrate,
 /// compute metrics and notify the observers; then, unless it was the last view, plan the next
 /// view and move there. Failures are outcomes: a capture or segmenter error is recorded and the
