@@ -465,7 +465,16 @@ Status CheckPlyHeader(const fs::path& file, uint64_t file_bytes, const std::stri
       if (i > j) words.push_back(line.substr(j, i - j));
     }
     if (line_no == 1) {
-      if (line != "ply") return Status::Ok();  // not a PLY: assimp says so in its own words
+      // assimp reads any file that starts with "ply" in any case as PLY, and its header parser is
+      // lenient ("ply(" and "element$vertex 1000000000" pass, and then it loops over the count
+      // whatever the file holds): such a file must meet this check, which wants the spec's line.
+      const auto lower = [](char c) { return static_cast<char>(c | 0x20); };
+      const bool ply_magic = line.size() >= 3 && lower(line[0]) == 'p' && lower(line[1]) == 'l' &&
+                             lower(line[2]) == 'y';
+      if (!ply_magic) return Status::Ok();  // not a PLY: assimp says so in its own words
+      if (line.size() != 3) {
+        return bad(fmt::format("line 1 is {}, not 'ply'", QuoteText(line)));
+      }
       continue;
     }
     if (words.empty() || words[0] == "comment" || words[0] == "obj_info") continue;

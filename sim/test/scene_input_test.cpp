@@ -74,6 +74,28 @@ TEST_F(SceneInputTest, PlyCountsMustFitTheFile) {
   EXPECT_TRUE(LoadMesh("ok.ply").ok()) << LoadMesh("ok.ply").ToString();
 }
 
+// assimp takes any file starting with "ply" (any case) as PLY and parses its header loosely
+// (found by the scene_file fuzzer: "ply(" and "element$vertex 1000000000" in a 240-byte file kept
+// it reading for over 10 s): the first line must be the spec's, so the counts are checked.
+TEST_F(SceneInputTest, AFirstLineThatOnlyStartsWithPlyIsRefusedNamingIt) {
+  Write("paren.ply",
+        "ply(\nformat binary_little_endian 1.0\nelement$vertex 1000000000\nproperty float x\n"
+        "end_header\n");
+  const Status s = LoadMesh("paren.ply");
+  EXPECT_EQ(s.code(), StatusCode::kParseError) << s.ToString();
+  EXPECT_THAT(s.message(), HasSubstr("paren.ply"));
+  EXPECT_THAT(s.message(), HasSubstr("line 1 is 'ply(', not 'ply'"));
+  // Upper case is PLY to assimp, so its counts are checked like any other's.
+  std::string upper = PlyHeader("1000000000", "1") + kTriangle;
+  upper.replace(0, 3, "PLY");
+  Write("upper.ply", upper);
+  EXPECT_EQ(LoadMesh("upper.ply").code(), StatusCode::kResourceExhausted);
+  upper = PlyHeader("3", "1") + kTriangle;
+  upper.replace(0, 3, "PLY");
+  Write("upper-ok.ply", upper);
+  EXPECT_TRUE(LoadMesh("upper-ok.ply").ok()) << LoadMesh("upper-ok.ply").ToString();
+}
+
 TEST_F(SceneInputTest, MeshLimitsAreConfigurableAndCoverTheWholeScene) {
   Write("ok.ply", PlyHeader("3", "1") + kTriangle);
   {
