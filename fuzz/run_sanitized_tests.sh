@@ -8,7 +8,8 @@
 #
 # Used by `make test` (the suites of the modules that read untrusted input) and
 # `make sanitize` (every suite). ctest is not used: the sanitizer build has only some programs
-# built, and ctest would list the others as failures.
+# built, and ctest would list the others as failures. SANITIZE_GTEST_FILTER, when set, is passed
+# to every program as --gtest_filter (make test leaves out a few long scene runs with it).
 set -euo pipefail
 
 if [ $# -lt 2 ]; then
@@ -31,6 +32,7 @@ export LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$(cd "$(dirname "${BASH_SOURCE
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 export AVP_CONFIG_DIR="${AVP_CONFIG_DIR:-$src/configs}"
 export AVP_SAN_BUILD="$build" AVP_SAN_WORK="$work" AVP_SAN_TIMEOUT="${SANITIZE_TIMEOUT:-1200}"
+export AVP_SAN_FILTER="${SANITIZE_GTEST_FILTER:-}"
 
 run_one() {
   local name="$1" exe
@@ -40,7 +42,9 @@ run_one() {
     return 1
   fi
   local log="$AVP_SAN_WORK/$name.log" start=$SECONDS rc=0
-  (cd "$(dirname "$exe")" && timeout "$AVP_SAN_TIMEOUT" "$exe" --gtest_brief=1) >"$log" 2>&1 || rc=$?
+  local filter=()
+  if [ -n "$AVP_SAN_FILTER" ]; then filter=("--gtest_filter=$AVP_SAN_FILTER"); fi
+  (cd "$(dirname "$exe")" && timeout "$AVP_SAN_TIMEOUT" "$exe" --gtest_brief=1 "${filter[@]}") >"$log" 2>&1 || rc=$?
   if [ "$rc" -eq 0 ]; then
     echo "sanitize $name: ok ($(grep -o '[0-9]* tests\? from [0-9]* test suites\? ran' "$log" | head -n 1), $((SECONDS - start)) s)"
   else
