@@ -147,7 +147,8 @@ Detections DetectedFruits(const std::map<uint16_t, InstanceStats>& stats, const 
     Rng rng = fruit_rng.Fork(id);
     const double u_detect = rng.Uniform01();
     const double z_confidence = rng.Normal();
-    const int boundary_px = static_cast<int>(rng.UniformInt(-o.max_boundary_px, o.max_boundary_px));
+    const int boundary_px = o.boundary_offset_px +
+                            static_cast<int>(rng.UniformInt(-o.max_boundary_px, o.max_boundary_px));
     const bool detected = s.pixels >= static_cast<size_t>(o.min_pixels) &&
                           u_detect < o.DetectionProbability(visible_fraction);
     if (!detected) continue;
@@ -257,6 +258,7 @@ OracleOptions OracleOptions::Perfect() {
   o.confidence_gain = 0.0;
   o.confidence_stddev = 0.0;
   o.max_boundary_px = 0;
+  o.boundary_offset_px = 0;
   o.p_false_positive = 0.0;
   o.p_merge = 0.0;
   return o;
@@ -283,6 +285,8 @@ const OptionTable<OracleOptions>& OracleOptionTable() {
     t->Real("confidence_max", &O::confidence_max, "", unit, "upper clamp of the score");
     t->Integer("max_boundary_px", &O::max_boundary_px, "px", ValueRange::Closed(0, 16),
                "masks grow or shrink by up to this many pixels");
+    t->Integer("boundary_offset_px", &O::boundary_offset_px, "px", ValueRange::Closed(-16, 16),
+               "every mask grows (> 0) or shrinks (< 0) by this many pixels more");
     t->Real("p_false_positive", &O::p_false_positive, "", unit,
             "probability of a false fruit on a leaf per frame");
     t->Real("false_positive_confidence_min", &O::false_positive_confidence_min, "", unit,

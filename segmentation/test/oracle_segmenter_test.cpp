@@ -345,6 +345,38 @@ TEST(OracleSegmenterTest, ErodedAwayMasksAreDropped) {
   ExpectRate(empty_or_missing, 300, 0.2, "eroded away");
 }
 
+TEST(OracleSegmenterTest, BoundaryOffsetShiftsEveryRadius) {
+  TestScene s(80, 80, 100.0);
+  s.PaintFruit(40, 40, 15, 1);
+  const MaskImage exact = s.MaskOf(1);
+  for (const int offset : {-2, 2}) {
+    OracleOptions o = AlwaysDetect();
+    o.max_boundary_px = 0;
+    o.boundary_offset_px = offset;
+    OracleSegmenter oracle(o, 3);
+    const auto r = oracle.Segment(s.Request("tomato", 0));
+    ASSERT_TRUE(r.ok());
+    ASSERT_EQ(r->instances.size(), 1u);
+    EXPECT_EQ(r->instances[0].mask, AdjustBoundary(exact, offset)) << "offset " << offset;
+  }
+  // With the spread as well, the radii are offset + {-1, 0, 1}: always eroded for -2.
+  OracleOptions o = AlwaysDetect();
+  o.max_boundary_px = 1;
+  o.boundary_offset_px = -2;
+  std::set<size_t> areas;
+  for (uint64_t i = 0; i < 100; ++i) {
+    OracleSegmenter oracle(o, 5);
+    const auto r = oracle.Segment(s.Request("tomato", i));
+    ASSERT_TRUE(r.ok());
+    ASSERT_EQ(r->instances.size(), 1u);
+    areas.insert(CountPixels(r->instances[0].mask));
+  }
+  EXPECT_EQ(areas, (std::set<size_t>{CountPixels(Erode(exact, 3)), CountPixels(Erode(exact, 2)),
+                                     CountPixels(Erode(exact, 1))}));
+  o.boundary_offset_px = 17;
+  EXPECT_THAT(o.Validate().message(), HasSubstr("boundary_offset_px (17 px)"));
+}
+
 // ---- False positives
 // -----------------------------------------------------------------------------
 

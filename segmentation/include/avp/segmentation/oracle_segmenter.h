@@ -45,10 +45,13 @@ struct OracleOptions {
   double confidence_min = 0.05;        ///< clamp, 0 <= min <= max <= 1
   double confidence_max = 0.99;
 
-  // ---- Boundary: per instance a radius uniform in [-max_boundary_px, +max_boundary_px] --------
+  // ---- Boundary: per instance a radius boundary_offset_px + uniform in [-max, +max] ------------
   /// Negative radii erode the mask, positive ones dilate it (disk structuring element, clipped to
   /// the image; dilation may spill onto neighbours, as a real segmenter does). In [0, 16].
   int max_boundary_px = 2;
+  /// A bias added to every mask's radius: a segmenter whose masks are systematically too small
+  /// (< 0, eroded) or too large (> 0, dilated). In [-16, 16].
+  int boundary_offset_px = 0;
 
   // ---- False positives on leaves --------------------------------------------------------------
   /// Per frame, the probability that one visible leaf instance (>= min_pixels pixels), chosen
