@@ -242,6 +242,9 @@ const OptionTable<AvpNbvOptions>& AvpNbvOptionTable() {
     t->Real("diversity_m", &O::diversity_m, "m", weight, "distance at which diversity saturates");
     t->Real("min_gain_bits", &O::min_gain_bits, "bits", weight,
             "stop when the best expected gain is below this (0: never)");
+    t->Real("min_gain_fraction", &O::min_gain_fraction, "", ValueRange::HalfOpen(0, 1),
+            "stop when the best expected gain is below this fraction of the first plan's (0: "
+            "never)");
     t->Flag("surface_gain", &O::surface_gain,
             "an unknown voxel counts its weight times the chance the ray ends there");
     t->Nested("candidates", &O::candidates, ShellCandidateOptionTable());
@@ -442,6 +445,17 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
     result.stop_reason =
         fmt::format("best expected gain {:.3f} bits is below the stopping threshold {:.3f} bits",
                     max_gain, options_.min_gain_bits);
+  }
+  // The episode's first plan sets the scale of the relative rule (a new episode starts again at
+  // view 1).
+  if (request.view_index <= 1 || !std::isfinite(first_max_gain_)) first_max_gain_ = max_gain;
+  if (result.status.ok() && !result.stop && options_.min_gain_fraction > 0.0 &&
+      max_gain < options_.min_gain_fraction * first_max_gain_) {
+    result.stop = true;
+    result.stop_reason = fmt::format(
+        "best expected gain {:.3f} bits is below the stopping threshold {:.3f} x the first "
+        "plan's {:.3f} bits",
+        max_gain, options_.min_gain_fraction, first_max_gain_);
   }
   return result;
 }

@@ -485,7 +485,7 @@ TEST(AvpNbvOptionTest, SetsFieldsByNameAndNamesBadKeysAndValues) {
   EXPECT_EQ(o.candidates.radii_m, (std::vector<double>{0.3, 0.5}));
   // Every key of the options before the table (docs/planning.md) is still there, and settable.
   const std::vector<std::string> keys = table.Keys();
-  EXPECT_EQ(keys.size(), 31u);
+  EXPECT_EQ(keys.size(), 32u);
   for (const std::string& k : keys) {
     AvpNbvOptions x;
     const bool ok =
@@ -505,6 +505,36 @@ TEST_F(AvpNbvPlannerTest, StoppingRuleFiresBelowTheGainThreshold) {
   const PlanResult r = AvpNbvPlanner(o).Plan(Request(), rng);
   EXPECT_TRUE(r.stop);
   EXPECT_NE(r.stop_reason.find("below the stopping threshold"), std::string::npos);
+}
+
+TEST_F(AvpNbvPlannerTest, RelativeStoppingRuleComparesWithTheFirstPlan) {
+  AvpNbvOptions o;
+  o.min_gain_fraction = 0.5;
+  AvpNbvPlanner planner(o);
+  Rng rng(1);
+  PlanningRequest first = Request();
+  first.view_index = 1;
+  const PlanResult a = planner.Plan(first, rng);
+  ASSERT_TRUE(a.status.ok());
+  EXPECT_FALSE(a.stop);  // the first plan sets the scale
+  // Later, a region of interest of 4 cm around the plant's centre: far less to gain.
+  PlanningRequest second = first;
+  second.view_index = 2;
+  second.roi = Box3::FromCenterAndHalfSize(first.roi.center(), Eigen::Vector3d::Constant(0.02));
+  const PlanResult b = planner.Plan(second, rng);
+  ASSERT_TRUE(b.status.ok());
+  const auto max_gain = [](const PlanResult& r) {
+    double g = 0.0;
+    for (const ViewCandidate& c : r.ranked) g = std::max(g, c.gain);
+    return g;
+  };
+  ASSERT_LT(max_gain(b), 0.5 * max_gain(a));
+  EXPECT_TRUE(b.stop);
+  EXPECT_NE(b.stop_reason.find("x the first plan's"), std::string::npos) << b.stop_reason;
+  // A new episode (view 1 again) starts a new scale.
+  EXPECT_FALSE(planner.Plan(first, rng).stop);
+  o.min_gain_fraction = 1.0;
+  EXPECT_NE(o.Validate().message().find("min_gain_fraction (1)"), std::string::npos);
 }
 
 TEST_F(AvpNbvPlannerTest, BadRequestsAndOptionsAreErrors) {

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <limits>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -39,8 +40,10 @@ namespace avp::planning {
 /// over the candidate set, d the distance from the candidate's eye to the nearest fused one (the
 /// greedy gain alone keeps returning to views like the ones it has, which fared worse than
 /// random views in the paper's scenarios); views within
-/// 2 cm / 10° of a fused view are never chosen. Stopping rule: when the best gain is below
-/// `min_gain_bits` (0 disables it) the planner asks the loop to stop.
+/// 2 cm / 10° of a fused view are never chosen. Stopping rules (both off by default): when the
+/// best gain is below `min_gain_bits`, or below `min_gain_fraction` times the best gain of the
+/// episode's first plan (view_index 1; scale-free: the same fraction suits a small plant and a
+/// wide tree, a 3 mm map and a 10 mm one), the planner asks the loop to stop.
 struct AvpNbvOptions {
   ShellCandidateOptions candidates;
   GainGridOptions grid;
@@ -73,6 +76,8 @@ struct AvpNbvOptions {
   double w_diversity = 0.5;
   double diversity_m = 0.2;
   double min_gain_bits = 0.0;
+  /// In [0, 1); 0 disables it.
+  double min_gain_fraction = 0.0;
   /// What an unknown voxel is worth to a ray: off (the default), its weight w whatever follows
   /// (a long unobserved path adds up); on, w times the probability that the ray ends there (its
   /// occlusion probability), as a ray shows one surface: the sum along a ray is bounded by the
@@ -121,6 +126,8 @@ class AvpNbvPlanner final : public ViewPlanner {
 
  private:
   AvpNbvOptions options_;
+  /// The best gain of this episode's first plan (min_gain_fraction); NaN before it.
+  double first_max_gain_ = std::numeric_limits<double>::quiet_NaN();
 };
 
 }  // namespace avp::planning
