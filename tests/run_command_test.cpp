@@ -728,6 +728,119 @@ TEST_F(RunCommandTest, BenchFolderHasTheLifecycleAndRefusesReruns) {
   EXPECT_TRUE(fs::exists(ro.out_dir / "record.json"));
 }
 
+TEST_F(RunCommandTest, BenchConditionsRunOneBenchEachAndCompareThem) {
+  const fs::path yaml = dir_ / "conditions.yaml";
+  std::ofstream(yaml) << R"(description: two conditions
+scenarios: [tomato-single-cluster]
+planners: [avp-nbv, predefined]
+seeds: [0, 1]
+run: {episode: {views: 3}, map: {grid: {voxel_size_m: 0.01}}}
+conditions:
+  - name: plain
+  - name: stop-early
+    description: avp-nbv stops at its second plan, masks 1 px smaller
+    run: {segmenter: {options: {boundary_offset_px: -1}}}
+    planner_options: {avp-nbv: {min_gain_fraction: 0.99}}
+)";
+  auto config = LoadBenchConfig(yaml);
+  ASSERT_TRUE(config.ok()) << config.status().ToString();
+  ASSERT_EQ(config->conditions.size(), 2u);
+  EXPECT_EQ(config->conditions[1].run,
+            (OptionValues{{"segmenter.options.boundary_offset_px", "-1"}}));
+  config->out_dir = dir_ / "out";
+  config->progress = false;
+  auto derived = ConditionBenchConfig(*config, config->conditions[1]);
+  ASSERT_TRUE(derived.ok()) << derived.status().ToString();
+  EXPECT_EQ(derived->out_dir, dir_ / "out" / "stop-early");
+  EXPECT_EQ(derived->base.segmenter.options, (OptionValues{{"boundary_offset_px", "-1"}}));
+  EXPECT_EQ(derived->base.episode.views, 3);
+  EXPECT_DOUBLE_EQ(derived->base.map.grid.voxel_size_m, 0.01);  // the bench's run stays
+  EXPECT_EQ(derived->planner_options.at("avp-nbv"), (OptionValues{{"min_gain_fraction", "0.99"}}));
+  EXPECT_EQ(derived->description,
+            "two conditions; condition stop-early: avp-nbv stops at its second plan, masks 1 px "
+            "smaller");
+  EXPECT_TRUE(derived->conditions.empty());
+
+  const auto r = RunBenchConditions(*config, registries_);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->episodes, 8u);
+  EXPECT_EQ(r->failed, 0u);
+  EXPECT_EQ(ReadFolderState(config->out_dir).value().kind, "bench-conditions");
+  EXPECT_EQ(ReadFolderState(config->out_dir).value().state, "complete");
+  EXPECT_EQ(ReadFolderState(config->out_dir / "plain").value().kind, "bench");
+  EXPECT_TRUE(fs::exists(config->out_dir / "stop-early" / "summary.md"));
+  // Each condition's bench is the bench it stands for: the same episodes as run alone.
+  BenchConfig alone = *derived;
+  alone.out_dir = dir_ / "alone";
+  const auto a = RunBench(alone, registries_);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  ASSERT_EQ(r->benches[1].second.cells.size(), a->cells.size());
+  for (size_t i = 0; i < a->cells.size(); ++i) {
+    EXPECT_EQ(r->benches[1].second.cells[i].final_f1_mean, a->cells[i].final_f1_mean);
+  }
+  // avp-nbv stops where its second plan expects less than 0.99 x its first's (seeds differ).
+  const report::ConditionTables& t = r->tables;
+  ASSERT_EQ(t.cells.size(), 4u);
+  EXPECT_EQ(t.cells[0].condition, "plain");
+  EXPECT_DOUBLE_EQ(t.cells[0].views.mean, 3.0);
+  EXPECT_EQ(t.cells[2].condition, "stop-early");
+  EXPECT_EQ(t.cells[2].planner, "avp-nbv");
+  EXPECT_GE(t.cells[2].views.mean, 2.0);
+  EXPECT_LT(t.cells[2].views.mean, 3.0);
+  EXPECT_DOUBLE_EQ(t.cells[3].views.mean, 3.0);
+  ASSERT_EQ(t.leads.size(), 2u);
+  EXPECT_EQ(t.leads[0].versus, "predefined");
+  EXPECT_EQ(t.leads[0].f1.n, 2u);
+  EXPECT_NEAR(t.leads[0].f1.mean, t.cells[0].f1.mean - t.cells[1].f1.mean, 1e-12);
+  std::ifstream md(config->out_dir / "conditions.md");
+  const std::string text((std::istreambuf_iterator<char>(md)), {});
+  EXPECT_THAT(text, HasSubstr("| stop-early | `"));
+  EXPECT_THAT(text, HasSubstr("## tomato-single-cluster"));
+
+  // A rerun is refused, --force replaces it; its folder is not a bench folder.
+  EXPECT_THAT(RunBenchConditions(*config, registries_).status().message(),
+              HasSubstr("the results of a complete avp bench (bench-conditions"));
+  BenchConfig plain_bench = *config;
+  plain_bench.conditions.clear();
+  plain_bench.force = true;
+  EXPECT_THAT(RunBench(plain_bench, registries_).status().message(),
+              HasSubstr("not an avp bench folder"));
+
+  // Bad conditions are named before anything runs.
+  BenchConfig bad = *config;
+  bad.out_dir = dir_ / "bad";
+  bad.conditions[0].name = "../up";
+  bad.conditions[1].run.emplace_back("episode.viewz", "3");
+  bad.conditions.push_back(bad.conditions[1]);
+  bad.conditions.push_back({.name = "other",
+                            .description = "",
+                            .run = {},
+                            .planner_options = {{"random", {{"x", "1"}}}}});
+  const std::string m = RunBenchConditions(bad, registries_).status().message();
+  EXPECT_THAT(m, HasSubstr("condition name '../up' must be a folder name"));
+  EXPECT_THAT(m, HasSubstr("condition 'stop-early': run: "));
+  EXPECT_THAT(m, HasSubstr("episode.viewz"));
+  EXPECT_THAT(m, HasSubstr("condition 'stop-early' is given twice"));
+  EXPECT_THAT(m, HasSubstr("condition 'other': invalid bench configuration: options are given "
+                           "for planner 'random'"));
+  EXPECT_FALSE(fs::exists(bad.out_dir));
+  std::ofstream(yaml) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv]\nseeds: [0]\n"
+                         "conditions: [{name: a, run: {seed: 3}}]\n";
+  EXPECT_THAT(LoadBenchConfig(yaml).status().message(),
+              HasSubstr("conditions[0]: run.seed is set by each job"));
+  std::ofstream(yaml) << "scenarios: [tomato-single-cluster]\nplanners: [avp-nbv]\nseeds: [0]\n"
+                         "conditions: [{name: a, colour: red}]\n";
+  EXPECT_THAT(LoadBenchConfig(yaml).status().message(), HasSubstr("colour"));
+}
+
+TEST_F(RunCommandTest, RobustnessConfigIsValid) {
+  auto r = LoadBenchConfig(fs::path(AVP_CONFIG_DIR) / "experiments" / "robustness.yaml");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->conditions.size(), 12u);
+  EXPECT_EQ(r->planners.front(), "avp-nbv");
+  EXPECT_TRUE(r->Validate(registries_).ok()) << r->Validate(registries_).ToString();
+}
+
 TEST_F(RunCommandTest, BenchLimitsEpisodesSeedsAndJobs) {
   BenchConfig o;
   o.scenarios = {"tomato-single-cluster", "tomato-full-occlusion"};

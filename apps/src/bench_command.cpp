@@ -1,14 +1,18 @@
 // avp bench: scenarios x planners x seeds in parallel, with summary tables and plots.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <avp/core/text.h>
 #include <avp/experiment/bench.h>
+#include <avp/report/conditions.h>
 
 #include "cli_common.h"
 
@@ -17,7 +21,7 @@ namespace avp::apps {
 namespace {
 
 struct BenchCli {
-  std::string config, scenarios, planners, seeds, segmenter, out = "out/bench";
+  std::string config, scenarios, planners, seeds, segmenter, conditions, out = "out/bench";
   int views = 0, jobs = 0;
   bool force = false;
   bool record = false, oracle_regret = false;
@@ -104,6 +108,25 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   b.force = cli.force;
   b.record = cli.record;
   if (cli.oracle_regret) b.base.oracle_regret = true;
+  if (cmd.get_option("--conditions")->count() > 0) {
+    AVP_ASSIGN_OR_RETURN(const std::vector<std::string> names,
+                         ParseCliList("--conditions", cli.conditions));
+    std::vector<experiment::BenchCondition> chosen;
+    std::vector<std::string> known;
+    for (const experiment::BenchCondition& c : b.conditions) known.push_back(c.name);
+    for (const std::string& name : names) {
+      const auto it = std::find_if(b.conditions.begin(), b.conditions.end(),
+                                   [&](const auto& c) { return c.name == name; });
+      if (it == b.conditions.end()) {
+        return InvalidArgumentError(fmt::format(
+            "--conditions: {} is not a condition of the configuration ({})", QuoteText(name),
+            known.empty() ? std::string("it has none")
+                          : fmt::format("{}", fmt::join(known, ", "))));
+      }
+      chosen.push_back(*it);
+    }
+    b.conditions = std::move(chosen);
+  }
   if (!cli.config.empty()) b.inputs.emplace_back(cli.config, "bench configuration file");
   return b;
 }
@@ -126,9 +149,38 @@ void PrintBench(const experiment::BenchConfig& bench, const experiment::BenchSum
   if (!s.report_html.empty()) std::printf("report: %s\n", s.report_html.string().c_str());
 }
 
+/// The lead planner's paired differences, one line each, and where the tables are.
+void PrintConditions(const report::ConditionTables& t) {
+  std::printf("Lead over each planner, final F1, paired by seed (mean ± 95 %% CI):\n");
+  for (const report::ConditionLead& l : t.leads) {
+    std::printf("  %-22s %-28s %s vs %-14s %+.3f ± %.3f  %s\n", l.condition.c_str(),
+                l.scenario.c_str(), l.planner.c_str(), l.versus.c_str(), l.f1.mean,
+                std::isfinite(l.f1.ci95) ? l.f1.ci95 : 0.0, l.verdict.c_str());
+  }
+  std::printf("wrote %s and %s\n", t.files.at(0).string().c_str(), t.files.at(1).string().c_str());
+}
+
+int BenchConditions(const experiment::BenchConfig& bench,
+                    const experiment::Registries& registries) {
+  const Result<experiment::ConditionsSummary> summary =
+      experiment::RunBenchConditions(bench, registries);
+  if (!summary.ok()) return Failed("bench", summary.status());
+  std::printf("%zu conditions, %zu episodes (%zu failed) in %.1f s.\n", summary->benches.size(),
+              summary->episodes, summary->failed, summary->seconds);
+  PrintConditions(summary->tables);
+  if (summary->failed > 0) {
+    return Failed("bench", UnavailableError(fmt::format(
+                               "{} of {} episodes failed (each run folder's avp-state.json or "
+                               "record.json says why)",
+                               summary->failed, summary->episodes)));
+  }
+  return 0;
+}
+
 int Bench(const CLI::App& cmd, const BenchCli& cli, const experiment::Registries& registries) {
   const Result<experiment::BenchConfig> bench = ResolveBench(cmd, cli, registries);
   if (!bench.ok()) return Failed("bench", bench.status());
+  if (!bench->conditions.empty()) return BenchConditions(*bench, registries);
   const Result<experiment::BenchSummary> summary = experiment::RunBench(*bench, registries);
   if (!summary.ok()) return Failed("bench", summary.status());
   PrintBench(*bench, *summary);
@@ -139,6 +191,27 @@ int Bench(const CLI::App& cmd, const BenchCli& cli, const experiment::Registries
                                "record.json says why)",
                                summary->failed, summary->episodes)));
   }
+  return 0;
+}
+
+struct CompareCli {
+  std::vector<std::string> dirs;
+  std::string out, lead = "avp-nbv";
+};
+
+/// avp bench compare DIR...: the conditions tables of bench folders run apart.
+int Compare(const CompareCli& cli) {
+  std::vector<report::ConditionBench> benches;
+  for (const std::string& d : cli.dirs) {
+    const std::filesystem::path dir = std::filesystem::path(d).lexically_normal();
+    std::string name = dir.filename().string();
+    if (name.empty()) name = dir.parent_path().filename().string();
+    benches.push_back({name, "", dir});
+  }
+  const Result<report::ConditionTables> t =
+      report::WriteConditionTables(cli.out, benches, cli.lead);
+  if (!t.ok()) return Failed("bench compare", t.status());
+  PrintConditions(*t);
   return 0;
 }
 
@@ -177,7 +250,24 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
                 "Measure each plan step's regret and rank correlation with the truth (summary.csv "
                 "and summary.md per scenario, record.json per run; the episodes are unchanged, "
                 "plans take longer)");
-  cmd->callback([cli, cmd, &context] {
+  cmd->add_option("--conditions", cli->conditions,
+                  "Comma-separated conditions of the config to run (default: all of them)");
+  auto compare = std::make_shared<CompareCli>();
+  CLI::App* compare_cmd = cmd->add_subcommand(
+      "compare",
+      "Compare bench folders run under different conditions: each planner's final F1 and fruits "
+      "found, and the lead planner's paired difference over each other one (conditions.md, "
+      "conditions.csv)");
+  compare_cmd->add_option("dirs", compare->dirs, "Bench folders; each is named by its folder")
+      ->required();
+  compare_cmd->add_option("--out", compare->out, "Folder for conditions.md and conditions.csv")
+      ->required();
+  compare_cmd->add_option("--lead", compare->lead, "The planner compared with the others")
+      ->default_str(compare->lead);
+  compare_cmd->callback(
+      [compare, &context] { RunGuarded(context, [&] { return Compare(*compare); }); });
+  cmd->callback([cli, cmd, compare_cmd, &context] {
+    if (compare_cmd->parsed()) return;  // avp bench compare: its own callback ran
     RunGuarded(context, [&] { return Bench(*cmd, *cli, *context.registries); });
   });
 }

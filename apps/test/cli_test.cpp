@@ -170,6 +170,37 @@ TEST_F(CliTest, AFolderIsNotAMissingFile) {
   EXPECT_THAT(r.output, Not(HasSubstr("does not exist")));
 }
 
+TEST_F(CliTest, BenchCompareTabulatesBenchFoldersAndRunsNoBench) {
+  // Two bench folders of one run each per planner, as avp bench leaves them.
+  for (const char* cond : {"wet", "dry"}) {
+    for (const char* planner : {"avp-nbv", "predefined"}) {
+      for (int seed = 0; seed < 2; ++seed) {
+        const fs::path d =
+            dir_ / cond / "runs" / "plant" / planner / ("seed-" + std::to_string(seed));
+        fs::create_directories(d);
+        std::ofstream(d / "record.json")
+            << "{\"scenario\": \"plant\", \"planner\": \"" << planner << "\", \"seed\": " << seed
+            << ", \"end\": \"budget-reached\"}";
+        const double f1 = (std::string(planner) == "avp-nbv" ? 0.6 : 0.4) + 0.1 * seed;
+        std::ofstream(d / "metrics.csv")
+            << "view,f1,fruits_found_fraction\n1,0,0\n2," << f1 << ",0.5\n";
+      }
+    }
+  }
+  const Ran r = Avp("bench compare wet dry --out table", "cd '" + dir_.string() + "' &&");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("plant"));
+  EXPECT_THAT(r.output, HasSubstr("avp-nbv vs predefined     +0.200 ± 0.000  ahead"));
+  EXPECT_THAT(ReadAll(dir_ / "table" / "conditions.md"), HasSubstr("| dry |"));
+  EXPECT_FALSE(fs::exists(dir_ / "out")) << "avp bench compare also ran a bench";
+  const Ran bad = Avp("bench compare " + dir_.string() + " --out " + (dir_ / "t2").string());
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_THAT(bad.output, HasSubstr("is not an avp bench folder: it has no runs/ folder"));
+  const Ran none = Avp("bench --config '" AVP_CONFIG_DIR "/experiments/paper.yaml' --conditions a");
+  EXPECT_EQ(none.exit_code, 1) << none.output;
+  EXPECT_THAT(none.output, HasSubstr("'a' is not a condition of the configuration (it has none)"));
+}
+
 TEST_F(CliTest, RunIntoAFolderWithResultsRefusesAtOnce) {
   const fs::path out = dir_ / "run";
   fs::create_directories(out);

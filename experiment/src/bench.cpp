@@ -437,6 +437,52 @@ Status ReadPlannerOptions(const YAML::Node& node, const std::string& ctx, BenchC
   return Status::Ok();
 }
 
+Status ReadConditions(const YAML::Node& node, const std::string& ctx, BenchConfig& o) {
+  if (!node) return Status::Ok();
+  if (!node.IsSequence() || node.size() == 0) {
+    return InvalidArgumentError(
+        fmt::format("{}: 'conditions' must be a non-empty list of {{name, description, run, "
+                    "planner_options}}",
+                    ctx));
+  }
+  for (size_t i = 0; i < node.size(); ++i) {
+    const YAML::Node item = node[i];
+    const std::string where = fmt::format("{}: conditions[{}]", ctx, i);
+    if (!item.IsMap()) {
+      return InvalidArgumentError(
+          fmt::format("{}: must be a map {{name, description, run, planner_options}}", where));
+    }
+    AVP_RETURN_IF_ERROR(
+        io::RejectUnknownKeys(item, {"name", "description", "run", "planner_options"}, where));
+    BenchCondition c;
+    if (!item["name"] || !item["name"].IsScalar()) {
+      return InvalidArgumentError(fmt::format("{}: 'name' is missing", where));
+    }
+    c.name = item["name"].as<std::string>();
+    if (item["description"]) c.description = item["description"].as<std::string>();
+    if (item["run"]) {
+      AVP_RETURN_IF_ERROR(RejectPerJobKeys(item["run"], where));
+      AVP_ASSIGN_OR_RETURN(c.run, io::FlattenYaml(item["run"], where + ".run"));
+    }
+    BenchConfig options;
+    AVP_RETURN_IF_ERROR(ReadPlannerOptions(item["planner_options"], where, options));
+    c.planner_options = std::move(options.planner_options);
+    o.conditions.push_back(std::move(c));
+  }
+  return Status::Ok();
+}
+
+/// A condition's name is a folder name of its own beside conditions.md / .csv.
+bool IsConditionName(const std::string& name) {
+  if (name.empty() || name.size() > 100 || name.front() == '.' || name == "conditions.md" ||
+      name == "conditions.csv" || name == kStateFileName) {
+    return false;
+  }
+  return std::all_of(name.begin(), name.end(), [](char ch) {
+    return std::isalnum(static_cast<unsigned char>(ch)) || ch == '.' || ch == '-' || ch == '_';
+  });
+}
+
 }  // namespace
 
 bool IsSceneFileEntry(std::string_view entry) {
@@ -571,6 +617,27 @@ Status BenchConfig::Validate(const Registries& registries) const {
     errors.push_back(fmt::format("jobs ({}) must be in [0, {}]", jobs, kMaxThreads));
   }
   if (out_dir.empty()) errors.push_back("the output folder (--out) is empty");
+  std::set<std::string> condition_names;
+  for (const BenchCondition& c : conditions) {
+    if (!IsConditionName(c.name)) {
+      errors.push_back(fmt::format(
+          "condition name {} must be a folder name: letters, digits, '.', '-', '_' (not first '.')",
+          QuoteText(c.name)));
+      continue;
+    }
+    if (!condition_names.insert(c.name).second) {
+      errors.push_back(fmt::format("condition '{}' is given twice", c.name));
+      continue;
+    }
+    Result<BenchConfig> derived = ConditionBenchConfig(*this, c);
+    if (derived.ok()) {
+      if (Status s = derived->Validate(registries); !s.ok()) {
+        errors.push_back(fmt::format("condition '{}': {}", c.name, s.message()));
+      }
+    } else {
+      errors.push_back(derived.status().message());
+    }
+  }
   if (errors.empty()) {
     RunConfig probe = JobBase(*this);
     probe.scenario = list->front().scenario;
@@ -587,7 +654,9 @@ Result<BenchConfig> LoadBenchConfig(const fs::path& yaml) {
   AVP_ASSIGN_OR_RETURN(const YAML::Node root, io::LoadYamlFile(yaml));
   const std::string ctx = yaml.string();
   AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(
-      root, {"description", "scenarios", "planners", "seeds", "planner_options", "run"}, ctx));
+      root,
+      {"description", "scenarios", "planners", "seeds", "planner_options", "run", "conditions"},
+      ctx));
   BenchConfig o;
   try {
     if (root["description"]) o.description = root["description"].as<std::string>();
@@ -607,6 +676,7 @@ Result<BenchConfig> LoadBenchConfig(const fs::path& yaml) {
     AVP_RETURN_IF_ERROR(ReadPlannerOptions(root["planner_options"], ctx, o));
     AVP_RETURN_IF_ERROR(ReadRunConfigYaml(root["run"], ctx + ": run", o.base));
     AVP_RETURN_IF_ERROR(RejectPerJobKeys(root["run"], ctx));
+    AVP_RETURN_IF_ERROR(ReadConditions(root["conditions"], ctx, o));
   } catch (const YAML::Exception& e) {
     return InvalidArgumentError(fmt::format("{}: {}", ctx, e.what()));
   }
@@ -709,6 +779,67 @@ Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& regis
   }
   AVP_RETURN_IF_ERROR(MarkComplete(config.out_dir, BenchFolderKind(), "avp bench"));
   summary->seconds = SecondsSince(t0);
+  return summary;
+}
+
+Result<BenchConfig> ConditionBenchConfig(const BenchConfig& config, const BenchCondition& c) {
+  BenchConfig b = config;
+  b.conditions.clear();
+  b.out_dir = config.out_dir / c.name;
+  b.force = false;  // the conditions' folder was empty, or emptied
+  for (const auto& [key, value] : c.run) {
+    if (Status s = SetRunConfigKey(b.base, key, value); !s.ok()) {
+      return InvalidArgumentError(fmt::format("condition '{}': run: {}", c.name, s.message()));
+    }
+  }
+  for (const auto& [planner, values] : c.planner_options) {
+    for (const auto& kv : values) b.planner_options[planner].push_back(kv);
+  }
+  const std::string what = c.description.empty() ? c.name : c.name + ": " + c.description;
+  b.description =
+      config.description.empty() ? "condition " + what : config.description + "; condition " + what;
+  return b;
+}
+
+Result<ConditionsSummary> RunBenchConditions(const BenchConfig& config,
+                                             const Registries& registries) {
+  const auto t0 = Clock::now();
+  if (config.conditions.empty()) return InvalidArgumentError("the bench has no conditions");
+  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  AVP_ASSIGN_OR_RETURN(std::vector<BenchScenario> list,
+                       ExpandScenarioList(config.scenarios, registries.scenarios));
+  AVP_RETURN_IF_ERROR(CheckBenchOutputs(config, list));
+  std::vector<std::string> names;
+  for (const BenchCondition& c : config.conditions) names.push_back(c.name);
+  const OutputFolderKind kind = ConditionsFolderKind(names);
+  AVP_RETURN_IF_ERROR(PrepareOutputFolder(config.out_dir, kind, config.force));
+  AVP_RETURN_IF_ERROR(MarkInProgress(config.out_dir, kind, "avp bench"));
+  ConditionsSummary summary;
+  std::vector<report::ConditionBench> benches;
+  const auto fail = [&](const Status& s) {
+    MarkFailed(config.out_dir, kind, "avp bench", s);
+    return s;
+  };
+  for (size_t i = 0; i < config.conditions.size(); ++i) {
+    const BenchCondition& c = config.conditions[i];
+    AVP_ASSIGN_OR_RETURN(const BenchConfig derived, ConditionBenchConfig(config, c));
+    if (config.progress) {
+      std::fprintf(stderr, "condition %zu/%zu: %s%s%s\n", i + 1, config.conditions.size(),
+                   c.name.c_str(), c.description.empty() ? "" : " - ", c.description.c_str());
+    }
+    Result<BenchSummary> s = RunBench(derived, registries);
+    if (!s.ok()) return fail(s.status().WithContext(fmt::format("condition '{}'", c.name)));
+    summary.episodes += s->episodes;
+    summary.failed += s->failed;
+    summary.benches.emplace_back(c.name, std::move(*s));
+    benches.push_back({c.name, c.description, derived.out_dir});
+  }
+  Result<report::ConditionTables> tables =
+      report::WriteConditionTables(config.out_dir, benches, config.planners.front());
+  if (!tables.ok()) return fail(tables.status());
+  summary.tables = std::move(*tables);
+  AVP_RETURN_IF_ERROR(MarkComplete(config.out_dir, kind, "avp bench"));
+  summary.seconds = SecondsSince(t0);
   return summary;
 }
 

@@ -97,6 +97,16 @@ const OutputFolderKind& BenchFolderKind() {
   return kind;
 }
 
+OutputFolderKind ConditionsFolderKind(std::vector<std::string> condition_names) {
+  return {"bench-conditions", [names = std::move(condition_names)](const std::string& name) {
+            static const std::vector<std::string> files = {std::string(kStateFileName),
+                                                           "conditions.md", "conditions.csv"};
+            return std::find(files.begin(), files.end(), name) != files.end() ||
+                   IsTempOf(name, files) ||
+                   std::find(names.begin(), names.end(), name) != names.end();
+          }};
+}
+
 Result<FolderState> ReadFolderState(const fs::path& dir) {
   const fs::path path = dir / std::string(kStateFileName);
   // A state marker is a few hundred bytes: one of more than 64 KiB is not avp's, and is refused

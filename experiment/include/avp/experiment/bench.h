@@ -14,6 +14,7 @@
 #include <avp/experiment/registries.h>
 #include <avp/experiment/run_config.h>
 #include <avp/report/bench_summary.h>
+#include <avp/report/conditions.h>
 #include <avp/sim/scenario.h>
 
 namespace avp::experiment {
@@ -53,6 +54,18 @@ bool IsSceneFileEntry(std::string_view entry);
 Result<std::vector<BenchScenario>> ExpandScenarioList(const std::vector<std::string>& entries,
                                                       const sim::ScenarioRegistry& scenarios);
 
+/// One condition of a bench (detector misses x2, 10 mm voxels, ...): its episodes' run
+/// configuration and planner options over the bench's (docs/experiments.md, "Conditions").
+struct BenchCondition {
+  /// Its bench folder under the bench's out_dir: letters, digits, '.', '-', '_'.
+  std::string name;
+  std::string description;  ///< one line, may be empty
+  /// Run configuration keys over the bench's, as `--set` takes them ("map.grid.voxel_size_m").
+  OptionValues run;
+  /// Per planner of the bench, options over the bench's planner_options.
+  std::map<std::string, OptionValues> planner_options;
+};
+
 /// `avp bench`: scenarios x planners x seeds, episodes in parallel (docs/experiments.md).
 struct BenchConfig {
   /// One line for the summary.
@@ -82,6 +95,9 @@ struct BenchConfig {
   /// `--record`: each episode also as MCAP, runs/<scenario>/<planner>/seed-<n>/episode.mcap
   /// (docs/recording.md).
   bool record = false;
+  /// When not empty, the bench runs once per condition, each into out_dir/<name>/, and compares
+  /// them (RunBenchConditions); the first planner is the one compared with the others.
+  std::vector<BenchCondition> conditions;
 
   /// Every problem at once: empty or unknown scenarios and planners, empty names, bad
   /// arrangements, missing scene files (naming the entry and the file), repeated seeds, too many
@@ -95,7 +111,8 @@ struct BenchConfig {
 /// files among them relative to the YAML file),
 /// planners (lists), seeds (a list, or {first, count}), planner_options ({planner: {key:
 /// value}}), run (a run configuration tree over the defaults, as `avp run --print-config` prints
-/// it). Unknown keys are errors naming them and the known ones.
+/// it), conditions (a list of {name, description, run, planner_options}, each over the bench's).
+/// Unknown keys are errors naming them and the known ones.
 Result<BenchConfig> LoadBenchConfig(const std::filesystem::path& yaml);
 
 struct BenchSummary {
@@ -117,5 +134,27 @@ struct BenchSummary {
 /// be written stops the bench (the running episodes are asked to stop, no new one starts) with
 /// IoError naming the file.
 Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& registries);
+
+/// The bench of one condition: out_dir/<name>, the condition's run keys applied over the base
+/// (after the bench's own), its planner options after the bench's, its description appended, no
+/// conditions. InvalidArgument naming the condition and the key for a bad run key.
+Result<BenchConfig> ConditionBenchConfig(const BenchConfig& config, const BenchCondition& c);
+
+struct ConditionsSummary {
+  /// Per condition, in order: its name and its bench's summary.
+  std::vector<std::pair<std::string, BenchSummary>> benches;
+  report::ConditionTables tables;
+  size_t episodes = 0, failed = 0;
+  double seconds = 0.0;
+};
+
+/// Runs the bench once per condition (config.conditions, in order), each a complete bench folder
+/// out_dir/<name>/ (RunBench), then writes conditions.md and conditions.csv into out_dir
+/// (report::WriteConditionTables, the first planner as the lead). out_dir has the output folder
+/// lifecycle (kind "bench-conditions"): refused when it holds results unless config.force.
+/// Every condition is validated before the first episode runs. A condition whose bench fails
+/// stops the run with its error, naming it.
+Result<ConditionsSummary> RunBenchConditions(const BenchConfig& config,
+                                             const Registries& registries);
 
 }  // namespace avp::experiment

@@ -35,6 +35,10 @@ const OutputFolderKind& RunFolderKind();
 /// A bench folder: summary.md, summary.csv, f1_*.svg, fruits_*.svg, report.html, runs/.
 const OutputFolderKind& BenchFolderKind();
 
+/// A bench folder of conditions (`avp bench` with a config's `conditions`): conditions.md,
+/// conditions.csv and one bench folder per condition, named as the conditions are.
+OutputFolderKind ConditionsFolderKind(std::vector<std::string> condition_names);
+
 /// What avp-state.json says.
 struct FolderState {
   std::string kind;     ///< "run", "bench"

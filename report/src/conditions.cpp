@@ -1,0 +1,340 @@
+#include "avp/report/conditions.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <map>
+#include <set>
+#include <sstream>
+#include <system_error>
+#include <tuple>
+#include <utility>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include <avp/io/file.h>
+#include <avp/io/json.h>
+
+namespace avp::report {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::vector<std::string> SplitCsvLine(const std::string& line) {
+  std::vector<std::string> fields;
+  std::string field;
+  std::istringstream in(line);
+  while (std::getline(in, field, ',')) fields.push_back(field);
+  if (!line.empty() && line.back() == ',') fields.emplace_back();
+  return fields;
+}
+
+/// A number of metrics.csv ("nan" is one).
+Result<double> CsvNumber(const std::string& text, const fs::path& file, size_t row,
+                         const std::string& column) {
+  const char* begin = text.c_str();
+  char* end = nullptr;
+  const double v = std::strtod(begin, &end);
+  if (text.empty() || end != begin + text.size()) {
+    return ParseError(fmt::format("{}: row {}: column {} ('{}') is not a number", file.string(),
+                                  row, column, text));
+  }
+  return v;
+}
+
+/// The views, final F1 and final found fraction of a run's metrics.csv.
+Status ReadMetrics(const fs::path& file, BenchRunResult& r) {
+  AVP_ASSIGN_OR_RETURN(const std::string text, io::ReadFileBounded(file, "metrics file"));
+  std::istringstream in(text);
+  std::string line;
+  if (!std::getline(in, line)) return ParseError(fmt::format("{}: no header", file.string()));
+  const std::vector<std::string> header = SplitCsvLine(line);
+  const auto column = [&](const std::string& name) -> Result<size_t> {
+    const auto it = std::find(header.begin(), header.end(), name);
+    if (it == header.end()) {
+      return ParseError(fmt::format("{}: no column '{}' in the header", file.string(), name));
+    }
+    return static_cast<size_t>(it - header.begin());
+  };
+  AVP_ASSIGN_OR_RETURN(const size_t f1_col, column("f1"));
+  AVP_ASSIGN_OR_RETURN(const size_t found_col, column("fruits_found_fraction"));
+  size_t row = 1;
+  while (std::getline(in, line)) {
+    ++row;
+    if (line.empty()) continue;
+    const std::vector<std::string> fields = SplitCsvLine(line);
+    if (fields.size() <= std::max(f1_col, found_col)) {
+      return ParseError(fmt::format("{}: row {} has {} fields", file.string(), row, fields.size()));
+    }
+    AVP_ASSIGN_OR_RETURN(r.f1, CsvNumber(fields[f1_col], file, row, "f1"));
+    AVP_ASSIGN_OR_RETURN(r.found_fraction,
+                         CsvNumber(fields[found_col], file, row, "fruits_found_fraction"));
+    ++r.views;
+  }
+  return Status::Ok();
+}
+
+Result<BenchRunResult> ReadRun(const fs::path& dir) {
+  BenchRunResult r;
+  // Names from the path until record.json says them (a run that never finished has none).
+  r.scenario = dir.parent_path().parent_path().filename().string();
+  r.planner = dir.parent_path().filename().string();
+  const std::string seed_text = dir.filename().string().substr(5);
+  r.seed = std::strtoull(seed_text.c_str(), nullptr, 10);
+  std::error_code ec;
+  if (!fs::exists(dir / "record.json", ec)) {
+    r.error = "no record.json (the episode failed or never finished)";
+    if (Result<nlohmann::json> state = io::ReadJsonFile(dir / "avp-state.json"); state.ok()) {
+      const nlohmann::json& s = *state;
+      r.error = fmt::format("state {}{}", s.value("state", std::string("unknown")),
+                            s.contains("error") ? ": " + s.value("error", std::string()) : "");
+    }
+    return r;
+  }
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json rec, io::ReadJsonFile(dir / "record.json"));
+  try {
+    r.scenario = rec.at("scenario").get<std::string>();
+    r.planner = rec.at("planner").get<std::string>();
+    r.seed = rec.at("seed").get<uint64_t>();
+    const std::string end = rec.at("end").get<std::string>();
+    if (end == "segmenter-fault") {
+      r.error = "segmenter fault: " + rec.value("end_reason", std::string());
+      return r;
+    }
+  } catch (const nlohmann::json::exception& e) {
+    return ParseError(
+        fmt::format("{}: not a bench record: {}", (dir / "record.json").string(), e.what()));
+  }
+  AVP_RETURN_IF_ERROR(ReadMetrics(dir / "metrics.csv", r));
+  r.ok = r.views > 0;
+  if (!r.ok) r.error = "no views";
+  return r;
+}
+
+std::string Num(double v) { return std::isfinite(v) ? fmt::format("{:.3f}", v) : "nan"; }
+std::string Signed(double v) { return std::isfinite(v) ? fmt::format("{:+.3f}", v) : "nan"; }
+std::string MeanCi(const eval::Summary& s) {
+  if (s.n == 0) return "–";
+  return std::isfinite(s.ci95) ? fmt::format("{} ± {}", Num(s.mean), Num(s.ci95)) : Num(s.mean);
+}
+std::string Csv(const eval::Summary& s) {
+  return fmt::format("{:.9g},{:.9g},{}", s.mean, std::isfinite(s.ci95) ? s.ci95 : 0.0, s.n);
+}
+
+}  // namespace
+
+Result<std::vector<BenchRunResult>> ReadBenchRuns(const fs::path& bench_dir) {
+  const fs::path runs = bench_dir / "runs";
+  std::error_code ec;
+  if (!fs::is_directory(runs, ec)) {
+    return NotFoundError(
+        fmt::format("'{}' is not an avp bench folder: it has no runs/ folder", bench_dir.string()));
+  }
+  std::vector<fs::path> dirs;
+  for (const auto& scenario : fs::directory_iterator(runs, ec)) {
+    if (!scenario.is_directory()) continue;
+    for (const auto& planner : fs::directory_iterator(scenario.path(), ec)) {
+      if (!planner.is_directory()) continue;
+      for (const auto& seed : fs::directory_iterator(planner.path(), ec)) {
+        if (seed.is_directory() && seed.path().filename().string().rfind("seed-", 0) == 0) {
+          dirs.push_back(seed.path());
+        }
+      }
+    }
+  }
+  if (ec) return IoError(fmt::format("cannot list '{}': {}", runs.string(), ec.message()));
+  std::sort(dirs.begin(), dirs.end());
+  std::vector<BenchRunResult> out;
+  out.reserve(dirs.size());
+  for (const fs::path& d : dirs) {
+    AVP_ASSIGN_OR_RETURN(BenchRunResult r, ReadRun(d));
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
+std::string LeadVerdict(const eval::Summary& d) {
+  if (d.n < 2 || !std::isfinite(d.ci95)) return "tied";
+  if (d.mean - d.ci95 > 0.0) return "ahead";
+  if (d.mean + d.ci95 < 0.0) return "behind";
+  return "tied";
+}
+
+Result<ConditionTables> WriteConditionTables(const fs::path& out_dir,
+                                             const std::vector<ConditionBench>& conditions,
+                                             const std::string& lead) {
+  if (conditions.empty()) return InvalidArgumentError("no condition to compare");
+  std::set<std::string> names;
+  for (const ConditionBench& c : conditions) {
+    if (!names.insert(c.name).second) {
+      return InvalidArgumentError(fmt::format("the condition '{}' is given twice", c.name));
+    }
+  }
+  ConditionTables t;
+  // Scenarios and planners in order of first appearance (the lead planner first).
+  std::vector<std::string> scenarios, planners = {lead};
+  // (condition, scenario, planner) -> seed -> run.
+  std::map<std::tuple<std::string, std::string, std::string>, std::map<uint64_t, BenchRunResult>>
+      runs;
+  for (const ConditionBench& c : conditions) {
+    AVP_ASSIGN_OR_RETURN(const std::vector<BenchRunResult> list, ReadBenchRuns(c.dir));
+    bool has_lead = false;
+    for (const BenchRunResult& r : list) {
+      if (std::find(scenarios.begin(), scenarios.end(), r.scenario) == scenarios.end()) {
+        scenarios.push_back(r.scenario);
+      }
+      if (std::find(planners.begin(), planners.end(), r.planner) == planners.end()) {
+        planners.push_back(r.planner);
+      }
+      has_lead = has_lead || r.planner == lead;
+      runs[{c.name, r.scenario, r.planner}][r.seed] = r;
+    }
+    if (!has_lead) {
+      return InvalidArgumentError(
+          fmt::format("the lead planner '{}' has no run in condition '{}' "
+                      "('{}')",
+                      lead, c.name, c.dir.string()));
+    }
+  }
+  std::string csv = "condition,scenario,planner,versus,metric,mean,ci95,n\n";
+  for (const std::string& s : scenarios) {
+    for (const ConditionBench& c : conditions) {
+      for (const std::string& p : planners) {
+        const auto it = runs.find({c.name, s, p});
+        if (it == runs.end()) continue;
+        ConditionCell cell;
+        cell.condition = c.name;
+        cell.scenario = s;
+        cell.planner = p;
+        std::vector<double> f1, found, views;
+        for (const auto& [seed, r] : it->second) {
+          if (!r.ok) {
+            ++cell.failed;
+            continue;
+          }
+          f1.push_back(r.f1);
+          found.push_back(r.found_fraction);
+          views.push_back(r.views);
+        }
+        cell.f1 = eval::Summarize(f1);
+        cell.found = eval::Summarize(found);
+        cell.views = eval::Summarize(views);
+        csv += fmt::format("{},{},{},,f1,{}\n", c.name, s, p, Csv(cell.f1));
+        csv += fmt::format("{},{},{},,fruits_found_fraction,{}\n", c.name, s, p, Csv(cell.found));
+        csv += fmt::format("{},{},{},,views,{}\n", c.name, s, p, Csv(cell.views));
+        t.cells.push_back(std::move(cell));
+      }
+      const auto lead_runs = runs.find({c.name, s, lead});
+      if (lead_runs == runs.end()) continue;
+      for (const std::string& p : planners) {
+        if (p == lead) continue;
+        const auto other = runs.find({c.name, s, p});
+        if (other == runs.end()) continue;
+        std::vector<double> d_f1, d_found;
+        for (const auto& [seed, a] : lead_runs->second) {
+          const auto b = other->second.find(seed);
+          if (!a.ok || b == other->second.end() || !b->second.ok) continue;
+          d_f1.push_back(a.f1 - b->second.f1);
+          d_found.push_back(a.found_fraction - b->second.found_fraction);
+        }
+        ConditionLead l;
+        l.condition = c.name;
+        l.scenario = s;
+        l.planner = lead;
+        l.versus = p;
+        l.f1 = eval::Summarize(d_f1);
+        l.found = eval::Summarize(d_found);
+        l.verdict = LeadVerdict(l.f1);
+        csv += fmt::format("{},{},{},{},f1_lead,{}\n", c.name, s, lead, p, Csv(l.f1));
+        csv += fmt::format("{},{},{},{},found_lead,{}\n", c.name, s, lead, p, Csv(l.found));
+        t.leads.push_back(std::move(l));
+      }
+    }
+  }
+
+  const auto cell_of = [&](const std::string& c, const std::string& s,
+                           const std::string& p) -> const ConditionCell* {
+    for (const ConditionCell& x : t.cells) {
+      if (x.condition == c && x.scenario == s && x.planner == p) return &x;
+    }
+    return nullptr;
+  };
+  const auto lead_of = [&](const std::string& c, const std::string& s,
+                           const std::string& p) -> const ConditionLead* {
+    for (const ConditionLead& x : t.leads) {
+      if (x.condition == c && x.scenario == s && x.versus == p) return &x;
+    }
+    return nullptr;
+  };
+  std::string md = "# avp bench: conditions\n\n";
+  md += fmt::format(
+      "{} condition(s), {} scenario(s), planners {}. Final view, mean ± 95 % CI over seeds; the "
+      "lead of `{}` is its F1 minus the other planner's, seed by seed (paired; Student's t): "
+      "**ahead** when its 95 % interval is above 0, **behind** when below, else tied. `found` = "
+      "fraction of the fruits found.\n\n",
+      conditions.size(), scenarios.size(), fmt::join(planners, ", "), lead);
+  md += "| condition | bench folder | what |\n|---|---|---|\n";
+  for (const ConditionBench& c : conditions) {
+    md += fmt::format("| {} | `{}` | {} |\n", c.name, c.dir.string(),
+                      c.description.empty() ? "–" : c.description);
+  }
+  for (const std::string& s : scenarios) {
+    md += fmt::format("\n## {}\n\n| condition |", s);
+    std::string rule = "|---|";
+    for (const std::string& p : planners) {
+      md += fmt::format(" {} F1 / found |", p);
+      rule += "---|";
+    }
+    for (size_t i = 1; i < planners.size(); ++i) {
+      md += fmt::format(" F1 lead vs {} |", planners[i]);
+      rule += "---|";
+    }
+    md += fmt::format(" views ({}) |\n{}---|\n", lead, rule);
+    for (const ConditionBench& c : conditions) {
+      md += fmt::format("| {} |", c.name);
+      for (const std::string& p : planners) {
+        const ConditionCell* x = cell_of(c.name, s, p);
+        md += x == nullptr ? " – |"
+                           : fmt::format(" {} / {}{} |", MeanCi(x->f1), Num(x->found.mean),
+                                         x->failed > 0 ? fmt::format(" ({} failed)", x->failed)
+                                                       : std::string());
+      }
+      for (size_t i = 1; i < planners.size(); ++i) {
+        const ConditionLead* l = lead_of(c.name, s, planners[i]);
+        md += l == nullptr ? " – |"
+                           : fmt::format(" {} ± {} {} |", Signed(l->f1.mean),
+                                         Num(std::isfinite(l->f1.ci95) ? l->f1.ci95 : 0.0),
+                                         l->verdict == "ahead" ? "**ahead**" : l->verdict);
+      }
+      const ConditionCell* x = cell_of(c.name, s, lead);
+      md += fmt::format(" {} |\n", x == nullptr ? "–" : fmt::format("{:.1f}", x->views.mean));
+    }
+  }
+  std::vector<const ConditionLead*> not_ahead;
+  for (const ConditionLead& l : t.leads) {
+    if (l.verdict != "ahead") not_ahead.push_back(&l);
+  }
+  md += fmt::format("\n`{}` is ahead in {} of {} comparisons (condition × scenario × planner).",
+                    lead, t.leads.size() - not_ahead.size(), t.leads.size());
+  if (!not_ahead.empty()) {
+    md += " Not ahead:\n\n";
+    for (const ConditionLead* l : not_ahead) {
+      md += fmt::format(
+          "- {}, {}, vs {}: F1 {} ± {} ({}), found {} ± {}\n", l->condition, l->scenario, l->versus,
+          Signed(l->f1.mean), Num(std::isfinite(l->f1.ci95) ? l->f1.ci95 : 0.0), l->verdict,
+          Signed(l->found.mean), Num(std::isfinite(l->found.ci95) ? l->found.ci95 : 0.0));
+    }
+  } else {
+    md += "\n";
+  }
+  const fs::path csv_path = out_dir / "conditions.csv";
+  const fs::path md_path = out_dir / "conditions.md";
+  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(csv_path, csv, "conditions table"));
+  AVP_RETURN_IF_ERROR(io::WriteFileAtomic(md_path, md, "conditions table"));
+  t.files = {md_path, csv_path};
+  return t;
+}
+
+}  // namespace avp::report
