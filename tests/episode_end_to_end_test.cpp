@@ -1,6 +1,8 @@
 // A short simulated episode end to end (scene -> oracle segmentation -> map -> avp-nbv -> arm):
 // the voxel F1 rises above a stated floor, the same seed gives the same episode, and another
 // planner runs through the same code.
+#include <algorithm>
+
 #include <gtest/gtest.h>
 
 #include <avp/experiment/episode_runner.h>
@@ -108,6 +110,8 @@ TEST(EpisodeEndToEndTest, OracleRegretMeasuresEachPlanWithoutChangingTheEpisode)
   ASSERT_TRUE(plain.ok()) << plain.status().ToString();
   EXPECT_TRUE(plain->regret.empty());
   c.oracle_regret = true;
+  // Recording the gain's parts changes no choice either.
+  c.planner.options.emplace_back("record_gain_terms", "true");
   auto probed = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
   ASSERT_TRUE(probed.ok()) << probed.status().ToString();
   ExpectSameEpisode(*probed, *plain);
@@ -126,6 +130,28 @@ TEST(EpisodeEndToEndTest, OracleRegretMeasuresEachPlanWithoutChangingTheEpisode)
     EXPECT_LE(r.chosen_true_rank, r.candidates);
     EXPECT_GE(r.rank_correlation, -1.0);
     EXPECT_LE(r.rank_correlation, 1.0);
+    // Every ranked candidate with the truth beside it, the chosen one first.
+    ASSERT_EQ(r.scored.size(), r.candidates);
+    EXPECT_EQ(r.scored.front().true_gain, r.chosen_true_gain);
+    double best = 0.0;
+    for (size_t j = 0; j < r.scored.size(); ++j) {
+      const eval::ScoredCandidate& sc = r.scored[j];
+      best = std::max(best, sc.true_gain);
+      if (j > 0) {
+        EXPECT_LE(sc.utility, r.scored[j - 1].utility);
+      }
+      EXPECT_NEAR(sc.forward.norm(), 1.0, 1e-9);
+      ASSERT_EQ(sc.gain_terms.size(), 4u);
+      EXPECT_EQ(sc.gain_terms[0].first, "target_entropy");
+      EXPECT_EQ(sc.gain_terms[3].first, "unknown_roi");
+      double sum = 0.0;
+      for (const auto& [name, value] : sc.gain_terms) {
+        EXPECT_GE(value, 0.0) << name;
+        sum += value;
+      }
+      EXPECT_NEAR(sum, sc.gain, 1e-6 * std::max(1.0, sc.gain));
+    }
+    EXPECT_EQ(best, r.best_true_gain);
   }
 }
 

@@ -182,7 +182,19 @@ planning::PlanResult RegretProbe::Plan(const planning::PlanningRequest& request,
       1 + static_cast<size_t>(std::count_if(truth.begin(), truth.end(),
                                             [&](double t) { return t > r.chosen_true_gain; }));
   r.rank_correlation = SpearmanRankCorrelation(predicted, truth);
-  steps_.push_back(r);
+  r.scored.reserve(result.ranked.size());
+  for (size_t i = 0; i < result.ranked.size(); ++i) {
+    const planning::ViewCandidate& c = result.ranked[i];
+    r.scored.push_back({.eye = c.X_WC.translation(),
+                        .forward = c.X_WC.rotation().col(2),
+                        .gain = c.gain,
+                        .utility = c.utility,
+                        .cost = c.cost,
+                        .true_gain = truth[i],
+                        .source = c.source,
+                        .gain_terms = c.gain_terms});
+  }
+  steps_.push_back(std::move(r));
   return result;
 }
 

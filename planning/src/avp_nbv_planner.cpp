@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -164,17 +165,21 @@ bool ClipRayToRoi(const Eigen::Vector3d& from, const Eigen::Vector3d& to, const 
 }
 
 /// One voxel's contribution; returns false when the ray ends there. Inlined into the walk: a call
-/// per voxel, with the GainVoxel materialised for it, was a fifth of a plan step.
+/// per voxel, with the GainVoxel materialised for it, was a fifth of a plan step. With kTerms,
+/// each contribution is also added to its part of the gain (terms[AvpGainTerm]).
+template <bool kTerms>
 [[gnu::always_inline]] inline bool Accumulate(const VoxelKey& k, const GainVoxel& v,
                                               SemanticClass target, double voxel_size_m,
                                               const CorePrior::View& prior,
                                               const Eigen::Vector3d& eye, const GainParams& o,
-                                              double& p_vis, double& gain) {
+                                              double& p_vis, double& gain, double* terms) {
   switch (v.state) {
     case mapping::VoxelState::kOccupied:
       if (v.cls == target) {
-        gain += p_vis * o.w_target_entropy * ClampedBinaryEntropyBits(v.p_target) *
-                RangeWeight(k, voxel_size_m, eye, o);
+        const double c = p_vis * o.w_target_entropy * ClampedBinaryEntropyBits(v.p_target) *
+                         RangeWeight(k, voxel_size_m, eye, o);
+        gain += c;
+        if constexpr (kTerms) terms[kGainTargetEntropy] += c;
       }
       return false;
     case mapping::VoxelState::kUnknown: {
@@ -190,7 +195,15 @@ bool ClipRayToRoi(const Eigen::Vector3d& from, const Eigen::Vector3d& to, const 
         if (v.near_target) w = o.w_unknown_near_target;
         if (o.surface_gain) w *= occlusion;
       }
-      if (w > 0.0) gain += p_vis * w * RangeWeight(k, voxel_size_m, eye, o);
+      if (w > 0.0) {
+        const double c = p_vis * w * RangeWeight(k, voxel_size_m, eye, o);
+        gain += c;
+        if constexpr (kTerms) {
+          terms[v.predicted_target ? kGainPredictedTarget
+                : v.near_target    ? kGainUnknownNearTarget
+                                   : kGainUnknownRoi] += c;
+        }
+      }
       p_vis *= 1.0 - occlusion;
       return p_vis > 1e-4;
     }
@@ -245,6 +258,8 @@ const OptionTable<AvpNbvOptions>& AvpNbvOptionTable() {
     t->Real("min_gain_fraction", &O::min_gain_fraction, "", ValueRange::HalfOpen(0, 1),
             "stop when the best expected gain is below this fraction of the first plan's (0: "
             "never)");
+    t->Flag("record_gain_terms", &O::record_gain_terms,
+            "keep each candidate's gain by part (ViewCandidate::gain_terms; for calibration)");
     t->Flag("surface_gain", &O::surface_gain,
             "an unknown voxel counts its weight times the chance the ray ends there");
     t->Nested("candidates", &O::candidates, ShellCandidateOptionTable());
@@ -262,6 +277,22 @@ const OptionTable<AvpNbvOptions>& AvpNbvOptionTable() {
   return *table;
 }
 
+const char* AvpGainTermName(AvpGainTerm term) {
+  switch (term) {
+    case kGainTargetEntropy:
+      return "target_entropy";
+    case kGainPredictedTarget:
+      return "predicted_target";
+    case kGainUnknownNearTarget:
+      return "unknown_near_target";
+    case kGainUnknownRoi:
+      return "unknown_roi";
+    case kGainTermCount:
+      break;
+  }
+  return "?";
+}
+
 Status AvpNbvOptions::Validate() const { return AvpNbvOptionTable().Validate(*this); }
 
 PlannerEntry AvpNbvPlannerEntry() {
@@ -276,8 +307,10 @@ PlannerEntry AvpNbvPlannerEntry() {
 
 namespace {
 
+template <bool kTerms = false>
 double RayGain(const GainGrid& grid, const CorePrior& core_prior, const Eigen::Vector3d& eye,
-               const Eigen::Vector3d& to_unclipped, const GainParams& params) {
+               const Eigen::Vector3d& to_unclipped, const GainParams& params,
+               double* terms = nullptr) {
   double p_vis = 1.0, gain = 0.0;
   const SemanticClass target = grid.target();
   const double s = grid.voxel_size_m();
@@ -290,7 +323,7 @@ double RayGain(const GainGrid& grid, const CorePrior& core_prior, const Eigen::V
   // Free voxels add nothing (Accumulate returns true and changes nothing): bricks flagged all-free
   // (GainGridOptions::skip_free_bricks, off by default) are walked through unread.
   grid.WalkSkippingFree(from, to, [&](const VoxelKey& k, const GainVoxel& v) {
-    return Accumulate(k, v, target, s, prior, from, options, p_vis, gain);
+    return Accumulate<kTerms>(k, v, target, s, prior, from, options, p_vis, gain, terms);
   });
   return gain;
 }
@@ -329,7 +362,10 @@ double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3
   for (const VoxelKey& k : keys) {
     const GainVoxel v =
         ReadGainVoxel(map, k, target, roi, options.grid.near_target_radius_m, &spheres);
-    if (!Accumulate(k, v, target, map.voxel_size_m(), prior, from, params, p_vis, gain)) break;
+    if (!Accumulate<false>(k, v, target, map.voxel_size_m(), prior, from, params, p_vis, gain,
+                           nullptr)) {
+      break;
+    }
   }
   return gain;
 }
@@ -372,13 +408,26 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   const std::vector<Eigen::Vector3d> fine = RayDirections(request.K, options_.ray_stride_px);
   const CorePrior prior = CorePrior::Tabulated(grid->roi(), grid->voxel_size_m(), options_);
   const GainParams params(options_, grid->voxel_size_m());
-  auto view_gain = [&](const ViewCandidate& c, const std::vector<Eigen::Vector3d>& dirs) {
+  // The gain of a candidate over `dirs`, times `scale`; with record_gain_terms its parts too.
+  auto view_gain = [&](ViewCandidate& c, const std::vector<Eigen::Vector3d>& dirs, double scale) {
     const Eigen::Vector3d origin = c.X_WC.translation();
     double g = 0.0;
-    for (const Eigen::Vector3d& d_C : dirs) {
-      g += RayGain(*grid, prior, origin, c.X_WC * (options_.max_range_m * d_C), params);
+    if (!options_.record_gain_terms) {
+      for (const Eigen::Vector3d& d_C : dirs) {
+        g += RayGain(*grid, prior, origin, c.X_WC * (options_.max_range_m * d_C), params);
+      }
+      return scale * g;
     }
-    return g;
+    std::array<double, kGainTermCount> terms{};
+    for (const Eigen::Vector3d& d_C : dirs) {
+      g += RayGain<true>(*grid, prior, origin, c.X_WC * (options_.max_range_m * d_C), params,
+                         terms.data());
+    }
+    c.gain_terms.clear();
+    for (int t = 0; t < kGainTermCount; ++t) {
+      c.gain_terms.emplace_back(AvpGainTermName(static_cast<AvpGainTerm>(t)), scale * terms[t]);
+    }
+    return scale * g;
   };
   std::vector<size_t> reachable;
   for (size_t i = 0; i < candidates.size(); ++i) {
@@ -420,7 +469,7 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
     const double scale = static_cast<double>(fine.size()) / static_cast<double>(coarse.size());
     ParallelFor(reachable.size(), options_.num_threads, [&](size_t j) {
       ViewCandidate& c = candidates[reachable[j]];
-      c.gain = scale * view_gain(c, coarse);
+      c.gain = view_gain(c, coarse, scale);
     });
     score();
     std::vector<size_t> order = reachable;
@@ -430,12 +479,12 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
     order.resize(static_cast<size_t>(options_.refine_top));
     ParallelFor(order.size(), options_.num_threads, [&](size_t j) {
       ViewCandidate& c = candidates[order[j]];
-      c.gain = view_gain(c, fine);
+      c.gain = view_gain(c, fine, 1.0);
     });
   } else {
     ParallelFor(reachable.size(), options_.num_threads, [&](size_t j) {
       ViewCandidate& c = candidates[reachable[j]];
-      c.gain = view_gain(c, fine);
+      c.gain = view_gain(c, fine, 1.0);
     });
   }
   const double max_gain = score();

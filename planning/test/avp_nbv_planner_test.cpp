@@ -2,6 +2,7 @@
 // random rays, and the planner on a rendered plant (deterministic, reachable, never a fused view,
 // enough candidates, stopping rule).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <memory>
@@ -485,7 +486,7 @@ TEST(AvpNbvOptionTest, SetsFieldsByNameAndNamesBadKeysAndValues) {
   EXPECT_EQ(o.candidates.radii_m, (std::vector<double>{0.3, 0.5}));
   // Every key of the options before the table (docs/planning.md) is still there, and settable.
   const std::vector<std::string> keys = table.Keys();
-  EXPECT_EQ(keys.size(), 32u);
+  EXPECT_EQ(keys.size(), 33u);
   for (const std::string& k : keys) {
     AvpNbvOptions x;
     const bool ok =
@@ -535,6 +536,37 @@ TEST_F(AvpNbvPlannerTest, RelativeStoppingRuleComparesWithTheFirstPlan) {
   EXPECT_FALSE(planner.Plan(first, rng).stop);
   o.min_gain_fraction = 1.0;
   EXPECT_NE(o.Validate().message().find("min_gain_fraction (1)"), std::string::npos);
+}
+
+TEST_F(AvpNbvPlannerTest, GainTermsSumToTheGainAndChangeNoChoice) {
+  AvpNbvOptions o;
+  Rng rng_plain(4), rng_terms(4);
+  const PlanResult plain = AvpNbvPlanner(o).Plan(Request(), rng_plain);
+  o.record_gain_terms = true;
+  const PlanResult terms = AvpNbvPlanner(o).Plan(Request(), rng_terms);
+  ASSERT_TRUE(plain.status.ok());
+  ASSERT_TRUE(terms.status.ok());
+  ASSERT_EQ(plain.ranked.size(), terms.ranked.size());
+  std::array<double, kGainTermCount> total{};
+  for (size_t i = 0; i < plain.ranked.size(); ++i) {
+    const ViewCandidate& c = terms.ranked[i];
+    EXPECT_TRUE(plain.ranked[i].gain_terms.empty());
+    EXPECT_EQ(c.X_WC.translation(), plain.ranked[i].X_WC.translation());
+    EXPECT_DOUBLE_EQ(c.gain, plain.ranked[i].gain);
+    ASSERT_EQ(c.gain_terms.size(), static_cast<size_t>(kGainTermCount));
+    double sum = 0.0;
+    for (int t = 0; t < kGainTermCount; ++t) {
+      EXPECT_EQ(c.gain_terms[t].first, AvpGainTermName(static_cast<AvpGainTerm>(t)));
+      EXPECT_GE(c.gain_terms[t].second, 0.0);
+      sum += c.gain_terms[t].second;
+      total[t] += c.gain_terms[t].second;
+    }
+    EXPECT_NEAR(sum, c.gain, 1e-9 * std::max(1.0, c.gain));
+  }
+  // The start view sees fruit: every part is at work somewhere in the candidate set.
+  for (int t = 0; t < kGainTermCount; ++t) {
+    EXPECT_GT(total[t], 0.0) << AvpGainTermName(static_cast<AvpGainTerm>(t));
+  }
 }
 
 TEST_F(AvpNbvPlannerTest, BadRequestsAndOptionsAreErrors) {

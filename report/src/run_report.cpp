@@ -122,14 +122,29 @@ json FruitsJson(const std::vector<eval::FruitResult>& fruits) {
 
 json RegretJson(const std::vector<eval::StepRegret>& regret) {
   json out = json::array();
+  const auto vec = [](const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); };
   for (const eval::StepRegret& g : regret) {
+    json scored = json::array();
+    for (const eval::ScoredCandidate& c : g.scored) {
+      json terms = json::object();
+      for (const auto& [name, value] : c.gain_terms) terms[name] = value;
+      scored.push_back({{"eye", vec(c.eye)},
+                        {"forward", vec(c.forward)},
+                        {"gain", c.gain},
+                        {"utility", c.utility},
+                        {"cost", c.cost},
+                        {"true_gain", c.true_gain},
+                        {"source", c.source},
+                        {"gain_terms", std::move(terms)}});
+    }
     out.push_back({{"step", g.step},
                    {"candidates", g.candidates},
                    {"chosen_true_gain", g.chosen_true_gain},
                    {"best_true_gain", g.best_true_gain},
                    {"regret", g.regret},
                    {"chosen_true_rank", g.chosen_true_rank},
-                   {"rank_correlation", Finite(g.rank_correlation)}});
+                   {"rank_correlation", Finite(g.rank_correlation)},
+                   {"scored", std::move(scored)}});
   }
   return out;
 }

@@ -2,9 +2,11 @@
 
 #include <limits>
 #include <memory>
+#include <string>
 #include <string_view>
 #include <unordered_map>
 #include <unordered_set>
+#include <utility>
 #include <vector>
 
 #include <avp/eval/ground_truth.h>
@@ -120,6 +122,16 @@ class OracleNbvPlanner final : public planning::ViewPlanner {
 
 /// How well a planner ranked its candidates at one plan step, measured with the truth
 /// (RegretProbe).
+/// One ranked candidate of a plan with what the truth says of it (RegretProbe).
+struct ScoredCandidate {
+  Eigen::Vector3d eye = Eigen::Vector3d::Zero();       ///< camera position, world frame
+  Eigen::Vector3d forward = Eigen::Vector3d::UnitZ();  ///< optical axis, world frame
+  double gain = 0.0, utility = 0.0, cost = 0.0;        ///< the planner's
+  double true_gain = 0.0;                              ///< OracleNbvPlanner::TrueGain
+  std::string source;
+  std::vector<std::pair<std::string, double>> gain_terms;  ///< ViewCandidate::gain_terms
+};
+
 struct StepRegret {
   int step = 0;           ///< plan call, from 0
   size_t candidates = 0;  ///< the ranked (reachable) candidates scored
@@ -135,6 +147,9 @@ struct StepRegret {
   /// Spearman correlation of the planner's gain with the true gain over the candidates; NaN when
   /// undefined (fewer than 2 candidates, or either gain constant).
   double rank_correlation = std::numeric_limits<double>::quiet_NaN();
+  /// Every ranked candidate, in rank order (the chosen one first): the planner's numbers beside
+  /// the true gain, the data to calibrate a gain on (docs/planning.md, "Regret of any planner").
+  std::vector<ScoredCandidate> scored;
 };
 
 /// Wraps a planner and, after each of its plans, renders every ranked candidate in the true scene

@@ -44,6 +44,17 @@ namespace avp::planning {
 /// best gain is below `min_gain_bits`, or below `min_gain_fraction` times the best gain of the
 /// episode's first plan (view_index 1; scale-free: the same fraction suits a small plant and a
 /// wide tree, a 3 mm map and a 10 mm one), the planner asks the loop to stop.
+/// The parts of avp-nbv's gain, each the sum of its voxels' weighted contributions.
+enum AvpGainTerm : int {
+  kGainTargetEntropy = 0,  ///< w_target_entropy: target voxels' semantic entropy
+  kGainPredictedTarget,    ///< w_predicted_target: unknown voxels on a fruit's predicted surface
+  kGainUnknownNearTarget,  ///< w_unknown_near_target: other unknown voxels near a target voxel
+  kGainUnknownRoi,         ///< w_unknown_roi: any other unknown ROI voxel (core prior)
+  kGainTermCount
+};
+/// "target_entropy", "predicted_target", "unknown_near_target", "unknown_roi".
+const char* AvpGainTermName(AvpGainTerm term);
+
 struct AvpNbvOptions {
   ShellCandidateOptions candidates;
   GainGridOptions grid;
@@ -83,6 +94,10 @@ struct AvpNbvOptions {
   /// occlusion probability), as a ray shows one surface: the sum along a ray is bounded by the
   /// largest weight. Voxels on a detected fruit's predicted surface count w fully either way.
   bool surface_gain = false;
+  /// Keep each candidate's gain by part in ViewCandidate::gain_terms (AvpGainTermName order,
+  /// summing to its gain): the data to calibrate the weights on (`--oracle-regret` records them
+  /// beside the true gain). Changes no choice.
+  bool record_gain_terms = false;
   /// Threads over candidates (0 = all hardware threads). Results do not depend on it. An
   /// execution setting (PlannerContext::threads), not part of the table.
   int num_threads = 0;

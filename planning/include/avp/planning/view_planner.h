@@ -3,6 +3,7 @@
 #include <cstddef>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -34,6 +35,9 @@ struct ViewCandidate {
   double utility = 0.0;
   /// Where the candidate came from: "fruit-shell", "frontier", "roi", "grid", "waypoint", ...
   std::string source;
+  /// The gain by part (name, the planner's units), summing to `gain`, when the planner records
+  /// them (avp-nbv's record_gain_terms); empty otherwise.
+  std::vector<std::pair<std::string, double>> gain_terms;
 };
 
 /// Everything a planner may look at to choose the next view. Pointers are non-owning and
