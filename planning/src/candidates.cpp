@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numbers>
 
@@ -17,7 +18,8 @@ constexpr double kDegToRad = std::numbers::pi / 180.0;
 /// Frontier voxels (free voxels in the ROI with an unknown 6-neighbour), clustered on a coarse
 /// lattice; returns cluster centres with their voxel counts (near-target voxels count 3x).
 std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const GainGrid& grid,
-                                         int max_clusters) {
+                                         int max_clusters, double spread_m,
+                                         const std::vector<ViewTarget>& chosen) {
   const double s = grid.voxel_size_m();
   constexpr double kCell = 0.05;
   struct Acc {
@@ -58,6 +60,34 @@ std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const G
   // Heaviest first; the map's ordering of equal weights is deterministic (std::map by cell).
   std::stable_sort(out.begin(), out.end(),
                    [](const ViewTarget& a, const ViewTarget& b) { return a.weight > b.weight; });
+  if (spread_m > 0.0 && static_cast<int>(out.size()) > max_clusters && max_clusters > 0) {
+    // Greedy: weight x min(1, distance to the nearest target so far / spread_m); the first
+    // (earliest in the weight order) of equal scores wins.
+    std::vector<double> d_min(out.size(), std::numeric_limits<double>::infinity());
+    const auto update = [&](const Eigen::Vector3d& p) {
+      for (size_t i = 0; i < out.size(); ++i)
+        d_min[i] = std::min(d_min[i], (out[i].p_W - p).norm());
+    };
+    for (const ViewTarget& t : chosen) update(t.p_W);
+    std::vector<ViewTarget> picked;
+    std::vector<bool> used(out.size(), false);
+    while (static_cast<int>(picked.size()) < max_clusters) {
+      size_t best = out.size();
+      double best_score = -1.0;
+      for (size_t i = 0; i < out.size(); ++i) {
+        if (used[i]) continue;
+        const double score = out[i].weight * std::min(1.0, d_min[i] / spread_m);
+        if (score > best_score) {
+          best_score = score;
+          best = i;
+        }
+      }
+      used[best] = true;
+      picked.push_back(out[best]);
+      update(out[best].p_W);
+    }
+    return picked;
+  }
   if (static_cast<int>(out.size()) > max_clusters) out.resize(static_cast<size_t>(max_clusters));
   return out;
 }
@@ -107,7 +137,8 @@ std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const Ga
   }
   const int frontier_budget =
       std::max(0, max_targets - static_cast<int>(core.size()) - static_cast<int>(targets.size()));
-  for (const ViewTarget& t : FrontierClusters(request, grid, frontier_budget)) {
+  for (const ViewTarget& t :
+       FrontierClusters(request, grid, frontier_budget, options.frontier_spread_m, targets)) {
     targets.push_back(t);
   }
   for (const Eigen::Vector3d& p : core) targets.push_back({p, "roi", 1.0});
@@ -209,6 +240,8 @@ const OptionTable<ShellCandidateOptions>& ShellCandidateOptionTable() {
             "no eye this close to a known occupied voxel");
     t->Real("plant_core_radius_m", &O::plant_core_radius_m, "m", ValueRange::HalfOpen(0, 2),
             "within this of the plant's core an eye must be in known free space (0: off)");
+    t->Real("frontier_spread_m", &O::frontier_spread_m, "m", ValueRange::Closed(0, 10),
+            "frontier targets spread at least this far apart where they can (0: heaviest first)");
     t->Real("core_target_spacing_m", &O::core_target_spacing_m, "m", ValueRange::Closed(0, 10),
             "targets along the core of a long ROI at least this far apart (0: the ROI centre)");
     t->Integer("ik_restarts", &O::ik_restarts, "", ValueRange::Closed(0, 32),

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <memory>
 #include <tuple>
@@ -16,6 +17,8 @@
 #include <avp/core/segmentation.h>
 #include <avp/mapping/integrator.h>
 #include <avp/planning/avp_nbv_planner.h>
+#include <avp/planning/candidates.h>
+#include <avp/planning/gain_grid.h>
 #include <avp/planning/isler_utilities.h>
 #include <avp/planning/predefined_planner.h>
 #include <avp/planning/reference_nbv_planner.h>
@@ -486,7 +489,7 @@ TEST(AvpNbvOptionTest, SetsFieldsByNameAndNamesBadKeysAndValues) {
   EXPECT_EQ(o.candidates.radii_m, (std::vector<double>{0.3, 0.5}));
   // Every key of the options before the table (docs/planning.md) is still there, and settable.
   const std::vector<std::string> keys = table.Keys();
-  EXPECT_EQ(keys.size(), 33u);
+  EXPECT_EQ(keys.size(), 34u);
   for (const std::string& k : keys) {
     AvpNbvOptions x;
     const bool ok =
@@ -567,6 +570,37 @@ TEST_F(AvpNbvPlannerTest, GainTermsSumToTheGainAndChangeNoChoice) {
   for (int t = 0; t < kGainTermCount; ++t) {
     EXPECT_GT(total[t], 0.0) << AvpGainTermName(static_cast<AvpGainTerm>(t));
   }
+}
+
+TEST_F(AvpNbvPlannerTest, SpreadFrontierTargetsCoverMoreOfTheBoundary) {
+  const PlanningRequest r = Request();
+  AvpNbvOptions o;
+  const Result<GainGrid> grid = GainGrid::Build(*r.map, r.target_class, r.roi, o.grid);
+  ASSERT_TRUE(grid.ok());
+  // The frontier targets' mean distance to their nearest neighbour among all targets.
+  const auto frontier_spacing = [&](double spread_m) {
+    ShellCandidateOptions c = o.candidates;
+    c.max_targets = 24;  // room for frontier targets beside the fruit
+    c.frontier_spread_m = spread_m;
+    const std::vector<ViewTarget> t = FindViewTargets(r, *grid, c);
+    double sum = 0.0;
+    int n = 0;
+    for (size_t i = 0; i < t.size(); ++i) {
+      if (t[i].source != "frontier") continue;
+      double d = std::numeric_limits<double>::infinity();
+      for (size_t j = 0; j < t.size(); ++j) {
+        if (j != i) d = std::min(d, (t[i].p_W - t[j].p_W).norm());
+      }
+      sum += d;
+      ++n;
+    }
+    return std::pair{n, sum / n};
+  };
+  const auto [n_heaviest, heaviest] = frontier_spacing(0.0);
+  const auto [n_spread, spread] = frontier_spacing(0.3);
+  ASSERT_GE(n_heaviest, 4);
+  EXPECT_EQ(n_spread, n_heaviest);
+  EXPECT_GT(spread, 1.5 * heaviest) << heaviest << " m -> " << spread << " m";
 }
 
 TEST_F(AvpNbvPlannerTest, BadRequestsAndOptionsAreErrors) {

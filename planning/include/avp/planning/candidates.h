@@ -36,6 +36,11 @@ struct ShellCandidateOptions {
   /// long one (a row or an espalier wall), so candidates cover a wide plant. 0: the ROI centre
   /// only.
   double core_target_spacing_m = 0.0;
+  /// Frontier clusters are chosen heaviest first (0), or spread: each next one maximises its
+  /// weight times min(1, d / frontier_spread_m), d its distance to the targets chosen before it
+  /// (fruit and frontiers), so the frontier targets cover the whole boundary of what was seen (a
+  /// wide plant's ends, a low tier) instead of its heaviest stretch (metres).
+  double frontier_spread_m = 0.0;
   /// IK restarts per candidate after the attempt from the current joints.
   int ik_restarts = 1;
   /// Threads for the IK checks (0 = all hardware threads); the result does not depend on it.
