@@ -160,6 +160,15 @@ void PrintConditions(const report::ConditionTables& t) {
   std::printf("wrote %s and %s\n", t.files.at(0).string().c_str(), t.files.at(1).string().c_str());
 }
 
+/// Failed episodes are left out of the statistics; the command says so and fails (0: none).
+int FailedEpisodes(size_t failed, size_t episodes) {
+  if (failed == 0) return 0;
+  return Failed("bench", UnavailableError(fmt::format(
+                             "{} of {} episodes failed (each run folder's avp-state.json or "
+                             "record.json says why)",
+                             failed, episodes)));
+}
+
 int BenchConditions(const experiment::BenchConfig& bench,
                     const experiment::Registries& registries) {
   const Result<experiment::ConditionsSummary> summary =
@@ -168,13 +177,7 @@ int BenchConditions(const experiment::BenchConfig& bench,
   std::printf("%zu conditions, %zu episodes (%zu failed) in %.1f s.\n", summary->benches.size(),
               summary->episodes, summary->failed, summary->seconds);
   PrintConditions(summary->tables);
-  if (summary->failed > 0) {
-    return Failed("bench", UnavailableError(fmt::format(
-                               "{} of {} episodes failed (each run folder's avp-state.json or "
-                               "record.json says why)",
-                               summary->failed, summary->episodes)));
-  }
-  return 0;
+  return FailedEpisodes(summary->failed, summary->episodes);
 }
 
 int Bench(const CLI::App& cmd, const BenchCli& cli, const experiment::Registries& registries) {
@@ -184,14 +187,7 @@ int Bench(const CLI::App& cmd, const BenchCli& cli, const experiment::Registries
   const Result<experiment::BenchSummary> summary = experiment::RunBench(*bench, registries);
   if (!summary.ok()) return Failed("bench", summary.status());
   PrintBench(*bench, *summary);
-  if (summary->failed > 0) {
-    // Failed episodes are left out of the statistics; the command says so and fails.
-    return Failed("bench", UnavailableError(fmt::format(
-                               "{} of {} episodes failed (each run folder's avp-state.json or "
-                               "record.json says why)",
-                               summary->failed, summary->episodes)));
-  }
-  return 0;
+  return FailedEpisodes(summary->failed, summary->episodes);
 }
 
 struct CompareCli {
