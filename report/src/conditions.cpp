@@ -1,6 +1,7 @@
 #include "avp/report/conditions.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdlib>
 #include <map>
@@ -81,8 +82,9 @@ Result<BenchRunResult> ReadRun(const fs::path& dir) {
   // Names from the path until record.json says them (a run that never finished has none).
   r.scenario = dir.parent_path().parent_path().filename().string();
   r.planner = dir.parent_path().filename().string();
+  // ReadBenchRuns passes only folders named seed-<n>.
   const std::string seed_text = dir.filename().string().substr(5);
-  r.seed = std::strtoull(seed_text.c_str(), nullptr, 10);
+  std::from_chars(seed_text.data(), seed_text.data() + seed_text.size(), r.seed);
   std::error_code ec;
   if (!fs::exists(dir / "record.json", ec)) {
     r.error = "no record.json (the episode failed or never finished)";
@@ -113,6 +115,15 @@ Result<BenchRunResult> ReadRun(const fs::path& dir) {
   return r;
 }
 
+/// conditions.csv writes names unquoted: none may hold a comma, a quote or a line break.
+Status CheckCsvName(std::string_view what, const std::string& name) {
+  if (name.find_first_of(",\"\r\n") == std::string::npos) return Status::Ok();
+  return InvalidArgumentError(fmt::format(
+      "the {} name '{}' holds a comma, a quote or a line break, which would break the columns of "
+      "conditions.csv: rename it",
+      what, name));
+}
+
 std::string Num(double v) { return std::isfinite(v) ? fmt::format("{:.3f}", v) : "nan"; }
 std::string Signed(double v) { return std::isfinite(v) ? fmt::format("{:+.3f}", v) : "nan"; }
 std::string MeanCi(const eval::Summary& s) {
@@ -138,9 +149,19 @@ Result<std::vector<BenchRunResult>> ReadBenchRuns(const fs::path& bench_dir) {
     for (const auto& planner : fs::directory_iterator(scenario.path(), ec)) {
       if (!planner.is_directory()) continue;
       for (const auto& seed : fs::directory_iterator(planner.path(), ec)) {
-        if (seed.is_directory() && seed.path().filename().string().rfind("seed-", 0) == 0) {
-          dirs.push_back(seed.path());
+        if (!seed.is_directory()) continue;
+        const std::string name = seed.path().filename().string();
+        uint64_t n = 0;
+        const char* first = name.data() + std::min<size_t>(5, name.size());
+        const char* last = name.data() + name.size();
+        const auto [ptr, err] = std::from_chars(first, last, n);
+        if (name.rfind("seed-", 0) != 0 || first == last || err != std::errc() || ptr != last) {
+          return InvalidArgumentError(fmt::format(
+              "'{}' is not a run folder of an avp bench (runs/<scenario>/<planner>/seed-<n>, n a "
+              "whole number)",
+              seed.path().string()));
         }
+        dirs.push_back(seed.path());
       }
     }
   }
@@ -167,10 +188,13 @@ Result<ConditionTables> WriteConditionTables(const fs::path& out_dir,
                                              const std::string& lead) {
   if (conditions.empty()) return InvalidArgumentError("no condition to compare");
   std::set<std::string> names;
+  std::error_code ec;
+  const fs::path out = fs::weakly_canonical(fs::absolute(out_dir, ec), ec);
   for (const ConditionBench& c : conditions) {
     if (!names.insert(c.name).second) {
       return InvalidArgumentError(fmt::format("the condition '{}' is given twice", c.name));
     }
+    AVP_RETURN_IF_ERROR(CheckCsvName("condition", c.name));
   }
   ConditionTables t;
   // Scenarios and planners in order of first appearance (the lead planner first).
@@ -180,8 +204,20 @@ Result<ConditionTables> WriteConditionTables(const fs::path& out_dir,
       runs;
   for (const ConditionBench& c : conditions) {
     AVP_ASSIGN_OR_RETURN(const std::vector<BenchRunResult> list, ReadBenchRuns(c.dir));
+    // The tables may not go into a bench they read (its own files, its --force).
+    std::error_code in_ec;
+    const fs::path in = fs::weakly_canonical(fs::absolute(c.dir, in_ec), in_ec);
+    const auto in_end = std::mismatch(in.begin(), in.end(), out.begin(), out.end()).first;
+    if (!ec && !in_ec && !in.empty() && in_end == in.end()) {
+      return InvalidArgumentError(
+          fmt::format("the output folder '{}' is inside the bench folder '{}' of condition '{}': "
+                      "write the tables elsewhere",
+                      out_dir.string(), c.dir.string(), c.name));
+    }
     bool has_lead = false;
     for (const BenchRunResult& r : list) {
+      AVP_RETURN_IF_ERROR(CheckCsvName("scenario", r.scenario));
+      AVP_RETURN_IF_ERROR(CheckCsvName("planner", r.planner));
       if (std::find(scenarios.begin(), scenarios.end(), r.scenario) == scenarios.end()) {
         scenarios.push_back(r.scenario);
       }

@@ -146,6 +146,36 @@ TEST_F(ConditionTablesTest, BadFoldersAreErrorsNamingThem) {
                   .message(),
               HasSubstr("the condition 'b' is given twice"));
   EXPECT_FALSE(WriteConditionTables(dir_, {}, "other").ok());
+
+  // conditions.csv writes names unquoted: a comma in a name is refused, naming it.
+  const fs::path out = dir_ / "tables";
+  EXPECT_THAT(WriteConditionTables(out, {{"b,c", "", dir_ / "b"}}, "other").status().message(),
+              HasSubstr("the condition name 'b,c' holds a comma"));
+  Run("q", "plant,x", "other", 0, {0.1});
+  EXPECT_THAT(WriteConditionTables(out, {{"q", "", dir_ / "q"}}, "other").status().message(),
+              HasSubstr("the scenario name 'plant,x' holds a comma"));
+  // The tables never go into a bench folder they read (nor into one of its subfolders).
+  for (const fs::path& inside : {dir_ / "b", dir_ / "b" / "runs", dir_ / "b" / "." / "new"}) {
+    EXPECT_THAT(WriteConditionTables(inside, {{"b", "", dir_ / "b"}}, "other").status().message(),
+                HasSubstr("is inside the bench folder"))
+        << inside;
+  }
+  EXPECT_TRUE(WriteConditionTables(dir_ / "b-tables", {{"b", "", dir_ / "b"}}, "other").ok());
+  EXPECT_TRUE(fs::exists(dir_ / "b-tables" / "conditions.csv"));
+
+  // A folder among the seeds that is not seed-<n> is an error naming it, not seed 0.
+  for (const std::string name : {"seed-", "seed-x", "seed-1a", "notes"}) {
+    fs::create_directories(dir_ / "b/runs/plant/other" / name);
+    const auto stray = ReadBenchRuns(dir_ / "b");
+    ASSERT_FALSE(stray.ok()) << name;
+    EXPECT_THAT(stray.status().message(), HasSubstr(name + "' is not a run folder")) << name;
+    fs::remove(dir_ / "b/runs/plant/other" / name);
+  }
+  Run("b", "plant", "other", 17, {0.3});
+  const auto two = ReadBenchRuns(dir_ / "b");
+  ASSERT_TRUE(two.ok()) << two.status().message();
+  ASSERT_EQ(two->size(), 2u);
+  EXPECT_EQ((*two)[1].seed, 17u);
 }
 
 }  // namespace

@@ -29,8 +29,9 @@ struct BenchRunResult {
 };
 
 /// Every run folder of the bench folder `bench_dir`, in path order. Errors: NotFound when it has
-/// no runs/ folder; ParseError naming the file for a record.json or metrics.csv that is not one
-/// avp wrote (a missing column, a bad number). A run that failed or never finished is returned
+/// no runs/ folder; InvalidArgument naming a folder under runs/<scenario>/<planner>/ that is not
+/// seed-<n>; ParseError naming the file for a record.json or metrics.csv that is not one avp
+/// wrote (a missing column, a bad number). A run that failed or never finished is returned
 /// with ok = false and its state as the error.
 Result<std::vector<BenchRunResult>> ReadBenchRuns(const std::filesystem::path& bench_dir);
 
@@ -75,8 +76,9 @@ std::string LeadVerdict(const eval::Summary& difference);
 ///                   found, the lead's difference over each other planner with its verdict, and
 ///                   the views the lead planner used; then every comparison the lead does not win.
 /// `lead` is the planner compared with the others (it must have run in every condition).
-/// Errors: InvalidArgument for no condition, repeated names or a lead planner missing from a
-/// condition; ReadBenchRuns' errors; IoError naming a file that cannot be written.
+/// Errors: InvalidArgument for no condition, repeated names, a condition, scenario or planner
+/// name with a comma, a quote or a line break (conditions.csv's names are unquoted), `out_dir`
+/// inside one of the bench folders, or a lead planner missing from a condition; ReadBenchRuns' errors; IoError naming a file that cannot be written.
 Result<ConditionTables> WriteConditionTables(const std::filesystem::path& out_dir,
                                              const std::vector<ConditionBench>& conditions,
                                              const std::string& lead);
