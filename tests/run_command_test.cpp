@@ -854,6 +854,18 @@ TEST_F(RunCommandTest, BenchLimitsEpisodesSeedsAndJobs) {
                                        "limit max_bench_episodes = 11"));
   }
   EXPECT_TRUE(o.Validate(registries_).ok());
+  {
+    // Each condition runs the whole bench again: 3 conditions x 12 episodes.
+    BenchConfig c = o;
+    c.conditions = {{"a", "", {}, {}}, {"b", "", {}, {}}, {"c", "", {}, {}}};
+    const ScopedLimit limit(MaxBenchEpisodes(), 35);
+    const Status s = c.Validate(registries_);
+    EXPECT_EQ(s.code(), StatusCode::kResourceExhausted);
+    EXPECT_THAT(s.message(), HasSubstr("2 scenarios x 2 planners x 3 seeds x 3 conditions (36) "
+                                       "exceeds the limit max_bench_episodes = 35"));
+    const ScopedLimit enough(MaxBenchEpisodes(), 36);
+    EXPECT_TRUE(c.Validate(registries_).ok()) << c.Validate(registries_).ToString();
+  }
   o.jobs = 5000;
   EXPECT_THAT(o.Validate(registries_).message(), HasSubstr("jobs (5000) must be in [0, 1024]"));
   o.jobs = 0;

@@ -601,13 +601,17 @@ Status BenchConfig::Validate(const Registries& registries) const {
   if (Status s = CheckSeedCount(seeds.size(), "seeds"); !s.ok()) errors.push_back(s.message());
   const size_t num_scenarios = list.ok() ? list->size() : scenarios.size();
   uint64_t shown = 0;
+  // Every condition runs the whole bench again.
+  const uint64_t runs = std::max<uint64_t>(1, conditions.size());
   if (__builtin_mul_overflow(uint64_t{num_scenarios}, uint64_t{planners.size()}, &shown) ||
-      __builtin_mul_overflow(shown, uint64_t{seeds.size()}, &shown)) {
+      __builtin_mul_overflow(shown, uint64_t{seeds.size()}, &shown) ||
+      __builtin_mul_overflow(shown, runs, &shown)) {
     shown = UINT64_MAX;
   }
-  if (Status s = MaxBenchEpisodes().Check(fmt::format("{} scenarios x {} planners x {} seeds",
-                                                      num_scenarios, planners.size(), seeds.size()),
-                                          shown);
+  if (Status s = MaxBenchEpisodes().Check(
+          fmt::format("{} scenarios x {} planners x {} seeds{}", num_scenarios, planners.size(),
+                      seeds.size(), runs > 1 ? fmt::format(" x {} conditions", runs) : ""),
+          shown);
       !s.ok()) {
     return s;
   }
