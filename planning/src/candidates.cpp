@@ -18,7 +18,7 @@ constexpr double kDegToRad = std::numbers::pi / 180.0;
 /// Frontier voxels (free voxels in the ROI with an unknown 6-neighbour), clustered on a coarse
 /// lattice; returns cluster centres with their voxel counts (near-target voxels count 3x).
 std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const GainGrid& grid,
-                                         int max_clusters, double spread_m,
+                                         int max_clusters, double spread_m, int spread_after,
                                          const std::vector<ViewTarget>& chosen) {
   const double s = grid.voxel_size_m();
   constexpr double kCell = 0.05;
@@ -71,6 +71,14 @@ std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const G
     for (const ViewTarget& t : chosen) update(t.p_W);
     std::vector<ViewTarget> picked;
     std::vector<bool> used(out.size(), false);
+    // The heaviest spread_after clusters first, as without spreading.
+    for (size_t i = 0;
+         i < out.size() && static_cast<int>(picked.size()) < std::min(spread_after, max_clusters);
+         ++i) {
+      used[i] = true;
+      picked.push_back(out[i]);
+      update(out[i].p_W);
+    }
     while (static_cast<int>(picked.size()) < max_clusters) {
       size_t best = out.size();
       double best_score = -1.0;
@@ -89,6 +97,111 @@ std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const G
     return picked;
   }
   if (static_cast<int>(out.size()) > max_clusters) out.resize(static_cast<size_t>(max_clusters));
+  return out;
+}
+
+/// Centres of ROI cubes (edge cell_m) that hold at most 10 % known voxels and border seen plant
+/// (occupied voxels in the 26 cubes around them), up to max_targets: the plant is likely to go
+/// on where its seen part ends. Greedy: each next cube maximises its bordering occupied voxels
+/// times min(1, d / (3 cell_m)), d its distance to the targets chosen so far (`chosen` first);
+/// ties go to the first cube in (z, y, x) order.
+std::vector<ViewTarget> UnseenTargets(const PlanningRequest& request, double voxel_size_m,
+                                      int max_targets, double cell_m,
+                                      const std::vector<ViewTarget>& chosen) {
+  std::vector<ViewTarget> out;
+  const Box3& roi = request.roi;
+  if (max_targets <= 0 || !(cell_m > 0.0) || roi.IsEmpty()) return out;
+  const Eigen::Vector3d extent = roi.max() - roi.min();
+  Eigen::Vector3i n;
+  for (int i = 0; i < 3; ++i) {
+    n[i] = std::max(1, static_cast<int>(std::ceil(extent[i] / cell_m - 1e-9)));
+  }
+  const size_t cells = static_cast<size_t>(n.x()) * n.y() * n.z();
+  if (cells > (size_t{1} << 20)) return out;  // a huge ROI at a tiny cell: not a target set
+  const auto index = [&](int x, int y, int z) {
+    return static_cast<size_t>(x) +
+           static_cast<size_t>(n.x()) * (static_cast<size_t>(y) + static_cast<size_t>(n.y()) * z);
+  };
+  const auto cell_of = [&](const Eigen::Vector3d& p) {
+    Eigen::Vector3i c;
+    for (int i = 0; i < 3; ++i) {
+      c[i] = std::clamp(static_cast<int>(std::floor((p[i] - roi.min()[i]) / cell_m)), 0, n[i] - 1);
+    }
+    return index(c.x(), c.y(), c.z());
+  };
+  std::vector<uint32_t> known(cells, 0), occupied(cells, 0);
+  const float occupied_log_odds = request.map->grid().occupied_log_odds();
+  request.map->grid().ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
+    const Eigen::Vector3d c = k.Center(voxel_size_m);
+    if (!roi.Contains(c)) return;
+    const size_t i = cell_of(c);
+    ++known[i];
+    if (log_odds >= occupied_log_odds) ++occupied[i];
+  });
+  const double voxel_volume = voxel_size_m * voxel_size_m * voxel_size_m;
+  std::vector<bool> unseen(cells, false);
+  for (int z = 0; z < n.z(); ++z) {
+    for (int y = 0; y < n.y(); ++y) {
+      for (int x = 0; x < n.x(); ++x) {
+        const Eigen::Vector3d lo = roi.min() + cell_m * Eigen::Vector3d(x, y, z);
+        const double volume =
+            ((lo + Eigen::Vector3d::Constant(cell_m)).cwiseMin(roi.max()) - lo).prod();
+        const size_t i = index(x, y, z);
+        unseen[i] = volume > 0.0 && static_cast<double>(known[i]) <= 0.1 * volume / voxel_volume;
+      }
+    }
+  }
+  struct Cube {
+    Eigen::Vector3d centre;
+    double weight;
+  };
+  std::vector<Cube> cubes;
+  for (int z = 0; z < n.z(); ++z) {
+    for (int y = 0; y < n.y(); ++y) {
+      for (int x = 0; x < n.x(); ++x) {
+        if (!unseen[index(x, y, z)]) continue;
+        double weight = 0.0;
+        for (int dz = -1; dz <= 1; ++dz) {
+          for (int dy = -1; dy <= 1; ++dy) {
+            for (int dx = -1; dx <= 1; ++dx) {
+              const int xx = x + dx, yy = y + dy, zz = z + dz;
+              if (xx < 0 || yy < 0 || zz < 0 || xx >= n.x() || yy >= n.y() || zz >= n.z()) continue;
+              weight += occupied[index(xx, yy, zz)];
+            }
+          }
+        }
+        if (weight <= 0.0) continue;
+        const Eigen::Vector3d lo = roi.min() + cell_m * Eigen::Vector3d(x, y, z);
+        cubes.push_back(
+            {0.5 * (lo + (lo + Eigen::Vector3d::Constant(cell_m)).cwiseMin(roi.max())), weight});
+      }
+    }
+  }
+  const double spread_m = 3.0 * cell_m;
+  std::vector<double> d_min(cubes.size(), std::numeric_limits<double>::infinity());
+  const auto update = [&](const Eigen::Vector3d& p) {
+    for (size_t i = 0; i < cubes.size(); ++i) {
+      d_min[i] = std::min(d_min[i], (cubes[i].centre - p).norm());
+    }
+  };
+  for (const ViewTarget& t : chosen) update(t.p_W);
+  std::vector<bool> used(cubes.size(), false);
+  while (static_cast<int>(out.size()) < max_targets) {
+    size_t best = cubes.size();
+    double best_score = 0.0;
+    for (size_t i = 0; i < cubes.size(); ++i) {
+      if (used[i]) continue;
+      const double score = cubes[i].weight * std::min(1.0, d_min[i] / spread_m);
+      if (score > best_score) {
+        best_score = score;
+        best = i;
+      }
+    }
+    if (best == cubes.size()) break;
+    used[best] = true;
+    out.push_back({cubes[best].centre, "unseen", cubes[best].weight});
+    update(cubes[best].centre);
+  }
   return out;
 }
 
@@ -135,10 +248,22 @@ std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const Ga
     if (static_cast<int>(targets.size()) >= fruit_budget) break;
     targets.push_back({info.centroid_W, "fruit-shell", static_cast<double>(info.voxels)});
   }
+  {
+    const int room =
+        std::max(0, max_targets - static_cast<int>(core.size()) - static_cast<int>(targets.size()));
+    std::vector<ViewTarget> chosen = targets;
+    for (const Eigen::Vector3d& p : core) chosen.push_back({p, "roi", 1.0});
+    for (const ViewTarget& t :
+         UnseenTargets(request, grid.voxel_size_m(), std::min(room, options.unseen_targets),
+                       options.unseen_cell_m, chosen)) {
+      targets.push_back(t);
+    }
+  }
   const int frontier_budget =
       std::max(0, max_targets - static_cast<int>(core.size()) - static_cast<int>(targets.size()));
   for (const ViewTarget& t :
-       FrontierClusters(request, grid, frontier_budget, options.frontier_spread_m, targets)) {
+       FrontierClusters(request, grid, frontier_budget, options.frontier_spread_m,
+                        options.frontier_spread_after, targets)) {
     targets.push_back(t);
   }
   for (const Eigen::Vector3d& p : core) targets.push_back({p, "roi", 1.0});
@@ -242,8 +367,14 @@ const OptionTable<ShellCandidateOptions>& ShellCandidateOptionTable() {
             "within this of the plant's core an eye must be in known free space (0: off)");
     t->Real("frontier_spread_m", &O::frontier_spread_m, "m", ValueRange::Closed(0, 10),
             "frontier targets spread at least this far apart where they can (0: heaviest first)");
+    t->Integer("frontier_spread_after", &O::frontier_spread_after, "", ValueRange::Closed(0, 256),
+               "with frontier_spread_m: the heaviest this many frontier targets come first");
     t->Real("core_target_spacing_m", &O::core_target_spacing_m, "m", ValueRange::Closed(0, 10),
             "targets along the core of a long ROI at least this far apart (0: the ROI centre)");
+    t->Integer("unseen_targets", &O::unseen_targets, "", ValueRange::Closed(0, 64),
+               "targets spread over ROI cubes no view has seen (0: off)");
+    t->Real("unseen_cell_m", &O::unseen_cell_m, "m", ValueRange::Closed(0.01, 2),
+            "edge of the ROI cubes for unseen_targets");
     t->Integer("ik_restarts", &O::ik_restarts, "", ValueRange::Closed(0, 32),
                "IK restarts per candidate after the attempt from the current joints");
     t->Threads("num_threads", &O::num_threads);

@@ -489,7 +489,7 @@ TEST(AvpNbvOptionTest, SetsFieldsByNameAndNamesBadKeysAndValues) {
   EXPECT_EQ(o.candidates.radii_m, (std::vector<double>{0.3, 0.5}));
   // Every key of the options before the table (docs/planning.md) is still there, and settable.
   const std::vector<std::string> keys = table.Keys();
-  EXPECT_EQ(keys.size(), 34u);
+  EXPECT_EQ(keys.size(), 37u);
   for (const std::string& k : keys) {
     AvpNbvOptions x;
     const bool ok =
@@ -601,6 +601,120 @@ TEST_F(AvpNbvPlannerTest, SpreadFrontierTargetsCoverMoreOfTheBoundary) {
   ASSERT_GE(n_heaviest, 4);
   EXPECT_EQ(n_spread, n_heaviest);
   EXPECT_GT(spread, 1.5 * heaviest) << heaviest << " m -> " << spread << " m";
+
+  // frontier_spread_after: the heaviest N come first as without spreading, the rest spread.
+  const auto frontiers = [&](double spread_m, int after) {
+    ShellCandidateOptions c = o.candidates;
+    c.max_targets = 24;
+    c.frontier_spread_m = spread_m;
+    c.frontier_spread_after = after;
+    std::vector<Eigen::Vector3d> p;
+    for (const ViewTarget& t : FindViewTargets(r, *grid, c)) {
+      if (t.source == "frontier") p.push_back(t.p_W);
+    }
+    return p;
+  };
+  const std::vector<Eigen::Vector3d> by_weight = frontiers(0.0, 0);
+  const std::vector<Eigen::Vector3d> spread_all = frontiers(0.3, 0);
+  const std::vector<Eigen::Vector3d> after2 = frontiers(0.3, 2);
+  ASSERT_EQ(after2.size(), by_weight.size());
+  EXPECT_EQ(after2[0], by_weight[0]);
+  EXPECT_EQ(after2[1], by_weight[1]);
+  EXPECT_NE(after2, by_weight);  // the others are spread
+  EXPECT_NE(after2, spread_all);
+  EXPECT_EQ(frontiers(0.3, 256), by_weight);  // all kept: heaviest first
+}
+
+TEST_F(AvpNbvPlannerTest, UnseenTargetsSitInCubesNoViewHasSeen) {
+  const PlanningRequest r = Request();
+  AvpNbvOptions o;
+  const Result<GainGrid> grid = GainGrid::Build(*r.map, r.target_class, r.roi, o.grid);
+  ASSERT_TRUE(grid.ok());
+  ShellCandidateOptions c = o.candidates;
+  c.max_targets = 24;
+  const auto count = [](const std::vector<ViewTarget>& t, const std::string& source) {
+    return std::count_if(t.begin(), t.end(),
+                         [&](const ViewTarget& v) { return v.source == source; });
+  };
+  const std::vector<ViewTarget> plain = FindViewTargets(r, *grid, c);
+  EXPECT_EQ(count(plain, "unseen"), 0);
+  c.unseen_targets = 3;
+  c.unseen_cell_m = 0.1;
+  const std::vector<ViewTarget> t = FindViewTargets(r, *grid, c);
+  ASSERT_EQ(count(t, "unseen"), 3);
+  // They come out of the frontiers' share; fruit and the ROI centre keep theirs.
+  EXPECT_EQ(t.size(), plain.size());
+  EXPECT_EQ(count(t, "frontier"), count(plain, "frontier") - 3);
+  EXPECT_EQ(count(t, "fruit-shell"), count(plain, "fruit-shell"));
+  // Each sits in a cube of the ROI with at most 10 % of its voxels known, never two in one
+  // cube.
+  const double s = r.map->grid().voxel_size_m();
+  std::vector<Eigen::Vector3d> unseen;
+  for (const ViewTarget& v : t) {
+    if (v.source != "unseen") continue;
+    EXPECT_TRUE(r.roi.Contains(v.p_W));
+    const Eigen::Vector3d lo =
+        r.roi.min() + 0.1 * ((v.p_W - r.roi.min()) / 0.1).array().floor().matrix();
+    const Box3 cube(lo, (lo + Eigen::Vector3d::Constant(0.1)).cwiseMin(r.roi.max()));
+    size_t known = 0;
+    r.map->grid().ForEachKnownVoxel([&](const VoxelKey& k, float) {
+      const Eigen::Vector3d p = k.Center(s);
+      if (cube.Contains(p) && r.roi.Contains(p)) ++known;
+    });
+    EXPECT_LE(static_cast<double>(known), 0.1 * cube.size().prod() / (s * s * s) + 1.0);
+    for (const Eigen::Vector3d& q : unseen) EXPECT_GE((q - v.p_W).norm(), 0.1 - 1e-9);
+    unseen.push_back(v.p_W);
+  }
+  // With room for all of them, exactly the unseen cubes that border seen plant (counted here,
+  // voxel by voxel) are targets; the start view saw part of the plant, so some cubes are seen.
+  const Eigen::Vector3i n = (r.roi.size() / 0.1 - Eigen::Vector3d::Constant(1e-9))
+                                .array()
+                                .ceil()
+                                .cast<int>()
+                                .max(1)
+                                .matrix();
+  const auto at = [&](int x, int y, int z) {
+    return static_cast<size_t>(x + n.x() * (y + n.y() * z));
+  };
+  std::vector<size_t> known(static_cast<size_t>(n.prod()), 0), occupied(known.size(), 0);
+  r.map->grid().ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
+    const Eigen::Vector3d p = k.Center(s);
+    if (!r.roi.Contains(p)) return;
+    const Eigen::Vector3i i =
+        ((p - r.roi.min()) / 0.1).array().floor().cast<int>().min(n.array() - 1).matrix();
+    ++known[at(i.x(), i.y(), i.z())];
+    if (log_odds >= r.map->grid().occupied_log_odds()) ++occupied[at(i.x(), i.y(), i.z())];
+  });
+  int unseen_cubes = 0, bordering = 0;
+  for (int z = 0; z < n.z(); ++z) {
+    for (int y = 0; y < n.y(); ++y) {
+      for (int x = 0; x < n.x(); ++x) {
+        const Eigen::Vector3d lo = r.roi.min() + 0.1 * Eigen::Vector3d(x, y, z);
+        const double volume =
+            ((lo + Eigen::Vector3d::Constant(0.1)).cwiseMin(r.roi.max()) - lo).prod();
+        if (static_cast<double>(known[at(x, y, z)]) > 0.1 * volume / (s * s * s)) continue;
+        ++unseen_cubes;
+        size_t plant = 0;
+        for (int dz = -1; dz <= 1; ++dz) {
+          for (int dy = -1; dy <= 1; ++dy) {
+            for (int dx = -1; dx <= 1; ++dx) {
+              const Eigen::Vector3i q(x + dx, y + dy, z + dz);
+              if ((q.array() >= 0).all() && (q.array() < n.array()).all()) {
+                plant += occupied[at(q.x(), q.y(), q.z())];
+              }
+            }
+          }
+        }
+        if (plant > 0) ++bordering;
+      }
+    }
+  }
+  ASSERT_GT(bordering, 3);
+  ASSERT_LT(bordering, unseen_cubes);  // some unseen cubes are nowhere near the seen plant
+  ASSERT_LT(unseen_cubes, n.prod());
+  c.unseen_targets = 64;
+  c.max_targets = 256;
+  EXPECT_EQ(count(FindViewTargets(r, *grid, c), "unseen"), std::min(64, bordering));
 }
 
 TEST_F(AvpNbvPlannerTest, BadRequestsAndOptionsAreErrors) {

@@ -41,6 +41,19 @@ struct ShellCandidateOptions {
   /// (fruit and frontiers), so the frontier targets cover the whole boundary of what was seen (a
   /// wide plant's ends, a low tier) instead of its heaviest stretch (metres).
   double frontier_spread_m = 0.0;
+  /// With frontier_spread_m: the heaviest this many frontier clusters are taken first, as without
+  /// spreading, and only the others are spread.
+  int frontier_spread_after = 0;
+  /// Up to this many targets in regions of the ROI that no view has seen yet, next to the plant
+  /// seen so far (where it likely goes on): the ROI is cut into cubes of unseen_cell_m, a cube
+  /// with at most 10 % of its voxels known is unseen, and it is weighted by the occupied voxels
+  /// of the 3 x 3 x 3 cubes around it (0: not a target). Chosen greedily, each next one
+  /// maximising its weight x min(1, d / (3 unseen_cell_m)), d its distance to the targets chosen
+  /// before it (fruit and the plant's core included). They come out of the frontiers' share of
+  /// max_targets. 0 turns them off (the default: measured in docs/planning.md, it did not help).
+  int unseen_targets = 0;
+  /// Edge of the cubes the ROI is cut into for unseen_targets (metres).
+  double unseen_cell_m = 0.1;
   /// IK restarts per candidate after the attempt from the current joints.
   int ik_restarts = 1;
   /// Threads for the IK checks (0 = all hardware threads); the result does not depend on it.
