@@ -78,7 +78,8 @@ std::string LeadVerdict(const eval::Summary& difference);
 /// `lead` is the planner compared with the others (it must have run in every condition).
 /// Errors: InvalidArgument for no condition, repeated names, a condition, scenario or planner
 /// name with a comma, a quote or a line break (conditions.csv's names are unquoted), `out_dir`
-/// inside one of the bench folders, or a lead planner missing from a condition; ReadBenchRuns' errors; IoError naming a file that cannot be written.
+/// inside one of the bench folders, or a lead planner missing from a condition; ReadBenchRuns'
+/// errors; IoError naming a file that cannot be written.
 Result<ConditionTables> WriteConditionTables(const std::filesystem::path& out_dir,
                                              const std::vector<ConditionBench>& conditions,
                                              const std::string& lead);
