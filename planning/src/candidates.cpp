@@ -19,6 +19,7 @@ constexpr double kDegToRad = std::numbers::pi / 180.0;
 /// lattice; returns cluster centres with their voxel counts (near-target voxels count 3x).
 std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const GainGrid& grid,
                                          int max_clusters, double spread_m, int spread_after,
+                                         int extra, double extra_spread_m,
                                          const std::vector<ViewTarget>& chosen) {
   const double s = grid.voxel_size_m();
   constexpr double kCell = 0.05;
@@ -60,44 +61,48 @@ std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const G
   // Heaviest first; the map's ordering of equal weights is deterministic (std::map by cell).
   std::stable_sort(out.begin(), out.end(),
                    [](const ViewTarget& a, const ViewTarget& b) { return a.weight > b.weight; });
-  if (spread_m > 0.0 && static_cast<int>(out.size()) > max_clusters && max_clusters > 0) {
-    // Greedy: weight x min(1, distance to the nearest target so far / spread_m); the first
-    // (earliest in the weight order) of equal scores wins.
-    std::vector<double> d_min(out.size(), std::numeric_limits<double>::infinity());
-    const auto update = [&](const Eigen::Vector3d& p) {
-      for (size_t i = 0; i < out.size(); ++i)
-        d_min[i] = std::min(d_min[i], (out[i].p_W - p).norm());
-    };
-    for (const ViewTarget& t : chosen) update(t.p_W);
-    std::vector<ViewTarget> picked;
-    std::vector<bool> used(out.size(), false);
-    // The heaviest spread_after clusters first, as without spreading.
-    for (size_t i = 0;
-         i < out.size() && static_cast<int>(picked.size()) < std::min(spread_after, max_clusters);
-         ++i) {
-      used[i] = true;
-      picked.push_back(out[i]);
-      update(out[i].p_W);
-    }
-    while (static_cast<int>(picked.size()) < max_clusters) {
-      size_t best = out.size();
-      double best_score = -1.0;
-      for (size_t i = 0; i < out.size(); ++i) {
-        if (used[i]) continue;
-        const double score = out[i].weight * std::min(1.0, d_min[i] / spread_m);
-        if (score > best_score) {
-          best_score = score;
-          best = i;
-        }
+  std::vector<double> d_min(out.size(), std::numeric_limits<double>::infinity());
+  const auto update = [&](const Eigen::Vector3d& p) {
+    for (size_t i = 0; i < out.size(); ++i) d_min[i] = std::min(d_min[i], (out[i].p_W - p).norm());
+  };
+  for (const ViewTarget& t : chosen) update(t.p_W);
+  std::vector<ViewTarget> picked;
+  std::vector<bool> used(out.size(), false);
+  const auto take = [&](size_t i) {
+    used[i] = true;
+    picked.push_back(out[i]);
+    update(out[i].p_W);
+  };
+  // Greedy: weight x min(1, distance to the nearest target so far / spread_m); the first
+  // (earliest in the weight order) of equal scores wins. Without spreading: the heaviest.
+  const auto take_best = [&](double spread) {
+    size_t best = out.size();
+    double best_score = -1.0;
+    for (size_t i = 0; i < out.size(); ++i) {
+      if (used[i]) continue;
+      const double score = spread > 0.0 ? out[i].weight * std::min(1.0, d_min[i] / spread) : 0.0;
+      if (score > best_score) {
+        best_score = score;
+        best = i;
       }
-      used[best] = true;
-      picked.push_back(out[best]);
-      update(out[best].p_W);
     }
-    return picked;
+    if (best == out.size()) return false;
+    take(best);
+    return true;
+  };
+  const int standard = std::min(std::max(0, max_clusters), static_cast<int>(out.size()));
+  if (spread_m > 0.0 && static_cast<int>(out.size()) > max_clusters) {
+    // The heaviest spread_after clusters first, as without spreading, then spread.
+    for (int i = 0; i < std::min(spread_after, standard); ++i) take(static_cast<size_t>(i));
+    while (static_cast<int>(picked.size()) < standard && take_best(spread_m)) {
+    }
+  } else {
+    for (int i = 0; i < standard; ++i) take(static_cast<size_t>(i));
   }
-  if (static_cast<int>(out.size()) > max_clusters) out.resize(static_cast<size_t>(max_clusters));
-  return out;
+  // Extra clusters beyond the budget, spread from everything chosen so far.
+  for (int e = 0; e < extra && take_best(extra_spread_m); ++e) {
+  }
+  return picked;
 }
 
 /// Centres of ROI cubes (edge cell_m) that hold at most 10 % known voxels and border seen plant
@@ -261,9 +266,9 @@ std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const Ga
   }
   const int frontier_budget =
       std::max(0, max_targets - static_cast<int>(core.size()) - static_cast<int>(targets.size()));
-  for (const ViewTarget& t :
-       FrontierClusters(request, grid, frontier_budget, options.frontier_spread_m,
-                        options.frontier_spread_after, targets)) {
+  for (const ViewTarget& t : FrontierClusters(
+           request, grid, frontier_budget, options.frontier_spread_m, options.frontier_spread_after,
+           options.extra_frontier_targets, options.extra_frontier_spread_m, targets)) {
     targets.push_back(t);
   }
   for (const Eigen::Vector3d& p : core) targets.push_back({p, "roi", 1.0});
@@ -277,7 +282,10 @@ std::vector<ViewCandidate> GenerateShellCandidates(const PlanningRequest& reques
   std::vector<ViewCandidate> out;
   if (targets.empty()) return out;
   const double s = grid.voxel_size_m();
-  const int per_target = std::max(1, options.max_candidates / static_cast<int>(targets.size()));
+  // Targets beyond max_targets (extra_frontier_targets) get as many candidates as the others.
+  const int per_target =
+      std::max(1, options.max_candidates /
+                      std::min(static_cast<int>(targets.size()), std::max(1, options.max_targets)));
   const double r_min = *std::min_element(options.radii_m.begin(), options.radii_m.end());
   const double r_max = *std::max_element(options.radii_m.begin(), options.radii_m.end());
   const double el_min =
@@ -369,6 +377,10 @@ const OptionTable<ShellCandidateOptions>& ShellCandidateOptionTable() {
             "frontier targets spread at least this far apart where they can (0: heaviest first)");
     t->Integer("frontier_spread_after", &O::frontier_spread_after, "", ValueRange::Closed(0, 256),
                "with frontier_spread_m: the heaviest this many frontier targets come first");
+    t->Integer("extra_frontier_targets", &O::extra_frontier_targets, "", ValueRange::Closed(0, 64),
+               "frontier targets beyond max_targets, spread from all others (0: none)");
+    t->Real("extra_frontier_spread_m", &O::extra_frontier_spread_m, "m", ValueRange::Closed(0, 10),
+            "spread of the extra frontier targets (0: heaviest next)");
     t->Real("core_target_spacing_m", &O::core_target_spacing_m, "m", ValueRange::Closed(0, 10),
             "targets along the core of a long ROI at least this far apart (0: the ROI centre)");
     t->Integer("unseen_targets", &O::unseen_targets, "", ValueRange::Closed(0, 64),

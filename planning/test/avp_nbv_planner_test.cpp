@@ -489,7 +489,7 @@ TEST(AvpNbvOptionTest, SetsFieldsByNameAndNamesBadKeysAndValues) {
   EXPECT_EQ(o.candidates.radii_m, (std::vector<double>{0.3, 0.5}));
   // Every key of the options before the table (docs/planning.md) is still there, and settable.
   const std::vector<std::string> keys = table.Keys();
-  EXPECT_EQ(keys.size(), 37u);
+  EXPECT_EQ(keys.size(), 39u);
   for (const std::string& k : keys) {
     AvpNbvOptions x;
     const bool ok =
@@ -623,6 +623,41 @@ TEST_F(AvpNbvPlannerTest, SpreadFrontierTargetsCoverMoreOfTheBoundary) {
   EXPECT_NE(after2, by_weight);  // the others are spread
   EXPECT_NE(after2, spread_all);
   EXPECT_EQ(frontiers(0.3, 256), by_weight);  // all kept: heaviest first
+}
+
+TEST_F(AvpNbvPlannerTest, ExtraFrontierTargetsAddToTheDefaultOnes) {
+  const PlanningRequest r = Request();
+  AvpNbvOptions o;
+  const Result<GainGrid> grid = GainGrid::Build(*r.map, r.target_class, r.roi, o.grid);
+  ASSERT_TRUE(grid.ok());
+  const std::vector<ViewTarget> plain = FindViewTargets(r, *grid, o.candidates);
+  ShellCandidateOptions c = o.candidates;
+  c.extra_frontier_targets = 3;
+  const std::vector<ViewTarget> more = FindViewTargets(r, *grid, c);
+  ASSERT_EQ(more.size(), plain.size() + 3);
+  // The default targets are all there, in order; the three extras are frontier clusters that
+  // are not among them, placed after the other frontiers (before the plant's core).
+  size_t extras = 0;
+  for (size_t i = 0, j = 0; i < more.size(); ++i) {
+    if (j < plain.size() && more[i].p_W == plain[j].p_W && more[i].source == plain[j].source) {
+      ++j;
+      continue;
+    }
+    EXPECT_EQ(more[i].source, "frontier");
+    for (const ViewTarget& t : plain) EXPECT_NE(t.p_W, more[i].p_W);
+    ++extras;
+  }
+  EXPECT_EQ(extras, 3u);
+  EXPECT_EQ(more.back().source, "roi");
+  // Every target gets max_candidates / max_targets candidates to draw: the extras add to them.
+  Rng a(7), b(7);
+  c.ik_restarts = 0;
+  ShellCandidateOptions p = o.candidates;
+  p.ik_restarts = 0;
+  const size_t n_plain = GenerateShellCandidates(r, *grid, plain, p, a).size();
+  const size_t n_more = GenerateShellCandidates(r, *grid, more, c, b).size();
+  EXPECT_GT(n_more, n_plain);
+  EXPECT_LE(n_more, n_plain + 3 * static_cast<size_t>(c.max_candidates / c.max_targets));
 }
 
 TEST_F(AvpNbvPlannerTest, UnseenTargetsSitInCubesNoViewHasSeen) {

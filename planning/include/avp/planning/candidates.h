@@ -44,6 +44,13 @@ struct ShellCandidateOptions {
   /// With frontier_spread_m: the heaviest this many frontier clusters are taken first, as without
   /// spreading, and only the others are spread.
   int frontier_spread_after = 0;
+  /// Frontier clusters beyond max_targets, added after all others: each next one maximises its
+  /// weight x min(1, d / extra_frontier_spread_m), d its distance to the targets chosen before it
+  /// (the heaviest remaining when extra_frontier_spread_m is 0). They get as many candidates as
+  /// every other target (max_candidates / max_targets each), so the plan has more candidates
+  /// and the others keep theirs. 0: none.
+  int extra_frontier_targets = 0;
+  double extra_frontier_spread_m = 0.3;
   /// Up to this many targets in regions of the ROI that no view has seen yet, next to the plant
   /// seen so far (where it likely goes on): the ROI is cut into cubes of unseen_cell_m, a cube
   /// with at most 10 % of its voxels known is unseen, and it is weighted by the occupied voxels
