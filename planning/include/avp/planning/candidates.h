@@ -23,7 +23,9 @@ struct ShellCandidateOptions {
   /// At most this many targets: fruit instances (largest first), then frontier clusters, then
   /// the ROI centre.
   int max_targets = 12;
-  /// Candidates to generate (spread evenly over the targets) before the reachability check.
+  /// Candidates to generate (spread evenly over the targets) before the reachability check;
+  /// with more than max_targets targets (extra_frontier_targets) each still gets
+  /// max_candidates / max_targets, so there are more.
   int max_candidates = 720;
   /// No candidate whose eye is within this distance of a known occupied voxel.
   double clearance_m = 0.03;
