@@ -3,6 +3,7 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <utility>
 
 #include <fmt/format.h>
 
@@ -14,6 +15,57 @@ namespace avp::planning {
 namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+/// Greedy spread choice among weighted points (frontier clusters, unseen cubes): each next one
+/// maximises weight x min(1, d / spread), d its distance to the points taken so far and to the
+/// targets given at the start; the first of equal scores wins. With spread 0 every score is 0:
+/// the first unused point.
+class SpreadPicker {
+ public:
+  SpreadPicker(std::vector<Eigen::Vector3d> points, std::vector<double> weights,
+               const std::vector<ViewTarget>& chosen)
+      : points_(std::move(points)),
+        weights_(std::move(weights)),
+        d_min_(points_.size(), std::numeric_limits<double>::infinity()),
+        used_(points_.size(), false) {
+    for (const ViewTarget& t : chosen) Update(t.p_W);
+  }
+  void Take(size_t i) {
+    used_[i] = true;
+    taken_.push_back(i);
+    Update(points_[i]);
+  }
+  /// Takes the best unused point whose score is above `floor`; false when there is none.
+  bool TakeBest(double spread, double floor) {
+    size_t best = points_.size();
+    double best_score = floor;
+    for (size_t i = 0; i < points_.size(); ++i) {
+      if (used_[i]) continue;
+      const double score = spread > 0.0 ? weights_[i] * std::min(1.0, d_min_[i] / spread) : 0.0;
+      if (score > best_score) {
+        best_score = score;
+        best = i;
+      }
+    }
+    if (best == points_.size()) return false;
+    Take(best);
+    return true;
+  }
+  /// The indices taken, in order.
+  const std::vector<size_t>& taken() const { return taken_; }
+
+ private:
+  void Update(const Eigen::Vector3d& p) {
+    for (size_t i = 0; i < points_.size(); ++i) {
+      d_min_[i] = std::min(d_min_[i], (points_[i] - p).norm());
+    }
+  }
+  std::vector<Eigen::Vector3d> points_;
+  std::vector<double> weights_;
+  std::vector<double> d_min_;
+  std::vector<bool> used_;
+  std::vector<size_t> taken_;
+};
 
 /// Frontier voxels (free voxels in the ROI with an unknown 6-neighbour), clustered on a coarse
 /// lattice; returns cluster centres with their voxel counts (near-target voxels count 3x).
@@ -61,47 +113,32 @@ std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const G
   // Heaviest first; the map's ordering of equal weights is deterministic (std::map by cell).
   std::stable_sort(out.begin(), out.end(),
                    [](const ViewTarget& a, const ViewTarget& b) { return a.weight > b.weight; });
-  std::vector<double> d_min(out.size(), std::numeric_limits<double>::infinity());
-  const auto update = [&](const Eigen::Vector3d& p) {
-    for (size_t i = 0; i < out.size(); ++i) d_min[i] = std::min(d_min[i], (out[i].p_W - p).norm());
-  };
-  for (const ViewTarget& t : chosen) update(t.p_W);
-  std::vector<ViewTarget> picked;
-  std::vector<bool> used(out.size(), false);
-  const auto take = [&](size_t i) {
-    used[i] = true;
-    picked.push_back(out[i]);
-    update(out[i].p_W);
-  };
-  // Greedy: weight x min(1, distance to the nearest target so far / spread_m); the first
-  // (earliest in the weight order) of equal scores wins. Without spreading: the heaviest.
-  const auto take_best = [&](double spread) {
-    size_t best = out.size();
-    double best_score = -1.0;
-    for (size_t i = 0; i < out.size(); ++i) {
-      if (used[i]) continue;
-      const double score = spread > 0.0 ? out[i].weight * std::min(1.0, d_min[i] / spread) : 0.0;
-      if (score > best_score) {
-        best_score = score;
-        best = i;
-      }
-    }
-    if (best == out.size()) return false;
-    take(best);
-    return true;
-  };
   const int standard = std::min(std::max(0, max_clusters), static_cast<int>(out.size()));
-  if (spread_m > 0.0 && static_cast<int>(out.size()) > max_clusters) {
+  const bool spread = spread_m > 0.0 && static_cast<int>(out.size()) > max_clusters;
+  if (!spread && extra <= 0) {  // heaviest first, nothing to spread
+    out.resize(static_cast<size_t>(standard));
+    return out;
+  }
+  std::vector<Eigen::Vector3d> points;
+  std::vector<double> weights;
+  for (const ViewTarget& t : out) {
+    points.push_back(t.p_W);
+    weights.push_back(t.weight);
+  }
+  SpreadPicker picker(std::move(points), std::move(weights), chosen);
+  if (spread) {
     // The heaviest spread_after clusters first, as without spreading, then spread.
-    for (int i = 0; i < std::min(spread_after, standard); ++i) take(static_cast<size_t>(i));
-    while (static_cast<int>(picked.size()) < standard && take_best(spread_m)) {
+    for (int i = 0; i < std::min(spread_after, standard); ++i) picker.Take(static_cast<size_t>(i));
+    while (static_cast<int>(picker.taken().size()) < standard && picker.TakeBest(spread_m, -1.0)) {
     }
   } else {
-    for (int i = 0; i < standard; ++i) take(static_cast<size_t>(i));
+    for (int i = 0; i < standard; ++i) picker.Take(static_cast<size_t>(i));
   }
   // Extra clusters beyond the budget, spread from everything chosen so far.
-  for (int e = 0; e < extra && take_best(extra_spread_m); ++e) {
+  for (int e = 0; e < extra && picker.TakeBest(extra_spread_m, -1.0); ++e) {
   }
+  std::vector<ViewTarget> picked;
+  for (size_t i : picker.taken()) picked.push_back(out[i]);
   return picked;
 }
 
@@ -144,27 +181,19 @@ std::vector<ViewTarget> UnseenTargets(const PlanningRequest& request, double vox
     if (log_odds >= occupied_log_odds) ++occupied[i];
   });
   const double voxel_volume = voxel_size_m * voxel_size_m * voxel_size_m;
-  std::vector<bool> unseen(cells, false);
+  std::vector<Eigen::Vector3d> centres;
+  std::vector<double> weights;
   for (int z = 0; z < n.z(); ++z) {
     for (int y = 0; y < n.y(); ++y) {
       for (int x = 0; x < n.x(); ++x) {
         const Eigen::Vector3d lo = roi.min() + cell_m * Eigen::Vector3d(x, y, z);
-        const double volume =
-            ((lo + Eigen::Vector3d::Constant(cell_m)).cwiseMin(roi.max()) - lo).prod();
-        const size_t i = index(x, y, z);
-        unseen[i] = volume > 0.0 && static_cast<double>(known[i]) <= 0.1 * volume / voxel_volume;
-      }
-    }
-  }
-  struct Cube {
-    Eigen::Vector3d centre;
-    double weight;
-  };
-  std::vector<Cube> cubes;
-  for (int z = 0; z < n.z(); ++z) {
-    for (int y = 0; y < n.y(); ++y) {
-      for (int x = 0; x < n.x(); ++x) {
-        if (!unseen[index(x, y, z)]) continue;
+        const Eigen::Vector3d hi = (lo + Eigen::Vector3d::Constant(cell_m)).cwiseMin(roi.max());
+        const double volume = (hi - lo).prod();
+        // Seen: more than 10 % of its voxels known.
+        if (!(volume > 0.0) ||
+            static_cast<double>(known[index(x, y, z)]) > 0.1 * volume / voxel_volume) {
+          continue;
+        }
         double weight = 0.0;
         for (int dz = -1; dz <= 1; ++dz) {
           for (int dy = -1; dy <= 1; ++dy) {
@@ -176,37 +205,16 @@ std::vector<ViewTarget> UnseenTargets(const PlanningRequest& request, double vox
           }
         }
         if (weight <= 0.0) continue;
-        const Eigen::Vector3d lo = roi.min() + cell_m * Eigen::Vector3d(x, y, z);
-        cubes.push_back(
-            {0.5 * (lo + (lo + Eigen::Vector3d::Constant(cell_m)).cwiseMin(roi.max())), weight});
+        centres.push_back(0.5 * (lo + hi));
+        weights.push_back(weight);
       }
     }
   }
-  const double spread_m = 3.0 * cell_m;
-  std::vector<double> d_min(cubes.size(), std::numeric_limits<double>::infinity());
-  const auto update = [&](const Eigen::Vector3d& p) {
-    for (size_t i = 0; i < cubes.size(); ++i) {
-      d_min[i] = std::min(d_min[i], (cubes[i].centre - p).norm());
-    }
-  };
-  for (const ViewTarget& t : chosen) update(t.p_W);
-  std::vector<bool> used(cubes.size(), false);
-  while (static_cast<int>(out.size()) < max_targets) {
-    size_t best = cubes.size();
-    double best_score = 0.0;
-    for (size_t i = 0; i < cubes.size(); ++i) {
-      if (used[i]) continue;
-      const double score = cubes[i].weight * std::min(1.0, d_min[i] / spread_m);
-      if (score > best_score) {
-        best_score = score;
-        best = i;
-      }
-    }
-    if (best == cubes.size()) break;
-    used[best] = true;
-    out.push_back({cubes[best].centre, "unseen", cubes[best].weight});
-    update(cubes[best].centre);
+  SpreadPicker picker(centres, weights, chosen);
+  while (static_cast<int>(picker.taken().size()) < max_targets &&
+         picker.TakeBest(3.0 * cell_m, 0.0)) {
   }
+  for (size_t i : picker.taken()) out.push_back({centres[i], "unseen", weights[i]});
   return out;
 }
 
@@ -253,7 +261,7 @@ std::vector<ViewTarget> FindViewTargets(const PlanningRequest& request, const Ga
     if (static_cast<int>(targets.size()) >= fruit_budget) break;
     targets.push_back({info.centroid_W, "fruit-shell", static_cast<double>(info.voxels)});
   }
-  {
+  if (options.unseen_targets > 0) {
     const int room =
         std::max(0, max_targets - static_cast<int>(core.size()) - static_cast<int>(targets.size()));
     std::vector<ViewTarget> chosen = targets;
