@@ -142,24 +142,35 @@ std::vector<ViewTarget> FrontierClusters(const PlanningRequest& request, const G
   return picked;
 }
 
-/// Centres of ROI cubes (edge cell_m) that hold at most 10 % known voxels and border seen plant
+/// The most ROI cubes UnseenTargets counts voxels in (8 MB of counters).
+constexpr size_t kMaxUnseenCubes = size_t{1} << 20;
+
+/// Centres of ROI cubes (edge cell_m, coarser when the ROI would hold more than
+/// kMaxUnseenCubes) that hold at most 10 % known voxels and border seen plant
 /// (occupied voxels in the 26 cubes around them), up to max_targets: the plant is likely to go
 /// on where its seen part ends. Greedy: each next cube maximises its bordering occupied voxels
 /// times min(1, d / (3 cell_m)), d its distance to the targets chosen so far (`chosen` first);
 /// ties go to the first cube in (z, y, x) order.
 std::vector<ViewTarget> UnseenTargets(const PlanningRequest& request, double voxel_size_m,
-                                      int max_targets, double cell_m,
+                                      int max_targets, double requested_cell_m,
                                       const std::vector<ViewTarget>& chosen) {
   std::vector<ViewTarget> out;
   const Box3& roi = request.roi;
-  if (max_targets <= 0 || !(cell_m > 0.0) || roi.IsEmpty()) return out;
+  if (max_targets <= 0 || !(requested_cell_m > 0.0) || roi.IsEmpty()) return out;
   const Eigen::Vector3d extent = roi.max() - roi.min();
+  // At most kMaxUnseenCubes cubes, whatever the ROI: coarser cubes for a huge one.
+  double cell_m = requested_cell_m;
   Eigen::Vector3i n;
-  for (int i = 0; i < 3; ++i) {
-    n[i] = std::max(1, static_cast<int>(std::ceil(extent[i] / cell_m - 1e-9)));
+  size_t cells = 0;
+  while (true) {
+    for (int i = 0; i < 3; ++i) {
+      n[i] = std::max(1, static_cast<int>(std::min(std::ceil(extent[i] / cell_m - 1e-9),
+                                                   double{kMaxUnseenCubes})));
+    }
+    cells = static_cast<size_t>(n.x()) * n.y() * n.z();
+    if (cells <= kMaxUnseenCubes) break;
+    cell_m *= 1.25;
   }
-  const size_t cells = static_cast<size_t>(n.x()) * n.y() * n.z();
-  if (cells > (size_t{1} << 20)) return out;  // a huge ROI at a tiny cell: not a target set
   const auto index = [&](int x, int y, int z) {
     return static_cast<size_t>(x) +
            static_cast<size_t>(n.x()) * (static_cast<size_t>(y) + static_cast<size_t>(n.y()) * z);

@@ -750,6 +750,13 @@ TEST_F(AvpNbvPlannerTest, UnseenTargetsSitInCubesNoViewHasSeen) {
   c.unseen_targets = 64;
   c.max_targets = 256;
   EXPECT_EQ(count(FindViewTargets(r, *grid, c), "unseen"), std::min(64, bordering));
+
+  // 1 cm cubes would be more than 2^20 over this ROI: coarser ones, still targets, bounded work.
+  ASSERT_GT(r.roi.size().prod() / 1e-6, double(size_t{1} << 20));
+  c.unseen_cell_m = 0.01;
+  c.unseen_targets = 3;
+  c.max_targets = 24;
+  EXPECT_EQ(count(FindViewTargets(r, *grid, c), "unseen"), 3);
 }
 
 TEST_F(AvpNbvPlannerTest, BadRequestsAndOptionsAreErrors) {

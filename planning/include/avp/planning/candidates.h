@@ -61,7 +61,8 @@ struct ShellCandidateOptions {
   /// before it (fruit and the plant's core included). They come out of the frontiers' share of
   /// max_targets. 0 turns them off (the default: measured in docs/planning.md, it did not help).
   int unseen_targets = 0;
-  /// Edge of the cubes the ROI is cut into for unseen_targets (metres).
+  /// Edge of the cubes the ROI is cut into for unseen_targets (metres); larger, by factors of
+  /// 1.25, when the ROI would hold more than 2^20 cubes.
   double unseen_cell_m = 0.1;
   /// IK restarts per candidate after the attempt from the current joints.
   int ik_restarts = 1;
