@@ -59,6 +59,7 @@ with tempfile.TemporaryDirectory() as tmp:
         cells = [c.strip() for c in line.split("|")]
         check(cells[3].startswith("-1.000"), f"today ranks backwards: {line}")
         check(cells[4].startswith("1.000 / 0.000"), f"held out ranks right: {line}")
+        check(cells[7].startswith("1.000 / 0.000"), f"fitted alone ranks right: {line}")
 
     bad = os.path.join(tmp, "bad")
     path = record(bad, "plant", 0, '{"scenario": ')
