@@ -21,9 +21,9 @@ namespace avp::apps {
 namespace {
 
 struct BenchCli {
-  std::string config, scenarios, planners, seeds, segmenter, conditions, out = "out/bench";
+  std::string config, scenarios, planners, seeds, segmenter, conditions, shard, out = "out/bench";
   int views = 0, jobs = 0;
-  bool force = false;
+  bool force = false, resume = false;
   bool record = false, oracle_regret = false;
   std::vector<std::string> planner_options, set;
 };
@@ -47,6 +47,21 @@ Result<std::vector<uint64_t>> ParseSeeds(const std::string& text) {
     seeds.push_back(s);
   }
   return seeds;
+}
+
+/// --shard K/N: 1 <= K <= N <= kMaxShards.
+constexpr uint64_t kMaxShards = 100000;
+Status ParseShard(const std::string& text, experiment::BenchConfig& b) {
+  const size_t slash = text.find('/');
+  if (slash == std::string::npos) {
+    return InvalidArgumentError(
+        fmt::format("--shard {} must be K/N (the K-th of N slices, e.g. 2/8)", QuoteText(text)));
+  }
+  AVP_ASSIGN_OR_RETURN(b.shard_count, ParseCliUnsigned("--shard: the shard count N",
+                                                       text.substr(slash + 1), 1, kMaxShards));
+  AVP_ASSIGN_OR_RETURN(b.shard_index, ParseCliUnsigned("--shard: the shard K of N",
+                                                       text.substr(0, slash), 1, b.shard_count));
+  return Status::Ok();
 }
 
 /// --planner-option PLANNER:KEY=VALUE (or KEY=VALUE when the bench has one planner).
@@ -106,6 +121,8 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   b.jobs = cli.jobs;
   b.out_dir = cli.out;
   b.force = cli.force;
+  b.resume = cli.resume;
+  if (cmd.get_option("--shard")->count() > 0) AVP_RETURN_IF_ERROR(ParseShard(cli.shard, b));
   b.record = cli.record;
   if (cli.oracle_regret) b.base.oracle_regret = true;
   if (cmd.get_option("--conditions")->count() > 0) {
@@ -131,9 +148,9 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   return b;
 }
 
-void PrintBench(const experiment::BenchConfig& bench, const experiment::BenchSummary& s) {
-  std::printf("%zu episodes (%zu failed) in %.1f s. Final view, mean ± 95 %% CI over %zu seeds:\n",
-              s.episodes, s.failed, s.seconds, bench.seeds.size());
+void PrintBench(const std::filesystem::path& out_dir, const experiment::BenchSummary& s) {
+  std::printf("%zu episodes (%zu failed) in %.1f s. Final view, mean ± 95 %% CI over the seeds:\n",
+              s.episodes, s.failed, s.seconds);
   size_t width = 28;
   for (const auto& c : s.cells) width = std::max(width, c.scenario.size());
   const int w = static_cast<int>(width);
@@ -145,7 +162,7 @@ void PrintBench(const experiment::BenchConfig& bench, const experiment::BenchSum
                 c.final_found_ci95, c.plan_ms_mean);
   }
   std::printf("wrote %s and the per-run records under %s\n", s.files.front().string().c_str(),
-              (bench.out_dir / "runs").string().c_str());
+              (out_dir / "runs").string().c_str());
   if (!s.report_html.empty()) std::printf("report: %s\n", s.report_html.string().c_str());
 }
 
@@ -186,8 +203,37 @@ int Bench(const CLI::App& cmd, const BenchCli& cli, const experiment::Registries
   if (!bench->conditions.empty()) return BenchConditions(*bench, registries);
   const Result<experiment::BenchSummary> summary = experiment::RunBench(*bench, registries);
   if (!summary.ok()) return Failed("bench", summary.status());
-  PrintBench(*bench, *summary);
+  if (summary->resumed > 0) {
+    std::printf("resumed: %zu of the episodes were complete and read back, not run again\n",
+                summary->resumed);
+  }
+  if (bench->shard_count > 1) {
+    std::printf(
+        "shard %llu/%llu: %zu episodes (%zu failed) in %.1f s under %s; merge the shards with "
+        "avp bench merge SHARD_DIR... --out DIR\n",
+        static_cast<unsigned long long>(bench->shard_index),
+        static_cast<unsigned long long>(bench->shard_count), summary->episodes, summary->failed,
+        summary->seconds, bench->out_dir.string().c_str());
+    return FailedEpisodes(summary->failed, summary->episodes);
+  }
+  PrintBench(bench->out_dir, *summary);
   return FailedEpisodes(summary->failed, summary->episodes);
+}
+
+struct MergeCli {
+  std::vector<std::string> dirs;
+  std::string out;
+  bool force = false;
+};
+
+/// avp bench merge SHARD_DIR... --out D: the shards of one bench as one bench folder.
+int Merge(const MergeCli& cli) {
+  std::vector<std::filesystem::path> dirs(cli.dirs.begin(), cli.dirs.end());
+  const Result<experiment::BenchSummary> s = experiment::MergeBenches(dirs, cli.out, cli.force);
+  if (!s.ok()) return Failed("bench merge", s.status());
+  std::printf("merged %zu shard folders.\n", dirs.size());
+  PrintBench(cli.out, *s);
+  return FailedEpisodes(s->failed, s->episodes);
 }
 
 struct CompareCli {
@@ -246,6 +292,12 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
                 "Measure each plan step's regret and rank correlation with the truth (summary.csv "
                 "and summary.md per scenario, record.json per run; the episodes are unchanged, "
                 "plans take longer)");
+  cmd->add_option("--shard", cli->shard,
+                  "K/N: run only the K-th of N deterministic slices of the job list (jobs dealt "
+                  "round-robin); merge the shard folders with avp bench merge (docs/cluster.md)");
+  cmd->add_flag("--resume", cli->resume,
+                "--out holds an interrupted run of this same bench: keep its complete episodes, "
+                "run the others");
   cmd->add_option("--conditions", cli->conditions,
                   "Comma-separated conditions of the config to run (default: all of them)");
   auto compare = std::make_shared<CompareCli>();
@@ -262,8 +314,19 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
       ->default_str(compare->lead);
   compare_cmd->callback(
       [compare, &context] { RunGuarded(context, [&] { return Compare(*compare); }); });
-  cmd->callback([cli, cmd, compare_cmd, &context] {
-    if (compare_cmd->parsed()) return;  // avp bench compare: its own callback ran
+  auto merge = std::make_shared<MergeCli>();
+  CLI::App* merge_cmd = cmd->add_subcommand(
+      "merge",
+      "Merge the shard folders of one bench (avp bench --shard K/N) into one bench folder: the "
+      "runs, summary.md, summary.csv, plots and report.html of a single-machine run");
+  merge_cmd->add_option("dirs", merge->dirs, "Shard folders (all N of them)")->required();
+  merge_cmd->add_option("--out", merge->out, "The merged bench folder")->required();
+  merge_cmd->add_flag("--force", merge->force,
+                      "Replace the results an earlier merge or bench left in --out");
+  merge_cmd->callback([merge, &context] { RunGuarded(context, [&] { return Merge(*merge); }); });
+  cmd->callback([cli, cmd, compare_cmd, merge_cmd, &context] {
+    // avp bench compare / merge: their own callbacks ran.
+    if (compare_cmd->parsed() || merge_cmd->parsed()) return;
     RunGuarded(context, [&] { return Bench(*cmd, *cli, *context.registries); });
   });
 }

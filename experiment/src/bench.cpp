@@ -5,6 +5,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <numeric>
 #include <optional>
 #include <set>
 #include <stop_token>
@@ -15,6 +16,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <avp/core/parallel.h>
+#include <avp/core/rng.h>
 #include <avp/core/text.h>
 #include <avp/experiment/bench.h>
 #include <avp/experiment/episode_recording.h>
@@ -177,8 +179,9 @@ Result<std::vector<std::shared_ptr<const sim::Scene>>> LoadSceneFiles(
   return scenes;
 }
 
-Result<std::vector<Group>> BuildGroups(const BenchConfig& config, const Registries& registries,
-                                       std::vector<BenchScenario>& list) {
+/// Every (scenario, seed) of the bench in list order, seeds inner: scene files read (and their
+/// display names known), no scene made and no ground truth computed yet.
+Result<std::vector<Group>> ListGroups(const BenchConfig& config, std::vector<BenchScenario>& list) {
   AVP_ASSIGN_OR_RETURN(const std::vector<std::shared_ptr<const sim::Scene>> files,
                        LoadSceneFiles(config, list));
   std::vector<Group> groups;
@@ -192,9 +195,20 @@ Result<std::vector<Group>> BuildGroups(const BenchConfig& config, const Registri
       groups.push_back(std::move(g));
     }
   }
+  return groups;
+}
+
+/// The scene and ground truth of every group with needed[i], in parallel.
+Status ComputeGroundTruth(const BenchConfig& config, const Registries& registries,
+                          std::vector<Group>& groups, const std::vector<bool>& needed) {
+  std::vector<size_t> todo;
+  for (size_t i = 0; i < groups.size(); ++i) {
+    if (needed[i]) todo.push_back(i);
+  }
   std::vector<Status> scene_status(groups.size());
-  report::Progress bar(report::ProgressOn(stderr, "ground truth", groups.size(), config.progress));
-  ParallelFor(groups.size(), config.jobs, [&](size_t i) {
+  report::Progress bar(report::ProgressOn(stderr, "ground truth", todo.size(), config.progress));
+  ParallelFor(todo.size(), config.jobs, [&](size_t t) {
+    const size_t i = todo[t];
     Group& g = groups[i];
     if (g.scene == nullptr) {
       Result<sim::Scene> scene = registries.scenarios.Make(g.source->scenario, g.seed);
@@ -209,7 +223,7 @@ Result<std::vector<Group>> BuildGroups(const BenchConfig& config, const Registri
     g.gt = GroundTruthFor(JobConfig(config, *g.source, g.seed, ""), *g.scene);
     bar.Done(fmt::format("{} seed {} {}", g.scenario, g.seed, g.gt.ok() ? "ok" : "failed"));
   });
-  for (size_t i = 0; i < groups.size(); ++i) {
+  for (size_t i : todo) {
     const Group& g = groups[i];
     if (!scene_status[i].ok()) return scene_status[i];
     if (!g.gt.ok()) {
@@ -217,7 +231,7 @@ Result<std::vector<Group>> BuildGroups(const BenchConfig& config, const Registri
                                                       g.seed, g.gt.status().message()));
     }
   }
-  return groups;
+  return Status::Ok();
 }
 
 /// The first result of the bench that could not be written: it asks every running episode to
@@ -329,6 +343,7 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
                      {"end", std::string(pipeline::ToString(r->episode.end))},
                      {"end_reason", r->episode.end_reason},
                      {"episode_seconds", j.episode_s},
+                     {"plan_ms", j.plan_ms},
                      {"git_revision", revision},
                      {"fruits", report::FruitsJson(r->fruits)}};
   // A scene file's entry: the file and the arrangement its scene was made with.
@@ -345,21 +360,230 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
   return j;
 }
 
-report::BenchDescription Describe(const BenchConfig& config, const std::vector<BenchScenario>& list,
-                                  const std::vector<Group>& groups, const std::string& revision) {
+// ---- bench.json: what a bench folder holds, for merging shards and resuming.
+
+constexpr const char* kManifestFormat = "avp-bench 1";
+constexpr const char* kManifestName = "bench.json";
+
+nlohmann::json OptionValuesJson(const OptionValues& values) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& [k, v] : values) out.push_back({k, v});
+  return out;
+}
+
+OptionValues OptionValuesFromJson(const nlohmann::json& j) {
+  OptionValues out;
+  for (const nlohmann::json& kv : j) {
+    out.emplace_back(kv.at(0).get<std::string>(), kv.at(1).get<std::string>());
+  }
+  return out;
+}
+
+/// The summary's description of the bench, without the visibility (which comes per group).
+nlohmann::json DescriptionJson(const BenchConfig& config, const std::vector<BenchScenario>& list) {
+  nlohmann::json scenarios = nlohmann::json::array();
+  for (const BenchScenario& b : list) scenarios.push_back(b.display_name);
+  nlohmann::json options = nlohmann::json::object();
+  for (const auto& [planner, values] : config.planner_options) {
+    options[planner] = OptionValuesJson(values);
+  }
+  return {{"description", config.description},
+          {"entries", config.scenarios},
+          {"scenarios", std::move(scenarios)},
+          {"planners", config.planners},
+          {"seeds", config.seeds},
+          {"views", config.base.episode.views},
+          {"segmenter", config.base.segmenter.name},
+          {"voxel_size_m", config.base.map.grid.voxel_size_m},
+          {"planner_options", std::move(options)},
+          {"run_options", OptionValuesJson(RunConfigTable().Differences(JobBase(config),
+                                                                        JobBase(BenchConfig{})))}};
+}
+
+report::BenchDescription DescriptionFromJson(const nlohmann::json& bench,
+                                             const std::string& revision) {
   report::BenchDescription d;
-  for (const BenchScenario& b : list) d.scenarios.push_back(b.display_name);
-  d.planners = config.planners;
-  d.seeds = config.seeds.size();
-  d.views = config.base.episode.views;
-  d.segmenter = config.base.segmenter.name;
-  d.voxel_size_m = config.base.map.grid.voxel_size_m;
+  d.scenarios = bench.at("scenarios").get<std::vector<std::string>>();
+  d.planners = bench.at("planners").get<std::vector<std::string>>();
+  d.seeds = bench.at("seeds").size();
+  d.views = bench.at("views").get<int>();
+  d.segmenter = bench.at("segmenter").get<std::string>();
+  d.voxel_size_m = bench.at("voxel_size_m").get<double>();
   d.revision = revision;
-  d.planner_options = config.planner_options;
-  d.description = config.description;
-  d.run_options = RunConfigTable().Differences(JobBase(config), JobBase(BenchConfig{}));
-  for (const Group& g : groups) d.visibility[g.scenario].Add(*g.gt);
+  for (const auto& [planner, values] : bench.at("planner_options").items()) {
+    d.planner_options[planner] = OptionValuesFromJson(values);
+  }
+  d.description = bench.at("description").get<std::string>();
+  d.run_options = OptionValuesFromJson(bench.at("run_options"));
   return d;
+}
+
+/// One job of the bench: its group (scenario, seed) and planner.
+struct JobRef {
+  size_t group;
+  std::string planner;
+};
+
+nlohmann::json JobsJson(const std::vector<Group>& groups, const std::vector<JobRef>& refs) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const JobRef& r : refs) {
+    out.push_back({groups[r.group].scenario, r.planner, groups[r.group].seed});
+  }
+  return out;
+}
+
+using GroupKey = std::pair<std::string, uint64_t>;  // (scenario, seed)
+
+nlohmann::json VisibilityJson(const std::map<GroupKey, report::FruitVisibility>& v) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& [key, f] : v) {
+    out.push_back({{"scenario", key.first},
+                   {"seed", key.second},
+                   {"fruits", f.fruits},
+                   {"visible", f.visible}});
+  }
+  return out;
+}
+
+std::map<GroupKey, report::FruitVisibility> VisibilityFromJson(const nlohmann::json& j) {
+  std::map<GroupKey, report::FruitVisibility> out;
+  for (const nlohmann::json& g : j) {
+    report::FruitVisibility f;
+    f.fruits = g.at("fruits").get<double>();
+    const nlohmann::json& visible = g.at("visible");
+    for (size_t i = 0; i < f.visible.size() && i < visible.size(); ++i) {
+      f.visible[i] = visible.at(i).get<double>();
+    }
+    out[{g.at("scenario").get<std::string>(), g.at("seed").get<uint64_t>()}] = f;
+  }
+  return out;
+}
+
+/// Per scenario, the sum over its groups (the summary's "fruits by visibility" denominators).
+std::map<std::string, report::FruitVisibility> VisibilityByScenario(
+    const std::map<GroupKey, report::FruitVisibility>& groups) {
+  std::map<std::string, report::FruitVisibility> out;
+  for (const auto& [key, f] : groups) {
+    report::FruitVisibility& s = out[key.first];
+    s.fruits += f.fruits;
+    for (size_t i = 0; i < s.visible.size(); ++i) s.visible[i] += f.visible[i];
+  }
+  return out;
+}
+
+/// A bench folder's bench.json, read and checked for the keys the merge and resume use.
+Result<nlohmann::json> ReadManifest(const fs::path& dir) {
+  const fs::path file = dir / kManifestName;
+  std::error_code ec;
+  if (!fs::exists(file, ec)) {
+    return FailedPreconditionError(fmt::format(
+        "'{}' has no {}: not a bench folder of this avp version (or its bench never started)",
+        dir.string(), kManifestName));
+  }
+  AVP_ASSIGN_OR_RETURN(nlohmann::json j, io::ReadJsonFile(file));
+  try {
+    if (j.at("format").get<std::string>() != kManifestFormat) {
+      return ParseError(fmt::format("{}: format '{}', this avp reads '{}'", file.string(),
+                                    j.at("format").get<std::string>(), kManifestFormat));
+    }
+    for (const char* key : {"bench", "revision", "jobs", "shard", "ground_truth"}) {
+      if (!j.contains(key)) return ParseError(fmt::format("{}: no '{}'", file.string(), key));
+    }
+    (void)DescriptionFromJson(j.at("bench"), j.at("revision").get<std::string>());
+    (void)VisibilityFromJson(j.at("ground_truth"));
+    for (const nlohmann::json& job : j.at("jobs")) {
+      (void)job.at(0).get<std::string>();
+      (void)job.at(1).get<std::string>();
+      (void)job.at(2).get<uint64_t>();
+    }
+    if (j.at("shard").at("count").get<uint64_t>() == 0 ||
+        j.at("shard").at("index").get<uint64_t>() == 0 ||
+        j.at("shard").at("index").get<uint64_t>() > j.at("shard").at("count").get<uint64_t>()) {
+      return ParseError(fmt::format("{}: a bad shard {}", file.string(), j.at("shard").dump()));
+    }
+  } catch (const nlohmann::json::exception& e) {
+    return ParseError(fmt::format("{}: not an avp bench.json: {}", file.string(), e.what()));
+  }
+  return j;
+}
+
+/// The first of a manifest's identity keys on which `a` and `b` differ ("" when none): what a
+/// merge and a resume require to be equal.
+std::string ManifestDifference(const nlohmann::json& a, const nlohmann::json& b, bool same_shard) {
+  if (a.at("bench") != b.at("bench")) {
+    for (const auto& [key, value] : a.at("bench").items()) {
+      if (!b.at("bench").contains(key) || b.at("bench").at(key) != value) {
+        return fmt::format("the configuration ({}: {} against {})", key, value.dump(),
+                           b.at("bench").value(key, nlohmann::json()).dump());
+      }
+    }
+    return "the configuration";
+  }
+  if (a.at("jobs") != b.at("jobs")) return "the job list";
+  if (a.at("revision") != b.at("revision")) {
+    return fmt::format("the revision ({} against {})", a.at("revision").dump(),
+                       b.at("revision").dump());
+  }
+  if (a.at("shard").at("count") != b.at("shard").at("count")) {
+    return fmt::format("the shard count ({} against {})", a.at("shard").at("count").dump(),
+                       b.at("shard").at("count").dump());
+  }
+  if (same_shard && a.at("shard") != b.at("shard")) {
+    return fmt::format("the shard ({}/{} against {}/{})", a.at("shard").at("index").dump(),
+                       a.at("shard").at("count").dump(), b.at("shard").at("index").dump(),
+                       b.at("shard").at("count").dump());
+  }
+  return "";
+}
+
+/// The jobs (indices into the job list, ascending) of shard `index` of `count`. The (scenario,
+/// seed) groups are dealt, each with all its planners (so that its ground truth is computed by one
+/// shard only): in a fixed shuffled order (by MixSeed of the group's index, the same on every
+/// machine), round-robin, so that every shard gets a share of every scenario whatever N is
+/// (dealing the list in its own order would give a shard runs of one scenario).
+std::vector<size_t> ShardJobs(const std::vector<JobRef>& refs, size_t groups, uint64_t index,
+                              uint64_t count) {
+  std::vector<size_t> order(groups);
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::sort(order.begin(), order.end(), [](size_t a, size_t b) {
+    const uint64_t ha = MixSeed(a), hb = MixSeed(b);
+    return ha != hb ? ha < hb : a < b;
+  });
+  std::vector<bool> ours(groups, false);
+  for (size_t r = index - 1; r < order.size(); r += count) ours[order[r]] = true;
+  std::vector<size_t> mine;
+  for (size_t i = 0; i < refs.size(); ++i) {
+    if (ours[refs[i].group]) mine.push_back(i);
+  }
+  return mine;
+}
+
+/// True when a run folder says complete and holds its record (what --resume skips).
+bool RunIsComplete(const fs::path& dir) {
+  const Result<FolderState> state = ReadFolderState(dir);
+  std::error_code ec;
+  return state.ok() && state->state == "complete" && fs::is_regular_file(dir / "record.json", ec);
+}
+
+/// The summary, plots and report.html of a bench folder from its episodes as read back.
+Result<BenchSummary> WriteSummaryAndReport(const fs::path& out_dir,
+                                           const report::BenchDescription& description,
+                                           const std::vector<report::BenchEpisode>& episodes,
+                                           double seconds) {
+  AVP_ASSIGN_OR_RETURN(report::BenchTables tables,
+                       report::WriteBenchSummary(out_dir, description, episodes, seconds));
+  // report.html: the same numbers as the summary, with per-scenario plots and links to the runs.
+  const fs::path html = out_dir / "report.html";
+  AVP_RETURN_IF_ERROR(report::WriteBenchReportHtml(
+      html, report::BenchReportJson(description, episodes, seconds, out_dir)));
+  BenchSummary summary;
+  summary.cells = std::move(tables.cells);
+  summary.files = std::move(tables.files);
+  summary.files.push_back(html);
+  summary.report_html = html;
+  summary.episodes = episodes.size();
+  summary.failed = tables.failed;
+  return summary;
 }
 
 /// A seed (or count) of the config: a whole number >= 0, never wrapped from a negative one.
@@ -598,6 +822,18 @@ Status BenchConfig::Validate(const Registries& registries) const {
   for (const std::string& p : planners) {
     if (p.empty()) errors.push_back("a planner name is empty");
   }
+  if (shard_count == 0 || shard_index == 0 || shard_index > shard_count) {
+    errors.push_back(
+        fmt::format("the shard {}/{} must be K/N with 1 <= K <= N", shard_index, shard_count));
+  }
+  if (resume && force) {
+    errors.push_back("--resume keeps the finished runs and --force removes them: give one");
+  }
+  if (!conditions.empty() && (shard_count != 1 || resume)) {
+    errors.push_back(
+        "a bench with conditions is not sharded or resumed (yet): run each condition as its own "
+        "bench (avp bench --set ...) and compare them with avp bench compare");
+  }
   if (Status s = CheckSeedCount(seeds.size(), "seeds"); !s.ok()) errors.push_back(s.message());
   const size_t num_scenarios = list.ok() ? list->size() : scenarios.size();
   uint64_t shown = 0;
@@ -717,52 +953,107 @@ Status CheckBenchOutputs(const BenchConfig& config, const std::vector<BenchScena
 }
 
 Result<BenchSummary> RunBenchInFolder(const BenchConfig& config, const Registries& registries,
-                                      std::vector<BenchScenario>& list, Clock::time_point t0) {
+                                      std::vector<BenchScenario>& list, Clock::time_point t0,
+                                      const std::optional<nlohmann::json>& previous) {
   std::error_code ec;
   fs::create_directories(config.out_dir / "runs", ec);
   if (ec) {
     return IoError(
         fmt::format("cannot create '{}': {}", (config.out_dir / "runs").string(), ec.message()));
   }
-  AVP_ASSIGN_OR_RETURN(const std::vector<Group> groups, BuildGroups(config, registries, list));
+  AVP_ASSIGN_OR_RETURN(std::vector<Group> groups, ListGroups(config, list));
   // Asked of git once, not per episode (two processes each).
   const std::string revision = report::SourceRevision();
-  struct JobRef {
-    size_t group;
-    std::string planner;
-  };
   std::vector<JobRef> refs;
   for (size_t gi = 0; gi < groups.size(); ++gi) {
     for (const std::string& p : config.planners) refs.push_back({gi, p});
   }
-  std::vector<report::BenchEpisode> episodes(refs.size());
+  nlohmann::json manifest = {
+      {"format", kManifestFormat},
+      {"bench", DescriptionJson(config, list)},
+      {"revision", revision},
+      {"jobs", JobsJson(groups, refs)},
+      {"shard", {{"index", config.shard_index}, {"count", config.shard_count}}},
+      {"ground_truth", nlohmann::json::array()},
+      {"seconds", 0.0}};
+  std::map<GroupKey, report::FruitVisibility> visibility;
+  double previous_seconds = 0.0;
+  if (previous.has_value()) {
+    if (const std::string d = ManifestDifference(*previous, manifest, true); !d.empty()) {
+      return FailedPreconditionError(fmt::format(
+          "cannot resume '{}': it holds another bench ({} differs); give another --out, or "
+          "--force to start it again",
+          config.out_dir.string(), d));
+    }
+    visibility = VisibilityFromJson(previous->at("ground_truth"));
+    previous_seconds = previous->value("seconds", 0.0);
+  }
+  std::vector<size_t> mine = ShardJobs(refs, groups.size(), config.shard_index, config.shard_count);
+  std::vector<size_t> pending;
+  const auto run_dir = [&](size_t i) {
+    return config.out_dir / report::BenchRunFolder(groups[refs[i].group].scenario, refs[i].planner,
+                                                   groups[refs[i].group].seed);
+  };
+  for (size_t i : mine) {
+    if (config.resume && RunIsComplete(run_dir(i))) continue;
+    // An unfinished or failed run of the interrupted bench: emptied (only what avp writes).
+    if (config.resume) AVP_RETURN_IF_ERROR(PrepareOutputFolder(run_dir(i), RunFolderKind(), true));
+    pending.push_back(i);
+  }
+  // The ground truth of the groups with a job to run, and of those whose visibility is unknown.
+  std::vector<bool> needed(groups.size(), false);
+  for (size_t i : pending) needed[refs[i].group] = true;
+  for (size_t i : mine) {
+    const Group& g = groups[refs[i].group];
+    if (!visibility.contains({g.scenario, g.seed})) needed[refs[i].group] = true;
+  }
+  AVP_RETURN_IF_ERROR(ComputeGroundTruth(config, registries, groups, needed));
+  for (size_t gi = 0; gi < groups.size(); ++gi) {
+    if (!needed[gi]) continue;
+    report::FruitVisibility f;
+    f.Add(*groups[gi].gt);
+    visibility[{groups[gi].scenario, groups[gi].seed}] = f;
+  }
+  manifest["ground_truth"] = VisibilityJson(visibility);
+  manifest["seconds"] = previous_seconds;
+  AVP_RETURN_IF_ERROR(io::WriteJsonFile(config.out_dir / kManifestName, manifest));
+
   WriteFailure failure;
   {
-    report::Progress bar(report::ProgressOn(stderr, "episodes", refs.size(), config.progress));
-    ParallelFor(refs.size(), config.jobs, [&](size_t i) {
-      episodes[i] =
-          RunJob(config, registries, groups[refs[i].group], refs[i].planner, revision, failure);
-      const report::BenchEpisode& e = episodes[i];
+    report::Progress bar(report::ProgressOn(stderr, "episodes", pending.size(), config.progress));
+    ParallelFor(pending.size(), config.jobs, [&](size_t t) {
+      const JobRef& r = refs[pending[t]];
+      const report::BenchEpisode e =
+          RunJob(config, registries, groups[r.group], r.planner, revision, failure);
       bar.Done(fmt::format("{} {} seed {} {}", e.scenario, e.planner, e.seed,
                            e.status.ok() ? "ok" : "failed"));
     });
   }
   if (failure.failed()) return failure.first();
-  const report::BenchDescription description = Describe(config, list, groups, revision);
-  const double seconds = SecondsSince(t0);
-  AVP_ASSIGN_OR_RETURN(report::BenchTables tables,
-                       report::WriteBenchSummary(config.out_dir, description, episodes, seconds));
-  // report.html: the same numbers as the summary, with per-scenario plots and links to the runs.
-  const fs::path html = config.out_dir / "report.html";
-  AVP_RETURN_IF_ERROR(report::WriteBenchReportHtml(
-      html, report::BenchReportJson(description, episodes, seconds, config.out_dir)));
+  // Every episode of this folder as written: the same numbers whether it ran now, in an earlier
+  // (resumed) run, or on another machine (MergeBenches).
+  std::vector<report::BenchEpisode> episodes;
+  episodes.reserve(mine.size());
+  for (size_t i : mine) {
+    const Group& g = groups[refs[i].group];
+    AVP_ASSIGN_OR_RETURN(report::BenchEpisode e,
+                         report::ReadBenchEpisode(run_dir(i), g.scenario, refs[i].planner, g.seed));
+    episodes.push_back(std::move(e));
+  }
+  const double seconds = previous_seconds + SecondsSince(t0);
+  manifest["seconds"] = seconds;
+  AVP_RETURN_IF_ERROR(io::WriteJsonFile(config.out_dir / kManifestName, manifest));
   BenchSummary summary;
-  summary.cells = std::move(tables.cells);
-  summary.files = std::move(tables.files);
-  summary.files.push_back(html);
-  summary.report_html = html;
-  summary.episodes = episodes.size();
-  summary.failed = tables.failed;
+  if (config.shard_count == 1) {
+    report::BenchDescription description = DescriptionFromJson(manifest["bench"], revision);
+    description.visibility = VisibilityByScenario(visibility);
+    AVP_ASSIGN_OR_RETURN(summary,
+                         WriteSummaryAndReport(config.out_dir, description, episodes, seconds));
+  } else {
+    summary.episodes = episodes.size();
+    for (const report::BenchEpisode& e : episodes) summary.failed += e.status.ok() ? 0 : 1;
+  }
+  summary.resumed = mine.size() - pending.size();
   return summary;
 }
 
@@ -774,15 +1065,165 @@ Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& regis
   AVP_ASSIGN_OR_RETURN(std::vector<BenchScenario> list,
                        ExpandScenarioList(config.scenarios, registries.scenarios));
   AVP_RETURN_IF_ERROR(CheckBenchOutputs(config, list));
-  AVP_RETURN_IF_ERROR(PrepareOutputFolder(config.out_dir, BenchFolderKind(), config.force));
+  // --resume into a folder that holds a bench: its bench.json, checked against this bench once
+  // the job list is known; a missing or empty folder starts afresh.
+  std::optional<nlohmann::json> previous;
+  std::error_code ec;
+  const bool has_content =
+      fs::is_directory(config.out_dir, ec) && !fs::is_empty(config.out_dir, ec);
+  if (config.resume && has_content) {
+    Result<nlohmann::json> m = ReadManifest(config.out_dir);
+    if (!m.ok()) {
+      return Status(m.status().code(), fmt::format("cannot resume: {}", m.status().message()));
+    }
+    previous = std::move(*m);
+  } else {
+    AVP_RETURN_IF_ERROR(PrepareOutputFolder(config.out_dir, BenchFolderKind(), config.force));
+  }
   AVP_RETURN_IF_ERROR(MarkInProgress(config.out_dir, BenchFolderKind(), "avp bench"));
-  Result<BenchSummary> summary = RunBenchInFolder(config, registries, list, t0);
+  Result<BenchSummary> summary = RunBenchInFolder(config, registries, list, t0, previous);
   if (!summary.ok()) {
     MarkFailed(config.out_dir, BenchFolderKind(), "avp bench", summary.status());
     return summary.status();
   }
   AVP_RETURN_IF_ERROR(MarkComplete(config.out_dir, BenchFolderKind(), "avp bench"));
   summary->seconds = SecondsSince(t0);
+  return summary;
+}
+
+namespace {
+
+/// True when `inner` is `outer` or lies inside it (both made absolute and normal).
+bool IsInside(const fs::path& inner, const fs::path& outer) {
+  std::error_code ec;
+  const fs::path in = fs::weakly_canonical(fs::absolute(inner, ec), ec);
+  const fs::path out = fs::weakly_canonical(fs::absolute(outer, ec), ec);
+  if (ec || in.empty() || out.empty()) return false;
+  return std::mismatch(out.begin(), out.end(), in.begin(), in.end()).first == out.end();
+}
+
+std::string JobName(const nlohmann::json& job) {
+  return fmt::format("{} / {} / seed {}", job.at(0).get<std::string>(),
+                     job.at(1).get<std::string>(), job.at(2).get<uint64_t>());
+}
+
+}  // namespace
+
+Result<BenchSummary> MergeBenches(const std::vector<fs::path>& shards, const fs::path& out_dir,
+                                  bool force, bool progress) {
+  if (shards.empty()) return InvalidArgumentError("no shard folder to merge");
+  std::vector<nlohmann::json> manifests;
+  std::map<uint64_t, fs::path> by_index;
+  for (const fs::path& dir : shards) {
+    if (IsInside(out_dir, dir) || IsInside(dir, out_dir)) {
+      return InvalidArgumentError(
+          fmt::format("the output folder '{}' and the shard '{}' lie one inside the other: give "
+                      "another --out",
+                      out_dir.string(), dir.string()));
+    }
+    AVP_ASSIGN_OR_RETURN(nlohmann::json m, ReadManifest(dir));
+    AVP_ASSIGN_OR_RETURN(const FolderState state, ReadFolderState(dir));
+    if (state.state != "complete") {
+      return FailedPreconditionError(fmt::format(
+          "the shard '{}' is {} (not complete): rerun its avp bench with --resume first",
+          dir.string(), state.state));
+    }
+    if (!manifests.empty()) {
+      if (const std::string d = ManifestDifference(manifests.front(), m, false); !d.empty()) {
+        return InvalidArgumentError(
+            fmt::format("the shards '{}' and '{}' are not of one bench: {} differs",
+                        shards.front().string(), dir.string(), d));
+      }
+    }
+    const uint64_t index = m.at("shard").at("index").get<uint64_t>();
+    if (const auto [it, fresh] = by_index.emplace(index, dir); !fresh) {
+      return InvalidArgumentError(fmt::format("shard {}/{} is given twice: '{}' and '{}'", index,
+                                              m.at("shard").at("count").get<uint64_t>(),
+                                              it->second.string(), dir.string()));
+    }
+    manifests.push_back(std::move(m));
+  }
+  const nlohmann::json& first = manifests.front();
+  const nlohmann::json& jobs = first.at("jobs");
+  // Each job from the one shard whose folder holds it complete.
+  std::vector<fs::path> source(jobs.size());
+  std::vector<std::string> missing;
+  for (size_t i = 0; i < jobs.size(); ++i) {
+    const fs::path rel =
+        report::BenchRunFolder(jobs[i].at(0).get<std::string>(), jobs[i].at(1).get<std::string>(),
+                               jobs[i].at(2).get<uint64_t>());
+    for (const fs::path& dir : shards) {
+      std::error_code ec;
+      if (!fs::exists(dir / rel / kStateFileName, ec)) continue;
+      if (!source[i].empty()) {
+        return InvalidArgumentError(fmt::format("the job {} is in two shards: '{}' and '{}'",
+                                                JobName(jobs[i]), source[i].string(),
+                                                dir.string()));
+      }
+      source[i] = dir / rel;
+    }
+    if (source[i].empty()) missing.push_back(JobName(jobs[i]));
+  }
+  if (!missing.empty()) {
+    std::vector<uint64_t> absent;
+    for (uint64_t k = 1; k <= first.at("shard").at("count").get<uint64_t>(); ++k) {
+      if (!by_index.contains(k)) absent.push_back(k);
+    }
+    return InvalidArgumentError(fmt::format(
+        "{} of {} jobs are in no shard (first: {}){}", missing.size(), jobs.size(), missing.front(),
+        absent.empty() ? std::string()
+                       : fmt::format("; shards {} of {} are not given", fmt::join(absent, ", "),
+                                     first.at("shard").at("count").get<uint64_t>())));
+  }
+  AVP_RETURN_IF_ERROR(PrepareOutputFolder(out_dir, BenchFolderKind(), force));
+  AVP_RETURN_IF_ERROR(MarkInProgress(out_dir, BenchFolderKind(), "avp bench merge"));
+  const auto fail = [&](const Status& s) {
+    MarkFailed(out_dir, BenchFolderKind(), "avp bench merge", s);
+    return s;
+  };
+  std::map<GroupKey, report::FruitVisibility> visibility;
+  double seconds = 0.0;
+  for (const nlohmann::json& m : manifests) {
+    visibility.merge(VisibilityFromJson(m.at("ground_truth")));
+    seconds += m.value("seconds", 0.0);
+  }
+  std::vector<report::BenchEpisode> episodes;
+  episodes.reserve(jobs.size());
+  {
+    report::Progress bar(report::ProgressOn(stderr, "runs copied", jobs.size(), progress));
+    for (size_t i = 0; i < jobs.size(); ++i) {
+      const std::string scenario = jobs[i].at(0).get<std::string>();
+      const std::string planner = jobs[i].at(1).get<std::string>();
+      const uint64_t seed = jobs[i].at(2).get<uint64_t>();
+      const fs::path to = out_dir / report::BenchRunFolder(scenario, planner, seed);
+      std::error_code ec;
+      fs::create_directories(to.parent_path(), ec);
+      if (!ec) fs::copy(source[i], to, fs::copy_options::recursive, ec);
+      if (ec) {
+        return fail(IoError(fmt::format("cannot copy '{}' to '{}': {}", source[i].string(),
+                                        to.string(), ec.message())));
+      }
+      Result<report::BenchEpisode> e = report::ReadBenchEpisode(to, scenario, planner, seed);
+      if (!e.ok()) return fail(e.status());
+      episodes.push_back(std::move(*e));
+      bar.Done(fmt::format("{} {} seed {}", scenario, planner, seed));
+    }
+  }
+  nlohmann::json manifest = first;
+  manifest["shard"] = {{"index", 1}, {"count", 1}};
+  manifest["ground_truth"] = VisibilityJson(visibility);
+  manifest["seconds"] = seconds;
+  manifest["merged_from"] = nlohmann::json::array();
+  for (const fs::path& dir : shards) manifest["merged_from"].push_back(dir.string());
+  if (Status s = io::WriteJsonFile(out_dir / kManifestName, manifest); !s.ok()) return fail(s);
+  report::BenchDescription description =
+      DescriptionFromJson(first.at("bench"), first.at("revision").get<std::string>());
+  description.visibility = VisibilityByScenario(visibility);
+  Result<BenchSummary> summary = WriteSummaryAndReport(out_dir, description, episodes, seconds);
+  if (!summary.ok()) return fail(summary.status());
+  AVP_RETURN_IF_ERROR(MarkComplete(out_dir, BenchFolderKind(), "avp bench merge"));
+  // The bench's time: its shards' wall times added up (as summary.md says), not the copying's.
+  summary->seconds = seconds;
   return summary;
 }
 

@@ -85,9 +85,13 @@ const OutputFolderKind& RunFolderKind() {
 const OutputFolderKind& BenchFolderKind() {
   static const OutputFolderKind kind{
       "bench", [](const std::string& name) {
-        static const std::vector<std::string> files = {
-            std::string(kStateFileName), "summary.md",  "summary.csv",
-            "fruits_by_visibility.csv",  "report.html", "runs"};
+        static const std::vector<std::string> files = {std::string(kStateFileName),
+                                                       "summary.md",
+                                                       "summary.csv",
+                                                       "fruits_by_visibility.csv",
+                                                       "report.html",
+                                                       "runs",
+                                                       "bench.json"};
         if (std::find(files.begin(), files.end(), name) != files.end() || IsTempOf(name, files)) {
           return true;
         }

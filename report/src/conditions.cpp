@@ -4,6 +4,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -115,6 +116,46 @@ Result<BenchRunResult> ReadRun(const fs::path& dir) {
   return r;
 }
 
+/// A number of a record, null for NaN (record.json writes non-finite numbers as null).
+double JsonNumber(const nlohmann::json& j) {
+  return j.is_null() ? std::numeric_limits<double>::quiet_NaN() : j.get<double>();
+}
+
+/// Every metric of every view of a run's metrics.csv: the columns after `view` and before
+/// `known_voxels` (MetricsCsvWriter writes the step's metrics there, in their order).
+Status ReadAllMetrics(const fs::path& file, BenchEpisode& e) {
+  AVP_ASSIGN_OR_RETURN(const std::string text, io::ReadFileBounded(file, "metrics file"));
+  std::istringstream in(text);
+  std::string line;
+  if (!std::getline(in, line)) return ParseError(fmt::format("{}: no header", file.string()));
+  const std::vector<std::string> header = SplitCsvLine(line);
+  const auto end = std::find(header.begin(), header.end(), "known_voxels");
+  if (header.empty() || header.front() != "view" || end == header.end()) {
+    return ParseError(fmt::format(
+        "{}: not an avp metrics file (the header must start with view and hold known_voxels)",
+        file.string()));
+  }
+  const size_t n = static_cast<size_t>(end - header.begin());
+  size_t row = 1;
+  while (std::getline(in, line)) {
+    ++row;
+    if (line.empty()) continue;
+    const std::vector<std::string> fields = SplitCsvLine(line);
+    if (fields.size() != header.size()) {
+      return ParseError(fmt::format("{}: row {} has {} fields, the header {}", file.string(), row,
+                                    fields.size(), header.size()));
+    }
+    std::vector<std::pair<std::string, double>> metrics;
+    metrics.reserve(n - 1);
+    for (size_t c = 1; c < n; ++c) {
+      AVP_ASSIGN_OR_RETURN(const double v, CsvNumber(fields[c], file, row, header[c]));
+      metrics.emplace_back(header[c], v);
+    }
+    e.metrics.push_back(std::move(metrics));
+  }
+  return Status::Ok();
+}
+
 /// conditions.csv writes names unquoted: none may hold a comma, a quote or a line break.
 Status CheckCsvName(std::string_view what, const std::string& name) {
   if (name.find_first_of(",\"\r\n") == std::string::npos) return Status::Ok();
@@ -174,6 +215,63 @@ Result<std::vector<BenchRunResult>> ReadBenchRuns(const fs::path& bench_dir) {
     out.push_back(std::move(r));
   }
   return out;
+}
+
+Result<BenchEpisode> ReadBenchEpisode(const fs::path& dir, const std::string& scenario,
+                                      const std::string& planner, uint64_t seed) {
+  BenchEpisode e;
+  e.scenario = scenario;
+  e.planner = planner;
+  e.seed = seed;
+  const Result<nlohmann::json> state = io::ReadJsonFile(dir / "avp-state.json");
+  if (!state.ok()) {
+    e.status = UnavailableError(
+        fmt::format("'{}' holds no finished episode: {}", dir.string(), state.status().message()));
+    return e;
+  }
+  const std::string s = state->is_object() ? state->value("state", std::string("unknown")) : "";
+  if (s != "complete") {
+    const std::string error = state->is_object() ? state->value("error", std::string()) : "";
+    e.status = UnavailableError(fmt::format("'{}': state {}{}", dir.string(), s.empty() ? "?" : s,
+                                            error.empty() ? "" : ": " + error));
+    return e;
+  }
+  const fs::path file = dir / "record.json";
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json rec, io::ReadJsonFile(file));
+  try {
+    const std::string r_scenario = rec.at("scenario").get<std::string>();
+    const std::string r_planner = rec.at("planner").get<std::string>();
+    const uint64_t r_seed = rec.at("seed").get<uint64_t>();
+    if (r_scenario != scenario || r_planner != planner || r_seed != seed) {
+      return ParseError(
+          fmt::format("{}: the record of {} / {} / seed {} where {} / {} / seed {} belongs",
+                      file.string(), r_scenario, r_planner, r_seed, scenario, planner, seed));
+    }
+    e.episode_s = rec.at("episode_seconds").get<double>();
+    for (const nlohmann::json& t : rec.value("plan_ms", nlohmann::json::array())) {
+      e.plan_ms.push_back(JsonNumber(t));
+    }
+    for (const nlohmann::json& f : rec.at("fruits")) {
+      e.fruits.push_back({.best_visible_fraction = JsonNumber(f.at("best_visible_fraction")),
+                          .episode_visible_fraction = JsonNumber(f.at("episode_visible_fraction")),
+                          .found = f.at("found").get<bool>()});
+    }
+    for (const nlohmann::json& g : rec.value("oracle_regret", nlohmann::json::array())) {
+      e.regret.push_back({.step = g.at("step").get<int>(),
+                          .candidates = g.at("candidates").get<size_t>(),
+                          .regret = JsonNumber(g.at("regret")),
+                          .chosen_true_rank = g.at("chosen_true_rank").get<size_t>(),
+                          .rank_correlation = JsonNumber(g.at("rank_correlation"))});
+    }
+    if (rec.at("end").get<std::string>() == "segmenter-fault") {
+      e.status = UnavailableError(
+          fmt::format("segmenter fault: {}", rec.value("end_reason", std::string())));
+    }
+  } catch (const nlohmann::json::exception& ex) {
+    return ParseError(fmt::format("{}: not a bench record: {}", file.string(), ex.what()));
+  }
+  AVP_RETURN_IF_ERROR(ReadAllMetrics(dir / "metrics.csv", e));
+  return e;
 }
 
 std::string LeadVerdict(const eval::Summary& d) {

@@ -95,6 +95,16 @@ struct BenchConfig {
   /// `--record`: each episode also as MCAP, runs/<scenario>/<planner>/seed-<n>/episode.mcap
   /// (docs/recording.md).
   bool record = false;
+  /// `--shard K/N`: run only the K-th (1-based) of N slices of the job list (scenario x seed x
+  /// planner). The (scenario, seed)s are dealt, each with all its planners (its ground truth is
+  /// computed once), round-robin in a fixed shuffled order (the same on every machine), so that
+  /// every slice gets a share of every scenario. A shard's folder holds its runs and bench.json
+  /// but no summary: `avp bench merge` makes it. 1/1: the whole bench.
+  uint64_t shard_index = 1, shard_count = 1;
+  /// `--resume`: out_dir may hold an earlier, interrupted run of this very bench (its bench.json
+  /// names the same configuration, job list, shard and revision): the jobs whose run folders are
+  /// complete are read back, not run again; the others are emptied and run. Not with `force`.
+  bool resume = false;
   /// When not empty, the bench runs once per condition, each into out_dir/<name>/, and compares
   /// them (RunBenchConditions); the first planner is the one compared with the others.
   std::vector<BenchCondition> conditions;
@@ -122,6 +132,8 @@ struct BenchSummary {
   /// The bench's report.html (docs/report.md, "Bench report").
   std::filesystem::path report_html;
   size_t episodes = 0, failed = 0;
+  /// Of `episodes`, those a resumed bench read back instead of running.
+  size_t resumed = 0;
   double seconds = 0.0;
 };
 
@@ -133,7 +145,30 @@ struct BenchSummary {
 /// output_folder.h): a folder holding results is refused unless config.force. A result that cannot
 /// be written stops the bench (the running episodes are asked to stop, no new one starts) with
 /// IoError naming the file.
+///
+/// Every bench folder also gets bench.json (written before the first episode, rewritten at the
+/// end): what was run (the description of the summary, the whole job list, the shard, the
+/// revision) and each (scenario, seed)'s ground-truth fruit visibility, so that shards can be
+/// merged and an interrupted bench resumed (docs/experiments.md, "Shards, merging, resuming").
+/// The summary is made from the run folders as written (report::ReadBenchEpisode): a bench run
+/// whole, merged from shards or resumed gives the same summary.csv. With shard_count > 1 no
+/// summary is written (files empty). Errors besides the above: InvalidArgument for a shard out
+/// of range, `resume` with `force`; FailedPrecondition when `resume` finds another bench (naming
+/// what differs) or a folder without bench.json.
 Result<BenchSummary> RunBench(const BenchConfig& config, const Registries& registries);
+
+/// `avp bench merge`: the shard folders `shards` (each a complete `avp bench --shard K/N`, or a
+/// whole bench) into one bench folder `out_dir`: their run folders copied under runs/, then
+/// bench.json, summary.md, summary.csv, plots and report.html as RunBench writes them. `out_dir`
+/// has the bench folder's lifecycle (refused when it holds results unless `force`). Errors:
+/// InvalidArgument for no shard, a shard given twice, shards of different benches (naming the
+/// two folders and what differs: configuration, job list, shard count, revision), a job missing
+/// from every shard or present in two (naming it and how many more), `out_dir` inside a shard or
+/// a shard inside it; FailedPrecondition for a shard that is not complete (resume it first) or
+/// has no bench.json; IoError naming a file that cannot be copied or written.
+Result<BenchSummary> MergeBenches(const std::vector<std::filesystem::path>& shards,
+                                  const std::filesystem::path& out_dir, bool force,
+                                  bool progress = true);
 
 /// The bench of one condition: out_dir/<name>, the condition's run keys applied over the base
 /// (after the bench's own), its planner options after the bench's, its description appended, no

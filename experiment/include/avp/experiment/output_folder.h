@@ -32,7 +32,7 @@ struct OutputFolderKind {
 
 /// A run folder: record.json, metrics.csv, map.ot, fruit_voxels.ply, metrics.svg, report.html.
 const OutputFolderKind& RunFolderKind();
-/// A bench folder: summary.md, summary.csv, f1_*.svg, fruits_*.svg, report.html, runs/.
+/// A bench folder: bench.json, summary.md, summary.csv, f1_*.svg, fruits_*.svg, report.html, runs/.
 const OutputFolderKind& BenchFolderKind();
 
 /// A bench folder of conditions (`avp bench` with a config's `conditions`): conditions.md,

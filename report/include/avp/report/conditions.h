@@ -11,6 +11,7 @@
 
 #include <avp/core/status.h>
 #include <avp/eval/statistics.h>
+#include <avp/report/bench_summary.h>
 
 namespace avp::report {
 
@@ -34,6 +35,19 @@ struct BenchRunResult {
 /// wrote (a missing column, a bad number). A run that failed or never finished is returned
 /// with ok = false and its state as the error.
 Result<std::vector<BenchRunResult>> ReadBenchRuns(const std::filesystem::path& bench_dir);
+
+/// One run folder of a bench (`run_dir`, runs/<scenario>/<planner>/seed-<n>) read back whole, as
+/// the bench's summary needs it: the metrics of every view (metrics.csv's columns from the first
+/// metric up to known_voxels, at its 9 significant digits), the plan times, the episode's seconds,
+/// its fruits and its regret (record.json). The summary of `avp bench`, of `avp bench merge` and
+/// of a resumed bench are all made from these, so they agree to the digit. A run that is not
+/// complete (its avp-state.json says so, or there is none) comes back with a failed status naming
+/// its state and error; so does one its record says ended by a segmenter fault (the bench's rule).
+/// Errors: ParseError naming the file for a record.json or metrics.csv that avp did not write, or
+/// whose scenario, planner or seed is not the expected one.
+Result<BenchEpisode> ReadBenchEpisode(const std::filesystem::path& run_dir,
+                                      const std::string& scenario, const std::string& planner,
+                                      uint64_t seed);
 
 /// A bench folder and the condition it ran under.
 struct ConditionBench {
