@@ -195,7 +195,7 @@ int SegmentAndReport(const SegmentOptions& options,
 
 struct SegmentCli {
   SegmentOptions options;
-  std::string image, models, out = SegmentOptions{}.out_dir.string();
+  std::string image, models, model_server, out = SegmentOptions{}.out_dir.string();
   std::vector<std::string> segmenter_options;
 };
 
@@ -217,6 +217,10 @@ void AddSegmentCommand(CLI::App& app, CommandContext& context) {
       ->default_val(s.backend);
   cmd->add_option("--models", cli->models,
                   "Model directory of ywes / lsam (default: AVP_ZSL_MODEL_DIR)");
+  cmd->add_option("--model-server", cli->model_server,
+                  "grpc://HOST:PORT: ywes / lsam run their networks on this KServe v2 server "
+                  "(avp serve models, Triton) instead of in this process (= "
+                  "AVP_ZSL_MODEL_SERVER)");
   AddKeyValueOption(*cmd, "--segmenter-option", cli->segmenter_options,
                     "Segmenter option over its defaults (repeatable)");
   AddNumberOption(*cmd, "--threshold", s.threshold, 0.0f, 1.0f,
@@ -226,6 +230,7 @@ void AddSegmentCommand(CLI::App& app, CommandContext& context) {
   cmd->add_option("--out", cli->out, "Output folder")->default_val(cli->out);
   cmd->callback([cli, &context] {
     RunGuarded(context, [&] {
+      if (!cli->model_server.empty()) setenv("AVP_ZSL_MODEL_SERVER", cli->model_server.c_str(), 1);
       SegmentOptions o = cli->options;
       o.image = cli->image;
       o.models = cli->models;

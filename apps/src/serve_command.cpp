@@ -1,6 +1,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <memory>
@@ -12,6 +13,9 @@
 
 #include <avp/apps/serve_command.h>
 #include <avp/io/file.h>
+#ifdef AVP_WITH_ONNX
+#include <avp/zsl/model_service.h>
+#endif
 
 #include "cli_common.h"
 
@@ -143,7 +147,57 @@ struct ServeCli {
   ServeOptions options;
   std::string backends = "oracle";
   std::string port_file;
+  std::string model_server;
 };
+
+struct ServeModelsCli {
+  std::string model_dir, port_file, device = "auto";
+  interop::TensorServerOptions server;
+  int intra_op_threads = 0;
+  bool verify_sha256 = false;
+};
+
+/// avp serve models: the manifest's networks over KServe v2 until SIGINT / SIGTERM.
+int ServeModels(const ServeModelsCli& cli) {
+#ifdef AVP_WITH_ONNX
+  zsl::ModelServiceOptions o;
+  o.server = cli.server;
+  o.runtime.intra_op_threads = cli.intra_op_threads;
+  const Result<zsl::Device> device = zsl::ParseDevice(cli.device);
+  if (!device.ok()) return Failed("serve models", device.status());
+  o.runtime.device = *device;
+  o.verify_sha256 = cli.verify_sha256;
+  const ScopedSignalBlock signals;
+  Result<zsl::ModelService> service = zsl::ServeModels(cli.model_dir, o);
+  if (!service.ok()) return Failed("serve models", service.status());
+  spdlog::info("serving the models of {} (KServe v2 / Open Inference Protocol, gRPC) on {}",
+               cli.model_dir, service->server->address());
+  for (const zsl::ModelService::Served& m : service->models) {
+    spdlog::info("model '{}': READY ({}); {}", m.name, m.provider, m.io);
+  }
+  if (!cli.port_file.empty()) {
+    const Status written = io::WriteFileAtomic(
+        cli.port_file, fmt::format("{}\n", service->server->port()), "port file");
+    if (!written.ok()) return Failed("serve models", written);
+  }
+  int signal = 0;
+  while (signal == 0) signal = signals.Wait(100);
+  spdlog::info("{}: shutting down", signal == SIGINT ? "SIGINT" : "SIGTERM");
+  service->server->Shutdown(std::chrono::seconds(5));
+  if (!cli.port_file.empty()) {
+    std::error_code ignored;
+    std::filesystem::remove(cli.port_file, ignored);
+  }
+  const interop::TensorServerStats stats = service->server->stats();
+  spdlog::info("stopped after {} answered and {} refused inference requests", stats.infer_ok,
+               stats.infer_failed);
+  return 0;
+#else
+  (void)cli;
+  return Failed("serve models",
+                FailedPreconditionError("this build has no ONNX Runtime (AVP_WITH_ONNX=OFF)"));
+#endif
+}
 
 }  // namespace
 
@@ -199,8 +253,12 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
       ->default_val(server.max_cached_seeds);
   cmd->add_option("--port-file", cli->port_file,
                   "Write the bound port to this file once listening");
+  cmd->add_option("--model-server", cli->model_server,
+                  "grpc://HOST:PORT: ywes and lsam run their networks on this KServe v2 server "
+                  "(avp serve models, Triton) instead of in this process (= AVP_ZSL_MODEL_SERVER)");
   cmd->callback([cli, &context] {
     RunGuarded(context, [&] {
+      if (!cli->model_server.empty()) setenv("AVP_ZSL_MODEL_SERVER", cli->model_server.c_str(), 1);
       ServeOptions o = cli->options;
       o.server.segmenters = &context.registries->segmenters;
       o.server.backends = SplitCommaList(cli->backends);
@@ -208,6 +266,32 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
       return ServeSegmentationAndReport(std::move(o));
     });
   });
+
+  auto models = std::make_shared<ServeModelsCli>();
+  CLI::App* models_cmd = serve_cmd->add_subcommand(
+      "models",
+      "Serve the ONNX networks of a model directory (its manifest.json) through ONNX Runtime over "
+      "KServe v2 / the Open Inference Protocol (gRPC), each named by its manifest role, for ywes "
+      "and lsam's --model-server (docs/zero-shot-models.md)");
+  models_cmd->add_option("--model-dir", models->model_dir, "Folder with manifest.json")->required();
+  models_cmd->add_option("--port", models->server.port, "TCP port (0 = pick a free one)")
+      ->default_val(models->server.port);
+  models_cmd->add_option("--host", models->server.host, "Address to listen on")
+      ->default_val(models->server.host);
+  models_cmd->add_option("--threads", models->server.threads, "Calls handled at once")
+      ->default_val(models->server.threads);
+  models_cmd
+      ->add_option("--intra-op-threads", models->intra_op_threads,
+                   "Threads of each ONNX Runtime session (0 = ORT's default)")
+      ->default_val(models->intra_op_threads);
+  models_cmd->add_option("--device", models->device, "auto, cpu or cuda")
+      ->default_val(models->device);
+  models_cmd->add_flag("--verify-sha256", models->verify_sha256,
+                       "Check every file's sha256 against the manifest first");
+  models_cmd->add_option("--port-file", models->port_file,
+                         "Write the bound port to this file once listening");
+  models_cmd->callback(
+      [models, &context] { RunGuarded(context, [&] { return ServeModels(*models); }); });
 }
 
 }  // namespace avp::apps

@@ -88,4 +88,39 @@ if "$avp" segment --image "$work/image.ppm" --backend ywes --models "$work/no-mo
   fail "a missing model directory succeeded"
 fi
 grep -q "$work/no-models" "$work/bad.txt" || { cat "$work/bad.txt" >&2; fail "error does not name the directory"; }
+# The networks on a model server: `avp serve models` serves the stub directory's networks over
+# KServe v2 on loopback, and `avp segment --model-server` gives the very same instances.json (all
+# but the timings) as in process; killed with SIGTERM, the server stops and removes its port file.
+"$avp" serve models --model-dir "$stubs/ywes" --port 0 --port-file "$work/port" \
+  >"$work/serve.txt" 2>&1 &
+server=$!
+trap 'kill $server 2>/dev/null || true' EXIT
+for _ in $(seq 1 100); do [ -s "$work/port" ] && break; sleep 0.1; done
+[ -s "$work/port" ] || { cat "$work/serve.txt" >&2; fail "avp serve models wrote no port file"; }
+port=$(cat "$work/port")
+grep -q "model 'detector': READY" "$work/serve.txt" || { cat "$work/serve.txt" >&2; fail "no detector"; }
+"$avp" segment --image "$work/image.ppm" --prompt "a, b" --backend "ywes://$stubs/ywes" \
+  --model-server "grpc://127.0.0.1:$port" --out "$work/remote" >"$work/remote.txt" 2>&1 ||
+  { cat "$work/remote.txt" "$work/serve.txt" >&2; fail "avp segment --model-server failed"; }
+"$python" - "$work/out/instances.json" "$work/remote/instances.json" <<'EOF2'
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:3])
+for d in (a, b):
+    d.pop("timings", None)
+    d.pop("total_ms", None)
+if a != b:
+    sys.exit("segment_command_test: --model-server gave another instances.json")
+print("segment_command_test: --model-server gives the same instances.json")
+EOF2
+# A server that is not there: an error naming the address.
+if "$avp" segment --image "$work/image.ppm" --prompt a --backend "ywes://$stubs/ywes" \
+  --model-server grpc://127.0.0.1:1 --out "$work/out3" >"$work/bad3.txt" 2>&1; then
+  fail "a missing model server succeeded"
+fi
+grep -q "127.0.0.1:1" "$work/bad3.txt" || { cat "$work/bad3.txt" >&2; fail "error does not name the server"; }
+kill -TERM $server
+wait $server || fail "avp serve models did not stop cleanly on SIGTERM"
+trap - EXIT
+[ ! -e "$work/port" ] || fail "the port file was left behind"
+grep -q "answered" "$work/serve.txt" || fail "no stop line"
 echo "segment_command_test: OK"

@@ -302,7 +302,7 @@ Result<Segmentation> LsamSegmenter::Segment(const segmentation::SegmentationRequ
 }
 
 const SamBoxSegmenter& LsamSegmenter::sam() const { return impl_->sam; }
-const OrtModel& LsamSegmenter::grounding() const { return impl_->grounding.model; }
+const TensorModel& LsamSegmenter::grounding() const { return impl_->grounding.model.get(); }
 const LsamOptions& LsamSegmenter::options() const { return impl_->options; }
 const std::filesystem::path& LsamSegmenter::model_dir() const { return impl_->model_dir; }
 

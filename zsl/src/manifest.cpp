@@ -16,6 +16,8 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "remote_model.h"
+
 namespace avp::zsl {
 
 namespace fs = std::filesystem;
@@ -670,8 +672,10 @@ Status CheckFile(const std::string& role, const FileRef& ref, const std::string&
 
 }  // namespace
 
-Status CheckFiles(const ModelEntry& entry, bool verify_sha256) {
-  AVP_RETURN_IF_ERROR(CheckFile(entry.role, entry.file, "file", "model file", verify_sha256));
+Status CheckFiles(const ModelEntry& entry, bool verify_sha256, bool model_file) {
+  if (model_file) {
+    AVP_RETURN_IF_ERROR(CheckFile(entry.role, entry.file, "file", "model file", verify_sha256));
+  }
   if (entry.text) {
     AVP_RETURN_IF_ERROR(CheckFile(entry.role, entry.text->vocabulary, "text.vocabulary",
                                   "vocabulary file", verify_sha256));
@@ -977,15 +981,20 @@ LoadedBackend LoadBackend(std::string_view backend, const Manifest& manifest,
                                       entry->contract, fmt::join(accepted, " or "))));
     }
   }
+  // With a model server the networks are there, not here: only the text files are needed.
+  const bool remote = !options.session.model_server.empty();
   for (const std::string& role : *roles) {
-    Status files = CheckFiles(*manifest.Find(role), options.verify_sha256);
+    Status files = CheckFiles(*manifest.Find(role), options.verify_sha256, !remote);
     if (!files.ok()) return Fail(std::move(out), files);
   }
 
-  // 2-3. One session per model, checked against its contract and the declared I/O.
+  // 2-3. One session (or one model of the server) per role, checked against its contract and
+  // the declared I/O.
   for (const std::string& role : *roles) {
     const ModelEntry& entry = *manifest.Find(role);
-    Result<OrtModel> model = OrtModel::Load(entry.file.path, options.session, role);
+    Result<ModelRef> model = remote ? ConnectRemoteModel(options.session.model_server, role)
+                                    : LoadOrtModel(entry.file.path, options.session, role);
+    if (!model.ok() && remote) return Fail(std::move(out), model.status());
     if (!model.ok()) {
       Status s = model.status();
       // A file that exists but does not load is INVALID, not MISSING.

@@ -192,7 +192,8 @@ Result<Manifest> ReadManifest(const std::filesystem::path& model_dir);
 /// file and the field: NotFound "segmenter.encoder: model file '…/x.onnx' does not exist (field
 /// models.segmenter.encoder.file)"; InvalidArgument "text: '…/clip.onnx' has 2810 bytes;
 /// models.text.bytes says 2811" or "…: sha256 is …; models.detector.sha256 says …".
-Status CheckFiles(const ModelEntry& entry, bool verify_sha256 = false);
+/// Without `model_file` only the text files are checked (the network is on a model server).
+Status CheckFiles(const ModelEntry& entry, bool verify_sha256 = false, bool model_file = true);
 
 /// The SHA-256 of a file as 64 lower-case hex digits. Errors: NotFound, IoError.
 Result<std::string> FileSha256(const std::filesystem::path& path);
@@ -216,7 +217,7 @@ std::string_view ToString(BackendState state);
 /// model), its session and what the contract check found.
 struct LoadedModel {
   ModelEntry entry;
-  OrtModel model;
+  ModelRef model;  ///< in process (OrtModel) or on a model server (RemoteModel)
   ContractBinding binding;
 };
 

@@ -16,6 +16,8 @@
 #include <onnxruntime_cxx_api.h>
 #include <onnxruntime_session_options_config_keys.h>
 
+#include <avp/interop/tensor_service.h>
+
 namespace avp::zsl {
 
 // ---- devices, element types, shapes ------------------------------------------------------------
@@ -98,6 +100,11 @@ Status SessionOptions::Validate() const {
   if (cuda_device_id < 0) {
     errors.push_back(fmt::format("cuda_device_id ({}) must be >= 0", cuda_device_id));
   }
+  if (!model_server.empty()) {
+    if (Result<std::string> a = interop::ParseGrpcAddress(model_server); !a.ok()) {
+      errors.push_back(a.status().message());
+    }
+  }
   if (errors.empty()) return Status::Ok();
   return InvalidArgumentError(fmt::format("invalid session options: {}", fmt::join(errors, "; ")));
 }
@@ -106,6 +113,7 @@ SessionOptions ToSessionOptions(const RuntimeOptions& runtime) {
   SessionOptions session;
   session.intra_op_threads = runtime.intra_op_threads;
   session.device = runtime.device;
+  session.model_server = runtime.model_server;
   return session;
 }
 
@@ -445,6 +453,12 @@ OrtModel::OrtModel(OrtModel&&) noexcept = default;
 OrtModel& OrtModel::operator=(OrtModel&&) noexcept = default;
 OrtModel::~OrtModel() = default;
 
+Result<ModelRef> LoadOrtModel(const std::filesystem::path& file, const SessionOptions& options,
+                              std::string label) {
+  AVP_ASSIGN_OR_RETURN(OrtModel model, OrtModel::Load(file, options, std::move(label)));
+  return ModelRef(std::make_shared<const OrtModel>(std::move(model)));
+}
+
 Result<OrtModel> OrtModel::Load(const std::filesystem::path& file, const SessionOptions& options,
                                 std::string label) {
   if (label.empty()) label = file.filename().string();
@@ -581,8 +595,8 @@ const std::string& OrtModel::provider() const { return impl_->provider; }
 Device OrtModel::device() const { return impl_->device; }
 const std::string& OrtModel::cuda_fallback_reason() const { return impl_->cuda_fallback_reason; }
 const ModelIo& OrtModel::io() const { return impl_->io; }
-const std::vector<TensorInfo>& OrtModel::inputs() const { return impl_->io.inputs; }
-const std::vector<TensorInfo>& OrtModel::outputs() const { return impl_->io.outputs; }
+const std::vector<TensorInfo>& TensorModel::inputs() const { return io().inputs; }
+const std::vector<TensorInfo>& TensorModel::outputs() const { return io().outputs; }
 Ort::Session& OrtModel::session() const { return *impl_->session; }
 
 // ---- OrtModel::Run's stages ---------------------------------------------------------------------

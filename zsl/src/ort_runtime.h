@@ -13,6 +13,8 @@
 #include <avp/core/status.h>
 #include <avp/zsl/zsl.h>  // Device, RuntimeOptions
 
+#include "tensor_model.h"
+
 // ONNX Runtime's C++ types, for code that needs the raw session (IoBinding, device tensors).
 // Include <onnxruntime_cxx_api.h> (target onnxruntime::onnxruntime) to use them; this header does
 // not.
@@ -39,6 +41,10 @@ struct SessionOptions {
   bool allow_spinning = false;
   /// The CUDA device ordinal when CUDA is tried. Must be >= 0.
   int cuda_device_id = 0;
+  /// "grpc://HOST:PORT": the backends run their networks on this KServe v2 server (avp serve
+  /// models, Triton, ...), each model named by its manifest role, instead of in this process
+  /// (RuntimeOptions::model_server). The other fields then do not apply. Empty: in process.
+  std::string model_server;
 
   /// OK, or InvalidArgument listing every bad field: "intra_op_threads (-1) must be >= 0".
   Status Validate() const;
@@ -152,7 +158,7 @@ const OutputTensor* FindOutput(std::span<const OutputTensor> outputs, std::strin
 ///
 /// The model's `label` (a manifest role such as "segmenter.decoder", or the file name) starts every
 /// error message about it: "segmenter.decoder: cannot load '…/decoder.onnx': …".
-class OrtModel {
+class OrtModel final : public TensorModel {
  public:
   /// Loads `file` with `options`. On kAuto a CUDA failure falls back to CPU (see
   /// `cuda_fallback_reason()`); on kCuda it is an error.
@@ -170,15 +176,15 @@ class OrtModel {
 
   OrtModel(OrtModel&&) noexcept;
   OrtModel& operator=(OrtModel&&) noexcept;
-  ~OrtModel();
+  ~OrtModel() override;
 
   /// The label errors start with.
-  const std::string& label() const;
+  const std::string& label() const override;
   /// The file the model came from (empty for a buffer).
   const std::filesystem::path& file() const;
 
   /// "CPUExecutionProvider" or "CUDAExecutionProvider": the EP the session was created with.
-  const std::string& provider() const;
+  const std::string& provider() const override;
   /// kCpu or kCuda: where the session runs.
   Device device() const;
   /// Why CUDA was not used although the options allowed it (kAuto), e.g. "Failed to load library
@@ -187,9 +193,7 @@ class OrtModel {
   const std::string& cuda_fallback_reason() const;
 
   /// Graph inputs and outputs with element types and shapes (-1 = dynamic).
-  const ModelIo& io() const;
-  const std::vector<TensorInfo>& inputs() const;
-  const std::vector<TensorInfo>& outputs() const;
+  const ModelIo& io() const override;
 
   /// Runs the model. Every graph input must be bound exactly once, by name; each input's type must
   /// be the graph's, its shape must have the graph's rank and static dimensions, and `count` must
@@ -197,8 +201,9 @@ class OrtModel {
   /// those, in that order. Errors: InvalidArgument naming the label and the tensor ("detector:
   /// input 'txt_feats' has 100 values; shape [1,32,512] needs 16384"), or ORT's run error with the
   /// label.
-  Result<std::vector<OutputTensor>> Run(std::span<const InputTensor> inputs,
-                                        std::span<const std::string> output_names = {}) const;
+  Result<std::vector<OutputTensor>> Run(
+      std::span<const InputTensor> inputs,
+      std::span<const std::string> output_names = {}) const override;
 
   /// The raw session for advanced use (IoBinding keeps tensors on the device). Include
   /// <onnxruntime_cxx_api.h>; catch Ort::Exception yourself.
@@ -213,6 +218,10 @@ class OrtModel {
                                  const std::string& label);
   std::unique_ptr<Impl> impl_;
 };
+
+/// OrtModel::Load, shared (LoadedModel::model).
+Result<ModelRef> LoadOrtModel(const std::filesystem::path& file, const SessionOptions& options,
+                              std::string label);
 
 namespace internal {
 /// Forgets the process-wide "CUDA failed under auto" state, so the next kAuto load tries CUDA again

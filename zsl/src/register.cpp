@@ -19,6 +19,7 @@ namespace {
 
 // manifest.h's kModelDirEnvVar; not included here, so that this file builds without ONNX Runtime.
 constexpr const char* kModelDirVariable = "AVP_ZSL_MODEL_DIR";
+constexpr const char* kModelServerVariable = "AVP_ZSL_MODEL_SERVER";
 
 using segmentation::Segmenter;
 
@@ -27,14 +28,19 @@ Result<std::unique_ptr<Segmenter>> MakeZslSegmenter(std::string_view backend,
 #ifdef AVP_WITH_ONNX
   AVP_ASSIGN_OR_RETURN(const std::filesystem::path dir, ModelDirForSpec(backend, spec));
   AVP_ASSIGN_OR_RETURN(const Device device, DeviceFromEnvironment());
+  // AVP_ZSL_MODEL_SERVER=grpc://HOST:PORT: the networks on that server (docs/zero-shot-models.md).
+  const char* server_env = std::getenv(kModelServerVariable);
+  const std::string server = server_env != nullptr ? server_env : "";
   if (backend == "ywes") {
     YwesOptions options;
     options.session.device = device;
+    options.session.model_server = server;
     AVP_ASSIGN_OR_RETURN(std::unique_ptr<YwesSegmenter> s, YwesSegmenter::Create(dir, options));
     return std::unique_ptr<Segmenter>(std::move(s));
   }
   LsamOptions options;
   options.session.device = device;
+  options.session.model_server = server;
   AVP_ASSIGN_OR_RETURN(std::unique_ptr<LsamSegmenter> s, LsamSegmenter::Create(dir, options));
   return std::unique_ptr<Segmenter>(std::move(s));
 #else

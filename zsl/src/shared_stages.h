@@ -60,8 +60,8 @@ class SamBoxSegmenter {
   int low_res() const;       ///< 256
   float mask_threshold() const;
   int decoder_batch() const;  ///< the decoder's static B, or 0 when dynamic
-  const OrtModel& encoder() const;
-  const OrtModel& decoder() const;
+  const TensorModel& encoder() const;
+  const TensorModel& decoder() const;
 
  private:
   struct Impl;

@@ -266,6 +266,6 @@ uint64_t TextEncoder::phrases_computed() const { return impl_->computed.load(); 
 size_t TextEncoder::cache_size() const { return impl_->cache.size(); }
 size_t TextEncoder::cache_capacity() const { return impl_->cache.capacity(); }
 size_t TextEncoder::precomputed_size() const { return impl_->precomputed.size(); }
-const OrtModel& TextEncoder::model() const { return impl_->model.model; }
+const TensorModel& TextEncoder::model() const { return impl_->model.model.get(); }
 
 }  // namespace avp::zsl

@@ -13,7 +13,7 @@
 namespace avp::zsl {
 
 struct LoadedModel;  // manifest.h
-class OrtModel;      // ort_runtime.h
+class TensorModel;   // tensor_model.h
 
 /// Settings of a TextEncoder.
 struct TextEncoderOptions {
@@ -91,7 +91,7 @@ class TextEncoder {
   /// Phrases of the precomputed vocabularies (normalised names).
   size_t precomputed_size() const;
   /// The session (for its provider and device).
-  const OrtModel& model() const;
+  const TensorModel& model() const;
 
  private:
   struct Impl;

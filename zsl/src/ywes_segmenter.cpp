@@ -289,8 +289,8 @@ int SamBoxSegmenter::prompt_frame() const { return impl_->prompt_frame; }
 int SamBoxSegmenter::low_res() const { return impl_->low_res; }
 float SamBoxSegmenter::mask_threshold() const { return impl_->mask_threshold; }
 int SamBoxSegmenter::decoder_batch() const { return impl_->decoder_batch; }
-const OrtModel& SamBoxSegmenter::encoder() const { return impl_->encoder.model; }
-const OrtModel& SamBoxSegmenter::decoder() const { return impl_->decoder.model; }
+const TensorModel& SamBoxSegmenter::encoder() const { return impl_->encoder.model.get(); }
+const TensorModel& SamBoxSegmenter::decoder() const { return impl_->decoder.model.get(); }
 
 // ---- YwesSegmenter
 // -------------------------------------------------------------------------------
@@ -547,7 +547,7 @@ const TextEncoder* YwesSegmenter::text_encoder() const {
   return impl_->text ? &*impl_->text : nullptr;
 }
 const SamBoxSegmenter& YwesSegmenter::sam() const { return impl_->sam; }
-const OrtModel& YwesSegmenter::detector() const { return impl_->detector.model; }
+const TensorModel& YwesSegmenter::detector() const { return impl_->detector.model.get(); }
 const YwesOptions& YwesSegmenter::options() const { return impl_->options; }
 const std::filesystem::path& YwesSegmenter::model_dir() const { return impl_->model_dir; }
 

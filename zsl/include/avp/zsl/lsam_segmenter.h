@@ -15,7 +15,7 @@
 namespace avp::zsl {
 
 // Internal parts of the backends (zsl/src), named only by the accessors that zsl's own tests use.
-class OrtModel;         // ort_runtime.h
+class TensorModel;      // tensor_model.h
 class SamBoxSegmenter;  // shared_stages.h
 
 /// Settings of an LsamSegmenter, with the reference values (design §1, lang-segment-anything) as
@@ -95,7 +95,7 @@ class LsamSegmenter final : public segmentation::Segmenter {
   Result<Grounding> Ground(const ImageRgb8& rgb, std::string_view prompt) const;
 
   const SamBoxSegmenter& sam() const;
-  const OrtModel& grounding() const;
+  const TensorModel& grounding() const;
   const LsamOptions& options() const;
   const std::filesystem::path& model_dir() const;
 

@@ -14,6 +14,8 @@ namespace avp::zsl {
 ///   "ywes://DIR", "lsam://DIR"     the model directory DIR ("ywes:///abs/models",
 ///                                  "ywes://relative/models").
 /// Sessions use the device of AVP_ZSL_DEVICE (auto, cpu, cuda) and ORT's default thread count;
+/// with AVP_ZSL_MODEL_SERVER=grpc://HOST:PORT the networks run on that KServe v2 server instead
+/// (`avp serve models`, Triton; RuntimeOptions::model_server), the manifest still read from DIR;
 /// every other setting is YwesOptions{} / LsamOptions{} (the reference values). The seed is
 /// ignored (the backends are deterministic).
 ///

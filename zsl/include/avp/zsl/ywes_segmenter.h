@@ -15,7 +15,7 @@
 namespace avp::zsl {
 
 // Internal parts of the backends (zsl/src), named only by the accessors that zsl's own tests use.
-class OrtModel;         // ort_runtime.h: one ONNX model in one ORT session
+class TensorModel;      // tensor_model.h: one network, in process or on a model server
 class SamBoxSegmenter;  // shared_stages.h: the SAM stage of ywes and lsam
 class TextEncoder;      // text_encoder.h: CLIP text embeddings
 
@@ -119,7 +119,7 @@ class YwesSegmenter final : public segmentation::Segmenter {
   /// The text encoder, or nullptr for a baked detector.
   const TextEncoder* text_encoder() const;
   const SamBoxSegmenter& sam() const;
-  const OrtModel& detector() const;
+  const TensorModel& detector() const;
   const YwesOptions& options() const;
   const std::filesystem::path& model_dir() const;
 

@@ -39,6 +39,11 @@ struct RuntimeOptions {
   /// Intra-op threads; 0 = ORT's default (one per physical core). Must be >= 0.
   int intra_op_threads = 0;
   Device device = Device::kAuto;
+  /// "grpc://HOST:PORT": run the networks on this KServe v2 / Open Inference Protocol server
+  /// (`avp serve models`, Triton, OpenVINO Model Server, KServe), each model named by its manifest
+  /// role; tokenisation, letterbox, NMS and the mask chain stay here. Empty: in this process.
+  /// AVP_ZSL_MODEL_SERVER sets it for the "ywes" / "lsam" segmenter specs.
+  std::string model_server;
 };
 
 }  // namespace avp::zsl

@@ -1,0 +1,37 @@
+#pragma once
+// Internal to avp_zsl: a network on a KServe v2 / Open Inference Protocol server (avp serve
+// models, Triton, OpenVINO Model Server, KServe), run through interop::TensorClient with the
+// tensors the in-process OrtModel takes and gives (docs/zero-shot-models.md, "The networks on an
+// inference server").
+
+#include <string>
+#include <string_view>
+
+#include <avp/core/status.h>
+#include <avp/interop/tensor.h>
+
+#include "ort_runtime.h"
+
+namespace avp::zsl {
+
+/// The model `model` of the server at `server` ("grpc://HOST:PORT"), labelled `model` in errors.
+/// Reads its ModelMetadata once (the I/O the contracts are checked against). Errors: the address
+/// (InvalidArgument), a server that cannot be reached (Unavailable), no such model (NotFound), a
+/// datatype avp does not use (InvalidArgument); each names the model and the server.
+Result<ModelRef> ConnectRemoteModel(std::string_view server, const std::string& model,
+                                    double deadline_s = 60.0);
+
+/// KServe datatype <-> ONNX element type (FP32 <-> float32, INT64 <-> int64, INT32, BOOL, FP16,
+/// FP64, UINT8, INT8, INT16). kOther / kUndefined for the rest, nullopt the other way.
+ElementType ElementTypeOf(interop::DataType datatype);
+std::optional<interop::DataType> DataTypeOf(ElementType type);
+
+/// An input as the wire carries it (little-endian, row-major; bool as one byte).
+Result<interop::Tensor> ToWire(const InputTensor& input);
+/// An output as OrtModel::Run gives it: FP32 into f32; INT64, INT32 and BOOL into i64 (bool 0/1).
+/// InvalidArgument naming the tensor for another datatype or contents that do not fill the shape.
+Result<OutputTensor> FromWire(const interop::Tensor& tensor);
+/// The other way, for a server: f32 as FP32, i64 as INT64 / INT32 / BOOL after `type`.
+Result<interop::Tensor> ToWire(const OutputTensor& output);
+
+}  // namespace avp::zsl
