@@ -4,12 +4,16 @@
 //
 // Cases (wall-clock time per frame):
 //   BM_InProcess/<backend>            Segment() on a segmenter in this process
-//   BM_Remote/<backend>/<image>       RemoteSegmenter -> SegmentationServer on 127.0.0.1 (same
-//                                     process, real sockets): encode, send, decode, segment,
-//                                     encode, send back, decode; image = raw RGB or PNG
+//   BM_Remote/<backend>/<image>[/<masks>] RemoteSegmenter -> SegmentationServer on 127.0.0.1
+//                                     (same process, real sockets): encode, send, decode,
+//                                     segment, encode, send back, decode; image = raw RGB or PNG;
+//                                     masks RLE (the client's default), dense or instance_ids
 // Backends: oracle (reads the labels, which cross the wire too) and color (HSV thresholds).
 // The service overhead is BM_Remote - BM_InProcess of the same backend; counters give the
-// request and response payload in MB.
+// request and answer payload in MB (answer_MB: the answer's tensors in that mask format).
+//
+// --clients [--seconds=S] (instead of the cases above): 1, 4 and 16 concurrent clients against a
+// server with 4 workers: requests per second, p50 and p99 latency.
 //
 // --mixed-load [--seconds=S] (instead of the cases above): a server with its default limits and
 // 2 workers; 4 valid clients (one connection each, one request at a time, the oracle on the 320 x
@@ -128,14 +132,26 @@ void BM_InProcess(benchmark::State& state, const std::string& backend) {
   }
 }
 
-void BM_Remote(benchmark::State& state, const std::string& backend, ImageEncoding image) {
+void BM_Remote(benchmark::State& state, const std::string& backend, ImageEncoding image,
+               MaskFormat masks) {
   RemoteOptions o;
   o.host = "127.0.0.1";
   o.port = TheServer().port();
   o.model = backend;
   o.seed = 7;
   o.image = image;
+  o.mask_format = masks;
   RemoteSegmenter remote(o);
+  // The answer's tensor bytes in this mask format (the same segmentation, encoded as the server
+  // does).
+  double answer_mb = 0.0;
+  if (auto local = Segmenters().Make(backend, 7); local.ok()) {
+    if (Result<Segmentation> seg = (*local)->Segment(Request(0)); seg.ok()) {
+      if (Result<InferResponse> a = EncodeSegmentation(*seg, masks); a.ok()) {
+        for (const Tensor& t : a->outputs) answer_mb += static_cast<double>(t.data.size()) / 1e6;
+      }
+    }
+  }
   // Payload sizes of one request and its answer, as the codec builds them.
   RequestEncodeOptions eo;
   eo.model_name = backend;
@@ -159,6 +175,7 @@ void BM_Remote(benchmark::State& state, const std::string& backend, ImageEncodin
     benchmark::DoNotOptimize(out->instances.size());
   }
   state.counters["request_MB"] = request_mb;
+  state.counters["answer_MB"] = answer_mb;
   state.counters["mask_MB"] = static_cast<double>(response_bytes) / 1e6;
 }
 
@@ -168,13 +185,24 @@ BENCHMARK_CAPTURE(BM_InProcess, oracle, std::string("oracle"))
 BENCHMARK_CAPTURE(BM_InProcess, color, std::string("color"))
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
-BENCHMARK_CAPTURE(BM_Remote, oracle / raw, std::string("oracle"), ImageEncoding::kRaw)
+BENCHMARK_CAPTURE(BM_Remote, oracle / raw, std::string("oracle"), ImageEncoding::kRaw,
+                  MaskFormat::kRle)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
-BENCHMARK_CAPTURE(BM_Remote, oracle / png, std::string("oracle"), ImageEncoding::kPng)
+BENCHMARK_CAPTURE(BM_Remote, oracle / raw / dense_masks, std::string("oracle"), ImageEncoding::kRaw,
+                  MaskFormat::kDense)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
-BENCHMARK_CAPTURE(BM_Remote, color / raw, std::string("color"), ImageEncoding::kRaw)
+BENCHMARK_CAPTURE(BM_Remote, oracle / raw / instance_ids, std::string("oracle"),
+                  ImageEncoding::kRaw, MaskFormat::kInstanceIds)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(BM_Remote, oracle / png, std::string("oracle"), ImageEncoding::kPng,
+                  MaskFormat::kRle)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(BM_Remote, color / raw, std::string("color"), ImageEncoding::kRaw,
+                  MaskFormat::kRle)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
@@ -374,6 +402,84 @@ std::string EncodedRequestBytes(const segmentation::SegmentationRequest& r) {
     inputs.emplace_back(t.name, std::string(ToString(t.datatype)), t.shape, t.data);
   }
   return InferRequestBytes("oracle", inputs);
+}
+
+/// --clients: 1, 4 and 16 clients (one connection each, one request at a time, the oracle on the
+/// 640 x 480 start view, RLE masks) against a server with `threads` workers, `seconds` each:
+/// requests per second and the p50 / p99 latency.
+int Clients(double seconds, const std::string& json_path) {
+  const int threads = 4;
+  ServerOptions so;
+  so.segmenters = &Segmenters();
+  so.host = "127.0.0.1";
+  so.port = 0;
+  so.backends = {"oracle"};
+  so.threads = threads;
+  so.max_queued_per_client = 4;
+  so.max_running_per_client = threads;
+  Result<std::unique_ptr<SegmentationServer>> started = SegmentationServer::Start(so);
+  if (!started.ok()) {
+    std::fprintf(stderr, "%s\n", started.status().ToString().c_str());
+    return 1;
+  }
+  (void)TheFrame();
+  std::vector<bench::BenchRecord> records;
+  std::printf(
+      "clients: the oracle on the 640 x 480 start view, RLE masks, %d server workers, %.0f s "
+      "each\n",
+      threads, seconds);
+  for (const int clients : {1, 4, 16}) {
+    std::mutex mu;
+    std::vector<double> ms;
+    std::atomic<uint64_t> errors{0};
+    std::atomic<bool> stop{false};
+    std::vector<std::thread> workers;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int c = 0; c < clients; ++c) {
+      workers.emplace_back([&, c] {
+        RemoteOptions o;
+        o.host = "127.0.0.1";
+        o.port = (*started)->port();
+        o.model = "oracle";
+        o.seed = 7;
+        RemoteSegmenter remote(o);
+        std::vector<double> mine;
+        uint64_t i = static_cast<uint64_t>(c);
+        while (!stop.load()) {
+          const auto a = std::chrono::steady_clock::now();
+          const Result<Segmentation> out = remote.Segment(Request(i++ % 8));
+          const double dt =
+              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a)
+                  .count();
+          if (out.ok()) {
+            mine.push_back(dt);
+          } else {
+            ++errors;
+          }
+        }
+        const std::lock_guard<std::mutex> lock(mu);
+        ms.insert(ms.end(), mine.begin(), mine.end());
+      });
+    }
+    std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+    stop = true;
+    for (std::thread& w : workers) w.join();
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double rate = static_cast<double>(ms.size()) / elapsed;
+    const double p50 = Percentile(ms, 0.50), p99 = Percentile(ms, 0.99);
+    std::printf("  %2d clients: %6.1f requests/s, p50 %6.1f ms, p99 %6.1f ms, %llu errors\n",
+                clients, rate, p50, p99, static_cast<unsigned long long>(errors.load()));
+    const std::string name = fmt::format("clients/{}", clients);
+    records.push_back(bench::MakeRecord(name + "/requests_per_s", rate, "1/s"));
+    records.push_back(bench::MakeRecord(name + "/p50", p50, "ms"));
+    records.push_back(bench::MakeRecord(name + "/p99", p99, "ms"));
+    records.push_back(bench::MakeRecord(name + "/errors", static_cast<double>(errors.load()), "",
+                                        std::nullopt, std::nullopt, std::nullopt, "<1"));
+  }
+  (*started)->Shutdown(std::chrono::seconds(2));
+  if (!json_path.empty() && !bench::WriteBenchRecords(json_path, records)) return 1;
+  return 0;
 }
 
 int MixedLoad(double seconds, const std::string& json_path) {
@@ -583,13 +689,15 @@ int MixedLoad(double seconds, const std::string& json_path) {
 }  // namespace avp::interop
 
 int main(int argc, char** argv) {
-  bool mixed = false;
+  bool mixed = false, clients = false;
   double seconds = 10.0;
   int kept = 1;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--mixed-load") {
       mixed = true;
+    } else if (arg == "--clients") {
+      clients = true;
     } else if (arg.rfind("--seconds=", 0) == 0) {
       seconds = std::stod(arg.substr(10));
     } else {
@@ -597,7 +705,8 @@ int main(int argc, char** argv) {
     }
   }
   argc = kept;
-  if (!mixed) return avp::bench::GoogleBenchmarkMain(argc, argv, {});
+  if (!mixed && !clients) return avp::bench::GoogleBenchmarkMain(argc, argv, {});
   const std::string json = avp::bench::TakeJsonPathArgument(argc, argv);
+  if (clients) return avp::interop::Clients(seconds, json);
   return avp::interop::MixedLoad(seconds, json);
 }

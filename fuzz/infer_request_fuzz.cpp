@@ -72,7 +72,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   avp::Status valid = seg->ValidateFor(decoded->frame.rgb.width(), decoded->frame.rgb.height());
   if (!valid.ok())
     avp::fuzz::Fail(backend + " returned an invalid segmentation: " + valid.ToString());
-  avp::Result<InferResponse> response = EncodeSegmentation(*seg);
+  avp::Result<InferResponse> response = EncodeSegmentation(*seg, decoded->mask_format);
   if (!response.ok())
     avp::fuzz::Fail("the segmentation does not encode: " + response.status().ToString());
   inference::ModelInferResponse wire;

@@ -274,6 +274,17 @@ void ResponseCorpus(const fs::path& dir) {
   inference::ModelInferResponse proto;
   interop::internal::ToProto(*response, &proto);
   Write(dir / "gen-two-instances.pb", proto.SerializeAsString());
+  // The compact mask formats (mask_format rle and instance_ids).
+  for (const auto& [format, name] :
+       {std::pair{interop::MaskFormat::kRle, "gen-two-instances-rle.pb"},
+        std::pair{interop::MaskFormat::kInstanceIds, "gen-two-instances-ids.pb"}}) {
+    auto compact = interop::EncodeSegmentation(TestSegmentation(), format);
+    Check(compact.status(), "EncodeSegmentation " + std::string(name));
+    if (!compact.ok()) continue;
+    inference::ModelInferResponse p;
+    interop::internal::ToProto(*compact, &p);
+    Write(dir / name, p.SerializeAsString());
+  }
   Segmentation none;
   none.width = 8;
   none.height = 6;

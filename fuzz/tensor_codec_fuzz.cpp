@@ -105,5 +105,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (!again.ok() || again->instances.size() != seg->instances.size()) {
     avp::fuzz::Fail("encode -> decode changed the number of instances");
   }
+  // The compact forms of the same masks decode to the same instance count.
+  for (const MaskFormat f : {MaskFormat::kRle, MaskFormat::kInstanceIds}) {
+    avp::Result<InferResponse> compact = EncodeSegmentation(*seg, f);
+    if (!compact.ok()) {
+      if (f == MaskFormat::kInstanceIds && seg->instances.size() > 65535) continue;
+      avp::fuzz::Fail("a decoded segmentation does not encode compactly: " +
+                      compact.status().ToString());
+    }
+    avp::Result<avp::Segmentation> c = DecodeSegmentation(*compact);
+    if (!c.ok() || c->instances.size() != seg->instances.size()) {
+      avp::fuzz::Fail("compact encode -> decode changed the number of instances");
+    }
+  }
   return 0;
 }

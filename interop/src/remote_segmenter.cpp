@@ -138,8 +138,13 @@ Result<RemoteOptions> ParseRemoteSpec(std::string_view spec) {
       if (value != "0" && value != "1")
         return bad(fmt::format("{} ({}) must be 0 or 1", key, value));
       (key == "depth" ? o.send_depth : o.send_labels) = value == "1";
+    } else if (key == "masks") {
+      const std::optional<MaskFormat> f = MaskFormatFromString(value);
+      if (!f) return bad(fmt::format("masks ({}) must be dense, rle or instance_ids", value));
+      o.mask_format = *f;
     } else {
-      return bad(fmt::format("unknown option '{}' (known: deadline_s, image, depth, labels)", key));
+      return bad(
+          fmt::format("unknown option '{}' (known: deadline_s, image, depth, labels, masks)", key));
     }
   }
   AVP_RETURN_IF_ERROR(o.Validate().WithContext(fmt::format("remote segmenter spec \"{}\"", spec)));
@@ -235,6 +240,7 @@ Result<Segmentation> RemoteSegmenter::Segment(const segmentation::SegmentationRe
   eo.image = options_.image;
   eo.send_depth = options_.send_depth;
   eo.send_labels = options_.send_labels;
+  eo.mask_format = options_.mask_format;
   Result<InferRequest> encoded = EncodeSegmentationRequest(request, eo);
   if (!encoded.ok()) {
     return encoded.status().WithContext(fmt::format("remote segmenter {}", spec_));

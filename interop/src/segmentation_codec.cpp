@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -19,6 +20,7 @@
 #include <avp/core/transform.h>
 #include <avp/interop/segmentation_codec.h>
 #include <avp/io/image_codec.h>
+#include <avp/io/mask_codec.h>
 
 namespace avp::interop {
 
@@ -313,8 +315,32 @@ const std::vector<TensorSpec>& SegmentationOutputs() {
       {std::string(names::kBoxes), DataType::kFp32, {-1, 4}, false},
       {std::string(names::kHasBox), DataType::kBool, {-1}, false},
       {std::string(names::kMaskScores), DataType::kFp32, {-1}, false},
+      // The compact forms of `masks` (request parameter mask_format).
+      {std::string(names::kMaskRle), DataType::kBytes, {-1}, true},
+      {std::string(names::kMaskIds), DataType::kUint16, {-1, -1}, true},
+      {std::string(names::kImageSize), DataType::kInt32, {2}, true},
+      {std::string(names::kMaskOn), DataType::kUint8, {-1}, true},
   };
   return kOutputs;
+}
+
+std::string_view ToString(MaskFormat format) {
+  switch (format) {
+    case MaskFormat::kDense:
+      return "dense";
+    case MaskFormat::kRle:
+      return "rle";
+    case MaskFormat::kInstanceIds:
+      return "instance_ids";
+  }
+  return "?";
+}
+
+std::optional<MaskFormat> MaskFormatFromString(std::string_view name) {
+  for (MaskFormat f : {MaskFormat::kDense, MaskFormat::kRle, MaskFormat::kInstanceIds}) {
+    if (ToString(f) == name) return f;
+  }
+  return std::nullopt;
 }
 
 std::string_view ToString(ImageEncoding encoding) {
@@ -585,6 +611,9 @@ Result<InferRequest> EncodeSegmentationRequest(const segmentation::SegmentationR
     out.parameters[std::string(names::kSeed)] = std::bit_cast<int64_t>(*options.seed);
   out.parameters[std::string(names::kFrameId)] = frame.frame_id;
   out.parameters[std::string(names::kStampNs)] = frame.stamp_ns;
+  if (options.mask_format != MaskFormat::kDense) {
+    out.parameters[std::string(names::kMaskFormat)] = std::string(ToString(options.mask_format));
+  }
 
   if (options.image == ImageEncoding::kRaw) {
     out.inputs.push_back(MakeTensor<uint8_t>(std::string(names::kRgb), DataType::kUint8, {h, w, 3},
@@ -687,24 +716,89 @@ Result<DecodedSegmentationRequest> DecodeSegmentationRequest(const InferRequest&
                        GetUint64Parameter(request.parameters, names::kFrameIndex));
   out.frame_index = frame_index.value_or(0);
   AVP_ASSIGN_OR_RETURN(out.seed, GetUint64Parameter(request.parameters, names::kSeed));
+  AVP_ASSIGN_OR_RETURN(const std::optional<std::string> format,
+                       GetStringParameter(request.parameters, names::kMaskFormat));
+  if (format) {
+    const std::optional<MaskFormat> f = MaskFormatFromString(*format);
+    if (!f) {
+      return InvalidArgumentError(fmt::format(
+          "parameter 'mask_format' ({}) must be dense, rle or instance_ids", QuoteText(*format)));
+    }
+    out.mask_format = *f;
+  }
   return out;
 }
 
 // ---- responses ----------------------------------------------------------------------------------
 
-Result<InferResponse> EncodeSegmentation(const Segmentation& segmentation) {
+Result<InferResponse> EncodeSegmentation(const Segmentation& segmentation, MaskFormat format) {
   const int w = segmentation.width;
   const int h = segmentation.height;
   const size_t n = segmentation.instances.size();
   if (w < 0 || h < 0) {
     return InvalidArgumentError(fmt::format("segmentation size {}x{} is negative", w, h));
   }
+  if (format == MaskFormat::kInstanceIds && n > 65535) {
+    return InvalidArgumentError(fmt::format(
+        "{} instances do not fit the UINT16 ids of mask_format instance_ids (at most 65535)", n));
+  }
+  for (size_t i = 0; i < n; ++i) {
+    const MaskImage& mask = segmentation.instances[i].mask;
+    if (!mask.SameSizeAs(w, h)) {
+      return InvalidArgumentError(fmt::format("instance {}: mask is {}x{}, the segmentation {}x{}",
+                                              i, mask.width(), mask.height(), w, h));
+    }
+  }
   const size_t pixels = static_cast<size_t>(w) * static_cast<size_t>(h);
-  Tensor masks;
-  masks.name = std::string(names::kMasks);
-  masks.datatype = DataType::kUint8;
-  masks.shape = {static_cast<int64_t>(n), h, w};
-  masks.data.resize(n * pixels);
+  std::vector<Tensor> mask_outputs;
+  if (format == MaskFormat::kDense) {
+    Tensor masks;
+    masks.name = std::string(names::kMasks);
+    masks.datatype = DataType::kUint8;
+    masks.shape = {static_cast<int64_t>(n), h, w};
+    masks.data.resize(n * pixels);
+    for (size_t i = 0; i < n; ++i) {
+      const MaskImage& mask = segmentation.instances[i].mask;
+      std::copy(mask.data().begin(), mask.data().end(),
+                reinterpret_cast<uint8_t*>(masks.data.data()) + i * pixels);
+    }
+    mask_outputs.push_back(std::move(masks));
+  } else {
+    if (format == MaskFormat::kRle) {
+      std::vector<std::string> runs(n);
+      for (size_t i = 0; i < n; ++i) {
+        const std::vector<uint32_t> counts = io::MaskToRle(segmentation.instances[i].mask);
+        runs[i].resize(counts.size() * sizeof(uint32_t));
+        internal::CopyLittleEndian(runs[i].data(), counts.data(), counts.size(), sizeof(uint32_t));
+      }
+      mask_outputs.push_back(MakeBytesTensor(std::string(names::kMaskRle), runs));
+    } else {
+      // The earliest instance (the best-scoring, as segmenters order them) keeps a pixel.
+      std::vector<uint16_t> ids(pixels, 0);
+      for (size_t i = n; i-- > 0;) {
+        const auto& data = segmentation.instances[i].mask.data();
+        for (size_t p = 0; p < pixels; ++p) {
+          if (data[p] != 0) ids[p] = static_cast<uint16_t>(i + 1);
+        }
+      }
+      mask_outputs.push_back(MakeTensor<uint16_t>(std::string(names::kMaskIds), DataType::kUint16,
+                                                  {h, w}, std::span<const uint16_t>(ids)));
+    }
+    const std::array<int32_t, 2> size = {h, w};
+    mask_outputs.push_back(MakeTensor<int32_t>(std::string(names::kImageSize), DataType::kInt32,
+                                               {2}, std::span<const int32_t>(size)));
+    // Each mask's foreground value (masks are "nonzero = instance": 1 from the oracle, 255 from
+    // the networks), so that the client rebuilds the very bytes.
+    std::vector<uint8_t> on(n, 255);
+    for (size_t i = 0; i < n; ++i) {
+      const auto& data = segmentation.instances[i].mask.data();
+      const auto it = std::find_if(data.begin(), data.end(), [](uint8_t v) { return v != 0; });
+      if (it != data.end()) on[i] = *it;
+    }
+    mask_outputs.push_back(MakeTensor<uint8_t>(std::string(names::kMaskOn), DataType::kUint8,
+                                               {static_cast<int64_t>(n)},
+                                               std::span<const uint8_t>(on)));
+  }
   std::vector<int32_t> classes(n);
   std::vector<float> scores(n);
   std::vector<std::string> labels(n);
@@ -713,12 +807,6 @@ Result<InferResponse> EncodeSegmentation(const Segmentation& segmentation) {
   std::vector<float> mask_scores(n);
   for (size_t i = 0; i < n; ++i) {
     const InstanceMask& m = segmentation.instances[i];
-    if (!m.mask.SameSizeAs(w, h)) {
-      return InvalidArgumentError(fmt::format("instance {}: mask is {}x{}, the segmentation {}x{}",
-                                              i, m.mask.width(), m.mask.height(), w, h));
-    }
-    std::copy(m.mask.data().begin(), m.mask.data().end(),
-              reinterpret_cast<uint8_t*>(masks.data.data()) + i * pixels);
     classes[i] = static_cast<int32_t>(m.semantic_class);
     scores[i] = m.confidence;
     labels[i] = m.label;
@@ -733,7 +821,7 @@ Result<InferResponse> EncodeSegmentation(const Segmentation& segmentation) {
   }
   const int64_t ni = static_cast<int64_t>(n);
   InferResponse out;
-  out.outputs.push_back(std::move(masks));
+  for (Tensor& t : mask_outputs) out.outputs.push_back(std::move(t));
   out.outputs.push_back(MakeTensor<int32_t>(std::string(names::kClasses), DataType::kInt32, {ni},
                                             std::span<const int32_t>(classes)));
   out.outputs.push_back(MakeTensor<float>(std::string(names::kScores), DataType::kFp32, {ni},
@@ -756,29 +844,69 @@ Result<InferResponse> EncodeSegmentation(const Segmentation& segmentation) {
 Result<Segmentation> DecodeSegmentation(const InferResponse& response) {
   for (const Tensor& t : response.outputs) AVP_RETURN_IF_ERROR(CheckTensor(t, "output"));
   const Tensor* masks_t = response.FindOutput(names::kMasks);
+  const Tensor* rle_t = response.FindOutput(names::kMaskRle);
+  const Tensor* ids_t = response.FindOutput(names::kMaskIds);
   const Tensor* scores_t = response.FindOutput(names::kScores);
-  if (masks_t == nullptr || scores_t == nullptr) {
+  const bool compact = masks_t == nullptr && (rle_t != nullptr || ids_t != nullptr);
+  if ((masks_t == nullptr && !compact) || scores_t == nullptr) {
     return InvalidArgumentError(fmt::format(
-        "the response lacks output '{}' ({}); a segmentation needs 'masks' UINT8 [N, H, W] and "
-        "'scores' FP32 [N]",
-        masks_t == nullptr ? names::kMasks : names::kScores,
-        masks_t == nullptr ? "UINT8 [N, H, W]" : "FP32 [N]"));
+        "the response lacks output '{}' ({}); a segmentation needs 'masks' UINT8 [N, H, W] (or "
+        "'mask_rle' / 'mask_ids' with 'image_size') and 'scores' FP32 [N]",
+        scores_t != nullptr ? names::kMasks : names::kScores,
+        scores_t != nullptr ? "UINT8 [N, H, W]" : "FP32 [N]"));
   }
-  if (masks_t->datatype == DataType::kBool) {
-    AVP_RETURN_IF_ERROR(
-        ExpectTensor(*masks_t, "output", DataType::kBool, {-1, -1, -1}, "[N, H, W]"));
+  int64_t n = 0, h = 0, w = 0;
+  std::vector<std::string> rle;
+  if (!compact) {
+    if (masks_t->datatype == DataType::kBool) {
+      AVP_RETURN_IF_ERROR(
+          ExpectTensor(*masks_t, "output", DataType::kBool, {-1, -1, -1}, "[N, H, W]"));
+    } else {
+      AVP_RETURN_IF_ERROR(
+          ExpectTensor(*masks_t, "output", DataType::kUint8, {-1, -1, -1}, "[N, H, W]"));
+    }
+    n = masks_t->shape[0];
+    h = masks_t->shape[1];
+    w = masks_t->shape[2];
   } else {
-    AVP_RETURN_IF_ERROR(
-        ExpectTensor(*masks_t, "output", DataType::kUint8, {-1, -1, -1}, "[N, H, W]"));
+    const Tensor* size_t_ = response.FindOutput(names::kImageSize);
+    if (size_t_ == nullptr) {
+      return InvalidArgumentError(
+          fmt::format("the response has '{}' but no 'image_size' INT32 [2] (H, W)",
+                      rle_t != nullptr ? names::kMaskRle : names::kMaskIds));
+    }
+    AVP_RETURN_IF_ERROR(ExpectTensor(*size_t_, "output", DataType::kInt32, {2}, "[2]", "(H, W)"));
+    AVP_ASSIGN_OR_RETURN(const std::vector<int32_t> size, ReadValues<int32_t>(*size_t_));
+    h = size[0];
+    w = size[1];
+    if (h < 0 || w < 0) {
+      return InvalidArgumentError(
+          fmt::format("output 'image_size' ({}, {}) must not be negative", h, w));
+    }
+    if (rle_t != nullptr) {
+      AVP_RETURN_IF_ERROR(ExpectTensor(*rle_t, "output", DataType::kBytes, {-1}, "[N]"));
+      AVP_ASSIGN_OR_RETURN(rle, ReadBytesElements(*rle_t));
+      n = static_cast<int64_t>(rle.size());
+    } else {
+      AVP_RETURN_IF_ERROR(ExpectTensor(*ids_t, "output", DataType::kUint16, {h, w}, "[H, W]",
+                                       "(the size of 'image_size')"));
+      n = scores_t->shape.empty() ? 0 : scores_t->shape[0];
+    }
   }
-  const int64_t n = masks_t->shape[0];
-  const int64_t h = masks_t->shape[1];
-  const int64_t w = masks_t->shape[2];
   if (h > kMaxSide || w > kMaxSide) {
-    return InvalidArgumentError(fmt::format("output 'masks' has shape {}: H and W must be <= {}",
-                                            ShapeToString(masks_t->shape), kMaxSide));
+    return InvalidArgumentError(
+        fmt::format("the masks are {} x {}: H and W must be <= {}", h, w, kMaxSide));
   }
-  const std::string_view per_instance = "(one per instance in 'masks')";
+  // A compact answer of a few bytes may declare many large masks: bound what it expands to.
+  const double decoded_bytes =
+      static_cast<double>(n) * static_cast<double>(h) * static_cast<double>(w);
+  if (compact && decoded_bytes > static_cast<double>(kMaxDecodedMaskBytes)) {
+    return ResourceExhaustedError(
+        fmt::format("the answer's {} masks of {} x {} would take {} bytes decoded, over the limit "
+                    "of {}",
+                    n, h, w, decoded_bytes, kMaxDecodedMaskBytes));
+  }
+  const std::string_view per_instance = "(one per instance of the masks)";
   AVP_RETURN_IF_ERROR(ExpectTensor(*scores_t, "output", DataType::kFp32, {n}, "[N]", per_instance));
   AVP_ASSIGN_OR_RETURN(const std::vector<float> scores, ReadValues<float>(*scores_t));
   for (size_t i = 0; i < scores.size(); ++i) {
@@ -826,6 +954,17 @@ Result<Segmentation> DecodeSegmentation(const InferResponse& response) {
     AVP_ASSIGN_OR_RETURN(mask_scores, ReadValues<float>(*t));
   }
 
+  std::vector<uint8_t> mask_on(static_cast<size_t>(n), 255);
+  if (const Tensor* t = response.FindOutput(names::kMaskOn); t != nullptr && compact) {
+    AVP_RETURN_IF_ERROR(ExpectTensor(*t, "output", DataType::kUint8, {n}, "[N]", per_instance));
+    AVP_ASSIGN_OR_RETURN(mask_on, ReadValues<uint8_t>(*t));
+    for (size_t i = 0; i < mask_on.size(); ++i) {
+      if (mask_on[i] == 0) {
+        return InvalidArgumentError(
+            fmt::format("output 'mask_on'[{}] is 0: a foreground value must be nonzero", i));
+      }
+    }
+  }
   Segmentation out;
   out.width = static_cast<int>(w);
   out.height = static_cast<int>(h);
@@ -833,9 +972,30 @@ Result<Segmentation> DecodeSegmentation(const InferResponse& response) {
   out.instances.resize(static_cast<size_t>(n));
   for (size_t i = 0; i < out.instances.size(); ++i) {
     InstanceMask& m = out.instances[i];
-    m.mask = MaskImage(out.width, out.height);
-    const auto* src = reinterpret_cast<const uint8_t*>(masks_t->data.data()) + i * pixels;
-    std::copy(src, src + pixels, m.mask.data().begin());
+    if (!compact) {
+      m.mask = MaskImage(out.width, out.height);
+      const auto* src = reinterpret_cast<const uint8_t*>(masks_t->data.data()) + i * pixels;
+      std::copy(src, src + pixels, m.mask.data().begin());
+    } else if (rle_t != nullptr) {
+      const std::string& bytes = rle[i];
+      if (bytes.size() % sizeof(uint32_t) != 0) {
+        return InvalidArgumentError(fmt::format(
+            "output 'mask_rle'[{}] has {} bytes: not whole UINT32 run lengths", i, bytes.size()));
+      }
+      std::vector<uint32_t> counts(bytes.size() / sizeof(uint32_t));
+      internal::CopyLittleEndian(counts.data(), bytes.data(), counts.size(), sizeof(uint32_t));
+      Result<MaskImage> mask = io::RleToMask(counts, out.width, out.height);
+      if (!mask.ok()) {
+        return InvalidArgumentError(
+            fmt::format("output 'mask_rle'[{}]: {}", i, mask.status().message()));
+      }
+      m.mask = std::move(*mask);
+      if (mask_on[i] != 255) {
+        for (uint8_t& v : m.mask.data()) v = v != 0 ? mask_on[i] : 0;
+      }
+    } else {
+      m.mask = MaskImage(out.width, out.height);  // filled from mask_ids below, in one pass
+    }
     m.semantic_class = static_cast<SemanticClass>(classes[i]);
     m.confidence = scores[i];
     m.label = std::move(labels[i]);
@@ -843,6 +1003,18 @@ Result<Segmentation> DecodeSegmentation(const InferResponse& response) {
       m.box = PixelBox{boxes[4 * i], boxes[4 * i + 1], boxes[4 * i + 2], boxes[4 * i + 3]};
     }
     m.mask_score = mask_scores[i];
+  }
+  if (compact && rle_t == nullptr) {
+    AVP_ASSIGN_OR_RETURN(const std::vector<uint16_t> ids, ReadValues<uint16_t>(*ids_t));
+    for (size_t p = 0; p < ids.size(); ++p) {
+      if (ids[p] == 0) continue;
+      if (ids[p] > out.instances.size()) {
+        return InvalidArgumentError(fmt::format(
+            "output 'mask_ids' holds id {} at pixel ({}, {}), but there are {} instances", ids[p],
+            p % static_cast<size_t>(w), p / static_cast<size_t>(w), out.instances.size()));
+      }
+      out.instances[ids[p] - 1].mask.data()[p] = mask_on[ids[p] - 1];
+    }
   }
   AVP_ASSIGN_OR_RETURN(const std::optional<std::string> timings,
                        GetStringParameter(response.parameters, names::kTimings));

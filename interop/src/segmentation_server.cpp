@@ -534,7 +534,8 @@ struct SegmentationServer::Impl final : public inference::GRPCInferenceService::
                        [&](const TensorSpec& s) { return s.name == name; })) {
         return {grpc::StatusCode::INVALID_ARGUMENT,
                 fmt::format("requested output {} does not exist; outputs: masks, classes, "
-                            "scores, labels, boxes, has_box, mask_scores",
+                            "scores, labels, boxes, has_box, mask_scores, mask_rle, mask_ids, "
+                            "image_size, mask_on",
                             QuoteText(name))};
       }
     }
@@ -591,7 +592,7 @@ struct SegmentationServer::Impl final : public inference::GRPCInferenceService::
               fmt::format("model '{}' returned an invalid segmentation: {}", m.state.name,
                           v.message())};
     }
-    Result<InferResponse> encoded = EncodeSegmentation(*segmentation);
+    Result<InferResponse> encoded = EncodeSegmentation(*segmentation, decoded->mask_format);
     if (!encoded.ok()) return internal::ToGrpcStatus(encoded.status());
     InferResponse out = std::move(*encoded);
     if (!request->requested_outputs.empty()) {

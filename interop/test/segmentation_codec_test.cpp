@@ -1,6 +1,7 @@
 // The segmentation tensor protocol: requests and segmentations round-trip exactly, the oracle's
 // results do not change through it, and malformed requests are errors naming the tensor.
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -177,6 +178,134 @@ TEST_F(CodecTest, OracleResultsThroughTheCodecAreBitIdentical) {
       ExpectSameSegmentation(*back, *expected, "frame " + std::to_string(frame_index));
     }
   }
+}
+
+/// The bytes of a response's tensors.
+size_t PayloadBytes(const InferResponse& r) {
+  size_t n = 0;
+  for (const Tensor& t : r.outputs) n += t.data.size();
+  return n;
+}
+
+TEST_F(CodecTest, CompactMasksGiveTheSameSegmentationInAFractionOfTheBytes) {
+  segmentation::OracleSegmenter oracle(segmentation::OracleOptions{}, 3);
+  size_t instances = 0, dense_bytes = 0, rle_bytes = 0, ids_bytes = 0;
+  for (uint64_t frame_index = 0; frame_index < 4; ++frame_index) {
+    const auto seg = oracle.Segment(scene_.Request(frame_index, "tomato", 0.0f));
+    ASSERT_TRUE(seg.ok()) << seg.status().ToString();
+    instances += seg->instances.size();
+    for (const MaskFormat f : {MaskFormat::kDense, MaskFormat::kRle, MaskFormat::kInstanceIds}) {
+      const auto encoded = EncodeSegmentation(*seg, f);
+      ASSERT_TRUE(encoded.ok()) << encoded.status().ToString();
+      EXPECT_EQ(encoded->FindOutput("masks") != nullptr, f == MaskFormat::kDense);
+      EXPECT_EQ(encoded->FindOutput("mask_rle") != nullptr, f == MaskFormat::kRle);
+      EXPECT_EQ(encoded->FindOutput("mask_ids") != nullptr, f == MaskFormat::kInstanceIds);
+      (f == MaskFormat::kDense ? dense_bytes
+       : f == MaskFormat::kRle ? rle_bytes
+                               : ids_bytes) += PayloadBytes(*encoded);
+      const auto back = DecodeSegmentation(*encoded);
+      ASSERT_TRUE(back.ok()) << back.status().ToString();
+      // dense and rle give the very bytes back; instance_ids too, but where the (noisy)
+      // oracle's masks overlap, the earlier instance keeps the pixel.
+      Segmentation expected = *seg;
+      if (f == MaskFormat::kInstanceIds) {
+        std::vector<uint8_t> taken(static_cast<size_t>(seg->width * seg->height), 0);
+        for (InstanceMask& m : expected.instances) {
+          for (size_t p = 0; p < taken.size(); ++p) {
+            if (m.mask.data()[p] == 0) continue;
+            if (taken[p] != 0) m.mask.data()[p] = 0;
+            taken[p] = 1;
+          }
+        }
+      }
+      ExpectSameSegmentation(*back, expected, std::string(ToString(f)));
+    }
+  }
+  ASSERT_GT(instances, 4u);
+  std::printf("%zu instances in 4 frames: dense %zu bytes, rle %zu, instance_ids %zu\n", instances,
+              dense_bytes, rle_bytes, ids_bytes);
+  EXPECT_LT(rle_bytes * 50, dense_bytes);
+  EXPECT_LT(ids_bytes, dense_bytes);
+}
+
+TEST(SegmentationCodecTest, InstanceIdsKeepTheEarlierInstanceWhereMasksOverlap) {
+  Segmentation s;
+  s.width = 4;
+  s.height = 2;
+  for (int i = 0; i < 2; ++i) {
+    InstanceMask m;
+    m.mask = MaskImage(4, 2, 0);
+    for (int u = i; u < i + 3; ++u) m.mask.at(u, 1) = i == 0 ? 255 : 1;
+    m.confidence = 0.9f - 0.1f * static_cast<float>(i);
+    s.instances.push_back(std::move(m));
+  }
+  const auto rle = DecodeSegmentation(*EncodeSegmentation(s, MaskFormat::kRle));
+  ASSERT_TRUE(rle.ok()) << rle.status().ToString();
+  ExpectSameSegmentation(*rle, s);  // RLE is exact, overlaps and foreground values included
+  const auto ids = DecodeSegmentation(*EncodeSegmentation(s, MaskFormat::kInstanceIds));
+  ASSERT_TRUE(ids.ok()) << ids.status().ToString();
+  EXPECT_TRUE(ids->instances[0].mask == s.instances[0].mask);
+  // Pixels (1, 1) and (2, 1) went to instance 0; instance 1 keeps (3, 1), with its value 1.
+  EXPECT_EQ(ids->instances[1].mask.at(1, 1), 0);
+  EXPECT_EQ(ids->instances[1].mask.at(2, 1), 0);
+  EXPECT_EQ(ids->instances[1].mask.at(3, 1), 1);
+}
+
+TEST(SegmentationCodecTest, BadCompactMasksAreErrorsNamingTheOutput) {
+  Segmentation s;
+  s.width = 3;
+  s.height = 2;
+  InstanceMask m;
+  m.mask = MaskImage(3, 2, 0);
+  m.mask.at(1, 1) = 255;
+  s.instances.push_back(m);
+  const auto error = [](InferResponse r) {
+    const auto d = DecodeSegmentation(r);
+    EXPECT_FALSE(d.ok());
+    return d.ok() ? std::string() : d.status().ToString();
+  };
+  InferResponse rle = *EncodeSegmentation(s, MaskFormat::kRle);
+  InferResponse no_size = rle;
+  std::erase_if(no_size.outputs, [](const Tensor& t) { return t.name == "image_size"; });
+  EXPECT_THAT(error(no_size), HasSubstr("no 'image_size'"));
+  InferResponse odd = rle;
+  const std::vector<std::string> three = {"abc"};
+  *std::find_if(odd.outputs.begin(), odd.outputs.end(), [](const Tensor& t) {
+    return t.name == "mask_rle";
+  }) = MakeBytesTensor("mask_rle", three);
+  EXPECT_THAT(error(odd), HasSubstr("'mask_rle'[0] has 3 bytes"));
+  InferResponse short_runs = rle;
+  const std::vector<uint32_t> runs = {1, 2};  // sums to 3, not 6
+  std::string bytes(reinterpret_cast<const char*>(runs.data()), 8);
+  *std::find_if(short_runs.outputs.begin(), short_runs.outputs.end(), [](const Tensor& t) {
+    return t.name == "mask_rle";
+  }) = MakeBytesTensor("mask_rle", std::vector<std::string>{bytes});
+  EXPECT_THAT(error(short_runs), HasSubstr("mask_rle'[0]"));
+  InferResponse ids = *EncodeSegmentation(s, MaskFormat::kInstanceIds);
+  const std::vector<uint16_t> big = {0, 0, 0, 0, 7, 0};
+  *std::find_if(ids.outputs.begin(), ids.outputs.end(), [](const Tensor& t) {
+    return t.name == "mask_ids";
+  }) = MakeTensor<uint16_t>("mask_ids", DataType::kUint16, {2, 3}, std::span<const uint16_t>(big));
+  EXPECT_THAT(error(ids), HasSubstr("id 7 at pixel (1, 1), but there are 1 instances"));
+  // A few bytes declaring two 16384 x 16384 masks are refused before anything is allocated.
+  InferResponse huge = rle;
+  const std::vector<int32_t> big_size = {16384, 16384};
+  *std::find_if(huge.outputs.begin(), huge.outputs.end(),
+                [](const Tensor& t) { return t.name == "image_size"; }) =
+      MakeTensor<int32_t>("image_size", DataType::kInt32, {2}, std::span<const int32_t>(big_size));
+  const std::vector<std::string> two = {"", ""};
+  *std::find_if(huge.outputs.begin(), huge.outputs.end(),
+                [](const Tensor& t) { return t.name == "mask_rle"; }) =
+      MakeBytesTensor("mask_rle", two);
+  const std::vector<float> two_scores = {0.5f, 0.5f};
+  *std::find_if(huge.outputs.begin(), huge.outputs.end(),
+                [](const Tensor& t) { return t.name == "scores"; }) =
+      MakeTensor<float>("scores", DataType::kFp32, {2}, std::span<const float>(two_scores));
+  const auto d = DecodeSegmentation(huge);
+  EXPECT_EQ(d.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_THAT(d.status().message(), HasSubstr("over the limit"));
+  EXPECT_FALSE(MaskFormatFromString("zip").has_value());
+  EXPECT_EQ(*MaskFormatFromString("instance_ids"), MaskFormat::kInstanceIds);
 }
 
 TEST(SegmentationCodecTest, SegmentationRoundTripsEveryField) {
@@ -390,6 +519,14 @@ TEST_F(MalformedRequestTest, BadValuesAndParameters) {
   r = good_;
   r.parameters["frame_index"] = std::string("seven");
   EXPECT_THAT(Error(r), HasSubstr("parameter 'frame_index' (string \"seven\")"));
+  r = good_;
+  r.parameters["mask_format"] = std::string("zip");
+  EXPECT_EQ(Error(r), "parameter 'mask_format' ('zip') must be dense, rle or instance_ids");
+  r = good_;
+  r.parameters["mask_format"] = std::string("rle");
+  const auto rle = DecodeSegmentationRequest(r);
+  ASSERT_TRUE(rle.ok()) << rle.status().ToString();
+  EXPECT_EQ(rle->mask_format, MaskFormat::kRle);
 }
 
 // ---- budgets: checked before anything is decoded
@@ -539,8 +676,8 @@ TEST_F(BudgetTest, CountsOfInputsParametersAndFruitsAreBounded) {
   r.parameters["frame_id"] = std::string(5000, '\x1b');
   EXPECT_THAT(Error(r), HasSubstr("parameter 'frame_id' is 5008 bytes long"));
   r = good_;
-  r.requested_outputs.assign(8, "masks");
-  EXPECT_THAT(Error(r), HasSubstr("asks for 8 outputs"));
+  r.requested_outputs.assign(12, "masks");
+  EXPECT_THAT(Error(r), HasSubstr("asks for 12 outputs"));
   r = good_;
   FindMutable(r, "fruits")->shape = {70000, 5};
   EXPECT_THAT(Error(r), HasSubstr("input 'fruits' has 70000 rows: at most 65535"));

@@ -272,6 +272,16 @@ TEST_F(ServiceTest, RemoteSchemeIsAFactory) {
   ASSERT_TRUE(got.ok()) << got.status().ToString();
   ExpectSameSegmentation(*got, *(*local)->Segment(frame_->Request(1)));
 
+  // The masks come back as RLE by default (exact), or dense when asked: the same segmentation.
+  auto dense = TestSegmenters().Make(
+      fmt::format("remote://127.0.0.1:{}/oracle?masks=dense", server_->port()), 9);
+  ASSERT_TRUE(dense.ok()) << dense.status().ToString();
+  const auto got_dense = (*dense)->Segment(frame_->Request(1));
+  ASSERT_TRUE(got_dense.ok()) << got_dense.status().ToString();
+  ExpectSameSegmentation(*got_dense, *(*local)->Segment(frame_->Request(1)));
+  EXPECT_THAT(TestSegmenters().Make("remote://127.0.0.1:8001?masks=zip", 0).status().message(),
+              HasSubstr("masks (zip) must be dense, rle or instance_ids"));
+
   auto bad = TestSegmenters().Make("remote://127.0.0.1:99999", 0);
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);

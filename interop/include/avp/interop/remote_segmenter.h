@@ -35,6 +35,9 @@ struct RemoteOptions {
   ImageEncoding image = ImageEncoding::kRaw;
   bool send_depth = true;
   bool send_labels = true;
+  /// How the answer's masks come back: RLE by default (exact, a few kB per instance instead of
+  /// H x W bytes; docs/segmentation-service.md, "Mask formats").
+  MaskFormat mask_format = MaskFormat::kRle;
 
   /// "127.0.0.1:8001" (IPv6 hosts in brackets).
   std::string Address() const;
@@ -46,7 +49,8 @@ struct RemoteOptions {
 
 /// Parses "remote://HOST[:PORT][/MODEL][?key=value&...]": PORT defaults to 8001, MODEL to
 /// "oracle"; HOST may be an IPv6 address in brackets. Query keys: deadline_s (seconds), image
-/// (raw, png or jpeg), depth and labels (0 or 1). InvalidArgument naming the bad part, e.g.
+/// (raw, png or jpeg), depth and labels (0 or 1), masks (dense, rle or instance_ids: how the
+/// answer's masks come back, rle by default). InvalidArgument naming the bad part, e.g.
 /// "remote segmenter spec \"remote://h:99999\": port (99999) must be in [1, 65535]".
 Result<RemoteOptions> ParseRemoteSpec(std::string_view spec);
 

@@ -29,12 +29,20 @@ namespace avp::interop {
 ///   fruits        FP64   [F, 5]  instance_id, centre x, y, z (world, m), radius (m) (optional)
 ///   prompt        BYTES  [P]     class phrases; P > 1 phrases are joined with ", "
 /// Request parameters: score_threshold (double), frame_index and seed (uint64, sent as int64
-/// holding the same 64 bits), frame_id (string), stamp_ns (int64).
+/// holding the same 64 bits), frame_id (string), stamp_ns (int64), mask_format (string: dense,
+/// rle or instance_ids; default dense).
 ///
 /// Outputs (N instances):
 ///   masks UINT8 [N, H, W] (nonzero = instance), classes INT32 [N] (SemanticClass),
 ///   scores FP32 [N], labels BYTES [N], boxes FP32 [N, 4] (x0, y0, x1, y1; 0 when has_box is
 ///   false), has_box BOOL [N], mask_scores FP32 [N] (negative = none).
+///   With mask_format "rle" the masks come as mask_rle BYTES [N] (each element an instance's
+///   COCO uncompressed RLE: little-endian UINT32 run lengths, column-major, starting with
+///   background, summing to H x W; io::MaskToRle) and image_size INT32 [2] (H, W) instead of
+///   `masks`; with "instance_ids" as mask_ids UINT16 [H, W] (0 = none, i + 1 = instance i; where
+///   instances overlap the earlier, better-scoring one keeps the pixel) and image_size; both with
+///   mask_on UINT8 [N], each mask's foreground value (1 from the oracle, 255 from the networks;
+///   compact masks are binary: a mask with several nonzero values comes back with its first).
 /// Response parameter: timings (string), a JSON array [{"stage": "...", "ms": 1.5}, ...].
 namespace names {
 inline constexpr std::string_view kRgb = "rgb";
@@ -52,6 +60,7 @@ inline constexpr std::string_view kFrameIndex = "frame_index";
 inline constexpr std::string_view kSeed = "seed";
 inline constexpr std::string_view kFrameId = "frame_id";
 inline constexpr std::string_view kStampNs = "stamp_ns";
+inline constexpr std::string_view kMaskFormat = "mask_format";
 
 inline constexpr std::string_view kMasks = "masks";
 inline constexpr std::string_view kClasses = "classes";
@@ -60,6 +69,10 @@ inline constexpr std::string_view kLabels = "labels";
 inline constexpr std::string_view kBoxes = "boxes";
 inline constexpr std::string_view kHasBox = "has_box";
 inline constexpr std::string_view kMaskScores = "mask_scores";
+inline constexpr std::string_view kMaskRle = "mask_rle";
+inline constexpr std::string_view kMaskIds = "mask_ids";
+inline constexpr std::string_view kImageSize = "image_size";
+inline constexpr std::string_view kMaskOn = "mask_on";
 
 inline constexpr std::string_view kTimings = "timings";
 }  // namespace names
@@ -77,6 +90,17 @@ struct TensorSpec {
 const std::vector<TensorSpec>& SegmentationInputs();
 /// The outputs it returns, in the order above.
 const std::vector<TensorSpec>& SegmentationOutputs();
+
+/// How the server sends the masks (request parameter mask_format).
+enum class MaskFormat : uint8_t {
+  kDense = 0,        ///< `masks` UINT8 [N, H, W]: N x H x W bytes, what standard clients expect
+  kRle = 1,          ///< `mask_rle` BYTES [N] + `image_size`: exact, a few kB per instance
+  kInstanceIds = 2,  ///< `mask_ids` UINT16 [H, W] + `image_size`: 2 x H x W bytes for any N;
+                     ///< overlaps keep only the earlier instance
+};
+/// "dense", "rle", "instance_ids".
+std::string_view ToString(MaskFormat format);
+std::optional<MaskFormat> MaskFormatFromString(std::string_view name);
 
 /// How the client sends the colour image.
 enum class ImageEncoding : uint8_t {
@@ -100,6 +124,8 @@ struct RequestEncodeOptions {
   bool send_depth = true;
   /// Send the simulator labels when the request has them.
   bool send_labels = true;
+  /// The mask_format parameter (not sent for kDense, the protocol's default).
+  MaskFormat mask_format = MaskFormat::kDense;
 };
 
 /// The KServe request for `request` (everything the OracleSegmenter reads crosses exactly, with
@@ -118,6 +144,8 @@ struct DecodedSegmentationRequest {
   uint64_t frame_index = 0;
   /// The `seed` parameter, when sent.
   std::optional<uint64_t> seed;
+  /// How the answer's masks are to be sent.
+  MaskFormat mask_format = MaskFormat::kDense;
 
   /// A SegmentationRequest pointing into this object: valid while it lives, unmoved.
   segmentation::SegmentationRequest request() const;
@@ -137,10 +165,13 @@ struct RequestBudget {
 
 /// Fixed bounds of the request format (not configurable: a valid request never comes near them).
 inline constexpr size_t kMaxRequestInputs = 9;       ///< one of each known input
-inline constexpr size_t kMaxRequestedOutputs = 7;    ///< one of each output
+inline constexpr size_t kMaxRequestedOutputs = 11;   ///< one of each output
 inline constexpr size_t kMaxRequestParameters = 64;  ///< known and unknown ones together
 inline constexpr size_t kMaxStringParameterBytes = 1024;
 inline constexpr int64_t kMaxFruits = 65535;  ///< one per UINT16 instance id
+/// The most bytes a compact answer's masks (mask_rle, mask_ids) may expand to when decoded, N x H
+/// x W (a dense answer is bounded by its message size already).
+inline constexpr int64_t kMaxDecodedMaskBytes = int64_t{1} << 28;
 
 /// The request's cost against `budget` and the format's fixed bounds, from shapes, counts and
 /// image headers alone: nothing is decoded, copied or parsed into elements. ResourceExhausted
@@ -163,14 +194,18 @@ std::optional<std::pair<uint32_t, uint32_t>> EncodedImageSize(std::string_view b
 Result<DecodedSegmentationRequest> DecodeSegmentationRequest(const InferRequest& request,
                                                              const RequestBudget& budget = {});
 
-/// The outputs and parameters for `segmentation` (model name and id are left to the caller).
-/// InvalidArgument when a mask's size differs from width x height.
-Result<InferResponse> EncodeSegmentation(const Segmentation& segmentation);
+/// The outputs and parameters for `segmentation` (model name and id are left to the caller), its
+/// masks in `format`. InvalidArgument when a mask's size differs from width x height, or (ids)
+/// for more than 65535 instances.
+Result<InferResponse> EncodeSegmentation(const Segmentation& segmentation,
+                                         MaskFormat format = MaskFormat::kDense);
 
-/// A Segmentation from a response's outputs: `masks` and `scores` are required; `classes`
+/// A Segmentation from a response's outputs: the masks (`masks`, or `mask_rle` or `mask_ids`
+/// with `image_size`) and `scores` are required; `classes`
 /// (default fruit), `labels` (default ""), `boxes` with `has_box` (default none; boxes without
 /// has_box means every instance has one), `mask_scores` (default -1) and the `timings`
-/// parameter are optional. masks may also be BOOL. InvalidArgument naming the output on a wrong
+/// parameter are optional. ResourceExhausted when compact masks would expand beyond
+/// kMaxDecodedMaskBytes. masks may also be BOOL. InvalidArgument naming the output on a wrong
 /// datatype, shape, size or value.
 Result<Segmentation> DecodeSegmentation(const InferResponse& response);
 
