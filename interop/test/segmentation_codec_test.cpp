@@ -290,17 +290,17 @@ TEST(SegmentationCodecTest, BadCompactMasksAreErrorsNamingTheOutput) {
   // A few bytes declaring two 16384 x 16384 masks are refused before anything is allocated.
   InferResponse huge = rle;
   const std::vector<int32_t> big_size = {16384, 16384};
-  *std::find_if(huge.outputs.begin(), huge.outputs.end(),
-                [](const Tensor& t) { return t.name == "image_size"; }) =
-      MakeTensor<int32_t>("image_size", DataType::kInt32, {2}, std::span<const int32_t>(big_size));
+  *std::find_if(huge.outputs.begin(), huge.outputs.end(), [](const Tensor& t) {
+    return t.name == "image_size";
+  }) = MakeTensor<int32_t>("image_size", DataType::kInt32, {2}, std::span<const int32_t>(big_size));
   const std::vector<std::string> two = {"", ""};
-  *std::find_if(huge.outputs.begin(), huge.outputs.end(),
-                [](const Tensor& t) { return t.name == "mask_rle"; }) =
-      MakeBytesTensor("mask_rle", two);
+  *std::find_if(huge.outputs.begin(), huge.outputs.end(), [](const Tensor& t) {
+    return t.name == "mask_rle";
+  }) = MakeBytesTensor("mask_rle", two);
   const std::vector<float> two_scores = {0.5f, 0.5f};
-  *std::find_if(huge.outputs.begin(), huge.outputs.end(),
-                [](const Tensor& t) { return t.name == "scores"; }) =
-      MakeTensor<float>("scores", DataType::kFp32, {2}, std::span<const float>(two_scores));
+  *std::find_if(huge.outputs.begin(), huge.outputs.end(), [](const Tensor& t) {
+    return t.name == "scores";
+  }) = MakeTensor<float>("scores", DataType::kFp32, {2}, std::span<const float>(two_scores));
   const auto d = DecodeSegmentation(huge);
   EXPECT_EQ(d.status().code(), StatusCode::kResourceExhausted);
   EXPECT_THAT(d.status().message(), HasSubstr("over the limit"));
