@@ -550,6 +550,7 @@ Status ParseModel(const json& value, Fields& models, const std::string& role, co
   AVP_RETURN_IF_ERROR(f.String(has_licence ? "licence" : "license", e.licence, false));
   if (e.licence.empty()) return f.Missing("licence", "the artifact's licence, e.g. \"Apache-2.0\"");
   AVP_RETURN_IF_ERROR(f.String("origin", e.origin, true));
+  AVP_RETURN_IF_ERROR(f.String("served_as", e.served_as, false));
 
   if (const json* in = f.Get("inputs"))
     AVP_RETURN_IF_ERROR(ParseTensorList(*in, f, "inputs", e.declared.inputs));
@@ -992,8 +993,9 @@ LoadedBackend LoadBackend(std::string_view backend, const Manifest& manifest,
   // the declared I/O.
   for (const std::string& role : *roles) {
     const ModelEntry& entry = *manifest.Find(role);
-    Result<ModelRef> model = remote ? ConnectRemoteModel(options.session.model_server, role)
-                                    : LoadOrtModel(entry.file.path, options.session, role);
+    Result<ModelRef> model =
+        remote ? ConnectRemoteModel(options.session.model_server, entry.ServedName(), role)
+               : LoadOrtModel(entry.file.path, options.session, role);
     if (!model.ok() && remote) return Fail(std::move(out), model.status());
     if (!model.ok()) {
       Status s = model.status();

@@ -155,6 +155,11 @@ struct ModelEntry {
   FileRef file;          ///< `bytes` is required for models
   std::string licence;
   std::string origin;
+  /// `served_as`: the model's name on a model server (RuntimeOptions::model_server, `avp serve
+  /// models`, a Triton repository); empty: the role.
+  std::string served_as;
+  /// served_as, or the role.
+  const std::string& ServedName() const { return served_as.empty() ? role : served_as; }
   /// The manifest's `inputs` / `outputs` (empty when not declared).
   ModelIo declared;
   Preprocess preprocess;

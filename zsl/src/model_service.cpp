@@ -116,7 +116,7 @@ Result<ModelService> ServeModels(const std::filesystem::path& model_dir,
     AVP_ASSIGN_OR_RETURN(OrtModel model, OrtModel::Load(entry.file.path, session, role));
     const std::string provider = model.provider();
     AVP_ASSIGN_OR_RETURN(std::shared_ptr<const OrtModelHandler> h,
-                         OrtModelHandler::Make(role, std::move(model)));
+                         OrtModelHandler::Make(entry.ServedName(), std::move(model)));
     const auto list = [](const std::vector<interop::TensorSpec>& specs) {
       std::vector<std::string> out;
       for (const interop::TensorSpec& t : specs) {
@@ -126,7 +126,7 @@ Result<ModelService> ServeModels(const std::filesystem::path& model_dir,
       return fmt::format("{}", fmt::join(out, ", "));
     };
     service.models.push_back(
-        {role, provider,
+        {entry.ServedName(), provider,
          fmt::format("inputs {}; outputs {}", list(h->inputs()), list(h->outputs()))});
     handlers.push_back(std::move(h));
   }

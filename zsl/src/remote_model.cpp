@@ -216,7 +216,8 @@ Result<interop::Tensor> ToWire(const OutputTensor& o) {
 }
 
 Result<ModelRef> ConnectRemoteModel(std::string_view server, const std::string& model,
-                                    double deadline_s) {
+                                    const std::string& label_in, double deadline_s) {
+  const std::string label = label_in.empty() ? model : label_in;
   AVP_ASSIGN_OR_RETURN(const std::string address, interop::ParseGrpcAddress(server));
   interop::TensorClientOptions options;
   options.address = address;
@@ -236,7 +237,7 @@ Result<ModelRef> ConnectRemoteModel(std::string_view server, const std::string& 
       const ElementType type = ElementTypeOf(s.datatype);
       if (type == ElementType::kOther) {
         return InvalidArgumentError(fmt::format("{}: model server {} declares tensor '{}' as {}",
-                                                model, server, s.name, ToString(s.datatype)));
+                                                label, server, s.name, ToString(s.datatype)));
       }
       std::vector<int64_t> shape = s.shape;
       for (int64_t& d : shape) d = d < 0 ? kDynamicDim : d;

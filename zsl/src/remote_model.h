@@ -14,12 +14,13 @@
 
 namespace avp::zsl {
 
-/// The model `model` of the server at `server` ("grpc://HOST:PORT"), labelled `model` in errors.
+/// The model `model` of the server at `server` ("grpc://HOST:PORT"), labelled `label` (its
+/// manifest role; `model` when empty) in errors.
 /// Reads its ModelMetadata once (the I/O the contracts are checked against). Errors: the address
 /// (InvalidArgument), a server that cannot be reached (Unavailable), no such model (NotFound), a
 /// datatype avp does not use (InvalidArgument); each names the model and the server.
 Result<ModelRef> ConnectRemoteModel(std::string_view server, const std::string& model,
-                                    double deadline_s = 60.0);
+                                    const std::string& label = "", double deadline_s = 60.0);
 
 /// KServe datatype <-> ONNX element type (FP32 <-> float32, INT64 <-> int64, INT32, BOOL, FP16,
 /// FP64, UINT8, INT8, INT16). kOther / kUndefined for the rest, nullopt the other way.

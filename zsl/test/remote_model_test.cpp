@@ -8,12 +8,14 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
@@ -158,6 +160,34 @@ TEST(RemoteModelTest, LsamOnTheModelServerEqualsLsamInProcess) {
     instances += x.instances.size();
   }
   EXPECT_GT(instances, 2u);
+}
+
+TEST(RemoteModelTest, ManifestNamesTheModelsOnTheServer) {
+  // A copy of the ywes stubs whose manifest serves the detector as "yolo-world-s" (served_as),
+  // as a Triton repository of another naming would.
+  const fs::path dir = fs::temp_directory_path() / "avp_remote_model_served_as";
+  fs::remove_all(dir);
+  fs::copy(kStubs / "ywes", dir, fs::copy_options::recursive);
+  nlohmann::json manifest = nlohmann::json::parse(std::ifstream(dir / "manifest.json"));
+  manifest["models"]["detector"]["served_as"] = "yolo-world-s";
+  std::ofstream(dir / "manifest.json") << manifest.dump(2);
+  ModelService service = Serve(dir);
+  ASSERT_NE(service.server, nullptr);
+  std::vector<std::string> names;
+  for (const ModelService::Served& m : service.models) names.push_back(m.name);
+  EXPECT_THAT(names, ::testing::Contains("yolo-world-s"));
+  YwesOptions o;
+  o.session.device = Device::kCpu;
+  o.session.model_server = Url(service);
+  Result<std::unique_ptr<YwesSegmenter>> renamed = YwesSegmenter::Create(dir, o);
+  ASSERT_TRUE(renamed.ok()) << renamed.status().ToString();
+  EXPECT_THAT((*renamed)->detector().provider(), HasSubstr("/yolo-world-s"));
+  // The stubs' own manifest asks for "detector", which this server does not have.
+  Result<std::unique_ptr<YwesSegmenter>> plain = YwesSegmenter::Create(kStubs / "ywes", o);
+  ASSERT_FALSE(plain.ok());
+  EXPECT_THAT(plain.status().message(),
+              AllOf(HasSubstr("no model 'detector' here"), HasSubstr("yolo-world-s")));
+  fs::remove_all(dir);
 }
 
 TEST(RemoteModelTest, ErrorsNameTheServerTheModelAndTheTensor) {
