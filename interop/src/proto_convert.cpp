@@ -294,4 +294,19 @@ grpc::Status ToGrpcStatus(const Status& status) {
   }
 }
 
+Status TensorSpecsFromProto(const google::protobuf::RepeatedPtrField<
+                                inference::ModelMetadataResponse::TensorMetadata>& tensors,
+                            std::string_view who, std::vector<TensorSpec>* out) {
+  for (const auto& t : tensors) {
+    const std::optional<DataType> datatype = DataTypeFromString(t.datatype());
+    if (!datatype) {
+      return InvalidArgumentError(
+          fmt::format("{}: ModelMetadata lists tensor '{}' with unknown datatype '{}'", who,
+                      t.name(), t.datatype()));
+    }
+    out->push_back({t.name(), *datatype, {t.shape().begin(), t.shape().end()}, false});
+  }
+  return Status::Ok();
+}
+
 }  // namespace avp::interop::internal

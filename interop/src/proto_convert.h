@@ -4,10 +4,12 @@
 // InferRequest / InferResponse, and between gRPC and avp statuses. Private to avp_interop.
 
 #include <string_view>
+#include <vector>
 
 #include <grpcpp/support/status.h>
 
 #include <avp/core/status.h>
+#include <avp/interop/segmentation_codec.h>  // TensorSpec
 #include <avp/interop/tensor.h>
 
 #include "grpc_predict_v2.pb.h"
@@ -30,6 +32,12 @@ Result<InferResponse> FromProto(const inference::ModelInferResponse& response);
 Parameters FromProto(const google::protobuf::Map<std::string, inference::InferParameter>& in);
 void ToProto(const Parameters& in,
              google::protobuf::Map<std::string, inference::InferParameter>* out);
+
+/// A ModelMetadata response's inputs and outputs. InvalidArgument "<who>: ModelMetadata lists
+/// tensor 'x' with unknown datatype 'Y'".
+Status TensorSpecsFromProto(const google::protobuf::RepeatedPtrField<
+                                inference::ModelMetadataResponse::TensorMetadata>& tensors,
+                            std::string_view who, std::vector<TensorSpec>* out);
 
 /// avp status -> gRPC status: InvalidArgument/ParseError -> INVALID_ARGUMENT, NotFound ->
 /// NOT_FOUND, FailedPrecondition -> FAILED_PRECONDITION, OutOfRange -> OUT_OF_RANGE, the rest ->

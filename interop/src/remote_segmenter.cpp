@@ -348,20 +348,9 @@ Result<ModelMetadata> RemoteSegmenter::GetModelMetadata() {
   out.name = response.name();
   out.versions.assign(response.versions().begin(), response.versions().end());
   out.platform = response.platform();
-  const auto convert = [&](const auto& tensors, std::vector<TensorSpec>& specs) -> Status {
-    for (const auto& t : tensors) {
-      const std::optional<DataType> datatype = DataTypeFromString(t.datatype());
-      if (!datatype) {
-        return InvalidArgumentError(fmt::format(
-            "remote segmenter {}: ModelMetadata lists tensor '{}' with unknown datatype '{}'",
-            spec_, t.name(), t.datatype()));
-      }
-      specs.push_back({t.name(), *datatype, {t.shape().begin(), t.shape().end()}, false});
-    }
-    return Status::Ok();
-  };
-  AVP_RETURN_IF_ERROR(convert(response.inputs(), out.inputs));
-  AVP_RETURN_IF_ERROR(convert(response.outputs(), out.outputs));
+  const std::string who = fmt::format("remote segmenter {}", spec_);
+  AVP_RETURN_IF_ERROR(internal::TensorSpecsFromProto(response.inputs(), who, &out.inputs));
+  AVP_RETURN_IF_ERROR(internal::TensorSpecsFromProto(response.outputs(), who, &out.outputs));
   return out;
 }
 

@@ -353,20 +353,10 @@ Result<TensorModelMetadata> TensorClient::Metadata() {
   TensorModelMetadata out;
   out.name = response.name();
   out.platform = response.platform();
-  const auto convert = [&](const auto& tensors, std::vector<TensorSpec>& specs) -> Status {
-    for (const auto& t : tensors) {
-      const std::optional<DataType> datatype = DataTypeFromString(t.datatype());
-      if (!datatype) {
-        return InvalidArgumentError(fmt::format(
-            "model '{}' at {}: ModelMetadata lists tensor '{}' with unknown datatype '{}'",
-            impl_->options.model, impl_->options.address, t.name(), t.datatype()));
-      }
-      specs.push_back({t.name(), *datatype, {t.shape().begin(), t.shape().end()}, false});
-    }
-    return Status::Ok();
-  };
-  AVP_RETURN_IF_ERROR(convert(response.inputs(), out.inputs));
-  AVP_RETURN_IF_ERROR(convert(response.outputs(), out.outputs));
+  const std::string who =
+      fmt::format("model '{}' at {}", impl_->options.model, impl_->options.address);
+  AVP_RETURN_IF_ERROR(internal::TensorSpecsFromProto(response.inputs(), who, &out.inputs));
+  AVP_RETURN_IF_ERROR(internal::TensorSpecsFromProto(response.outputs(), who, &out.outputs));
   return out;
 }
 
