@@ -84,9 +84,11 @@ const std::map<std::string, std::set<std::string>> kAllowed = {
      {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "pipeline", "eval",
       "report", "mcap", "recording", "experiment"}},
     // Zero-shot segmentation backends (ONNX Runtime) and the segmentation service (gRPC): both
-    // implement segmentation's Segmenter and are registered with it by apps/.
-    {"zsl", {"core", "io", "segmentation", "zsl"}},
+    // implement segmentation's Segmenter and are registered with it by apps/. zsl runs its
+    // networks on a model server through interop's tensor client (tensor_service.h, no gRPC
+    // header), and serves them with its tensor server (avp serve models).
     {"interop", {"core", "io", "segmentation", "interop"}},
+    {"zsl", {"core", "io", "segmentation", "interop", "zsl"}},
     // ROS 2: the messages (no middleware), the DDS transport, the live robot (no simulator) and
     // the simulator as a ROS 2 robot.
     {"rosmsg", {"core", "rosmsg"}},
