@@ -52,7 +52,8 @@ inline int TestDomainId(int offset = 0) {
     const int domain = 100 + (start + i) % 100;
     if (fds.contains(domain)) continue;
     const std::string path = "/tmp/avp-test-dds-domain-" + std::to_string(domain) + ".lock";
-    const int fd = ::open(path.c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0666);
+    // Read-only: flock needs no write access, so a file another user created works too.
+    const int fd = ::open(path.c_str(), O_CREAT | O_RDONLY | O_CLOEXEC, 0666);
     if (fd < 0) continue;
     if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
       ::close(fd);
