@@ -669,9 +669,35 @@ Result<std::vector<ImportedPart>> ImportMesh(const MeshEntry& entry, const std::
   std::string assimp_said;
   {
     AssimpMessages messages;
-    ai = importer.ReadFile(entry.file.string(),
-                           aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
-                               aiProcess_SortByPType | aiProcess_ValidateDataStructure);
+    // Read and validated first, post-processed after: a malformed file can leave a mesh with a
+    // face of no vertex, or primitive types that disagree with its faces (an ASCII PLY face list
+    // cut short), and assimp's triangulation then aborts the process on an assertion
+    // (fuzz/regressions/scene_file). Such a face is refused and the types are recomputed from the
+    // faces before it runs.
+    ai = importer.ReadFile(entry.file.string(), aiProcess_ValidateDataStructure);
+    if (ai != nullptr && (ai->mFlags & AI_SCENE_FLAGS_INCOMPLETE) == 0) {
+      for (unsigned i = 0; i < ai->mNumMeshes; ++i) {
+        aiMesh* m = ai->mMeshes[i];
+        if (m == nullptr) continue;
+        unsigned types = 0;
+        for (unsigned f = 0; f < m->mNumFaces; ++f) {
+          const unsigned n = m->mFaces[f].mNumIndices;
+          if (n == 0) {
+            return ParseError(
+                fmt::format("{}.file: mesh '{}': face {} of mesh {} has no vertex (a corrupt face "
+                            "list){}",
+                            context, entry.file.string(), f, i, messages.Quote()));
+          }
+          types |= n == 1   ? aiPrimitiveType_POINT
+                   : n == 2 ? aiPrimitiveType_LINE
+                   : n == 3 ? aiPrimitiveType_TRIANGLE
+                            : aiPrimitiveType_POLYGON;
+        }
+        m->mPrimitiveTypes = types;
+      }
+      ai = importer.ApplyPostProcessing(aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
+                                        aiProcess_SortByPType);
+    }
     assimp_said = messages.Quote();
   }
   if (ai == nullptr || ai->mRootNode == nullptr || (ai->mFlags & AI_SCENE_FLAGS_INCOMPLETE) != 0) {
