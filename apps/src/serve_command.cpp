@@ -286,6 +286,10 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
       ->default_val(models->intra_op_threads);
   models_cmd->add_option("--device", models->device, "auto, cpu or cuda")
       ->default_val(models->device);
+  models_cmd
+      ->add_option("--max-dynamic-dim", models->server.max_dynamic_dim,
+                   "Largest value of a dimension a model leaves dynamic (boxes, texts)")
+      ->default_val(models->server.max_dynamic_dim);
   models_cmd->add_flag("--verify-sha256", models->verify_sha256,
                        "Check every file's sha256 against the manifest first");
   models_cmd->add_option("--port-file", models->port_file,

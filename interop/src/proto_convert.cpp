@@ -309,4 +309,10 @@ Status TensorSpecsFromProto(const google::protobuf::RepeatedPtrField<
   return Status::Ok();
 }
 
+std::string HostPort(const std::string& host, int port) {
+  return host.find(':') != std::string::npos && host.front() != '['
+             ? fmt::format("[{}]:{}", host, port)
+             : fmt::format("{}:{}", host, port);
+}
+
 }  // namespace avp::interop::internal

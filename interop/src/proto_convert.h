@@ -33,6 +33,9 @@ Parameters FromProto(const google::protobuf::Map<std::string, inference::InferPa
 void ToProto(const Parameters& in,
              google::protobuf::Map<std::string, inference::InferParameter>* out);
 
+/// "host:port", an IPv6 host in brackets ("[::1]:8001"): the address gRPC listens on or dials.
+std::string HostPort(const std::string& host, int port);
+
 /// A ModelMetadata response's inputs and outputs. InvalidArgument "<who>: ModelMetadata lists
 /// tensor 'x' with unknown datatype 'Y'".
 Status TensorSpecsFromProto(const google::protobuf::RepeatedPtrField<

@@ -654,10 +654,7 @@ Result<std::unique_ptr<SegmentationServer>> SegmentationServer::Start(
       static_cast<size_t>(options.max_running_per_client > 0 ? options.max_running_per_client
                                                              : std::max(1, options.threads / 2)));
 
-  const std::string address =
-      options.host.find(':') != std::string::npos && options.host.front() != '['
-          ? fmt::format("[{}]:{}", options.host, options.port)
-          : fmt::format("{}:{}", options.host, options.port);
+  const std::string address = internal::HostPort(options.host, options.port);
   grpc::ServerBuilder builder;
   builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &impl->port);
   builder.RegisterService(impl.get());
@@ -679,11 +676,7 @@ Result<std::unique_ptr<SegmentationServer>> SegmentationServer::Start(
 int SegmentationServer::port() const { return impl_->port; }
 
 std::string SegmentationServer::address() const {
-  const std::string& host = impl_->options.host;
-  if (host.find(':') != std::string::npos && host.front() != '[') {
-    return fmt::format("[{}]:{}", host, impl_->port);
-  }
-  return fmt::format("{}:{}", host, impl_->port);
+  return internal::HostPort(impl_->options.host, impl_->port);
 }
 
 std::vector<ModelState> SegmentationServer::models() const {

@@ -37,7 +37,8 @@ std::string SpecList(const std::vector<TensorSpec>& specs) {
 
 /// The request's inputs against the model's: each declared input exactly once, no other, with
 /// the declared datatype, rank and static dimensions, and contents that fill the shape.
-Status CheckInputs(const TensorModelHandler& model, const InferRequest& request) {
+Status CheckInputs(const TensorModelHandler& model, const InferRequest& request,
+                   int64_t max_dynamic_dim) {
   std::set<std::string> seen;
   for (const Tensor& t : request.inputs) {
     const auto it = std::find_if(model.inputs().begin(), model.inputs().end(),
@@ -53,6 +54,15 @@ Status CheckInputs(const TensorModelHandler& model, const InferRequest& request)
     bool shape_ok = t.datatype == it->datatype && t.shape.size() == it->shape.size();
     for (size_t d = 0; shape_ok && d < t.shape.size(); ++d) {
       shape_ok = it->shape[d] < 0 || it->shape[d] == t.shape[d];
+    }
+    // A dynamic dimension sizes the outputs too (SAM's B boxes give B masks): bounded before the
+    // model runs, whatever the request's own size.
+    for (size_t d = 0; shape_ok && d < t.shape.size(); ++d) {
+      if (it->shape[d] < 0 && t.shape[d] > max_dynamic_dim) {
+        return ResourceExhaustedError(fmt::format(
+            "model '{}': input {}: dimension {} ({}) exceeds the limit max_dynamic_dim = {}",
+            model.name(), t.Describe(), d, t.shape[d], max_dynamic_dim));
+      }
     }
     if (!shape_ok) {
       return InvalidArgumentError(fmt::format("model '{}': input {} does not fit '{}' {} {}",
@@ -82,12 +92,6 @@ void ToProto(
   }
 }
 
-std::string Address(const std::string& host, int port) {
-  return host.find(':') != std::string::npos && host.front() != '['
-             ? fmt::format("[{}]:{}", host, port)
-             : fmt::format("{}:{}", host, port);
-}
-
 }  // namespace
 
 Status TensorServerOptions::Validate() const {
@@ -97,6 +101,10 @@ Status TensorServerOptions::Validate() const {
     problems.push_back(fmt::format("port ({}) must be in [0, 65535]", port));
   if (threads < 1 || threads > 1024) {
     problems.push_back(fmt::format("threads ({}) must be in [1, 1024]", threads));
+  }
+  if (max_dynamic_dim < 1 || max_dynamic_dim > (int64_t{1} << 20)) {
+    problems.push_back(
+        fmt::format("max_dynamic_dim ({}) must be in [1, 1048576]", max_dynamic_dim));
   }
   if (max_message_bytes < kMinMessageBytes || max_message_bytes > kMaxMessageBytes) {
     problems.push_back(fmt::format("max_message_bytes ({}) must be in [{}, {}]", max_message_bytes,
@@ -168,7 +176,7 @@ struct TensorServer::Impl final : public inference::GRPCInferenceService::Servic
     }
     Result<InferRequest> decoded = internal::FromProto(*request);
     Status s = decoded.status();
-    if (s.ok()) s = CheckInputs(*m, *decoded);
+    if (s.ok()) s = CheckInputs(*m, *decoded, options.max_dynamic_dim);
     Result<InferResponse> answer = s.ok() ? m->Infer(*decoded) : Result<InferResponse>(s);
     if (!answer.ok()) {
       ++infer_failed;
@@ -196,7 +204,7 @@ Result<std::unique_ptr<TensorServer>> TensorServer::Start(
       return InvalidArgumentError(fmt::format("tensor server: two models are named '{}'", name));
     }
   }
-  const std::string address = Address(options.host, options.port);
+  const std::string address = internal::HostPort(options.host, options.port);
   grpc::ServerBuilder builder;
   builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &impl->port);
   builder.RegisterService(impl.get());
@@ -220,7 +228,9 @@ TensorServer::TensorServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) 
 TensorServer::~TensorServer() { Shutdown(std::chrono::milliseconds(0)); }
 
 int TensorServer::port() const { return impl_->port; }
-std::string TensorServer::address() const { return Address(impl_->options.host, impl_->port); }
+std::string TensorServer::address() const {
+  return internal::HostPort(impl_->options.host, impl_->port);
+}
 TensorServerStats TensorServer::stats() const {
   return {impl_->infer_ok.load(), impl_->infer_failed.load()};
 }

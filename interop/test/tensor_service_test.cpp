@@ -106,6 +106,11 @@ TEST(TensorServiceTest, RefusalsNameTheModelAndTheTensor) {
   r = client->Infer(Request({1, 2, 3, 4}, {1, 4}));  // a static dimension that differs
   EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
   EXPECT_THAT(r.status().message(), AllOf(HasSubstr("'x'"), HasSubstr("[-1, 3]")));
+  // A dynamic dimension past max_dynamic_dim (1024) is refused before the model runs.
+  r = client->Infer(Request(std::vector<float>(3 * 1025, 0.f), {1025, 3}));
+  EXPECT_EQ(r.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_THAT(r.status().message(),
+              HasSubstr("dimension 0 (1025) exceeds the limit max_dynamic_dim"));
   InferRequest missing = Request({1, 2, 3}, {1, 3});
   missing.inputs.pop_back();
   r = client->Infer(missing);

@@ -7,6 +7,7 @@
 // tensors mean. No gRPC or protobuf header is included.
 
 #include <chrono>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -42,6 +43,10 @@ struct TensorServerOptions {
   int threads = 4;
   /// Largest request or response, bytes, [1 MiB, 1 GiB].
   int max_message_bytes = 256 << 20;
+  /// The largest value a request may give a dimension the model leaves dynamic (-1), [1, 2^20]:
+  /// such a dimension sizes the outputs too (SAM's B boxes give B masks of 256 x 256), so it is
+  /// bounded before the model runs (RESOURCE_EXHAUSTED naming the input).
+  int64_t max_dynamic_dim = 1024;
   /// Every bad field at once, naming the values.
   Status Validate() const;
 };
