@@ -111,7 +111,9 @@ bool StartsWith(std::span<const uint8_t> b, std::string_view prefix) {
 }
 
 /// PNM (P1..P6): "P6", then width and height as decimal text, separated by whitespace and
-/// "#" comments (to the end of the line). Safe on any bytes: at most 10 digits per number.
+/// "#" comments (to the end of the line), read exactly as OpenCV's PxM decoder reads them (a
+/// header read otherwise would check another size than the one OpenCV allocates). Safe on any
+/// bytes: at most 10 digits per number.
 Result<ImageHeader> PnmHeader(std::span<const uint8_t> b) {
   size_t at = 2;
   uint64_t sides[2] = {0, 0};
@@ -133,6 +135,9 @@ Result<ImageHeader> PnmHeader(std::span<const uint8_t> b) {
       ++at;
     }
     if (digits == 0) return ParseError("PNM header: truncated or malformed width/height");
+    // As OpenCV's reader does, the byte that ends a number is consumed with it, whatever it is:
+    // in "100000#10500 ..." the '#' starts no comment and the height is 10500.
+    if (at < b.size()) ++at;
   }
   return ImageHeader{"PNM", sides[0], sides[1]};
 }

@@ -214,6 +214,18 @@ TEST_F(InputLimitsTest, PnmHeadersAreReadAndHugeOnesRefused) {
   const Status s = DecodeImage(std::vector<uint8_t>(huge.begin(), huge.end())).status();
   EXPECT_EQ(s.code(), StatusCode::kResourceExhausted) << s.ToString();
   EXPECT_THAT(s.message(), HasSubstr("20000 x 20000"));
+  // The byte that ends a number goes with it, as in OpenCV's reader: here the '#' after the
+  // width starts no comment, the height is 10500, and 100000 x 10500 is refused before OpenCV
+  // allocates 3.15 GB for it (found by the fuzzer; fuzz/regressions/image_codec).
+  const std::string glued("P5\n100000#10500P100\n10\0A\0", 25);
+  const std::vector<uint8_t> glued_bytes(glued.begin(), glued.end());
+  const Result<ImageHeader> g = ReadImageHeader(glued_bytes);
+  ASSERT_TRUE(g.ok()) << g.status().ToString();
+  EXPECT_EQ(g->width, 100000u);
+  EXPECT_EQ(g->height, 10500u);
+  const Status gs = DecodeImage(glued_bytes).status();
+  EXPECT_EQ(gs.code(), StatusCode::kResourceExhausted) << gs.ToString();
+  EXPECT_THAT(gs.message(), HasSubstr("100000 x 10500"));
   for (const std::string& bad :
        std::vector<std::string>{"P6", "P6 12", "P6 99999999999 1 255\n", "P7\nWIDTH 1\n"}) {
     EXPECT_FALSE(ReadImageHeader(std::vector<uint8_t>(bad.begin(), bad.end())).ok()) << bad;
