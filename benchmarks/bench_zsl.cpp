@@ -15,7 +15,20 @@
 // running system), BM_YwesUncachedText/<models>/threads:N (text model every call), and
 // BM_Lsam/<models>/threads:N. Prompts for the stubs: "a, b, c" (three planted boxes) and
 // "tomato, leaf, stem".
+//
+// --serve-clients [--seconds=S] (instead of the cases above): dynamic batching in `avp serve
+// models` (interop/tensor_batcher.h). The text model of the `ywes_heavy_text` stubs (the CLIP
+// text contract, input_ids [B,77], with about 0.6 GMAC of residual MLP blocks per prompt: the
+// work of a small transformer, not its accuracy) served on 127.0.0.1 with 16 gRPC threads:
+// without batching (1 ONNX Runtime thread per run, runs side by side, one per request), and with
+// it (up to 16 rows per run, 2 ms wait) as 2 batches at once of 1 ORT thread each (batched_2x1)
+// or 1 batch at a time of 2 ORT threads (batched_1x2); 1, 4 and 16 clients, each its own
+// connection, one request of one prompt at a time, S seconds each: requests per second, p50 and
+// p99 latency, and the mean requests per run.
+#include <algorithm>
 #include <array>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -23,8 +36,12 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
+#include <span>
 #include <string>
+#include <thread>
+#include <tuple>
 #include <vector>
 
 #include <benchmark/benchmark.h>
@@ -33,9 +50,11 @@
 
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
+#include <avp/interop/tensor_service.h>
 #include <avp/io/image_codec.h>
 #include <avp/segmentation/segmenter.h>
 #include <avp/zsl/lsam_segmenter.h>
+#include <avp/zsl/model_service.h>
 #include <avp/zsl/ywes_segmenter.h>
 
 #include "bench_report.h"
@@ -53,13 +72,15 @@ std::optional<std::string> Env(const char* name) {
 
 /// The stub model folder: AVP_ZSL_STUB_DIR, or make_stubs.py run into a temporary folder (removed
 /// at exit).
-Result<fs::path> StubDir() {
-  if (std::optional<std::string> dir = Env("AVP_ZSL_STUB_DIR")) return fs::path(*dir);
+Result<fs::path> StubDir(bool bench_models = false) {
+  if (std::optional<std::string> dir = Env("AVP_ZSL_STUB_DIR")) {
+    if (!bench_models || fs::exists(fs::path(*dir) / "ywes_heavy_text")) return fs::path(*dir);
+  }
   static fs::path temp;
   temp = fs::temp_directory_path() / fmt::format("avp_bench_zsl_{}", ::getpid());
   const std::string command =
-      fmt::format("/usr/bin/python3 '{}' '{}' --clip-merges '{}' > /dev/null", AVP_ZSL_MAKE_STUBS,
-                  temp.string(), AVP_ZSL_CLIP_MERGES);
+      fmt::format("/usr/bin/python3 '{}' '{}' --clip-merges '{}'{} > /dev/null", AVP_ZSL_MAKE_STUBS,
+                  temp.string(), AVP_ZSL_CLIP_MERGES, bench_models ? " --bench" : "");
   if (std::system(command.c_str()) != 0) {
     return FailedPreconditionError(fmt::format(
         "'{}' failed: the stub models need Debian's python3-onnx (scripts/setup), or set "
@@ -223,10 +244,148 @@ bool RegisterAll() {
   return true;
 }
 
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5)];
+}
+
+/// --serve-clients: see the top of the file.
+int ServeClients(double seconds, const std::string& json_path) {
+  Result<fs::path> stubs = StubDir(true);
+  if (!stubs.ok()) {
+    std::fprintf(stderr, "bench_zsl: %s\n", stubs.status().ToString().c_str());
+    return 1;
+  }
+  std::vector<bench::BenchRecord> records;
+  std::printf(
+      "serve clients: text model of ywes_heavy_text ([1, 77] -> [1, 512], ~0.6 GMAC), 16 gRPC "
+      "threads; unbatched: 1 ORT thread per run, runs side by side; batched_RxT: R batches at "
+      "once of T ORT threads each; %.0f s each\n",
+      seconds);
+  // (batched, batches run at once, ORT threads per run): both cores busy either way.
+  const std::vector<std::tuple<bool, int, int>> modes = {{false, 0, 1}, {true, 2, 1}, {true, 1, 2}};
+  for (const auto& [batched, instances, ort_threads] : modes) {
+    ModelServiceOptions o;
+    o.server.port = 0;
+    o.server.threads = 16;
+    o.runtime.intra_op_threads = ort_threads;
+    o.runtime.device = Device::kCpu;
+    if (batched) {
+      o.server.batching.max_batch = 16;
+      o.server.batching.max_delay = std::chrono::microseconds(2000);
+      o.server.batching.instances = instances;
+    }
+    Result<ModelService> service = ServeModels(*stubs / "ywes_heavy_text", o);
+    if (!service.ok()) {
+      std::fprintf(stderr, "bench_zsl: %s\n", service.status().ToString().c_str());
+      return 1;
+    }
+    const std::string mode =
+        batched ? fmt::format("batched_{}x{}", instances, ort_threads) : "unbatched";
+    std::printf("  %s (%s)\n", mode.c_str(), service->server->batching().at("text").c_str());
+    for (const int clients : {1, 4, 16}) {
+      const interop::TensorServerStats before = service->server->stats();
+      std::mutex mu;
+      std::vector<double> ms;
+      std::atomic<uint64_t> errors{0};
+      std::string first_error;
+      std::atomic<bool> stop{false};
+      std::vector<std::thread> workers;
+      const auto t0 = std::chrono::steady_clock::now();
+      for (int c = 0; c < clients; ++c) {
+        workers.emplace_back([&, c] {
+          interop::TensorClientOptions co;
+          co.address = service->server->address();
+          co.model = "text";
+          Result<std::unique_ptr<interop::TensorClient>> client = interop::TensorClient::Create(co);
+          if (!client.ok()) {
+            ++errors;
+            return;
+          }
+          std::vector<double> mine;
+          std::vector<int64_t> ids(77, 0);
+          uint64_t state = 0x9E3779B97F4A7C15ull * static_cast<uint64_t>(c + 1);
+          while (!stop.load()) {
+            for (int64_t& id : ids) {
+              state = state * 6364136223846793005ull + 1442695040888963407ull;
+              id = static_cast<int64_t>((state >> 33) % 49408);
+            }
+            interop::InferRequest request;
+            request.inputs.push_back(interop::MakeTensor<int64_t>(
+                "input_ids", interop::DataType::kInt64, {1, 77}, std::span<const int64_t>(ids)));
+            const auto a = std::chrono::steady_clock::now();
+            const Result<interop::InferResponse> out = (*client)->Infer(std::move(request));
+            const double dt =
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a)
+                    .count();
+            if (out.ok()) {
+              mine.push_back(dt);
+            } else if (errors.fetch_add(1) == 0) {
+              const std::lock_guard<std::mutex> lock(mu);
+              first_error = out.status().ToString();
+            }
+          }
+          const std::lock_guard<std::mutex> lock(mu);
+          ms.insert(ms.end(), mine.begin(), mine.end());
+        });
+      }
+      std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+      stop = true;
+      for (std::thread& w : workers) w.join();
+      const double elapsed =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double rate = static_cast<double>(ms.size()) / elapsed;
+      const double p50 = Percentile(ms, 0.50), p99 = Percentile(ms, 0.99);
+      double per_run = 1.0;
+      if (batched) {
+        const interop::BatchingStats& b0 = before.batching.at("text");
+        const interop::BatchingStats b1 = service->server->stats().batching.at("text");
+        per_run = b1.batches > b0.batches ? static_cast<double>(b1.requests - b0.requests) /
+                                                static_cast<double>(b1.batches - b0.batches)
+                                          : 0.0;
+      }
+      std::printf(
+          "    %2d clients: %6.1f requests/s, p50 %7.1f ms, p99 %7.1f ms, %.2f requests per "
+          "run, %llu errors\n",
+          clients, rate, p50, p99, per_run, static_cast<unsigned long long>(errors.load()));
+      if (!first_error.empty()) std::printf("      first error: %s\n", first_error.c_str());
+      const std::string name = fmt::format("serve/{}/clients/{}", mode, clients);
+      records.push_back(bench::MakeRecord(name + "/requests_per_s", rate, "1/s"));
+      records.push_back(bench::MakeRecord(name + "/p50", p50, "ms"));
+      records.push_back(bench::MakeRecord(name + "/p99", p99, "ms"));
+      records.push_back(bench::MakeRecord(name + "/requests_per_run", per_run, ""));
+      records.push_back(bench::MakeRecord(name + "/errors", static_cast<double>(errors.load()), "",
+                                          std::nullopt, std::nullopt, std::nullopt, "<1"));
+    }
+    service->server->Shutdown(std::chrono::seconds(2));
+  }
+  if (!json_path.empty() && !bench::WriteBenchRecords(json_path, records)) return 1;
+  return 0;
+}
+
 }  // namespace
 }  // namespace avp::zsl
 
 int main(int argc, char** argv) {
+  bool serve = false;
+  double seconds = 5.0;
+  int kept = 1;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--serve-clients") {
+      serve = true;
+    } else if (arg.rfind("--seconds=", 0) == 0) {
+      seconds = std::stod(arg.substr(10));
+    } else {
+      argv[kept++] = argv[i];
+    }
+  }
+  argc = kept;
+  if (serve) {
+    const std::string json = avp::bench::TakeJsonPathArgument(argc, argv);
+    return avp::zsl::ServeClients(seconds, json);
+  }
   if (!avp::zsl::RegisterAll()) return 1;
   // No targets: design §5 gives estimates only (YWES S + L0 ≈ 0.7–1.3 s per image on 2 cores).
   return avp::bench::GoogleBenchmarkMain(argc, argv, {});

@@ -4,6 +4,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <string>
 
@@ -154,6 +155,7 @@ struct ServeModelsCli {
   std::string model_dir, port_file, device = "auto";
   interop::TensorServerOptions server;
   int intra_op_threads = 0;
+  int64_t batch_delay_us = 2000;
   bool verify_sha256 = false;
 };
 
@@ -162,6 +164,7 @@ int ServeModels(const ServeModelsCli& cli) {
 #ifdef AVP_WITH_ONNX
   zsl::ModelServiceOptions o;
   o.server = cli.server;
+  o.server.batching.max_delay = std::chrono::microseconds(cli.batch_delay_us);
   o.runtime.intra_op_threads = cli.intra_op_threads;
   const Result<zsl::Device> device = zsl::ParseDevice(cli.device);
   if (!device.ok()) return Failed("serve models", device.status());
@@ -172,8 +175,11 @@ int ServeModels(const ServeModelsCli& cli) {
   if (!service.ok()) return Failed("serve models", service.status());
   spdlog::info("serving the models of {} (KServe v2 / Open Inference Protocol, gRPC) on {}",
                cli.model_dir, service->server->address());
+  const std::map<std::string, std::string> batching = service->server->batching();
   for (const zsl::ModelService::Served& m : service->models) {
-    spdlog::info("model '{}': READY ({}); {}", m.name, m.provider, m.io);
+    const auto how = batching.find(m.name);
+    spdlog::info("model '{}': READY ({}, {}); {}", m.name, m.provider,
+                 how == batching.end() ? "batching off" : how->second, m.io);
   }
   if (!cli.port_file.empty()) {
     const Status written = io::WriteFileAtomic(
@@ -191,6 +197,14 @@ int ServeModels(const ServeModelsCli& cli) {
   const interop::TensorServerStats stats = service->server->stats();
   spdlog::info("stopped after {} answered and {} refused inference requests", stats.infer_ok,
                stats.infer_failed);
+  for (const auto& [name, b] : stats.batching) {
+    spdlog::info(
+        "model '{}': {} requests in {} runs ({:.2f} per run, at most {}); {} refused, a "
+        "full waiting line; {} stacked runs redone one by one",
+        name, b.requests, b.batches,
+        b.batches == 0 ? 0.0 : static_cast<double>(b.requests) / static_cast<double>(b.batches),
+        b.largest, b.refused, b.reruns);
+  }
   return 0;
 #else
   (void)cli;
@@ -290,6 +304,24 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
       ->add_option("--max-dynamic-dim", models->server.max_dynamic_dim,
                    "Largest value of a dimension a model leaves dynamic (boxes, texts)")
       ->default_val(models->server.max_dynamic_dim);
+  models_cmd
+      ->add_option("--max-batch", models->server.batching.max_batch,
+                   "Dynamic batching: the most rows one run stacks, for the models whose inputs "
+                   "and outputs all have a dynamic leading axis (1 = off; raise --threads to "
+                   "match)")
+      ->default_val(models->server.batching.max_batch);
+  models_cmd
+      ->add_option("--batch-delay-us", models->batch_delay_us,
+                   "Dynamic batching: how long a request waits for others, microseconds")
+      ->default_val(models->batch_delay_us);
+  models_cmd
+      ->add_option("--max-batch-queue", models->server.batching.max_queue,
+                   "Dynamic batching: requests waiting per model; more are RESOURCE_EXHAUSTED")
+      ->default_val(models->server.batching.max_queue);
+  models_cmd
+      ->add_option("--batch-instances", models->server.batching.instances,
+                   "Dynamic batching: batches of one model run at once")
+      ->default_val(models->server.batching.instances);
   models_cmd->add_flag("--verify-sha256", models->verify_sha256,
                        "Check every file's sha256 against the manifest first");
   models_cmd->add_option("--port-file", models->port_file,

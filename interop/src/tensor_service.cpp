@@ -12,6 +12,7 @@
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/resource_quota.h>
 
+#include "avp/interop/tensor_batcher.h"
 #include "grpc_predict_v2.grpc.pb.h"
 #include "proto_convert.h"
 
@@ -110,6 +111,7 @@ Status TensorServerOptions::Validate() const {
     problems.push_back(fmt::format("max_message_bytes ({}) must be in [{}, {}]", max_message_bytes,
                                    kMinMessageBytes, kMaxMessageBytes));
   }
+  if (Status b = batching.Validate(); !b.ok()) problems.push_back(b.message());
   if (problems.empty()) return Status::Ok();
   return InvalidArgumentError(
       fmt::format("invalid tensor server options: {}", fmt::join(problems, "; ")));
@@ -118,6 +120,9 @@ Status TensorServerOptions::Validate() const {
 struct TensorServer::Impl final : public inference::GRPCInferenceService::Service {
   TensorServerOptions options;
   std::map<std::string, std::shared_ptr<const TensorModelHandler>, std::less<>> models;
+  /// The batched ones among them, and how each model is served (TensorServer::batching).
+  std::map<std::string, std::shared_ptr<const BatchingHandler>> batched;
+  std::map<std::string, std::string> batching;
   std::unique_ptr<grpc::Server> server;
   int port = 0;
   std::atomic<uint64_t> infer_ok{0}, infer_failed{0};
@@ -200,6 +205,20 @@ Result<std::unique_ptr<TensorServer>> TensorServer::Start(
   for (std::shared_ptr<const TensorModelHandler>& m : models) {
     if (m == nullptr) return InvalidArgumentError("tensor server: a model handler is null");
     const std::string name = m->name();
+    std::string how = "batching off";
+    if (options.batching.max_batch > 1) {
+      if (std::optional<std::string> why = WhyNotBatchable(*m)) {
+        how = fmt::format("not batched: {}", *why);
+      } else {
+        AVP_ASSIGN_OR_RETURN(std::shared_ptr<BatchingHandler> b,
+                             BatchingHandler::Make(m, options.batching));
+        how = fmt::format("batched: up to {} rows, waiting at most {} us",
+                          options.batching.max_batch, options.batching.max_delay.count());
+        impl->batched[name] = b;
+        m = std::move(b);
+      }
+    }
+    impl->batching[name] = how;
     if (!impl->models.emplace(name, std::move(m)).second) {
       return InvalidArgumentError(fmt::format("tensor server: two models are named '{}'", name));
     }
@@ -211,8 +230,16 @@ Result<std::unique_ptr<TensorServer>> TensorServer::Start(
   builder.SetMaxReceiveMessageSize(options.max_message_bytes);
   builder.SetMaxSendMessageSize(options.max_message_bytes);
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  // `threads` calls at once. The quota counts every thread of the server: one completion queue
+  // with 1 to 2 polling threads, and threads that have sent their answer but not yet returned to
+  // polling (their client may already have sent the next call). With a quota of threads + 1 and
+  // gRPC's default of one queue per core, 16 clients one call at a time on 16 threads were
+  // refused "Server Threadpool Exhausted" a few hundred times in 5 s; the slack absorbs it.
+  builder.SetSyncServerOption(grpc::ServerBuilder::NUM_CQS, 1);
+  builder.SetSyncServerOption(grpc::ServerBuilder::MIN_POLLERS, 1);
+  builder.SetSyncServerOption(grpc::ServerBuilder::MAX_POLLERS, 2);
   grpc::ResourceQuota quota("avp-tensor-server");
-  quota.SetMaxThreads(std::max(2, options.threads + 1));
+  quota.SetMaxThreads(2 * options.threads + 2);
   builder.SetResourceQuota(quota);
   impl->server = builder.BuildAndStart();
   if (impl->server == nullptr || impl->port == 0) {
@@ -232,8 +259,11 @@ std::string TensorServer::address() const {
   return internal::HostPort(impl_->options.host, impl_->port);
 }
 TensorServerStats TensorServer::stats() const {
-  return {impl_->infer_ok.load(), impl_->infer_failed.load()};
+  TensorServerStats stats{impl_->infer_ok.load(), impl_->infer_failed.load(), {}};
+  for (const auto& [name, b] : impl_->batched) stats.batching[name] = b->stats();
+  return stats;
 }
+std::map<std::string, std::string> TensorServer::batching() const { return impl_->batching; }
 void TensorServer::Shutdown(std::chrono::milliseconds grace) {
   if (impl_->server == nullptr) return;
   impl_->server->Shutdown(std::chrono::system_clock::now() + grace);
@@ -307,6 +337,12 @@ struct TensorClient::Impl {
       case grpc::StatusCode::FAILED_PRECONDITION:
         return FailedPreconditionError(what);
       case grpc::StatusCode::RESOURCE_EXHAUSTED:
+        if (s.error_message() == "Server Threadpool Exhausted") {
+          return ResourceExhaustedError(
+              what +
+              " (every thread of the server is busy with another call: retry later, or "
+              "raise its threads, e.g. avp serve models --threads N)");
+        }
         return ResourceExhaustedError(what);
       case grpc::StatusCode::UNAVAILABLE:
         return UnavailableError(what);

@@ -6,11 +6,14 @@
 #include "remote_model.h"
 
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -137,6 +140,60 @@ TEST(RemoteModelTest, YwesOnTheModelServerEqualsYwesInProcess) {
   // The networks ran on the server: per image at least the detector, the SAM encoder and its
   // decoder, and the text encoder for each new phrase (its embeddings are cached here).
   EXPECT_GE(service.server->stats().infer_ok - before, 3u * 8u + 4u);
+}
+
+TEST(RemoteModelTest, YwesOnABatchingModelServerEqualsYwesInProcess) {
+  // avp serve models --max-batch 4: of the ywes stubs only the text encoder (input_ids [B,77])
+  // has a batch axis. Four robots send one prompt each at once: their text requests run as one
+  // stacked run, and every answer is the one ywes gives in process.
+  ModelServiceOptions o;
+  o.server.port = 0;
+  o.server.threads = 8;
+  o.server.batching.max_batch = 4;
+  o.server.batching.max_delay = std::chrono::seconds(1);  // full long before: 4 rows
+  o.runtime.device = Device::kCpu;
+  o.runtime.intra_op_threads = 1;
+  Result<ModelService> service = ServeModels(kStubs / "ywes", o);
+  ASSERT_TRUE(service.ok()) << service.status().ToString();
+  const std::map<std::string, std::string> how = service->server->batching();
+  EXPECT_EQ(how.at("text"), "batched: up to 4 rows, waiting at most 1000000 us");
+  EXPECT_EQ(how.at("detector"), "not batched: input 'images' has a fixed leading dimension 1");
+  EXPECT_EQ(how.at("segmenter.decoder"),
+            "not batched: input 'image_embeddings' has a fixed leading dimension 1");
+  YwesOptions local;
+  local.session.device = Device::kCpu;
+  local.session.intra_op_threads = 1;
+  YwesOptions remote = local;
+  remote.session.model_server = "grpc://127.0.0.1:" + std::to_string(service->server->port());
+  const std::vector<std::string> prompts = {"a", "b", "c", "d"};
+  std::vector<std::unique_ptr<YwesSegmenter>> robots;
+  for (size_t i = 0; i < prompts.size(); ++i) {
+    Result<std::unique_ptr<YwesSegmenter>> r = YwesSegmenter::Create(kStubs / "ywes", remote);
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    robots.push_back(std::move(r).value());
+  }
+  Result<std::unique_ptr<YwesSegmenter>> in_process = YwesSegmenter::Create(kStubs / "ywes", local);
+  ASSERT_TRUE(in_process.ok()) << in_process.status().ToString();
+  const RgbdFrame frame = Frame(640, 480, {200, 50, 10});
+  std::vector<Segmentation> answers(prompts.size());
+  std::vector<std::thread> threads;
+  for (size_t i = 0; i < prompts.size(); ++i) {
+    threads.emplace_back([&, i] { answers[i] = SegmentOk(*robots[i], frame, prompts[i]); });
+  }
+  for (std::thread& t : threads) t.join();
+  size_t instances = 0;
+  for (size_t i = 0; i < prompts.size(); ++i) {
+    SCOPED_TRACE(prompts[i]);
+    const Segmentation x = SegmentOk(**in_process, frame, prompts[i]);
+    ExpectSame(x, answers[i]);
+    instances += x.instances.size();
+  }
+  EXPECT_GT(instances, 2u);  // the planted anchors fired: real masks were compared
+  const interop::BatchingStats text = service->server->stats().batching.at("text");
+  EXPECT_EQ(text.requests, 4u);
+  EXPECT_EQ(text.batches, 1u);
+  EXPECT_EQ(text.largest, 4);
+  EXPECT_EQ(service->server->stats().batching.count("detector"), 0u);
 }
 
 TEST(RemoteModelTest, LsamOnTheModelServerEqualsLsamInProcess) {

@@ -20,6 +20,8 @@ Directories (OUT_DIR/...):
   ywes_baked_logits/  as ywes_baked/, logits + "sigmoid"
   ywes_transposed/    detector with output0 [1,8400,4+N], manifest declares layout "[A,4+N]"
   lsam/          grounding (gdino.ort/1, L dynamic), segmenter.encoder, segmenter.decoder
+  ywes_heavy_text/  (only with --bench) ywes whose text model does transformer-sized work:
+                 clip_text_heavy(), for bench_zsl --serve-clients; not used by tests
   wrong/<case>/  a complete ywes or lsam set with one defect (see WRONG below); every case must fail
                  at load time with text naming the model role, the tensor and the expectation.
 
@@ -247,6 +249,26 @@ def clip_text(int32_ids=False):
     g.op("Pad", [projected, g.const([0, 0, 0, 512 - CLIP_BUCKETS], np.int64), g.const(0.0)],
          "text_embeds")
     return g.model(inputs, [vi("text_embeds", F32, ["batch", 512])])
+
+
+def clip_text_heavy(layers=4, width=512, hidden=2048, table=1024):
+    """The CLIP text contract with a transformer-sized amount of work (bench_zsl --serve-clients):
+    input_ids int64 [B,77] -> embedding table[ids mod table] [B,77,W] -> `layers` residual MLP
+    blocks (MatMul W x H, Relu, MatMul H x W, Add) -> mean over the 77 tokens -> text_embeds
+    [B,W]. Seeded random weights; about 0.6 GMAC per prompt at the defaults. Not used by tests."""
+    rng = np.random.default_rng(20261204)
+    g = Graph("clip_text_heavy_stub")
+    inputs = [vi("input_ids", I64, ["batch", 77])]
+    bucket = g.op("Mod", ["input_ids", g.const(table, np.int64)])
+    x = g.op("Gather", [g.const(rng.standard_normal((table, width)).astype(np.float32)), bucket],
+             axis=0)
+    for _ in range(layers):
+        w1 = (rng.standard_normal((width, hidden)) / np.sqrt(width)).astype(np.float32)
+        w2 = (rng.standard_normal((hidden, width)) / np.sqrt(hidden)).astype(np.float32)
+        h = g.op("Relu", [g.op("MatMul", [x, g.const(w1)])])
+        x = g.op("Add", [x, g.op("MatMul", [h, g.const(w2)])])
+    g.op("ReduceMean", [x], "text_embeds", axes=[1], keepdims=0)
+    return g.model(inputs, [vi("text_embeds", F32, ["batch", width])])
 
 
 def sam_encoder(small_output=False):
@@ -513,6 +535,9 @@ def main():
     parser.add_argument("out_dir")
     parser.add_argument("--clip-merges", help="CLIP merges fixture to ship as the text vocabulary")
     parser.add_argument("--bert-vocab", help="WordPiece vocab.txt fixture for the grounding model")
+    parser.add_argument("--bench", action="store_true",
+                        help="also ywes_heavy_text/: ywes with clip_text_heavy() as its text model "
+                             "(34 MB; for bench_zsl --serve-clients)")
     args = parser.parse_args()
 
     out = os.path.abspath(args.out_dir)
@@ -535,6 +560,10 @@ def main():
                     "n_max": YOLO_N}).save()
     make_lsam(os.path.join(out, "lsam"), bert,
               "lsam stubs: Grounding DINO + EfficientViT-SAM").save()
+    if args.bench:
+        make_ywes(os.path.join(out, "ywes_heavy_text"), merges,
+                  "ywes stubs, a text model with transformer-sized work (benchmarks only)",
+                  text_model=clip_text_heavy()).save()
 
     wrong = os.path.join(out, "wrong")
     ywes_cases = {

@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -34,6 +35,22 @@ class TensorModelHandler {
   virtual Result<InferResponse> Infer(const InferRequest& request) const = 0;
 };
 
+/// Dynamic batching of one model's requests (BatchingHandler, tensor_batcher.h).
+struct BatchingOptions {
+  /// The most rows (sum of the requests' leading dimensions) one run stacks, [1, 1024]; 1 = no
+  /// batching. A request larger than this runs alone.
+  int max_batch = 1;
+  /// How long the oldest waiting request waits for more before its batch runs anyway, [0, 1 s].
+  std::chrono::microseconds max_delay{2000};
+  /// Requests waiting for a batch, over all shapes, [1, 100000]; one more is refused with
+  /// RESOURCE_EXHAUSTED naming the limit.
+  int max_queue = 256;
+  /// Batches that run at once, each on a thread of its own (Triton's instance count), [1, 64].
+  int instances = 1;
+  /// Every bad field at once, naming the values.
+  Status Validate() const;
+};
+
 struct TensorServerOptions {
   /// Address to listen on ("127.0.0.1", "0.0.0.0", "::").
   std::string host = "127.0.0.1";
@@ -47,13 +64,30 @@ struct TensorServerOptions {
   /// such a dimension sizes the outputs too (SAM's B boxes give B masks of 256 x 256), so it is
   /// bounded before the model runs (RESOURCE_EXHAUSTED naming the input).
   int64_t max_dynamic_dim = 1024;
+  /// Dynamic batching of the models that allow it (tensor_batcher.h WhyNotBatchable); off by
+  /// default (max_batch 1). Requests stack only when they are handled at once: `threads` bounds
+  /// how many are, so it should be at least max_batch.
+  BatchingOptions batching;
   /// Every bad field at once, naming the values.
   Status Validate() const;
+};
+
+/// What one batched model has done since it started (BatchingHandler::stats).
+struct BatchingStats {
+  uint64_t requests = 0;  ///< requests answered through the batcher (alone or stacked)
+  uint64_t batches = 0;   ///< runs of the model
+  uint64_t rows = 0;      ///< rows run
+  uint64_t refused = 0;   ///< RESOURCE_EXHAUSTED: the waiting line was full
+  uint64_t reruns = 0;    ///< stacked runs that failed or did not split, run again one by one
+  int largest = 0;        ///< most requests stacked in one run
+  uint64_t waiting = 0;   ///< requests waiting for a batch now
 };
 
 /// Requests answered and refused since the start.
 struct TensorServerStats {
   uint64_t infer_ok = 0, infer_failed = 0;
+  /// Per batched model (by name).
+  std::map<std::string, BatchingStats> batching;
 };
 
 /// A KServe v2 gRPC server of TensorModelHandlers: ServerLive, ServerReady, ServerMetadata,
@@ -78,6 +112,10 @@ class TensorServer {
   /// "127.0.0.1:PORT".
   std::string address() const;
   TensorServerStats stats() const;
+  /// For each model (by name), how it is served: "batched: up to 8 rows, waiting at most 2000 us"
+  /// or "not batched: input 'image_embeddings' has a fixed leading dimension 1" (or "batching
+  /// off" when options.batching.max_batch is 1).
+  std::map<std::string, std::string> batching() const;
   /// Stops accepting calls and waits up to `grace` for running ones.
   void Shutdown(std::chrono::milliseconds grace = std::chrono::seconds(5));
 
