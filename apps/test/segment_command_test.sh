@@ -90,15 +90,21 @@ fi
 grep -q "$work/no-models" "$work/bad.txt" || { cat "$work/bad.txt" >&2; fail "error does not name the directory"; }
 # The networks on a model server: `avp serve models` serves the stub directory's networks over
 # KServe v2 on loopback, and `avp segment --model-server` gives the very same instances.json (all
-# but the timings) as in process; killed with SIGTERM, the server stops and removes its port file.
-"$avp" serve models --model-dir "$stubs/ywes" --port 0 --port-file "$work/port" \
-  >"$work/serve.txt" 2>&1 &
+# but the timings) as in process, with dynamic batching on (of the stubs only the text encoder
+# has a batch axis: its request goes through the batcher); killed with SIGTERM, the server stops,
+# removes its port file and reports what it batched.
+"$avp" serve models --model-dir "$stubs/ywes" --port 0 --port-file "$work/port" --threads 8 \
+  --max-batch 4 --batch-delay-us 500 >"$work/serve.txt" 2>&1 &
 server=$!
 trap 'kill $server 2>/dev/null || true' EXIT
 for _ in $(seq 1 100); do [ -s "$work/port" ] && break; sleep 0.1; done
 [ -s "$work/port" ] || { cat "$work/serve.txt" >&2; fail "avp serve models wrote no port file"; }
 port=$(cat "$work/port")
 grep -q "model 'detector': READY" "$work/serve.txt" || { cat "$work/serve.txt" >&2; fail "no detector"; }
+grep -q "model 'text': READY (CPUExecutionProvider, batched: up to 4 rows, waiting at most 500 us)" \
+  "$work/serve.txt" || { cat "$work/serve.txt" >&2; fail "the text model is not batched"; }
+grep -q "model 'detector': READY (CPUExecutionProvider, not batched: input 'images' has a fixed" \
+  "$work/serve.txt" || { cat "$work/serve.txt" >&2; fail "the detector's batching is not reported"; }
 "$avp" segment --image "$work/image.ppm" --prompt "a, b" --backend "ywes://$stubs/ywes" \
   --model-server "grpc://127.0.0.1:$port" --out "$work/remote" >"$work/remote.txt" 2>&1 ||
   { cat "$work/remote.txt" "$work/serve.txt" >&2; fail "avp segment --model-server failed"; }
@@ -123,4 +129,6 @@ wait $server || fail "avp serve models did not stop cleanly on SIGTERM"
 trap - EXIT
 [ ! -e "$work/port" ] || fail "the port file was left behind"
 grep -q "answered" "$work/serve.txt" || fail "no stop line"
+grep -q "model 'text': 1 requests in 1 runs" "$work/serve.txt" ||
+  { cat "$work/serve.txt" >&2; fail "no batching report for the text model"; }
 echo "segment_command_test: OK"
