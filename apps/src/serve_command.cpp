@@ -16,6 +16,7 @@
 #include <avp/io/file.h>
 #ifdef AVP_WITH_ONNX
 #include <avp/zsl/model_service.h>
+#include <avp/zsl/zsl.h>
 #endif
 
 #include "cli_common.h"
@@ -96,6 +97,15 @@ Status RunServeSegmentation(const ServeOptions& options) {
   if (ready == 0) {
     log(ServeLogLevel::kWarning, "no model is ready: every request will be refused");
   }
+#ifdef AVP_WITH_ONNX
+  // Networks shared by the instances and batched (--max-batch, AVP_ZSL_MAX_BATCH).
+  for (const zsl::BatchedNetwork& n : zsl::BatchedNetworks()) {
+    log(ServeLogLevel::kInfo,
+        fmt::format("network '{}' ({}): shared by the instances, batched: up to {} rows, waiting "
+                    "at most {} us",
+                    n.role, n.file, n.options.max_batch, n.options.max_delay.count()));
+  }
+#endif
   if (!options.port_file.empty()) {
     const Status written =
         io::WriteFileAtomic(options.port_file, fmt::format("{}\n", server->port()), "port file");
@@ -126,6 +136,15 @@ Status RunServeSegmentation(const ServeOptions& options) {
                   "refused with a full queue, {} over a per-request limit)",
                   stats.infer_ok, stats.infer_failed, stats.infer_expired, stats.infer_interrupted,
                   stats.infer_queue_full, stats.infer_over_budget));
+#ifdef AVP_WITH_ONNX
+  for (const zsl::BatchedNetwork& n : zsl::BatchedNetworks()) {
+    log(ServeLogLevel::kInfo,
+        fmt::format("network '{}': {} calls in {} runs (at most {} stacked); {} refused, a full "
+                    "waiting line; {} stacked runs redone one by one",
+                    n.role, n.stats.requests, n.stats.batches, n.stats.largest, n.stats.refused,
+                    n.stats.reruns));
+  }
+#endif
   return Status::Ok();
 }
 
@@ -149,6 +168,8 @@ struct ServeCli {
   std::string backends = "oracle";
   std::string port_file;
   std::string model_server;
+  int max_batch = 1;
+  int64_t batch_delay_us = 2000;
 };
 
 struct ServeModelsCli {
@@ -270,9 +291,24 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
   cmd->add_option("--model-server", cli->model_server,
                   "grpc://HOST:PORT: ywes and lsam run their networks on this KServe v2 server "
                   "(avp serve models, Triton) instead of in this process (= AVP_ZSL_MODEL_SERVER)");
+  cmd->add_option("--max-batch", cli->max_batch,
+                  "ywes / lsam in this process: each network with a batch axis is shared by the "
+                  "instances and its concurrent calls stacked, up to N rows per run (1 = off; = "
+                  "AVP_ZSL_MAX_BATCH; needs --instances > 1)")
+      ->default_val(cli->max_batch)
+      ->check(CLI::Range(1, 1024));
+  cmd->add_option("--batch-delay-us", cli->batch_delay_us,
+                  "With --max-batch: how long a network call waits for others, microseconds (= "
+                  "AVP_ZSL_BATCH_DELAY_US)")
+      ->default_val(cli->batch_delay_us)
+      ->check(CLI::Range(int64_t{0}, int64_t{1000000}));
   cmd->callback([cli, &context] {
     RunGuarded(context, [&] {
       if (!cli->model_server.empty()) setenv("AVP_ZSL_MODEL_SERVER", cli->model_server.c_str(), 1);
+      if (cli->max_batch != 1) {
+        setenv("AVP_ZSL_MAX_BATCH", std::to_string(cli->max_batch).c_str(), 1);
+        setenv("AVP_ZSL_BATCH_DELAY_US", std::to_string(cli->batch_delay_us).c_str(), 1);
+      }
       ServeOptions o = cli->options;
       o.server.segmenters = &context.registries->segmenters;
       o.server.backends = SplitCommaList(cli->backends);

@@ -131,4 +131,42 @@ trap - EXIT
 grep -q "answered" "$work/serve.txt" || fail "no stop line"
 grep -q "model 'text': 1 requests in 1 runs" "$work/serve.txt" ||
   { cat "$work/serve.txt" >&2; fail "no batching report for the text model"; }
+# The segmentation service with its networks batched in process (--max-batch): the instances
+# share the stubs' text encoder (its only network with a batch axis), the service says so at
+# start and counts its calls at stop, and four clients at once get the instances.json of
+# `avp segment` in process (the stacking itself: zsl.RemoteModelTest.InProcessBatching*).
+AVP_ZSL_MODEL_DIR="$stubs/ywes" AVP_ZSL_DEVICE=cpu "$avp" serve segmentation --backend ywes \
+  --host 127.0.0.1 --port 0 --port-file "$work/seg-port" --threads 4 --instances 4 --max-batch 4 \
+  --batch-delay-us 2000 >"$work/seg-serve.txt" 2>&1 &
+segserver=$!
+trap 'kill $segserver 2>/dev/null || true' EXIT
+for _ in $(seq 1 100); do [ -s "$work/seg-port" ] && break; sleep 0.1; done
+[ -s "$work/seg-port" ] || { cat "$work/seg-serve.txt" >&2; fail "avp serve segmentation wrote no port file"; }
+grep -q "network 'text' (.*clip_stub_text.onnx): shared by the instances, batched: up to 4 rows" \
+  "$work/seg-serve.txt" || { cat "$work/seg-serve.txt" >&2; fail "no batched text network"; }
+segport=$(cat "$work/seg-port")
+pids=()
+for p in a b c; do
+  "$avp" segment --image "$work/image.ppm" --prompt "$p" --backend "ywes://$stubs/ywes" \
+    --out "$work/local-$p" >"$work/local-$p.txt" 2>&1 || fail "avp segment $p failed"
+  "$avp" segment --image "$work/image.ppm" --prompt "$p" \
+    --backend "remote://127.0.0.1:$segport/ywes" --out "$work/served-$p" >"$work/served-$p.txt" 2>&1 &
+  pids+=($!)
+done
+for pid in "${pids[@]}"; do wait "$pid" || fail "a client of the batched service failed"; done
+kill -TERM $segserver
+wait $segserver || fail "avp serve segmentation did not stop cleanly"
+trap - EXIT
+grep -q "network 'text': 3 calls in" "$work/seg-serve.txt" ||
+  { cat "$work/seg-serve.txt" >&2; fail "the batched text network did not count 3 calls"; }
+"$python" - "$work" <<'EOF2'
+import json, sys
+for p in "abc":
+    a, b = (json.load(open("%s/%s-%s/instances.json" % (sys.argv[1], kind, p)))
+            for kind in ("local", "served"))
+    strip = lambda d: d["instances"]
+    if strip(a) != strip(b) or len(a["instances"]) != 1:
+        sys.exit("segment_command_test: the batched service answered %s otherwise" % p)
+print("segment_command_test: the batched service gives the in-process instances")
+EOF2
 echo "segment_command_test: OK"

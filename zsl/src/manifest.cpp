@@ -16,6 +16,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "ort_handler.h"
 #include "remote_model.h"
 
 namespace avp::zsl {
@@ -995,7 +996,7 @@ LoadedBackend LoadBackend(std::string_view backend, const Manifest& manifest,
     const ModelEntry& entry = *manifest.Find(role);
     Result<ModelRef> model =
         remote ? ConnectRemoteModel(options.session.model_server, entry.ServedName(), role)
-               : LoadOrtModel(entry.file.path, options.session, role);
+               : LoadBatchedOrtModel(entry.file.path, options.session, role);
     if (!model.ok() && remote) return Fail(std::move(out), model.status());
     if (!model.ok()) {
       Status s = model.status();

@@ -105,6 +105,7 @@ Status SessionOptions::Validate() const {
       errors.push_back(a.status().message());
     }
   }
+  if (Status b = batching.Validate(); !b.ok()) errors.push_back(b.message());
   if (errors.empty()) return Status::Ok();
   return InvalidArgumentError(fmt::format("invalid session options: {}", fmt::join(errors, "; ")));
 }
@@ -114,6 +115,7 @@ SessionOptions ToSessionOptions(const RuntimeOptions& runtime) {
   session.intra_op_threads = runtime.intra_op_threads;
   session.device = runtime.device;
   session.model_server = runtime.model_server;
+  session.batching = runtime.batching;
   return session;
 }
 

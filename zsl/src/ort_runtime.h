@@ -45,6 +45,9 @@ struct SessionOptions {
   /// models, Triton, ...), each model named by its manifest role, instead of in this process
   /// (RuntimeOptions::model_server). The other fields then do not apply. Empty: in process.
   std::string model_server;
+  /// Dynamic batching of the networks run in process (RuntimeOptions::batching); max_batch 1 =
+  /// off. Ignored with a model_server (the server batches, or not).
+  interop::BatchingOptions batching;
 
   /// OK, or InvalidArgument listing every bad field: "intra_op_threads (-1) must be >= 0".
   Status Validate() const;

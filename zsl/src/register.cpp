@@ -1,16 +1,23 @@
+#include <charconv>
+#include <chrono>
+#include <cstdint>
 #include <cstdlib>
 #include <memory>
 #include <string>
+#include <string_view>
+#include <system_error>
 
 #include <fmt/format.h>
 
 #include <avp/core/error.h>
 #include <avp/segmentation/segmenter_registry.h>
 #include <avp/zsl/register.h>
+#include <avp/zsl/zsl.h>
 #ifdef AVP_WITH_ONNX
 #include <avp/zsl/lsam_segmenter.h>
 #include <avp/zsl/ywes_segmenter.h>
-#include <avp/zsl/zsl.h>
+
+#include "ort_handler.h"
 #endif
 
 namespace avp::zsl {
@@ -20,8 +27,38 @@ namespace {
 // manifest.h's kModelDirEnvVar; not included here, so that this file builds without ONNX Runtime.
 constexpr const char* kModelDirVariable = "AVP_ZSL_MODEL_DIR";
 constexpr const char* kModelServerVariable = "AVP_ZSL_MODEL_SERVER";
+constexpr const char* kMaxBatchVariable = "AVP_ZSL_MAX_BATCH";
+constexpr const char* kBatchDelayVariable = "AVP_ZSL_BATCH_DELAY_US";
 
 using segmentation::Segmenter;
+
+#ifdef AVP_WITH_ONNX
+/// An integer environment variable in [lo, hi], or `fallback` when unset; InvalidArgument naming
+/// the variable and its text otherwise.
+Result<int64_t> IntFromEnvironment(const char* name, int64_t fallback, int64_t lo, int64_t hi) {
+  const char* v = std::getenv(name);
+  if (v == nullptr || *v == '\0') return fallback;
+  int64_t value = 0;
+  const std::string_view text(v);
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec != std::errc() || ptr != text.data() + text.size() || value < lo || value > hi) {
+    return InvalidArgumentError(
+        fmt::format("{}='{}' must be an integer in [{}, {}]", name, text, lo, hi));
+  }
+  return value;
+}
+
+Result<interop::BatchingOptions> BatchingFromEnvironment() {
+  interop::BatchingOptions b;
+  AVP_ASSIGN_OR_RETURN(const int64_t max_batch,
+                       IntFromEnvironment(kMaxBatchVariable, b.max_batch, 1, 1024));
+  AVP_ASSIGN_OR_RETURN(const int64_t delay_us,
+                       IntFromEnvironment(kBatchDelayVariable, b.max_delay.count(), 0, 1000000));
+  b.max_batch = static_cast<int>(max_batch);
+  b.max_delay = std::chrono::microseconds(delay_us);
+  return b;
+}
+#endif
 
 Result<std::unique_ptr<Segmenter>> MakeZslSegmenter(std::string_view backend,
                                                     std::string_view spec) {
@@ -31,16 +68,20 @@ Result<std::unique_ptr<Segmenter>> MakeZslSegmenter(std::string_view backend,
   // AVP_ZSL_MODEL_SERVER=grpc://HOST:PORT: the networks on that server (docs/zero-shot-models.md).
   const char* server_env = std::getenv(kModelServerVariable);
   const std::string server = server_env != nullptr ? server_env : "";
+  // AVP_ZSL_MAX_BATCH / AVP_ZSL_BATCH_DELAY_US: dynamic batching of the networks in process.
+  AVP_ASSIGN_OR_RETURN(const interop::BatchingOptions batching, BatchingFromEnvironment());
   if (backend == "ywes") {
     YwesOptions options;
     options.session.device = device;
     options.session.model_server = server;
+    options.session.batching = batching;
     AVP_ASSIGN_OR_RETURN(std::unique_ptr<YwesSegmenter> s, YwesSegmenter::Create(dir, options));
     return std::unique_ptr<Segmenter>(std::move(s));
   }
   LsamOptions options;
   options.session.device = device;
   options.session.model_server = server;
+  options.session.batching = batching;
   AVP_ASSIGN_OR_RETURN(std::unique_ptr<LsamSegmenter> s, LsamSegmenter::Create(dir, options));
   return std::unique_ptr<Segmenter>(std::move(s));
 #else
@@ -53,6 +94,16 @@ Result<std::unique_ptr<Segmenter>> MakeZslSegmenter(std::string_view backend,
 }
 
 }  // namespace
+
+std::vector<BatchedNetwork> BatchedNetworks() {
+  std::vector<BatchedNetwork> out;
+#ifdef AVP_WITH_ONNX
+  for (const internal::BatchedModelInfo& m : internal::BatchedModels()) {
+    out.push_back({m.label, m.file.string(), m.options, m.stats});
+  }
+#endif
+  return out;
+}
 
 Result<std::filesystem::path> ModelDirForSpec(std::string_view backend, std::string_view spec) {
   const std::string scheme = std::string(backend) + "://";

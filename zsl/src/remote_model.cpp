@@ -1,6 +1,7 @@
 #include "remote_model.h"
 
 #include <algorithm>
+#include <functional>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -15,11 +16,13 @@ namespace {
 
 using interop::DataType;
 
-class RemoteModel final : public TensorModel {
+/// A network run through KServe v2 tensors: on a server (a TensorClient) or in this process (a
+/// TensorModelHandler, e.g. the batcher in front of an OrtModel). `call` is thread-safe.
+class WireModel final : public TensorModel {
  public:
-  RemoteModel(std::unique_ptr<interop::TensorClient> client, std::string label, ModelIo io,
-              std::string provider)
-      : client_(std::move(client)),
+  using Call = std::function<Result<interop::InferResponse>(interop::InferRequest)>;
+  WireModel(Call call, std::string label, ModelIo io, std::string provider)
+      : call_(std::move(call)),
         label_(std::move(label)),
         io_(std::move(io)),
         provider_(std::move(provider)) {}
@@ -41,7 +44,7 @@ class RemoteModel final : public TensorModel {
       request.inputs.push_back(std::move(t));
     }
     for (const std::string& name : output_names) request.requested_outputs.push_back(name);
-    Result<interop::InferResponse> response = client_->Infer(std::move(request));
+    Result<interop::InferResponse> response = call_(std::move(request));
     if (!response.ok()) {
       return Status(response.status().code(),
                     fmt::format("{}: {}", label_, response.status().message()));
@@ -56,7 +59,7 @@ class RemoteModel final : public TensorModel {
       const interop::Tensor* t = response->FindOutput(name);
       if (t == nullptr) {
         return InvalidArgumentError(
-            fmt::format("{}: the server's answer has no output '{}'", label_, name));
+            fmt::format("{}: the answer ({}) has no output '{}'", label_, provider_, name));
       }
       Result<OutputTensor> o = FromWire(*t);
       if (!o.ok()) {
@@ -68,8 +71,7 @@ class RemoteModel final : public TensorModel {
   }
 
  private:
-  // TensorClient is thread-safe; Run is const.
-  std::unique_ptr<interop::TensorClient> client_;
+  Call call_;  // thread-safe; Run is const
   std::string label_;
   ModelIo io_;
   std::string provider_;
@@ -247,8 +249,17 @@ Result<ModelRef> ConnectRemoteModel(std::string_view server, const std::string& 
   };
   AVP_RETURN_IF_ERROR(convert(meta->inputs, io.inputs));
   AVP_RETURN_IF_ERROR(convert(meta->outputs, io.outputs));
-  return ModelRef(std::make_shared<const RemoteModel>(std::move(client), model, std::move(io),
-                                                      fmt::format("remote {}/{}", server, model)));
+  std::shared_ptr<interop::TensorClient> shared(std::move(client));
+  return ModelRef(std::make_shared<const WireModel>(
+      [shared](interop::InferRequest request) { return shared->Infer(std::move(request)); }, model,
+      std::move(io), fmt::format("remote {}/{}", server, model)));
+}
+
+ModelRef HandlerModel(std::shared_ptr<const interop::TensorModelHandler> handler, std::string label,
+                      ModelIo io, std::string provider) {
+  return ModelRef(std::make_shared<const WireModel>(
+      [handler](interop::InferRequest request) { return handler->Infer(request); },
+      std::move(label), std::move(io), std::move(provider)));
 }
 
 }  // namespace avp::zsl

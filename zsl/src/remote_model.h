@@ -4,11 +4,13 @@
 // tensors the in-process OrtModel takes and gives (docs/zero-shot-models.md, "The networks on an
 // inference server").
 
+#include <memory>
 #include <string>
 #include <string_view>
 
 #include <avp/core/status.h>
 #include <avp/interop/tensor.h>
+#include <avp/interop/tensor_service.h>
 
 #include "ort_runtime.h"
 
@@ -21,6 +23,12 @@ namespace avp::zsl {
 /// datatype avp does not use (InvalidArgument); each names the model and the server.
 Result<ModelRef> ConnectRemoteModel(std::string_view server, const std::string& model,
                                     const std::string& label = "", double deadline_s = 60.0);
+
+/// A network run in this process through `handler` (e.g. an interop::BatchingHandler in front of
+/// an OrtModel), with the same tensor conversions as a remote one; `io` and `provider` are the
+/// network's own. Thread-safe as `handler` is.
+ModelRef HandlerModel(std::shared_ptr<const interop::TensorModelHandler> handler, std::string label,
+                      ModelIo io, std::string provider);
 
 /// KServe datatype <-> ONNX element type (FP32 <-> float32, INT64 <-> int64, INT32, BOOL, FP16,
 /// FP64, UINT8, INT8, INT16). kOther / kUndefined for the rest, nullopt the other way.

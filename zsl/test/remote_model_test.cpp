@@ -29,6 +29,7 @@
 #include <avp/zsl/ywes_segmenter.h>
 
 #include "manifest.h"
+#include "ort_handler.h"
 #include "tensor_model.h"
 
 namespace avp::zsl {
@@ -194,6 +195,62 @@ TEST(RemoteModelTest, YwesOnABatchingModelServerEqualsYwesInProcess) {
   EXPECT_EQ(text.batches, 1u);
   EXPECT_EQ(text.largest, 4);
   EXPECT_EQ(service->server->stats().batching.count("detector"), 0u);
+}
+
+TEST(RemoteModelTest, InProcessBatchingSharesANetworkAndStacksItsCalls) {
+  // SessionOptions::batching in process (avp serve segmentation --max-batch): the backend
+  // instances share one batched text encoder (the stubs' only network with a batch axis); four
+  // instances segmenting at once have their text calls stacked into one run, and each answer is
+  // the one an unbatched instance gives.
+  YwesOptions plain;
+  plain.session.device = Device::kCpu;
+  plain.session.intra_op_threads = 1;
+  YwesOptions batched = plain;
+  batched.session.batching.max_batch = 4;
+  batched.session.batching.max_delay = std::chrono::seconds(1);  // full long before: 4 rows
+  const fs::path text_file = fs::canonical(kStubs / "ywes" / "text" / "clip_stub_text.onnx");
+  const auto text_batchers = [&] {
+    std::vector<internal::BatchedModelInfo> mine;
+    for (const internal::BatchedModelInfo& m : internal::BatchedModels()) {
+      if (fs::canonical(m.file) == text_file) mine.push_back(m);
+    }
+    return mine;
+  };
+  const std::vector<std::string> prompts = {"a", "b", "c", "d"};
+  std::vector<Segmentation> answers(prompts.size());
+  {
+    std::vector<std::unique_ptr<YwesSegmenter>> instances;
+    for (size_t i = 0; i < prompts.size(); ++i) {
+      Result<std::unique_ptr<YwesSegmenter>> r = YwesSegmenter::Create(kStubs / "ywes", batched);
+      ASSERT_TRUE(r.ok()) << r.status().ToString();
+      instances.push_back(std::move(r).value());
+    }
+    ASSERT_EQ(text_batchers().size(), 1u);  // one text encoder for the four instances
+    EXPECT_EQ(text_batchers()[0].label, "text");
+    const RgbdFrame frame = Frame(640, 480, {200, 50, 10});
+    std::vector<std::thread> threads;
+    for (size_t i = 0; i < prompts.size(); ++i) {
+      threads.emplace_back([&, i] { answers[i] = SegmentOk(*instances[i], frame, prompts[i]); });
+    }
+    for (std::thread& t : threads) t.join();
+    const interop::BatchingStats stats = text_batchers().at(0).stats;
+    EXPECT_EQ(stats.requests, 4u);
+    EXPECT_EQ(stats.batches, 1u);
+    EXPECT_EQ(stats.largest, 4);
+  }
+  EXPECT_TRUE(text_batchers().empty());  // gone with the last instance
+  Result<std::unique_ptr<YwesSegmenter>> alone = YwesSegmenter::Create(kStubs / "ywes", plain);
+  ASSERT_TRUE(alone.ok()) << alone.status().ToString();
+  EXPECT_TRUE(text_batchers().empty());  // without batching nothing is shared
+  const RgbdFrame frame = Frame(640, 480, {200, 50, 10});
+  size_t found = 0;
+  for (size_t i = 0; i < prompts.size(); ++i) {
+    SCOPED_TRACE(prompts[i]);
+    const Segmentation x = SegmentOk(**alone, frame, prompts[i]);
+    ExpectSame(x, answers[i]);
+    found += x.instances.size();
+  }
+  EXPECT_GT(found, 2u);
 }
 
 TEST(RemoteModelTest, LsamOnTheModelServerEqualsLsamInProcess) {

@@ -821,6 +821,49 @@ TEST(YwesRegistrationTest, SchemesAndTheEnvironmentNameTheModelDirectory) {
   EXPECT_THAT(nowhere.status().message(), HasSubstr((kStubs / "nope").string()));
 }
 
+TEST(YwesRegistrationTest, BatchingComesFromTheEnvironment) {
+  // AVP_ZSL_MAX_BATCH / AVP_ZSL_BATCH_DELAY_US: the spec's instances share the batched text
+  // encoder; a value out of range is an error naming the variable and the value.
+  segmentation::SegmenterRegistry registry;
+  RegisterZslSegmenters(registry);
+  setenv("AVP_ZSL_DEVICE", "cpu", 1);
+  const std::string spec = "ywes://" + (kStubs / "ywes").string();
+  setenv("AVP_ZSL_MAX_BATCH", "0", 1);
+  auto bad = registry.Make(spec, 0);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(bad.status().message(),
+              HasSubstr("AVP_ZSL_MAX_BATCH='0' must be an integer in [1, 1024]"));
+  setenv("AVP_ZSL_MAX_BATCH", "8", 1);
+  setenv("AVP_ZSL_BATCH_DELAY_US", "soon", 1);
+  auto bad_delay = registry.Make(spec, 0);
+  ASSERT_FALSE(bad_delay.ok());
+  EXPECT_THAT(bad_delay.status().message(),
+              HasSubstr("AVP_ZSL_BATCH_DELAY_US='soon' must be an integer in [0, 1000000]"));
+  setenv("AVP_ZSL_BATCH_DELAY_US", "500", 1);
+  {
+    auto one = registry.Make(spec, 0);
+    auto two = registry.Make(spec, 1);
+    ASSERT_TRUE(one.ok()) << one.status().ToString();
+    ASSERT_TRUE(two.ok()) << two.status().ToString();
+    size_t shared = 0;
+    for (const BatchedNetwork& n : BatchedNetworks()) {
+      if (fs::path(n.file).filename() == "clip_stub_text.onnx") {
+        ++shared;
+        EXPECT_EQ(n.role, "text");
+        EXPECT_EQ(n.options.max_batch, 8);
+        EXPECT_EQ(n.options.max_delay.count(), 500);
+      }
+    }
+    EXPECT_EQ(shared, 1u);  // one text encoder for both
+  }
+  unsetenv("AVP_ZSL_MAX_BATCH");
+  unsetenv("AVP_ZSL_BATCH_DELAY_US");
+  auto plain = registry.Make(spec, 0);
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  EXPECT_TRUE(BatchedNetworks().empty());
+}
+
 TEST(YwesRegistrationTest, TheRegisteredSegmenterMeetsTheSegmenterContract) {
   segmentation::SegmenterRegistry registry;
   RegisterZslSegmenters(registry);

@@ -1,8 +1,11 @@
 #pragma once
 
+#include <string>
 #include <string_view>
+#include <vector>
 
 #include <avp/core/status.h>
+#include <avp/interop/tensor_service.h>  // BatchingOptions
 
 namespace avp::zsl {
 
@@ -44,6 +47,22 @@ struct RuntimeOptions {
   /// role; tokenisation, letterbox, NMS and the mask chain stay here. Empty: in this process.
   /// AVP_ZSL_MODEL_SERVER sets it for the "ywes" / "lsam" segmenter specs.
   std::string model_server;
+  /// In process (no model_server), max_batch > 1: each network whose inputs and outputs all have
+  /// a dynamic leading axis is loaded once per process and shared by every backend instance
+  /// with the same file and settings, its concurrent calls stacked (interop::BatchingHandler).
+  /// AVP_ZSL_MAX_BATCH and AVP_ZSL_BATCH_DELAY_US set max_batch and max_delay for the specs.
+  interop::BatchingOptions batching;
 };
+
+/// A network loaded with RuntimeOptions::batching and alive in this process (shared by the
+/// backend instances that use it), and what its batcher has done.
+struct BatchedNetwork {
+  std::string role;  ///< its manifest role ("text")
+  std::string file;  ///< the .onnx file
+  interop::BatchingOptions options;
+  interop::BatchingStats stats;
+};
+/// The batched networks alive now (none in a build without ONNX Runtime).
+std::vector<BatchedNetwork> BatchedNetworks();
 
 }  // namespace avp::zsl
