@@ -1,11 +1,16 @@
 #include "bench_report.h"
 
+#include <algorithm>
+#include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <mutex>
 #include <string_view>
+#include <thread>
 #include <utility>
 
 #include <benchmark/benchmark.h>
@@ -203,6 +208,64 @@ int GoogleBenchmarkMain(int argc, char** argv, const std::vector<GoogleBenchmark
     }
   }
   return WriteBenchRecords(json_path, records) ? 0 : 1;
+}
+
+double Percentile(std::vector<double> values, double q) {
+  if (values.empty()) return 0.0;
+  std::sort(values.begin(), values.end());
+  const size_t i =
+      std::min(values.size() - 1, static_cast<size_t>(q * static_cast<double>(values.size())));
+  return values[i];
+}
+
+ClientLoad RunClientLoad(int clients, double seconds,
+                         const std::function<ClientCall(int client)>& make_client) {
+  std::mutex mu;
+  std::vector<double> ms;
+  ClientLoad load;
+  std::atomic<uint64_t> errors{0};
+  std::atomic<bool> stop{false};
+  std::vector<std::thread> workers;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int c = 0; c < clients; ++c) {
+    workers.emplace_back([&, c] {
+      const ClientCall call = make_client(c);
+      std::vector<double> mine;
+      std::string error;
+      while (!stop.load()) {
+        const auto a = std::chrono::steady_clock::now();
+        const bool ok = call(error);
+        const double dt =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count();
+        if (ok) {
+          mine.push_back(dt);
+        } else if (errors.fetch_add(1) == 0) {
+          const std::lock_guard<std::mutex> lock(mu);
+          load.first_error = error;
+        }
+      }
+      const std::lock_guard<std::mutex> lock(mu);
+      ms.insert(ms.end(), mine.begin(), mine.end());
+    });
+  }
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  stop = true;
+  for (std::thread& w : workers) w.join();
+  const double elapsed =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  load.requests_per_s = static_cast<double>(ms.size()) / elapsed;
+  load.p50_ms = Percentile(ms, 0.50);
+  load.p99_ms = Percentile(ms, 0.99);
+  load.errors = errors.load();
+  return load;
+}
+
+std::vector<BenchRecord> ClientLoadRecords(const std::string& prefix, const ClientLoad& load) {
+  return {MakeRecord(prefix + "/requests_per_s", load.requests_per_s, "1/s"),
+          MakeRecord(prefix + "/p50", load.p50_ms, "ms"),
+          MakeRecord(prefix + "/p99", load.p99_ms, "ms"),
+          MakeRecord(prefix + "/errors", static_cast<double>(load.errors), "", std::nullopt,
+                     std::nullopt, std::nullopt, "<1")};
 }
 
 }  // namespace avp::bench

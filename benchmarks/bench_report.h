@@ -11,6 +11,8 @@
 // reference): reference / value for times and sizes, value / reference for rates. A `target`
 // ending in "x" applies to `ratio`, any other target ("<=25", ">=99.9") to `value`.
 
+#include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -61,5 +63,29 @@ struct GoogleBenchmarkTarget {
 /// without "/iterations:N" and "/real_time"; targets are attached to the real-time records.
 /// Returns the process exit code.
 int GoogleBenchmarkMain(int argc, char** argv, const std::vector<GoogleBenchmarkTarget>& targets);
+
+/// The value below which a fraction `q` (0..1) of `values` lies (the nearest rank); 0 when empty.
+double Percentile(std::vector<double> values, double q);
+
+/// What RunClientLoad measured.
+struct ClientLoad {
+  double requests_per_s = 0.0;
+  double p50_ms = 0.0, p99_ms = 0.0;  ///< latency of the answered requests
+  uint64_t errors = 0;
+  std::string first_error;  ///< the first error's text
+};
+
+/// One call of a client: true when answered, false with `error` set otherwise.
+using ClientCall = std::function<bool(std::string& error)>;
+
+/// `clients` threads, each with its own call from `make_client(c)` (made in the thread: one
+/// connection each), calling it back to back for `seconds`: requests answered per second over
+/// the whole time, and the answered ones' p50 / p99 latency.
+ClientLoad RunClientLoad(int clients, double seconds,
+                         const std::function<ClientCall(int client)>& make_client);
+
+/// The records of one load: `<prefix>/requests_per_s`, `/p50`, `/p99` and `/errors` (target
+/// "<1").
+std::vector<BenchRecord> ClientLoadRecords(const std::string& prefix, const ClientLoad& load);
 
 }  // namespace avp::bench

@@ -369,12 +369,7 @@ std::string CodeName(grpc::StatusCode c) {
   }
 }
 
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const size_t i = std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size())));
-  return v[i];
-}
+using bench::Percentile;
 
 /// The start view at half resolution (320 x 240), for the mixed-load clients.
 const Frame& SmallFrame() {
@@ -429,53 +424,27 @@ int Clients(double seconds, const std::string& json_path) {
       "each\n",
       threads, seconds);
   for (const int clients : {1, 4, 16}) {
-    std::mutex mu;
-    std::vector<double> ms;
-    std::atomic<uint64_t> errors{0};
-    std::atomic<bool> stop{false};
-    std::vector<std::thread> workers;
-    const auto t0 = std::chrono::steady_clock::now();
-    for (int c = 0; c < clients; ++c) {
-      workers.emplace_back([&, c] {
-        RemoteOptions o;
-        o.host = "127.0.0.1";
-        o.port = (*started)->port();
-        o.model = "oracle";
-        o.seed = 7;
-        RemoteSegmenter remote(o);
-        std::vector<double> mine;
-        uint64_t i = static_cast<uint64_t>(c);
-        while (!stop.load()) {
-          const auto a = std::chrono::steady_clock::now();
-          const Result<Segmentation> out = remote.Segment(Request(i++ % 8));
-          const double dt =
-              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a)
-                  .count();
-          if (out.ok()) {
-            mine.push_back(dt);
-          } else {
-            ++errors;
-          }
-        }
-        const std::lock_guard<std::mutex> lock(mu);
-        ms.insert(ms.end(), mine.begin(), mine.end());
-      });
-    }
-    std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
-    stop = true;
-    for (std::thread& w : workers) w.join();
-    const double elapsed =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    const double rate = static_cast<double>(ms.size()) / elapsed;
-    const double p50 = Percentile(ms, 0.50), p99 = Percentile(ms, 0.99);
+    const bench::ClientLoad load = bench::RunClientLoad(clients, seconds, [&](int c) {
+      RemoteOptions o;
+      o.host = "127.0.0.1";
+      o.port = (*started)->port();
+      o.model = "oracle";
+      o.seed = 7;
+      auto remote = std::make_shared<RemoteSegmenter>(o);
+      auto i = std::make_shared<uint64_t>(static_cast<uint64_t>(c));
+      return [remote, i](std::string& error) {
+        const Result<Segmentation> out = remote->Segment(Request((*i)++ % 8));
+        if (!out.ok()) error = out.status().ToString();
+        return out.ok();
+      };
+    });
     std::printf("  %2d clients: %6.1f requests/s, p50 %6.1f ms, p99 %6.1f ms, %llu errors\n",
-                clients, rate, p50, p99, static_cast<unsigned long long>(errors.load()));
-    const std::string name = fmt::format("clients/{}", clients);
-    records.push_back(bench::MakeRecord(name + "/requests_per_s", rate, "1/s"));
-    records.push_back(bench::MakeRecord(name + "/p50", p50, "ms"));
-    records.push_back(bench::MakeRecord(name + "/p99", p99, "ms"));
-    records.push_back(bench::MakeRecord(name + "/errors", static_cast<double>(errors.load()), "",
-                                        std::nullopt, std::nullopt, std::nullopt, "<1"));
+                clients, load.requests_per_s, load.p50_ms, load.p99_ms,
+                static_cast<unsigned long long>(load.errors));
+    for (bench::BenchRecord& r :
+         bench::ClientLoadRecords(fmt::format("clients/{}", clients), load)) {
+      records.push_back(std::move(r));
+    }
   }
   (*started)->Shutdown(std::chrono::seconds(2));
   if (!json_path.empty() && !bench::WriteBenchRecords(json_path, records)) return 1;

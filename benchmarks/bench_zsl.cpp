@@ -244,12 +244,6 @@ bool RegisterAll() {
   return true;
 }
 
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5)];
-}
-
 /// --serve-clients: see the top of the file.
 int ServeClients(double seconds, const std::string& json_path) {
   Result<fs::path> stubs = StubDir(true);
@@ -286,57 +280,36 @@ int ServeClients(double seconds, const std::string& json_path) {
     std::printf("  %s (%s)\n", mode.c_str(), service->server->batching().at("text").c_str());
     for (const int clients : {1, 4, 16}) {
       const interop::TensorServerStats before = service->server->stats();
-      std::mutex mu;
-      std::vector<double> ms;
-      std::atomic<uint64_t> errors{0};
-      std::string first_error;
-      std::atomic<bool> stop{false};
-      std::vector<std::thread> workers;
-      const auto t0 = std::chrono::steady_clock::now();
-      for (int c = 0; c < clients; ++c) {
-        workers.emplace_back([&, c] {
-          interop::TensorClientOptions co;
-          co.address = service->server->address();
-          co.model = "text";
-          Result<std::unique_ptr<interop::TensorClient>> client = interop::TensorClient::Create(co);
-          if (!client.ok()) {
-            ++errors;
-            return;
+      const std::string address = service->server->address();
+      const bench::ClientLoad load = bench::RunClientLoad(clients, seconds, [&](int c) {
+        interop::TensorClientOptions co;
+        co.address = address;
+        co.model = "text";
+        std::shared_ptr<interop::TensorClient> client;
+        if (Result<std::unique_ptr<interop::TensorClient>> made = interop::TensorClient::Create(co);
+            made.ok()) {
+          client = std::move(made).value();
+        }
+        auto state =
+            std::make_shared<uint64_t>(0x9E3779B97F4A7C15ull * static_cast<uint64_t>(c + 1));
+        return [client, state](std::string& error) {
+          if (client == nullptr) {
+            error = "no client";
+            return false;
           }
-          std::vector<double> mine;
           std::vector<int64_t> ids(77, 0);
-          uint64_t state = 0x9E3779B97F4A7C15ull * static_cast<uint64_t>(c + 1);
-          while (!stop.load()) {
-            for (int64_t& id : ids) {
-              state = state * 6364136223846793005ull + 1442695040888963407ull;
-              id = static_cast<int64_t>((state >> 33) % 49408);
-            }
-            interop::InferRequest request;
-            request.inputs.push_back(interop::MakeTensor<int64_t>(
-                "input_ids", interop::DataType::kInt64, {1, 77}, std::span<const int64_t>(ids)));
-            const auto a = std::chrono::steady_clock::now();
-            const Result<interop::InferResponse> out = (*client)->Infer(std::move(request));
-            const double dt =
-                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a)
-                    .count();
-            if (out.ok()) {
-              mine.push_back(dt);
-            } else if (errors.fetch_add(1) == 0) {
-              const std::lock_guard<std::mutex> lock(mu);
-              first_error = out.status().ToString();
-            }
+          for (int64_t& id : ids) {
+            *state = *state * 6364136223846793005ull + 1442695040888963407ull;
+            id = static_cast<int64_t>((*state >> 33) % 49408);
           }
-          const std::lock_guard<std::mutex> lock(mu);
-          ms.insert(ms.end(), mine.begin(), mine.end());
-        });
-      }
-      std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
-      stop = true;
-      for (std::thread& w : workers) w.join();
-      const double elapsed =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      const double rate = static_cast<double>(ms.size()) / elapsed;
-      const double p50 = Percentile(ms, 0.50), p99 = Percentile(ms, 0.99);
+          interop::InferRequest request;
+          request.inputs.push_back(interop::MakeTensor<int64_t>(
+              "input_ids", interop::DataType::kInt64, {1, 77}, std::span<const int64_t>(ids)));
+          const Result<interop::InferResponse> out = client->Infer(std::move(request));
+          if (!out.ok()) error = out.status().ToString();
+          return out.ok();
+        };
+      });
       double per_run = 1.0;
       if (batched) {
         const interop::BatchingStats& b0 = before.batching.at("text");
@@ -348,15 +321,16 @@ int ServeClients(double seconds, const std::string& json_path) {
       std::printf(
           "    %2d clients: %6.1f requests/s, p50 %7.1f ms, p99 %7.1f ms, %.2f requests per "
           "run, %llu errors\n",
-          clients, rate, p50, p99, per_run, static_cast<unsigned long long>(errors.load()));
-      if (!first_error.empty()) std::printf("      first error: %s\n", first_error.c_str());
+          clients, load.requests_per_s, load.p50_ms, load.p99_ms, per_run,
+          static_cast<unsigned long long>(load.errors));
+      if (!load.first_error.empty()) {
+        std::printf("      first error: %s\n", load.first_error.c_str());
+      }
       const std::string name = fmt::format("serve/{}/clients/{}", mode, clients);
-      records.push_back(bench::MakeRecord(name + "/requests_per_s", rate, "1/s"));
-      records.push_back(bench::MakeRecord(name + "/p50", p50, "ms"));
-      records.push_back(bench::MakeRecord(name + "/p99", p99, "ms"));
+      for (bench::BenchRecord& r : bench::ClientLoadRecords(name, load)) {
+        records.push_back(std::move(r));
+      }
       records.push_back(bench::MakeRecord(name + "/requests_per_run", per_run, ""));
-      records.push_back(bench::MakeRecord(name + "/errors", static_cast<double>(errors.load()), "",
-                                          std::nullopt, std::nullopt, std::nullopt, "<1"));
     }
     service->server->Shutdown(std::chrono::seconds(2));
   }
