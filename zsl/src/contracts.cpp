@@ -185,9 +185,15 @@ void CheckDeclared(std::string_view role, const char* kind, const std::vector<Te
       errors.push_back(fmt::format("{}: {} '{}' is {}; the manifest declares {}", role, kind,
                                    d.name, ToString(t->type), ToString(d.type)));
     }
+    // -1 on either side matches: the manifest may leave a dimension open, and it may state
+    // one the graph leaves dynamic (the official EfficientViT-SAM encoder export has a dynamic
+    // batch axis and symbolic 64 x 64 output dimensions); the stated value is then checked
+    // against the contract instead (CheckContract).
     bool same = t->shape.size() == d.shape.size();
     for (size_t i = 0; same && i < d.shape.size(); ++i) {
-      if (d.shape[i] != kDynamicDim && d.shape[i] != t->shape[i]) same = false;
+      if (d.shape[i] != kDynamicDim && t->shape[i] != kDynamicDim && d.shape[i] != t->shape[i]) {
+        same = false;
+      }
     }
     if (!same) {
       errors.push_back(fmt::format("{}: {} '{}' has shape {}; the manifest declares {}", role, kind,
@@ -237,9 +243,25 @@ Result<ContractBinding> CheckContract(std::string_view role, const ModelIo& io,
                                       const Contract& contract, const ModelIo* declared,
                                       const ContractCheckOptions& options) {
   std::vector<std::string> errors;
+  // The shapes checked against the contract: the graph's, with each dimension it leaves dynamic
+  // and the manifest states filled in from the manifest.
+  ModelIo effective = io;
   if (declared != nullptr) {
     CheckDeclared(role, "input", io.inputs, declared->inputs, /*require_all=*/true, errors);
     CheckDeclared(role, "output", io.outputs, declared->outputs, /*require_all=*/false, errors);
+    const auto narrow = [](std::vector<TensorInfo>& tensors,
+                           const std::vector<TensorInfo>& stated) {
+      for (TensorInfo& t : tensors) {
+        for (const TensorInfo& d : stated) {
+          if (d.name != t.name || d.shape.size() != t.shape.size()) continue;
+          for (size_t i = 0; i < t.shape.size(); ++i) {
+            if (t.shape[i] == kDynamicDim) t.shape[i] = d.shape[i];
+          }
+        }
+      }
+    };
+    narrow(effective.inputs, declared->inputs);
+    narrow(effective.outputs, declared->outputs);
   }
 
   ContractBinding binding;
@@ -251,8 +273,8 @@ Result<ContractBinding> CheckContract(std::string_view role, const ModelIo& io,
     const std::vector<TensorSpec>& specs;
     const std::vector<TensorInfo>& tensors;
   };
-  const Side sides[] = {{"input", contract.inputs, io.inputs},
-                        {"output", contract.outputs, io.outputs}};
+  const Side sides[] = {{"input", contract.inputs, effective.inputs},
+                        {"output", contract.outputs, effective.outputs}};
   for (const Side& side : sides) {
     for (const TensorSpec& spec : side.specs) {
       const TensorInfo* t = FindByNames(side.tensors, spec);

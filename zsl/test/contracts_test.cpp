@@ -212,6 +212,25 @@ TEST(ContractsTest, EveryProblemIsReportedOnOneLine) {
   EXPECT_EQ(e.find('\n'), std::string::npos);
 }
 
+TEST(ContractsTest, TheManifestMayStateWhatTheGraphLeavesDynamic) {
+  // The official EfficientViT-SAM L0 encoder export (export_encoder.py, torch 1.13) has a dynamic
+  // batch axis and symbolic output dimensions; the docs' shapes stated in the manifest are
+  // accepted, and it is the stated value that the contract then checks.
+  const ModelIo official = {{{"input_image", f32, {-1, 3, 512, 512}}},
+                            {{"image_embeddings", f32, {-1, 256, -1, -1}}}};
+  ModelIo declared = {{{"input_image", f32, {1, 3, 512, 512}}},
+                      {{"image_embeddings", f32, {1, 256, 64, 64}}}};
+  const Result<ContractBinding> b =
+      CheckContract("segmenter.encoder", official, Get(kEvitSamEncoder), &declared);
+  ASSERT_TRUE(b.ok()) << b.status().ToString();
+  EXPECT_EQ(b->Dim("S"), 512);
+  declared.outputs[0].shape = {1, 256, 32, 32};
+  EXPECT_THAT(
+      ErrorOf(CheckContract("segmenter.encoder", official, Get(kEvitSamEncoder), &declared)),
+      HasSubstr("segmenter.encoder: output 'image_embeddings' has shape [1,256,32,32]; "
+                "evitsam.encoder/1 expects"));
+}
+
 TEST(ContractsTest, DeclaredIoMustDescribeTheModel) {
   ModelIo declared = TxtFeatsIo();
   declared.inputs[1].shape = {1, 16, 512};

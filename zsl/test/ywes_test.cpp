@@ -554,6 +554,25 @@ TEST(YwesPipelineTest, TheTransposedLayoutGivesTheSameSegmentation) {
   }
 }
 
+TEST(YwesPipelineTest, TheOfficialSamExportShapesGiveTheSameSegmentation) {
+  // The SAM stubs with the I/O of the official EfficientViT-SAM exports (a dynamic encoder batch
+  // axis, symbolic 64 x 64 embeddings and 256 x 256 masks), the docs' shapes stated in the
+  // manifest: they load and segment as the plain stubs do.
+  auto plain = MakeYwes();
+  auto official = MakeYwes("ywes_official_shapes");
+  ASSERT_NE(plain, nullptr);
+  ASSERT_NE(official, nullptr);
+  const RgbdFrame frame = SolidFrame(1024, 768);
+  const Segmentation a = SegmentOk(*plain, frame, "a, b, c");
+  const Segmentation b = SegmentOk(*official, frame, "a, b, c");
+  ASSERT_EQ(a.instances.size(), 3u);
+  ASSERT_EQ(b.instances.size(), 3u);
+  for (size_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(a.instances[i].box, b.instances[i].box);
+    EXPECT_TRUE(a.instances[i].mask == b.instances[i].mask);
+  }
+}
+
 TEST(YwesPipelineTest, ClassAwareNmsGivesTheSameResultForDisjointBoxes) {
   YwesOptions o = CpuOptions();
   o.class_agnostic_nms = false;

@@ -19,6 +19,9 @@ Directories (OUT_DIR/...):
   ywes_baked/    detector yoloworld.baked/1 (nc = 2, baked_names ["tomato", "leaf"]), no text model
   ywes_baked_logits/  as ywes_baked/, logits + "sigmoid"
   ywes_transposed/    detector with output0 [1,8400,4+N], manifest declares layout "[A,4+N]"
+  ywes_official_shapes/  the SAM stubs with the I/O shapes of the official EfficientViT-SAM
+                 exports (encoder [batch_size,3,S,S] -> [?,256,?,?], decoder masks [?,1,?,?]);
+                 the manifest states the docs' static shapes
   lsam/          grounding (gdino.ort/1, L dynamic), segmenter.encoder, segmenter.decoder
   ywes_heavy_text/  (only with --bench) ywes whose text model does transformer-sized work:
                  clip_text_heavy(), for bench_zsl --serve-clients; not used by tests
@@ -271,7 +274,9 @@ def clip_text_heavy(layers=4, width=512, hidden=2048, table=1024):
     return g.model(inputs, [vi("text_embeds", F32, ["batch", width])])
 
 
-def sam_encoder(small_output=False):
+def sam_encoder(small_output=False, official_shapes=False):
+    """official_shapes: the graph's I/O as the official export_encoder.py gives them with torch
+    1.13 (a dynamic batch axis, symbolic output dimensions): [batch_size,3,S,S] -> [?,256,?,?]."""
     g = Graph("evitsam_encoder_stub")
     k = SAM_S // 64 * (2 if small_output else 1)
     pooled = g.op("AveragePool", ["input_image"], kernel_shape=[k, k], strides=[k, k])
@@ -280,11 +285,16 @@ def sam_encoder(small_output=False):
         w[c, c % 3, 0, 0] = 1.0
     g.op("Conv", [pooled, g.const(w)], "image_embeddings")
     side = 32 if small_output else 64
+    if official_shapes:
+        return g.model([vi("input_image", F32, ["batch_size", 3, SAM_S, SAM_S])],
+                       [vi("image_embeddings", F32, ["e0", 256, "e2", "e3"])])
     return g.model([vi("input_image", F32, [1, 3, SAM_S, SAM_S])],
                    [vi("image_embeddings", F32, [1, 256, side, side])])
 
 
-def sam_decoder(int32_labels=False, drop_iou=False, extra_input=False):
+def sam_decoder(int32_labels=False, drop_iou=False, extra_input=False, official_shapes=False):
+    """official_shapes: outputs as the official export_decoder.py --return-single-mask gives them
+    with torch 1.13: masks [?,1,?,?], iou_predictions [?,1]."""
     g = Graph("evitsam_decoder_single_stub")
     inputs = [vi("image_embeddings", F32, [1, 256, 64, 64]),
               vi("point_coords", F32, ["batch", "points", 2]),
@@ -322,9 +332,9 @@ def sam_decoder(int32_labels=False, drop_iou=False, extra_input=False):
                                                g.const(0.0)])])
     g.op("Add", [masks, used], "masks")
     g.op("Add", [g.op("Mul", [l0, g.const(0.0)]), g.const(0.875)], "iou_predictions")
-    outputs = [vi("masks", F32, ["batch", 1, 256, 256])]
+    outputs = [vi("masks", F32, ["m0", 1, "m2", "m3"] if official_shapes else ["batch", 1, 256, 256])]
     if not drop_iou:
-        outputs.append(vi("iou_predictions", F32, ["batch", 1]))
+        outputs.append(vi("iou_predictions", F32, ["i0" if official_shapes else "batch", 1]))
     return g.model(inputs, outputs)
 
 
@@ -560,6 +570,16 @@ def main():
                     "n_max": YOLO_N}).save()
     make_lsam(os.path.join(out, "lsam"), bert,
               "lsam stubs: Grounding DINO + EfficientViT-SAM").save()
+    # The official EfficientViT-SAM exports leave dimensions dynamic that the docs state; the
+    # manifest states them (docs/zero-shot-models.md) and avp checks the stated values.
+    d = make_ywes(os.path.join(out, "ywes_official_shapes"), merges,
+                  "ywes stubs with the I/O shapes of the official EfficientViT-SAM exports",
+                  encoder=sam_encoder(official_shapes=True),
+                  decoder=sam_decoder(official_shapes=True))
+    d.models["segmenter.encoder"]["inputs"][0]["shape"] = [1, 3, SAM_S, SAM_S]
+    d.models["segmenter.encoder"]["outputs"][0]["shape"] = [1, 256, 64, 64]
+    d.models["segmenter.decoder"]["outputs"][0]["shape"] = [-1, 1, 256, 256]
+    d.save()
     if args.bench:
         make_ywes(os.path.join(out, "ywes_heavy_text"), merges,
                   "ywes stubs, a text model with transformer-sized work (benchmarks only)",
