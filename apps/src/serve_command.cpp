@@ -249,8 +249,9 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
   cmd->add_option("--port", server.port, "TCP port (0 = pick a free one)")
       ->default_val(server.port);
   cmd->add_option("--backend", cli->backends,
-                  "Backends to serve, comma separated, each as a model of its name (any "
-                  "registered segmenter: `avp run --segmenter help`)")
+                  "Backends to serve, comma separated, each SPEC (any registered segmenter: `avp "
+                  "run --segmenter help`) served as a model of its name, a spec with a scheme by "
+                  "its scheme (ywes://DIR as 'ywes'), or NAME=SPEC")
       ->default_val(cli->backends);
   cmd->add_option("--host", server.host, "Address to listen on")->default_val(server.host);
   cmd->add_option("--threads", server.threads, "Worker threads")->default_val(server.threads);

@@ -135,7 +135,8 @@ grep -q "model 'text': 1 requests in 1 runs" "$work/serve.txt" ||
 # share the stubs' text encoder (its only network with a batch axis), the service says so at
 # start and counts its calls at stop, and four clients at once get the instances.json of
 # `avp segment` in process (the stacking itself: zsl.RemoteModelTest.InProcessBatching*).
-AVP_ZSL_MODEL_DIR="$stubs/ywes" AVP_ZSL_DEVICE=cpu "$avp" serve segmentation --backend ywes \
+# The spec ywes://DIR is served as model 'ywes' (clients name it in remote://HOST:PORT/ywes).
+AVP_ZSL_DEVICE=cpu "$avp" serve segmentation --backend "ywes://$stubs/ywes" \
   --host 127.0.0.1 --port 0 --port-file "$work/seg-port" --threads 4 --instances 4 --max-batch 4 \
   --batch-delay-us 2000 >"$work/seg-serve.txt" 2>&1 &
 segserver=$!
@@ -144,6 +145,8 @@ for _ in $(seq 1 100); do [ -s "$work/seg-port" ] && break; sleep 0.1; done
 [ -s "$work/seg-port" ] || { cat "$work/seg-serve.txt" >&2; fail "avp serve segmentation wrote no port file"; }
 grep -q "network 'text' (.*clip_stub_text.onnx): shared by the instances, batched: up to 4 rows" \
   "$work/seg-serve.txt" || { cat "$work/seg-serve.txt" >&2; fail "no batched text network"; }
+grep -q "model 'ywes': READY" "$work/seg-serve.txt" ||
+  { cat "$work/seg-serve.txt" >&2; fail "ywes://DIR is not served as model 'ywes'"; }
 segport=$(cat "$work/seg-port")
 pids=()
 for p in a b c; do

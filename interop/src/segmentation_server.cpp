@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <condition_variable>
 #include <deque>
 #include <exception>
@@ -269,6 +270,22 @@ class WorkQueue {
 
 }  // namespace
 
+ServedBackend ParseServedBackend(std::string_view entry) {
+  const size_t eq = entry.find('=');
+  const std::string_view before = entry.substr(0, eq == std::string_view::npos ? 0 : eq);
+  const bool plain_name = !before.empty() && std::all_of(before.begin(), before.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '.' || c == '_' || c == '-';
+  });
+  if (eq != std::string_view::npos && plain_name) {
+    return {std::string(before), std::string(entry.substr(eq + 1))};
+  }
+  const size_t scheme = entry.find("://");
+  if (scheme != std::string_view::npos && scheme > 0) {
+    return {std::string(entry.substr(0, scheme)), std::string(entry)};
+  }
+  return {std::string(entry), std::string(entry)};
+}
+
 // ---- options ------------------------------------------------------------------------------------
 
 Status ServerOptions::Validate() const {
@@ -279,10 +296,29 @@ Status ServerOptions::Validate() const {
     errors.push_back(fmt::format("port ({}) must be in [0, 65535]", port));
   if (backends.empty()) errors.push_back("backends must name at least one backend");
   for (size_t i = 0; i < backends.size(); ++i) {
-    if (backends[i].empty()) errors.push_back(fmt::format("backends[{}] is empty", i));
+    if (backends[i].empty()) {
+      errors.push_back(fmt::format("backends[{}] is empty", i));
+      continue;
+    }
+    const ServedBackend served = ParseServedBackend(backends[i]);
+    if (served.spec.empty()) {
+      errors.push_back(
+          fmt::format("backends[{}] (\"{}\") names no segmenter after '='", i, backends[i]));
+    }
+    if (served.model.find('/') != std::string::npos) {
+      errors.push_back(fmt::format(
+          "backends[{}] (\"{}\") would be served as model \"{}\", which clients cannot name "
+          "(remote://HOST:PORT/MODEL): give it a name, NAME=SPEC",
+          i, backends[i], served.model));
+    }
     for (size_t j = 0; j < i; ++j) {
-      if (backends[j] == backends[i] && !backends[i].empty()) {
+      if (backends[j] == backends[i]) {
         errors.push_back(fmt::format("backends[{}] (\"{}\") is listed twice", i, backends[i]));
+      } else if (!backends[j].empty() && ParseServedBackend(backends[j]).model == served.model) {
+        errors.push_back(fmt::format(
+            "backends[{}] (\"{}\") and backends[{}] (\"{}\") would both be served as model "
+            "\"{}\": name them, NAME=SPEC",
+            j, backends[j], i, backends[i], served.model));
       }
     }
   }
@@ -626,9 +662,11 @@ Result<std::unique_ptr<SegmentationServer>> SegmentationServer::Start(
   AVP_RETURN_IF_ERROR(options.Validate());
   auto impl = std::make_unique<Impl>();
   impl->options = options;
-  for (const std::string& backend : options.backends) {
+  for (const std::string& entry : options.backends) {
+    const ServedBackend served = ParseServedBackend(entry);
+    const std::string& backend = served.spec;
     Model m;
-    m.state.name = backend;
+    m.state.name = served.model;
     Result<std::unique_ptr<segmentation::Segmenter>> s = InternalError("not built");
     try {
       s = options.segmenters->Make(backend, options.default_seed);

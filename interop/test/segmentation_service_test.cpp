@@ -843,6 +843,48 @@ TEST(ServerLifecycleTest, ServerDownIsUnavailableNamingTheAddress) {
   EXPECT_THAT(live.status().message(), HasSubstr(fmt::format("127.0.0.1:{}", port)));
 }
 
+TEST(ServerLifecycleTest, BackendsAreServedUnderNamesClientsCanGive) {
+  // A spec with a scheme is served by its scheme, NAME=SPEC by NAME; remote://HOST:PORT/MODEL
+  // cannot name a model with '/' in it, so such a name is refused at start-up.
+  EXPECT_EQ(ParseServedBackend("ywes://models").model, "ywes");
+  EXPECT_EQ(ParseServedBackend("ywes://models").spec, "ywes://models");
+  EXPECT_EQ(ParseServedBackend("fast=ywes:///m/s").model, "fast");
+  EXPECT_EQ(ParseServedBackend("fast=ywes:///m/s").spec, "ywes:///m/s");
+  EXPECT_EQ(ParseServedBackend("oracle").model, "oracle");
+  EXPECT_EQ(ParseServedBackend("a/b=oracle").model, "a/b=oracle");
+  ServerOptions bad;
+  bad.segmenters = &TestSegmenters();
+  bad.backends = {"ywes://a", "ywes://b", "a/b=oracle", "empty="};
+  const Status s = bad.Validate();
+  EXPECT_THAT(s.message(), HasSubstr("backends[0] (\"ywes://a\") and backends[1] (\"ywes://b\") "
+                                     "would both be served as model \"ywes\": name them, "
+                                     "NAME=SPEC"));
+  EXPECT_THAT(s.message(), HasSubstr("backends[2] (\"a/b=oracle\") would be served as model "
+                                     "\"a/b=oracle\", which clients cannot name"));
+  EXPECT_THAT(s.message(), HasSubstr("backends[3] (\"empty=\") names no segmenter after '='"));
+
+  ServerOptions o;
+  o.segmenters = &TestSegmenters();
+  o.port = 0;
+  o.backends = {"truth=oracle", "color"};
+  auto server = SegmentationServer::Start(o);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  ASSERT_EQ((*server)->models().size(), 2u);
+  EXPECT_EQ((*server)->models()[0].name, "truth");
+  EXPECT_TRUE((*server)->models()[0].ready) << (*server)->models()[0].reason;
+  TestFrame frame;
+  RemoteOptions ro;
+  ro.port = (*server)->port();
+  ro.model = "truth";
+  RemoteSegmenter remote(ro);
+  auto local = TestSegmenters().Make("oracle", o.default_seed);
+  ASSERT_TRUE(local.ok());
+  const auto expected = (*local)->Segment(frame.Request(0));
+  const auto got = remote.Segment(frame.Request(0));
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  ExpectSameSegmentation(*got, *expected, "truth=oracle");
+}
+
 TEST(ServerLifecycleTest, BadOptionsAndBusyPorts) {
   ServerOptions bad;
   bad.segmenters = &TestSegmenters();

@@ -5,12 +5,22 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <avp/core/status.h>
 #include <avp/segmentation/segmenter_registry.h>
 
 namespace avp::interop {
+
+/// How one entry of ServerOptions::backends is served: the model name clients ask for, and the
+/// segmenter spec behind it. "fast=ywes://models/s" -> ("fast", "ywes://models/s");
+/// "ywes://models" -> ("ywes", "ywes://models"); "oracle" -> ("oracle", "oracle").
+struct ServedBackend {
+  std::string model;
+  std::string spec;
+};
+ServedBackend ParseServedBackend(std::string_view entry);
 
 /// Configuration of a SegmentationServer (`avp serve segmentation` fills it from its flags).
 struct ServerOptions {
@@ -21,8 +31,10 @@ struct ServerOptions {
   /// Where the backends come from (required; must outlive the server): the program's
   /// segmenters.
   const segmentation::SegmenterRegistry* segmenters = nullptr;
-  /// Backends to serve, each as a model of the same name: any spec `segmenters` knows ("oracle",
-  /// "oracle-perfect", "color", the registered network backends).
+  /// Backends to serve: any spec `segmenters` knows ("oracle", "oracle-perfect", "color", the
+  /// registered network backends), each served as a model named by ParseServedBackend: "NAME=SPEC"
+  /// as NAME, a spec with a scheme ("ywes://models") by its scheme ("ywes"), any other by itself.
+  /// Model names are unique and contain no '/' (clients name them in remote://HOST:PORT/MODEL).
   std::vector<std::string> backends = {"oracle"};
   /// Worker threads running Segment(); requests beyond them wait in a queue (deadlines apply).
   int threads = 4;
