@@ -100,10 +100,8 @@ Status RunServeSegmentation(const ServeOptions& options) {
 #ifdef AVP_WITH_ONNX
   // Networks shared by the instances and batched (--max-batch, AVP_ZSL_MAX_BATCH).
   for (const zsl::BatchedNetwork& n : zsl::BatchedNetworks()) {
-    log(ServeLogLevel::kInfo,
-        fmt::format("network '{}' ({}): shared by the instances, batched: up to {} rows, waiting "
-                    "at most {} us",
-                    n.role, n.file, n.options.max_batch, n.options.max_delay.count()));
+    log(ServeLogLevel::kInfo, fmt::format("network '{}' ({}): shared by the instances, batched: {}",
+                                          n.role, n.file, n.options.Describe()));
   }
 #endif
   if (!options.port_file.empty()) {

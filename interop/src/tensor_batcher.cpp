@@ -18,11 +18,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-constexpr int kMaxBatch = 1024;
-constexpr int kMaxQueue = 100000;
-constexpr int kMaxInstances = 64;
-constexpr std::chrono::microseconds kMaxDelay{1000000};
-
 /// One request waiting for its batch; it lives on the stack of the thread that waits for it.
 struct Pending {
   const InferRequest* request = nullptr;
@@ -89,6 +84,10 @@ Status BatchingOptions::Validate() const {
   if (problems.empty()) return Status::Ok();
   return InvalidArgumentError(
       fmt::format("invalid batching options: {}", fmt::join(problems, "; ")));
+}
+
+std::string BatchingOptions::Describe() const {
+  return fmt::format("up to {} rows, waiting at most {} us", max_batch, max_delay.count());
 }
 
 std::optional<std::string> WhyNotBatchable(const TensorModelHandler& model) {

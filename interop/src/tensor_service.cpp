@@ -212,8 +212,7 @@ Result<std::unique_ptr<TensorServer>> TensorServer::Start(
       } else {
         AVP_ASSIGN_OR_RETURN(std::shared_ptr<BatchingHandler> b,
                              BatchingHandler::Make(m, options.batching));
-        how = fmt::format("batched: up to {} rows, waiting at most {} us",
-                          options.batching.max_batch, options.batching.max_delay.count());
+        how = "batched: " + options.batching.Describe();
         impl->batched[name] = b;
         m = std::move(b);
       }

@@ -1,15 +1,15 @@
-#include <charconv>
 #include <chrono>
 #include <cstdint>
 #include <cstdlib>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
-#include <system_error>
 
 #include <fmt/format.h>
 
 #include <avp/core/error.h>
+#include <avp/core/options.h>
 #include <avp/segmentation/segmenter_registry.h>
 #include <avp/zsl/register.h>
 #include <avp/zsl/zsl.h>
@@ -38,22 +38,22 @@ using segmentation::Segmenter;
 Result<int64_t> IntFromEnvironment(const char* name, int64_t fallback, int64_t lo, int64_t hi) {
   const char* v = std::getenv(name);
   if (v == nullptr || *v == '\0') return fallback;
-  int64_t value = 0;
-  const std::string_view text(v);
-  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (ec != std::errc() || ptr != text.data() + text.size() || value < lo || value > hi) {
+  const std::optional<int64_t> value = options_internal::ParseInteger(v);
+  if (!value || *value < lo || *value > hi) {
     return InvalidArgumentError(
-        fmt::format("{}='{}' must be an integer in [{}, {}]", name, text, lo, hi));
+        fmt::format("{}='{}' must be an integer in [{}, {}]", name, v, lo, hi));
   }
-  return value;
+  return *value;
 }
 
 Result<interop::BatchingOptions> BatchingFromEnvironment() {
   interop::BatchingOptions b;
-  AVP_ASSIGN_OR_RETURN(const int64_t max_batch,
-                       IntFromEnvironment(kMaxBatchVariable, b.max_batch, 1, 1024));
+  AVP_ASSIGN_OR_RETURN(
+      const int64_t max_batch,
+      IntFromEnvironment(kMaxBatchVariable, b.max_batch, 1, interop::BatchingOptions::kMaxBatch));
   AVP_ASSIGN_OR_RETURN(const int64_t delay_us,
-                       IntFromEnvironment(kBatchDelayVariable, b.max_delay.count(), 0, 1000000));
+                       IntFromEnvironment(kBatchDelayVariable, b.max_delay.count(), 0,
+                                          interop::BatchingOptions::kMaxDelay.count()));
   b.max_batch = static_cast<int>(max_batch);
   b.max_delay = std::chrono::microseconds(delay_us);
   return b;

@@ -105,6 +105,33 @@ void ExpectSame(const Segmentation& local, const Segmentation& remote) {
   }
 }
 
+/// Each of `segmenters` segments `frame` with its prompt, all at once (one thread each).
+std::vector<Segmentation> SegmentAtOnce(
+    const std::vector<std::unique_ptr<YwesSegmenter>>& segmenters, const RgbdFrame& frame,
+    const std::vector<std::string>& prompts) {
+  std::vector<Segmentation> answers(prompts.size());
+  std::vector<std::thread> threads;
+  for (size_t i = 0; i < prompts.size(); ++i) {
+    threads.emplace_back([&, i] { answers[i] = SegmentOk(*segmenters[i], frame, prompts[i]); });
+  }
+  for (std::thread& t : threads) t.join();
+  return answers;
+}
+
+/// ExpectSame of `reference`'s answer for each prompt against `answers`; the instances compared.
+size_t ExpectSameAsReference(YwesSegmenter& reference, const RgbdFrame& frame,
+                             const std::vector<std::string>& prompts,
+                             const std::vector<Segmentation>& answers) {
+  size_t instances = 0;
+  for (size_t i = 0; i < prompts.size(); ++i) {
+    SCOPED_TRACE(prompts[i]);
+    const Segmentation x = SegmentOk(reference, frame, prompts[i]);
+    ExpectSame(x, answers[i]);
+    instances += x.instances.size();
+  }
+  return instances;
+}
+
 TEST(RemoteModelTest, YwesOnTheModelServerEqualsYwesInProcess) {
   ModelService service = Serve(kStubs / "ywes");
   ASSERT_NE(service.server, nullptr);
@@ -176,19 +203,8 @@ TEST(RemoteModelTest, YwesOnABatchingModelServerEqualsYwesInProcess) {
   Result<std::unique_ptr<YwesSegmenter>> in_process = YwesSegmenter::Create(kStubs / "ywes", local);
   ASSERT_TRUE(in_process.ok()) << in_process.status().ToString();
   const RgbdFrame frame = Frame(640, 480, {200, 50, 10});
-  std::vector<Segmentation> answers(prompts.size());
-  std::vector<std::thread> threads;
-  for (size_t i = 0; i < prompts.size(); ++i) {
-    threads.emplace_back([&, i] { answers[i] = SegmentOk(*robots[i], frame, prompts[i]); });
-  }
-  for (std::thread& t : threads) t.join();
-  size_t instances = 0;
-  for (size_t i = 0; i < prompts.size(); ++i) {
-    SCOPED_TRACE(prompts[i]);
-    const Segmentation x = SegmentOk(**in_process, frame, prompts[i]);
-    ExpectSame(x, answers[i]);
-    instances += x.instances.size();
-  }
+  const std::vector<Segmentation> answers = SegmentAtOnce(robots, frame, prompts);
+  const size_t instances = ExpectSameAsReference(**in_process, frame, prompts, answers);
   EXPECT_GT(instances, 2u);  // the planted anchors fired: real masks were compared
   const interop::BatchingStats text = service->server->stats().batching.at("text");
   EXPECT_EQ(text.requests, 4u);
@@ -227,12 +243,7 @@ TEST(RemoteModelTest, InProcessBatchingSharesANetworkAndStacksItsCalls) {
     }
     ASSERT_EQ(text_batchers().size(), 1u);  // one text encoder for the four instances
     EXPECT_EQ(text_batchers()[0].label, "text");
-    const RgbdFrame frame = Frame(640, 480, {200, 50, 10});
-    std::vector<std::thread> threads;
-    for (size_t i = 0; i < prompts.size(); ++i) {
-      threads.emplace_back([&, i] { answers[i] = SegmentOk(*instances[i], frame, prompts[i]); });
-    }
-    for (std::thread& t : threads) t.join();
+    answers = SegmentAtOnce(instances, Frame(640, 480, {200, 50, 10}), prompts);
     const interop::BatchingStats stats = text_batchers().at(0).stats;
     EXPECT_EQ(stats.requests, 4u);
     EXPECT_EQ(stats.batches, 1u);
@@ -242,14 +253,8 @@ TEST(RemoteModelTest, InProcessBatchingSharesANetworkAndStacksItsCalls) {
   Result<std::unique_ptr<YwesSegmenter>> alone = YwesSegmenter::Create(kStubs / "ywes", plain);
   ASSERT_TRUE(alone.ok()) << alone.status().ToString();
   EXPECT_TRUE(text_batchers().empty());  // without batching nothing is shared
-  const RgbdFrame frame = Frame(640, 480, {200, 50, 10});
-  size_t found = 0;
-  for (size_t i = 0; i < prompts.size(); ++i) {
-    SCOPED_TRACE(prompts[i]);
-    const Segmentation x = SegmentOk(**alone, frame, prompts[i]);
-    ExpectSame(x, answers[i]);
-    found += x.instances.size();
-  }
+  const size_t found =
+      ExpectSameAsReference(**alone, Frame(640, 480, {200, 50, 10}), prompts, answers);
   EXPECT_GT(found, 2u);
 }
 

@@ -37,6 +37,12 @@ class TensorModelHandler {
 
 /// Dynamic batching of one model's requests (BatchingHandler, tensor_batcher.h).
 struct BatchingOptions {
+  /// The bounds Validate() checks.
+  static constexpr int kMaxBatch = 1024;
+  static constexpr std::chrono::microseconds kMaxDelay{1000000};
+  static constexpr int kMaxQueue = 100000;
+  static constexpr int kMaxInstances = 64;
+
   /// The most rows (sum of the requests' leading dimensions) one run stacks, [1, 1024]; 1 = no
   /// batching. A request larger than this runs alone.
   int max_batch = 1;
@@ -49,6 +55,8 @@ struct BatchingOptions {
   int instances = 1;
   /// Every bad field at once, naming the values.
   Status Validate() const;
+  /// "up to 8 rows, waiting at most 2000 us".
+  std::string Describe() const;
 };
 
 struct TensorServerOptions {
