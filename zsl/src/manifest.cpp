@@ -145,6 +145,16 @@ Result<std::string> FileSha256(const fs::path& path) {
 
 namespace {
 
+// Bounds on what a manifest may declare, each sizing an allocation (docs/limits.md): an image side
+// of a network's input (preprocess.size, prompt_frame, low_res), the classes of a detector
+// (n_max: txt_feats rows), a text model's context and embedding width, and a stated dimension.
+constexpr int64_t kMaxImageSide = 8192;
+constexpr int64_t kMaxClasses = 4096;
+constexpr int64_t kMaxContext = 4096;
+constexpr int64_t kMaxEmbeddingDim = 65536;
+constexpr int64_t kMaxDeclaredDim = int64_t{1} << 20;
+constexpr size_t kMaxDeclaredRank = 8;
+
 std::string Describe(const json& value) {
   std::string text = value.dump();
   if (text.size() > 40) text = text.substr(0, 37) + "...";
@@ -193,10 +203,13 @@ class Fields {
     return Status::Ok();
   }
 
-  Status Int(const std::string& key, int& out, bool required, int64_t min) {
+  /// `max`: what the value may size (a side in pixels, rows of a tensor) is bounded before
+  /// anything is allocated from it.
+  Status Int(const std::string& key, int& out, bool required, int64_t min,
+             int64_t max = 1'000'000'000) {
     int64_t value = out;
     AVP_RETURN_IF_ERROR(Int(key, value, required, min));
-    if (value > 1'000'000'000) return Error(key, fmt::format("{} is too large", value));
+    if (value > max) return Error(key, fmt::format("{} is too large (at most {})", value, max));
     out = static_cast<int>(value);
     return Status::Ok();
   }
@@ -343,9 +356,18 @@ Status ParseTensorList(const json& value, Fields& parent, const std::string& key
     if (shape == nullptr) return f.Missing("shape", "an array of integers, -1 = dynamic");
     if (!shape->is_array())
       return f.Error("shape", fmt::format("expected an array, got {}", Describe(*shape)));
+    // A stated dimension may size what avp allocates (it stands for one the graph leaves
+    // dynamic: CheckContract), so it is bounded as a request's dynamic dimension is.
+    if (shape->size() > kMaxDeclaredRank) {
+      return f.Error("shape", fmt::format("rank {} exceeds {}", shape->size(), kMaxDeclaredRank));
+    }
     for (const json& d : *shape) {
       if (!d.is_number_integer() || d.get<int64_t>() < -1) {
         return f.Error("shape", fmt::format("expected integers >= -1, got {}", Describe(*shape)));
+      }
+      if (d.get<int64_t>() > kMaxDeclaredDim) {
+        return f.Error("shape", fmt::format("a dimension exceeds {}, got {}", kMaxDeclaredDim,
+                                            Describe(*shape)));
       }
       t.shape.push_back(d.get<int64_t>());
     }
@@ -359,17 +381,19 @@ Status ParsePreprocess(const json& value, Fields& parent, Preprocess& p) {
   AVP_RETURN_IF_ERROR(ExpectObject(value, parent, "preprocess"));
   Fields f(value, parent.path() + ".preprocess", parent.source());
   if (const json* size = f.Get("size")) {
-    if (size->is_number_integer() && size->get<int64_t>() > 0) {
+    // The network's input is allocated from it: each side in [1, kMaxImageSide].
+    const auto side = [](const json& v) {
+      return v.is_number_integer() && v.get<int64_t>() > 0 && v.get<int64_t>() <= kMaxImageSide;
+    };
+    if (side(*size)) {
       p.height = p.width = static_cast<int>(size->get<int64_t>());
-    } else if (size->is_array() && size->size() == 2 && (*size)[0].is_number_integer() &&
-               (*size)[1].is_number_integer() && (*size)[0].get<int64_t>() > 0 &&
-               (*size)[1].get<int64_t>() > 0) {
+    } else if (size->is_array() && size->size() == 2 && side((*size)[0]) && side((*size)[1])) {
       p.height = static_cast<int>((*size)[0].get<int64_t>());
       p.width = static_cast<int>((*size)[1].get<int64_t>());
     } else {
-      return f.Error("size",
-                     fmt::format("expected S or [height, width] (positive integers), got {}",
-                                 Describe(*size)));
+      return f.Error("size", fmt::format("expected S or [height, width] (integers in [1, {}]), "
+                                         "got {}",
+                                         kMaxImageSide, Describe(*size)));
     }
   }
   AVP_RETURN_IF_ERROR(f.Enum<ResizeMode>(
@@ -411,7 +435,7 @@ Status ParsePostprocess(const json& value, Fields& parent, Postprocess& p) {
   AVP_RETURN_IF_ERROR(f.Enum<ScoreActivation>(
       "score_activation", p.score_activation,
       {{"none", ScoreActivation::kNone}, {"sigmoid", ScoreActivation::kSigmoid}}));
-  AVP_RETURN_IF_ERROR(f.Int("n_max", p.n_max, false, 1));
+  AVP_RETURN_IF_ERROR(f.Int("n_max", p.n_max, false, 1, kMaxClasses));
   if (const json* names = f.Get("baked_names")) {
     bool ok = names->is_array() && !names->empty();
     for (size_t i = 0; ok && i < names->size(); ++i) {
@@ -424,8 +448,8 @@ Status ParsePostprocess(const json& value, Fields& parent, Postprocess& p) {
     p.baked_names.clear();
     for (const json& n : *names) p.baked_names.push_back(n.get<std::string>());
   }
-  AVP_RETURN_IF_ERROR(f.Int("prompt_frame", p.prompt_frame, false, 1));
-  AVP_RETURN_IF_ERROR(f.Int("low_res", p.low_res, false, 1));
+  AVP_RETURN_IF_ERROR(f.Int("prompt_frame", p.prompt_frame, false, 1, kMaxImageSide));
+  AVP_RETURN_IF_ERROR(f.Int("low_res", p.low_res, false, 1, kMaxImageSide));
   AVP_RETURN_IF_ERROR(f.Number("mask_threshold", p.mask_threshold));
   return f.CheckUnknown();
 }
@@ -436,7 +460,7 @@ Status ParseText(const json& value, Fields& parent, const fs::path& dir, TextCon
   AVP_RETURN_IF_ERROR(f.Enum<TokenizerKind>(
       "tokenizer", t.tokenizer,
       {{"clip_bpe", TokenizerKind::kClipBpe}, {"bert_wordpiece", TokenizerKind::kBertWordPiece}}));
-  AVP_RETURN_IF_ERROR(f.Int("context", t.context, false, 1));
+  AVP_RETURN_IF_ERROR(f.Int("context", t.context, false, 1, kMaxContext));
   AVP_RETURN_IF_ERROR(f.Int("sot", t.sot, false, 0));
   AVP_RETURN_IF_ERROR(f.Int("eot", t.eot, false, 0));
   AVP_RETURN_IF_ERROR(f.Int("pad", t.pad, false, 0));
@@ -446,7 +470,7 @@ Status ParseText(const json& value, Fields& parent, const fs::path& dir, TextCon
   const json* vocab = f.Get("vocabulary");
   if (vocab == nullptr) return f.Missing("vocabulary", "the tokenizer's vocabulary file");
   AVP_RETURN_IF_ERROR(ParseFileRef(*vocab, f, "vocabulary", dir, false, t.vocabulary));
-  AVP_RETURN_IF_ERROR(f.Int("dim", t.dim, false, 1));
+  AVP_RETURN_IF_ERROR(f.Int("dim", t.dim, false, 1, kMaxEmbeddingDim));
   AVP_RETURN_IF_ERROR(f.Bool("normalized_in_graph", t.normalized_in_graph));
   AVP_RETURN_IF_ERROR(f.Bool("lower_case", t.lower_case));
   if (const json* pre = f.Get("precomputed")) {

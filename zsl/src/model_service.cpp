@@ -19,6 +19,12 @@ Result<ModelService> ServeModels(const std::filesystem::path& model_dir,
         "a model service runs its models itself: runtime.model_server ('{}') must be empty",
         options.runtime.model_server));
   }
+  if (options.runtime.batching.max_batch != 1) {
+    return InvalidArgumentError(fmt::format(
+        "a model service batches through server.batching (avp serve models --max-batch): "
+        "runtime.batching.max_batch ({}) must be 1",
+        options.runtime.batching.max_batch));
+  }
   AVP_ASSIGN_OR_RETURN(const Manifest manifest, ReadManifest(model_dir));
   if (manifest.models.empty()) {
     return InvalidArgumentError(fmt::format("{} lists no model to serve", manifest.file.string()));

@@ -153,6 +153,29 @@ TEST(ManifestParseTest, BadJsonSaysWhere) {
   EXPECT_THAT(s.message(), HasSubstr("line 3"));
 }
 
+TEST(ManifestParseTest, WhatSizesAnAllocationIsBounded) {
+  // An image side, the detector's classes, a text model's context and width, and a stated
+  // dimension each size what avp allocates: refused past their bounds, naming the field.
+  EXPECT_THAT(ParseStatus(MiniManifest(R"(, "preprocess": {"size": 100000})")).message(),
+              HasSubstr("models.detector.preprocess.size: expected S or [height, width] "
+                        "(integers in [1, 8192]), got 100000"));
+  EXPECT_THAT(ParseStatus(MiniManifest(R"(, "postprocess": {"n_max": 1000000000})")).message(),
+              HasSubstr("models.detector.postprocess.n_max: 1000000000 is too large (at most "
+                        "4096)"));
+  EXPECT_THAT(ParseStatus(Replace(MiniManifest(), R"("vocabulary": "text/bpe.txt.gz")",
+                                  R"("vocabulary": "text/bpe.txt.gz", "context": 100000)"))
+                  .message(),
+              HasSubstr("models.text.text.context: 100000 is too large (at most 4096)"));
+  EXPECT_THAT(
+      ParseStatus(
+          MiniManifest(
+              R"(, "inputs": [{"name": "images", "type": "float32", "shape": [1, 3, 9999999, 640]}])"))
+          .message(),
+      HasSubstr("models.detector.inputs[0].shape: a dimension exceeds 1048576, got "
+                "[1,3,9999999,640]"));
+  EXPECT_TRUE(ParseStatus(MiniManifest(R"(, "preprocess": {"size": [800, 1200]})")).ok());
+}
+
 TEST(ManifestParseTest, ErrorsNameTheField) {
   EXPECT_EQ(ParseStatus(R"({"models": {}})").message(),
             "manifest.json: manifest: missing field 'format' (a string)");

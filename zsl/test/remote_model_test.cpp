@@ -258,6 +258,17 @@ TEST(RemoteModelTest, InProcessBatchingSharesANetworkAndStacksItsCalls) {
   EXPECT_GT(found, 2u);
 }
 
+TEST(RemoteModelTest, AModelServiceBatchesOnlyThroughItsServerOptions) {
+  ModelServiceOptions o;
+  o.server.port = 0;
+  o.runtime.device = Device::kCpu;
+  o.runtime.batching.max_batch = 4;
+  const Result<ModelService> s = ServeModels(kStubs / "ywes", o);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.status().message(), HasSubstr("runtime.batching.max_batch (4) must be 1"));
+}
+
 TEST(RemoteModelTest, LsamOnTheModelServerEqualsLsamInProcess) {
   ModelService service = Serve(kStubs / "lsam");
   ASSERT_NE(service.server, nullptr);
