@@ -515,7 +515,13 @@ Result<Segmentation> YwesSegmenter::Segment(const segmentation::SegmentationRequ
   }
   if (!decoded.ok()) return decoded.status().WithContext(kName);
   std::vector<Detection> detections = std::move(decoded).value();
-  std::erase_if(detections, [&](const Detection& d) { return d.score < request.score_threshold; });
+  // Below the request's threshold, or entirely in the letterbox padding (the box clips to
+  // nothing in the image): dropped before NMS, so that such a box neither suppresses a box in the
+  // image nor takes one of the max_detections places.
+  std::erase_if(detections, [&](const Detection& d) {
+    const PixelBox source = lb.ToSource(d.box);
+    return d.score < request.score_threshold || !(source.x1 > source.x0 && source.y1 > source.y0);
+  });
   detections =
       NonMaxSuppression(std::move(detections), m.options.nms_iou, m.options.class_agnostic_nms,
                         static_cast<size_t>(m.options.max_detections));
@@ -523,7 +529,6 @@ Result<Segmentation> YwesSegmenter::Segment(const segmentation::SegmentationRequ
   std::vector<internal::BoxCandidate> candidates;
   std::vector<PixelBox> boxes;
   for (const Detection& d : detections) {
-    if (!(d.box.x1 > d.box.x0 && d.box.y1 > d.box.y0)) continue;  // entirely in the padding
     candidates.push_back({d.box, d.score, classes[static_cast<size_t>(d.class_index)]});
     boxes.push_back(d.box);
   }

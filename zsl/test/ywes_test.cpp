@@ -398,6 +398,20 @@ TEST(YwesPipelineTest, ABoxInThePaddingIsDroppedBeforeSam) {
   ExpectBoxEq(square.instances[0].box, PixelBox{972.8f, 972.8f, 1024.f, 1024.f});
 }
 
+TEST(YwesPipelineTest, ABoxInThePaddingTakesNoDetectionPlace) {
+  // With one place (max_detections 1), the padding box of "d" (score 1) must not take it from
+  // the class "a b" (0.707 at a_0 and at a_1): it is dropped before NMS and the cut. Dropped
+  // after the cut, it left nothing; a random-weight detector's best anchors all lie there.
+  YwesOptions o = CpuOptions();
+  o.max_detections = 1;
+  auto s = MakeYwes("ywes", o);
+  ASSERT_NE(s, nullptr);
+  const Segmentation seg = SegmentOk(*s, SolidFrame(1024, 768), "d, a b");
+  ASSERT_EQ(seg.instances.size(), 1u);
+  EXPECT_EQ(seg.instances[0].label, "a b");
+  ExpectBoxEq(seg.instances[0].box, kPlanted1024x768[0]);
+}
+
 TEST(YwesPipelineTest, ScoresProveRgbOrderScalingAndPadValue) {
   // score = mean of the R input plane over 640x640. A BGR feed, a missing ÷255 or a pad of 0
   // would each give another number.
@@ -554,10 +568,10 @@ TEST(YwesPipelineTest, TheTransposedLayoutGivesTheSameSegmentation) {
   }
 }
 
-TEST(YwesPipelineTest, TheOfficialSamExportShapesGiveTheSameSegmentation) {
-  // The SAM stubs with the I/O of the official EfficientViT-SAM exports (a dynamic encoder batch
-  // axis, symbolic 64 x 64 embeddings and 256 x 256 masks), the docs' shapes stated in the
-  // manifest: they load and segment as the plain stubs do.
+TEST(YwesPipelineTest, TheOfficialExportShapesGiveTheSameSegmentation) {
+  // The stubs with the I/O of the official exports (EfficientViT-SAM: a dynamic encoder batch
+  // axis, symbolic 64 x 64 embeddings and 256 x 256 masks; YOLO-World: output0 [?,?,?]), the
+  // docs' shapes stated in the manifest: they load and segment as the plain stubs do.
   auto plain = MakeYwes();
   auto official = MakeYwes("ywes_official_shapes");
   ASSERT_NE(plain, nullptr);

@@ -19,9 +19,9 @@ Directories (OUT_DIR/...):
   ywes_baked/    detector yoloworld.baked/1 (nc = 2, baked_names ["tomato", "leaf"]), no text model
   ywes_baked_logits/  as ywes_baked/, logits + "sigmoid"
   ywes_transposed/    detector with output0 [1,8400,4+N], manifest declares layout "[A,4+N]"
-  ywes_official_shapes/  the SAM stubs with the I/O shapes of the official EfficientViT-SAM
-                 exports (encoder [batch_size,3,S,S] -> [?,256,?,?], decoder masks [?,1,?,?]);
-                 the manifest states the docs' static shapes
+  ywes_official_shapes/  the stubs with the I/O shapes of the official exports: EfficientViT-SAM
+                 (encoder [batch_size,3,S,S] -> [?,256,?,?], decoder masks [?,1,?,?]) and
+                 YOLO-World (output0 [?,?,?]); the manifest states the docs' static shapes
   lsam/          grounding (gdino.ort/1, L dynamic), segmenter.encoder, segmenter.decoder
   ywes_heavy_text/  (only with --bench) ywes whose text model does transformer-sized work:
                  clip_text_heavy(), for bench_zsl --serve-clients; not used by tests
@@ -187,7 +187,10 @@ F32, I64, I32, BOOL = TensorProto.FLOAT, TensorProto.INT64, TensorProto.INT32, T
 
 # ---- the stubs -----------------------------------------------------------------------------------
 
-def yolo_world(baked=False, logits=False, rename_images=False, rank2_txt=False, transposed=False):
+def yolo_world(baked=False, logits=False, rename_images=False, rank2_txt=False, transposed=False,
+               official_shapes=False):
+    """official_shapes: the output as the docs' torch.onnx.export of Ultralytics' WorldModel gives
+    it with torch 1.13 (scripts/export-random-weights): all three dimensions symbolic."""
     g = Graph("yolo_world_stub")
     images = "image" if rename_images else "images"
     n = len(BAKED_NAMES) if baked else YOLO_N
@@ -231,7 +234,8 @@ def yolo_world(baked=False, logits=False, rename_images=False, rank2_txt=False, 
         outputs = [vi("output0", F32, [1, YOLO_ANCHORS, 4 + n])]
     else:
         g.op("Concat", [boxes, scores], "output0", axis=1)
-        outputs = [vi("output0", F32, [1, 4 + n, YOLO_ANCHORS])]
+        outputs = [vi("output0", F32, ["o0", "o1", "o2"] if official_shapes
+                      else [1, 4 + n, YOLO_ANCHORS])]
     return g.model(inputs, outputs)
 
 
@@ -570,12 +574,14 @@ def main():
                     "n_max": YOLO_N}).save()
     make_lsam(os.path.join(out, "lsam"), bert,
               "lsam stubs: Grounding DINO + EfficientViT-SAM").save()
-    # The official EfficientViT-SAM exports leave dimensions dynamic that the docs state; the
-    # manifest states them (docs/zero-shot-models.md) and avp checks the stated values.
+    # The official EfficientViT-SAM and YOLO-World exports leave dimensions dynamic that the docs
+    # state; the manifest states them (docs/zero-shot-models.md) and avp checks the stated values.
     d = make_ywes(os.path.join(out, "ywes_official_shapes"), merges,
-                  "ywes stubs with the I/O shapes of the official EfficientViT-SAM exports",
+                  "ywes stubs with the I/O shapes of the official EfficientViT-SAM and YOLO-World exports",
+                  detector=yolo_world(official_shapes=True),
                   encoder=sam_encoder(official_shapes=True),
                   decoder=sam_decoder(official_shapes=True))
+    d.models["detector"]["outputs"][0]["shape"] = [1, 4 + YOLO_N, YOLO_ANCHORS]
     d.models["segmenter.encoder"]["inputs"][0]["shape"] = [1, 3, SAM_S, SAM_S]
     d.models["segmenter.encoder"]["outputs"][0]["shape"] = [1, 256, 64, 64]
     d.models["segmenter.decoder"]["outputs"][0]["shape"] = [-1, 1, 256, 256]

@@ -58,8 +58,8 @@ struct YwesOptions {
 ///     `txt_feats` [1,N_max,512], row i = class i, unused rows zero (and their scores ignored).
 ///  3. letterbox (the detector's `preprocess`: fit + centre padding, pad value, scale,
 ///     mean/std, channel order) → the detector → DecodeYoloHead over the active classes (layout
-///     and `score_activation` from the manifest) → NMS → DetectionsToSource. Boxes clipped to
-///     nothing (entirely in the padding) are dropped.
+///     and `score_activation` from the manifest) → drop boxes that clip to nothing (entirely in
+///     the padding: they neither suppress nor count) → NMS → DetectionsToSource.
 ///  4. SamBoxSegmenter: the encoder once, the decoder for all boxes at once.
 ///  5. one instance per box, best score first: mask, label = the class phrase (normalised, so
 ///     each instance of "tomato, green apple" keeps its own phrase), box (source pixels),
