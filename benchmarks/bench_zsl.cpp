@@ -10,7 +10,11 @@
 //          pipeline's own cost (letterbox, tokenizer, NMS, mask chain, ORT overhead), not networks.
 //   real   the model directory of AVP_ZSL_MODEL_DIR, when set, on AVP_ZSL_TEST_IMAGE (default: a
 //          synthetic 640x480 picture) with the prompt AVP_ZSL_TEST_PROMPT (default "tomato"), on
-//          the device of AVP_ZSL_DEVICE.
+//          the device of AVP_ZSL_DEVICE. With AVP_ZSL_BENCH_BOXES=K[,K...] also
+//          BM_Ywes/real_boxes:K: the K best-scoring anchors are the detections (no score
+//          threshold, no suppression), so the SAM decoder runs on K boxes whatever the weights
+//          (random-weight exports, scripts/export-random-weights, score every anchor below the
+//          0.002 default).
 // Cases: BM_Ywes/<models>/threads:N (the text embeddings cached after the first call, as in a
 // running system), BM_YwesUncachedText/<models>/threads:N (text model every call), and
 // BM_Lsam/<models>/threads:N. Prompts for the stubs: "a, b, c" (three planted boxes) and
@@ -49,6 +53,7 @@
 #include <unistd.h>
 
 #include <avp/core/camera.h>
+#include <avp/core/options.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/interop/tensor_service.h>
 #include <avp/io/image_codec.h>
@@ -181,12 +186,23 @@ Device BenchDevice(bool stub) {
   return d.ok() ? *d : Device::kAuto;
 }
 
-Factory YwesFactory(const fs::path& dir, bool stub, size_t text_cache) {
-  return [dir, stub, text_cache](int threads) -> Result<std::unique_ptr<segmentation::Segmenter>> {
+/// `boxes` > 0: the `boxes` best-scoring anchors are the detections (YwesOptions::score_threshold
+/// 0, nms_iou 1 = no suppression, max_detections `boxes`), so the SAM decoder runs on that many
+/// boxes whatever the detector's weights: a random-weight detector scores every anchor near
+/// sigmoid(-10), below the 0.002 default, and its boxes overlap so that NMS would keep only a few.
+/// (A box entirely in the letterbox padding is still dropped: `instances` <= `boxes`.)
+Factory YwesFactory(const fs::path& dir, bool stub, size_t text_cache, int boxes = 0) {
+  return [dir, stub, text_cache,
+          boxes](int threads) -> Result<std::unique_ptr<segmentation::Segmenter>> {
     YwesOptions o;
     o.session.device = BenchDevice(stub);
     o.session.intra_op_threads = threads;
     o.text_cache_capacity = text_cache;
+    if (boxes > 0) {
+      o.score_threshold = 0.0f;
+      o.nms_iou = 1.0f;
+      o.max_detections = boxes;
+    }
     AVP_ASSIGN_OR_RETURN(std::unique_ptr<YwesSegmenter> s, YwesSegmenter::Create(dir, o));
     return std::unique_ptr<segmentation::Segmenter>(std::move(s));
   };
@@ -245,6 +261,19 @@ bool RegisterAll() {
     const std::string prompt = Env("AVP_ZSL_TEST_PROMPT").value_or("tomato");
     Register("BM_Ywes/real", YwesFactory(*real, false, 1024), frame, prompt, 8.0);
     Register("BM_YwesUncachedText/real", YwesFactory(*real, false, 0), frame, prompt, 8.0);
+    // AVP_ZSL_BENCH_BOXES=K[,K...]: BM_Ywes/real_boxes:K, the pipeline with K detections.
+    if (std::optional<std::string> list = Env("AVP_ZSL_BENCH_BOXES")) {
+      for (const std::string& item : options_internal::SplitList(*list)) {
+        const std::optional<int64_t> k = options_internal::ParseInteger(item);
+        if (!k || *k < 1 || *k > 300) {
+          std::fprintf(stderr, "bench_zsl: AVP_ZSL_BENCH_BOXES item '%s' must be in [1, 300]\n",
+                       item.c_str());
+          return false;
+        }
+        Register(fmt::format("BM_Ywes/real_boxes:{}", *k),
+                 YwesFactory(*real, false, 1024, static_cast<int>(*k)), frame, prompt, 8.0);
+      }
+    }
     Register("BM_Lsam/real", LsamFactory(*real, false), frame, prompt, 8.0);
   } else {
     std::fprintf(stderr,
