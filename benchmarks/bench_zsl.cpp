@@ -190,7 +190,8 @@ Device BenchDevice(bool stub) {
 /// 0, nms_iou 1 = no suppression, max_detections `boxes`), so the SAM decoder runs on that many
 /// boxes whatever the detector's weights: a random-weight detector scores every anchor near
 /// sigmoid(-10), below the 0.002 default, and its boxes overlap so that NMS would keep only a few.
-/// (A box entirely in the letterbox padding is still dropped: `instances` <= `boxes`.)
+/// (A box entirely in the letterbox padding is dropped before the cut, as in any ywes run; a box
+/// whose mask comes out empty gives no instance: `instances` <= `boxes`.)
 Factory YwesFactory(const fs::path& dir, bool stub, size_t text_cache, int boxes = 0) {
   return [dir, stub, text_cache,
           boxes](int threads) -> Result<std::unique_ptr<segmentation::Segmenter>> {

@@ -70,6 +70,11 @@ std::vector<Detection> NonMaxSuppression(std::vector<Detection> detections, floa
 /// kept (with zero width or height).
 std::vector<Detection> DetectionsToSource(std::vector<Detection> detections, const Letterbox& lb);
 
+/// True when a box in source pixels has no area: it was clipped to nothing (a YOLO box entirely in
+/// the letterbox padding, a Grounding DINO box outside the image). Both backends drop such boxes
+/// before their max_detections cut.
+inline bool ClipsToNothing(const PixelBox& box) { return !(box.x1 > box.x0 && box.y1 > box.y0); }
+
 /// A Grounding DINO box (normalised cx, cy, w, h in [0, 1] of the image, design §4.4) in pixels
 /// of an image_w x image_h image: x0 = (cx − w/2)·image_w, ..., clipped to [0, image_w] x
 /// [0, image_h].

@@ -263,7 +263,7 @@ Result<Grounding> LsamSegmenter::Ground(const ImageRgb8& rgb, std::string_view p
     const float* b = boxes.f32.data() + q * 4;
     const PixelBox box =
         NormalizedCxcywhToPixels(b[0], b[1], b[2], b[3], rgb.width(), rgb.height());
-    if (!(box.x1 > box.x0 && box.y1 > box.y0)) continue;
+    if (ClipsToNothing(box)) continue;
     out.boxes.push_back(
         {box, best, (*phrases)[static_cast<size_t>(best_phrase)], static_cast<int>(q)});
   }

@@ -519,8 +519,7 @@ Result<Segmentation> YwesSegmenter::Segment(const segmentation::SegmentationRequ
   // nothing in the image): dropped before NMS, so that such a box neither suppresses a box in the
   // image nor takes one of the max_detections places.
   std::erase_if(detections, [&](const Detection& d) {
-    const PixelBox source = lb.ToSource(d.box);
-    return d.score < request.score_threshold || !(source.x1 > source.x0 && source.y1 > source.y0);
+    return d.score < request.score_threshold || ClipsToNothing(lb.ToSource(d.box));
   });
   detections =
       NonMaxSuppression(std::move(detections), m.options.nms_iou, m.options.class_agnostic_nms,

@@ -550,16 +550,23 @@ TEST(YwesPipelineTest, TheLogitVariantAppliesTheManifestsSigmoid) {
   ExpectBoxEq(FindLabel(seg, "b")->box, kPlanted1024x768[1]);
 }
 
-TEST(YwesPipelineTest, TheTransposedLayoutGivesTheSameSegmentation) {
-  auto plain = MakeYwes();
-  auto transposed = MakeYwes("ywes_transposed");
-  ASSERT_NE(plain, nullptr);
-  ASSERT_NE(transposed, nullptr);
+/// "a, b, c" on a 1024x768 frame with the plain stubs (`plain`) and with the stub set `variant`
+/// (`other`): three instances each.
+void SegmentPlainAndVariant(const std::string& variant, Segmentation& plain, Segmentation& other) {
+  auto a = MakeYwes();
+  auto b = MakeYwes(variant);
+  ASSERT_NE(a, nullptr);
+  ASSERT_NE(b, nullptr);
   const RgbdFrame frame = SolidFrame(1024, 768);
-  const Segmentation a = SegmentOk(*plain, frame, "a, b, c");
-  const Segmentation b = SegmentOk(*transposed, frame, "a, b, c");
-  ASSERT_EQ(a.instances.size(), 3u);
-  ASSERT_EQ(b.instances.size(), 3u);
+  plain = SegmentOk(*a, frame, "a, b, c");
+  other = SegmentOk(*b, frame, "a, b, c");
+  ASSERT_EQ(plain.instances.size(), 3u);
+  ASSERT_EQ(other.instances.size(), 3u);
+}
+
+TEST(YwesPipelineTest, TheTransposedLayoutGivesTheSameSegmentation) {
+  Segmentation a, b;
+  ASSERT_NO_FATAL_FAILURE(SegmentPlainAndVariant("ywes_transposed", a, b));
   for (size_t i = 0; i < 3; ++i) {
     EXPECT_EQ(a.instances[i].label, b.instances[i].label);
     EXPECT_EQ(a.instances[i].confidence, b.instances[i].confidence);
@@ -572,15 +579,8 @@ TEST(YwesPipelineTest, TheOfficialExportShapesGiveTheSameSegmentation) {
   // The stubs with the I/O of the official exports (EfficientViT-SAM: a dynamic encoder batch
   // axis, symbolic 64 x 64 embeddings and 256 x 256 masks; YOLO-World: output0 [?,?,?]), the
   // docs' shapes stated in the manifest: they load and segment as the plain stubs do.
-  auto plain = MakeYwes();
-  auto official = MakeYwes("ywes_official_shapes");
-  ASSERT_NE(plain, nullptr);
-  ASSERT_NE(official, nullptr);
-  const RgbdFrame frame = SolidFrame(1024, 768);
-  const Segmentation a = SegmentOk(*plain, frame, "a, b, c");
-  const Segmentation b = SegmentOk(*official, frame, "a, b, c");
-  ASSERT_EQ(a.instances.size(), 3u);
-  ASSERT_EQ(b.instances.size(), 3u);
+  Segmentation a, b;
+  ASSERT_NO_FATAL_FAILURE(SegmentPlainAndVariant("ywes_official_shapes", a, b));
   for (size_t i = 0; i < 3; ++i) {
     EXPECT_EQ(a.instances[i].box, b.instances[i].box);
     EXPECT_TRUE(a.instances[i].mask == b.instances[i].mask);
