@@ -10,7 +10,8 @@
 //          pipeline's own cost (letterbox, tokenizer, NMS, mask chain, ORT overhead), not networks.
 //   real   the model directory of AVP_ZSL_MODEL_DIR, when set, on AVP_ZSL_TEST_IMAGE (default: a
 //          synthetic 640x480 picture) with the prompt AVP_ZSL_TEST_PROMPT (default "tomato"), on
-//          the device of AVP_ZSL_DEVICE. With AVP_ZSL_BENCH_BOXES=K[,K...] also
+//          the device of AVP_ZSL_DEVICE. With AVP_ZSL_BENCH_BOXES=K[,K...] (at most 16
+//          counts, each in [1, 300]) also
 //          BM_Ywes/real_boxes:K: the K best-scoring anchors are the detections (no score
 //          threshold, no suppression), so the SAM decoder runs on K boxes whatever the weights
 //          (random-weight exports, scripts/export-random-weights, score every anchor below the
@@ -264,7 +265,15 @@ bool RegisterAll() {
     Register("BM_YwesUncachedText/real", YwesFactory(*real, false, 0), frame, prompt, 8.0);
     // AVP_ZSL_BENCH_BOXES=K[,K...]: BM_Ywes/real_boxes:K, the pipeline with K detections.
     if (std::optional<std::string> list = Env("AVP_ZSL_BENCH_BOXES")) {
-      for (const std::string& item : options_internal::SplitList(*list)) {
+      // Each item is a case of at least 2 x 8 s: a few are a sweep, more is a mistake.
+      constexpr size_t kMaxBoxCases = 16;
+      const std::vector<std::string> items = options_internal::SplitList(*list);
+      if (items.size() > kMaxBoxCases) {
+        std::fprintf(stderr, "bench_zsl: AVP_ZSL_BENCH_BOXES lists %zu box counts; at most %zu\n",
+                     items.size(), kMaxBoxCases);
+        return false;
+      }
+      for (const std::string& item : items) {
         const std::optional<int64_t> k = options_internal::ParseInteger(item);
         if (!k || *k < 1 || *k > 300) {
           std::fprintf(stderr, "bench_zsl: AVP_ZSL_BENCH_BOXES item '%s' must be in [1, 300]\n",
