@@ -15,6 +15,7 @@
 #include "contracts.h"
 #include "detections.h"  // ScoreActivation
 #include "ort_runtime.h"
+#include "sha256.h"  // FileSha256
 
 namespace avp::zsl {
 
@@ -199,9 +200,6 @@ Result<Manifest> ReadManifest(const std::filesystem::path& model_dir);
 /// models.text.bytes says 2811" or "…: sha256 is …; models.detector.sha256 says …".
 /// Without `model_file` only the text files are checked (the network is on a model server).
 Status CheckFiles(const ModelEntry& entry, bool verify_sha256 = false, bool model_file = true);
-
-/// The SHA-256 of a file as 64 lower-case hex digits. Errors: NotFound, IoError.
-Result<std::string> FileSha256(const std::filesystem::path& path);
 
 /// The roles `backend` ("ywes" or "lsam") needs from this manifest, in load order. ywes needs
 /// `text` only with a text-feature detector. Errors: InvalidArgument for an unknown backend.

@@ -15,6 +15,8 @@
 
 #include <avp/test/temp_dir_test.h>
 
+#include "sha256.h"
+
 namespace avp::zsl {
 namespace {
 
@@ -238,6 +240,34 @@ TEST_F(WordPieceVocabFileTest, CrlfLinesAndNoFinalNewline) {
   EXPECT_EQ(tokenizer->vocab_size(), 6u);
   EXPECT_EQ(tokenizer->dot_id(), 4);
   EXPECT_EQ(tokenizer->Encode("tomato."), (Ids{5, 4}));
+}
+
+// Golden ids of bert-base-uncased (Hugging Face's BertTokenizer) with the real vocabulary,
+// committed in zsl/data/vocab (AVP_ZSL_VOCAB_DIR; its README names the source and licence) and
+// pinned by its sha256, so this runs in every build.
+TEST(WordPieceRealVocabularyTest, GoldenIds) {
+  const std::filesystem::path path =
+      std::filesystem::path(AVP_ZSL_VOCAB_DIR) / "bert-base-uncased-vocab.txt";
+  const Result<std::string> sha = FileSha256(path);
+  ASSERT_TRUE(sha.ok()) << sha.status().ToString();
+  ASSERT_EQ(*sha, "07eced375cec144d27c900241f3e339478dec958f92fddbc551f295c992038a3")
+      << path.string() << " is not BERT's bert-base-uncased vocab.txt";
+  auto tokenizer = WordPieceTokenizer::FromVocabFile(path);
+  ASSERT_TRUE(tokenizer.ok()) << tokenizer.status().ToString();
+  EXPECT_EQ(tokenizer->vocab_size(), 30522u);
+  EXPECT_EQ(tokenizer->pad_id(), 0);
+  EXPECT_EQ(tokenizer->unk_id(), 100);
+  EXPECT_EQ(tokenizer->cls_id(), 101);
+  EXPECT_EQ(tokenizer->sep_id(), 102);
+  EXPECT_EQ(tokenizer->dot_id(), 1012);
+  EXPECT_EQ(tokenizer->Encode("a photo of a cat"), (Ids{1037, 6302, 1997, 1037, 4937}));
+  EXPECT_EQ(tokenizer->Encode("Hello, world!"), (Ids{7592, 1010, 2088, 999}));
+  // "transformer" is not a token: greedy longest match gives "transform" "##er".
+  EXPECT_EQ(tokenizer->Encode("Using a Transformer network is simple"),
+            (Ids{2478, 1037, 10938, 2121, 2897, 2003, 3722}));
+  Result<GroundingText> text = tokenizer->EncodeGroundingPrompt({"tomato", "green apple"});
+  ASSERT_TRUE(text.ok()) << text.status().ToString();
+  EXPECT_EQ(text->input_ids, (Ids64{101, 20856, 1012, 2665, 6207, 1012, 102}));
 }
 
 }  // namespace
