@@ -213,15 +213,143 @@ std::vector<std::vector<uint16_t>> FruitClusters(const Scene& scene, double gap_
   return clusters;
 }
 
-size_t CountFruitPixels(const Scene& scene, const CameraIntrinsics& camera,
-                        const RigidTransform& X_WC) {
-  const RgbdRenderer renderer(scene);
-  const RenderedFrame frame = renderer.Render(camera, X_WC);
+namespace {
+
+/// Pixels of class fruit in a rendered frame.
+size_t FruitPixels(const RenderedFrame& frame) {
   size_t pixels = 0;
   for (uint8_t c : frame.class_ids.data()) {
     if (c == static_cast<uint8_t>(SemanticClass::kFruit)) ++pixels;
   }
   return pixels;
+}
+
+/// 1. The arm's start: joint 1 and the start camera with it.
+Status TurnArmStart(Scene& scene, const Arrangement& arrangement, std::vector<std::string>& done) {
+  if (arrangement.start_yaw_deg == 0.0) return Status::Ok();
+  if (scene.start_joints_rad.empty()) {
+    return InvalidArgumentError(
+        fmt::format("scene {} has no start joints to turn by start-yaw {} deg",
+                    QuoteText(scene.name), arrangement.start_yaw_deg));
+  }
+  scene.start_joints_rad[0] += DegToRad(arrangement.start_yaw_deg);
+  scene.X_WC_start =
+      RigidTransform(Rz(-arrangement.start_yaw_deg), Eigen::Vector3d::Zero()) * scene.X_WC_start;
+  done.push_back(
+      fmt::format("arm joint 1 turned by {} deg at the start", arrangement.start_yaw_deg));
+  return Status::Ok();
+}
+
+/// The cluster to keep: the largest, the one whose centroid is nearest the start camera among
+/// equals.
+size_t LargestNearestCluster(const Scene& scene,
+                             const std::vector<std::vector<uint16_t>>& clusters) {
+  const std::vector<FruitTruth> fruits = scene.Fruits();
+  const Eigen::Vector3d eye = scene.X_WC_start.translation();
+  const auto centroid_distance = [&](const std::vector<uint16_t>& cluster) {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (uint16_t id : cluster) {
+      for (const FruitTruth& f : fruits) {
+        if (f.instance_id == id) c += f.center_W;
+      }
+    }
+    return (c / static_cast<double>(cluster.size()) - eye).norm();
+  };
+  size_t best = 0;
+  double best_distance = centroid_distance(clusters[0]);
+  for (size_t i = 1; i < clusters.size(); ++i) {
+    const double d = centroid_distance(clusters[i]);
+    if (clusters[i].size() > clusters[best].size() ||
+        (clusters[i].size() == clusters[best].size() && d < best_distance)) {
+      best = i;
+      best_distance = d;
+    }
+  }
+  return best;
+}
+
+/// 2. One fruit cluster kept (single-cluster).
+Status KeepOneFruitCluster(Scene& scene, const Arrangement& arrangement, ArrangementReport& report,
+                           std::vector<std::string>& done) {
+  if (!arrangement.single_cluster) return Status::Ok();
+  const std::vector<std::vector<uint16_t>> clusters =
+      FruitClusters(scene, arrangement.cluster_gap_m);
+  if (clusters.empty()) {
+    return InvalidArgumentError(fmt::format(
+        "scene {} has no fruit: single-cluster keeps one fruit cluster", QuoteText(scene.name)));
+  }
+  const std::vector<uint16_t>& keep = clusters[LargestNearestCluster(scene, clusters)];
+  const size_t before = scene.objects.size();
+  std::erase_if(scene.objects, [&](const SceneObject& o) {
+    return o.semantic_class == SemanticClass::kFruit &&
+           std::find(keep.begin(), keep.end(), o.instance_id) == keep.end();
+  });
+  report.fruits_removed = before - scene.objects.size();
+  done.push_back(fmt::format(
+      "kept the {} fruit of the largest of {} fruit clusters (surface gaps <= {} m), removed {}",
+      keep.size(), clusters.size(), arrangement.cluster_gap_m, report.fruits_removed));
+  scene.UpdatePlantBounds();
+  return Status::Ok();
+}
+
+/// 3. The turn that hides the most fruit from the start camera (of 0, 15, ..., 345 deg), with the
+/// fruit pixels of each in the report.
+double OccludingYaw(const Scene& scene, const Arrangement& arrangement,
+                    const CameraIntrinsics& camera, const Eigen::Vector3d& center,
+                    ArrangementReport& report, std::vector<std::string>& done) {
+  // The plant alone (ground and background stay where they are and never stand between the
+  // camera and the plant), moved; the start camera turned the other way about the plant's axis
+  // sees what the turned plant would show it.
+  Scene plant;
+  plant.name = scene.name;
+  for (const SceneObject& o : scene.objects) {
+    if (IsPlant(o)) plant.objects.push_back(o);
+  }
+  const RigidTransform move(arrangement.plant_offset_m);
+  for (SceneObject& o : plant.objects) MoveObject(o, move);
+  const Eigen::Vector3d moved_center = center + arrangement.plant_offset_m;
+  const RgbdRenderer renderer(plant);
+  double yaw = arrangement.plant_yaw_deg;
+  size_t best_pixels = std::numeric_limits<size_t>::max();
+  const int steps = static_cast<int>(std::lround(360.0 / kOcclusionYawStepDeg));
+  for (int k = 0; k < steps; ++k) {
+    const double candidate = kOcclusionYawStepDeg * k;
+    const RigidTransform X_WC =
+        PlantMotion(moved_center, -candidate, Eigen::Vector3d::Zero()) * scene.X_WC_start;
+    const size_t pixels = FruitPixels(renderer.Render(camera, X_WC));
+    report.fruit_pixels_by_yaw.push_back(pixels);
+    if (pixels < best_pixels) {  // strictly fewer: ties keep the smaller yaw
+      best_pixels = pixels;
+      yaw = candidate;
+    }
+  }
+  done.push_back(fmt::format(
+      "plant turned {} deg about the vertical through {} (the yaw of 0, 15, ..., 345 that "
+      "leaves the fewest fruit pixels in the start view: {}, {} at 0 deg)",
+      yaw, FormatPoint2(center), best_pixels, report.fruit_pixels_by_yaw.front()));
+  return yaw;
+}
+
+/// 4. The plant turned by `yaw` about the vertical through `center`, then moved.
+void MovePlant(Scene& scene, const Arrangement& arrangement, const Eigen::Vector3d& center,
+               double yaw, std::vector<std::string>& done) {
+  if (yaw == 0.0 && arrangement.plant_offset_m.isZero(0.0)) return;
+  const RigidTransform X = PlantMotion(center, yaw, arrangement.plant_offset_m);
+  for (SceneObject& o : scene.objects) {
+    if (IsPlant(o)) MoveObject(o, X);
+  }
+  if (!arrangement.plant_offset_m.isZero(0.0)) {
+    done.push_back(fmt::format("plant moved by ({}, {}, {}) m", arrangement.plant_offset_m.x(),
+                               arrangement.plant_offset_m.y(), arrangement.plant_offset_m.z()));
+  }
+}
+
+}  // namespace
+
+size_t CountFruitPixels(const Scene& scene, const CameraIntrinsics& camera,
+                        const RigidTransform& X_WC) {
+  const RgbdRenderer renderer(scene);
+  return FruitPixels(renderer.Render(camera, X_WC));
 }
 
 Result<ArrangementReport> ApplyArrangement(Scene& scene, const Arrangement& arrangement,
@@ -236,116 +364,21 @@ Result<ArrangementReport> ApplyArrangement(Scene& scene, const Arrangement& arra
                     QuoteText(scene.name)));
   }
   std::vector<std::string> done;
-
-  // 1. The arm's start: joint 1 and the start camera with it.
-  if (arrangement.start_yaw_deg != 0.0) {
-    if (scene.start_joints_rad.empty()) {
-      return InvalidArgumentError(
-          fmt::format("scene {} has no start joints to turn by start-yaw {} deg",
-                      QuoteText(scene.name), arrangement.start_yaw_deg));
-    }
-    scene.start_joints_rad[0] += DegToRad(arrangement.start_yaw_deg);
-    scene.X_WC_start =
-        RigidTransform(Rz(-arrangement.start_yaw_deg), Eigen::Vector3d::Zero()) * scene.X_WC_start;
-    done.push_back(
-        fmt::format("arm joint 1 turned by {} deg at the start", arrangement.start_yaw_deg));
-  }
-
-  // 2. One fruit cluster kept.
-  if (arrangement.single_cluster) {
-    const std::vector<std::vector<uint16_t>> clusters =
-        FruitClusters(scene, arrangement.cluster_gap_m);
-    if (clusters.empty()) {
-      return InvalidArgumentError(fmt::format(
-          "scene {} has no fruit: single-cluster keeps one fruit cluster", QuoteText(scene.name)));
-    }
-    const std::vector<FruitTruth> fruits = scene.Fruits();
-    const Eigen::Vector3d eye = scene.X_WC_start.translation();
-    const auto centroid_distance = [&](const std::vector<uint16_t>& cluster) {
-      Eigen::Vector3d c = Eigen::Vector3d::Zero();
-      for (uint16_t id : cluster) {
-        for (const FruitTruth& f : fruits) {
-          if (f.instance_id == id) c += f.center_W;
-        }
-      }
-      return (c / static_cast<double>(cluster.size()) - eye).norm();
-    };
-    size_t best = 0;
-    double best_distance = centroid_distance(clusters[0]);
-    for (size_t i = 1; i < clusters.size(); ++i) {
-      const double d = centroid_distance(clusters[i]);
-      if (clusters[i].size() > clusters[best].size() ||
-          (clusters[i].size() == clusters[best].size() && d < best_distance)) {
-        best = i;
-        best_distance = d;
-      }
-    }
-    const std::vector<uint16_t>& keep = clusters[best];
-    const size_t before = scene.objects.size();
-    std::erase_if(scene.objects, [&](const SceneObject& o) {
-      return o.semantic_class == SemanticClass::kFruit &&
-             std::find(keep.begin(), keep.end(), o.instance_id) == keep.end();
-    });
-    report.fruits_removed = before - scene.objects.size();
-    done.push_back(fmt::format(
-        "kept the {} fruit of the largest of {} fruit clusters (surface gaps <= {} m), removed {}",
-        keep.size(), clusters.size(), arrangement.cluster_gap_m, report.fruits_removed));
-    scene.UpdatePlantBounds();
-  }
+  AVP_RETURN_IF_ERROR(TurnArmStart(scene, arrangement, done));
+  AVP_RETURN_IF_ERROR(KeepOneFruitCluster(scene, arrangement, report, done));
   report.fruits_kept = scene.Fruits().size();
 
   // 3. The turn (fixed, or the one hiding the most fruit from the start camera), 4. the move.
   const Eigen::Vector3d center = scene.plant_bounds.center();
   double yaw = arrangement.plant_yaw_deg;
   if (arrangement.occluding_yaw) {
-    // The plant alone (ground and background stay where they are and never stand between the
-    // camera and the plant), moved; the start camera turned the other way about the plant's axis
-    // sees what the turned plant would show it.
-    Scene plant;
-    plant.name = scene.name;
-    for (const SceneObject& o : scene.objects) {
-      if (IsPlant(o)) plant.objects.push_back(o);
-    }
-    const RigidTransform move(arrangement.plant_offset_m);
-    for (SceneObject& o : plant.objects) MoveObject(o, move);
-    const Eigen::Vector3d moved_center = center + arrangement.plant_offset_m;
-    const RgbdRenderer renderer(plant);
-    size_t best_pixels = std::numeric_limits<size_t>::max();
-    const int steps = static_cast<int>(std::lround(360.0 / kOcclusionYawStepDeg));
-    for (int k = 0; k < steps; ++k) {
-      const double candidate = kOcclusionYawStepDeg * k;
-      const RigidTransform X_WC =
-          PlantMotion(moved_center, -candidate, Eigen::Vector3d::Zero()) * scene.X_WC_start;
-      const RenderedFrame frame = renderer.Render(camera, X_WC);
-      size_t pixels = 0;
-      for (uint8_t c : frame.class_ids.data()) {
-        if (c == static_cast<uint8_t>(SemanticClass::kFruit)) ++pixels;
-      }
-      report.fruit_pixels_by_yaw.push_back(pixels);
-      if (pixels < best_pixels) {  // strictly fewer: ties keep the smaller yaw
-        best_pixels = pixels;
-        yaw = candidate;
-      }
-    }
-    done.push_back(fmt::format(
-        "plant turned {} deg about the vertical through {} (the yaw of 0, 15, ..., 345 that "
-        "leaves the fewest fruit pixels in the start view: {}, {} at 0 deg)",
-        yaw, FormatPoint2(center), best_pixels, report.fruit_pixels_by_yaw.front()));
+    yaw = OccludingYaw(scene, arrangement, camera, center, report, done);
   } else if (yaw != 0.0) {
     done.push_back(fmt::format("plant turned {} deg about the vertical through {}", yaw,
                                FormatPoint2(center)));
   }
   report.plant_yaw_deg = yaw;
-  if (yaw != 0.0 || !arrangement.plant_offset_m.isZero(0.0)) {
-    const RigidTransform X = PlantMotion(center, yaw, arrangement.plant_offset_m);
-    for (SceneObject& o : scene.objects) {
-      if (IsPlant(o)) MoveObject(o, X);
-    }
-    if (!arrangement.plant_offset_m.isZero(0.0)) {
-      done.push_back(fmt::format("plant moved by ({}, {}, {}) m", arrangement.plant_offset_m.x(),
-                                 arrangement.plant_offset_m.y(), arrangement.plant_offset_m.z()));
-    }
-  }
+  MovePlant(scene, arrangement, center, yaw, done);
   scene.UpdatePlantBounds();
 
   if (done.empty()) done.push_back("as the file places it");

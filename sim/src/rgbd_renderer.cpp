@@ -223,6 +223,62 @@ struct SurfaceColors {
   }
 };
 
+/// An object's per-instance tint: colour x hue, x brightness.
+struct InstanceTint {
+  Eigen::Vector3f hue;
+  float brightness;
+};
+
+InstanceTint TintOf(uint16_t instance_id) {
+  const uint64_t key = MixSeed(0xA1BED0ULL ^ instance_id);
+  const float brightness = 1.0f + kInstanceBrightness * HashSigned(key);
+  const Eigen::Vector3f hue(1.0f + kInstanceHue * HashSigned(key + 1),
+                            1.0f + kInstanceHue * HashSigned(key + 2),
+                            1.0f + kInstanceHue * HashSigned(key + 3));
+  return {hue, brightness};
+}
+
+/// `c` with the tint applied, clamped to [0, 1].
+Eigen::Vector3f Tinted(const Eigen::Vector3f& c, const InstanceTint& tint) {
+  return (c.cwiseProduct(tint.hue) * tint.brightness).cwiseMax(0.0f).cwiseMin(1.0f);
+}
+
+/// Textured or per-triangle colours of a mesh, shaded per hit (Shade).
+SurfaceColors MeshSurface(const TriangleMesh& mesh, const InstanceTint& tint) {
+  SurfaceColors surface;
+  surface.hue = tint.hue;
+  surface.brightness = tint.brightness;
+  if (mesh.texture != nullptr) {
+    surface.texture = mesh.texture;
+    surface.triangle_uvs.reserve(mesh.triangles.size());
+    for (const Eigen::Vector3i& t : mesh.triangles) {
+      surface.triangle_uvs.push_back({mesh.uvs[t[0]], mesh.uvs[t[1]], mesh.uvs[t[2]]});
+    }
+  } else {
+    surface.face_rgb.reserve(mesh.face_albedo.size());
+    for (const Eigen::Vector3f& c : mesh.face_albedo) surface.face_rgb.push_back(Tinted(c, tint));
+  }
+  return surface;
+}
+
+/// The user-geometry primitive of an ellipsoid, its float box rounded outwards so it contains
+/// the double one.
+EllipsoidPrim MakeEllipsoidPrim(const Ellipsoid& e) {
+  EllipsoidPrim prim;
+  prim.center_W = e.center_W;
+  prim.A = e.radii.cwiseInverse().asDiagonal() * e.R_WE.transpose();
+  const Box3 box = e.Bounds();
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  prim.bounds.lower_x = std::nextafter(static_cast<float>(box.min().x()), -kInf);
+  prim.bounds.lower_y = std::nextafter(static_cast<float>(box.min().y()), -kInf);
+  prim.bounds.lower_z = std::nextafter(static_cast<float>(box.min().z()), -kInf);
+  prim.bounds.upper_x = std::nextafter(static_cast<float>(box.max().x()), kInf);
+  prim.bounds.upper_y = std::nextafter(static_cast<float>(box.max().y()), kInf);
+  prim.bounds.upper_z = std::nextafter(static_cast<float>(box.max().z()), kInf);
+  prim.bounds.align0 = prim.bounds.align1 = 0.0f;
+  return prim;
+}
+
 /// One traced pixel, as Embree left it.
 struct PixelHit {
   float t;
@@ -323,6 +379,15 @@ struct RgbdRenderer::Impl {
     if (geom_id == ellipsoid_geom_id) return &objects[ellipsoid_objects[prim_id]];
     return &objects[geom_to_object[geom_id]];
   }
+
+  /// The Embree device and an empty scene (robust triangle tests, high-quality BVH).
+  void CreateScene();
+  /// One scene object: its shading info, and its triangles or ellipsoid (attached later).
+  void AddObject(const SceneObject& object);
+  /// A non-empty mesh as an Embree triangle geometry of object `object_index`.
+  void AddMesh(const SceneObject& object, const TriangleMesh& mesh, int32_t object_index);
+  /// Every ellipsoid as one Embree user geometry.
+  void AttachEllipsoids();
 
   void Shade(const PixelHit& h, const Eigen::Vector3f& dir_W, float min_depth, size_t idx,
              const FrameOut& out) const;
@@ -494,6 +559,88 @@ void RgbdRenderer::Impl::TraceBand(int band, const FrameRays& rays, const FrameO
 
 // ---- RgbdRenderer ----------------------------------------------------------------------------
 
+void RgbdRenderer::Impl::CreateScene() {
+  device = rtcNewDevice(nullptr);
+  if (device == nullptr) {
+    throw Error(fmt::format("RgbdRenderer: rtcNewDevice failed (Embree error {})",
+                            static_cast<int>(rtcGetDeviceError(nullptr))));
+  }
+  scene = rtcNewScene(device);
+  // Robust (watertight) triangle tests: no cracks along shared edges of a mesh.
+  rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+}
+
+void RgbdRenderer::Impl::AddMesh(const SceneObject& object, const TriangleMesh& mesh,
+                                 int32_t object_index) {
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.vertices.size()));
+  auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0,
+                                                            RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
+                                                            mesh.triangles.size()));
+  if (vb == nullptr || ib == nullptr) {
+    rtcReleaseGeometry(geom);
+    ThrowOnDeviceError(fmt::format("allocating buffers for '{}'", object.name).c_str());
+    throw Error("RgbdRenderer: Embree buffer allocation failed for '" + object.name + "'");
+  }
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    vb[3 * i + 0] = mesh.vertices[i].x();
+    vb[3 * i + 1] = mesh.vertices[i].y();
+    vb[3 * i + 2] = mesh.vertices[i].z();
+  }
+  for (size_t i = 0; i < mesh.triangles.size(); ++i) {
+    ib[3 * i + 0] = static_cast<unsigned>(mesh.triangles[i].x());
+    ib[3 * i + 1] = static_cast<unsigned>(mesh.triangles[i].y());
+    ib[3 * i + 2] = static_cast<unsigned>(mesh.triangles[i].z());
+  }
+  rtcCommitGeometry(geom);
+  const unsigned geom_id = rtcAttachGeometry(scene, geom);
+  rtcReleaseGeometry(geom);
+  if (geom_id >= geom_to_object.size()) geom_to_object.resize(geom_id + 1, -1);
+  geom_to_object[geom_id] = object_index;
+  num_triangles += mesh.triangles.size();
+}
+
+void RgbdRenderer::Impl::AddObject(const SceneObject& object) {
+  ObjectInfo info;
+  info.instance_id = object.instance_id;
+  info.class_id = static_cast<uint8_t>(object.semantic_class);
+  const InstanceTint tint = TintOf(object.instance_id);
+  info.base_rgb = Tinted(object.albedo, tint);
+  const int32_t object_index = static_cast<int32_t>(objects.size());
+  if (const auto* mesh = std::get_if<TriangleMesh>(&object.shape)) {
+    if (mesh->empty()) return;
+    info.is_mesh = true;
+    AddMesh(object, *mesh, object_index);
+    if (mesh->has_own_colors()) {
+      // Textured or per-triangle colours: shaded per hit (Shade); base_rgb stays the albedo's.
+      info.surface = static_cast<int32_t>(surfaces.size());
+      surfaces.push_back(MeshSurface(*mesh, tint));
+    }
+  } else {
+    const Ellipsoid& e = std::get<Ellipsoid>(object.shape);
+    // Ellipsoid::Bounds() (and so the BVH) assumes R_WE is a rotation.
+    AVP_THROW_UNLESS(IsRotationMatrix(e.R_WE, 1e-6), object.name, e.R_WE);
+    ellipsoids.push_back(MakeEllipsoidPrim(e));
+    ellipsoid_objects.push_back(object_index);
+  }
+  objects.push_back(info);
+}
+
+void RgbdRenderer::Impl::AttachEllipsoids() {
+  if (ellipsoids.empty()) return;
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+  rtcSetGeometryUserPrimitiveCount(geom, static_cast<unsigned>(ellipsoids.size()));
+  rtcSetGeometryUserData(geom, &ellipsoids);
+  rtcSetGeometryBoundsFunction(geom, EllipsoidBoundsFunc, nullptr);
+  rtcSetGeometryIntersectFunction(geom, EllipsoidIntersectFunc);
+  rtcSetGeometryOccludedFunction(geom, EllipsoidOccludedFunc);
+  rtcCommitGeometry(geom);
+  ellipsoid_geom_id = rtcAttachGeometry(scene, geom);
+  rtcReleaseGeometry(geom);
+}
+
 RgbdRenderer::RgbdRenderer(const Scene& scene, RendererOptions options)
     : impl_(std::make_unique<Impl>()) {
   const Status valid = scene.Validate();
@@ -505,120 +652,13 @@ RgbdRenderer::RgbdRenderer(const Scene& scene, RendererOptions options)
   AVP_THROW_UNLESS(options.background_rgb.allFinite(), options.background_rgb.transpose());
   Impl& m = *impl_;
   m.options = options;
-
-  m.device = rtcNewDevice(nullptr);
-  if (m.device == nullptr) {
-    throw Error(fmt::format("RgbdRenderer: rtcNewDevice failed (Embree error {})",
-                            static_cast<int>(rtcGetDeviceError(nullptr))));
-  }
-  m.scene = rtcNewScene(m.device);
-  // Robust (watertight) triangle tests: no cracks along shared edges of a mesh.
-  rtcSetSceneFlags(m.scene, RTC_SCENE_FLAG_ROBUST);
-  rtcSetSceneBuildQuality(m.scene, RTC_BUILD_QUALITY_HIGH);
-
+  m.CreateScene();
   const auto& lut = SrgbLut();
   m.background_srgb = {ToSrgb8(options.background_rgb.x(), lut),
                        ToSrgb8(options.background_rgb.y(), lut),
                        ToSrgb8(options.background_rgb.z(), lut)};
-
-  for (const SceneObject& object : scene.objects) {
-    ObjectInfo info;
-    info.instance_id = object.instance_id;
-    info.class_id = static_cast<uint8_t>(object.semantic_class);
-    const uint64_t key = MixSeed(0xA1BED0ULL ^ object.instance_id);
-    const float brightness = 1.0f + kInstanceBrightness * HashSigned(key);
-    const Eigen::Vector3f hue(1.0f + kInstanceHue * HashSigned(key + 1),
-                              1.0f + kInstanceHue * HashSigned(key + 2),
-                              1.0f + kInstanceHue * HashSigned(key + 3));
-    info.base_rgb = (object.albedo.cwiseProduct(hue) * brightness).cwiseMax(0.0f).cwiseMin(1.0f);
-    const int32_t object_index = static_cast<int32_t>(m.objects.size());
-
-    if (const auto* mesh = std::get_if<TriangleMesh>(&object.shape)) {
-      if (mesh->empty()) continue;
-      info.is_mesh = true;
-      RTCGeometry geom = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
-      auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                             RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                             mesh->vertices.size()));
-      auto* ib = static_cast<unsigned*>(
-          rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                  3 * sizeof(unsigned), mesh->triangles.size()));
-      if (vb == nullptr || ib == nullptr) {
-        rtcReleaseGeometry(geom);
-        m.ThrowOnDeviceError(fmt::format("allocating buffers for '{}'", object.name).c_str());
-        throw Error("RgbdRenderer: Embree buffer allocation failed for '" + object.name + "'");
-      }
-      for (size_t i = 0; i < mesh->vertices.size(); ++i) {
-        vb[3 * i + 0] = mesh->vertices[i].x();
-        vb[3 * i + 1] = mesh->vertices[i].y();
-        vb[3 * i + 2] = mesh->vertices[i].z();
-      }
-      for (size_t i = 0; i < mesh->triangles.size(); ++i) {
-        ib[3 * i + 0] = static_cast<unsigned>(mesh->triangles[i].x());
-        ib[3 * i + 1] = static_cast<unsigned>(mesh->triangles[i].y());
-        ib[3 * i + 2] = static_cast<unsigned>(mesh->triangles[i].z());
-      }
-      if (mesh->has_own_colors()) {
-        // Textured or per-triangle colours: shaded per hit (Shade); base_rgb stays the albedo's.
-        SurfaceColors surface;
-        surface.hue = hue;
-        surface.brightness = brightness;
-        if (mesh->texture != nullptr) {
-          surface.texture = mesh->texture;
-          surface.triangle_uvs.reserve(mesh->triangles.size());
-          for (const Eigen::Vector3i& t : mesh->triangles) {
-            surface.triangle_uvs.push_back({mesh->uvs[t[0]], mesh->uvs[t[1]], mesh->uvs[t[2]]});
-          }
-        } else {
-          surface.face_rgb.reserve(mesh->face_albedo.size());
-          for (const Eigen::Vector3f& c : mesh->face_albedo) {
-            surface.face_rgb.push_back(
-                (c.cwiseProduct(hue) * brightness).cwiseMax(0.0f).cwiseMin(1.0f));
-          }
-        }
-        info.surface = static_cast<int32_t>(m.surfaces.size());
-        m.surfaces.push_back(std::move(surface));
-      }
-      rtcCommitGeometry(geom);
-      const unsigned geom_id = rtcAttachGeometry(m.scene, geom);
-      rtcReleaseGeometry(geom);
-      if (geom_id >= m.geom_to_object.size()) m.geom_to_object.resize(geom_id + 1, -1);
-      m.geom_to_object[geom_id] = object_index;
-      m.num_triangles += mesh->triangles.size();
-    } else {
-      const Ellipsoid& e = std::get<Ellipsoid>(object.shape);
-      // Ellipsoid::Bounds() (and so the BVH) assumes R_WE is a rotation.
-      AVP_THROW_UNLESS(IsRotationMatrix(e.R_WE, 1e-6), object.name, e.R_WE);
-      EllipsoidPrim prim;
-      prim.center_W = e.center_W;
-      prim.A = e.radii.cwiseInverse().asDiagonal() * e.R_WE.transpose();
-      const Box3 box = e.Bounds();
-      constexpr float kInf = std::numeric_limits<float>::infinity();
-      // Round outwards so the float box contains the double one.
-      prim.bounds.lower_x = std::nextafter(static_cast<float>(box.min().x()), -kInf);
-      prim.bounds.lower_y = std::nextafter(static_cast<float>(box.min().y()), -kInf);
-      prim.bounds.lower_z = std::nextafter(static_cast<float>(box.min().z()), -kInf);
-      prim.bounds.upper_x = std::nextafter(static_cast<float>(box.max().x()), kInf);
-      prim.bounds.upper_y = std::nextafter(static_cast<float>(box.max().y()), kInf);
-      prim.bounds.upper_z = std::nextafter(static_cast<float>(box.max().z()), kInf);
-      prim.bounds.align0 = prim.bounds.align1 = 0.0f;
-      m.ellipsoids.push_back(prim);
-      m.ellipsoid_objects.push_back(object_index);
-    }
-    m.objects.push_back(info);
-  }
-
-  if (!m.ellipsoids.empty()) {
-    RTCGeometry geom = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_USER);
-    rtcSetGeometryUserPrimitiveCount(geom, static_cast<unsigned>(m.ellipsoids.size()));
-    rtcSetGeometryUserData(geom, &m.ellipsoids);
-    rtcSetGeometryBoundsFunction(geom, EllipsoidBoundsFunc, nullptr);
-    rtcSetGeometryIntersectFunction(geom, EllipsoidIntersectFunc);
-    rtcSetGeometryOccludedFunction(geom, EllipsoidOccludedFunc);
-    rtcCommitGeometry(geom);
-    m.ellipsoid_geom_id = rtcAttachGeometry(m.scene, geom);
-    rtcReleaseGeometry(geom);
-  }
+  for (const SceneObject& object : scene.objects) m.AddObject(object);
+  m.AttachEllipsoids();
   rtcCommitScene(m.scene);
   m.ThrowOnDeviceError("building the scene BVH");
 }
