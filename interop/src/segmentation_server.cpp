@@ -513,40 +513,34 @@ struct SegmentationServer::Impl final : public inference::GRPCInferenceService::
     return reactor;
   }
 
-  grpc::Status Infer(grpc::CallbackServerContext* context,
-                     const inference::ModelInferRequest& proto,
-                     inference::ModelInferResponse* response, Clock::time_point queued) {
-    const Clock::time_point started = Clock::now();
+  /// Clock readings of one call, for the server_*_ms parameters of its answer.
+  struct InferTimes {
+    Clock::time_point queued, started, decoded, acquired, segmented, encoded;
+  };
+
+  /// A call interrupted (cancelled, or past its deadline), counted.
+  grpc::Status Stopped(const Status& status) {
+    infer_interrupted.fetch_add(1);
+    return internal::ToGrpcStatus(status);
+  }
+
+  /// The call is still waited for when a worker takes it: not cancelled, deadline not passed.
+  grpc::Status CheckStillWaitedFor(grpc::CallbackServerContext* context, const InferTimes& times) {
     if (context->IsCancelled()) {
       infer_expired.fetch_add(1);
       return {grpc::StatusCode::CANCELLED, "the call was cancelled before a worker took it"};
     }
-    const std::chrono::system_clock::time_point deadline = context->deadline();
-    if (std::chrono::system_clock::now() >= deadline) {
+    if (std::chrono::system_clock::now() >= context->deadline()) {
       infer_expired.fetch_add(1);
       return {grpc::StatusCode::DEADLINE_EXCEEDED,
               fmt::format("the deadline passed while the request waited {:.0f} ms in the queue",
-                          MsBetween(queued, started))};
+                          MsBetween(times.queued, times.started))};
     }
-    // Stops the work once the client cancelled or left, or the deadline passed.
-    const std::function<Status()> interrupt = [context, deadline]() -> Status {
-      if (context->IsCancelled()) return CancelledError("the client cancelled the call or left");
-      if (std::chrono::system_clock::now() >= deadline) {
-        return DeadlineExceededError("the call's deadline passed");
-      }
-      return Status::Ok();
-    };
-    const auto stopped = [this](const Status& status) {
-      infer_interrupted.fetch_add(1);
-      return internal::ToGrpcStatus(status);
-    };
-    Result<const Model*> model = Lookup(proto.model_name(), proto.model_version());
-    if (!model.ok()) return internal::ToGrpcStatus(model.status());
-    const Model& m = **model;
-    if (!m.state.ready) {
-      return {grpc::StatusCode::FAILED_PRECONDITION,
-              fmt::format("model '{}' is not ready: {}", m.state.name, m.state.reason)};
-    }
+    return grpc::Status::OK;
+  }
+
+  /// The request from its proto, within the budget, asking only for outputs that exist.
+  grpc::Status ReadRequest(const inference::ModelInferRequest& proto, InferRequest& out) {
     // Counts before anything is converted: a request with a million tensors or parameters is
     // refused without copying them.
     if (static_cast<size_t>(proto.inputs_size()) > kMaxRequestInputs ||
@@ -575,23 +569,26 @@ struct SegmentationServer::Impl final : public inference::GRPCInferenceService::
                             QuoteText(name))};
       }
     }
-    if (Status stop = interrupt(); !stop.ok()) return stopped(stop.WithContext("before decoding"));
-    Result<DecodedSegmentationRequest> decoded = DecodeSegmentationRequest(*request, budget_);
-    if (!decoded.ok()) return internal::ToGrpcStatus(decoded.status());
-    const Clock::time_point decoded_at = Clock::now();
+    out = std::move(*request);
+    return grpc::Status::OK;
+  }
 
-    const uint64_t seed = decoded->seed.value_or(options.default_seed);
+  /// The model's segmentation of the decoded request, with a segmenter of its cache for the
+  /// request's seed; an interrupted call's answer is dropped.
+  grpc::Status Segment(const Model& m, const DecodedSegmentationRequest& decoded,
+                       const std::function<Status()>& interrupt, InferTimes& times,
+                       Result<Segmentation>& segmentation) {
+    const uint64_t seed = decoded.seed.value_or(options.default_seed);
     Result<std::unique_ptr<segmentation::Segmenter>> segmenter = m.cache->Acquire(seed, interrupt);
     if (!segmenter.ok()) {
       const StatusCode code = segmenter.status().code();
       if (code == StatusCode::kCancelled || code == StatusCode::kDeadlineExceeded) {
-        return stopped(segmenter.status());
+        return Stopped(segmenter.status());
       }
       return internal::ToGrpcStatus(segmenter.status());
     }
-    const Clock::time_point acquired = Clock::now();
-    Result<Segmentation> segmentation = InternalError("not segmented");
-    segmentation::SegmentationRequest segmentation_request = decoded->request();
+    times.acquired = Clock::now();
+    segmentation::SegmentationRequest segmentation_request = decoded.request();
     segmentation_request.interrupt = interrupt;
     try {
       segmentation = (*segmenter)->Segment(segmentation_request);
@@ -599,55 +596,105 @@ struct SegmentationServer::Impl final : public inference::GRPCInferenceService::
       segmentation = InternalError(fmt::format("model '{}' threw: {}", m.state.name, e.what()));
     }
     m.cache->Release(seed, std::move(*segmenter));
-    const Clock::time_point segmented = Clock::now();
+    times.segmented = Clock::now();
     // A backend that does not ask the interrupt still has its answer dropped when nobody waits.
     if (Status stop = interrupt(); !stop.ok()) {
-      return stopped(stop.WithContext(fmt::format("model '{}'", m.state.name)));
+      return Stopped(stop.WithContext(fmt::format("model '{}'", m.state.name)));
     }
     if (!segmentation.ok()) {
       const StatusCode code = segmentation.status().code();
       const Status status =
           segmentation.status().WithContext(fmt::format("model '{}'", m.state.name));
       if (code == StatusCode::kCancelled || code == StatusCode::kDeadlineExceeded) {
-        return stopped(status);
+        return Stopped(status);
       }
       return internal::ToGrpcStatus(status);
     }
+    return grpc::Status::OK;
+  }
+
+  /// The segmentation is within max_instances and valid for the frame.
+  grpc::Status CheckSegmentation(const Model& m, const Segmentation& segmentation,
+                                 const DecodedSegmentationRequest& decoded) {
     if (Status n = CheckLimit(fmt::format("instances found by model '{}'", m.state.name),
-                              segmentation->instances.size(), "max_instances",
+                              segmentation.instances.size(), "max_instances",
                               static_cast<uint64_t>(options.max_instances),
                               "raise it with `avp serve segmentation --max-instances N`, or "
                               "narrow the prompt");
         !n.ok()) {
       return internal::ToGrpcStatus(n);
     }
-    const int w = decoded->frame.rgb.width();
-    const int h = decoded->frame.rgb.height();
-    if (Status v = segmentation->ValidateFor(w, h); !v.ok()) {
+    const int w = decoded.frame.rgb.width();
+    const int h = decoded.frame.rgb.height();
+    if (Status v = segmentation.ValidateFor(w, h); !v.ok()) {
       return {grpc::StatusCode::INTERNAL,
               fmt::format("model '{}' returned an invalid segmentation: {}", m.state.name,
                           v.message())};
     }
-    Result<InferResponse> encoded = EncodeSegmentation(*segmentation, decoded->mask_format);
+    return grpc::Status::OK;
+  }
+
+  /// The answer: the segmentation encoded in the requested mask format, only the requested
+  /// outputs (all when none are named), and the server's timings.
+  grpc::Status Answer(const Model& m, const inference::ModelInferRequest& proto,
+                      const InferRequest& request, const DecodedSegmentationRequest& decoded,
+                      const Segmentation& segmentation, InferTimes& times,
+                      inference::ModelInferResponse* response) {
+    Result<InferResponse> encoded = EncodeSegmentation(segmentation, decoded.mask_format);
     if (!encoded.ok()) return internal::ToGrpcStatus(encoded.status());
     InferResponse out = std::move(*encoded);
-    if (!request->requested_outputs.empty()) {
+    if (!request.requested_outputs.empty()) {
       std::erase_if(out.outputs, [&](const Tensor& t) {
-        return std::find(request->requested_outputs.begin(), request->requested_outputs.end(),
-                         t.name) == request->requested_outputs.end();
+        return std::find(request.requested_outputs.begin(), request.requested_outputs.end(),
+                         t.name) == request.requested_outputs.end();
       });
     }
     out.model_name = m.state.name;
     out.model_version = kModelVersion;
     out.id = proto.id();
-    const Clock::time_point encoded_at = Clock::now();
-    out.parameters["server_queue_ms"] = MsBetween(queued, started);
-    out.parameters["server_decode_ms"] = MsBetween(started, decoded_at);
-    out.parameters["server_wait_ms"] = MsBetween(decoded_at, acquired);
-    out.parameters["server_segment_ms"] = MsBetween(acquired, segmented);
-    out.parameters["server_encode_ms"] = MsBetween(segmented, encoded_at);
+    times.encoded = Clock::now();
+    out.parameters["server_queue_ms"] = MsBetween(times.queued, times.started);
+    out.parameters["server_decode_ms"] = MsBetween(times.started, times.decoded);
+    out.parameters["server_wait_ms"] = MsBetween(times.decoded, times.acquired);
+    out.parameters["server_segment_ms"] = MsBetween(times.acquired, times.segmented);
+    out.parameters["server_encode_ms"] = MsBetween(times.segmented, times.encoded);
     internal::ToProto(std::move(out), response);
     return grpc::Status::OK;
+  }
+
+  grpc::Status Infer(grpc::CallbackServerContext* context,
+                     const inference::ModelInferRequest& proto,
+                     inference::ModelInferResponse* response, Clock::time_point queued) {
+    InferTimes times;
+    times.queued = queued;
+    times.started = Clock::now();
+    if (grpc::Status s = CheckStillWaitedFor(context, times); !s.ok()) return s;
+    // Stops the work once the client cancelled or left, or the deadline passed.
+    const std::chrono::system_clock::time_point deadline = context->deadline();
+    const std::function<Status()> interrupt = [context, deadline]() -> Status {
+      if (context->IsCancelled()) return CancelledError("the client cancelled the call or left");
+      if (std::chrono::system_clock::now() >= deadline) {
+        return DeadlineExceededError("the call's deadline passed");
+      }
+      return Status::Ok();
+    };
+    Result<const Model*> model = Lookup(proto.model_name(), proto.model_version());
+    if (!model.ok()) return internal::ToGrpcStatus(model.status());
+    const Model& m = **model;
+    if (!m.state.ready) {
+      return {grpc::StatusCode::FAILED_PRECONDITION,
+              fmt::format("model '{}' is not ready: {}", m.state.name, m.state.reason)};
+    }
+    InferRequest request;
+    if (grpc::Status s = ReadRequest(proto, request); !s.ok()) return s;
+    if (Status stop = interrupt(); !stop.ok()) return Stopped(stop.WithContext("before decoding"));
+    Result<DecodedSegmentationRequest> decoded = DecodeSegmentationRequest(request, budget_);
+    if (!decoded.ok()) return internal::ToGrpcStatus(decoded.status());
+    times.decoded = Clock::now();
+    Result<Segmentation> segmentation = InternalError("not segmented");
+    if (grpc::Status s = Segment(m, *decoded, interrupt, times, segmentation); !s.ok()) return s;
+    if (grpc::Status s = CheckSegmentation(m, *segmentation, *decoded); !s.ok()) return s;
+    return Answer(m, proto, request, *decoded, *segmentation, times, response);
   }
 };
 
