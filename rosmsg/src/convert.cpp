@@ -60,6 +60,16 @@ Eigen::Vector3d FromPointMsg(const Point& p) { return {p.x, p.y, p.z}; }
 Vector3 ToVector3Msg(const Eigen::Vector3d& v) { return Vector3{v.x(), v.y(), v.z()}; }
 Eigen::Vector3d FromVector3Msg(const Vector3& v) { return {v.x, v.y, v.z}; }
 
+std::string FormatStamp(int64_t ns) {
+  int64_t s = ns / 1'000'000'000;
+  int64_t rest = ns % 1'000'000'000;
+  if (rest < 0) {
+    --s;
+    rest += 1'000'000'000;
+  }
+  return fmt::format("{}.{:09d}", s, rest);
+}
+
 ColorRGBA Rgba(double r, double g, double b, double a) {
   return {static_cast<float>(r), static_cast<float>(g), static_cast<float>(b),
           static_cast<float>(a)};

@@ -3,6 +3,7 @@
 // Conversions between avp's core types and ROS 2 messages.
 
 #include <cstdint>
+#include <string>
 
 #include <Eigen/Core>
 
@@ -34,6 +35,9 @@ Quaternion ToQuaternionMsg(const Eigen::Matrix3d& R);
 /// (Time::FromNanoseconds / ToNanoseconds).
 inline Time ToTimeMsg(int64_t stamp_ns) { return Time::FromNanoseconds(stamp_ns); }
 inline int64_t FromTimeMsg(const Time& t) { return t.ToNanoseconds(); }
+/// A stamp as "sec.nanosec" for messages: the seconds floored, the nanoseconds in [0, 1e9) (1 ns
+/// before the epoch is "-1.999999999").
+std::string FormatStamp(int64_t stamp_ns);
 
 /// A marker colour from doubles in [0, 1].
 ColorRGBA Rgba(double r, double g, double b, double a = 1.0);
