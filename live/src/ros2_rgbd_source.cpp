@@ -1,7 +1,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -17,44 +16,10 @@ using SteadyClock = std::chrono::steady_clock;
 
 int64_t StampNs(const rosmsg::Header& h) { return h.stamp.ToNanoseconds(); }
 
-/// Checks an image's size, step and data length for `bytes_per_pixel`.
-Status CheckLayout(const rosmsg::Image& msg, std::string_view topic, int bytes_per_pixel) {
-  if (msg.width == 0 || msg.height == 0 || msg.width > 16384 || msg.height > 16384) {
-    return InvalidArgumentError(fmt::format("{}: image size {}x{} is out of range (1..16384)",
-                                            topic, msg.width, msg.height));
-  }
-  const uint64_t row = uint64_t{msg.width} * static_cast<uint64_t>(bytes_per_pixel);
-  if (msg.step < row) {
-    return InvalidArgumentError(
-        fmt::format("{}: step {} is shorter than a row of {} '{}' pixels ({} bytes)", topic,
-                    msg.step, msg.width, msg.encoding, row));
-  }
-  const uint64_t expected = uint64_t{msg.step} * msg.height;
-  if (msg.data.size() != expected) {
-    return InvalidArgumentError(fmt::format("{}: data holds {} bytes, but step {} x height {} = {}",
-                                            topic, msg.data.size(), msg.step, msg.height,
-                                            expected));
-  }
-  return Status::Ok();
-}
-
-/// A colour (rgb8, bgr8) or depth (16UC1/mono16 mm, 32FC1 m) image avp can use: its encoding,
-/// then its size, step and data length. Checked once on arrival and again on conversion.
+/// The check on arrival: the encoding and layout, and for 32FC1 depth every value
+/// (rosmsg/images.h), so that a refused image is counted and never waits for a partner.
 Status CheckImage(const rosmsg::Image& msg, std::string_view topic, bool is_color) {
-  if (is_color) {
-    if (msg.encoding != "rgb8" && msg.encoding != "bgr8") {
-      return InvalidArgumentError(fmt::format(
-          "{}: colour encoding '{}' is not supported (rgb8, bgr8)", topic, msg.encoding));
-    }
-    return CheckLayout(msg, topic, 3);
-  }
-  const bool mm = msg.encoding == "16UC1" || msg.encoding == "mono16";
-  if (!mm && msg.encoding != "32FC1") {
-    return InvalidArgumentError(fmt::format(
-        "{}: depth encoding '{}' is not supported (16UC1 in millimetres, 32FC1 in metres)", topic,
-        msg.encoding));
-  }
-  return CheckLayout(msg, topic, mm ? 2 : 4);
+  return is_color ? rosmsg::CheckColorImage(msg, topic) : rosmsg::CheckDepthImage(msg, topic);
 }
 
 }  // namespace
@@ -65,36 +30,15 @@ int64_t NowNs() {
       .count();
 }
 
-std::string FormatStamp(int64_t ns) {
-  return fmt::format("{}.{:09d}", ns / 1'000'000'000, std::abs(ns % 1'000'000'000));
-}
-
-Result<RigidTransform> ToRigidTransform(const rosmsg::Transform& t, std::string_view what) {
-  const rosmsg::Quaternion& q = t.rotation;
-  const double norm = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
-  if (std::isfinite(norm) && std::abs(norm - 1.0) > 1e-3) {
-    return InvalidArgumentError(fmt::format(
-        "{}: the quaternion ({}, {}, {}, {}) has norm {}, not 1", what, q.x, q.y, q.z, q.w, norm));
-  }
-  Result<RigidTransform> X = rosmsg::FromTransformMsg(t);
-  if (!X.ok()) return X.status().WithContext(what);
-  return X;
-}
+std::string FormatStamp(int64_t ns) { return rosmsg::FormatStamp(ns); }
 
 const OptionTable<CameraTopicsOptions>& CameraTopicsOptionTable() {
   static const auto* table = [] {
     using O = CameraTopicsOptions;
     auto* t = new OptionTable<O>("camera topic option");
-    t->Text("color_topic", &O::color_topic, "colour image (rgb8, bgr8)");
-    t->Text("depth_topic", &O::depth_topic, "depth aligned to colour (16UC1 mm, 32FC1 m)");
-    t->Text("camera_info_topic", &O::camera_info_topic, "the colour camera's CameraInfo");
-    t->Text("base_frame", &O::base_frame, "the map's frame: the arm's base");
-    t->Text("camera_frame", &O::camera_frame,
-            "the camera's optical frame (empty: the colour image's frame_id)");
+    rosmsg::AddCameraTopicOptions(*t);
     t->Flag("best_effort", &O::best_effort,
             "subscribe to images best-effort (sensor data QoS); false: reliable");
-    t->Real("max_pair_skew_ms", &O::max_pair_skew_ms, "ms", ValueRange::Closed(0, 1000),
-            "colour and depth stamps may differ by this much");
     t->Real("frame_timeout_s", &O::frame_timeout_s, "s", ValueRange::LeftOpen(0, 600),
             "wait at most this long for a frame pair");
     t->Real("tf_timeout_s", &O::tf_timeout_s, "s", ValueRange::Closed(0, 600),
@@ -105,14 +49,6 @@ const OptionTable<CameraTopicsOptions>& CameraTopicsOptionTable() {
             "simulator label topics for the oracle segmenter (empty: none)");
     t->Integer("queue", &O::queue, "", ValueRange::Closed(2, 120),
                "frames of each topic kept while waiting for a partner");
-    t->AddRule([](const O& o, std::vector<std::string>& errors) {
-      for (const auto& [key, value] : {std::pair{"color_topic", &o.color_topic},
-                                       {"depth_topic", &o.depth_topic},
-                                       {"camera_info_topic", &o.camera_info_topic},
-                                       {"base_frame", &o.base_frame}}) {
-        if (value->empty()) errors.push_back(fmt::format("{} is empty", key));
-      }
-    });
     return t;
   }();
   return *table;
@@ -194,87 +130,9 @@ Status Ros2RgbdSource::Subscribe() {
   return Status::Ok();
 }
 
-Result<ImageRgb8> Ros2RgbdSource::ColorFromMessage(const rosmsg::Image& msg,
-                                                   std::string_view topic) {
-  AVP_RETURN_IF_ERROR(CheckImage(msg, topic, /*is_color=*/true));
-  const bool rgb = msg.encoding == "rgb8";
-  const int w = static_cast<int>(msg.width);
-  const int h = static_cast<int>(msg.height);
-  ImageRgb8 out(w, h);
-  for (int v = 0; v < h; ++v) {
-    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
-    for (int u = 0; u < w; ++u) {
-      const uint8_t* p = row + 3 * u;
-      out.at(u, v, 0) = rgb ? p[0] : p[2];
-      out.at(u, v, 1) = p[1];
-      out.at(u, v, 2) = rgb ? p[2] : p[0];
-    }
-  }
-  return out;
-}
-
-Result<DepthImage> Ros2RgbdSource::DepthFromMessage(const rosmsg::Image& msg,
-                                                    std::string_view topic) {
-  AVP_RETURN_IF_ERROR(CheckImage(msg, topic, /*is_color=*/false));
-  const bool mm = msg.encoding == "16UC1" || msg.encoding == "mono16";
-  const int w = static_cast<int>(msg.width);
-  const int h = static_cast<int>(msg.height);
-  DepthImage out(w, h);
-  const bool swap = msg.is_bigendian != 0;
-  for (int v = 0; v < h; ++v) {
-    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
-    for (int u = 0; u < w; ++u) {
-      float z = 0.0f;
-      if (mm) {
-        const uint8_t* p = row + 2 * u;
-        const uint16_t raw = swap ? static_cast<uint16_t>((p[0] << 8) | p[1])
-                                  : static_cast<uint16_t>(p[0] | (p[1] << 8));
-        z = static_cast<float>(raw) * 0.001f;
-      } else {
-        uint8_t b[4];
-        std::memcpy(b, row + 4 * u, 4);
-        if (swap) {
-          std::swap(b[0], b[3]);
-          std::swap(b[1], b[2]);
-        }
-        std::memcpy(&z, b, 4);
-      }
-      out.at(u, v) = std::isfinite(z) && z > 0.0f ? z : 0.0f;
-    }
-  }
-  return out;
-}
-
-Result<CameraIntrinsics> Ros2RgbdSource::IntrinsicsFromCameraInfo(const rosmsg::CameraInfo& info,
-                                                                  const CameraIntrinsics& range) {
-  if (info.width == 0 || info.height == 0 || info.width > 16384 || info.height > 16384) {
-    return InvalidArgumentError(
-        fmt::format("CameraInfo (frame '{}'): size {}x{} is out of range (1..16384)",
-                    info.header.frame_id, info.width, info.height));
-  }
-  CameraIntrinsics K;
-  K.width = static_cast<int>(info.width);
-  K.height = static_cast<int>(info.height);
-  K.fx = info.k[0];
-  K.fy = info.k[4];
-  K.cx = info.k[2];
-  K.cy = info.k[5];
-  K.min_depth_m = range.min_depth_m;
-  K.max_depth_m = range.max_depth_m;
-  if (Status s = K.Validate(); !s.ok()) {
-    return InvalidArgumentError(fmt::format("CameraInfo (frame '{}') gives invalid intrinsics: {}",
-                                            info.header.frame_id, s.message()));
-  }
-  if (info.binning_x > 1 || info.binning_y > 1 || info.roi.width != 0 || info.roi.height != 0) {
-    return InvalidArgumentError(fmt::format(
-        "CameraInfo (frame '{}'): binning {}x{} or a region of interest {}x{} is not supported",
-        info.header.frame_id, info.binning_x, info.binning_y, info.roi.width, info.roi.height));
-  }
-  return K;
-}
-
 void Ros2RgbdSource::OnCameraInfo(rosmsg::CameraInfo&& msg) {
-  Result<CameraIntrinsics> K = IntrinsicsFromCameraInfo(msg, camera_);
+  Result<CameraIntrinsics> K =
+      rosmsg::FromCameraInfo(msg, camera_.min_depth_m, camera_.max_depth_m);
   std::lock_guard lock(mutex_);
   ++counters_.camera_info;
   if (!K.ok()) {
@@ -436,8 +294,8 @@ Result<robot::Observation> Ros2RgbdSource::Assemble(const rosmsg::Image& color,
                               options_.base_frame, camera_frame, FormatStamp(t),
                               options_.tf_timeout_s, X_WC.status().message()));
   }
-  AVP_ASSIGN_OR_RETURN(ImageRgb8 rgb, ColorFromMessage(color, options_.color_topic));
-  AVP_ASSIGN_OR_RETURN(DepthImage depth_m, DepthFromMessage(depth, options_.depth_topic));
+  AVP_ASSIGN_OR_RETURN(ImageRgb8 rgb, rosmsg::ColorFromImage(color, options_.color_topic));
+  AVP_ASSIGN_OR_RETURN(DepthImage depth_m, rosmsg::DepthFromImage(depth, options_.depth_topic));
   if (!rgb.SameSizeAs(depth_m) || !rgb.SameSizeAs(K.width, K.height)) {
     return InvalidArgumentError(fmt::format(
         "colour {}x{}, depth {}x{} and CameraInfo {}x{} differ: is the depth aligned to colour "
@@ -452,26 +310,9 @@ Result<robot::Observation> Ros2RgbdSource::Assemble(const rosmsg::Image& color,
   obs.frame.stamp_ns = t;
   obs.frame.frame_id = camera_frame;
   if (instance && cls) {
-    SimulatorLabels labels;
-    if (instance->encoding != "16UC1" || cls->encoding != "mono8" ||
-        !CheckLayout(*instance, options_.labels_prefix, 2).ok() ||
-        !CheckLayout(*cls, options_.labels_prefix, 1).ok() || instance->width != color.width ||
-        instance->height != color.height || cls->width != color.width ||
-        cls->height != color.height) {
-      return InvalidArgumentError(fmt::format(
-          "{}: label images must be 16UC1 (instance) and mono8 (class) of the colour size",
-          options_.labels_prefix));
-    }
-    labels.instance_ids = InstanceImage(K.width, K.height);
-    labels.class_ids = ClassImage(K.width, K.height);
-    for (int v = 0; v < K.height; ++v) {
-      const uint8_t* ir = instance->data.data() + static_cast<size_t>(v) * instance->step;
-      const uint8_t* cr = cls->data.data() + static_cast<size_t>(v) * cls->step;
-      for (int u = 0; u < K.width; ++u) {
-        labels.instance_ids.at(u, v) = static_cast<uint16_t>(ir[2 * u] | (ir[2 * u + 1] << 8));
-        labels.class_ids.at(u, v) = cr[u];
-      }
-    }
+    AVP_ASSIGN_OR_RETURN(
+        SimulatorLabels labels,
+        rosmsg::LabelsFromImages(*instance, *cls, K.width, K.height, options_.labels_prefix));
     labels.fruits = fruits;
     obs.labels = std::move(labels);
   }

@@ -1,6 +1,5 @@
 #include <fmt/format.h>
 
-#include <avp/live/ros2_rgbd_source.h>
 #include <avp/live/tf_listener.h>
 
 namespace avp::live {
@@ -26,17 +25,7 @@ Result<std::unique_ptr<TfListener>> TfListener::Create(ros2::Node& node, TfBuffe
 void TfListener::OnMessage(const rosmsg::TFMessage& msg, bool is_static) {
   for (const rosmsg::TransformStamped& t : msg.transforms) {
     ++received_;
-    const std::string what = fmt::format("{} '{}' -> '{}'", is_static ? "/tf_static" : "/tf",
-                                         t.header.frame_id, t.child_frame_id);
-    Status s = Status::Ok();
-    Result<RigidTransform> X = ToRigidTransform(t.transform, what);
-    if (X.ok()) {
-      s = buffer_.Add(t.header.frame_id, t.child_frame_id, *X, t.header.stamp.ToNanoseconds(),
-                      is_static);
-    } else {
-      s = X.status();
-    }
-    if (!s.ok()) {
+    if (Status s = buffer_.Add(t, is_static); !s.ok()) {
       ++refused_;
       std::lock_guard lock(mutex_);
       last_problem_ = s.message();

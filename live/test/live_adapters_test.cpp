@@ -1,7 +1,8 @@
 // The live adapters over DDS on loopback, against a fake camera and a fake arm in the same
-// process: image conversion and refusals, pairing by stamp, frames stamped before the capture,
-// a camera that stops, missing TF, a malformed sample, an arm that arrives, one that never does,
-// and a stop request.
+// process (the image conversions are rosmsg's: rosmsg/test/images_test.cpp, and
+// same_frames_test.cpp for every encoding through this source): refusals, pairing by stamp, frames
+// stamped before the capture, a camera that stops, missing TF, a malformed sample, an arm that
+// arrives, one that never does, and a stop request.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -70,18 +71,6 @@ rosmsg::Image DepthMm(int w, int h, uint16_t mm, int64_t stamp_ns) {
   return m;
 }
 
-rosmsg::Image DepthM(const std::vector<float>& z, int w, int h, int64_t stamp_ns) {
-  rosmsg::Image m;
-  m.header.stamp = rosmsg::Time::FromNanoseconds(stamp_ns);
-  m.width = static_cast<uint32_t>(w);
-  m.height = static_cast<uint32_t>(h);
-  m.encoding = "32FC1";
-  m.step = static_cast<uint32_t>(4 * w);
-  m.data.resize(4 * z.size());
-  std::memcpy(m.data.data(), z.data(), m.data.size());
-  return m;
-}
-
 rosmsg::CameraInfo Info(int w, int h) {
   rosmsg::CameraInfo info;
   info.header.frame_id = "camera_color_optical_frame";
@@ -90,62 +79,6 @@ rosmsg::CameraInfo Info(int w, int h) {
   info.distortion_model = "plumb_bob";
   info.k = {50.0, 0, (w - 1) / 2.0, 0, 50.0, (h - 1) / 2.0, 0, 0, 1};
   return info;
-}
-
-TEST(LiveImageTest, ColourAndDepthEncodingsConvert) {
-  const rosmsg::Image rgb = ColorImage(4, 3, "rgb8", 0);
-  const rosmsg::Image bgr = ColorImage(4, 3, "bgr8", 0);
-  auto a = Ros2RgbdSource::ColorFromMessage(rgb, "/c");
-  auto b = Ros2RgbdSource::ColorFromMessage(bgr, "/c");
-  ASSERT_TRUE(a.ok() && b.ok());
-  EXPECT_EQ(a->at(1, 1, 0), 10);
-  EXPECT_EQ(a->at(1, 1, 2), 30);
-  EXPECT_EQ(b->at(1, 1, 0), 30);  // bgr8: blue first on the wire
-  EXPECT_EQ(b->at(1, 1, 2), 10);
-
-  auto mm = Ros2RgbdSource::DepthFromMessage(DepthMm(4, 3, 1234, 0), "/d");
-  ASSERT_TRUE(mm.ok());
-  EXPECT_FLOAT_EQ(mm->at(2, 2), 1.234f);
-  rosmsg::Image be = DepthMm(4, 3, 0x0102, 0);
-  be.is_bigendian = 1;  // the bytes 02 01 read big-endian: 0x0201
-  EXPECT_FLOAT_EQ(Ros2RgbdSource::DepthFromMessage(be, "/d")->at(0, 0), 0x0201 * 0.001f);
-
-  const float nan = std::nanf("");
-  auto m = Ros2RgbdSource::DepthFromMessage(
-      DepthM({1.5f, nan, 0.0f, -2.0f, INFINITY, 0.7f}, 3, 2, 0), "/d");
-  ASSERT_TRUE(m.ok());
-  EXPECT_FLOAT_EQ(m->at(0, 0), 1.5f);
-  EXPECT_EQ(m->at(1, 0), 0.0f);  // NaN: no return
-  EXPECT_EQ(m->at(2, 0), 0.0f);
-  EXPECT_EQ(m->at(0, 1), 0.0f);  // negative
-  EXPECT_EQ(m->at(1, 1), 0.0f);  // infinite
-  EXPECT_FLOAT_EQ(m->at(2, 1), 0.7f);
-}
-
-TEST(LiveImageTest, BadImagesAreRefusedByName) {
-  EXPECT_THAT(Ros2RgbdSource::ColorFromMessage(ColorImage(4, 3, "yuv422", 0), "/cam/color")
-                  .status()
-                  .message(),
-              HasSubstr("/cam/color: colour encoding 'yuv422' is not supported (rgb8, bgr8)"));
-  rosmsg::Image short_step = ColorImage(4, 3, "rgb8", 0);
-  short_step.step = 10;
-  EXPECT_THAT(Ros2RgbdSource::ColorFromMessage(short_step, "/c").status().message(),
-              HasSubstr("step 10 is shorter than a row"));
-  rosmsg::Image truncated = ColorImage(4, 3, "rgb8", 0);
-  truncated.data.resize(20);
-  EXPECT_THAT(Ros2RgbdSource::ColorFromMessage(truncated, "/c").status().message(),
-              HasSubstr("data holds 20 bytes, but step 12 x height 3 = 36"));
-  rosmsg::Image empty = ColorImage(4, 3, "rgb8", 0);
-  empty.width = 0;
-  EXPECT_THAT(Ros2RgbdSource::ColorFromMessage(empty, "/c").status().message(),
-              HasSubstr("out of range"));
-  EXPECT_THAT(
-      Ros2RgbdSource::DepthFromMessage(ColorImage(4, 3, "rgb8", 0), "/d").status().message(),
-      HasSubstr("depth encoding 'rgb8' is not supported"));
-  rosmsg::CameraInfo info = Info(4, 3);
-  info.k[0] = 0.0;
-  EXPECT_THAT(Ros2RgbdSource::IntrinsicsFromCameraInfo(info, CameraIntrinsics{}).status().message(),
-              HasSubstr("invalid intrinsics"));
 }
 
 /// A fake RealSense + robot_state_publisher on one node, avp's live side on another.

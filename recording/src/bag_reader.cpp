@@ -1,9 +1,6 @@
 #include <algorithm>
-#include <bit>
 #include <cmath>
-#include <cstring>
 #include <limits>
-#include <set>
 #include <utility>
 
 #include <fmt/format.h>
@@ -15,308 +12,16 @@
 #include <avp/recording/encode.h>
 #include <avp/recording/layout.h>
 #include <avp/rosmsg/convert.h>
+#include <avp/rosmsg/images.h>
+#include <avp/rosmsg/tf_buffer.h>
 
 namespace avp::recording {
 
 namespace {
 
-constexpr uint32_t kMaxImageSide = 16384;
-
-std::string Stamp(int64_t ns) {
-  const int64_t s = ns >= 0 ? ns / 1'000'000'000 : -((-ns + 999'999'999) / 1'000'000'000);
-  return fmt::format("{}.{:09d}", s, ns - s * 1'000'000'000);
-}
-
-/// An image's size, step and data length for `bytes_per_pixel`.
-Status CheckLayout(const rosmsg::Image& msg, std::string_view topic, int bytes_per_pixel) {
-  if (msg.width == 0 || msg.height == 0 || msg.width > kMaxImageSide ||
-      msg.height > kMaxImageSide) {
-    return InvalidArgumentError(fmt::format("{}: image size {}x{} is out of range (1..{})", topic,
-                                            msg.width, msg.height, kMaxImageSide));
-  }
-  const uint64_t row = uint64_t{msg.width} * static_cast<uint64_t>(bytes_per_pixel);
-  if (msg.step < row) {
-    return InvalidArgumentError(
-        fmt::format("{}: step {} is shorter than a row of {} '{}' pixels ({} bytes)", topic,
-                    msg.step, msg.width, EscapeText(msg.encoding), row));
-  }
-  const uint64_t expected = uint64_t{msg.step} * msg.height;
-  if (msg.data.size() != expected) {
-    return InvalidArgumentError(fmt::format("{}: data holds {} bytes, but step {} x height {} = {}",
-                                            topic, msg.data.size(), msg.step, msg.height,
-                                            expected));
-  }
-  return Status::Ok();
-}
-
-uint16_t U16(const uint8_t* p, bool big) {
-  return big ? static_cast<uint16_t>((p[0] << 8) | p[1])
-             : static_cast<uint16_t>(p[0] | (p[1] << 8));
-}
-
-/// A frame name as tf2 keys it: without a leading '/' (ROS 1 bags and old drivers write one).
-std::string FrameName(std::string_view name) {
-  return std::string(!name.empty() && name.front() == '/' ? name.substr(1) : name);
-}
-
-RigidTransform Interpolate(const RigidTransform& a, const RigidTransform& b, double t) {
-  const Eigen::Quaterniond qa = a.quaternion();
-  const Eigen::Quaterniond qb = b.quaternion();
-  const Eigen::Vector3d p = (1.0 - t) * a.translation() + t * b.translation();
-  return RigidTransform(qa.slerp(t, qb).normalized(), p);
-}
+std::string Stamp(int64_t ns) { return rosmsg::FormatStamp(ns); }
 
 }  // namespace
-
-// ---- Images, CameraInfo -------------------------------------------------------------------------
-
-Result<ImageRgb8> ColorFromImageMsg(const rosmsg::Image& msg, std::string_view topic) {
-  int bpp = 0;
-  int r = 0, g = 1, b = 2;
-  if (msg.encoding == "rgb8") {
-    bpp = 3;
-  } else if (msg.encoding == "bgr8") {
-    bpp = 3;
-    r = 2;
-    b = 0;
-  } else if (msg.encoding == "rgba8") {
-    bpp = 4;
-  } else if (msg.encoding == "bgra8") {
-    bpp = 4;
-    r = 2;
-    b = 0;
-  } else if (msg.encoding == "mono8") {
-    bpp = 1;
-    r = g = b = 0;
-  } else {
-    return InvalidArgumentError(
-        fmt::format("{}: colour encoding {} is not supported (rgb8, bgr8, rgba8, bgra8, mono8)",
-                    topic, QuoteText(msg.encoding)));
-  }
-  AVP_RETURN_IF_ERROR(CheckLayout(msg, topic, bpp));
-  const int w = static_cast<int>(msg.width);
-  const int h = static_cast<int>(msg.height);
-  ImageRgb8 out(w, h);
-  for (int v = 0; v < h; ++v) {
-    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
-    for (int u = 0; u < w; ++u) {
-      const uint8_t* p = row + static_cast<size_t>(bpp) * u;
-      out.at(u, v, 0) = p[r];
-      out.at(u, v, 1) = p[g];
-      out.at(u, v, 2) = p[b];
-    }
-  }
-  return out;
-}
-
-Result<DepthImage> DepthFromImageMsg(const rosmsg::Image& msg, std::string_view topic) {
-  const bool mm = msg.encoding == "16UC1" || msg.encoding == "mono16";
-  if (!mm && msg.encoding != "32FC1") {
-    return InvalidArgumentError(fmt::format(
-        "{}: depth encoding {} is not supported (32FC1 in metres, 16UC1 in millimetres)", topic,
-        QuoteText(msg.encoding)));
-  }
-  AVP_RETURN_IF_ERROR(CheckLayout(msg, topic, mm ? 2 : 4));
-  const int w = static_cast<int>(msg.width);
-  const int h = static_cast<int>(msg.height);
-  DepthImage out(w, h);
-  const bool big = msg.is_bigendian != 0;
-  for (int v = 0; v < h; ++v) {
-    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
-    for (int u = 0; u < w; ++u) {
-      if (mm) {
-        out.at(u, v) = static_cast<float>(U16(row + 2 * u, big)) * 0.001f;
-        continue;
-      }
-      uint8_t bytes[4];
-      std::memcpy(bytes, row + 4 * u, 4);
-      if (big) {
-        std::swap(bytes[0], bytes[3]);
-        std::swap(bytes[1], bytes[2]);
-      }
-      float z;
-      std::memcpy(&z, bytes, 4);
-      if (std::isfinite(z) && (z < 0.0f || (z != 0.0f && !std::isnormal(z)))) {
-        return InvalidArgumentError(fmt::format(
-            "{}: depth {} m at pixel ({}, {}) (stamp {}): a 32FC1 depth must be >= 0 (NaN or "
-            "inf: no return)",
-            topic, z, u, v, Stamp(msg.header.stamp.ToNanoseconds())));
-      }
-      out.at(u, v) = z;
-    }
-  }
-  return out;
-}
-
-Result<CameraIntrinsics> IntrinsicsFromCameraInfoMsg(const rosmsg::CameraInfo& info,
-                                                     double min_depth_m, double max_depth_m) {
-  if (info.width == 0 || info.height == 0 || info.width > kMaxImageSide ||
-      info.height > kMaxImageSide) {
-    return InvalidArgumentError(
-        fmt::format("CameraInfo (frame {}): size {}x{} is out of range (1..{})",
-                    QuoteText(info.header.frame_id), info.width, info.height, kMaxImageSide));
-  }
-  CameraIntrinsics K;
-  K.width = static_cast<int>(info.width);
-  K.height = static_cast<int>(info.height);
-  K.fx = info.k[0];
-  K.fy = info.k[4];
-  K.cx = info.k[2];
-  K.cy = info.k[5];
-  K.min_depth_m = min_depth_m;
-  K.max_depth_m = max_depth_m;
-  if (Status s = K.Validate(); !s.ok()) {
-    return InvalidArgumentError(fmt::format("CameraInfo (frame {}) gives invalid intrinsics: {}",
-                                            QuoteText(info.header.frame_id), s.message()));
-  }
-  if (info.binning_x > 1 || info.binning_y > 1 || info.roi.width != 0 || info.roi.height != 0) {
-    return InvalidArgumentError(fmt::format(
-        "CameraInfo (frame {}): binning {}x{} or a region of interest {}x{} is not supported",
-        QuoteText(info.header.frame_id), info.binning_x, info.binning_y, info.roi.width,
-        info.roi.height));
-  }
-  return K;
-}
-
-// ---- TF -----------------------------------------------------------------------------------------
-
-Status TfTree::Add(const rosmsg::TransformStamped& t, bool is_static) {
-  const std::string parent = FrameName(t.header.frame_id);
-  const std::string child = FrameName(t.child_frame_id);
-  const int64_t stamp_ns = t.header.stamp.ToNanoseconds();
-  if (parent.empty() || child.empty() || parent == child) {
-    return InvalidArgumentError(
-        fmt::format("transform {} -> {} at {}: frames must be non-empty and differ",
-                    QuoteText(parent), QuoteText(child), Stamp(stamp_ns)));
-  }
-  const rosmsg::Quaternion& q = t.transform.rotation;
-  const double norm = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
-  if (!std::isfinite(norm) || std::abs(norm - 1.0) > 1e-3) {
-    return InvalidArgumentError(fmt::format(
-        "transform {} -> {} at {}: the quaternion ({}, {}, {}, {}) has norm {}, not 1",
-        QuoteText(parent), QuoteText(child), Stamp(stamp_ns), q.x, q.y, q.z, q.w, norm));
-  }
-  Result<RigidTransform> X = rosmsg::FromTransformMsg(t.transform);
-  if (!X.ok()) {
-    return X.status().WithContext(fmt::format("transform {} -> {} at {}", QuoteText(parent),
-                                              QuoteText(child), Stamp(stamp_ns)));
-  }
-  auto [it, inserted] = edges_.try_emplace(child);
-  Edge& edge = it->second;
-  if (inserted) {
-    edge.parent = parent;
-    edge.is_static = is_static;
-  } else if (edge.parent != parent) {
-    return InvalidArgumentError(
-        fmt::format("frame {} already has parent {}; refusing {} as its parent", QuoteText(child),
-                    QuoteText(edge.parent), QuoteText(parent)));
-  }
-  if (is_static || edge.is_static) {
-    edge.is_static = true;
-    edge.samples.assign(1, Sample{stamp_ns, *X});
-    return Status::Ok();
-  }
-  std::vector<Sample>& samples = edge.samples;
-  if (samples.empty() || stamp_ns >= samples.back().stamp_ns) {
-    samples.push_back(Sample{stamp_ns, *X});
-  } else {  // out of order (two publishers): in place
-    auto pos = std::upper_bound(samples.begin(), samples.end(), stamp_ns,
-                                [](int64_t when, const Sample& x) { return when < x.stamp_ns; });
-    samples.insert(pos, Sample{stamp_ns, *X});
-  }
-  return Status::Ok();
-}
-
-std::vector<std::string> TfTree::Frames() const {
-  std::set<std::string> frames;
-  for (const auto& [child, edge] : edges_) {
-    frames.insert(child);
-    frames.insert(edge.parent);
-  }
-  return {frames.begin(), frames.end()};
-}
-
-std::vector<std::string> TfTree::ChainToRoot(const std::string& frame) const {
-  std::vector<std::string> chain{frame};  // frame, its parent, ..., the root
-  for (size_t guard = 0; guard <= edges_.size(); ++guard) {
-    auto it = edges_.find(chain.back());
-    if (it == edges_.end()) break;
-    chain.push_back(it->second.parent);
-  }
-  return chain;
-}
-
-Result<RigidTransform> TfTree::EdgeAt(const std::string& child, const Edge& edge, int64_t stamp_ns,
-                                      int64_t tolerance_ns) const {
-  const std::vector<Sample>& s = edge.samples;
-  if (edge.is_static) return s.front().X_PC;
-  auto hi = std::lower_bound(s.begin(), s.end(), stamp_ns,
-                             [](const Sample& x, int64_t t) { return x.stamp_ns < t; });
-  if (hi != s.end() && hi->stamp_ns == stamp_ns) return hi->X_PC;
-  if (hi == s.begin() || hi == s.end()) {
-    const Sample& nearest = hi == s.end() ? s.back() : s.front();
-    const int64_t gap =
-        nearest.stamp_ns > stamp_ns ? nearest.stamp_ns - stamp_ns : stamp_ns - nearest.stamp_ns;
-    if (gap <= tolerance_ns) return nearest.X_PC;
-    return OutOfRangeError(fmt::format(
-        "transform {} -> {} at {}: the nearest sample is {:.1f} ms {} ({}), beyond the tolerance "
-        "of {:.1f} ms",
-        QuoteText(edge.parent), QuoteText(child), Stamp(stamp_ns), static_cast<double>(gap) / 1e6,
-        hi == s.end() ? "earlier" : "later", Stamp(nearest.stamp_ns),
-        static_cast<double>(tolerance_ns) / 1e6));
-  }
-  auto lo = hi - 1;
-  if (lo->X_PC.translation() == hi->X_PC.translation() &&
-      lo->X_PC.rotation() == hi->X_PC.rotation()) {
-    return lo->X_PC;  // at rest: exactly
-  }
-  const double t = static_cast<double>(stamp_ns - lo->stamp_ns) /
-                   static_cast<double>(hi->stamp_ns - lo->stamp_ns);
-  return Interpolate(lo->X_PC, hi->X_PC, t);
-}
-
-Result<RigidTransform> TfTree::Lookup(const std::string& target_frame,
-                                      const std::string& source_frame, int64_t stamp_ns,
-                                      int64_t tolerance_ns) const {
-  const std::string target = FrameName(target_frame);
-  const std::string source = FrameName(source_frame);
-  if (target == source) return RigidTransform::Identity();
-  const std::vector<std::string> frames = Frames();
-  for (const std::string& f : {target, source}) {
-    if (!std::binary_search(frames.begin(), frames.end(), f)) {
-      return NotFoundError(
-          fmt::format("frame {} is not in the bag's transforms (frames: {})", QuoteText(f),
-                      EscapeText(fmt::format("{}", fmt::join(frames, ", ")), 400)));
-    }
-  }
-  const std::vector<std::string> up_s = ChainToRoot(source);
-  const std::vector<std::string> up_t = ChainToRoot(target);
-  if (up_s.back() != up_t.back()) {
-    return NotFoundError(fmt::format(
-        "frames {} and {} are not connected in the bag's transforms: their trees have roots {} "
-        "and {}",
-        QuoteText(target), QuoteText(source), QuoteText(up_t.back()), QuoteText(up_s.back())));
-  }
-  size_t common = 0;
-  while (common < up_s.size() && common < up_t.size() &&
-         up_s[up_s.size() - 1 - common] == up_t[up_t.size() - 1 - common]) {
-    ++common;
-  }
-  // up_x[0 .. size - common - 1] are the frames below the lowest common ancestor.
-  RigidTransform X_AS;
-  for (size_t i = up_s.size() - common; i-- > 0;) {
-    const Edge& e = edges_.find(up_s[i])->second;
-    AVP_ASSIGN_OR_RETURN(const RigidTransform X_PC, EdgeAt(up_s[i], e, stamp_ns, tolerance_ns));
-    X_AS = X_AS * X_PC;
-  }
-  RigidTransform X_AT;
-  for (size_t i = up_t.size() - common; i-- > 0;) {
-    const Edge& e = edges_.find(up_t[i])->second;
-    AVP_ASSIGN_OR_RETURN(const RigidTransform X_PC, EdgeAt(up_t[i], e, stamp_ns, tolerance_ns));
-    X_AT = X_AT * X_PC;
-  }
-  return X_AT.inverse() * X_AS;
-}
 
 // ---- Options ------------------------------------------------------------------------------------
 
@@ -324,18 +29,11 @@ const OptionTable<BagReadOptions>& BagReadOptionTable() {
   static const auto* table = [] {
     using O = BagReadOptions;
     auto* t = new OptionTable<O>("bag option");
-    t->Text("color_topic", &O::color_topic, "colour image (rgb8, bgr8, rgba8, bgra8, mono8)");
-    t->Text("depth_topic", &O::depth_topic, "depth aligned to colour (32FC1 m, 16UC1 mm)");
-    t->Text("camera_info_topic", &O::camera_info_topic, "the colour camera's CameraInfo");
+    rosmsg::AddCameraTopicOptions(*t);
     t->Text("tf_topic", &O::tf_topic, "dynamic transforms (tf2_msgs/TFMessage)");
     t->Text("tf_static_topic", &O::tf_static_topic, "static transforms (tf2_msgs/TFMessage)");
-    t->Text("base_frame", &O::base_frame, "the map's frame: the arm's base");
-    t->Text("camera_frame", &O::camera_frame,
-            "the camera's optical frame (empty: the colour image's frame_id)");
     t->Text("labels_prefix", &O::labels_prefix,
             "simulator label images PREFIX/instance, PREFIX/class (empty: none)");
-    t->Real("max_pair_skew_ms", &O::max_pair_skew_ms, "ms", ValueRange::Closed(0, 1000),
-            "colour and depth stamps may differ by this much");
     t->Real("tf_tolerance_ms", &O::tf_tolerance_ms, "ms", ValueRange::Closed(0, 10000),
             "outside a TF edge's samples, its nearest one within this much is used");
     t->Real("frame_rate_hz", &O::frame_rate_hz, "Hz", ValueRange::Closed(0, 1000),
@@ -347,12 +45,6 @@ const OptionTable<BagReadOptions>& BagReadOptionTable() {
     t->Flag("as_robot_bag", &O::as_robot_bag,
             "read an avp recording like a robot's bag (images, CameraInfo, TF; no /avp/step)");
     t->AddRule([](const O& o, std::vector<std::string>& errors) {
-      for (const auto& [key, value] : {std::pair{"color_topic", &o.color_topic},
-                                       {"depth_topic", &o.depth_topic},
-                                       {"camera_info_topic", &o.camera_info_topic},
-                                       {"base_frame", &o.base_frame}}) {
-        if (value->empty()) errors.push_back(fmt::format("{} is empty", key));
-      }
       if (!(o.min_depth_m > 0.0) || !(o.max_depth_m > o.min_depth_m) ||
           !std::isfinite(o.max_depth_m)) {
         errors.push_back(fmt::format("depth range [{}, {}] m must satisfy 0 < min < max",
@@ -384,7 +76,12 @@ struct TopicMessages {
 
 class Reader {
  public:
-  Reader(const BagReadOptions& options, Bag& bag) : o_(options), bag_(bag) {}
+  Reader(const BagReadOptions& options, Bag& bag)
+      : o_(options),
+        bag_(bag),
+        // The whole bag is kept; its tolerance on both sides of an edge's samples.
+        tf_(rosmsg::TfBuffer::Options{.cache_s = 0.0,
+                                      .extrapolation_s = options.tf_tolerance_ms * 1e-3}) {}
 
   /// Keeps `view`, unless the views would then hold more than max_decoded_mb.
   Status Keep(BagView view) {
@@ -495,8 +192,7 @@ class Reader {
       return NotFoundError(fmt::format("no transforms on {} or {}", QuoteText(o_.tf_topic),
                                        QuoteText(o_.tf_static_topic)));
     }
-    return tf_.Lookup(o_.base_frame, camera_frame, stamp_ns,
-                      static_cast<int64_t>(std::llround(o_.tf_tolerance_ms * 1e6)));
+    return tf_.Lookup(o_.base_frame, camera_frame, stamp_ns);
   }
 
   /// The CameraInfo nearest in time to `stamp_ns` (the latest at or before it, else the first
@@ -523,7 +219,7 @@ class Reader {
     auto it = std::upper_bound(infos_.begin(), infos_.end(), stamp_ns,
                                [](int64_t t, const auto& x) { return t < x.first; });
     const rosmsg::CameraInfo& info = it == infos_.begin() ? it->second : std::prev(it)->second;
-    return IntrinsicsFromCameraInfoMsg(info, o_.min_depth_m, o_.max_depth_m);
+    return rosmsg::FromCameraInfo(info, o_.min_depth_m, o_.max_depth_m);
   }
 
   /// Simulator labels at log time `t` (both images), when the bag has them.
@@ -541,33 +237,8 @@ class Reader {
     if (mi == nullptr || mc == nullptr) return std::optional<SimulatorLabels>();
     AVP_ASSIGN_OR_RETURN(const rosmsg::Image i, rosmsg::Decode<rosmsg::Image>(mi->data));
     AVP_ASSIGN_OR_RETURN(const rosmsg::Image c, rosmsg::Decode<rosmsg::Image>(mc->data));
-    if (i.encoding != "16UC1" && i.encoding != "mono16") {
-      return InvalidArgumentError(fmt::format("{}: encoding {} (16UC1 or mono16 instance ids)",
-                                              inst_topic, QuoteText(i.encoding)));
-    }
-    if (c.encoding != "mono8" && c.encoding != "8UC1") {
-      return InvalidArgumentError(
-          fmt::format("{}: encoding {} (mono8 classes)", class_topic, QuoteText(c.encoding)));
-    }
-    AVP_RETURN_IF_ERROR(CheckLayout(i, inst_topic, 2));
-    AVP_RETURN_IF_ERROR(CheckLayout(c, class_topic, 1));
-    if (static_cast<int>(i.width) != width || static_cast<int>(i.height) != height ||
-        static_cast<int>(c.width) != width || static_cast<int>(c.height) != height) {
-      return InvalidArgumentError(
-          fmt::format("label images {}x{} and {}x{} do not match the {}x{} colour image", i.width,
-                      i.height, c.width, c.height, width, height));
-    }
-    SimulatorLabels labels;
-    labels.instance_ids = InstanceImage(width, height);
-    labels.class_ids = ClassImage(width, height);
-    for (int v = 0; v < height; ++v) {
-      const uint8_t* ri = i.data.data() + static_cast<size_t>(v) * i.step;
-      const uint8_t* rc = c.data.data() + static_cast<size_t>(v) * c.step;
-      for (int u = 0; u < width; ++u) {
-        labels.instance_ids.at(u, v) = U16(ri + 2 * u, i.is_bigendian != 0);
-        labels.class_ids.at(u, v) = rc[u];
-      }
-    }
+    AVP_ASSIGN_OR_RETURN(SimulatorLabels labels,
+                         rosmsg::LabelsFromImages(i, c, width, height, o_.labels_prefix));
     return std::optional<SimulatorLabels>(std::move(labels));
   }
 
@@ -575,8 +246,8 @@ class Reader {
   Result<RgbdFrame> Frame(const rosmsg::Image& color, const rosmsg::Image& depth,
                           const TopicMessages& infos) {
     RgbdFrame frame;
-    AVP_ASSIGN_OR_RETURN(frame.rgb, ColorFromImageMsg(color, o_.color_topic));
-    AVP_ASSIGN_OR_RETURN(frame.depth_m, DepthFromImageMsg(depth, o_.depth_topic));
+    AVP_ASSIGN_OR_RETURN(frame.rgb, rosmsg::ColorFromImage(color, o_.color_topic));
+    AVP_ASSIGN_OR_RETURN(frame.depth_m, rosmsg::DepthFromImage(depth, o_.depth_topic));
     frame.stamp_ns = color.header.stamp.ToNanoseconds();
     AVP_ASSIGN_OR_RETURN(frame.K, Intrinsics(infos, frame.stamp_ns));
     if (!frame.depth_m.SameSizeAs(frame.rgb) || frame.K.width != frame.rgb.width() ||
@@ -787,7 +458,7 @@ class Reader {
   const BagReadOptions& o_;
   Bag& bag_;
   std::map<std::string, TopicMessages> topics_;
-  TfTree tf_;
+  rosmsg::TfBuffer tf_;
   std::vector<std::pair<int64_t, rosmsg::CameraInfo>> infos_;
   uint64_t decoded_bytes_ = 0;
 };

@@ -14,52 +14,12 @@
 #include <avp/mapping/octomap_io.h>
 #include <avp/recording/layout.h>
 #include <avp/rosmsg/convert.h>
+#include <avp/rosmsg/images.h>
 
 namespace avp::recording {
 namespace {
 
 using nlohmann::json;
-
-template <class T>
-rosmsg::Image RawImage(const Image<T, 1>& image, std::string_view encoding,
-                       const rosmsg::Header& header, int channels_bytes) {
-  rosmsg::Image m;
-  m.header = header;
-  m.height = static_cast<uint32_t>(image.height());
-  m.width = static_cast<uint32_t>(image.width());
-  m.encoding = std::string(encoding);
-  m.is_bigendian = 0;
-  m.step = static_cast<uint32_t>(image.width() * channels_bytes);
-  const auto data = image.data();
-  m.data.resize(data.size_bytes());
-  // avp runs on little-endian hosts (as the CDR writer); copy the values' bytes as they are.
-  static_assert(std::endian::native == std::endian::little);
-  std::memcpy(m.data.data(), data.data(), data.size_bytes());
-  return m;
-}
-
-Status CheckImage(const rosmsg::Image& msg, std::string_view want, uint32_t bytes_per_pixel) {
-  const uint64_t row = static_cast<uint64_t>(msg.width) * bytes_per_pixel;
-  if (msg.step < row || static_cast<uint64_t>(msg.step) * msg.height != msg.data.size() ||
-      msg.width > static_cast<uint32_t>(std::numeric_limits<int>::max()) ||
-      msg.height > static_cast<uint32_t>(std::numeric_limits<int>::max())) {
-    return InvalidArgumentError(fmt::format(
-        "{} image {}x{} ({}): step {} and {} data bytes do not agree with {} bytes per pixel", want,
-        msg.width, msg.height, msg.encoding, msg.step, msg.data.size(), bytes_per_pixel));
-  }
-  if (msg.is_bigendian != 0 && bytes_per_pixel > 1) {
-    return InvalidArgumentError(
-        fmt::format("{} image ({}): big-endian data is not supported", want, msg.encoding));
-  }
-  return Status::Ok();
-}
-
-template <class T>
-T LoadLe(const uint8_t* p) {
-  T v;
-  std::memcpy(&v, p, sizeof(T));
-  return v;
-}
 
 using rosmsg::Rgba;
 using rosmsg::Viridis;
@@ -247,112 +207,20 @@ Result<std::string> OctomapBinaryTree(const mapping::OccupancyGrid& grid) {
   return BinaryTreeWriter(blocks).Write();
 }
 
-rosmsg::Image ColorImageMsg(const ImageRgb8& rgb, const rosmsg::Header& header) {
-  rosmsg::Image m;
-  m.header = header;
-  m.height = static_cast<uint32_t>(rgb.height());
-  m.width = static_cast<uint32_t>(rgb.width());
-  m.encoding = std::string(kColorEncoding);
-  m.step = static_cast<uint32_t>(rgb.width() * 3);
-  m.data.assign(rgb.data().begin(), rgb.data().end());
-  return m;
-}
-
-rosmsg::Image DepthImageMsg(const DepthImage& depth_m, const rosmsg::Header& header) {
-  return RawImage(depth_m, kDepthEncoding, header, 4);
-}
-
-rosmsg::Image U16ImageMsg(const InstanceImage& image, std::string_view encoding,
-                          const rosmsg::Header& header) {
-  return RawImage(image, encoding, header, 2);
-}
-
-rosmsg::Image ClassImageMsg(const ClassImage& image, const rosmsg::Header& header) {
-  return RawImage(image, kSimClassEncoding, header, 1);
-}
-
-rosmsg::CameraInfo CameraInfoMsg(const CameraIntrinsics& K, const rosmsg::Header& header) {
-  rosmsg::CameraInfo m;
-  m.header = header;
-  m.width = static_cast<uint32_t>(K.width);
-  m.height = static_cast<uint32_t>(K.height);
-  m.distortion_model = "plumb_bob";
-  m.d = {0.0, 0.0, 0.0, 0.0, 0.0};
-  m.k = {K.fx, 0.0, K.cx, 0.0, K.fy, K.cy, 0.0, 0.0, 1.0};
-  m.r = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
-  m.p = {K.fx, 0.0, K.cx, 0.0, 0.0, K.fy, K.cy, 0.0, 0.0, 0.0, 1.0, 0.0};
-  return m;
-}
-
 Result<ImageRgb8> ColorFromMsg(const rosmsg::Image& msg) {
-  const bool bgr = msg.encoding == "bgr8";
-  if (msg.encoding != "rgb8" && !bgr) {
-    return InvalidArgumentError(
-        fmt::format("colour image: encoding '{}' is not supported (rgb8, bgr8)", msg.encoding));
-  }
-  AVP_RETURN_IF_ERROR(CheckImage(msg, "colour", 3));
-  ImageRgb8 out(static_cast<int>(msg.width), static_cast<int>(msg.height));
-  for (uint32_t v = 0; v < msg.height; ++v) {
-    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
-    for (uint32_t u = 0; u < msg.width; ++u) {
-      for (int c = 0; c < 3; ++c) {
-        out.at(static_cast<int>(u), static_cast<int>(v), c) = row[u * 3 + (bgr ? 2 - c : c)];
-      }
-    }
-  }
-  return out;
+  return rosmsg::ColorFromImage(msg, kColorTopic);
 }
 
 Result<DepthImage> DepthFromMsg(const rosmsg::Image& msg) {
-  const bool metres = msg.encoding == "32FC1";
-  const bool mm = msg.encoding == "16UC1" || msg.encoding == "mono16";
-  if (!metres && !mm) {
-    return InvalidArgumentError(
-        fmt::format("depth image: encoding '{}' is not supported (32FC1 metres, 16UC1 millimetres)",
-                    msg.encoding));
-  }
-  AVP_RETURN_IF_ERROR(CheckImage(msg, "depth", metres ? 4 : 2));
-  DepthImage out(static_cast<int>(msg.width), static_cast<int>(msg.height));
-  for (uint32_t v = 0; v < msg.height; ++v) {
-    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
-    for (uint32_t u = 0; u < msg.width; ++u) {
-      out.at(static_cast<int>(u), static_cast<int>(v)) =
-          metres ? LoadLe<float>(row + 4 * u)
-                 : static_cast<float>(LoadLe<uint16_t>(row + 2 * u)) * 0.001f;
-    }
-  }
-  return out;
+  return rosmsg::DepthFromImage(msg, kDepthTopic);
 }
 
 Result<InstanceImage> U16FromMsg(const rosmsg::Image& msg) {
-  if (msg.encoding != "16UC1" && msg.encoding != "mono16") {
-    return InvalidArgumentError(fmt::format(
-        "instance image: encoding '{}' is not supported (16UC1, mono16)", msg.encoding));
-  }
-  AVP_RETURN_IF_ERROR(CheckImage(msg, "instance", 2));
-  InstanceImage out(static_cast<int>(msg.width), static_cast<int>(msg.height));
-  for (uint32_t v = 0; v < msg.height; ++v) {
-    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
-    for (uint32_t u = 0; u < msg.width; ++u) {
-      out.at(static_cast<int>(u), static_cast<int>(v)) = LoadLe<uint16_t>(row + 2 * u);
-    }
-  }
-  return out;
+  return rosmsg::InstanceIdsFromImage(msg, kInstanceImageTopic);
 }
 
 Result<ClassImage> ClassFromMsg(const rosmsg::Image& msg) {
-  if (msg.encoding != "mono8" && msg.encoding != "8UC1") {
-    return InvalidArgumentError(
-        fmt::format("class image: encoding '{}' is not supported (mono8, 8UC1)", msg.encoding));
-  }
-  AVP_RETURN_IF_ERROR(CheckImage(msg, "class", 1));
-  ClassImage out(static_cast<int>(msg.width), static_cast<int>(msg.height));
-  for (uint32_t v = 0; v < msg.height; ++v) {
-    const uint8_t* row = msg.data.data() + static_cast<size_t>(v) * msg.step;
-    for (uint32_t u = 0; u < msg.width; ++u)
-      out.at(static_cast<int>(u), static_cast<int>(v)) = row[u];
-  }
-  return out;
+  return rosmsg::ClassIdsFromImage(msg, kSimClassTopic);
 }
 
 InstanceImage InstanceIdImage(const Segmentation& s) {

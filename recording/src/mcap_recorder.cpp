@@ -4,6 +4,7 @@
 
 #include <avp/recording/encode.h>
 #include <avp/rosmsg/convert.h>
+#include <avp/rosmsg/images.h>
 #include <avp/rosmsg/messages.h>
 
 namespace avp::recording {
@@ -105,9 +106,9 @@ Status McapRecorder::WriteView(const pipeline::StepRecord& step, const pipeline:
   if (obs != nullptr) {
     const RgbdFrame& f = obs->frame;
     const rosmsg::Header cam{rosmsg::ToTimeMsg(stamp), f.frame_id};
-    AVP_RETURN_IF_ERROR(Publish(channel(kColorTopic), t, ColorImageMsg(f.rgb, cam)));
-    AVP_RETURN_IF_ERROR(Publish(channel(kDepthTopic), t, DepthImageMsg(f.depth_m, cam)));
-    AVP_RETURN_IF_ERROR(Publish(channel(kCameraInfoTopic), t, CameraInfoMsg(f.K, cam)));
+    AVP_RETURN_IF_ERROR(Publish(channel(kColorTopic), t, rosmsg::ToColorImage(f.rgb, cam)));
+    AVP_RETURN_IF_ERROR(Publish(channel(kDepthTopic), t, rosmsg::ToDepthImage(f.depth_m, cam)));
+    AVP_RETURN_IF_ERROR(Publish(channel(kCameraInfoTopic), t, rosmsg::ToCameraInfo(f.K, cam)));
     rosmsg::TFMessage tf;
     tf.transforms.resize(1);
     tf.transforms[0].header = base;
@@ -117,14 +118,14 @@ Status McapRecorder::WriteView(const pipeline::StepRecord& step, const pipeline:
     if (obs->labels) {
       AVP_RETURN_IF_ERROR(
           Publish(channel(kSimInstanceTopic), t,
-                  U16ImageMsg(obs->labels->instance_ids, kSimInstanceEncoding, cam)));
+                  rosmsg::ToInstanceIdImage(obs->labels->instance_ids, kSimInstanceEncoding, cam)));
       AVP_RETURN_IF_ERROR(
-          Publish(channel(kSimClassTopic), t, ClassImageMsg(obs->labels->class_ids, cam)));
+          Publish(channel(kSimClassTopic), t, rosmsg::ToClassIdImage(obs->labels->class_ids, cam)));
     }
     if (data.segmentation != nullptr) {
-      AVP_RETURN_IF_ERROR(
-          Publish(channel(kInstanceImageTopic), t,
-                  U16ImageMsg(InstanceIdImage(*data.segmentation), kInstanceImageEncoding, cam)));
+      AVP_RETURN_IF_ERROR(Publish(channel(kInstanceImageTopic), t,
+                                  rosmsg::ToInstanceIdImage(InstanceIdImage(*data.segmentation),
+                                                            kInstanceImageEncoding, cam)));
       AVP_RETURN_IF_ERROR(Publish(channel(kInstancesTopic), t,
                                   rosmsg::String{InstancesToJson(*data.segmentation).dump()}));
     }

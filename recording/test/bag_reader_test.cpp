@@ -19,6 +19,8 @@
 #include <avp/rosmsg/convert.h>
 #include <avp/test/temp_dir_test.h>
 
+#include "camera_fixtures.h"
+
 namespace avp::recording {
 namespace {
 
@@ -58,6 +60,8 @@ struct BagSpec {
   std::string depth_encoding = "16UC1";
   int64_t depth_offset_ns = 1'000'000;  // depth stamped 1 ms after colour
   bool with_tf = true;
+  /// /tf runs from 20 ms before the first image to this long after the bag's last 1/30 s.
+  int64_t tf_tail_ns = 20'000'000;
   bool with_camera_info = true;
   /// Frame index whose colour image is broken (its data one byte short), or -1.
   int broken_color = -1;
@@ -104,8 +108,8 @@ class BagReaderTest : public test::TempDirTest {
     }
     const auto frames = static_cast<int>(std::lround(spec.seconds * 30));
     // /tf at 100 Hz from 20 ms before the first image to 20 ms after the last.
-    for (int64_t t = kT0 - 20'000'000; spec.with_tf && t <= kT0 + frames * kFrameNs + 20'000'000;
-         t += 10'000'000) {
+    for (int64_t t = kT0 - 20'000'000;
+         spec.with_tf && t <= kT0 + frames * kFrameNs + spec.tf_tail_ns; t += 10'000'000) {
       Put(*w, tf, t, rosmsg::TFMessage{{Tf("arm_mount", "link1", Link1At(t), t)}});
     }
     for (int i = 0; i < frames; ++i) {
@@ -272,7 +276,7 @@ TEST_F(BagReaderTest, MissingTransformsAndCameraInfoAreErrorsNamingThem) {
   bag = ReadBag(WriteBag({.seconds = 1.0}), o);
   ASSERT_FALSE(bag.ok());
   EXPECT_THAT(bag.status().message(),
-              HasSubstr("frame 'world' is not in the bag's transforms (frames: arm_mount, "
+              HasSubstr("frame 'world' is not in the transform tree (known: arm_mount, "
                         "camera_color_optical_frame, igus_rebel_base_link, link1)"));
 
   bag = ReadBag(WriteBag({.seconds = 1.0, .with_camera_info = false}, "noinfo.mcap"));
@@ -289,24 +293,17 @@ TEST_F(BagReaderTest, TransformOutsideItsSamplesBeyondTheToleranceIsAnError) {
   Result<Bag> bag = ReadBag(path, o);
   ASSERT_TRUE(bag.ok()) << bag.status().ToString();
   EXPECT_EQ(bag->views.size(), 30u);  // /tf covers every image
-  // The tree at a stamp 30 ms after the last /tf sample.
-  TfTree tree;
-  ASSERT_TRUE(tree.Add(Tf("a", "b", RigidTransform::Identity(), 0), false).ok());
-  ASSERT_TRUE(tree.Add(Tf("a", "b", RigidTransform(Eigen::Vector3d(1, 0, 0)), 10), false).ok());
-  Result<RigidTransform> mid = tree.Lookup("/a", "b", 5, 0);  // a leading '/' as tf2: ignored
-  ASSERT_TRUE(mid.ok());
-  EXPECT_DOUBLE_EQ(mid->translation().x(), 0.5);
-  EXPECT_TRUE(tree.Lookup("a", "b", 40, 30).ok());
-  Result<RigidTransform> late = tree.Lookup("a", "b", 40'000'010, 20'000'000);
-  ASSERT_FALSE(late.ok());
-  EXPECT_THAT(late.status().message(),
-              HasSubstr("the nearest sample is 40.0 ms earlier (0.000000010), beyond the "
-                        "tolerance of 20.0 ms"));
-  EXPECT_THAT(tree.Add(Tf("c", "b", RigidTransform::Identity(), 0), false).message(),
-              HasSubstr("frame 'b' already has parent 'a'; refusing 'c'"));
-  rosmsg::TransformStamped bad = Tf("a", "d", RigidTransform::Identity(), 0);
-  bad.transform.rotation = {0, 0, 0, 0};
-  EXPECT_THAT(tree.Add(bad, false).message(), HasSubstr("the quaternion (0, 0, 0, 0) has norm 0"));
+  // /tf ending at 920 ms: the last image (966.7 ms) is 46.7 ms past it, beyond 20 ms; the one
+  // before (933.3 ms) is within.
+  o.tf_tolerance_ms = 20.0;
+  bag = ReadBag(WriteBag({.seconds = 1.0, .tf_tail_ns = -75'000'000}, "short_tf.mcap"), o);
+  ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+  EXPECT_EQ(bag->views.size(), 29u);
+  ASSERT_EQ(bag->skipped_count, 1u) << ::testing::PrintToString(bag->skipped);
+  EXPECT_THAT(bag->skipped[0],
+              HasSubstr("transform 'arm_mount' -> 'link1' at 1700000000.966666657 is not "
+                        "available yet: the newest is 1700000000.920000000 (46.7 ms earlier, "
+                        "beyond the tolerance of 20.0 ms)"));
 }
 
 TEST_F(BagReaderTest, BadImagesAreSkippedNamingTheValue) {
@@ -333,64 +330,60 @@ TEST_F(BagReaderTest, BadImagesAreSkippedNamingTheValue) {
                         "colour, 6 depth images)"));
 }
 
-TEST(BagImageTest, EncodingsAndBadValues) {
-  rosmsg::Image m;
-  m.width = 2;
-  m.height = 1;
-  m.encoding = "bgra8";
-  m.step = 8;
-  m.data = {1, 2, 3, 4, 5, 6, 7, 8};
-  ImageRgb8 c = ColorFromImageMsg(m, "/c").value();
-  EXPECT_EQ(c.at(0, 0, 0), 3);
-  EXPECT_EQ(c.at(0, 0, 2), 1);
-  EXPECT_EQ(c.at(1, 0, 1), 6);
-  m.encoding = "mono8";
-  m.step = 2;
-  m.data = {9, 200};
-  c = ColorFromImageMsg(m, "/c").value();
-  EXPECT_EQ(c.at(1, 0, 0), 200);
-  EXPECT_EQ(c.at(1, 0, 2), 200);
-
-  rosmsg::Image d;
-  d.width = 3;
-  d.height = 1;
-  d.encoding = "32FC1";
-  d.step = 12;
-  const float values[3] = {1.25f, std::numeric_limits<float>::quiet_NaN(), -0.5f};
-  d.data.resize(12);
-  std::memcpy(d.data.data(), values, 12);
-  Result<DepthImage> depth = DepthFromImageMsg(d, "/d");
-  ASSERT_FALSE(depth.ok());
-  EXPECT_THAT(depth.status().message(),
-              HasSubstr("/d: depth -0.5 m at pixel (2, 0) (stamp 0.000000000): a 32FC1 depth "
-                        "must be >= 0"));
-  std::memset(d.data.data() + 8, 0, 4);
-  depth = DepthFromImageMsg(d, "/d");
-  ASSERT_TRUE(depth.ok());
-  EXPECT_EQ(depth->at(0, 0), 1.25f);
-  EXPECT_TRUE(std::isnan(depth->at(1, 0)));  // no return (REP 118), as recorded
-  d.is_bigendian = 1;
-  d.encoding = "16UC1";
-  d.step = 6;
-  d.data = {0x01, 0x02, 0, 0, 0xff, 0xff};
-  depth = DepthFromImageMsg(d, "/d");
-  ASSERT_TRUE(depth.ok());
-  EXPECT_EQ(depth->at(0, 0), 258 * 0.001f);
-  EXPECT_EQ(depth->at(2, 0), 65535 * 0.001f);
-  d.encoding = "rgb8";
-  EXPECT_THAT(DepthFromImageMsg(d, "/d").status().message(),
-              HasSubstr("depth encoding 'rgb8' is not supported"));
-  d.encoding = "16UC1";
-  d.width = 20000;
-  EXPECT_THAT(DepthFromImageMsg(d, "/d").status().message(),
-              HasSubstr("image size 20000x1 is out of range"));
-
-  rosmsg::CameraInfo info;
-  info.width = 4;
-  info.height = 3;
-  info.k = {0, 0, 2, 0, 5, 1, 0, 0, 1};
-  EXPECT_THAT(IntrinsicsFromCameraInfoMsg(info, 0.1, 3.0).status().message(),
-              HasSubstr("gives invalid intrinsics"));
+TEST_F(BagReaderTest, EveryCameraFixtureReadsAsLiveCapturesIt) {
+  // The fixtures of live/test/same_frames_test.cpp, one frame a second, in a rosbag2 MCAP: each
+  // reads back exactly as the fixture (and so as Ros2RgbdSource captures it); the frame with a
+  // negative depth is skipped, naming the pixel.
+  const std::vector<rosmsg::testing::CameraFixture> fixtures = rosmsg::testing::CameraFixtures();
+  const fs::path path = dir_ / "fixtures.mcap";
+  {
+    auto w = mcap::Writer::Open(path).value();
+    const uint16_t color = Channel<rosmsg::Image>(*w, "/camera/camera/color/image_raw");
+    const uint16_t depth =
+        Channel<rosmsg::Image>(*w, "/camera/camera/aligned_depth_to_color/image_raw");
+    const uint16_t info = Channel<rosmsg::CameraInfo>(*w, "/camera/camera/color/camera_info");
+    const uint16_t tf_static = Channel<rosmsg::TFMessage>(*w, "/tf_static");
+    Put(*w, tf_static, kT0,
+        rosmsg::TFMessage{{Tf("igus_rebel_base_link", "camera_color_optical_frame",
+                              kBaseToArm * kLinkToOptical, kT0)}});
+    for (size_t i = 0; i < fixtures.size(); ++i) {
+      const int64_t t = kT0 + static_cast<int64_t>(i) * 1'000'000'000;
+      rosmsg::Image c = fixtures[i].color;
+      rosmsg::Image d = fixtures[i].depth;
+      rosmsg::CameraInfo k = rosmsg::testing::FixtureCameraInfo();
+      c.header.stamp = d.header.stamp = k.header.stamp = rosmsg::ToTimeMsg(t);
+      Put(*w, info, t, k);
+      Put(*w, depth, t, d);
+      Put(*w, color, t, c);
+    }
+    ASSERT_TRUE(w->Close().ok());
+  }
+  BagReadOptions o;
+  o.frame_rate_hz = 0.0;
+  Result<Bag> bag = ReadBag(path, o);
+  ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+  EXPECT_EQ(bag->pairs, fixtures.size());
+  size_t view = 0;
+  for (size_t i = 0; i < fixtures.size(); ++i) {
+    const rosmsg::testing::CameraFixture& f = fixtures[i];
+    SCOPED_TRACE(f.name);
+    if (!f.depth_error.empty()) {
+      ASSERT_EQ(bag->skipped_count, 1u);
+      EXPECT_THAT(bag->skipped[0],
+                  HasSubstr("/camera/camera/aligned_depth_to_color/image_raw: " + f.depth_error));
+      continue;
+    }
+    ASSERT_LT(view, bag->views.size());
+    const RgbdFrame& frame = bag->views[view++].observation.frame;
+    EXPECT_EQ(frame.stamp_ns, kT0 + static_cast<int64_t>(i) * 1'000'000'000);
+    EXPECT_EQ(frame.rgb, f.rgb);
+    EXPECT_EQ(frame.depth_m, f.depth_m);  // bit for bit: 0 for every no-return pixel
+    EXPECT_EQ(frame.K.width, rosmsg::testing::kFixtureWidth);
+    EXPECT_EQ(frame.K.fx, 50.0);
+    EXPECT_EQ(frame.frame_id, "camera_color_optical_frame");
+    EXPECT_TRUE(frame.X_WC.IsNearlyEqualTo(kBaseToArm * kLinkToOptical, 1e-12, 1e-12));
+  }
+  EXPECT_EQ(view, bag->views.size());
 }
 
 TEST_F(BagReaderTest, GarbledPayloadsAreErrorsOrSkipsNeverCrashes) {

@@ -1,6 +1,5 @@
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <thread>
 
 #include <fmt/format.h>
@@ -8,6 +7,7 @@
 
 #include <avp/live/ros2_rgbd_source.h>
 #include <avp/rosmsg/convert.h>
+#include <avp/rosmsg/images.h>
 #include <avp/simrobot/sim_ros2_robot.h>
 
 namespace avp::simrobot {
@@ -17,19 +17,6 @@ namespace {
 /// The longest trajectory obeyed (its time_from_start; times time_scale <= 100 it stays far from
 /// int64 nanoseconds).
 constexpr double kMaxTrajectorySeconds = 3600.0;
-
-rosmsg::Image MakeImage(const std::string& frame, int width, int height, std::string encoding,
-                        int bytes_per_pixel) {
-  rosmsg::Image m;
-  m.header.frame_id = frame;
-  m.width = static_cast<uint32_t>(width);
-  m.height = static_cast<uint32_t>(height);
-  m.encoding = std::move(encoding);
-  m.is_bigendian = 0;
-  m.step = static_cast<uint32_t>(width * bytes_per_pixel);
-  m.data.resize(static_cast<size_t>(m.step) * m.height);
-  return m;
-}
 
 }  // namespace
 
@@ -148,16 +135,10 @@ Result<std::unique_ptr<SimRos2Robot>> SimRos2Robot::Create(
     }
     AVP_RETURN_IF_ERROR(r->fruits_pub_->Publish(fruits));
   }
-  // CameraInfo: the pinhole intrinsics, no distortion.
-  rosmsg::CameraInfo& info = r->info_;
-  info.header.frame_id = options.camera_frame;
-  info.width = static_cast<uint32_t>(camera.width);
-  info.height = static_cast<uint32_t>(camera.height);
-  info.distortion_model = "plumb_bob";
-  info.d = {0.0, 0.0, 0.0, 0.0, 0.0};
-  info.k = {camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0};
-  info.r = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
-  info.p = {camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0};
+  // CameraInfo: the pinhole intrinsics, no distortion (the recorder's builder).
+  rosmsg::Header header;
+  header.frame_id = options.camera_frame;
+  r->info_ = rosmsg::ToCameraInfo(camera, header);
   return r;
 }
 
@@ -209,38 +190,15 @@ void SimRos2Robot::OnTrajectory(const rosmsg::JointTrajectory& msg) {
 Status SimRos2Robot::RenderAtRest(int64_t stamp_ns) {
   Result<robot::Observation> obs = source_.Capture(model_.CameraPose(q_), stamp_ns);
   if (!obs.ok()) return obs.status();
-  const int w = camera_.width;
-  const int h = camera_.height;
-  color_ = MakeImage(options_.camera_frame, w, h, "rgb8", 3);
-  std::memcpy(color_.data.data(), obs->frame.rgb.data().data(), color_.data.size());
-  const bool mm = options_.depth_encoding == "16UC1";
-  depth_ = MakeImage(options_.camera_frame, w, h, options_.depth_encoding, mm ? 2 : 4);
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
-      const float z = obs->frame.depth_m.at(u, v);
-      const size_t i = static_cast<size_t>(v) * w + u;
-      if (mm) {
-        const double m = std::isfinite(z) && z > 0 ? std::round(z * 1000.0) : 0.0;
-        const uint16_t raw = static_cast<uint16_t>(std::min(m, 65535.0));
-        depth_.data[2 * i] = static_cast<uint8_t>(raw & 0xff);
-        depth_.data[2 * i + 1] = static_cast<uint8_t>(raw >> 8);
-      } else {
-        std::memcpy(&depth_.data[4 * i], &z, 4);
-      }
-    }
-  }
+  rosmsg::Header header;
+  header.frame_id = options_.camera_frame;
+  color_ = rosmsg::ToColorImage(obs->frame.rgb, header);
+  depth_ = rosmsg::ToDepthImage(obs->frame.depth_m, header,
+                                options_.depth_encoding == "16UC1" ? rosmsg::DepthEncoding::k16UC1
+                                                                   : rosmsg::DepthEncoding::k32FC1);
   if (instance_pub_ != nullptr && obs->labels) {
-    instance_ = MakeImage(options_.camera_frame, w, h, "16UC1", 2);
-    class_ = MakeImage(options_.camera_frame, w, h, "mono8", 1);
-    for (int v = 0; v < h; ++v) {
-      for (int u = 0; u < w; ++u) {
-        const size_t i = static_cast<size_t>(v) * w + u;
-        const uint16_t id = obs->labels->instance_ids.at(u, v);
-        instance_.data[2 * i] = static_cast<uint8_t>(id & 0xff);
-        instance_.data[2 * i + 1] = static_cast<uint8_t>(id >> 8);
-        class_.data[i] = obs->labels->class_ids.at(u, v);
-      }
-    }
+    instance_ = rosmsg::ToInstanceIdImage(obs->labels->instance_ids, "16UC1", header);
+    class_ = rosmsg::ToClassIdImage(obs->labels->class_ids, header);
   }
   rendered_ = true;
   std::lock_guard lock(mutex_);

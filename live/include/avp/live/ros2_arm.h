@@ -11,7 +11,7 @@
 
 #include <avp/core/options.h>
 #include <avp/core/status.h>
-#include <avp/live/tf_buffer.h>
+#include <avp/live/tf_listener.h>
 #include <avp/robot/arm.h>
 #include <avp/ros2/node.h>
 #include <avp/rosmsg/messages.h>

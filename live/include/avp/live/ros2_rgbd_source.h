@@ -14,27 +14,21 @@
 #include <avp/core/options.h>
 #include <avp/core/status.h>
 #include <avp/live/clock.h>
-#include <avp/live/tf_buffer.h>
+#include <avp/live/tf_listener.h>
 #include <avp/robot/rgbd_source.h>
 #include <avp/ros2/node.h>
+#include <avp/rosmsg/camera_topics.h>
+#include <avp/rosmsg/images.h>
 #include <avp/rosmsg/messages.h>
 
 namespace avp::live {
 
-/// Where a live camera's frames come from (docs/ros2.md). The defaults are the seed system's
-/// RealSense D435 under realsense2_camera with align_depth.enable:=true, on an igus ReBeL.
-struct CameraTopicsOptions {
-  std::string color_topic = "/camera/camera/color/image_raw";
-  std::string depth_topic = "/camera/camera/aligned_depth_to_color/image_raw";
-  std::string camera_info_topic = "/camera/camera/color/camera_info";
-  /// The map's frame (the arm's base) and the camera's optical frame; empty camera_frame: the
-  /// colour image's header.frame_id.
-  std::string base_frame = "igus_rebel_base_link";
-  std::string camera_frame = "camera_color_optical_frame";
+/// Where a live camera's frames come from (docs/ros2.md): the topics and frames shared with
+/// `avp replay` (rosmsg::CameraTopics: color_topic, depth_topic, camera_info_topic, base_frame,
+/// camera_frame, max_pair_skew_ms) and what only a live source needs.
+struct CameraTopicsOptions : rosmsg::CameraTopics {
   /// Images with the sensor-data QoS (best effort, as camera drivers publish); false: reliable.
   bool best_effort = true;
-  /// A colour and a depth image form a pair when their stamps differ by at most this.
-  double max_pair_skew_ms = 5.0;
   /// A capture waits at most this long for a pair stamped after it was asked for.
   double frame_timeout_s = 5.0;
   /// ... and then at most this long for the transform at the pair's stamp.
@@ -55,18 +49,20 @@ struct SourceCounters {
   uint64_t color = 0;
   uint64_t depth = 0;
   uint64_t camera_info = 0;
-  uint64_t refused = 0;  ///< images refused on arrival (encoding, size, step)
+  uint64_t refused = 0;  ///< images refused on arrival (encoding, size, step, a bad depth)
   uint64_t pairs_used = 0;
   std::string last_problem;
 };
 
-/// A robot::RgbdSource on ROS 2 topics: colour (rgb8, bgr8) and aligned depth (16UC1 mm, 32FC1
-/// m) paired by stamp, the intrinsics from CameraInfo (the depth range from `camera`), and X_WC
-/// from the TF buffer at the pair's stamp, base_frame → camera_frame. Capture(X_WC, stamp) waits
-/// (bounded, and ended by the stop token) for the first pair stamped after it was called.
-/// Non-finite, zero or negative depth becomes "no return" (0). Every problem is a status naming
-/// the topic and the value: an unsupported encoding, a size or step that does not match, a
-/// camera that stops (DeadlineExceeded), TF missing or late.
+/// A robot::RgbdSource on ROS 2 topics: colour and aligned depth paired by stamp, the intrinsics
+/// from CameraInfo (the depth range from `camera`), and X_WC from the TF buffer at the pair's
+/// stamp, base_frame → camera_frame. Images are read as `avp replay` reads them
+/// (rosmsg/images.h): colour rgb8, bgr8, rgba8, bgra8, mono8; depth 16UC1 mm, 32FC1 m, with
+/// NaN, inf and 0 as "no return" (0) and an image with a negative depth refused.
+/// Capture(X_WC, stamp) waits (bounded, and ended by the stop token) for the first pair stamped
+/// after it was called. Images are checked on arrival; one refused is counted and named in the
+/// errors. Every problem is a status naming the topic and the value: an unsupported encoding, a
+/// size or step that does not match, a camera that stops (DeadlineExceeded), TF missing or late.
 class Ros2RgbdSource final : public robot::RgbdSource {
  public:
   /// Subscribes and waits (frame_timeout_s) for the first CameraInfo. `tf` is shared with the
@@ -81,12 +77,14 @@ class Ros2RgbdSource final : public robot::RgbdSource {
   CameraIntrinsics intrinsics() const override;
   SourceCounters counters() const;
 
-  /// Converts one image, checking encoding, sizes and step (exposed for tests).
-  static Result<ImageRgb8> ColorFromMessage(const rosmsg::Image& msg, std::string_view topic);
-  static Result<DepthImage> DepthFromMessage(const rosmsg::Image& msg, std::string_view topic);
-  /// Intrinsics from a CameraInfo (k), with the depth range of `range`.
-  static Result<CameraIntrinsics> IntrinsicsFromCameraInfo(const rosmsg::CameraInfo& info,
-                                                           const CameraIntrinsics& range);
+  /// rosmsg::ColorFromImage and rosmsg::DepthFromImage, the conversions the source uses (the
+  /// names benchmarks/bench_ros2.cpp calls).
+  static Result<ImageRgb8> ColorFromMessage(const rosmsg::Image& msg, std::string_view topic) {
+    return rosmsg::ColorFromImage(msg, topic);
+  }
+  static Result<DepthImage> DepthFromMessage(const rosmsg::Image& msg, std::string_view topic) {
+    return rosmsg::DepthFromImage(msg, topic);
+  }
 
  private:
   Ros2RgbdSource(ros2::Node& node, TfBuffer& tf, const CameraTopicsOptions& options,
@@ -121,10 +119,5 @@ class Ros2RgbdSource final : public robot::RgbdSource {
   std::unique_ptr<ros2::Subscription<rosmsg::CameraInfo>> info_sub_;
   std::unique_ptr<ros2::Subscription<rosmsg::MarkerArray>> fruits_sub_;
 };
-
-/// Transform message → RigidTransform as tf2 takes it: rosmsg::FromTransformMsg, refusing also a
-/// quaternion whose norm is not within 1e-3 of 1 (tf2's "denormalized quaternion"); the message
-/// names `what`.
-Result<RigidTransform> ToRigidTransform(const rosmsg::Transform& t, std::string_view what);
 
 }  // namespace avp::live

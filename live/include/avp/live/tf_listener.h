@@ -6,15 +6,18 @@
 #include <string>
 
 #include <avp/core/status.h>
-#include <avp/live/tf_buffer.h>
 #include <avp/ros2/node.h>
 #include <avp/rosmsg/messages.h>
+#include <avp/rosmsg/tf_buffer.h>
 
 namespace avp::live {
 
+/// The one TF buffer, shared with `avp replay` (rosmsg/tf_buffer.h).
+using TfBuffer = rosmsg::TfBuffer;
+
 /// Fills a TfBuffer from /tf (reliable, keep-last 100) and /tf_static (reliable, transient
-/// local), as tf2_ros::TransformListener does. Transforms that TfBuffer refuses are counted and
-/// the last reason kept; they never stop the listener.
+/// local), as tf2_ros::TransformListener does: TfBuffer::Add(TransformStamped). Transforms that
+/// TfBuffer refuses are counted and the last reason kept; they never stop the listener.
 class TfListener {
  public:
   static Result<std::unique_ptr<TfListener>> Create(

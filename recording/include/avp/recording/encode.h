@@ -1,8 +1,8 @@
 #pragma once
 
 // What McapRecorder writes for one fused view, as functions: the ROS 2 messages of the layout
-// (layout.h) built from avp's frames, segmentations and plans, and the exact JSON of the
-// segmentation and of the step, with their inverses for the replay.
+// (layout.h) built from avp's segmentations and plans, and the exact JSON of the segmentation and
+// of the step, with their inverses for the replay.
 
 #include <cstdint>
 #include <string>
@@ -23,21 +23,12 @@
 
 namespace avp::recording {
 
-/// rgb8 colour, step 3·width.
-rosmsg::Image ColorImageMsg(const ImageRgb8& rgb, const rosmsg::Header& header);
-/// 32FC1 depth in metres (little-endian floats, bit-exact), step 4·width.
-rosmsg::Image DepthImageMsg(const DepthImage& depth_m, const rosmsg::Header& header);
-/// A uint16 image (instance ids: mono16 or 16UC1), little-endian, step 2·width.
-rosmsg::Image U16ImageMsg(const InstanceImage& image, std::string_view encoding,
-                          const rosmsg::Header& header);
-/// mono8 (class ids), step width.
-rosmsg::Image ClassImageMsg(const ClassImage& image, const rosmsg::Header& header);
-/// K as CameraInfo (plumb_bob, zero distortion, P = [K | 0]).
-rosmsg::CameraInfo CameraInfoMsg(const CameraIntrinsics& K, const rosmsg::Header& header);
+// The images and CameraInfo of a view are rosmsg's (rosmsg/images.h: ToColorImage, ToDepthImage
+// with 32FC1, ToInstanceIdImage, ToClassIdImage, ToCameraInfo), as `avp sim ros2` publishes them.
 
-/// An image message back as avp images: rgb8 (or bgr8), 32FC1 metres (or 16UC1 / mono16
-/// millimetres, 0 = no return), 16UC1 / mono16 ids, mono8 classes. InvalidArgument naming the
-/// encoding, the size and the data length when they do not agree.
+/// The layout's images read back, by the rules `avp live` and `avp replay` read them
+/// (rosmsg::ColorFromImage, DepthFromImage, InstanceIdsFromImage, ClassIdsFromImage), errors
+/// naming the layout's topic.
 Result<ImageRgb8> ColorFromMsg(const rosmsg::Image& msg);
 Result<DepthImage> DepthFromMsg(const rosmsg::Image& msg);
 Result<InstanceImage> U16FromMsg(const rosmsg::Image& msg);
