@@ -32,8 +32,7 @@ namespace avp::zsl {
 
 inline constexpr const char* kManifestFileName = "manifest.json";
 inline constexpr const char* kManifestFormat = "avp.zsl.models/1";
-/// The environment variable naming the model directory.
-inline constexpr const char* kModelDirEnvVar = "AVP_ZSL_MODEL_DIR";
+// kModelDirEnvVar (AVP_ZSL_MODEL_DIR): avp/zsl/zsl.h.
 
 // Roles.
 inline constexpr const char* kRoleDetector = "detector";

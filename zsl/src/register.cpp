@@ -1,10 +1,8 @@
-#include <chrono>
-#include <cstdint>
-#include <cstdlib>
 #include <memory>
-#include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -24,73 +22,79 @@ namespace avp::zsl {
 
 namespace {
 
-// manifest.h's kModelDirEnvVar; not included here, so that this file builds without ONNX Runtime.
-constexpr const char* kModelDirVariable = "AVP_ZSL_MODEL_DIR";
-constexpr const char* kModelServerVariable = "AVP_ZSL_MODEL_SERVER";
-constexpr const char* kMaxBatchVariable = "AVP_ZSL_MAX_BATCH";
-constexpr const char* kBatchDelayVariable = "AVP_ZSL_BATCH_DELAY_US";
-
 using segmentation::Segmenter;
+using segmentation::SegmenterContext;
 
-#ifdef AVP_WITH_ONNX
-/// An integer environment variable in [lo, hi], or `fallback` when unset; InvalidArgument naming
-/// the variable and its text otherwise.
-Result<int64_t> IntFromEnvironment(const char* name, int64_t fallback, int64_t lo, int64_t hi) {
-  const char* v = std::getenv(name);
-  if (v == nullptr || *v == '\0') return fallback;
-  const std::optional<int64_t> value = options_internal::ParseInteger(v);
-  if (!value || *value < lo || *value > hi) {
-    return InvalidArgumentError(
-        fmt::format("{}='{}' must be an integer in [{}, {}]", name, v, lo, hi));
-  }
-  return *value;
-}
-
-Result<interop::BatchingOptions> BatchingFromEnvironment() {
-  interop::BatchingOptions b;
-  AVP_ASSIGN_OR_RETURN(
-      const int64_t max_batch,
-      IntFromEnvironment(kMaxBatchVariable, b.max_batch, 1, interop::BatchingOptions::kMaxBatch));
-  AVP_ASSIGN_OR_RETURN(const int64_t delay_us,
-                       IntFromEnvironment(kBatchDelayVariable, b.max_delay.count(), 0,
-                                          interop::BatchingOptions::kMaxDelay.count()));
-  b.max_batch = static_cast<int>(max_batch);
-  b.max_delay = std::chrono::microseconds(delay_us);
-  return b;
-}
-#endif
-
-Result<std::unique_ptr<Segmenter>> MakeZslSegmenter(std::string_view backend,
-                                                    std::string_view spec) {
-#ifdef AVP_WITH_ONNX
-  AVP_ASSIGN_OR_RETURN(const std::filesystem::path dir, ModelDirForSpec(backend, spec));
-  AVP_ASSIGN_OR_RETURN(const Device device, DeviceFromEnvironment());
-  // AVP_ZSL_MODEL_SERVER=grpc://HOST:PORT: the networks on that server (docs/zero-shot-models.md).
-  const char* server_env = std::getenv(kModelServerVariable);
-  const std::string server = server_env != nullptr ? server_env : "";
-  // AVP_ZSL_MAX_BATCH / AVP_ZSL_BATCH_DELAY_US: dynamic batching of the networks in process.
-  AVP_ASSIGN_OR_RETURN(const interop::BatchingOptions batching, BatchingFromEnvironment());
-  if (backend == "ywes") {
-    YwesOptions options;
-    options.session.device = device;
-    options.session.model_server = server;
-    options.session.batching = batching;
-    AVP_ASSIGN_OR_RETURN(std::unique_ptr<YwesSegmenter> s, YwesSegmenter::Create(dir, options));
-    return std::unique_ptr<Segmenter>(std::move(s));
-  }
-  LsamOptions options;
-  options.session.device = device;
-  options.session.model_server = server;
-  options.session.batching = batching;
-  AVP_ASSIGN_OR_RETURN(std::unique_ptr<LsamSegmenter> s, LsamSegmenter::Create(dir, options));
-  return std::unique_ptr<Segmenter>(std::move(s));
-#else
-  (void)backend;
+#ifndef AVP_WITH_ONNX
+Status NoOnnxRuntime(std::string_view spec) {
   return FailedPreconditionError(fmt::format(
       "segmenter '{}': this build has no ONNX Runtime (configured with AVP_WITH_ONNX=OFF); "
       "rebuild with -DAVP_WITH_ONNX=ON after scripts/setup (docs/zero-shot-models.md)",
       spec));
+}
 #endif
+
+Result<std::unique_ptr<Segmenter>> MakeYwes(std::string_view spec, const YwesEntryOptions& o) {
+#ifdef AVP_WITH_ONNX
+  AVP_ASSIGN_OR_RETURN(const std::filesystem::path dir, ModelDirForSpec("ywes", spec, o.model_dir));
+  AVP_ASSIGN_OR_RETURN(std::unique_ptr<YwesSegmenter> s,
+                       YwesSegmenter::Create(dir, o.ToYwesOptions()));
+  return std::unique_ptr<Segmenter>(std::move(s));
+#else
+  (void)o;
+  return NoOnnxRuntime(spec);
+#endif
+}
+
+Result<std::unique_ptr<Segmenter>> MakeLsam(std::string_view spec, const LsamEntryOptions& o) {
+#ifdef AVP_WITH_ONNX
+  AVP_ASSIGN_OR_RETURN(const std::filesystem::path dir, ModelDirForSpec("lsam", spec, o.model_dir));
+  AVP_ASSIGN_OR_RETURN(std::unique_ptr<LsamSegmenter> s,
+                       LsamSegmenter::Create(dir, o.ToLsamOptions()));
+  return std::unique_ptr<Segmenter>(std::move(s));
+#else
+  (void)o;
+  return NoOnnxRuntime(spec);
+#endif
+}
+
+/// The entries "<backend>" and "<backend>://" with `defaults`; their factories return
+/// `environment` when it is an error (a bad environment variable read at registration).
+template <typename Options>
+void AddEntries(std::vector<segmentation::SegmenterEntry>& entries, const std::string& backend,
+                const std::string& what, const OptionTable<Options>& table, const Options& defaults,
+                const Status& environment,
+                Result<std::unique_ptr<Segmenter>> (*make)(std::string_view, const Options&)) {
+  for (const std::string& name : {backend, backend + "://"}) {
+    const std::string description =
+        name == backend
+            ? fmt::format("{} through ONNX Runtime, models from the option model_dir ({})", what,
+                          kModelDirEnvVar)
+            : fmt::format("{} with the models of DIR: {}DIR", what, name);
+    entries.push_back(segmentation::MakeSegmenterEntry<Options>(
+        name, description, table, defaults,
+        [environment, make](std::string_view spec, const Options& o,
+                            const SegmenterContext&) -> Result<std::unique_ptr<Segmenter>> {
+          if (!environment.ok()) {
+            return environment.WithContext(fmt::format("segmenter '{}'", spec));
+          }
+          return make(spec, o);
+        }));
+  }
+}
+
+void Register(segmentation::SegmenterRegistry& registry, const BackendSettings& defaults,
+              const Status& environment) {
+  std::vector<segmentation::SegmenterEntry> entries;
+  YwesEntryOptions ywes;
+  static_cast<BackendSettings&>(ywes) = defaults;
+  LsamEntryOptions lsam;
+  static_cast<BackendSettings&>(lsam) = defaults;
+  AddEntries<YwesEntryOptions>(entries, "ywes", "YOLO-World + EfficientViT-SAM",
+                               YwesEntryOptionTable(), ywes, environment, &MakeYwes);
+  AddEntries<LsamEntryOptions>(entries, "lsam", "Grounding DINO + SAM", LsamEntryOptionTable(),
+                               lsam, environment, &MakeLsam);
+  AddAll(registry, std::move(entries));
 }
 
 }  // namespace
@@ -105,7 +109,8 @@ std::vector<BatchedNetwork> BatchedNetworks() {
   return out;
 }
 
-Result<std::filesystem::path> ModelDirForSpec(std::string_view backend, std::string_view spec) {
+Result<std::filesystem::path> ModelDirForSpec(std::string_view backend, std::string_view spec,
+                                              const std::filesystem::path& model_dir) {
   const std::string scheme = std::string(backend) + "://";
   if (spec.substr(0, scheme.size()) == scheme) {
     const std::string_view dir = spec.substr(scheme.size());
@@ -120,38 +125,39 @@ Result<std::filesystem::path> ModelDirForSpec(std::string_view backend, std::str
     return InvalidArgumentError(
         fmt::format("segmenter '{}' is not '{}' or '{}DIR'", spec, backend, scheme));
   }
-  const char* env = std::getenv(kModelDirVariable);
-  if (env == nullptr || *env == '\0') {
+  if (model_dir.empty()) {
     return FailedPreconditionError(fmt::format(
         "segmenter '{0}' needs a model directory: set {1} to a folder holding manifest.json and "
         "the exported models (docs/zero-shot-models.md, \"Model directory and manifest\"), or "
-        "name it in the spec as {0}://DIR",
-        backend, kModelDirVariable));
+        "the option model_dir (--segmenter-option model_dir=DIR), or name it in the spec as "
+        "{0}://DIR",
+        backend, kModelDirEnvVar));
   }
-  return std::filesystem::path(env);
+  return model_dir;
+}
+
+void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry,
+                           const BackendSettings& defaults) {
+  Register(registry, defaults, Status::Ok());
 }
 
 void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry) {
-  std::vector<segmentation::SegmenterEntry> entries;
-  for (const char* backend : {"ywes", "lsam"}) {
-    const std::string name = backend;
-    const std::string what =
-        name == "ywes" ? "YOLO-World + EfficientViT-SAM" : "Grounding DINO + SAM";
-    for (const std::string& entry_name : {name, name + "://"}) {
-      segmentation::SegmenterEntry e;
-      e.name = entry_name;
-      e.description =
-          entry_name == name
-              ? fmt::format("{} through ONNX Runtime, models from {}", what, kModelDirVariable)
-              : fmt::format("{} with the models of DIR: {}DIR", what, entry_name);
-      e.make = [name](std::string_view spec, const AnyOptions&,
-                      const segmentation::SegmenterContext&) {
-        return MakeZslSegmenter(name, spec);
-      };
-      entries.push_back(std::move(e));
+  const Result<BackendSettings> environment = BackendSettingsFromEnvironment();
+  Register(registry, environment.ok() ? *environment : BackendSettings{}, environment.status());
+}
+
+Result<segmentation::SegmenterRegistry> WithZslDefaults(
+    const segmentation::SegmenterRegistry& registry, const OptionValues& overrides) {
+  segmentation::SegmenterRegistry out;
+  for (segmentation::SegmenterEntry e : registry.entries()) {
+    if (e.options.Holds<YwesEntryOptions>() || e.options.Holds<LsamEntryOptions>()) {
+      const std::string what = fmt::format("segmenter '{}'", e.DisplayName());
+      AVP_RETURN_IF_ERROR(e.options.SetAll(overrides, what).WithContext(what));
+      AVP_RETURN_IF_ERROR(e.options.Validate().WithContext(what));
     }
+    AVP_RETURN_IF_ERROR(out.Add(std::move(e)));
   }
-  AddAll(registry, std::move(entries));
+  return out;
 }
 
 }  // namespace avp::zsl

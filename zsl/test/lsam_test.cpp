@@ -12,6 +12,7 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -309,8 +310,9 @@ TEST(LsamTest, ConcurrentCallsGiveIdenticalResults) {
 
 TEST(LsamTest, TheRegisteredSchemeBuildsIt) {
   segmentation::SegmenterRegistry registry;
-  RegisterZslSegmenters(registry);
-  setenv("AVP_ZSL_DEVICE", "cpu", 1);
+  BackendSettings cpu;
+  cpu.device = Device::kCpu;
+  RegisterZslSegmenters(registry, cpu);
   auto made = registry.Make("lsam://" + (kStubs / "lsam").string(), 0);
   ASSERT_TRUE(made.ok()) << made.status().ToString();
   EXPECT_EQ((*made)->name(), "lsam");
@@ -320,6 +322,28 @@ TEST(LsamTest, TheRegisteredSchemeBuildsIt) {
   EXPECT_TRUE(seg->ValidateFor(320, 240).ok());
   ASSERT_EQ(seg->instances.size(), 1u);
   EXPECT_EQ(seg->instances[0].label, "leaf");
+}
+
+TEST(LsamTest, OptionsSetThroughTheRegistryReachTheBackend) {
+  // Scores are sigmoid(10) = 0.9999546 (BoxAndTextThresholdsApply): a box_threshold above it
+  // leaves no box; the option model_dir loads the stub models without a spec directory.
+  segmentation::SegmenterRegistry registry;
+  BackendSettings cpu;
+  cpu.device = Device::kCpu;
+  RegisterZslSegmenters(registry, cpu);
+  const RgbdFrame frame = GreyFrame(320, 240);
+  for (const auto& [threshold, expected] :
+       std::vector<std::pair<std::string, size_t>>{{"0.99995", 1u}, {"0.99996", 0u}}) {
+    Result<AnyOptions> options = registry.Options(
+        "lsam", {{"model_dir", (kStubs / "lsam").string()}, {"box_threshold", threshold}});
+    ASSERT_TRUE(options.ok()) << options.status().ToString();
+    auto made = registry.Make("lsam", *options, {});
+    ASSERT_TRUE(made.ok()) << made.status().ToString();
+    EXPECT_EQ(dynamic_cast<LsamSegmenter&>(**made).options().box_threshold, std::stof(threshold));
+    Result<Segmentation> seg = (*made)->Segment(Request(frame, "leaf"));
+    ASSERT_TRUE(seg.ok()) << seg.status().ToString();
+    EXPECT_EQ(seg->instances.size(), expected) << "box_threshold " << threshold;
+  }
 }
 
 }  // namespace

@@ -17,12 +17,14 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <avp/core/camera.h>
+#include <avp/core/options.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/segmentation/segmenter.h>
 #include <avp/segmentation/segmenter_registry.h>
@@ -40,6 +42,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using segmentation::SegmentationRequest;
+using ::testing::AllOf;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
@@ -128,7 +131,8 @@ SegmentationRequest Request(const RgbdFrame& frame, const std::string& prompt) {
   return r;
 }
 
-Segmentation SegmentOk(YwesSegmenter& s, const RgbdFrame& frame, const std::string& prompt) {
+Segmentation SegmentOk(segmentation::Segmenter& s, const RgbdFrame& frame,
+                       const std::string& prompt) {
   Result<Segmentation> r = s.Segment(Request(frame, prompt));
   EXPECT_TRUE(r.ok()) << r.status().ToString();
   if (!r.ok()) return {};
@@ -813,40 +817,88 @@ TEST(SamBoxSegmenterTest, ABoxOnMultiplesOf4GivesTheRectangleLessItsFourCorners)
 
 // ---- registration and the Segmenter contract ---------------------------------------------------
 
-TEST(YwesRegistrationTest, SchemesAndTheEnvironmentNameTheModelDirectory) {
+/// Sets (value) or unsets (nullptr) an environment variable for its lifetime.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const char* value) : name_(name) {
+    if (const char* old = std::getenv(name)) saved_ = old;
+    if (value != nullptr) {
+      setenv(name, value, 1);
+    } else {
+      unsetenv(name);
+    }
+  }
+  ~ScopedEnv() {
+    if (saved_) {
+      setenv(name_.c_str(), saved_->c_str(), 1);
+    } else {
+      unsetenv(name_.c_str());
+    }
+  }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  std::string name_;
+  std::optional<std::string> saved_;
+};
+
+BackendSettings CpuSettings() {
+  BackendSettings s;
+  s.device = Device::kCpu;
+  s.threads = 1;
+  return s;
+}
+
+segmentation::SegmenterRegistry CpuRegistry() {
   segmentation::SegmenterRegistry registry;
-  RegisterZslSegmenters(registry);
+  RegisterZslSegmenters(registry, CpuSettings());
+  return registry;
+}
+
+Result<std::unique_ptr<segmentation::Segmenter>> MakeWith(
+    const segmentation::SegmenterRegistry& registry, const std::string& spec,
+    const OptionValues& overrides) {
+  AVP_ASSIGN_OR_RETURN(const AnyOptions options, registry.Options(spec, overrides));
+  return registry.Make(spec, options, {});
+}
+
+TEST(YwesRegistrationTest, SchemesAndTheModelDirOptionNameTheModelDirectory) {
+  const ScopedEnv no_dir("AVP_ZSL_MODEL_DIR", nullptr);
+  segmentation::SegmenterRegistry registry = CpuRegistry();
   EXPECT_TRUE(nullptr != registry.Find("ywes"));
   EXPECT_TRUE(nullptr != registry.Find("lsam"));
   EXPECT_TRUE(nullptr != registry.Find("ywes:///opt/models"));
   EXPECT_TRUE(nullptr != registry.Find("lsam://models"));
 
-  Result<fs::path> dir = ModelDirForSpec("ywes", "ywes:///opt/models");
+  Result<fs::path> dir = ModelDirForSpec("ywes", "ywes:///opt/models", "/elsewhere");
   ASSERT_TRUE(dir.ok());
-  EXPECT_EQ(*dir, fs::path("/opt/models"));
-  Result<fs::path> empty = ModelDirForSpec("ywes", "ywes://");
+  EXPECT_EQ(*dir, fs::path("/opt/models"));  // the spec's DIR overrides the option
+  EXPECT_EQ(ModelDirForSpec("ywes", "ywes", "/opt/m").value(), fs::path("/opt/m"));
+  Result<fs::path> empty = ModelDirForSpec("ywes", "ywes://", "/opt/m");
   ASSERT_FALSE(empty.ok());
   EXPECT_THAT(empty.status().message(), HasSubstr("names no model directory"));
 
-  const char* saved = std::getenv("AVP_ZSL_MODEL_DIR");
-  const std::string saved_value = saved != nullptr ? saved : "";
-  unsetenv("AVP_ZSL_MODEL_DIR");
   auto missing = registry.Make("ywes", 0);
   ASSERT_FALSE(missing.ok());
   EXPECT_EQ(missing.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_THAT(missing.status().message(),
               HasSubstr("segmenter 'ywes' needs a model directory: set AVP_ZSL_MODEL_DIR to a "
                         "folder holding manifest.json"));
+  EXPECT_THAT(missing.status().message(), HasSubstr("--segmenter-option model_dir=DIR"));
   EXPECT_THAT(missing.status().message(), HasSubstr("docs/zero-shot-models.md"));
-  setenv("AVP_ZSL_MODEL_DIR", (kStubs / "ywes").c_str(), 1);
-  setenv("AVP_ZSL_DEVICE", "cpu", 1);
-  auto from_env = registry.Make("ywes", 0);
-  EXPECT_TRUE(from_env.ok()) << from_env.status().ToString();
-  if (saved != nullptr) {
-    setenv("AVP_ZSL_MODEL_DIR", saved_value.c_str(), 1);
-  } else {
-    unsetenv("AVP_ZSL_MODEL_DIR");
-  }
+
+  // The option model_dir loads the stub models without the environment variable.
+  auto from_option = MakeWith(registry, "ywes", {{"model_dir", (kStubs / "ywes").string()}});
+  ASSERT_TRUE(from_option.ok()) << from_option.status().ToString();
+  EXPECT_EQ((*from_option)->name(), "ywes");
+  auto* ywes = dynamic_cast<YwesSegmenter*>(from_option->get());
+  ASSERT_NE(ywes, nullptr);
+  EXPECT_EQ(ywes->model_dir(), kStubs / "ywes");
+  // A ywes://DIR spec wins over the option.
+  auto scheme = MakeWith(registry, "ywes://" + (kStubs / "ywes").string(),
+                         {{"model_dir", (kStubs / "nope").string()}});
+  EXPECT_TRUE(scheme.ok()) << scheme.status().ToString();
 
   auto nowhere = registry.Make("ywes://" + (kStubs / "nope").string(), 0);
   ASSERT_FALSE(nowhere.ok());
@@ -854,29 +906,163 @@ TEST(YwesRegistrationTest, SchemesAndTheEnvironmentNameTheModelDirectory) {
   EXPECT_THAT(nowhere.status().message(), HasSubstr((kStubs / "nope").string()));
 }
 
-TEST(YwesRegistrationTest, BatchingComesFromTheEnvironment) {
-  // AVP_ZSL_MAX_BATCH / AVP_ZSL_BATCH_DELAY_US: the spec's instances share the batched text
-  // encoder; a value out of range is an error naming the variable and the value.
+TEST(YwesRegistrationTest, OptionsSetThroughTheRegistryReachTheBackend) {
+  const segmentation::SegmenterRegistry registry = CpuRegistry();
+  const std::string spec = "ywes://" + (kStubs / "ywes").string();
+  const RgbdFrame frame = SolidFrame(1024, 768);
+  // "a" scores 0.7 at a_0, "a b" 0.495 at a_1 (TheDetectorThresholdOptionApplies).
+  auto plain = MakeWith(registry, spec, {});
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  EXPECT_EQ(SegmentOk(**plain, frame, "a, a b").instances.size(), 2u);
+
+  auto strict =
+      MakeWith(registry, spec, {{"score_threshold", "0.5"}, {"nms_iou", "0.4"}, {"threads", "2"}});
+  ASSERT_TRUE(strict.ok()) << strict.status().ToString();
+  const Segmentation seg = SegmentOk(**strict, frame, "a, a b");
+  ASSERT_EQ(seg.instances.size(), 1u);  // 0.495 is not > 0.5
+  EXPECT_EQ(seg.instances[0].label, "a");
+  auto* ywes = dynamic_cast<YwesSegmenter*>(strict->get());
+  ASSERT_NE(ywes, nullptr);
+  EXPECT_EQ(ywes->options().score_threshold, 0.5f);
+  EXPECT_EQ(ywes->options().nms_iou, 0.4f);
+  EXPECT_EQ(ywes->options().session.intra_op_threads, 2);
+  EXPECT_EQ(ywes->options().session.device, Device::kCpu);
+
+  auto one = MakeWith(registry, spec, {{"max_detections", "1"}});
+  ASSERT_TRUE(one.ok()) << one.status().ToString();
+  EXPECT_EQ(SegmentOk(**one, frame, "a, b, c").instances.size(), 1u);
+}
+
+TEST(YwesRegistrationTest, BadOptionsAreRefusedNamingTheKeyAndValue) {
+  const segmentation::SegmenterRegistry registry = CpuRegistry();
+  const auto refused = [&](const std::string& spec, const OptionValues& values) {
+    Result<AnyOptions> o = registry.Options(spec, values);
+    EXPECT_FALSE(o.ok()) << spec;
+    if (o.ok()) return std::string();
+    EXPECT_EQ(o.status().code(), StatusCode::kInvalidArgument);
+    return o.status().message();
+  };
+  EXPECT_THAT(refused("ywes", {{"score_threshold", "1.5"}}),
+              HasSubstr("score_threshold (1.5) must be in [0, 1]"));
+  EXPECT_THAT(refused("ywes", {{"max_detections", "0"}}),
+              HasSubstr("max_detections (0) must be >= 1"));
+  EXPECT_THAT(refused("ywes", {{"device", "gpu"}}),
+              HasSubstr("ywes option device: 'gpu' is not one of auto, cpu, cuda"));
+  EXPECT_THAT(refused("ywes", {{"max_batch", "0"}}),
+              HasSubstr("max_batch (0 rows) must be in [1, 1024]"));
+  EXPECT_THAT(refused("ywes", {{"batch_delay_us", "2000000"}}),
+              HasSubstr("batch_delay_us (2000000 us) must be in [0, 1000000]"));
+  EXPECT_THAT(refused("ywes", {{"threads", "-1"}}),
+              HasSubstr("threads (-1 threads) must be in [0, 1024]"));
+  EXPECT_THAT(refused("ywes", {{"model_server", "http://host:1"}}),
+              HasSubstr("model_server: model server 'http://host:1' must be grpc://HOST:PORT"));
+  EXPECT_THAT(refused("ywes", {{"nope", "1"}}), HasSubstr("unknown ywes option 'nope'"));
+  EXPECT_THAT(refused("lsam", {{"box_threshold", "2"}, {"text_threshold", "-0.5"}}),
+              AllOf(HasSubstr("box_threshold (2) must be in [0, 1]"),
+                    HasSubstr("text_threshold (-0.5) must be in [0, 1]")));
+  EXPECT_THAT(refused("lsam", {{"max_batch", "x"}}),
+              HasSubstr("lsam option max_batch: 'x' is not a whole number"));
+}
+
+TEST(YwesRegistrationTest, TheHelpListingShowsEveryField) {
+  const segmentation::SegmenterRegistry registry = CpuRegistry();
+  const std::vector<std::string> shared = {"model_dir", "model_server", "device",
+                                           "threads",   "max_batch",    "batch_delay_us"};
+  EXPECT_EQ(BackendSettingsTable().Keys(), shared);
+  for (const char* name : {"ywes", "lsam", "ywes://", "lsam://"}) {
+    const std::vector<std::string> keys = registry.Find(name)->options.Keys();
+    for (const std::string& key : shared) {
+      EXPECT_NE(std::find(keys.begin(), keys.end(), key), keys.end()) << name << " " << key;
+    }
+  }
+  const std::string ywes = FormatOptionHelp(registry.Find("ywes")->options.Info());
+  for (const char* key : {"score_threshold", "nms_iou", "class_agnostic_nms", "max_detections",
+                          "verify_sha256", "warm_up", "text_cache_capacity", "model_dir",
+                          "model_server", "device", "threads", "max_batch", "batch_delay_us"}) {
+    EXPECT_THAT(ywes, HasSubstr(key));
+  }
+  EXPECT_THAT(ywes, HasSubstr("auto, cpu, cuda"));
+  EXPECT_THAT(ywes, HasSubstr("AVP_ZSL_MODEL_DIR"));
+  EXPECT_THAT(ywes, HasSubstr("device=cpu"));  // the default given to the registry
+  const std::string lsam = FormatOptionHelp(registry.Find("lsam")->options.Info());
+  for (const char* key : {"box_threshold", "text_threshold", "max_detections", "device"}) {
+    EXPECT_THAT(lsam, HasSubstr(key));
+  }
+}
+
+TEST(YwesRegistrationTest, TheEnvironmentGivesTheDefaultsOnceAtRegistration) {
+  const ScopedEnv dir("AVP_ZSL_MODEL_DIR", (kStubs / "ywes").c_str());
+  const ScopedEnv device("AVP_ZSL_DEVICE", " CPU ");
+  const ScopedEnv server("AVP_ZSL_MODEL_SERVER", nullptr);
+  const ScopedEnv batch("AVP_ZSL_MAX_BATCH", "4");
+  const ScopedEnv delay("AVP_ZSL_BATCH_DELAY_US", "750");
   segmentation::SegmenterRegistry registry;
   RegisterZslSegmenters(registry);
-  setenv("AVP_ZSL_DEVICE", "cpu", 1);
-  const std::string spec = "ywes://" + (kStubs / "ywes").string();
-  setenv("AVP_ZSL_MAX_BATCH", "0", 1);
-  auto bad = registry.Make(spec, 0);
+  const YwesEntryOptions ywes = registry.Find("ywes")->options.As<YwesEntryOptions>();
+  EXPECT_EQ(ywes.model_dir, kStubs / "ywes");
+  EXPECT_EQ(ywes.device, Device::kCpu);
+  EXPECT_EQ(ywes.max_batch, 4);
+  EXPECT_EQ(ywes.batch_delay_us, 750);
+  EXPECT_EQ(ywes.score_threshold, YwesOptions{}.score_threshold);
+  const LsamEntryOptions lsam = registry.Find("lsam://")->options.As<LsamEntryOptions>();
+  EXPECT_EQ(lsam.model_dir, kStubs / "ywes");
+  EXPECT_EQ(lsam.max_batch, 4);
+  // What record.json and --print-config write: the table's values, the environment's included.
+  const OptionValues values = registry.Options("ywes").value().Values();
+  EXPECT_NE(
+      std::find(values.begin(), values.end(), std::pair<std::string, std::string>{"device", "cpu"}),
+      values.end());
+  EXPECT_NE(std::find(values.begin(), values.end(),
+                      std::pair<std::string, std::string>{"max_batch", "4"}),
+            values.end());
+
+  // Read once: the environment changed later changes nothing, even when it is bad now.
+  const ScopedEnv later_dir("AVP_ZSL_MODEL_DIR", (kStubs / "nope").c_str());
+  const ScopedEnv later_device("AVP_ZSL_DEVICE", "gpu");
+  auto made = registry.Make("ywes", 0);
+  ASSERT_TRUE(made.ok()) << made.status().ToString();
+  EXPECT_EQ(dynamic_cast<YwesSegmenter&>(**made).model_dir(), kStubs / "ywes");
+  EXPECT_EQ(dynamic_cast<YwesSegmenter&>(**made).options().session.batching.max_batch, 4);
+}
+
+TEST(YwesRegistrationTest, ABadEnvironmentValueIsAnErrorNamingTheVariableAndValue) {
+  const ScopedEnv batch("AVP_ZSL_MAX_BATCH", "0");
+  const ScopedEnv delay("AVP_ZSL_BATCH_DELAY_US", "soon");
+  const ScopedEnv device("AVP_ZSL_DEVICE", "gpu");
+  const ScopedEnv server("AVP_ZSL_MODEL_SERVER", "localhost:8001");
+  Result<BackendSettings> env = BackendSettingsFromEnvironment();
+  ASSERT_FALSE(env.ok());
+  EXPECT_EQ(env.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(env.status().message(), HasSubstr("AVP_ZSL_MAX_BATCH='0' must be an integer in [1, "
+                                                "1024]"));
+  EXPECT_THAT(env.status().message(),
+              HasSubstr("AVP_ZSL_BATCH_DELAY_US='soon' must be an integer in [0, 1000000]"));
+  EXPECT_THAT(env.status().message(),
+              HasSubstr("AVP_ZSL_DEVICE='gpu' must be one of auto, cpu, cuda"));
+  EXPECT_THAT(env.status().message(), HasSubstr("AVP_ZSL_MODEL_SERVER='localhost:8001': model "
+                                                "server 'localhost:8001' must be grpc://"));
+
+  // The entries are still registered (other commands work); building one returns the error.
+  segmentation::SegmenterRegistry registry;
+  RegisterZslSegmenters(registry);
+  ASSERT_NE(registry.Find("ywes"), nullptr);
+  auto bad = registry.Make("ywes://" + (kStubs / "ywes").string(), 0);
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
   EXPECT_THAT(bad.status().message(),
               HasSubstr("AVP_ZSL_MAX_BATCH='0' must be an integer in [1, 1024]"));
-  setenv("AVP_ZSL_MAX_BATCH", "8", 1);
-  setenv("AVP_ZSL_BATCH_DELAY_US", "soon", 1);
-  auto bad_delay = registry.Make(spec, 0);
-  ASSERT_FALSE(bad_delay.ok());
-  EXPECT_THAT(bad_delay.status().message(),
-              HasSubstr("AVP_ZSL_BATCH_DELAY_US='soon' must be an integer in [0, 1000000]"));
-  setenv("AVP_ZSL_BATCH_DELAY_US", "500", 1);
+  auto bad_lsam = registry.Make("lsam", 0);
+  ASSERT_FALSE(bad_lsam.ok());
+  EXPECT_THAT(bad_lsam.status().message(), HasSubstr("AVP_ZSL_DEVICE='gpu'"));
+}
+
+TEST(YwesRegistrationTest, BatchingComesFromTheOptions) {
+  // max_batch / batch_delay_us: the spec's instances share the batched text encoder.
+  const segmentation::SegmenterRegistry registry = CpuRegistry();
+  const std::string spec = "ywes://" + (kStubs / "ywes").string();
   {
-    auto one = registry.Make(spec, 0);
-    auto two = registry.Make(spec, 1);
+    auto one = MakeWith(registry, spec, {{"max_batch", "8"}, {"batch_delay_us", "500"}});
+    auto two = MakeWith(registry, spec, {{"max_batch", "8"}, {"batch_delay_us", "500"}});
     ASSERT_TRUE(one.ok()) << one.status().ToString();
     ASSERT_TRUE(two.ok()) << two.status().ToString();
     size_t shared = 0;
@@ -890,17 +1076,37 @@ TEST(YwesRegistrationTest, BatchingComesFromTheEnvironment) {
     }
     EXPECT_EQ(shared, 1u);  // one text encoder for both
   }
-  unsetenv("AVP_ZSL_MAX_BATCH");
-  unsetenv("AVP_ZSL_BATCH_DELAY_US");
   auto plain = registry.Make(spec, 0);
   ASSERT_TRUE(plain.ok()) << plain.status().ToString();
   EXPECT_TRUE(BatchedNetworks().empty());
 }
 
+TEST(YwesRegistrationTest, WithZslDefaultsSetsOnlyTheBackendsDefaults) {
+  segmentation::SegmenterRegistry registry = segmentation::BuiltinSegmenters();
+  RegisterZslSegmenters(registry, CpuSettings());
+  Result<segmentation::SegmenterRegistry> served =
+      WithZslDefaults(registry, {{"model_server", "grpc://127.0.0.1:9"}, {"max_batch", "8"}});
+  ASSERT_TRUE(served.ok()) << served.status().ToString();
+  EXPECT_EQ(served->Names(), registry.Names());
+  for (const char* name : {"ywes", "ywes://"}) {
+    const YwesEntryOptions& o = served->Find(name)->options.As<YwesEntryOptions>();
+    EXPECT_EQ(o.model_server, "grpc://127.0.0.1:9");
+    EXPECT_EQ(o.max_batch, 8);
+    EXPECT_EQ(o.device, Device::kCpu);
+  }
+  EXPECT_EQ(served->Find("lsam")->options.As<LsamEntryOptions>().max_batch, 8);
+  EXPECT_EQ(served->Find("oracle")->options.Values(), registry.Find("oracle")->options.Values());
+  // The original is untouched.
+  EXPECT_EQ(registry.Find("ywes")->options.As<YwesEntryOptions>().max_batch, 1);
+
+  Result<segmentation::SegmenterRegistry> bad = WithZslDefaults(registry, {{"max_batch", "0"}});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_THAT(bad.status().message(), HasSubstr("segmenter 'ywes'"));
+  EXPECT_THAT(bad.status().message(), HasSubstr("max_batch (0 rows) must be in [1, 1024]"));
+}
+
 TEST(YwesRegistrationTest, TheRegisteredSegmenterMeetsTheSegmenterContract) {
-  segmentation::SegmenterRegistry registry;
-  RegisterZslSegmenters(registry);
-  setenv("AVP_ZSL_DEVICE", "cpu", 1);
+  const segmentation::SegmenterRegistry registry = CpuRegistry();
   auto made = registry.Make("ywes://" + (kStubs / "ywes").string(), 7);
   ASSERT_TRUE(made.ok()) << made.status().ToString();
   segmentation::Segmenter& s = **made;
