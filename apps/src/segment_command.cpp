@@ -17,6 +17,7 @@
 #include <avp/io/mask_codec.h>
 #include <avp/io/overlay.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/zsl/register.h>
 
 #include "cli_common.h"
 
@@ -230,7 +231,6 @@ void AddSegmentCommand(CLI::App& app, CommandContext& context) {
   cmd->add_option("--out", cli->out, "Output folder")->default_val(cli->out);
   cmd->callback([cli, &context] {
     RunGuarded(context, [&] {
-      if (!cli->model_server.empty()) setenv("AVP_ZSL_MODEL_SERVER", cli->model_server.c_str(), 1);
       SegmentOptions o = cli->options;
       o.image = cli->image;
       o.models = cli->models;
@@ -239,7 +239,12 @@ void AddSegmentCommand(CLI::App& app, CommandContext& context) {
           ParseKeyValues(cli->segmenter_options, "segmenter option");
       if (!values.ok()) return Failed("segment", values.status());
       o.segmenter_options = *values;
-      return SegmentAndReport(o, context.registries->segmenters);
+      if (cli->model_server.empty()) return SegmentAndReport(o, context.registries->segmenters);
+      // --model-server: the default model_server of ywes and lsam (over AVP_ZSL_MODEL_SERVER).
+      const Result<segmentation::SegmenterRegistry> segmenters = zsl::WithZslDefaults(
+          context.registries->segmenters, {{"model_server", cli->model_server}});
+      if (!segmenters.ok()) return Failed("segment", segmenters.status());
+      return SegmentAndReport(o, *segmenters);
     });
   });
 }

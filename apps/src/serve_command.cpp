@@ -14,6 +14,7 @@
 
 #include <avp/apps/serve_command.h>
 #include <avp/io/file.h>
+#include <avp/zsl/register.h>
 #ifdef AVP_WITH_ONNX
 #include <avp/zsl/model_service.h>
 #include <avp/zsl/zsl.h>
@@ -303,13 +304,19 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
       ->check(CLI::Range(int64_t{0}, int64_t{1000000}));
   cmd->callback([cli, &context] {
     RunGuarded(context, [&] {
-      if (!cli->model_server.empty()) setenv("AVP_ZSL_MODEL_SERVER", cli->model_server.c_str(), 1);
+      // --model-server, --max-batch: the defaults of ywes and lsam (over AVP_ZSL_MODEL_SERVER,
+      // AVP_ZSL_MAX_BATCH, AVP_ZSL_BATCH_DELAY_US), which the server builds by spec.
+      OptionValues zsl_defaults;
+      if (!cli->model_server.empty()) zsl_defaults.emplace_back("model_server", cli->model_server);
       if (cli->max_batch != 1) {
-        setenv("AVP_ZSL_MAX_BATCH", std::to_string(cli->max_batch).c_str(), 1);
-        setenv("AVP_ZSL_BATCH_DELAY_US", std::to_string(cli->batch_delay_us).c_str(), 1);
+        zsl_defaults.emplace_back("max_batch", std::to_string(cli->max_batch));
+        zsl_defaults.emplace_back("batch_delay_us", std::to_string(cli->batch_delay_us));
       }
+      const Result<segmentation::SegmenterRegistry> segmenters =
+          zsl::WithZslDefaults(context.registries->segmenters, zsl_defaults);
+      if (!segmenters.ok()) return Failed("serve segmentation", segmenters.status());
       ServeOptions o = cli->options;
-      o.server.segmenters = &context.registries->segmenters;
+      o.server.segmenters = &*segmenters;
       o.server.backends = SplitCommaList(cli->backends);
       o.port_file = cli->port_file;
       return ServeSegmentationAndReport(std::move(o));
