@@ -69,57 +69,41 @@ bool IsSpace(char c) { return c == ' ' || c == '\t'; }
 
 }  // namespace
 
-Status CheckYamlDepth(std::string_view text, std::string_view name) {
-  // An upper estimate of the collections open at each point, without parsing: block collections
-  // from the indentation (each deeper indentation and each compact "- " / "? " indicator opens
-  // one), flow collections from the brackets outside quotes and comments. Block scalars (| >)
-  // are skipped. A document that passes cannot make yaml-cpp's recursive parser (or anything
-  // that walks the nodes) go deeper than this.
-  const uint64_t limit = MaxYamlDepth().value();
+namespace {
+
+/// What CheckYamlDepth carries from line to line.
+struct YamlDepthScan {
   std::vector<size_t> block;  // indentation of the open block levels
   uint64_t flow = 0;          // open flow collections
   uint64_t flow_base = 0;     // block depth where the open flow collection started
   char quote = 0;             // inside a quoted scalar: ' or "
   bool block_scalar = false;
   size_t block_scalar_indent = 0;
-  size_t line_no = 0;
-  size_t start = 0;
-  while (start <= text.size()) {
-    size_t end = text.find('\n', start);
-    if (end == std::string_view::npos) end = text.size();
-    std::string_view line = text.substr(start, end - start);
-    start = end + 1;
-    ++line_no;
-    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
-    size_t indent = 0;
-    while (indent < line.size() && line[indent] == ' ') ++indent;
-    const bool blank = indent == line.size();
-    if (block_scalar) {
-      if (blank || indent > block_scalar_indent) continue;
-      block_scalar = false;
+
+  /// The block levels open at a line outside flow collections and quotes: those of deeper
+  /// indentation closed, one for the line, one per compact "- " / "? " indicator ("- - x",
+  /// "- ? x"); a document marker closes them all. Returns where the line's tokens start.
+  size_t OpenBlockLevels(std::string_view line, size_t indent) {
+    if (indent == 0 && (line.starts_with("---") || line.starts_with("..."))) {
+      block.clear();
+      return 3;
     }
-    size_t at = 0;
-    uint64_t depth = flow_base + flow;
-    if (flow == 0 && quote == 0) {
-      if (blank || line[indent] == '#') continue;
-      if (indent == 0 && (line.starts_with("---") || line.starts_with("..."))) {
-        block.clear();
-        at = 3;
-      } else {
-        while (!block.empty() && block.back() >= indent) block.pop_back();
-        block.push_back(indent);
-        at = indent;
-        // Compact nested collections on one line: "- - x", "- ? x".
-        while (at + 1 <= line.size() && (line[at] == '-' || line[at] == '?') &&
-               (at + 1 == line.size() || IsSpace(line[at + 1]))) {
-          at += 1;
-          while (at < line.size() && IsSpace(line[at])) ++at;
-          block.push_back(at);
-        }
-      }
-      depth = block.size();
-      flow_base = depth;
+    while (!block.empty() && block.back() >= indent) block.pop_back();
+    block.push_back(indent);
+    size_t at = indent;
+    while (at + 1 <= line.size() && (line[at] == '-' || line[at] == '?') &&
+           (at + 1 == line.size() || IsSpace(line[at + 1]))) {
+      at += 1;
+      while (at < line.size() && IsSpace(line[at])) ++at;
+      block.push_back(at);
     }
+    return at;
+  }
+
+  /// The line's tokens from `at`: quotes, comments, flow brackets (raising `depth`; the scan
+  /// stops once it passes `limit`) and a block scalar header.
+  void ScanTokens(std::string_view line, size_t at, size_t indent, uint64_t limit,
+                  uint64_t& depth) {
     bool token_start = true;
     for (; at < line.size(); ++at) {
       const char c = line[at];
@@ -166,6 +150,44 @@ Status CheckYamlDepth(std::string_view text, std::string_view name) {
       }
       token_start = IsSpace(c) || c == ',' || c == ':' || c == '-' || c == '?';
     }
+  }
+};
+
+}  // namespace
+
+Status CheckYamlDepth(std::string_view text, std::string_view name) {
+  // An upper estimate of the collections open at each point, without parsing: block collections
+  // from the indentation (each deeper indentation and each compact "- " / "? " indicator opens
+  // one), flow collections from the brackets outside quotes and comments. Block scalars (| >)
+  // are skipped. A document that passes cannot make yaml-cpp's recursive parser (or anything
+  // that walks the nodes) go deeper than this.
+  const uint64_t limit = MaxYamlDepth().value();
+  YamlDepthScan scan;
+  size_t line_no = 0;
+  size_t start = 0;
+  while (start <= text.size()) {
+    size_t end = text.find('\n', start);
+    if (end == std::string_view::npos) end = text.size();
+    std::string_view line = text.substr(start, end - start);
+    start = end + 1;
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    size_t indent = 0;
+    while (indent < line.size() && line[indent] == ' ') ++indent;
+    const bool blank = indent == line.size();
+    if (scan.block_scalar) {
+      if (blank || indent > scan.block_scalar_indent) continue;
+      scan.block_scalar = false;
+    }
+    size_t at = 0;
+    uint64_t depth = scan.flow_base + scan.flow;
+    if (scan.flow == 0 && scan.quote == 0) {
+      if (blank || line[indent] == '#') continue;
+      at = scan.OpenBlockLevels(line, indent);
+      depth = scan.block.size();
+      scan.flow_base = depth;
+    }
+    scan.ScanTokens(line, at, indent, limit, depth);
     if (depth > limit) {
       return MaxYamlDepth().Check(
           fmt::format("YAML {}: collections nested at line {}", name, line_no), depth);
