@@ -731,70 +731,55 @@ Status CheckRayLimits(const IntegratorOptions& options, const OccupancyGrid& gri
   return Status::Ok();
 }
 
-}  // namespace
-
-Integrator::Integrator(const IntegratorOptions& options) : options_(options) {
-  const Status s = options.Validate();
-  if (!s.ok()) throw Error(s.message());
+/// Projective carving leaves voxels near the image plane to ray walking (kNearRadius), which is
+/// complete only for fields of view below 150 degrees (see CarveProjective).
+Status CheckProjectiveFieldOfView(const RgbdFrame& frame, int w, int h) {
+  double max_tan = 0.0;
+  for (double u : {-0.5, w - 0.5}) {
+    for (double v : {-0.5, h - 0.5}) {
+      max_tan = std::max(max_tan,
+                         std::hypot((u - frame.K.cx) / frame.K.fx, (v - frame.K.cy) / frame.K.fy));
+    }
+  }
+  if (std::atan(max_tan) * 2.0 > 150.0 * M_PI / 180.0) {
+    return InvalidArgumentError(fmt::format(
+        "projective carving needs a diagonal field of view below 150 deg, this camera has {:.1f} "
+        "deg: use carving raycast",
+        std::atan(max_tan) * 360.0 / M_PI));
+  }
+  return Status::Ok();
 }
 
-Result<IntegrationStats> Integrator::Integrate(const RgbdFrame& frame,
-                                               const Segmentation* segmentation,
-                                               SemanticMap& map) const {
-  const auto t0 = Clock::now();
-  AVP_RETURN_IF_ERROR(frame.Validate());
-  if (!frame.X_WC.translation().allFinite() || !frame.X_WC.rotation().allFinite()) {
-    return InvalidArgumentError("frame pose X_WC is not finite: " + frame.X_WC.ToString());
-  }
-  const int w = frame.depth_m.width(), h = frame.depth_m.height();
-  if (segmentation != nullptr) {
-    AVP_RETURN_IF_ERROR(segmentation->ValidateFor(w, h));
-  }
-  if (options_.carving == FreeSpaceCarving::kProjective) {
-    // Projective carving leaves voxels near the image plane to ray walking (kNearRadius), which
-    // is complete only for fields of view below 150 degrees (see CarveProjective).
-    double max_tan = 0.0;
-    for (double u : {-0.5, w - 0.5}) {
-      for (double v : {-0.5, h - 0.5}) {
-        max_tan = std::max(
-            max_tan, std::hypot((u - frame.K.cx) / frame.K.fx, (v - frame.K.cy) / frame.K.fy));
+/// Per-pixel mask label: the most confident mask containing the pixel (lower index on ties), -1
+/// for none; empty without masks.
+std::vector<int32_t> PixelMaskLabels(const Segmentation* segmentation, size_t pixels) {
+  std::vector<int32_t> label;
+  if (segmentation == nullptr || segmentation->instances.empty()) return label;
+  label.assign(pixels, -1);
+  for (size_t m = 0; m < segmentation->instances.size(); ++m) {
+    const InstanceMask& inst = segmentation->instances[m];
+    const auto mask = inst.mask.data();
+    for (size_t p = 0; p < mask.size(); ++p) {
+      if (mask[p] == 0) continue;
+      const int32_t cur = label[p];
+      if (cur < 0 ||
+          inst.confidence > segmentation->instances[static_cast<size_t>(cur)].confidence) {
+        label[p] = static_cast<int32_t>(m);
       }
     }
-    if (std::atan(max_tan) * 2.0 > 150.0 * M_PI / 180.0) {
-      return InvalidArgumentError(fmt::format(
-          "projective carving needs a diagonal field of view below 150 deg, this camera has {:.1f} "
-          "deg: use carving raycast",
-          std::atan(max_tan) * 360.0 / M_PI));
-    }
   }
-  OccupancyGrid& grid = map.grid();
+  return label;
+}
+
+/// One ray per pixel of valid depth, from the sensor origin to its point (a hit, with its mask
+/// label) or cut at max_range (no hit); the pixel counts in `stats`.
+std::vector<RayEnd> BackProjectRays(const RgbdFrame& frame, const std::vector<int32_t>& label,
+                                    double max_range, IntegrationStats& stats) {
+  const int w = frame.depth_m.width(), h = frame.depth_m.height();
   const CameraIntrinsics& K = frame.K;
   const Eigen::Vector3d origin = frame.X_WC.translation();
-  AVP_RETURN_IF_ERROR(CheckRayLimits(options_, grid, origin));
-  IntegrationStats stats;
-  stats.pixels = static_cast<size_t>(w) * static_cast<size_t>(h);
-
-  // Per-pixel mask label: the most confident mask containing the pixel (lower index on ties).
-  std::vector<int32_t> label;
-  if (segmentation != nullptr && !segmentation->instances.empty()) {
-    label.assign(stats.pixels, -1);
-    for (size_t m = 0; m < segmentation->instances.size(); ++m) {
-      const InstanceMask& inst = segmentation->instances[m];
-      const auto mask = inst.mask.data();
-      for (size_t p = 0; p < mask.size(); ++p) {
-        if (mask[p] == 0) continue;
-        const int32_t cur = label[p];
-        if (cur < 0 ||
-            inst.confidence > segmentation->instances[static_cast<size_t>(cur)].confidence) {
-          label[p] = static_cast<int32_t>(m);
-        }
-      }
-    }
-  }
-
   std::vector<RayEnd> rays;
   rays.reserve(stats.pixels);
-  const double max_range = options_.max_range_m;
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const float d = frame.depth_m.at(u, v);
@@ -822,6 +807,38 @@ Result<IntegrationStats> Integrator::Integrate(const RgbdFrame& frame,
       rays.push_back(r);
     }
   }
+  return rays;
+}
+
+}  // namespace
+
+Integrator::Integrator(const IntegratorOptions& options) : options_(options) {
+  const Status s = options.Validate();
+  if (!s.ok()) throw Error(s.message());
+}
+
+Result<IntegrationStats> Integrator::Integrate(const RgbdFrame& frame,
+                                               const Segmentation* segmentation,
+                                               SemanticMap& map) const {
+  const auto t0 = Clock::now();
+  AVP_RETURN_IF_ERROR(frame.Validate());
+  if (!frame.X_WC.translation().allFinite() || !frame.X_WC.rotation().allFinite()) {
+    return InvalidArgumentError("frame pose X_WC is not finite: " + frame.X_WC.ToString());
+  }
+  const int w = frame.depth_m.width(), h = frame.depth_m.height();
+  if (segmentation != nullptr) {
+    AVP_RETURN_IF_ERROR(segmentation->ValidateFor(w, h));
+  }
+  if (options_.carving == FreeSpaceCarving::kProjective) {
+    AVP_RETURN_IF_ERROR(CheckProjectiveFieldOfView(frame, w, h));
+  }
+  OccupancyGrid& grid = map.grid();
+  const Eigen::Vector3d origin = frame.X_WC.translation();
+  AVP_RETURN_IF_ERROR(CheckRayLimits(options_, grid, origin));
+  IntegrationStats stats;
+  stats.pixels = static_cast<size_t>(w) * static_cast<size_t>(h);
+  const std::vector<int32_t> label = PixelMaskLabels(segmentation, stats.pixels);
+  const std::vector<RayEnd> rays = BackProjectRays(frame, label, options_.max_range_m, stats);
 
   const uint32_t frame_number = grid.BeginFrame();
   const bool semantics = segmentation != nullptr;
