@@ -383,6 +383,130 @@ double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const Camer
   return gain;
 }
 
+namespace {
+
+/// The gain of a candidate over `dirs`, times `scale`; with record_gain_terms its parts too.
+double ViewGain(const GainGrid& grid, const CorePrior& prior, const GainParams& params,
+                const AvpNbvOptions& options, ViewCandidate& c,
+                const std::vector<Eigen::Vector3d>& dirs, double scale) {
+  const Eigen::Vector3d origin = c.X_WC.translation();
+  double g = 0.0;
+  if (!options.record_gain_terms) {
+    for (const Eigen::Vector3d& d_C : dirs) {
+      g += RayGain(grid, prior, origin, c.X_WC * (options.max_range_m * d_C), params);
+    }
+    return scale * g;
+  }
+  std::array<double, kGainTermCount> terms{};
+  for (const Eigen::Vector3d& d_C : dirs) {
+    g += RayGain<true>(grid, prior, origin, c.X_WC * (options.max_range_m * d_C), params,
+                       terms.data());
+  }
+  c.gain_terms.clear();
+  for (int t = 0; t < kGainTermCount; ++t) {
+    c.gain_terms.emplace_back(AvpGainTermName(static_cast<AvpGainTerm>(t)), scale * terms[t]);
+  }
+  return scale * g;
+}
+
+/// Viewpoint diversity: the distance to the nearest fused eye, saturating at diversity_m. It does
+/// not depend on the gains, so the coarse and the final scoring share it.
+std::vector<double> ViewpointDiversity(const std::vector<ViewCandidate>& candidates,
+                                       const std::vector<RigidTransform>& fused_views,
+                                       double diversity_m) {
+  std::vector<double> diversity(candidates.size(), 0.0);
+  if (diversity_m <= 0.0) return diversity;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    double d_min = std::numeric_limits<double>::infinity();
+    for (const RigidTransform& f : fused_views) {
+      d_min = std::min(d_min, (f.translation() - candidates[i].X_WC.translation()).norm());
+    }
+    diversity[i] = std::min(1.0, d_min / diversity_m);
+  }
+  return diversity;
+}
+
+/// The candidates' gains (in parallel over candidates, each independent) and utilities; returns
+/// the largest gain. With coarse_ray_stride_px, every reachable candidate is first scored with the
+/// coarse rays (their gain scaled to the fine ray count), then the refine_top best by that utility
+/// again with the fine rays.
+double ScoreCandidates(const PlanningRequest& request, const GainGrid& grid,
+                       const AvpNbvOptions& options, std::vector<ViewCandidate>& candidates) {
+  const std::vector<Eigen::Vector3d> fine = RayDirections(request.K, options.ray_stride_px);
+  const CorePrior prior = CorePrior::Tabulated(grid.roi(), grid.voxel_size_m(), options);
+  const GainParams params(options, grid.voxel_size_m());
+  std::vector<size_t> reachable;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (candidates[i].reachable) reachable.push_back(i);
+  }
+  const std::vector<double> diversity =
+      ViewpointDiversity(candidates, request.fused_views, options.diversity_m);
+  double max_cost = 0.0;
+  for (size_t i : reachable) max_cost = std::max(max_cost, candidates[i].cost);
+  // Utilities from the gains; returns the largest gain.
+  auto score = [&]() {
+    double max_gain = 0.0;
+    for (size_t i : reachable) max_gain = std::max(max_gain, candidates[i].gain);
+    for (size_t i = 0; i < candidates.size(); ++i) {
+      ViewCandidate& c = candidates[i];
+      const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
+      const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
+      c.utility = g - options.w_motion * m + options.w_diversity * diversity[i];
+    }
+    return max_gain;
+  };
+  // Gains of the candidates `which` indexes, over `dirs` times `scale`.
+  auto gains = [&](const std::vector<size_t>& which, const std::vector<Eigen::Vector3d>& dirs,
+                   double scale) {
+    ParallelFor(which.size(), options.num_threads, [&](size_t j) {
+      ViewCandidate& c = candidates[which[j]];
+      c.gain = ViewGain(grid, prior, params, options, c, dirs, scale);
+    });
+  };
+  const bool coarse_to_fine = options.coarse_ray_stride_px > options.ray_stride_px &&
+                              reachable.size() > static_cast<size_t>(options.refine_top);
+  if (coarse_to_fine) {
+    const std::vector<Eigen::Vector3d> coarse =
+        RayDirections(request.K, options.coarse_ray_stride_px);
+    gains(reachable, coarse, static_cast<double>(fine.size()) / static_cast<double>(coarse.size()));
+    score();
+    std::vector<size_t> order = reachable;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+      return candidates[a].utility > candidates[b].utility;
+    });
+    order.resize(static_cast<size_t>(options.refine_top));
+    gains(order, fine, 1.0);
+  } else {
+    gains(reachable, fine, 1.0);
+  }
+  return score();
+}
+
+/// The stopping rules: the best gain under min_gain_bits, or under min_gain_fraction of the
+/// episode's first plan's (`first_max_gain`, set on the episode's first plan).
+void ApplyStoppingRules(const AvpNbvOptions& options, const PlanningRequest& request,
+                        double max_gain, double& first_max_gain, PlanResult& result) {
+  if (result.status.ok() && options.min_gain_bits > 0.0 && max_gain < options.min_gain_bits) {
+    result.stop = true;
+    result.stop_reason =
+        fmt::format("best expected gain {:.3f} bits is below the stopping threshold {:.3f} bits",
+                    max_gain, options.min_gain_bits);
+  }
+  // The episode's first plan sets the scale of the relative rule (a new episode starts again at
+  // view 1).
+  if (request.view_index <= 1 || !std::isfinite(first_max_gain)) first_max_gain = max_gain;
+  if (result.status.ok() && !result.stop && options.min_gain_fraction > 0.0 &&
+      max_gain < options.min_gain_fraction * first_max_gain) {
+    result.stop = true;
+    result.stop_reason = fmt::format(
+        "best expected gain {:.3f} bits is below the stopping threshold {:.3f} x the first "
+        "plan's {:.3f} bits",
+        max_gain, options.min_gain_fraction, first_max_gain);
+  }
+}
+
+}  // namespace
+
 AvpNbvPlanner::AvpNbvPlanner(const AvpNbvOptions& options) : options_(options) {
   if (const Status s = options.Validate(); !s.ok()) throw Error(s.ToString());
 }
@@ -403,109 +527,9 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   std::vector<ViewCandidate> candidates =
       GenerateShellCandidates(request, *grid, targets, options_.candidates, rng);
   const size_t generated = candidates.size();
-
-  // Gains of the reachable candidates, in parallel over candidates (each independent).
-  const std::vector<Eigen::Vector3d> fine = RayDirections(request.K, options_.ray_stride_px);
-  const CorePrior prior = CorePrior::Tabulated(grid->roi(), grid->voxel_size_m(), options_);
-  const GainParams params(options_, grid->voxel_size_m());
-  // The gain of a candidate over `dirs`, times `scale`; with record_gain_terms its parts too.
-  auto view_gain = [&](ViewCandidate& c, const std::vector<Eigen::Vector3d>& dirs, double scale) {
-    const Eigen::Vector3d origin = c.X_WC.translation();
-    double g = 0.0;
-    if (!options_.record_gain_terms) {
-      for (const Eigen::Vector3d& d_C : dirs) {
-        g += RayGain(*grid, prior, origin, c.X_WC * (options_.max_range_m * d_C), params);
-      }
-      return scale * g;
-    }
-    std::array<double, kGainTermCount> terms{};
-    for (const Eigen::Vector3d& d_C : dirs) {
-      g += RayGain<true>(*grid, prior, origin, c.X_WC * (options_.max_range_m * d_C), params,
-                         terms.data());
-    }
-    c.gain_terms.clear();
-    for (int t = 0; t < kGainTermCount; ++t) {
-      c.gain_terms.emplace_back(AvpGainTermName(static_cast<AvpGainTerm>(t)), scale * terms[t]);
-    }
-    return scale * g;
-  };
-  std::vector<size_t> reachable;
-  for (size_t i = 0; i < candidates.size(); ++i) {
-    if (candidates[i].reachable) reachable.push_back(i);
-  }
-  // Viewpoint diversity: the distance to the nearest fused eye, saturating at diversity_m. It
-  // does not depend on the gains, so the coarse and the final scoring share it.
-  std::vector<double> diversity(candidates.size(), 0.0);
-  if (options_.diversity_m > 0.0) {
-    for (size_t i = 0; i < candidates.size(); ++i) {
-      double d_min = std::numeric_limits<double>::infinity();
-      for (const RigidTransform& f : request.fused_views) {
-        d_min = std::min(d_min, (f.translation() - candidates[i].X_WC.translation()).norm());
-      }
-      diversity[i] = std::min(1.0, d_min / options_.diversity_m);
-    }
-  }
-  double max_cost = 0.0;
-  for (size_t i : reachable) max_cost = std::max(max_cost, candidates[i].cost);
-  // Utilities from the gains; returns the largest gain.
-  auto score = [&]() {
-    double max_gain = 0.0;
-    for (size_t i : reachable) max_gain = std::max(max_gain, candidates[i].gain);
-    for (size_t i = 0; i < candidates.size(); ++i) {
-      ViewCandidate& c = candidates[i];
-      const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
-      const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
-      c.utility = g - options_.w_motion * m + options_.w_diversity * diversity[i];
-    }
-    return max_gain;
-  };
-  const bool coarse_to_fine = options_.coarse_ray_stride_px > options_.ray_stride_px &&
-                              reachable.size() > static_cast<size_t>(options_.refine_top);
-  if (coarse_to_fine) {
-    // Every candidate with the coarse rays (their gain scaled to the fine ray count), then the
-    // refine_top best by that utility again with the fine rays.
-    const std::vector<Eigen::Vector3d> coarse =
-        RayDirections(request.K, options_.coarse_ray_stride_px);
-    const double scale = static_cast<double>(fine.size()) / static_cast<double>(coarse.size());
-    ParallelFor(reachable.size(), options_.num_threads, [&](size_t j) {
-      ViewCandidate& c = candidates[reachable[j]];
-      c.gain = view_gain(c, coarse, scale);
-    });
-    score();
-    std::vector<size_t> order = reachable;
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-      return candidates[a].utility > candidates[b].utility;
-    });
-    order.resize(static_cast<size_t>(options_.refine_top));
-    ParallelFor(order.size(), options_.num_threads, [&](size_t j) {
-      ViewCandidate& c = candidates[order[j]];
-      c.gain = view_gain(c, fine, 1.0);
-    });
-  } else {
-    ParallelFor(reachable.size(), options_.num_threads, [&](size_t j) {
-      ViewCandidate& c = candidates[reachable[j]];
-      c.gain = view_gain(c, fine, 1.0);
-    });
-  }
-  const double max_gain = score();
+  const double max_gain = ScoreCandidates(request, *grid, options_, candidates);
   result = RankCandidates(std::move(candidates), generated, name());
-  if (result.status.ok() && options_.min_gain_bits > 0.0 && max_gain < options_.min_gain_bits) {
-    result.stop = true;
-    result.stop_reason =
-        fmt::format("best expected gain {:.3f} bits is below the stopping threshold {:.3f} bits",
-                    max_gain, options_.min_gain_bits);
-  }
-  // The episode's first plan sets the scale of the relative rule (a new episode starts again at
-  // view 1).
-  if (request.view_index <= 1 || !std::isfinite(first_max_gain_)) first_max_gain_ = max_gain;
-  if (result.status.ok() && !result.stop && options_.min_gain_fraction > 0.0 &&
-      max_gain < options_.min_gain_fraction * first_max_gain_) {
-    result.stop = true;
-    result.stop_reason = fmt::format(
-        "best expected gain {:.3f} bits is below the stopping threshold {:.3f} x the first "
-        "plan's {:.3f} bits",
-        max_gain, options_.min_gain_fraction, first_max_gain_);
-  }
+  ApplyStoppingRules(options_, request, max_gain, first_max_gain_, result);
   return result;
 }
 
