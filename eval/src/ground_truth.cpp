@@ -285,6 +285,82 @@ CameraIntrinsics ObservationIntrinsics(const CameraIntrinsics& K,
   return out;
 }
 
+namespace {
+
+/// What every view of ObservableGroundTruth shares.
+struct ViewContext {
+  const CameraIntrinsics& K_view;
+  const GroundTruthOptions& options;
+  const std::vector<BoundingSphere>& fruit_spheres;
+  const sim::RgbdRenderer& renderer;
+  const std::unordered_map<uint16_t, GroundTruthFruit>& truth;
+};
+
+/// One worker's findings and scratch space.
+struct ViewWorker {
+  std::vector<KeyAndId> found;
+  /// Each fruit's largest visible fraction so far (merged with max: thread-count free).
+  std::unordered_map<uint16_t, double> best;
+  /// Fruit pixels of the current view (windows may overlap: each pixel counts once).
+  std::vector<uint8_t> seen_by;
+  std::unordered_map<uint16_t, size_t> pixels;
+};
+
+/// The fruit voxels a reachable view sees, and each fruit's visible fraction in it. Only pixels
+/// that can see a fruit are rendered: the fruits' projected boxes, merged.
+void ObserveView(const ObservationView& view, const ViewContext& ctx, ViewWorker& w) {
+  const CameraIntrinsics& K_view = ctx.K_view;
+  const RigidTransform X_CW = view.X_WC.inverse();
+  std::vector<PixelRect> rects;
+  for (const BoundingSphere& sphere : ctx.fruit_spheres) {
+    const PixelRect r = ProjectedRect(sphere, X_CW, K_view, ctx.options.max_range_m);
+    if (!r.empty()) rects.push_back(r);
+  }
+  MergeRects(rects);
+  const size_t before = w.found.size();
+  w.pixels.clear();
+  for (const PixelRect& rect : rects) {
+    const sim::RenderedFrame frame = ctx.renderer.Render(Window(K_view, rect), view.X_WC);
+    CollectFruitVoxels(frame, rect, K_view.width, ctx.options.voxel_size_m, ctx.options.max_range_m,
+                       w.found, w.seen_by, w.pixels);
+  }
+  for (const PixelRect& rect : rects) ClearRect(rect, K_view.width, w.seen_by);
+  for (const auto& [id, n] : w.pixels) {
+    const auto t = ctx.truth.find(id);
+    if (t == ctx.truth.end()) continue;
+    const std::optional<double> area =
+        segmentation::ExpectedFruitAreaPx(K_view, view.X_WC, t->second);
+    const double v = area ? std::clamp(static_cast<double>(n) / *area, 0.0, 1.0) : 1.0;
+    double& b = w.best[id];
+    b = std::max(b, v);
+  }
+  // Keep the per-worker list small: drop the duplicates this view added to itself.
+  std::sort(w.found.begin() + static_cast<std::ptrdiff_t>(before), w.found.end());
+  w.found.erase(std::unique(w.found.begin() + static_cast<std::ptrdiff_t>(before), w.found.end()),
+                w.found.end());
+}
+
+/// The workers' findings into `gt`: voxels, best visible fractions, reachable views.
+void MergeWorkers(const std::vector<ViewWorker>& workers, const std::vector<uint8_t>& reachable,
+                  const std::vector<ObservationView>& views, GroundTruth& gt) {
+  std::vector<KeyAndId> pairs;
+  for (const ViewWorker& w : workers) pairs.insert(pairs.end(), w.found.begin(), w.found.end());
+  for (const sim::FruitTruth& f : gt.fruits) gt.best_visible_fraction[f.instance_id] = 0.0;
+  for (const ViewWorker& w : workers) {
+    for (const auto& [id, v] : w.best) {
+      double& b = gt.best_visible_fraction[id];
+      b = std::max(b, v);
+    }
+  }
+  for (size_t i = 0; i < views.size(); ++i) {
+    if (reachable[i] != 0) gt.views.push_back(views[i]);
+  }
+  gt.views_reachable = gt.views.size();
+  BuildVoxelMap(pairs, gt);
+}
+
+}  // namespace
+
 Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::ArmModel& arm,
                                           const Eigen::VectorXd& q_start, const CameraIntrinsics& K,
                                           const GroundTruthOptions& options) {
@@ -314,59 +390,26 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
   renderer_options.num_threads = 1;  // one view per worker
   const sim::RgbdRenderer renderer(scene, renderer_options);
   const Rng views_rng = Rng(options.seed).Fork("observable-ground-truth");
-
-  const int threads = ResolveThreads(options.num_threads, views.size());
-  std::vector<std::vector<KeyAndId>> found(static_cast<size_t>(threads));
-  // Per worker, each fruit's largest visible fraction so far (merged with max: thread-count free).
-  std::vector<std::unordered_map<uint16_t, double>> best(static_cast<size_t>(threads));
   std::unordered_map<uint16_t, GroundTruthFruit> truth;
   for (const sim::FruitTruth& f : gt.fruits) {
     truth[f.instance_id] = {f.instance_id, f.center_W, f.mean_radius_m()};
   }
+  const ViewContext ctx{K_view, options, fruit_spheres, renderer, truth};
+
+  const int threads = ResolveThreads(options.num_threads, views.size());
+  std::vector<ViewWorker> workers(static_cast<size_t>(threads));
   std::vector<uint8_t> reachable(views.size(), 0);  // written by the view's worker only
   std::atomic<size_t> next{0};
   const auto work = [&](size_t worker) {
-    std::vector<KeyAndId>& out = found[worker];
-    std::unordered_map<uint16_t, double>& best_of = best[worker];
-    // Fruit pixels of the current view (windows may overlap: each pixel counts once).
-    std::vector<uint8_t> seen_by(static_cast<size_t>(K_view.width) * K_view.height, 0);
-    std::unordered_map<uint16_t, size_t> pixels;
+    ViewWorker& w = workers[worker];
+    w.seen_by.assign(static_cast<size_t>(K_view.width) * K_view.height, 0);
     while (true) {
       const size_t i = next.fetch_add(1, std::memory_order_relaxed);
       if (i >= views.size()) return;
-      const ObservationView& view = views[i];
       Rng rng = views_rng.Fork(static_cast<uint64_t>(i));
-      if (!arm.SolveCameraIk(view.X_WC, q_start, rng).ok()) continue;
+      if (!arm.SolveCameraIk(views[i].X_WC, q_start, rng).ok()) continue;
       reachable[i] = 1;
-      // Only pixels that can see a fruit are rendered: the fruits' projected boxes, merged.
-      const RigidTransform X_CW = view.X_WC.inverse();
-      std::vector<PixelRect> rects;
-      for (const BoundingSphere& sphere : fruit_spheres) {
-        const PixelRect r = ProjectedRect(sphere, X_CW, K_view, options.max_range_m);
-        if (!r.empty()) rects.push_back(r);
-      }
-      MergeRects(rects);
-      const size_t before = out.size();
-      pixels.clear();
-      for (const PixelRect& rect : rects) {
-        const sim::RenderedFrame frame = renderer.Render(Window(K_view, rect), view.X_WC);
-        CollectFruitVoxels(frame, rect, K_view.width, options.voxel_size_m, options.max_range_m,
-                           out, seen_by, pixels);
-      }
-      for (const PixelRect& rect : rects) ClearRect(rect, K_view.width, seen_by);
-      for (const auto& [id, n] : pixels) {
-        const auto t = truth.find(id);
-        if (t == truth.end()) continue;
-        const std::optional<double> area =
-            segmentation::ExpectedFruitAreaPx(K_view, view.X_WC, t->second);
-        const double v = area ? std::clamp(static_cast<double>(n) / *area, 0.0, 1.0) : 1.0;
-        double& b = best_of[id];
-        b = std::max(b, v);
-      }
-      // Keep the per-worker list small: drop the duplicates this view added to itself.
-      std::sort(out.begin() + static_cast<std::ptrdiff_t>(before), out.end());
-      out.erase(std::unique(out.begin() + static_cast<std::ptrdiff_t>(before), out.end()),
-                out.end());
+      ObserveView(views[i], ctx, w);
     }
   };
   if (threads == 1) {
@@ -377,21 +420,7 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
     for (int t = 0; t < threads; ++t) pool.emplace_back(work, static_cast<size_t>(t));
     for (std::thread& t : pool) t.join();
   }
-
-  std::vector<KeyAndId> pairs;
-  for (const std::vector<KeyAndId>& f : found) pairs.insert(pairs.end(), f.begin(), f.end());
-  for (const sim::FruitTruth& f : gt.fruits) gt.best_visible_fraction[f.instance_id] = 0.0;
-  for (const auto& worker_best : best) {
-    for (const auto& [id, v] : worker_best) {
-      double& b = gt.best_visible_fraction[id];
-      b = std::max(b, v);
-    }
-  }
-  for (size_t i = 0; i < views.size(); ++i) {
-    if (reachable[i] != 0) gt.views.push_back(views[i]);
-  }
-  gt.views_reachable = gt.views.size();
-  BuildVoxelMap(pairs, gt);
+  MergeWorkers(workers, reachable, views, gt);
   return gt;
 }
 

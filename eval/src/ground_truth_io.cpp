@@ -140,8 +140,13 @@ nlohmann::json GroundTruthToJson(const GroundTruth& truth) {
           {"views", std::move(views)}};
 }
 
-Result<GroundTruth> GroundTruthFromJson(const nlohmann::json& j) {
-  if (!j.is_object()) return Bad("the document", "a JSON object", j);
+namespace {
+
+constexpr int64_t kI32Lo = std::numeric_limits<int32_t>::min();
+constexpr int64_t kI32Hi = std::numeric_limits<int32_t>::max();
+
+/// "format" and "version" checked, then "source" and "voxel_size_m".
+Status ReadHeader(const nlohmann::json& j, GroundTruth& truth) {
   AVP_ASSIGN_OR_RETURN(const nlohmann::json* format, Field(j, "", "format"));
   if (!format->is_string() || format->get<std::string>() != kFormat) {
     return Bad("format", fmt::format("\"{}\"", kFormat), *format);
@@ -150,16 +155,17 @@ Result<GroundTruth> GroundTruthFromJson(const nlohmann::json& j) {
   if (!version->is_number_integer() || version->get<int64_t>() != kVersion) {
     return Bad("version", fmt::format("{} (the version this avp reads)", kVersion), *version);
   }
-  GroundTruth truth;
   AVP_ASSIGN_OR_RETURN(const nlohmann::json* source, Field(j, "", "source"));
   if (!source->is_string()) return Bad("source", "a string", *source);
   truth.source = source->get<std::string>();
   AVP_ASSIGN_OR_RETURN(const nlohmann::json* size, Field(j, "", "voxel_size_m"));
   AVP_ASSIGN_OR_RETURN(truth.voxel_size_m, Finite(*size, "voxel_size_m"));
   if (!(truth.voxel_size_m > 0.0)) return Bad("voxel_size_m", "> 0", *size);
+  return Status::Ok();
+}
 
-  constexpr int64_t kI32Lo = std::numeric_limits<int32_t>::min();
-  constexpr int64_t kI32Hi = std::numeric_limits<int32_t>::max();
+/// "voxels": [x, y, z, fruit_id] each, every voxel once.
+Status ReadVoxels(const nlohmann::json& j, GroundTruth& truth) {
   AVP_ASSIGN_OR_RETURN(const nlohmann::json* voxels, Array(j, "voxels", 0));
   truth.voxels.reserve(voxels->size());
   for (size_t i = 0; i < voxels->size(); ++i) {
@@ -178,27 +184,29 @@ Result<GroundTruth> GroundTruthFromJson(const nlohmann::json& j) {
       return Bad(field, "a voxel listed once", e);
     }
   }
+  return Status::Ok();
+}
 
-  AVP_ASSIGN_OR_RETURN(const nlohmann::json* fruits, Array(j, "fruits", 0));
-  for (size_t i = 0; i < fruits->size(); ++i) {
-    const nlohmann::json& e = (*fruits)[i];
-    const std::string where = fmt::format("fruits[{}]", i);
-    sim::FruitTruth f;
-    AVP_ASSIGN_OR_RETURN(const nlohmann::json* id, Field(e, where, "instance_id"));
-    AVP_ASSIGN_OR_RETURN(const int64_t id_value,
-                         Integer(*id, Join(where, "instance_id"), 0, 65535, "[0, 65535]"));
-    f.instance_id = static_cast<uint16_t>(id_value);
-    AVP_ASSIGN_OR_RETURN(const nlohmann::json* name, Field(e, where, "name"));
-    if (!name->is_string()) return Bad(Join(where, "name"), "a string", *name);
-    f.name = name->get<std::string>();
-    AVP_ASSIGN_OR_RETURN(const nlohmann::json* c, Field(e, where, "center_W"));
-    AVP_ASSIGN_OR_RETURN(f.center_W, Vector3(*c, Join(where, "center_W")));
-    AVP_ASSIGN_OR_RETURN(const nlohmann::json* r, Field(e, where, "radii"));
-    AVP_ASSIGN_OR_RETURN(f.radii, Vector3(*r, Join(where, "radii")));
-    if (f.radii.minCoeff() < 0.0) return Bad(Join(where, "radii"), "radii >= 0", *r);
-    truth.fruits.push_back(std::move(f));
-  }
+/// One entry of "fruits": instance_id, name, center_W, radii (>= 0).
+Result<sim::FruitTruth> ReadFruit(const nlohmann::json& e, const std::string& where) {
+  sim::FruitTruth f;
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* id, Field(e, where, "instance_id"));
+  AVP_ASSIGN_OR_RETURN(const int64_t id_value,
+                       Integer(*id, Join(where, "instance_id"), 0, 65535, "[0, 65535]"));
+  f.instance_id = static_cast<uint16_t>(id_value);
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* name, Field(e, where, "name"));
+  if (!name->is_string()) return Bad(Join(where, "name"), "a string", *name);
+  f.name = name->get<std::string>();
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* c, Field(e, where, "center_W"));
+  AVP_ASSIGN_OR_RETURN(f.center_W, Vector3(*c, Join(where, "center_W")));
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* r, Field(e, where, "radii"));
+  AVP_ASSIGN_OR_RETURN(f.radii, Vector3(*r, Join(where, "radii")));
+  if (f.radii.minCoeff() < 0.0) return Bad(Join(where, "radii"), "radii >= 0", *r);
+  return f;
+}
 
+/// "voxels_per_fruit": [fruit_id, count] each, every fruit once.
+Status ReadVoxelsPerFruit(const nlohmann::json& j, GroundTruth& truth) {
   AVP_ASSIGN_OR_RETURN(const nlohmann::json* per_fruit, Array(j, "voxels_per_fruit", 0));
   for (size_t i = 0; i < per_fruit->size(); ++i) {
     const nlohmann::json& e = (*per_fruit)[i];
@@ -210,7 +218,11 @@ Result<GroundTruth> GroundTruthFromJson(const nlohmann::json& j) {
       return Bad(field, "a fruit listed once", e);
     }
   }
+  return Status::Ok();
+}
 
+/// "best_visible_fraction": [fruit_id, fraction in [0, 1]] each, every fruit once.
+Status ReadBestVisibleFractions(const nlohmann::json& j, GroundTruth& truth) {
   AVP_ASSIGN_OR_RETURN(const nlohmann::json* visible, Array(j, "best_visible_fraction", 0));
   for (size_t i = 0; i < visible->size(); ++i) {
     const nlohmann::json& e = (*visible)[i];
@@ -223,7 +235,53 @@ Result<GroundTruth> GroundTruthFromJson(const nlohmann::json& j) {
       return Bad(field, "a fruit listed once", e);
     }
   }
+  return Status::Ok();
+}
 
+/// A view's "X_WC": 12 numbers, 3x4 [R | p] row-major, R a rotation.
+Result<RigidTransform> ReadViewPose(const nlohmann::json& X, const std::string& x_field) {
+  if (!X.is_array() || X.size() != 12) {
+    return Bad(x_field, "an array of 12 numbers (3x4 [R | p], row-major)", X);
+  }
+  Eigen::Matrix3d R;
+  Eigen::Vector3d p;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      AVP_ASSIGN_OR_RETURN(const double value,
+                           Finite(X[r * 4 + c], fmt::format("{}[{}]", x_field, r * 4 + c)));
+      if (c < 3) {
+        R(r, c) = value;
+      } else {
+        p[r] = value;
+      }
+    }
+  }
+  if (!IsRotationMatrix(R, 1e-6)) {
+    return Bad(x_field, "a rigid transform (orthonormal rotation, det +1)", X);
+  }
+  return RigidTransform(R, p);
+}
+
+/// One entry of "views": fruit_id, radius_m, azimuth_deg, elevation_deg, X_WC.
+Result<ObservationView> ReadView(const nlohmann::json& e, const std::string& where) {
+  ObservationView v;
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* id, Field(e, where, "fruit_id"));
+  AVP_ASSIGN_OR_RETURN(const int64_t id_value,
+                       Integer(*id, Join(where, "fruit_id"), 0, 65535, "[0, 65535]"));
+  v.fruit_id = static_cast<uint16_t>(id_value);
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* radius, Field(e, where, "radius_m"));
+  AVP_ASSIGN_OR_RETURN(v.radius_m, Finite(*radius, Join(where, "radius_m")));
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* az, Field(e, where, "azimuth_deg"));
+  AVP_ASSIGN_OR_RETURN(v.azimuth_deg, Finite(*az, Join(where, "azimuth_deg")));
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* el, Field(e, where, "elevation_deg"));
+  AVP_ASSIGN_OR_RETURN(v.elevation_deg, Finite(*el, Join(where, "elevation_deg")));
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* X, Field(e, where, "X_WC"));
+  AVP_ASSIGN_OR_RETURN(v.X_WC, ReadViewPose(*X, Join(where, "X_WC")));
+  return v;
+}
+
+/// "views_tried", "views_reachable" (<= views_tried) and "views".
+Status ReadViews(const nlohmann::json& j, GroundTruth& truth) {
   AVP_ASSIGN_OR_RETURN(const nlohmann::json* tried, Field(j, "", "views_tried"));
   AVP_ASSIGN_OR_RETURN(const int64_t tried_n, Integer(*tried, "views_tried", 0, kMaxSize, ">= 0"));
   AVP_ASSIGN_OR_RETURN(const nlohmann::json* reachable, Field(j, "", "views_reachable"));
@@ -231,47 +289,30 @@ Result<GroundTruth> GroundTruthFromJson(const nlohmann::json& j) {
                        Integer(*reachable, "views_reachable", 0, tried_n, "[0, views_tried]"));
   truth.views_tried = static_cast<size_t>(tried_n);
   truth.views_reachable = static_cast<size_t>(reachable_n);
-
   AVP_ASSIGN_OR_RETURN(const nlohmann::json* views, Array(j, "views", 0));
   truth.views.reserve(views->size());
   for (size_t i = 0; i < views->size(); ++i) {
-    const nlohmann::json& e = (*views)[i];
-    const std::string where = fmt::format("views[{}]", i);
-    ObservationView v;
-    AVP_ASSIGN_OR_RETURN(const nlohmann::json* id, Field(e, where, "fruit_id"));
-    AVP_ASSIGN_OR_RETURN(const int64_t id_value,
-                         Integer(*id, Join(where, "fruit_id"), 0, 65535, "[0, 65535]"));
-    v.fruit_id = static_cast<uint16_t>(id_value);
-    AVP_ASSIGN_OR_RETURN(const nlohmann::json* radius, Field(e, where, "radius_m"));
-    AVP_ASSIGN_OR_RETURN(v.radius_m, Finite(*radius, Join(where, "radius_m")));
-    AVP_ASSIGN_OR_RETURN(const nlohmann::json* az, Field(e, where, "azimuth_deg"));
-    AVP_ASSIGN_OR_RETURN(v.azimuth_deg, Finite(*az, Join(where, "azimuth_deg")));
-    AVP_ASSIGN_OR_RETURN(const nlohmann::json* el, Field(e, where, "elevation_deg"));
-    AVP_ASSIGN_OR_RETURN(v.elevation_deg, Finite(*el, Join(where, "elevation_deg")));
-    AVP_ASSIGN_OR_RETURN(const nlohmann::json* X, Field(e, where, "X_WC"));
-    const std::string x_field = Join(where, "X_WC");
-    if (!X->is_array() || X->size() != 12) {
-      return Bad(x_field, "an array of 12 numbers (3x4 [R | p], row-major)", *X);
-    }
-    Eigen::Matrix3d R;
-    Eigen::Vector3d p;
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 4; ++c) {
-        AVP_ASSIGN_OR_RETURN(const double value,
-                             Finite((*X)[r * 4 + c], fmt::format("{}[{}]", x_field, r * 4 + c)));
-        if (c < 3) {
-          R(r, c) = value;
-        } else {
-          p[r] = value;
-        }
-      }
-    }
-    if (!IsRotationMatrix(R, 1e-6)) {
-      return Bad(x_field, "a rigid transform (orthonormal rotation, det +1)", *X);
-    }
-    v.X_WC = RigidTransform(R, p);
+    AVP_ASSIGN_OR_RETURN(ObservationView v, ReadView((*views)[i], fmt::format("views[{}]", i)));
     truth.views.push_back(std::move(v));
   }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<GroundTruth> GroundTruthFromJson(const nlohmann::json& j) {
+  if (!j.is_object()) return Bad("the document", "a JSON object", j);
+  GroundTruth truth;
+  AVP_RETURN_IF_ERROR(ReadHeader(j, truth));
+  AVP_RETURN_IF_ERROR(ReadVoxels(j, truth));
+  AVP_ASSIGN_OR_RETURN(const nlohmann::json* fruits, Array(j, "fruits", 0));
+  for (size_t i = 0; i < fruits->size(); ++i) {
+    AVP_ASSIGN_OR_RETURN(sim::FruitTruth f, ReadFruit((*fruits)[i], fmt::format("fruits[{}]", i)));
+    truth.fruits.push_back(std::move(f));
+  }
+  AVP_RETURN_IF_ERROR(ReadVoxelsPerFruit(j, truth));
+  AVP_RETURN_IF_ERROR(ReadBestVisibleFractions(j, truth));
+  AVP_RETURN_IF_ERROR(ReadViews(j, truth));
   return truth;
 }
 

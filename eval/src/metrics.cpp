@@ -195,16 +195,12 @@ std::vector<uint16_t> FoundFruitIds(const std::vector<VoxelKey>& predicted, cons
   return found;
 }
 
-MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
-                       const EvalOptions& options, std::vector<FruitResult>* fruits) {
-  const Status valid = options.Validate();
-  if (!valid.ok()) ThrowStatus(valid);
-  const double s = map.voxel_size_m();
-  const double gt_s = gt.voxel_size_m;
-  AVP_THROW_UNLESS(std::abs(s - gt_s) <= 1e-9 * s, s, gt_s);
-  const mapping::OccupancyGrid& grid = map.grid();
+namespace {
 
-  MapMetrics m;
+/// The voxels labelled `options.target`: their count and entropy in `m`; returns the occupied
+/// ones, sorted (the predicted voxels).
+std::vector<VoxelKey> PredictedVoxelsWithEntropy(const mapping::OccupancyGrid& grid,
+                                                 const EvalOptions& options, MapMetrics& m) {
   std::vector<VoxelKey> predicted;
   grid.ForEachSemanticVoxel([&](const VoxelKey& k, const mapping::SemanticCell& cell) {
     if (cell.cls() != options.target) return;
@@ -215,11 +211,50 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
   std::sort(predicted.begin(), predicted.end());
   m.entropy_mean_bits =
       m.labelled_voxels > 0 ? m.entropy_sum_bits / static_cast<double>(m.labelled_voxels) : 0.0;
-  m.predicted_voxels = predicted.size();
-  m.exact = ScoreVoxelSets(predicted, gt, 0);
-  m.tolerant = ScoreVoxelSets(predicted, gt, 1);
+  return predicted;
+}
 
-  // ---- Fruits: found ones (FoundFruitIds' rule) and matched predicted voxels per fruit.
+/// One fruit's result: its truth, voxels observable, recalled and matched, found or not, and for
+/// a found fruit with matched voxels the sphere fitted to them.
+FruitResult ScoreFruit(const sim::FruitTruth& fruit, const GroundTruth& gt,
+                       const std::map<uint16_t, size_t>& recalled,
+                       const std::map<uint16_t, std::vector<Eigen::Vector3d>>& matched,
+                       const EvalOptions& options) {
+  FruitResult r;
+  r.instance_id = fruit.instance_id;
+  r.name = fruit.name;
+  r.center_W = fruit.center_W;
+  r.radii = fruit.radii;
+  r.radius_m = fruit.mean_radius_m();
+  if (const auto v = gt.best_visible_fraction.find(fruit.instance_id);
+      v != gt.best_visible_fraction.end()) {
+    r.best_visible_fraction = v->second;
+  }
+  r.observable_voxels = ObservableVoxels(gt, fruit.instance_id);
+  if (const auto h = recalled.find(fruit.instance_id); h != recalled.end()) {
+    r.recalled_voxels = h->second;
+  }
+  const auto pts = matched.find(fruit.instance_id);
+  r.matched_voxels = pts == matched.end() ? 0 : pts->second.size();
+  r.found = IsFound(r.recalled_voxels, r.observable_voxels, options);
+  if (r.found && r.matched_voxels > 0) {
+    const SphereFit fit = FitSphere(pts->second);
+    r.estimated = true;
+    r.sphere_fitted = fit.fitted;
+    r.estimated_center_W = fit.center;
+    r.estimated_radius_m = fit.radius_m;
+    r.center_error_m = (fit.center - fruit.center_W).norm();
+    r.radius_error_m = std::abs(fit.radius_m - r.radius_m);
+  }
+  return r;
+}
+
+/// Fruits: found ones (FoundFruitIds' rule) and matched predicted voxels per fruit, with each
+/// fruit's result in `fruits` when given.
+void ScoreFruits(const mapping::SemanticMap& map, const GroundTruth& gt,
+                 const std::vector<VoxelKey>& predicted, const EvalOptions& options, FruitScores& f,
+                 std::vector<FruitResult>* fruits) {
+  const double s = map.voxel_size_m();
   const std::map<uint16_t, size_t> recalled = RecalledPerFruit(predicted, gt);
   std::map<uint16_t, std::vector<Eigen::Vector3d>> matched;
   for (const VoxelKey& k : predicted) {  // sorted: the fits see their points in a fixed order
@@ -227,7 +262,6 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
     const uint16_t id = NearestGtFruit(gt, k, &found);
     if (found) matched[id].push_back(k.Center(s));
   }
-  FruitScores& f = m.fruits;
   f.total = gt.fruits.size();
   double center_error_sum = 0.0;
   double radius_error_sum = 0.0;
@@ -237,38 +271,13 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
     fruits->reserve(gt.fruits.size());
   }
   for (const sim::FruitTruth& fruit : gt.fruits) {
-    FruitResult r;
-    r.instance_id = fruit.instance_id;
-    r.name = fruit.name;
-    r.center_W = fruit.center_W;
-    r.radii = fruit.radii;
-    r.radius_m = fruit.mean_radius_m();
-    if (const auto v = gt.best_visible_fraction.find(fruit.instance_id);
-        v != gt.best_visible_fraction.end()) {
-      r.best_visible_fraction = v->second;
-    }
-    r.observable_voxels = ObservableVoxels(gt, fruit.instance_id);
-    if (const auto h = recalled.find(fruit.instance_id); h != recalled.end()) {
-      r.recalled_voxels = h->second;
-    }
-    const auto pts = matched.find(fruit.instance_id);
-    r.matched_voxels = pts == matched.end() ? 0 : pts->second.size();
-    r.found = IsFound(r.recalled_voxels, r.observable_voxels, options);
+    FruitResult r = ScoreFruit(fruit, gt, recalled, matched, options);
     if (r.observable_voxels > 0) ++f.observable;
-    if (r.found) {
-      ++f.found;
-      if (r.matched_voxels > 0) {
-        const SphereFit fit = FitSphere(pts->second);
-        r.estimated = true;
-        r.sphere_fitted = fit.fitted;
-        r.estimated_center_W = fit.center;
-        r.estimated_radius_m = fit.radius_m;
-        r.center_error_m = (fit.center - fruit.center_W).norm();
-        r.radius_error_m = std::abs(fit.radius_m - r.radius_m);
-        center_error_sum += r.center_error_m;
-        radius_error_sum += r.radius_error_m;
-        ++fitted;
-      }
+    if (r.found) ++f.found;
+    if (r.estimated) {
+      center_error_sum += r.center_error_m;
+      radius_error_sum += r.radius_error_m;
+      ++fitted;
     }
     if (fruits != nullptr) fruits->push_back(std::move(r));
   }
@@ -280,24 +289,44 @@ MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
   for (const mapping::InstanceInfo& inst : map.Instances()) {
     if (inst.semantic_class == options.target) ++f.map_instances;
   }
+}
 
-  // ---- Coverage of the ROI.
-  if (!options.roi.IsEmpty()) {
-    VoxelKey lo;
-    VoxelKey hi;
-    RoiKeyRange(options.roi, s, lo, hi);
-    if (lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z) {
-      m.roi_voxels = static_cast<size_t>(hi.x - lo.x + 1) * static_cast<size_t>(hi.y - lo.y + 1) *
-                     static_cast<size_t>(hi.z - lo.z + 1);
-      grid.ForEachKnownVoxel([&](const VoxelKey& k, float) {
-        if (k.x >= lo.x && k.x <= hi.x && k.y >= lo.y && k.y <= hi.y && k.z >= lo.z &&
-            k.z <= hi.z) {
-          ++m.roi_known_voxels;
-        }
-      });
-      m.roi_coverage = Ratio(m.roi_known_voxels, m.roi_voxels);
+/// Coverage of the ROI: its voxels, and those known.
+void ScoreRoiCoverage(const mapping::OccupancyGrid& grid, const EvalOptions& options, double s,
+                      MapMetrics& m) {
+  if (options.roi.IsEmpty()) return;
+  VoxelKey lo;
+  VoxelKey hi;
+  RoiKeyRange(options.roi, s, lo, hi);
+  if (lo.x > hi.x || lo.y > hi.y || lo.z > hi.z) return;
+  m.roi_voxels = static_cast<size_t>(hi.x - lo.x + 1) * static_cast<size_t>(hi.y - lo.y + 1) *
+                 static_cast<size_t>(hi.z - lo.z + 1);
+  grid.ForEachKnownVoxel([&](const VoxelKey& k, float) {
+    if (k.x >= lo.x && k.x <= hi.x && k.y >= lo.y && k.y <= hi.y && k.z >= lo.z && k.z <= hi.z) {
+      ++m.roi_known_voxels;
     }
-  }
+  });
+  m.roi_coverage = Ratio(m.roi_known_voxels, m.roi_voxels);
+}
+
+}  // namespace
+
+MapMetrics EvaluateMap(const mapping::SemanticMap& map, const GroundTruth& gt,
+                       const EvalOptions& options, std::vector<FruitResult>* fruits) {
+  const Status valid = options.Validate();
+  if (!valid.ok()) ThrowStatus(valid);
+  const double s = map.voxel_size_m();
+  const double gt_s = gt.voxel_size_m;
+  AVP_THROW_UNLESS(std::abs(s - gt_s) <= 1e-9 * s, s, gt_s);
+  const mapping::OccupancyGrid& grid = map.grid();
+
+  MapMetrics m;
+  const std::vector<VoxelKey> predicted = PredictedVoxelsWithEntropy(grid, options, m);
+  m.predicted_voxels = predicted.size();
+  m.exact = ScoreVoxelSets(predicted, gt, 0);
+  m.tolerant = ScoreVoxelSets(predicted, gt, 1);
+  ScoreFruits(map, gt, predicted, options, m.fruits, fruits);
+  ScoreRoiCoverage(grid, options, s, m);
   return m;
 }
 
