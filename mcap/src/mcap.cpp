@@ -718,12 +718,17 @@ Status Writer::Close() {
 // ---- Readers
 // --------------------------------------------------------------------------------------
 
-Result<File> ReadIndexed(const std::filesystem::path& path) {
-  const std::string where = path.string();
-  AVP_ASSIGN_OR_RETURN(const std::string contents, ReadAll(path));
-  const std::span<const uint8_t> bytes = Bytes(contents);
-  File file;
-  AVP_RETURN_IF_ERROR(ReadHeader(bytes, where, file));
+namespace {
+
+/// Where an indexed file's summary section is: its start and the Footer's offset (the summary
+/// ends where the Footer does, before its CRC).
+struct SummaryLocation {
+  uint64_t footer_at = 0;
+  uint64_t summary_start = 0;
+};
+
+/// The Footer of a closed file and its summary section, CRC checked.
+Result<SummaryLocation> LocateSummary(std::span<const uint8_t> bytes, const std::string& where) {
   const size_t n = bytes.size();
   constexpr size_t kFooterSize = 1 + 8 + 8 + 8 + 4;
   const bool closed = n >= 8 + kFooterSize + 8 &&
@@ -735,36 +740,70 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
         "read it streaming to recover the intact chunks",
         where, n >= 8 ? n - 8 : 0));
   }
-  const uint64_t footer_at = n - 8 - kFooterSize;
-  AVP_ASSIGN_OR_RETURN(Record footer, RecordAt(bytes, footer_at, 0, where));
+  SummaryLocation loc;
+  loc.footer_at = n - 8 - kFooterSize;
+  AVP_ASSIGN_OR_RETURN(Record footer, RecordAt(bytes, loc.footer_at, 0, where));
   if (footer.op != static_cast<uint8_t>(Opcode::kFooter) || footer.content.size() != 20) {
-    return ParseError(fmt::format("{}: no Footer record at offset {}", where, footer_at));
+    return ParseError(fmt::format("{}: no Footer record at offset {}", where, loc.footer_at));
   }
-  Cursor fc(footer.content, footer_at + 9, "Footer");
-  const uint64_t summary_start = fc.U64("summary_start");
+  Cursor fc(footer.content, loc.footer_at + 9, "Footer");
+  loc.summary_start = fc.U64("summary_start");
   fc.U64("summary_offset_start");
   const uint32_t summary_crc = fc.U32("summary_crc");
-  if (summary_start == 0) {
+  if (loc.summary_start == 0) {
     return ParseError(
-        fmt::format("{}: the Footer at offset {} names no summary section", where, footer_at));
+        fmt::format("{}: the Footer at offset {} names no summary section", where, loc.footer_at));
   }
-  if (summary_start < 8 || summary_start > footer_at) {
+  if (loc.summary_start < 8 || loc.summary_start > loc.footer_at) {
     return ParseError(fmt::format("{}: Footer at offset {}: summary_start {} is outside the file",
-                                  where, footer_at, summary_start));
+                                  where, loc.footer_at, loc.summary_start));
   }
-  const auto summary_bytes = std::span<const uint8_t>(bytes).subspan(
-      summary_start, footer_at + 1 + 8 + 8 + 8 - summary_start);
+  const auto summary_bytes =
+      bytes.subspan(loc.summary_start, loc.footer_at + 1 + 8 + 8 + 8 - loc.summary_start);
   if (summary_crc != 0 && Crc32(summary_bytes) != summary_crc) {
     return ParseError(
         fmt::format("{}: summary CRC mismatch (summary at offset {}): stored {:08x}, "
                     "computed {:08x}",
-                    where, summary_start, summary_crc, Crc32(summary_bytes)));
+                    where, loc.summary_start, summary_crc, Crc32(summary_bytes)));
   }
-  std::vector<Record> chunk_indexes, other_indexes;
-  uint64_t at = summary_start;
-  while (at < footer_at) {
-    AVP_ASSIGN_OR_RETURN(Record r,
-                         RecordAt(std::span<const uint8_t>(bytes).first(footer_at), at, 0, where));
+  return loc;
+}
+
+/// A Statistics record's fields into `s`.
+Status ParseStatistics(const Record& r, const std::string& where, Statistics& s) {
+  Cursor c(r.content, r.offset + 9, "Statistics");
+  s.message_count = c.U64("message_count");
+  s.schema_count = c.U16("schema_count");
+  s.channel_count = c.U32("channel_count");
+  s.attachment_count = c.U32("attachment_count");
+  s.metadata_count = c.U32("metadata_count");
+  s.chunk_count = c.U32("chunk_count");
+  s.message_start_time = c.U64("message_start_time");
+  s.message_end_time = c.U64("message_end_time");
+  const uint32_t len = c.U32("channel_message_counts");
+  Cursor m(c.Take(len, "channel_message_counts"), c.offset() - len, "Statistics counts");
+  while (c.ok() && m.ok() && m.left() > 0) {
+    const uint16_t channel = m.U16("channel_id");
+    s.channel_message_counts[channel] = m.U64("count");
+  }
+  if (!c.ok()) return Bad(where, c);
+  if (!m.ok()) return Bad(where, m);
+  return Status::Ok();
+}
+
+/// The summary section's records: schemas, channels and statistics into `file`; the chunk
+/// indexes and the attachment and metadata indexes kept for reading what they point at.
+struct SummaryIndexes {
+  std::vector<Record> chunks;
+  std::vector<Record> others;
+};
+
+Result<SummaryIndexes> ReadSummary(std::span<const uint8_t> bytes, const SummaryLocation& loc,
+                                   const std::string& where, File& file) {
+  SummaryIndexes indexes;
+  uint64_t at = loc.summary_start;
+  while (at < loc.footer_at) {
+    AVP_ASSIGN_OR_RETURN(Record r, RecordAt(bytes.first(loc.footer_at), at, 0, where));
     switch (static_cast<Opcode>(r.op)) {
       case Opcode::kSchema: {
         AVP_ASSIGN_OR_RETURN(Schema s, ParseSchema(r, where));
@@ -776,39 +815,28 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
         file.channels.push_back(std::move(ch));
         break;
       }
-      case Opcode::kStatistics: {
-        Cursor c(r.content, r.offset + 9, "Statistics");
-        Statistics& s = file.statistics;
-        s.message_count = c.U64("message_count");
-        s.schema_count = c.U16("schema_count");
-        s.channel_count = c.U32("channel_count");
-        s.attachment_count = c.U32("attachment_count");
-        s.metadata_count = c.U32("metadata_count");
-        s.chunk_count = c.U32("chunk_count");
-        s.message_start_time = c.U64("message_start_time");
-        s.message_end_time = c.U64("message_end_time");
-        const uint32_t len = c.U32("channel_message_counts");
-        Cursor m(c.Take(len, "channel_message_counts"), c.offset() - len, "Statistics counts");
-        while (c.ok() && m.ok() && m.left() > 0) {
-          const uint16_t channel = m.U16("channel_id");
-          s.channel_message_counts[channel] = m.U64("count");
-        }
-        if (!c.ok()) return Bad(where, c);
-        if (!m.ok()) return Bad(where, m);
+      case Opcode::kStatistics:
+        AVP_RETURN_IF_ERROR(ParseStatistics(r, where, file.statistics));
         break;
-      }
       case Opcode::kChunkIndex:
-        chunk_indexes.push_back(r);
+        indexes.chunks.push_back(r);
         break;
       case Opcode::kAttachmentIndex:
       case Opcode::kMetadataIndex:
-        other_indexes.push_back(r);
+        indexes.others.push_back(r);
         break;
       default:
         break;
     }
     at = r.end();
   }
+  return indexes;
+}
+
+/// The chunks the Chunk Indexes point at, each checked to lie in the data section.
+Status ReadIndexedChunks(std::span<const uint8_t> bytes, uint64_t summary_start,
+                         const std::vector<Record>& chunk_indexes, const std::string& where,
+                         File& file) {
   for (const Record& r : chunk_indexes) {
     Cursor c(r.content, r.offset + 9, "Chunk Index");
     c.U64("message_start_time");
@@ -824,8 +852,7 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
                       where, r.offset, chunk_start, chunk_start + chunk_length));
     }
     AVP_ASSIGN_OR_RETURN(Record chunk,
-                         RecordAt(std::span<const uint8_t>(bytes).first(chunk_start + chunk_length),
-                                  chunk_start, 0, where));
+                         RecordAt(bytes.first(chunk_start + chunk_length), chunk_start, 0, where));
     if (chunk.op != static_cast<uint8_t>(Opcode::kChunk)) {
       return ParseError(
           fmt::format("{}: Chunk Index at offset {} points at offset {}, which holds "
@@ -835,8 +862,14 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
     AVP_RETURN_IF_ERROR(ReadChunk(chunk, where, file, file.messages, nullptr, nullptr));
     ++file.chunk_count;
   }
-  // Attachments and metadata through their indexes (offset and length of each record).
-  for (const Record& r : other_indexes) {
+  return Status::Ok();
+}
+
+/// Attachments and metadata through their indexes (offset and length of each record).
+Status ReadIndexedRecords(std::span<const uint8_t> bytes, uint64_t summary_start,
+                          const std::vector<Record>& indexes, const std::string& where,
+                          File& file) {
+  for (const Record& r : indexes) {
     const bool attachment = r.op == static_cast<uint8_t>(Opcode::kAttachmentIndex);
     Cursor c(r.content, r.offset + 9, attachment ? "Attachment Index" : "Metadata Index");
     const uint64_t record_at = c.U64("offset");
@@ -848,9 +881,8 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
           fmt::format("{}: {} at offset {} points at bytes {}..{}, outside the data section", where,
                       OpcodeName(r.op), r.offset, record_at, record_at + length));
     }
-    AVP_ASSIGN_OR_RETURN(
-        Record rec,
-        RecordAt(std::span<const uint8_t>(bytes).first(record_at + length), record_at, 0, where));
+    AVP_ASSIGN_OR_RETURN(Record rec,
+                         RecordAt(bytes.first(record_at + length), record_at, 0, where));
     const Opcode want = attachment ? Opcode::kAttachment : Opcode::kMetadata;
     if (rec.op != static_cast<uint8_t>(want) || rec.end() != record_at + length) {
       return ParseError(
@@ -867,6 +899,108 @@ Result<File> ReadIndexed(const std::filesystem::path& path) {
       file.metadata.push_back(std::move(md));
     }
   }
+  return Status::Ok();
+}
+
+/// A streaming reader's state: where it is and whether it has passed the Data End record.
+struct StreamPosition {
+  uint64_t at = 8;
+  bool data_end = false;
+};
+
+/// One record of the data section read in file order into `file`. Schemas and channels after
+/// the Data End record (the summary's copies) are not added twice.
+Status ReadStreamRecord(std::span<const uint8_t> bytes, const Record& r, const std::string& where,
+                        StreamPosition& pos, File& file) {
+  switch (static_cast<Opcode>(r.op)) {
+    case Opcode::kSchema: {
+      AVP_ASSIGN_OR_RETURN(Schema s, ParseSchema(r, where));
+      if (!pos.data_end) file.schemas.push_back(std::move(s));
+      return Status::Ok();
+    }
+    case Opcode::kChannel: {
+      AVP_ASSIGN_OR_RETURN(Channel ch, ParseChannel(r, where));
+      if (!pos.data_end) file.channels.push_back(std::move(ch));
+      return Status::Ok();
+    }
+    case Opcode::kMessage: {
+      AVP_ASSIGN_OR_RETURN(Message m, ParseMessage(r, where));
+      file.messages.push_back(std::move(m));
+      return Status::Ok();
+    }
+    case Opcode::kChunk:
+      AVP_RETURN_IF_ERROR(ReadChunk(r, where, file, file.messages, &file.schemas, &file.channels));
+      ++file.chunk_count;
+      return Status::Ok();
+    case Opcode::kAttachment: {
+      AVP_ASSIGN_OR_RETURN(Attachment a, ParseAttachment(r, where));
+      file.attachments.push_back(std::move(a));
+      return Status::Ok();
+    }
+    case Opcode::kMetadata: {
+      AVP_ASSIGN_OR_RETURN(Metadata md, ParseMetadata(r, where));
+      file.metadata.push_back(std::move(md));
+      return Status::Ok();
+    }
+    case Opcode::kDataEnd: {
+      Cursor c(r.content, r.offset + 9, "Data End");
+      const uint32_t crc = c.U32("data_section_crc");
+      if (!c.ok()) return Bad(where, c);
+      const uint32_t computed = Crc32(bytes.first(pos.at));
+      if (crc != 0 && crc != computed) {
+        return ParseError(
+            fmt::format("{}: data section CRC mismatch (Data End at offset "
+                        "{}): stored {:08x}, computed {:08x}",
+                        where, pos.at, crc, computed));
+      }
+      pos.data_end = true;
+      return Status::Ok();
+    }
+    case Opcode::kFooter: {
+      const uint64_t end = r.end();
+      if (end + 8 > bytes.size() ||
+          !std::equal(kMagic.begin(), kMagic.end(), bytes.begin() + static_cast<long>(end),
+                      [](char a, uint8_t b) { return static_cast<uint8_t>(a) == b; })) {
+        return ParseError(fmt::format(
+            "{}: no closing magic after the Footer at offset {} (the file ends at byte {})", where,
+            pos.at, bytes.size()));
+      }
+      return Status::Ok();
+    }
+    default:
+      return Status::Ok();
+  }
+}
+
+/// A streamed file's statistics, counted from what was read.
+void CountStatistics(File& file) {
+  Statistics& s = file.statistics;
+  s.message_count = file.messages.size();
+  s.schema_count = static_cast<uint16_t>(file.schemas.size());
+  s.channel_count = static_cast<uint32_t>(file.channels.size());
+  s.chunk_count = file.chunk_count;
+  s.attachment_count = static_cast<uint32_t>(file.attachments.size());
+  s.metadata_count = static_cast<uint32_t>(file.metadata.size());
+  for (size_t i = 0; i < file.messages.size(); ++i) {
+    const Message& m = file.messages[i];
+    s.message_start_time = i == 0 ? m.log_time : std::min(s.message_start_time, m.log_time);
+    s.message_end_time = i == 0 ? m.log_time : std::max(s.message_end_time, m.log_time);
+    ++s.channel_message_counts[m.channel_id];
+  }
+}
+
+}  // namespace
+
+Result<File> ReadIndexed(const std::filesystem::path& path) {
+  const std::string where = path.string();
+  AVP_ASSIGN_OR_RETURN(const std::string contents, ReadAll(path));
+  const std::span<const uint8_t> bytes = Bytes(contents);
+  File file;
+  AVP_RETURN_IF_ERROR(ReadHeader(bytes, where, file));
+  AVP_ASSIGN_OR_RETURN(const SummaryLocation loc, LocateSummary(bytes, where));
+  AVP_ASSIGN_OR_RETURN(const SummaryIndexes indexes, ReadSummary(bytes, loc, where, file));
+  AVP_RETURN_IF_ERROR(ReadIndexedChunks(bytes, loc.summary_start, indexes.chunks, where, file));
+  AVP_RETURN_IF_ERROR(ReadIndexedRecords(bytes, loc.summary_start, indexes.others, where, file));
   std::stable_sort(file.messages.begin(), file.messages.end(),
                    [](const Message& a, const Message& b) { return a.log_time < b.log_time; });
   return file;
@@ -887,105 +1021,26 @@ StreamResult ReadStreaming(const std::filesystem::path& path) {
     result.intact_bytes = bytes.size() >= kMagic.size() ? kMagic.size() : 0;
     return result;
   }
-  uint64_t at = 8;
-  bool data_end = false;
+  StreamPosition pos;
   auto fail = [&](Status s) {
     result.status = std::move(s);
-    result.intact_bytes = at;
+    result.intact_bytes = pos.at;
     return result;
   };
   while (true) {
-    if (at == bytes.size()) {
-      return fail(
-          ParseError(fmt::format("{}: the file ends at offset {} without {}: truncated "
-                                 "(the messages before it are intact)",
-                                 where, at, data_end ? "its Footer" : "a Data End record")));
+    if (pos.at == bytes.size()) {
+      return fail(ParseError(
+          fmt::format("{}: the file ends at offset {} without {}: truncated "
+                      "(the messages before it are intact)",
+                      where, pos.at, pos.data_end ? "its Footer" : "a Data End record")));
     }
-    auto rec = RecordAt(bytes, at, 0, where);
+    auto rec = RecordAt(bytes, pos.at, 0, where);
     if (!rec.ok()) return fail(rec.status());
-    const Record& r = *rec;
-    switch (static_cast<Opcode>(r.op)) {
-      case Opcode::kSchema: {
-        auto s = ParseSchema(r, where);
-        if (!s.ok()) return fail(s.status());
-        if (!data_end) file.schemas.push_back(std::move(*s));
-        break;
-      }
-      case Opcode::kChannel: {
-        auto ch = ParseChannel(r, where);
-        if (!ch.ok()) return fail(ch.status());
-        if (!data_end) file.channels.push_back(std::move(*ch));
-        break;
-      }
-      case Opcode::kMessage: {
-        auto m = ParseMessage(r, where);
-        if (!m.ok()) return fail(m.status());
-        file.messages.push_back(std::move(*m));
-        break;
-      }
-      case Opcode::kChunk: {
-        Status s = ReadChunk(r, where, file, file.messages, &file.schemas, &file.channels);
-        if (!s.ok()) return fail(s);
-        ++file.chunk_count;
-        break;
-      }
-      case Opcode::kAttachment: {
-        auto a = ParseAttachment(r, where);
-        if (!a.ok()) return fail(a.status());
-        file.attachments.push_back(std::move(*a));
-        break;
-      }
-      case Opcode::kMetadata: {
-        auto md = ParseMetadata(r, where);
-        if (!md.ok()) return fail(md.status());
-        file.metadata.push_back(std::move(*md));
-        break;
-      }
-      case Opcode::kDataEnd: {
-        Cursor c(r.content, r.offset + 9, "Data End");
-        const uint32_t crc = c.U32("data_section_crc");
-        if (!c.ok()) return fail(Bad(where, c));
-        const uint32_t computed = Crc32(std::span<const uint8_t>(bytes).first(at));
-        if (crc != 0 && crc != computed) {
-          return fail(
-              ParseError(fmt::format("{}: data section CRC mismatch (Data End at offset "
-                                     "{}): stored {:08x}, computed {:08x}",
-                                     where, at, crc, computed)));
-        }
-        data_end = true;
-        break;
-      }
-      case Opcode::kFooter: {
-        const uint64_t end = r.end();
-        if (end + 8 > bytes.size() ||
-            !std::equal(kMagic.begin(), kMagic.end(), bytes.begin() + static_cast<long>(end),
-                        [](char a, uint8_t b) { return static_cast<uint8_t>(a) == b; })) {
-          return fail(ParseError(fmt::format(
-              "{}: no closing magic after the Footer at offset {} (the file ends at byte {})",
-              where, at, bytes.size())));
-        }
-        break;
-      }
-      default:
-        break;
-    }
-    if (r.op == static_cast<uint8_t>(Opcode::kFooter)) break;
-    at = r.end();
+    if (Status s = ReadStreamRecord(bytes, *rec, where, pos, file); !s.ok()) return fail(s);
+    if (rec->op == static_cast<uint8_t>(Opcode::kFooter)) break;
+    pos.at = rec->end();
   }
-  // Counted statistics.
-  Statistics& s = file.statistics;
-  s.message_count = file.messages.size();
-  s.schema_count = static_cast<uint16_t>(file.schemas.size());
-  s.channel_count = static_cast<uint32_t>(file.channels.size());
-  s.chunk_count = file.chunk_count;
-  s.attachment_count = static_cast<uint32_t>(file.attachments.size());
-  s.metadata_count = static_cast<uint32_t>(file.metadata.size());
-  for (size_t i = 0; i < file.messages.size(); ++i) {
-    const Message& m = file.messages[i];
-    s.message_start_time = i == 0 ? m.log_time : std::min(s.message_start_time, m.log_time);
-    s.message_end_time = i == 0 ? m.log_time : std::max(s.message_end_time, m.log_time);
-    ++s.channel_message_counts[m.channel_id];
-  }
+  CountStatistics(file);
   result.intact_bytes = bytes.size();
   return result;
 }
