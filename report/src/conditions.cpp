@@ -281,49 +281,71 @@ std::string LeadVerdict(const eval::Summary& d) {
   return "tied";
 }
 
-Result<ConditionTables> WriteConditionTables(const fs::path& out_dir,
-                                             const std::vector<ConditionBench>& conditions,
-                                             const std::string& lead) {
-  if (conditions.empty()) return InvalidArgumentError("no condition to compare");
+namespace {
+
+/// (condition, scenario, planner) -> seed -> run.
+using RunKey = std::tuple<std::string, std::string, std::string>;
+using RunMap = std::map<RunKey, std::map<uint64_t, BenchRunResult>>;
+
+/// Every condition's runs, with the scenarios and planners in order of first appearance (the
+/// lead planner first).
+struct ConditionRuns {
+  std::vector<std::string> scenarios;
+  std::vector<std::string> planners;
+  RunMap runs;
+};
+
+/// Each condition named once, with a name fit for a CSV field.
+Status CheckConditionNames(const std::vector<ConditionBench>& conditions) {
   std::set<std::string> names;
-  std::error_code ec;
-  const fs::path out = fs::weakly_canonical(fs::absolute(out_dir, ec), ec);
   for (const ConditionBench& c : conditions) {
     if (!names.insert(c.name).second) {
       return InvalidArgumentError(fmt::format("the condition '{}' is given twice", c.name));
     }
     AVP_RETURN_IF_ERROR(CheckCsvName("condition", c.name));
   }
-  ConditionTables t;
-  // Scenarios and planners in order of first appearance (the lead planner first).
-  std::vector<std::string> scenarios, planners = {lead};
-  // (condition, scenario, planner) -> seed -> run.
-  std::map<std::tuple<std::string, std::string, std::string>, std::map<uint64_t, BenchRunResult>>
-      runs;
+  return Status::Ok();
+}
+
+/// The tables may not go into a bench they read (its own files, its --force). `out`: out_dir
+/// made canonical (`out_ok`: without error).
+Status CheckOutsideBench(const fs::path& out_dir, const fs::path& out, bool out_ok,
+                         const ConditionBench& c) {
+  std::error_code in_ec;
+  const fs::path in = fs::weakly_canonical(fs::absolute(c.dir, in_ec), in_ec);
+  const auto in_end = std::mismatch(in.begin(), in.end(), out.begin(), out.end()).first;
+  if (out_ok && !in_ec && !in.empty() && in_end == in.end()) {
+    return InvalidArgumentError(
+        fmt::format("the output folder '{}' is inside the bench folder '{}' of condition '{}': "
+                    "write the tables elsewhere",
+                    out_dir.string(), c.dir.string(), c.name));
+  }
+  return Status::Ok();
+}
+
+Result<ConditionRuns> ReadConditionRuns(const fs::path& out_dir,
+                                        const std::vector<ConditionBench>& conditions,
+                                        const std::string& lead) {
+  std::error_code ec;
+  const fs::path out = fs::weakly_canonical(fs::absolute(out_dir, ec), ec);
+  ConditionRuns all;
+  all.planners = {lead};
   for (const ConditionBench& c : conditions) {
     AVP_ASSIGN_OR_RETURN(const std::vector<BenchRunResult> list, ReadBenchRuns(c.dir));
-    // The tables may not go into a bench they read (its own files, its --force).
-    std::error_code in_ec;
-    const fs::path in = fs::weakly_canonical(fs::absolute(c.dir, in_ec), in_ec);
-    const auto in_end = std::mismatch(in.begin(), in.end(), out.begin(), out.end()).first;
-    if (!ec && !in_ec && !in.empty() && in_end == in.end()) {
-      return InvalidArgumentError(
-          fmt::format("the output folder '{}' is inside the bench folder '{}' of condition '{}': "
-                      "write the tables elsewhere",
-                      out_dir.string(), c.dir.string(), c.name));
-    }
+    AVP_RETURN_IF_ERROR(CheckOutsideBench(out_dir, out, !ec, c));
     bool has_lead = false;
     for (const BenchRunResult& r : list) {
       AVP_RETURN_IF_ERROR(CheckCsvName("scenario", r.scenario));
       AVP_RETURN_IF_ERROR(CheckCsvName("planner", r.planner));
-      if (std::find(scenarios.begin(), scenarios.end(), r.scenario) == scenarios.end()) {
-        scenarios.push_back(r.scenario);
+      if (std::find(all.scenarios.begin(), all.scenarios.end(), r.scenario) ==
+          all.scenarios.end()) {
+        all.scenarios.push_back(r.scenario);
       }
-      if (std::find(planners.begin(), planners.end(), r.planner) == planners.end()) {
-        planners.push_back(r.planner);
+      if (std::find(all.planners.begin(), all.planners.end(), r.planner) == all.planners.end()) {
+        all.planners.push_back(r.planner);
       }
       has_lead = has_lead || r.planner == lead;
-      runs[{c.name, r.scenario, r.planner}][r.seed] = r;
+      all.runs[{c.name, r.scenario, r.planner}][r.seed] = r;
     }
     if (!has_lead) {
       return InvalidArgumentError(
@@ -332,137 +354,193 @@ Result<ConditionTables> WriteConditionTables(const fs::path& out_dir,
                       lead, c.name, c.dir.string()));
     }
   }
+  return all;
+}
+
+/// One planner's final-view F1, found fraction and views over the seeds (failed runs counted).
+ConditionCell Cell(const std::string& condition, const std::string& scenario,
+                   const std::string& planner, const std::map<uint64_t, BenchRunResult>& seeds) {
+  ConditionCell cell;
+  cell.condition = condition;
+  cell.scenario = scenario;
+  cell.planner = planner;
+  std::vector<double> f1, found, views;
+  for (const auto& [seed, r] : seeds) {
+    if (!r.ok) {
+      ++cell.failed;
+      continue;
+    }
+    f1.push_back(r.f1);
+    found.push_back(r.found_fraction);
+    views.push_back(r.views);
+  }
+  cell.f1 = eval::Summarize(f1);
+  cell.found = eval::Summarize(found);
+  cell.views = eval::Summarize(views);
+  return cell;
+}
+
+/// The lead planner's F1 and found fraction minus another's, seed by seed (both runs ok).
+ConditionLead Lead(const std::string& condition, const std::string& scenario,
+                   const std::string& lead, const std::string& versus,
+                   const std::map<uint64_t, BenchRunResult>& lead_seeds,
+                   const std::map<uint64_t, BenchRunResult>& other_seeds) {
+  std::vector<double> d_f1, d_found;
+  for (const auto& [seed, a] : lead_seeds) {
+    const auto b = other_seeds.find(seed);
+    if (!a.ok || b == other_seeds.end() || !b->second.ok) continue;
+    d_f1.push_back(a.f1 - b->second.f1);
+    d_found.push_back(a.found_fraction - b->second.found_fraction);
+  }
+  ConditionLead l;
+  l.condition = condition;
+  l.scenario = scenario;
+  l.planner = lead;
+  l.versus = versus;
+  l.f1 = eval::Summarize(d_f1);
+  l.found = eval::Summarize(d_found);
+  l.verdict = LeadVerdict(l.f1);
+  return l;
+}
+
+/// The cells and leads of every (scenario, condition), into `t`; returns conditions.csv.
+std::string ScoreConditions(const ConditionRuns& all, const std::vector<ConditionBench>& conditions,
+                            const std::string& lead, ConditionTables& t) {
   std::string csv = "condition,scenario,planner,versus,metric,mean,ci95,n\n";
-  for (const std::string& s : scenarios) {
+  for (const std::string& s : all.scenarios) {
     for (const ConditionBench& c : conditions) {
-      for (const std::string& p : planners) {
-        const auto it = runs.find({c.name, s, p});
-        if (it == runs.end()) continue;
-        ConditionCell cell;
-        cell.condition = c.name;
-        cell.scenario = s;
-        cell.planner = p;
-        std::vector<double> f1, found, views;
-        for (const auto& [seed, r] : it->second) {
-          if (!r.ok) {
-            ++cell.failed;
-            continue;
-          }
-          f1.push_back(r.f1);
-          found.push_back(r.found_fraction);
-          views.push_back(r.views);
-        }
-        cell.f1 = eval::Summarize(f1);
-        cell.found = eval::Summarize(found);
-        cell.views = eval::Summarize(views);
+      for (const std::string& p : all.planners) {
+        const auto it = all.runs.find({c.name, s, p});
+        if (it == all.runs.end()) continue;
+        ConditionCell cell = Cell(c.name, s, p, it->second);
         csv += fmt::format("{},{},{},,f1,{}\n", c.name, s, p, Csv(cell.f1));
         csv += fmt::format("{},{},{},,fruits_found_fraction,{}\n", c.name, s, p, Csv(cell.found));
         csv += fmt::format("{},{},{},,views,{}\n", c.name, s, p, Csv(cell.views));
         t.cells.push_back(std::move(cell));
       }
-      const auto lead_runs = runs.find({c.name, s, lead});
-      if (lead_runs == runs.end()) continue;
-      for (const std::string& p : planners) {
+      const auto lead_runs = all.runs.find({c.name, s, lead});
+      if (lead_runs == all.runs.end()) continue;
+      for (const std::string& p : all.planners) {
         if (p == lead) continue;
-        const auto other = runs.find({c.name, s, p});
-        if (other == runs.end()) continue;
-        std::vector<double> d_f1, d_found;
-        for (const auto& [seed, a] : lead_runs->second) {
-          const auto b = other->second.find(seed);
-          if (!a.ok || b == other->second.end() || !b->second.ok) continue;
-          d_f1.push_back(a.f1 - b->second.f1);
-          d_found.push_back(a.found_fraction - b->second.found_fraction);
-        }
-        ConditionLead l;
-        l.condition = c.name;
-        l.scenario = s;
-        l.planner = lead;
-        l.versus = p;
-        l.f1 = eval::Summarize(d_f1);
-        l.found = eval::Summarize(d_found);
-        l.verdict = LeadVerdict(l.f1);
+        const auto other = all.runs.find({c.name, s, p});
+        if (other == all.runs.end()) continue;
+        ConditionLead l = Lead(c.name, s, lead, p, lead_runs->second, other->second);
         csv += fmt::format("{},{},{},{},f1_lead,{}\n", c.name, s, lead, p, Csv(l.f1));
         csv += fmt::format("{},{},{},{},found_lead,{}\n", c.name, s, lead, p, Csv(l.found));
         t.leads.push_back(std::move(l));
       }
     }
   }
+  return csv;
+}
 
-  const auto cell_of = [&](const std::string& c, const std::string& s,
-                           const std::string& p) -> const ConditionCell* {
-    for (const ConditionCell& x : t.cells) {
-      if (x.condition == c && x.scenario == s && x.planner == p) return &x;
+const ConditionCell* FindCell(const ConditionTables& t, const std::string& c, const std::string& s,
+                              const std::string& p) {
+  for (const ConditionCell& x : t.cells) {
+    if (x.condition == c && x.scenario == s && x.planner == p) return &x;
+  }
+  return nullptr;
+}
+
+const ConditionLead* FindLead(const ConditionTables& t, const std::string& c, const std::string& s,
+                              const std::string& p) {
+  for (const ConditionLead& x : t.leads) {
+    if (x.condition == c && x.scenario == s && x.versus == p) return &x;
+  }
+  return nullptr;
+}
+
+/// The markdown table of one scenario: a row per condition, F1 / found per planner, the lead's
+/// F1 lead over each other planner, and the lead's views.
+std::string ScenarioTable(const ConditionTables& t, const std::string& s,
+                          const std::vector<ConditionBench>& conditions,
+                          const std::vector<std::string>& planners, const std::string& lead) {
+  std::string md = fmt::format("\n## {}\n\n| condition |", s);
+  std::string rule = "|---|";
+  for (const std::string& p : planners) {
+    md += fmt::format(" {} F1 / found |", p);
+    rule += "---|";
+  }
+  for (size_t i = 1; i < planners.size(); ++i) {
+    md += fmt::format(" F1 lead vs {} |", planners[i]);
+    rule += "---|";
+  }
+  md += fmt::format(" views ({}) |\n{}---|\n", lead, rule);
+  for (const ConditionBench& c : conditions) {
+    md += fmt::format("| {} |", c.name);
+    for (const std::string& p : planners) {
+      const ConditionCell* x = FindCell(t, c.name, s, p);
+      md += x == nullptr ? " – |"
+                         : fmt::format(" {} / {}{} |", MeanCi(x->f1), Num(x->found.mean),
+                                       x->failed > 0 ? fmt::format(" ({} failed)", x->failed)
+                                                     : std::string());
     }
-    return nullptr;
-  };
-  const auto lead_of = [&](const std::string& c, const std::string& s,
-                           const std::string& p) -> const ConditionLead* {
-    for (const ConditionLead& x : t.leads) {
-      if (x.condition == c && x.scenario == s && x.versus == p) return &x;
+    for (size_t i = 1; i < planners.size(); ++i) {
+      const ConditionLead* l = FindLead(t, c.name, s, planners[i]);
+      md += l == nullptr ? " – |"
+                         : fmt::format(" {} ± {} {} |", Signed(l->f1.mean),
+                                       Num(std::isfinite(l->f1.ci95) ? l->f1.ci95 : 0.0),
+                                       l->verdict == "ahead" ? "**ahead**" : l->verdict);
     }
-    return nullptr;
-  };
+    const ConditionCell* x = FindCell(t, c.name, s, lead);
+    md += fmt::format(" {} |\n", x == nullptr ? "–" : fmt::format("{:.1f}", x->views.mean));
+  }
+  return md;
+}
+
+/// How often the lead planner is ahead, and every comparison where it is not.
+std::string LeadSummary(const ConditionTables& t, const std::string& lead) {
+  std::vector<const ConditionLead*> not_ahead;
+  for (const ConditionLead& l : t.leads) {
+    if (l.verdict != "ahead") not_ahead.push_back(&l);
+  }
+  std::string md =
+      fmt::format("\n`{}` is ahead in {} of {} comparisons (condition × scenario × planner).", lead,
+                  t.leads.size() - not_ahead.size(), t.leads.size());
+  if (not_ahead.empty()) return md + "\n";
+  md += " Not ahead:\n\n";
+  for (const ConditionLead* l : not_ahead) {
+    md += fmt::format(
+        "- {}, {}, vs {}: F1 {} ± {} ({}), found {} ± {}\n", l->condition, l->scenario, l->versus,
+        Signed(l->f1.mean), Num(std::isfinite(l->f1.ci95) ? l->f1.ci95 : 0.0), l->verdict,
+        Signed(l->found.mean), Num(std::isfinite(l->found.ci95) ? l->found.ci95 : 0.0));
+  }
+  return md;
+}
+
+/// conditions.md: the conditions, a table per scenario, and the lead's summary.
+std::string ConditionMarkdown(const ConditionTables& t, const ConditionRuns& all,
+                              const std::vector<ConditionBench>& conditions,
+                              const std::string& lead) {
   std::string md = "# avp bench: conditions\n\n";
   md += fmt::format(
       "{} condition(s), {} scenario(s), planners {}. Final view, mean ± 95 % CI over seeds; the "
       "lead of `{}` is its F1 minus the other planner's, seed by seed (paired; Student's t): "
       "**ahead** when its 95 % interval is above 0, **behind** when below, else tied. `found` = "
       "fraction of the fruits found.\n\n",
-      conditions.size(), scenarios.size(), fmt::join(planners, ", "), lead);
+      conditions.size(), all.scenarios.size(), fmt::join(all.planners, ", "), lead);
   md += "| condition | bench folder | what |\n|---|---|---|\n";
   for (const ConditionBench& c : conditions) {
     md += fmt::format("| {} | `{}` | {} |\n", c.name, c.dir.string(),
                       c.description.empty() ? "–" : c.description);
   }
-  for (const std::string& s : scenarios) {
-    md += fmt::format("\n## {}\n\n| condition |", s);
-    std::string rule = "|---|";
-    for (const std::string& p : planners) {
-      md += fmt::format(" {} F1 / found |", p);
-      rule += "---|";
-    }
-    for (size_t i = 1; i < planners.size(); ++i) {
-      md += fmt::format(" F1 lead vs {} |", planners[i]);
-      rule += "---|";
-    }
-    md += fmt::format(" views ({}) |\n{}---|\n", lead, rule);
-    for (const ConditionBench& c : conditions) {
-      md += fmt::format("| {} |", c.name);
-      for (const std::string& p : planners) {
-        const ConditionCell* x = cell_of(c.name, s, p);
-        md += x == nullptr ? " – |"
-                           : fmt::format(" {} / {}{} |", MeanCi(x->f1), Num(x->found.mean),
-                                         x->failed > 0 ? fmt::format(" ({} failed)", x->failed)
-                                                       : std::string());
-      }
-      for (size_t i = 1; i < planners.size(); ++i) {
-        const ConditionLead* l = lead_of(c.name, s, planners[i]);
-        md += l == nullptr ? " – |"
-                           : fmt::format(" {} ± {} {} |", Signed(l->f1.mean),
-                                         Num(std::isfinite(l->f1.ci95) ? l->f1.ci95 : 0.0),
-                                         l->verdict == "ahead" ? "**ahead**" : l->verdict);
-      }
-      const ConditionCell* x = cell_of(c.name, s, lead);
-      md += fmt::format(" {} |\n", x == nullptr ? "–" : fmt::format("{:.1f}", x->views.mean));
-    }
+  for (const std::string& s : all.scenarios) {
+    md += ScenarioTable(t, s, conditions, all.planners, lead);
   }
-  std::vector<const ConditionLead*> not_ahead;
-  for (const ConditionLead& l : t.leads) {
-    if (l.verdict != "ahead") not_ahead.push_back(&l);
-  }
-  md += fmt::format("\n`{}` is ahead in {} of {} comparisons (condition × scenario × planner).",
-                    lead, t.leads.size() - not_ahead.size(), t.leads.size());
-  if (!not_ahead.empty()) {
-    md += " Not ahead:\n\n";
-    for (const ConditionLead* l : not_ahead) {
-      md += fmt::format(
-          "- {}, {}, vs {}: F1 {} ± {} ({}), found {} ± {}\n", l->condition, l->scenario, l->versus,
-          Signed(l->f1.mean), Num(std::isfinite(l->f1.ci95) ? l->f1.ci95 : 0.0), l->verdict,
-          Signed(l->found.mean), Num(std::isfinite(l->found.ci95) ? l->found.ci95 : 0.0));
-    }
-  } else {
-    md += "\n";
-  }
+  return md + LeadSummary(t, lead);
+}
+
+}  // namespace
+
+Result<ConditionTables> WriteConditionTables(const fs::path& out_dir,
+                                             const std::vector<ConditionBench>& conditions,
+                                             const std::string& lead) {
+  if (conditions.empty()) return InvalidArgumentError("no condition to compare");
+  AVP_RETURN_IF_ERROR(CheckConditionNames(conditions));
+  AVP_ASSIGN_OR_RETURN(const ConditionRuns all, ReadConditionRuns(out_dir, conditions, lead));
+  ConditionTables t;
+  const std::string csv = ScoreConditions(all, conditions, lead, t);
+  const std::string md = ConditionMarkdown(t, all, conditions, lead);
   const fs::path csv_path = out_dir / "conditions.csv";
   const fs::path md_path = out_dir / "conditions.md";
   AVP_RETURN_IF_ERROR(io::WriteFileAtomic(csv_path, csv, "conditions table"));
