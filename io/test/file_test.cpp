@@ -2,7 +2,6 @@
 // and names the path when it cannot write.
 #include <algorithm>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -10,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <avp/io/file.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::io {
@@ -18,12 +18,7 @@ namespace {
 using ::testing::HasSubstr;
 using ::testing::Not;
 
-std::string Read(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+std::string Read(const std::filesystem::path& p) { return test::ReadWholeFile(p); }
 
 class WriteFileAtomicTest : public test::TempDirTest {};
 

@@ -1,7 +1,6 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <limits>
 #include <numbers>
 #include <string>
@@ -15,6 +14,7 @@
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/io/json.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::io {
@@ -238,8 +238,7 @@ TEST_F(JsonFileTest, WriteAndReadBack) {
   const fs::path path = dir_ / "nested" / "dir" / "camera.json";
   const nlohmann::json j = ToJson(OddIntrinsics());
   ASSERT_TRUE(WriteJsonFile(path, j).ok());
-  std::ifstream in(path);
-  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  const std::string text = test::ReadWholeFile(path);
   EXPECT_EQ(text, j.dump(2) + "\n");  // pretty-printed with 2 spaces, trailing newline
   EXPECT_THAT(text, HasSubstr("\n  \"cx\": 640.123"));
   const Result<nlohmann::json> back = ReadJsonFile(path);

@@ -2,7 +2,6 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <limits>
 #include <string>
 #include <vector>
@@ -15,6 +14,7 @@
 #include <avp/core/status.h>
 #include <avp/io/depth.h>
 #include <avp/io/png.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::io {
@@ -88,8 +88,8 @@ class PngTest : public test::TempDirTest {
     ASSERT_TRUE(out.good());
   }
   std::vector<uint8_t> ReadBytes(const fs::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+    const std::string bytes = test::ReadWholeFile(path);
+    return {bytes.begin(), bytes.end()};
   }
 };
 

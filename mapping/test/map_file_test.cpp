@@ -17,6 +17,7 @@
 #include <avp/mapping/map_file.h>
 #include <avp/mapping/ply_export.h>
 #include <avp/mapping/semantic_map.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::mapping {
@@ -441,10 +442,7 @@ struct PlyFile {
 };
 
 PlyFile ReadPly(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string all = ss.str();
+  const std::string all = test::ReadWholeFile(path);
   const size_t end = all.find("end_header\n");
   EXPECT_NE(end, std::string::npos);
   return {all.substr(0, end + 11), all.substr(end + 11)};

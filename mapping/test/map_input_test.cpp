@@ -19,6 +19,7 @@
 #include <avp/mapping/map_file.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/mapping/semantic_map.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::mapping {
@@ -35,10 +36,7 @@ octomap::OcTreeKey OcKey(const VoxelKey& k) {
 
 class MapInputTest : public test::TempDirTest {
  protected:
-  std::string ReadBytes(const fs::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-  }
+  std::string ReadBytes(const fs::path& path) { return test::ReadWholeFile(path); }
   fs::path WriteBytes(const std::string& name, const std::string& bytes) {
     const fs::path path = dir_ / name;
     std::ofstream(path, std::ios::binary) << bytes;

@@ -2,7 +2,6 @@
 // class colours come back as classes, other colours as unlabelled occupied voxels; broken files
 // are refused naming the file and the byte.
 #include <fstream>
-#include <iterator>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -17,6 +16,7 @@
 #include <avp/mapping/map_file.h>
 #include <avp/mapping/map_reader.h>
 #include <avp/mapping/octomap_io.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::mapping {
@@ -66,10 +66,7 @@ class MapReaderTest : public test::TempDirTest {
     std::ofstream(p, std::ios::binary) << bytes;
     return p;
   }
-  static std::string Read(const fs::path& p) {
-    std::ifstream in(p, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), {}};
-  }
+  static std::string Read(const fs::path& p) { return test::ReadWholeFile(p); }
 };
 
 TEST(MapFileFormatTest, DetectedFromTheFirstBytes) {

@@ -22,6 +22,7 @@
 #include <avp/io/label_preview.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/mapping/semantic_map.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::mapping {
@@ -87,12 +88,7 @@ std::string OctomapTool(const std::string& name) {
   return {};
 }
 
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+std::string ReadText(const fs::path& path) { return test::ReadWholeFile(path); }
 
 /// Every voxel covered by an occupied/free leaf of `tree`, expanded to the finest level.
 template <class Tree>

@@ -3,8 +3,6 @@
 // fruits_by_visibility.csv / summary.md table WriteBenchSummary writes from them.
 #include <cmath>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -12,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <avp/report/bench_summary.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::report {
@@ -21,12 +20,7 @@ namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 using ::testing::Not;
 
-std::string ReadAll(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+std::string ReadAll(const fs::path& p) { return test::ReadWholeFile(p); }
 
 /// A successful episode of one view with fruits (best visible fraction, found).
 BenchEpisode Episode(const std::string& planner, uint64_t seed,

@@ -10,6 +10,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::report {
@@ -93,16 +94,14 @@ TEST_F(ConditionTablesTest, PairsTheLeadWithEachPlannerSeedBySeed) {
   EXPECT_EQ(t->cells[4].failed, 1u);
   EXPECT_EQ(t->cells[4].f1.n, 3u);
 
-  std::ifstream md_in(dir_ / "conditions.md");
-  const std::string md((std::istreambuf_iterator<char>(md_in)), {});
+  const std::string md = test::ReadWholeFile(dir_ / "conditions.md");
   EXPECT_THAT(md, HasSubstr("| easy | `"));
   EXPECT_THAT(md, HasSubstr("| nothing changed |"));
   EXPECT_THAT(md, HasSubstr("| +0.300 ± 0.026 **ahead** |"));
   EXPECT_THAT(md, HasSubstr("(1 failed)"));
   EXPECT_THAT(md, HasSubstr("`avp-nbv` is ahead in 2 of 4 comparisons"));
   EXPECT_THAT(md, HasSubstr("- hard, plant, vs other: F1 +0.017"));
-  std::ifstream csv_in(dir_ / "conditions.csv");
-  const std::string csv((std::istreambuf_iterator<char>(csv_in)), {});
+  const std::string csv = test::ReadWholeFile(dir_ / "conditions.csv");
   EXPECT_THAT(csv, HasSubstr("condition,scenario,planner,versus,metric,mean,ci95,n\n"));
   EXPECT_THAT(csv, HasSubstr("\neasy,plant,avp-nbv,,views,3,0,4\n"));
   EXPECT_THAT(csv, HasSubstr("\neasy,plant,avp-nbv,other,f1_lead,0.3,"));

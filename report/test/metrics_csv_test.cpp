@@ -2,7 +2,6 @@
 // episode goes, and a write that fails (a full disk) stops the episode and names the file.
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <stop_token>
 #include <string>
 
@@ -11,6 +10,7 @@
 
 #include <avp/mapping/semantic_map.h>
 #include <avp/report/metrics_csv.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::report {
@@ -20,12 +20,7 @@ namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
-std::string ReadAll(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+std::string ReadAll(const fs::path& p) { return test::ReadWholeFile(p); }
 
 pipeline::StepRecord Step(int view) {
   pipeline::StepRecord s;

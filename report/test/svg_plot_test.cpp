@@ -2,9 +2,7 @@
 // escaping, bands, gaps, a second axis, validation errors and the atomic write.
 #include <cctype>
 #include <cmath>
-#include <fstream>
 #include <limits>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -12,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <avp/report/svg_plot.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::report {
@@ -115,12 +114,7 @@ std::string XmlProblem(const std::string& xml) {
   return "";
 }
 
-std::string ReadFile(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+std::string ReadFile(const fs::path& path) { return test::ReadWholeFile(path); }
 
 size_t Count(const std::string& text, const std::string& what) {
   size_t n = 0;
