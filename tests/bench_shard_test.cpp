@@ -5,7 +5,6 @@
 #include <filesystem>
 #include <fstream>
 #include <set>
-#include <sstream>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -18,6 +17,7 @@
 #include <avp/experiment/bench.h>
 #include <avp/experiment/output_folder.h>
 #include <avp/report/conditions.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::experiment {
@@ -27,12 +27,7 @@ namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 using Job = std::tuple<std::string, std::string, uint64_t>;
 
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+std::string Slurp(const fs::path& p) { return test::ReadWholeFile(p); }
 
 nlohmann::json ReadJson(const fs::path& p) { return nlohmann::json::parse(Slurp(p)); }
 
