@@ -63,6 +63,85 @@ Status RemoteOptions::Validate() const {
       fmt::format("invalid remote segmenter options: {}", fmt::join(errors, "; ")));
 }
 
+namespace {
+
+// Stages of ParseRemoteSpec: each returns what is wrong with its part of the spec ("" when
+// nothing), which ParseRemoteSpec wraps in the spec's error message.
+
+/// "/MODEL" after the authority, when given; `authority` is what precedes it.
+std::string ReadSpecModel(std::string_view rest, std::string_view& authority, RemoteOptions& o) {
+  authority = rest;
+  const size_t slash = rest.find('/');
+  if (slash == std::string_view::npos) return "";
+  authority = rest.substr(0, slash);
+  const std::string_view model = rest.substr(slash + 1);
+  if (model.empty()) return "the model after '/' is empty";
+  if (model.find('/') != std::string_view::npos) {
+    return fmt::format("model \"{}\" must not contain '/'", model);
+  }
+  o.model = std::string(model);
+  return "";
+}
+
+/// HOST[:PORT] or [IPV6][:PORT].
+std::string ReadSpecHostAndPort(std::string_view authority, RemoteOptions& o) {
+  std::string_view port_text;
+  if (!authority.empty() && authority.front() == '[') {
+    const size_t close = authority.find(']');
+    if (close == std::string_view::npos) return "IPv6 host lacks its closing ']'";
+    o.host = std::string(authority.substr(1, close - 1));
+    const std::string_view after = authority.substr(close + 1);
+    if (!after.empty()) {
+      if (after.front() != ':') return "expected ':PORT' after the IPv6 host";
+      port_text = after.substr(1);
+      if (port_text.empty()) return "the port after ':' is empty";
+    }
+  } else {
+    const size_t colon = authority.find(':');
+    o.host = std::string(authority.substr(0, colon));
+    if (colon != std::string_view::npos) {
+      port_text = authority.substr(colon + 1);
+      if (port_text.empty()) return "the port after ':' is empty";
+    }
+  }
+  if (o.host.empty()) return "the host is empty";
+  if (!port_text.empty()) {
+    const std::optional<int> port = ParseNumber<int>(port_text);
+    if (!port || *port < 1 || *port > 65535) {
+      return fmt::format("port ({}) must be in [1, 65535]", port_text);
+    }
+    o.port = *port;
+  }
+  return "";
+}
+
+/// One "KEY=VALUE" of the query: deadline_s, image, depth, labels, masks.
+std::string ReadSpecOption(std::string_view key, std::string_view value, RemoteOptions& o) {
+  if (key == "deadline_s") {
+    const std::optional<double> d = ParseNumber<double>(value);
+    if (!d || !(std::isfinite(*d) && *d > 0.0)) {
+      return fmt::format("deadline_s ({}) must be a number of seconds > 0", value);
+    }
+    o.deadline_s = *d;
+  } else if (key == "image") {
+    const std::optional<ImageEncoding> e = ImageEncodingFromString(value);
+    if (!e) return fmt::format("image ({}) must be raw, png or jpeg", value);
+    o.image = *e;
+  } else if (key == "depth" || key == "labels") {
+    if (value != "0" && value != "1") return fmt::format("{} ({}) must be 0 or 1", key, value);
+    (key == "depth" ? o.send_depth : o.send_labels) = value == "1";
+  } else if (key == "masks") {
+    const std::optional<MaskFormat> f = MaskFormatFromString(value);
+    if (!f) return fmt::format("masks ({}) must be dense, rle or instance_ids", value);
+    o.mask_format = *f;
+  } else {
+    return fmt::format("unknown option '{}' (known: deadline_s, image, depth, labels, masks)", key);
+  }
+  return "";
+}
+
+}  // namespace
+
 Result<RemoteOptions> ParseRemoteSpec(std::string_view spec) {
   const auto bad = [&](const std::string& what) {
     return InvalidArgumentError(
@@ -78,43 +157,9 @@ Result<RemoteOptions> ParseRemoteSpec(std::string_view spec) {
     rest = rest.substr(0, q);
   }
   RemoteOptions o;
-  std::string_view authority = rest;
-  if (const size_t slash = rest.find('/'); slash != std::string_view::npos) {
-    authority = rest.substr(0, slash);
-    const std::string_view model = rest.substr(slash + 1);
-    if (model.empty()) return bad("the model after '/' is empty");
-    if (model.find('/') != std::string_view::npos) {
-      return bad(fmt::format("model \"{}\" must not contain '/'", model));
-    }
-    o.model = std::string(model);
-  }
-  std::string_view port_text;
-  if (!authority.empty() && authority.front() == '[') {
-    const size_t close = authority.find(']');
-    if (close == std::string_view::npos) return bad("IPv6 host lacks its closing ']'");
-    o.host = std::string(authority.substr(1, close - 1));
-    const std::string_view after = authority.substr(close + 1);
-    if (!after.empty()) {
-      if (after.front() != ':') return bad("expected ':PORT' after the IPv6 host");
-      port_text = after.substr(1);
-      if (port_text.empty()) return bad("the port after ':' is empty");
-    }
-  } else {
-    const size_t colon = authority.find(':');
-    o.host = std::string(authority.substr(0, colon));
-    if (colon != std::string_view::npos) {
-      port_text = authority.substr(colon + 1);
-      if (port_text.empty()) return bad("the port after ':' is empty");
-    }
-  }
-  if (o.host.empty()) return bad("the host is empty");
-  if (!port_text.empty()) {
-    const std::optional<int> port = ParseNumber<int>(port_text);
-    if (!port || *port < 1 || *port > 65535) {
-      return bad(fmt::format("port ({}) must be in [1, 65535]", port_text));
-    }
-    o.port = *port;
-  }
+  std::string_view authority;
+  if (std::string what = ReadSpecModel(rest, authority, o); !what.empty()) return bad(what);
+  if (std::string what = ReadSpecHostAndPort(authority, o); !what.empty()) return bad(what);
   while (!query.empty()) {
     const size_t amp = query.find('&');
     const std::string_view item = query.substr(0, amp);
@@ -124,28 +169,7 @@ Result<RemoteOptions> ParseRemoteSpec(std::string_view spec) {
     const std::string_view key = item.substr(0, eq);
     const std::string_view value =
         eq == std::string_view::npos ? std::string_view() : item.substr(eq + 1);
-    if (key == "deadline_s") {
-      const std::optional<double> d = ParseNumber<double>(value);
-      if (!d || !(std::isfinite(*d) && *d > 0.0)) {
-        return bad(fmt::format("deadline_s ({}) must be a number of seconds > 0", value));
-      }
-      o.deadline_s = *d;
-    } else if (key == "image") {
-      const std::optional<ImageEncoding> e = ImageEncodingFromString(value);
-      if (!e) return bad(fmt::format("image ({}) must be raw, png or jpeg", value));
-      o.image = *e;
-    } else if (key == "depth" || key == "labels") {
-      if (value != "0" && value != "1")
-        return bad(fmt::format("{} ({}) must be 0 or 1", key, value));
-      (key == "depth" ? o.send_depth : o.send_labels) = value == "1";
-    } else if (key == "masks") {
-      const std::optional<MaskFormat> f = MaskFormatFromString(value);
-      if (!f) return bad(fmt::format("masks ({}) must be dense, rle or instance_ids", value));
-      o.mask_format = *f;
-    } else {
-      return bad(
-          fmt::format("unknown option '{}' (known: deadline_s, image, depth, labels, masks)", key));
-    }
+    if (std::string what = ReadSpecOption(key, value, o); !what.empty()) return bad(what);
   }
   AVP_RETURN_IF_ERROR(o.Validate().WithContext(fmt::format("remote segmenter spec \"{}\"", spec)));
   return o;
