@@ -193,31 +193,23 @@ sim::RgbdRenderer* IntegratorSceneTest::renderer_ = nullptr;
 
 // ---- Geometry ----------------------------------------------------------------------------------
 
-TEST_F(IntegratorSceneTest, OneFrameMatchesTheAnalyticGeometry) {
-  const AnalyticScene& sc = *scene_;
-  const RigidTransform X_WC = Poses()[0];
-  const sim::RenderedFrame f = Render(X_WC);
-  SemanticMap map(DefaultMap());
-  const Integrator integrator(Options());
-  const auto stats = integrator.Integrate(f.rgbd, nullptr, map);
-  ASSERT_TRUE(stats.ok()) << stats.status().ToString();
-  const OccupancyGrid& grid = map.grid();
-  const Eigen::Vector3d o = X_WC.translation();
-  const CameraIntrinsics K = SmallCamera();
-
-  // Stats add up; the scene has all three kinds of pixel.
-  EXPECT_EQ(stats->pixels, kPixels);
-  EXPECT_EQ(stats->invalid_depth + stats->beyond_max_range + stats->endpoints, stats->pixels);
-  EXPECT_EQ(stats->invalid_depth, 0u);
-  EXPECT_GT(stats->beyond_max_range, 2000u);
-  EXPECT_GT(stats->endpoints, 2000u);
-  EXPECT_EQ(stats->rejected_points, 0u);
-  EXPECT_EQ(stats->masked_endpoints, 0u);
-  EXPECT_EQ(stats->occupied_updates, grid.CountOccupiedVoxels());
-  EXPECT_EQ(stats->free_updates, grid.CountKnownVoxels() - grid.CountOccupiedVoxels());
+/// Stats add up; the scene has all three kinds of pixel.
+void ExpectStatsAddUp(const IntegrationStats& stats, const OccupancyGrid& grid) {
+  EXPECT_EQ(stats.pixels, kPixels);
+  EXPECT_EQ(stats.invalid_depth + stats.beyond_max_range + stats.endpoints, stats.pixels);
+  EXPECT_EQ(stats.invalid_depth, 0u);
+  EXPECT_GT(stats.beyond_max_range, 2000u);
+  EXPECT_GT(stats.endpoints, 2000u);
+  EXPECT_EQ(stats.rejected_points, 0u);
+  EXPECT_EQ(stats.masked_endpoints, 0u);
+  EXPECT_EQ(stats.occupied_updates, grid.CountOccupiedVoxels());
+  EXPECT_EQ(stats.free_updates, grid.CountKnownVoxels() - grid.CountOccupiedVoxels());
   EXPECT_EQ(grid.frame(), 1u);
+}
 
-  // Occupied voxels lie on the surface; no known voxel lies behind a surface or beyond range.
+/// Occupied voxels lie on the surface; no known voxel lies behind a surface or beyond range.
+void ExpectKnownVoxelsOnOrBeforeSurfaces(const OccupancyGrid& grid, const AnalyticScene& sc,
+                                         const Eigen::Vector3d& o) {
   size_t occupied = 0;
   grid.ForEachKnownVoxel([&](const VoxelKey& k, float v) {
     const Eigen::Vector3d c = k.Center(kVoxel);
@@ -231,13 +223,58 @@ TEST_F(IntegratorSceneTest, OneFrameMatchesTheAnalyticGeometry) {
     EXPECT_LE((c - o).norm(), kMaxRange + 2 * kHalfDiagonal + kEps) << c.transpose();
   });
   EXPECT_GT(occupied, 2000u);
+}
 
-  // Pixel by pixel: the analytic hit's voxel is occupied (sphere, wall); points well in front of
-  // the surface are free; points in the sphere's shadow stay unknown; rays to the far wall are
-  // free up to max range and unknown beyond.
-  Rng rng(5);
+/// What the pixel survey of OneFrameMatchesTheAnalyticGeometry counts: points sampled along the
+/// analytic rays of every other pixel, and the states the map gives them.
+struct PixelSurvey {
   size_t surface = 0, surface_occupied = 0, front = 0, front_free = 0, front_occupied = 0;
   size_t shadow = 0, shadow_known = 0, ranged = 0, ranged_free = 0, beyond = 0, beyond_known = 0;
+};
+
+/// Points well in front of the surface along `dir` (hit at `range`), away from surfaces and the
+/// range limit.
+void SurveyFront(const OccupancyGrid& grid, const AnalyticScene& sc, const Eigen::Vector3d& o,
+                 const Eigen::Vector3d& dir, double range, Rng& rng, PixelSurvey& s) {
+  const double free_until = std::min(range, kMaxRange);
+  for (int i = 0; i < 6; ++i) {
+    const double r = rng.Uniform(0.0, free_until);
+    const Eigen::Vector3d q = o + dir.normalized() * r;
+    const VoxelKey k = grid.KeyOf(q);
+    const Eigen::Vector3d c = k.Center(kVoxel);
+    if (sc.SurfaceDistance(c) <= kHalfDiagonal + kEps) continue;  // a surface voxel
+    if ((c - o).norm() >= kMaxRange - kHalfDiagonal) continue;    // at the range limit
+    ++s.front;
+    s.front_free += grid.State(k) == VoxelState::kFree;
+    s.front_occupied += grid.State(k) == VoxelState::kOccupied;
+  }
+}
+
+/// Rays well inside the sphere's silhouette: behind the sphere, before the wall, is shadow.
+void SurveyShadow(const OccupancyGrid& grid, const AnalyticScene& sc, const Eigen::Vector3d& o,
+                  const Eigen::Vector3d& dir, double range, Rng& rng, PixelSurvey& s) {
+  const Eigen::Vector3d oc = o - sc.sphere_c;
+  const double margin = sc.sphere_r - (oc - oc.dot(dir.normalized()) * dir.normalized()).norm();
+  if (margin < 3 * kVoxel) return;
+  for (int i = 0; i < 6; ++i) {
+    const double r = rng.Uniform(range, range + 0.3);
+    const Eigen::Vector3d q = o + dir.normalized() * r;
+    const VoxelKey k = grid.KeyOf(q);
+    const Eigen::Vector3d c = k.Center(kVoxel);
+    if ((c - sc.sphere_c).norm() <= sc.sphere_r + kHalfDiagonal + kEps) continue;
+    if (AnalyticScene::BoxSignedDistance(c, sc.wall) <= kHalfDiagonal + kEps) continue;
+    ++s.shadow;
+    s.shadow_known += grid.State(k) != VoxelState::kUnknown;
+  }
+}
+
+/// Pixel by pixel: the analytic hit's voxel (sphere, wall), points in front of the surface,
+/// points in the sphere's shadow, and on rays to the far wall the points before and beyond max
+/// range.
+void SurveyPixels(const OccupancyGrid& grid, const AnalyticScene& sc, const RigidTransform& X_WC,
+                  const CameraIntrinsics& K, PixelSurvey& s) {
+  const Eigen::Vector3d o = X_WC.translation();
+  Rng rng(5);
   for (int v = 0; v < K.height; v += 2) {
     for (int u = 0; u < K.width; u += 2) {
       const Eigen::Vector3d dir = X_WC.rotation() * K.RayDirection(Eigen::Vector2d(u, v));
@@ -247,65 +284,58 @@ TEST_F(IntegratorSceneTest, OneFrameMatchesTheAnalyticGeometry) {
       const Eigen::Vector3d hit = o + *t * dir;
       const double range = (hit - o).norm();
       if (!far) {
-        ++surface;
-        surface_occupied += grid.State(grid.KeyOf(hit)) == VoxelState::kOccupied;
+        ++s.surface;
+        s.surface_occupied += grid.State(grid.KeyOf(hit)) == VoxelState::kOccupied;
       }
-      const double free_until = std::min(range, kMaxRange);
-      for (int i = 0; i < 6; ++i) {
-        const double r = rng.Uniform(0.0, free_until);
-        const Eigen::Vector3d q = o + dir.normalized() * r;
-        const VoxelKey k = grid.KeyOf(q);
-        const Eigen::Vector3d c = k.Center(kVoxel);
-        if (sc.SurfaceDistance(c) <= kHalfDiagonal + kEps) continue;  // a surface voxel
-        if ((c - o).norm() >= kMaxRange - kHalfDiagonal) continue;    // at the range limit
-        ++front;
-        front_free += grid.State(k) == VoxelState::kFree;
-        front_occupied += grid.State(k) == VoxelState::kOccupied;
-      }
+      SurveyFront(grid, sc, o, dir, range, rng, s);
       if (far) {
         for (const double r : {0.90, 0.95}) {
-          ++ranged;
-          ranged_free += grid.State(grid.KeyOf(o + dir.normalized() * r)) == VoxelState::kFree;
+          ++s.ranged;
+          s.ranged_free += grid.State(grid.KeyOf(o + dir.normalized() * r)) == VoxelState::kFree;
         }
         for (const double r : {1.05, 1.15, 1.25}) {
-          ++beyond;
-          beyond_known += grid.State(grid.KeyOf(o + dir.normalized() * r)) != VoxelState::kUnknown;
+          ++s.beyond;
+          s.beyond_known +=
+              grid.State(grid.KeyOf(o + dir.normalized() * r)) != VoxelState::kUnknown;
         }
       }
-      if (sphere) {
-        // Rays well inside the silhouette: behind the sphere, before the wall, is shadow.
-        const Eigen::Vector3d oc = o - sc.sphere_c;
-        const double margin =
-            sc.sphere_r - (oc - oc.dot(dir.normalized()) * dir.normalized()).norm();
-        if (margin < 3 * kVoxel) continue;
-        for (int i = 0; i < 6; ++i) {
-          const double r = rng.Uniform(range, range + 0.3);
-          const Eigen::Vector3d q = o + dir.normalized() * r;
-          const VoxelKey k = grid.KeyOf(q);
-          const Eigen::Vector3d c = k.Center(kVoxel);
-          if ((c - sc.sphere_c).norm() <= sc.sphere_r + kHalfDiagonal + kEps) continue;
-          if (AnalyticScene::BoxSignedDistance(c, sc.wall) <= kHalfDiagonal + kEps) continue;
-          ++shadow;
-          shadow_known += grid.State(k) != VoxelState::kUnknown;
-        }
-      }
+      if (sphere) SurveyShadow(grid, sc, o, dir, range, rng, s);
     }
   }
+}
+
+TEST_F(IntegratorSceneTest, OneFrameMatchesTheAnalyticGeometry) {
+  const AnalyticScene& sc = *scene_;
+  const RigidTransform X_WC = Poses()[0];
+  const sim::RenderedFrame f = Render(X_WC);
+  SemanticMap map(DefaultMap());
+  const Integrator integrator(Options());
+  const auto stats = integrator.Integrate(f.rgbd, nullptr, map);
+  ASSERT_TRUE(stats.ok()) << stats.status().ToString();
+  const OccupancyGrid& grid = map.grid();
+  ExpectStatsAddUp(*stats, grid);
+  ExpectKnownVoxelsOnOrBeforeSurfaces(grid, sc, X_WC.translation());
+
+  // The analytic hit's voxel is occupied (sphere, wall); points well in front of the surface are
+  // free; points in the sphere's shadow stay unknown; rays to the far wall are free up to max
+  // range and unknown beyond.
+  PixelSurvey s;
+  ASSERT_NO_FATAL_FAILURE(SurveyPixels(grid, sc, X_WC, SmallCamera(), s));
   std::printf(
       "[ surface voxels occupied %zu/%zu, free in front %zu/%zu, shadow known %zu/%zu, "
       "free before max range %zu/%zu, known beyond %zu/%zu ]\n",
-      surface_occupied, surface, front_free, front, shadow_known, shadow, ranged_free, ranged,
-      beyond_known, beyond);
-  EXPECT_GT(surface, 800u);
-  EXPECT_GE(surface_occupied, surface * 99 / 100);
-  EXPECT_GT(front, 10000u);
-  EXPECT_EQ(front_occupied, 0u);
-  EXPECT_GE(front_free, front * 999 / 1000);
-  EXPECT_GT(shadow, 100u);
-  EXPECT_EQ(shadow_known, 0u);
-  EXPECT_GT(ranged, 2000u);
-  EXPECT_GE(ranged_free, ranged * 999 / 1000);
-  EXPECT_EQ(beyond_known, 0u);
+      s.surface_occupied, s.surface, s.front_free, s.front, s.shadow_known, s.shadow, s.ranged_free,
+      s.ranged, s.beyond_known, s.beyond);
+  EXPECT_GT(s.surface, 800u);
+  EXPECT_GE(s.surface_occupied, s.surface * 99 / 100);
+  EXPECT_GT(s.front, 10000u);
+  EXPECT_EQ(s.front_occupied, 0u);
+  EXPECT_GE(s.front_free, s.front * 999 / 1000);
+  EXPECT_GT(s.shadow, 100u);
+  EXPECT_EQ(s.shadow_known, 0u);
+  EXPECT_GT(s.ranged, 2000u);
+  EXPECT_GE(s.ranged_free, s.ranged * 999 / 1000);
+  EXPECT_EQ(s.beyond_known, 0u);
 }
 
 TEST_F(IntegratorSceneTest, InteriorOfTheSphereAndBehindTheWallStayUnknownOverManyFrames) {

@@ -495,7 +495,12 @@ TEST(GainGridTest, WalkSkippingFreeVisitsEveryNonFreeVoxelOfWalkInOrder) {
                 static_cast<long long>(walked));
     EXPECT_GT(stops, 1000) << shift;
   }
+}
+
+TEST(GainGridTest, WalkSkippingFreeIsWalkWithoutFreeBricks) {
   // Without flags (dense, or skipping off) it is Walk.
+  const mapping::SemanticMap map = SparseMap(7);
+  const Box3 roi(Eigen::Vector3d(-0.1, -0.12, -0.05), Eigen::Vector3d(0.2, 0.15, 0.2));
   for (const auto& [shift, skip] : {std::pair{0, true}, {3, false}}) {
     GainGridOptions options;
     options.brick_shift = shift;

@@ -105,6 +105,75 @@ class BenchHtmlTest : public test::TempDirTest {
   std::vector<BenchEpisode> episodes_;
 };
 
+/// The report's planners by (scenario, planner).
+using PlannerData = std::map<std::pair<std::string, std::string>, const nlohmann::json*>;
+
+/// Every row of summary.csv (scenario,planner,segmenter,view,metric,mean,ci95,n) equals the
+/// report's per-view numbers: 4 (scenario, planner) x 6 metrics x 3 views.
+void ExpectSummaryCsvEqualsReport(const fs::path& file, const PlannerData& planners) {
+  std::istringstream csv(ReadAll(file));
+  std::string line;
+  std::getline(csv, line);
+  ASSERT_EQ(line, "scenario,planner,segmenter,view,metric,mean,ci95,n");
+  size_t rows = 0;
+  while (std::getline(csv, line)) {
+    const std::vector<std::string> c = Split(line);
+    ASSERT_EQ(c.size(), 8u) << line;
+    const nlohmann::json& pv = (*planners.at({c[0], c[1]}))["per_view"];
+    ASSERT_TRUE(pv.contains(c[4])) << line;
+    const size_t v = std::stoul(c[3]) - 1;
+    EXPECT_EQ(G9(pv[c[4]]["mean"][v]), c[5]) << line;
+    EXPECT_EQ(G9(pv[c[4]]["ci95"][v]), c[6]) << line;
+    EXPECT_EQ(std::to_string(pv[c[4]]["n"][v].get<size_t>()), c[7]) << line;
+    ++rows;
+  }
+  EXPECT_EQ(rows, 72u);
+}
+
+/// fruits_by_visibility.csv (scenario,planner,segmenter,visible_from,visible_to,fruits,found,
+/// fraction,wilson_lo,wilson_hi) equals the report's visibility bins.
+void ExpectVisibilityCsvEqualsReport(const fs::path& file, const PlannerData& planners) {
+  std::istringstream vis(ReadAll(file));
+  std::string line;
+  std::getline(vis, line);
+  size_t bins = 0;
+  std::map<std::pair<std::string, std::string>, size_t> bin_index;
+  while (std::getline(vis, line)) {
+    const std::vector<std::string> c = Split(line);
+    ASSERT_EQ(c.size(), 10u) << line;
+    const size_t i = bin_index[{c[0], c[1]}]++;
+    const nlohmann::json& b = (*planners.at({c[0], c[1]}))["visibility_bins"][i];
+    EXPECT_EQ(G9(b["lo"]), c[3]) << line;
+    EXPECT_EQ(G9(b["hi"]), c[4]) << line;
+    EXPECT_EQ(std::to_string(b["fruits"].get<size_t>()), c[5]) << line;
+    EXPECT_EQ(std::to_string(b["found"].get<size_t>()), c[6]) << line;
+    EXPECT_EQ(G9(b["fraction"]), c[7]) << line;
+    EXPECT_EQ(G9(b["ci_lo"]), c[8]) << line;
+    EXPECT_EQ(G9(b["ci_hi"]), c[9]) << line;
+    ++bins;
+  }
+  EXPECT_EQ(bins, 16u);
+}
+
+/// summary.md's final-view table: the cells WriteBenchSummary returns equal the report's.
+void ExpectCellsEqualReport(const std::vector<BenchCell>& cells, const PlannerData& planners) {
+  ASSERT_EQ(cells.size(), 4u);
+  for (const BenchCell& cell : cells) {
+    const nlohmann::json& p = *planners.at({cell.scenario, cell.planner});
+    EXPECT_EQ(p["n"].get<size_t>(), cell.runs);
+    EXPECT_EQ(p["failed"].get<size_t>(), cell.failed);
+    EXPECT_DOUBLE_EQ(p["final"]["f1"]["mean"].get<double>(), cell.final_f1_mean);
+    EXPECT_DOUBLE_EQ(p["final"]["f1"]["ci95"].get<double>(), cell.final_f1_ci95);
+    EXPECT_DOUBLE_EQ(p["final"]["fruits_found_fraction"]["mean"].get<double>(),
+                     cell.final_found_mean);
+    EXPECT_DOUBLE_EQ(p["final"]["fruits_found_fraction"]["ci95"].get<double>(),
+                     cell.final_found_ci95);
+    EXPECT_DOUBLE_EQ(p["final"]["fruits_total"]["mean"].get<double>(), cell.fruits_total_mean);
+    EXPECT_DOUBLE_EQ(p["final"]["plan_ms_mean"].get<double>(), cell.plan_ms_mean);
+    EXPECT_DOUBLE_EQ(p["final"]["episode_s_mean"].get<double>(), cell.episode_s_mean);
+  }
+}
+
 TEST_F(BenchHtmlTest, EmbeddedNumbersEqualSummaryCsv) {
   const fs::path dir = dir_ / "bench";
   const Result<BenchTables> tables = WriteBenchSummary(dir, bench_, episodes_, 12.0);
@@ -124,7 +193,7 @@ TEST_F(BenchHtmlTest, EmbeddedNumbersEqualSummaryCsv) {
   EXPECT_EQ((*data)["bench"]["failed"], 1);
   ASSERT_EQ((*data)["scenarios"].size(), 2u);
 
-  std::map<std::pair<std::string, std::string>, const nlohmann::json*> planners;
+  PlannerData planners;
   for (const nlohmann::json& s : (*data)["scenarios"]) {
     for (const nlohmann::json& p : s["planners"]) {
       planners[{s["name"].get<std::string>(), p["name"].get<std::string>()}] = &p;
@@ -132,25 +201,7 @@ TEST_F(BenchHtmlTest, EmbeddedNumbersEqualSummaryCsv) {
   }
   ASSERT_EQ(planners.size(), 4u);
 
-  // Every row of summary.csv: scenario,planner,segmenter,view,metric,mean,ci95,n.
-  std::istringstream csv(ReadAll(dir / "summary.csv"));
-  std::string line;
-  std::getline(csv, line);
-  ASSERT_EQ(line, "scenario,planner,segmenter,view,metric,mean,ci95,n");
-  size_t rows = 0;
-  while (std::getline(csv, line)) {
-    const std::vector<std::string> c = Split(line);
-    ASSERT_EQ(c.size(), 8u) << line;
-    const nlohmann::json& pv = (*planners.at({c[0], c[1]}))["per_view"];
-    ASSERT_TRUE(pv.contains(c[4])) << line;
-    const size_t v = std::stoul(c[3]) - 1;
-    EXPECT_EQ(G9(pv[c[4]]["mean"][v]), c[5]) << line;
-    EXPECT_EQ(G9(pv[c[4]]["ci95"][v]), c[6]) << line;
-    EXPECT_EQ(std::to_string(pv[c[4]]["n"][v].get<size_t>()), c[7]) << line;
-    ++rows;
-  }
-  // 4 (scenario, planner) x 6 metrics x 3 views.
-  EXPECT_EQ(rows, 72u);
+  ASSERT_NO_FATAL_FAILURE(ExpectSummaryCsvEqualsReport(dir / "summary.csv", planners));
   // Spot checks by hand: s/a view 2 f1 = 0.35 + 0.037 s over seeds 0, 1 -> mean 0.3685, CI
   // t(0.975, 1) * sd / sqrt(2) = 12.706205 * 0.0261630 / 1.4142136 = 0.235062.
   const nlohmann::json& sa = (*planners.at({"s", "a"}))["per_view"]["f1"];
@@ -168,44 +219,9 @@ TEST_F(BenchHtmlTest, EmbeddedNumbersEqualSummaryCsv) {
   EXPECT_EQ((*planners.at({"t", "a"}))["n"], 2);
   EXPECT_EQ((*planners.at({"t", "a"}))["failed"], 1);
 
-  // fruits_by_visibility.csv: scenario,planner,segmenter,visible_from,visible_to,fruits,found,
-  // fraction,wilson_lo,wilson_hi.
-  std::istringstream vis(ReadAll(dir / "fruits_by_visibility.csv"));
-  std::getline(vis, line);
-  size_t bins = 0;
-  std::map<std::pair<std::string, std::string>, size_t> bin_index;
-  while (std::getline(vis, line)) {
-    const std::vector<std::string> c = Split(line);
-    ASSERT_EQ(c.size(), 10u) << line;
-    const size_t i = bin_index[{c[0], c[1]}]++;
-    const nlohmann::json& b = (*planners.at({c[0], c[1]}))["visibility_bins"][i];
-    EXPECT_EQ(G9(b["lo"]), c[3]) << line;
-    EXPECT_EQ(G9(b["hi"]), c[4]) << line;
-    EXPECT_EQ(std::to_string(b["fruits"].get<size_t>()), c[5]) << line;
-    EXPECT_EQ(std::to_string(b["found"].get<size_t>()), c[6]) << line;
-    EXPECT_EQ(G9(b["fraction"]), c[7]) << line;
-    EXPECT_EQ(G9(b["ci_lo"]), c[8]) << line;
-    EXPECT_EQ(G9(b["ci_hi"]), c[9]) << line;
-    ++bins;
-  }
-  EXPECT_EQ(bins, 16u);
-
-  // summary.md's final-view table: the cells WriteBenchSummary returns.
-  ASSERT_EQ(tables->cells.size(), 4u);
-  for (const BenchCell& cell : tables->cells) {
-    const nlohmann::json& p = *planners.at({cell.scenario, cell.planner});
-    EXPECT_EQ(p["n"].get<size_t>(), cell.runs);
-    EXPECT_EQ(p["failed"].get<size_t>(), cell.failed);
-    EXPECT_DOUBLE_EQ(p["final"]["f1"]["mean"].get<double>(), cell.final_f1_mean);
-    EXPECT_DOUBLE_EQ(p["final"]["f1"]["ci95"].get<double>(), cell.final_f1_ci95);
-    EXPECT_DOUBLE_EQ(p["final"]["fruits_found_fraction"]["mean"].get<double>(),
-                     cell.final_found_mean);
-    EXPECT_DOUBLE_EQ(p["final"]["fruits_found_fraction"]["ci95"].get<double>(),
-                     cell.final_found_ci95);
-    EXPECT_DOUBLE_EQ(p["final"]["fruits_total"]["mean"].get<double>(), cell.fruits_total_mean);
-    EXPECT_DOUBLE_EQ(p["final"]["plan_ms_mean"].get<double>(), cell.plan_ms_mean);
-    EXPECT_DOUBLE_EQ(p["final"]["episode_s_mean"].get<double>(), cell.episode_s_mean);
-  }
+  ASSERT_NO_FATAL_FAILURE(
+      ExpectVisibilityCsvEqualsReport(dir / "fruits_by_visibility.csv", planners));
+  ASSERT_NO_FATAL_FAILURE(ExpectCellsEqualReport(tables->cells, planners));
 
   // Runs: every episode with its folder and the files there.
   const nlohmann::json& runs = (*planners.at({"s", "a"}))["runs"];
