@@ -62,6 +62,89 @@ class RunReportTest : public test::TempDirTest {
   const experiment::Registries registries_ = experiment::BuiltinRegistries();
 };
 
+/// One step of the page against record.json's step and the episode's: the frustum (pose and
+/// intrinsics), the masks picture with one row per instance, and (but after the last view) every
+/// ranked candidate, the chosen one as the record has it.
+void ExpectStepMatchesRecord(const json& step, const json& rstep, const RigidTransform& X_WC,
+                             bool last, size_t view) {
+  const json& cam = step["camera"];
+  ASSERT_EQ(cam["X_WC"].size(), 12u);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(cam["X_WC"][i * 4 + 3].get<double>(), X_WC.translation()(i), 1e-5);
+  }
+  EXPECT_EQ(cam["K"]["width"], 640);
+  EXPECT_GT(cam["median_depth_m"].get<double>(), 0.1);
+  const json& img = step["image"];
+  EXPECT_EQ(img["width"], 320);
+  EXPECT_EQ(img["instances"].size(), rstep["masks"].get<size_t>());
+  auto jpeg = Base64Decode(img["jpeg"].get<std::string>());
+  ASSERT_TRUE(jpeg.ok());
+  ASSERT_GT(jpeg->size(), 1000u);
+  EXPECT_EQ(static_cast<uint8_t>((*jpeg)[0]), 0xff);  // JPEG SOI
+  EXPECT_EQ(static_cast<uint8_t>((*jpeg)[1]), 0xd8);
+  if (last) {
+    EXPECT_TRUE(step["plan"].is_null());  // no plan after the last view
+    return;
+  }
+  const json& plan = step["plan"];
+  ASSERT_TRUE(plan.is_object()) << "view " << view;
+  EXPECT_EQ(plan["generated"], rstep["plan"]["generated"]);
+  EXPECT_EQ(plan["ranked"], rstep["plan"]["reachable"]);
+  EXPECT_EQ(plan["kept"], plan["ranked"]);
+  EXPECT_EQ(plan["chosen_rank"], rstep["plan"]["chosen_rank"]);
+  EXPECT_EQ(plan["candidates"]["utility"].size(), plan["kept"].get<size_t>());
+  EXPECT_EQ(plan["candidates"]["eye"].size(), 3 * plan["kept"].get<size_t>());
+  const json& top = rstep["plan"]["top_candidates"];
+  ASSERT_GE(top.size(), 1u);
+  for (size_t i = 0; i < top.size(); ++i) {
+    const double u = top[i]["utility"].get<double>();
+    EXPECT_NEAR(plan["candidates"]["utility"][i].get<double>(), u, 1e-5 * std::abs(u) + 1e-12);
+  }
+}
+
+/// The final state is the final map's occupied voxels, with their class and instance.
+void ExpectStateIsTheMap(const fs::path& map_file, const std::map<Key, Cell>& state) {
+  auto map = mapping::LoadMap(map_file);
+  ASSERT_TRUE(map.ok()) << map.status().ToString();
+  size_t checked = 0;
+  const float occupied = map->grid().occupied_log_odds();
+  map->grid().ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
+    if (log_odds < occupied) return;
+    const auto it = state.find({k.x, k.y, k.z});
+    ASSERT_NE(it, state.end());
+    const mapping::SemanticCell* cell = map->Semantic(k);
+    const bool labelled = cell != nullptr && cell->has_label();
+    EXPECT_EQ(it->second.cls, labelled ? cell->semantic_class : 0);
+    EXPECT_EQ(it->second.instance, labelled ? cell->instance_id : 0);
+    if (labelled) {
+      EXPECT_NEAR(it->second.confidence / 255.0, cell->confidence, 0.5 / 255 + 1e-6);
+    }
+    ++checked;
+  });
+  EXPECT_EQ(checked, state.size());
+  const size_t fruit_voxels =
+      static_cast<size_t>(std::count_if(state.begin(), state.end(), [](const auto& kv) {
+        return kv.second.cls == static_cast<int>(SemanticClass::kFruit);
+      }));
+  EXPECT_GT(fruit_voxels, 50u);
+}
+
+/// The ground-truth fruit, found and missed, as record.json has them.
+void ExpectFruitsMatchRecord(const json& data, const json& record) {
+  const json& fruits = data["fruits"];
+  ASSERT_EQ(fruits.size(), record["fruits"].size());
+  size_t found = 0;
+  for (size_t i = 0; i < fruits.size(); ++i) {
+    EXPECT_EQ(fruits[i]["found"], record["fruits"][i]["found"]);
+    EXPECT_EQ(fruits[i]["center_m"], record["fruits"][i]["center_m"]);
+    EXPECT_EQ(fruits[i]["radius_m"], record["fruits"][i]["radius_m"]);
+    found += fruits[i]["found"].get<bool>() ? 1 : 0;
+  }
+  EXPECT_EQ(data["expected"]["fruit_found"], found);
+  EXPECT_EQ(data["expected"]["fruit_missed"], fruits.size() - found);
+  EXPECT_EQ(found, record["final_metrics"]["fruits_found"].get<size_t>());
+}
+
 TEST_F(RunReportTest, ThePageHoldsWhatTheRunRecorded) {
   experiment::RunConfig c;
   c.scenario = "tomato-single-cluster";
@@ -96,85 +179,15 @@ TEST_F(RunReportTest, ThePageHoldsWhatTheRunRecorded) {
     EXPECT_EQ(state.size(), occupied) << "view " << k + 1;
     EXPECT_EQ(steps[k]["voxels"]["occupied"].get<size_t>(), occupied);
     EXPECT_EQ(steps[k]["view"], rsteps[k]["view"]);
-    // The frustum: the view's pose (row-major 3x4) and intrinsics.
-    const json& cam = steps[k]["camera"];
-    ASSERT_EQ(cam["X_WC"].size(), 12u);
-    for (int i = 0; i < 3; ++i) {
-      EXPECT_NEAR(cam["X_WC"][i * 4 + 3].get<double>(),
-                  r->result.episode.steps[k].X_WC.translation()(i), 1e-5);
-    }
-    EXPECT_EQ(cam["K"]["width"], 640);
-    EXPECT_GT(cam["median_depth_m"].get<double>(), 0.1);
-    // The masks picture (JPEG, reduced) and one row per instance.
-    const json& img = steps[k]["image"];
-    EXPECT_EQ(img["width"], 320);
-    EXPECT_EQ(img["instances"].size(), rsteps[k]["masks"].get<size_t>());
-    auto jpeg = Base64Decode(img["jpeg"].get<std::string>());
-    ASSERT_TRUE(jpeg.ok());
-    ASSERT_GT(jpeg->size(), 1000u);
-    EXPECT_EQ(static_cast<uint8_t>((*jpeg)[0]), 0xff);  // JPEG SOI
-    EXPECT_EQ(static_cast<uint8_t>((*jpeg)[1]), 0xd8);
-    // Every ranked candidate, the chosen one as the record has it.
-    if (k + 1 < steps.size()) {
-      const json& plan = steps[k]["plan"];
-      ASSERT_TRUE(plan.is_object()) << "view " << k + 1;
-      EXPECT_EQ(plan["generated"], rsteps[k]["plan"]["generated"]);
-      EXPECT_EQ(plan["ranked"], rsteps[k]["plan"]["reachable"]);
-      EXPECT_EQ(plan["kept"], plan["ranked"]);
-      EXPECT_EQ(plan["chosen_rank"], rsteps[k]["plan"]["chosen_rank"]);
-      EXPECT_EQ(plan["candidates"]["utility"].size(), plan["kept"].get<size_t>());
-      EXPECT_EQ(plan["candidates"]["eye"].size(), 3 * plan["kept"].get<size_t>());
-      const json& top = rsteps[k]["plan"]["top_candidates"];
-      ASSERT_GE(top.size(), 1u);
-      for (size_t i = 0; i < top.size(); ++i) {
-        const double u = top[i]["utility"].get<double>();
-        EXPECT_NEAR(plan["candidates"]["utility"][i].get<double>(), u, 1e-5 * std::abs(u) + 1e-12);
-      }
-    } else {
-      EXPECT_TRUE(steps[k]["plan"].is_null());  // no plan after the last view
-    }
+    ASSERT_NO_FATAL_FAILURE(ExpectStepMatchesRecord(
+        steps[k], rsteps[k], r->result.episode.steps[k].X_WC, k + 1 == steps.size(), k + 1));
   }
   EXPECT_EQ((*data)["expected"]["voxels"], rsteps.back()["occupied_voxels"]);
   EXPECT_EQ((*data)["expected"]["frustums"], (*record)["views_fused"]);
 
-  // The final state is the final map's occupied voxels, with their class and instance.
-  auto map = mapping::LoadMap(o.out_dir / "map.avpmap");
-  ASSERT_TRUE(map.ok()) << map.status().ToString();
-  size_t checked = 0;
-  const float occupied = map->grid().occupied_log_odds();
-  map->grid().ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
-    if (log_odds < occupied) return;
-    const auto it = state.find({k.x, k.y, k.z});
-    ASSERT_NE(it, state.end());
-    const mapping::SemanticCell* cell = map->Semantic(k);
-    const bool labelled = cell != nullptr && cell->has_label();
-    EXPECT_EQ(it->second.cls, labelled ? cell->semantic_class : 0);
-    EXPECT_EQ(it->second.instance, labelled ? cell->instance_id : 0);
-    if (labelled) {
-      EXPECT_NEAR(it->second.confidence / 255.0, cell->confidence, 0.5 / 255 + 1e-6);
-    }
-    ++checked;
-  });
-  EXPECT_EQ(checked, state.size());
-  const size_t fruit_voxels =
-      static_cast<size_t>(std::count_if(state.begin(), state.end(), [](const auto& kv) {
-        return kv.second.cls == static_cast<int>(SemanticClass::kFruit);
-      }));
-  EXPECT_GT(fruit_voxels, 50u);
+  ASSERT_NO_FATAL_FAILURE(ExpectStateIsTheMap(o.out_dir / "map.avpmap", state));
 
-  // The ground-truth fruit, found and missed, as record.json has them.
-  const json& fruits = (*data)["fruits"];
-  ASSERT_EQ(fruits.size(), (*record)["fruits"].size());
-  size_t found = 0;
-  for (size_t i = 0; i < fruits.size(); ++i) {
-    EXPECT_EQ(fruits[i]["found"], (*record)["fruits"][i]["found"]);
-    EXPECT_EQ(fruits[i]["center_m"], (*record)["fruits"][i]["center_m"]);
-    EXPECT_EQ(fruits[i]["radius_m"], (*record)["fruits"][i]["radius_m"]);
-    found += fruits[i]["found"].get<bool>() ? 1 : 0;
-  }
-  EXPECT_EQ((*data)["expected"]["fruit_found"], found);
-  EXPECT_EQ((*data)["expected"]["fruit_missed"], fruits.size() - found);
-  EXPECT_EQ(found, (*record)["final_metrics"]["fruits_found"].get<size_t>());
+  ASSERT_NO_FATAL_FAILURE(ExpectFruitsMatchRecord(*data, *record));
   // The curves' numbers are the record's metrics.
   EXPECT_NEAR(steps.back()["metrics"]["f1"].get<double>(),
               rsteps.back()["metrics"]["f1"].get<double>(), 1e-6);
