@@ -187,13 +187,19 @@ std::vector<int> IntList(const std::string& s) {
   return out;
 }
 
-std::optional<Options> ParseOptions(int argc, char** argv) {
-  Options o;
-  o.json_path = TakeJsonPathArgument(argc, argv);
-  bool quick = false, hd = false;
+/// The flags that choose the cases and override Options' defaults after the cases are chosen.
+struct CaseFlags {
+  bool quick = false;
+  bool hd = false;
   std::optional<std::vector<std::string>> case_ids;
   std::optional<std::vector<int>> candidates, threads;
   std::optional<int> reps, nbv_reps;
+};
+
+/// The command line into `o` and the returned flags; nothing on a bad or unknown argument
+/// (said on stderr). --help prints the usage and exits.
+std::optional<CaseFlags> ParseFlags(int argc, char** argv, Options& o) {
+  CaseFlags f;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const size_t eq = a.find('=');
@@ -201,21 +207,21 @@ std::optional<Options> ParseOptions(int argc, char** argv) {
     const std::string value = eq == std::string::npos ? "" : a.substr(eq + 1);
     try {
       if (key == "--quick") {
-        quick = true;
+        f.quick = true;
       } else if (key == "--hd") {
-        hd = true;
+        f.hd = true;
       } else if (key == "--cases") {
-        case_ids = SplitList(value);
+        f.case_ids = SplitList(value);
       } else if (key == "--views") {
         o.views_override = std::stoi(value);
       } else if (key == "--candidates") {
-        candidates = IntList(value);
+        f.candidates = IntList(value);
       } else if (key == "--threads") {
-        threads = IntList(value);
+        f.threads = IntList(value);
       } else if (key == "--reps") {
-        reps = std::stoi(value);
+        f.reps = std::stoi(value);
       } else if (key == "--nbv-reps") {
-        nbv_reps = std::stoi(value);
+        f.nbv_reps = std::stoi(value);
       } else if (key == "--octomap-reps") {
         o.octomap_reps = std::stoi(value);
       } else if (key == "--rep-budget") {
@@ -243,6 +249,12 @@ std::optional<Options> ParseOptions(int argc, char** argv) {
       return std::nullopt;
     }
   }
+  return f;
+}
+
+/// The cases to run (the default four, six with --hd, two with --quick, or --cases) into
+/// o.cases; false on an unknown case (said on stderr).
+bool SelectCases(const CaseFlags& f, Options& o) {
   const std::vector<MapCase> all = AllCases();
   auto find = [&](const std::string& id) -> std::optional<MapCase> {
     for (const MapCase& c : all) {
@@ -251,18 +263,18 @@ std::optional<Options> ParseOptions(int argc, char** argv) {
     return std::nullopt;
   };
   std::vector<std::string> ids = {"plant5", "plant3", "full5", "full3"};
-  if (hd) {
+  if (f.hd) {
     ids.push_back("full5-hd");
     ids.push_back("full3-hd");
   }
-  if (quick) {
+  if (f.quick) {
     ids = {"plant5", "full5"};
     o.reps = 1;
     o.nbv_reps = 1;
     o.candidates = {16};
   }
-  if (case_ids) {
-    ids = *case_ids;
+  if (f.case_ids) {
+    ids = *f.case_ids;
     if (ids.size() == 1 && ids[0] == "all") {
       ids.clear();
       for (const MapCase& c : all) ids.push_back(c.id);
@@ -272,16 +284,24 @@ std::optional<Options> ParseOptions(int argc, char** argv) {
     std::optional<MapCase> c = find(id);
     if (!c) {
       std::fprintf(stderr, "bench_map: unknown case '%s'\n", id.c_str());
-      return std::nullopt;
+      return false;
     }
-    if (quick) c->views = c->full_image ? 2 : 3;
+    if (f.quick) c->views = c->full_image ? 2 : 3;
     if (o.views_override > 0) c->views = o.views_override;
     o.cases.push_back(*c);
   }
-  if (candidates) o.candidates = *candidates;
-  if (threads) o.threads = *threads;
-  if (reps) o.reps = *reps;
-  if (nbv_reps) o.nbv_reps = *nbv_reps;
+  return true;
+}
+
+std::optional<Options> ParseOptions(int argc, char** argv) {
+  Options o;
+  o.json_path = TakeJsonPathArgument(argc, argv);
+  const std::optional<CaseFlags> f = ParseFlags(argc, argv, o);
+  if (!f || !SelectCases(*f, o)) return std::nullopt;
+  if (f->candidates) o.candidates = *f->candidates;
+  if (f->threads) o.threads = *f->threads;
+  if (f->reps) o.reps = *f->reps;
+  if (f->nbv_reps) o.nbv_reps = *f->nbv_reps;
   const bool bad =
       o.reps < 1 || o.nbv_reps < 1 || o.octomap_reps < 1 || o.threads.empty() ||
       !(o.render_max_depth_m > 0.05) || !(o.rep_budget_s >= 0) ||
@@ -1268,6 +1288,13 @@ class Benchmark {
 
   // ---- tables
   void PrintTables() {
+    PrintInsertionTable();
+    PrintConfusion();
+    PrintNbvTable();
+  }
+
+  /// Insertion per cloud: one row per library, build, threads and case.
+  void PrintInsertionTable() {
     std::printf(
         "\n## Insertion (per cloud; median [min] over the non-first clouds of every build)\n\n");
     std::printf(
@@ -1320,6 +1347,10 @@ class Benchmark {
           r.cmp ? Fixed(r.cmp->known_agreement_pct(), 4).c_str() : no_cmp,
           r.cmp ? Fixed(r.cmp->occupied_iou(), 4).c_str() : no_cmp);
     }
+  }
+
+  /// The ROI's state confusion of each compared build against OctoMap.
+  void PrintConfusion() const {
     std::printf(
         "\nROI = voxel centres in x, y in [-0.3, 0.3] m, z in [0, 1.1] m. Confusion "
         "(rows OctoMap, columns avp; unknown/free/occupied):\n");
@@ -1333,7 +1364,10 @@ class Benchmark {
           m[1][2], m[2][0], m[2][1], m[2][2], r.cmp->octo_known, r.cmp->ours_known,
           r.cmp->both_known, r.cmp->octo_occupied, r.cmp->ours_occupied, r.cmp->both_occupied);
     }
+  }
 
+  /// NBV view evaluation: one row per library, build, threads and candidate count.
+  void PrintNbvTable() {
     if (nbv_rows_.empty()) return;
     std::printf(
         "\n## NBV view evaluation (4 800 rays of 1.0 m per candidate; ms/candidate median "

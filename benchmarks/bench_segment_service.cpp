@@ -451,6 +451,197 @@ int Clients(double seconds, const std::string& json_path) {
   return 0;
 }
 
+/// What the valid clients of MixedLoad measure: latencies idle and under attack, errors.
+struct ValidClients {
+  std::atomic<bool> attack{false}, stop{false};
+  std::mutex lat_mutex;
+  std::vector<double> idle_ms, attack_ms;
+  std::atomic<uint64_t> valid_errors{0};
+  std::string first_valid_error;
+};
+
+/// What the hostile clients of MixedLoad got back.
+struct HostileOutcomes {
+  Outcomes huge_image, huge_prompt, flood, leaving;
+};
+
+/// `count` valid clients, each one request at a time until `v.stop`: the latency of every answer
+/// that did not straddle the switch to the attack, as idle or under attack.
+std::vector<std::thread> StartValidClients(int port, int count, ValidClients& v) {
+  std::vector<std::thread> valid;
+  for (int c = 0; c < count; ++c) {
+    valid.emplace_back([&v, port, c] {
+      RemoteOptions o;
+      o.port = port;
+      o.seed = 7;
+      o.deadline_s = 30;
+      RemoteSegmenter client(o);
+      uint64_t i = static_cast<uint64_t>(c) * 1000;
+      while (!v.stop.load()) {
+        const bool under_attack = v.attack.load();
+        const Clock::time_point a = Clock::now();
+        Result<Segmentation> r = client.Segment(SmallRequest(i++ % 8));
+        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - a).count();
+        if (!r.ok()) {
+          if (v.valid_errors.fetch_add(1) == 0) {
+            std::lock_guard lock(v.lat_mutex);
+            v.first_valid_error = r.status().ToString();
+          }
+          continue;
+        }
+        if (under_attack != v.attack.load()) continue;  // straddles the switch: not counted
+        std::lock_guard lock(v.lat_mutex);
+        (under_attack ? v.attack_ms : v.idle_ms).push_back(ms);
+      }
+    });
+  }
+  return valid;
+}
+
+/// The attack, until `stop`: requests declaring 20000 x 20000 pixels (a PNG header alone, and a
+/// raw rgb shape alone); 100 000-phrase prompts (800 KB each) with the real frame; a flood of 24
+/// threads on one connection, each sending again as soon as it has an answer (10 ms after a
+/// refusal); clients that leave 5 ms after sending (their requests are queued or running when
+/// they go). Requests are encoded once: the clients' own encoding is not what is measured.
+std::vector<std::thread> StartHostileClients(int port, const std::atomic<bool>& stop,
+                                             HostileOutcomes& out) {
+  std::vector<std::thread> hostile;
+  for (int k = 0; k < 2; ++k) {
+    hostile.emplace_back([&stop, &out, port, k] {
+      RawClient client(port);
+      const std::string prompt = BytesElement("tomato");
+      const std::string request =
+          k == 0 ? InferRequestBytes(
+                       "oracle", {{"image", "BYTES", {1}, BytesElement(PngHeader(20000, 20000))},
+                                  {"prompt", "BYTES", {1}, prompt}})
+                 : InferRequestBytes("oracle", {{"rgb", "UINT8", {20000, 20000, 3}, ""},
+                                                {"prompt", "BYTES", {1}, prompt}});
+      while (!stop.load()) {
+        out.huge_image.Add(CodeName(client.Call(request)));
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      }
+    });
+  }
+  std::string phrases = "tomato";
+  for (int i = 1; i < 100000; ++i) phrases += ", tomato";
+  auto prompt_request = std::make_shared<const std::string>([&] {
+    // The client would refuse it (SplitPrompt's limits): encode it past them, for the server to
+    // refuse.
+    const ScopedLimit bytes(segmentation::MaxPromptBytes(), 1u << 20);
+    const ScopedLimit count(segmentation::MaxPromptPhrases(), 1u << 20);
+    return EncodedRequestBytes(SmallRequest(0, phrases));
+  }());
+  auto valid_request = std::make_shared<const std::string>(EncodedRequestBytes(SmallRequest(1)));
+  hostile.emplace_back([&stop, &out, port, prompt_request] {
+    RawClient client(port);
+    while (!stop.load()) {
+      out.huge_prompt.Add(CodeName(client.Call(*prompt_request)));
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  });
+  auto flood_client = std::make_shared<RawClient>(port);
+  for (int t = 0; t < 24; ++t) {
+    hostile.emplace_back([&stop, &out, flood_client, valid_request] {
+      while (!stop.load()) {
+        const grpc::StatusCode code = flood_client->Call(*valid_request);
+        out.flood.Add(CodeName(code));
+        if (code != grpc::StatusCode::OK)
+          std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      }
+    });
+  }
+  for (int t = 0; t < 2; ++t) {
+    hostile.emplace_back([&stop, &out, port, valid_request] {
+      RawClient client(port);
+      while (!stop.load()) {
+        out.leaving.Add(CodeName(client.Call(*valid_request, 0.005)));
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      }
+    });
+  }
+  return hostile;
+}
+
+/// RSS in MB over the run: (seconds since the start, MB) samples, their maxima idle and under
+/// attack, and the values at the end of each phase.
+struct RssTrace {
+  std::vector<std::pair<double, double>> samples;
+  double idle_end = 0.0, attack_end = 0.0, idle_max = 0.0, attack_max = 0.0;
+};
+
+void PrintMixedLoad(double seconds, ValidClients& v, HostileOutcomes& h, const RssTrace& rss,
+                    const ServerStats& stats) {
+  const double p50_idle = Percentile(v.idle_ms, 0.50), p99_idle = Percentile(v.idle_ms, 0.99);
+  const double p50_attack = Percentile(v.attack_ms, 0.50);
+  const double p99_attack = Percentile(v.attack_ms, 0.99);
+  std::printf(
+      "mixed load: 4 valid clients (oracle, 320 x 240, one request at a time), %.0f s idle "
+      "then %.0f s under attack; server: 2 workers, default limits\n",
+      seconds, seconds);
+  std::printf("  valid, idle:         %zu requests, p50 %.1f ms, p99 %.1f ms\n", v.idle_ms.size(),
+              p50_idle, p99_idle);
+  std::printf("  valid, under attack: %zu requests, p50 %.1f ms, p99 %.1f ms (p99 %.2fx idle)\n",
+              v.attack_ms.size(), p50_attack, p99_attack, p99_attack / std::max(p99_idle, 1e-9));
+  std::printf("  valid errors: %llu%s%s\n", static_cast<unsigned long long>(v.valid_errors.load()),
+              v.first_valid_error.empty() ? "" : ", first: ", v.first_valid_error.c_str());
+  std::printf("  hostile, 20000 x 20000 declared: %s\n", h.huge_image.Describe().c_str());
+  std::printf("  hostile, 100000-phrase prompt:   %s\n", h.huge_prompt.Describe().c_str());
+  std::printf("  hostile, flood (24 in flight):   %s\n", h.flood.Describe().c_str());
+  std::printf("  hostile, leave after 5 ms:       %s\n", h.leaving.Describe().c_str());
+  std::printf(
+      "  server: %llu answered, %llu refused (%llu over budget, %llu queue full, %llu "
+      "expired in the queue, %llu stopped while running)\n",
+      static_cast<unsigned long long>(stats.infer_ok),
+      static_cast<unsigned long long>(stats.infer_failed),
+      static_cast<unsigned long long>(stats.infer_over_budget),
+      static_cast<unsigned long long>(stats.infer_queue_full),
+      static_cast<unsigned long long>(stats.infer_expired),
+      static_cast<unsigned long long>(stats.infer_interrupted));
+  std::printf(
+      "  RSS: %.0f MB at the end of idle (max %.0f), max %.0f MB under attack, %.0f MB "
+      "at its end\n",
+      rss.idle_end, rss.idle_max, rss.attack_max, rss.attack_end);
+  std::printf("  RSS over time (s: MB):");
+  for (size_t i = 0; i < rss.samples.size(); i += 10)
+    std::printf(" %.0f:%.0f", rss.samples[i].first, rss.samples[i].second);
+  std::printf("\n");
+}
+
+std::vector<bench::BenchRecord> MixedLoadRecords(ValidClients& v, HostileOutcomes& h,
+                                                 const RssTrace& rss) {
+  const double p50_idle = Percentile(v.idle_ms, 0.50), p99_idle = Percentile(v.idle_ms, 0.99);
+  const double p50_attack = Percentile(v.attack_ms, 0.50);
+  const double p99_attack = Percentile(v.attack_ms, 0.99);
+  std::vector<bench::BenchRecord> records;
+  records.push_back(bench::MakeRecord("mixed/valid_p50_idle", p50_idle, "ms"));
+  records.push_back(bench::MakeRecord("mixed/valid_p99_idle", p99_idle, "ms"));
+  records.push_back(bench::MakeRecord("mixed/valid_p50_attack", p50_attack, "ms", "idle", p50_idle,
+                                      p50_idle / std::max(p50_attack, 1e-9)));
+  records.push_back(bench::MakeRecord("mixed/valid_p99_attack", p99_attack, "ms", "idle", p99_idle,
+                                      p99_idle / std::max(p99_attack, 1e-9), ">=0.5x"));
+  records.push_back(bench::MakeRecord("mixed/valid_errors", static_cast<double>(v.valid_errors),
+                                      "requests", std::nullopt, std::nullopt, std::nullopt, "<=0"));
+  const auto refused_pct = [](Outcomes& o) {
+    const uint64_t total = o.Total();
+    return total == 0 ? 0.0
+                      : 100.0 * static_cast<double>(o.Count("RESOURCE_EXHAUSTED")) /
+                            static_cast<double>(total);
+  };
+  records.push_back(bench::MakeRecord("mixed/huge_image_refused", refused_pct(h.huge_image), "%",
+                                      std::nullopt, std::nullopt, std::nullopt, ">=100"));
+  records.push_back(bench::MakeRecord("mixed/huge_prompt_refused", refused_pct(h.huge_prompt), "%",
+                                      std::nullopt, std::nullopt, std::nullopt, ">=100"));
+  records.push_back(bench::MakeRecord("mixed/flood_refused", refused_pct(h.flood), "%"));
+  records.push_back(bench::MakeRecord("mixed/rss_max_idle", rss.idle_max, "MB"));
+  records.push_back(bench::MakeRecord("mixed/rss_max_attack", rss.attack_max, "MB", "idle",
+                                      rss.idle_max, rss.idle_max / std::max(rss.attack_max, 1e-9),
+                                      ">=0.5x"));
+  return records;
+}
+
+/// --mixed: 4 valid clients against a server of 2 workers, `seconds` idle, then `seconds` under
+/// the attack of StartHostileClients: the valid clients' latency, what the hostile ones got, the
+/// server's counters and its RSS over time.
 int MixedLoad(double seconds, const std::string& json_path) {
   ServerOptions so;
   so.segmenters = &Segmenters();
@@ -467,189 +658,40 @@ int MixedLoad(double seconds, const std::string& json_path) {
   const int port = server.port();
   (void)SmallFrame();
 
-  std::atomic<bool> attack{false}, stop{false};
-  std::mutex lat_mutex;
-  std::vector<double> idle_ms, attack_ms;
-  std::atomic<uint64_t> valid_errors{0};
-  std::string first_valid_error;
-
+  ValidClients v;
+  RssTrace rss;
   // RSS every 100 ms.
-  std::vector<std::pair<double, double>> rss;  // (s since start, MB)
   const Clock::time_point t0 = Clock::now();
   std::thread sampler([&] {
-    while (!stop.load()) {
-      rss.emplace_back(std::chrono::duration<double>(Clock::now() - t0).count(), RssMb());
+    while (!v.stop.load()) {
+      rss.samples.emplace_back(std::chrono::duration<double>(Clock::now() - t0).count(), RssMb());
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
     }
   });
-
-  constexpr int kValid = 4;
-  std::vector<std::thread> valid;
-  for (int c = 0; c < kValid; ++c) {
-    valid.emplace_back([&, c] {
-      RemoteOptions o;
-      o.port = port;
-      o.seed = 7;
-      o.deadline_s = 30;
-      RemoteSegmenter client(o);
-      uint64_t i = static_cast<uint64_t>(c) * 1000;
-      while (!stop.load()) {
-        const bool under_attack = attack.load();
-        const Clock::time_point a = Clock::now();
-        Result<Segmentation> r = client.Segment(SmallRequest(i++ % 8));
-        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - a).count();
-        if (!r.ok()) {
-          if (valid_errors.fetch_add(1) == 0) {
-            std::lock_guard lock(lat_mutex);
-            first_valid_error = r.status().ToString();
-          }
-          continue;
-        }
-        if (under_attack != attack.load()) continue;  // straddles the switch: not counted
-        std::lock_guard lock(lat_mutex);
-        (under_attack ? attack_ms : idle_ms).push_back(ms);
-      }
-    });
-  }
+  std::vector<std::thread> valid = StartValidClients(port, 4, v);
   std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
-  const double rss_idle_end = RssMb();
+  rss.idle_end = RssMb();
 
-  // ---- the attack
-  attack = true;
+  v.attack = true;
   std::atomic<bool> attack_stop{false};
-  Outcomes huge_image, huge_prompt, flood, leaving;
-  std::vector<std::thread> hostile;
-  // Requests declaring 20000 x 20000 pixels: a PNG header alone, and a raw rgb shape alone.
-  for (int k = 0; k < 2; ++k) {
-    hostile.emplace_back([&, k] {
-      RawClient client(port);
-      const std::string prompt = BytesElement("tomato");
-      const std::string request =
-          k == 0 ? InferRequestBytes(
-                       "oracle", {{"image", "BYTES", {1}, BytesElement(PngHeader(20000, 20000))},
-                                  {"prompt", "BYTES", {1}, prompt}})
-                 : InferRequestBytes("oracle", {{"rgb", "UINT8", {20000, 20000, 3}, ""},
-                                                {"prompt", "BYTES", {1}, prompt}});
-      while (!attack_stop.load()) {
-        huge_image.Add(CodeName(client.Call(request)));
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-      }
-    });
-  }
-  // 100 000-phrase prompts (800 KB each) with the real frame; a flood of 24 threads on one
-  // connection, each sending again as soon as it has an answer (10 ms after a refusal); clients
-  // that leave 5 ms after sending (their requests are queued or running when they go). Requests
-  // are encoded once: the clients' own encoding is not what is measured.
-  std::string phrases = "tomato";
-  for (int i = 1; i < 100000; ++i) phrases += ", tomato";
-  const std::string prompt_request = [&] {
-    // The client would refuse it (SplitPrompt's limits): encode it past them, for the server to
-    // refuse.
-    const ScopedLimit bytes(segmentation::MaxPromptBytes(), 1u << 20);
-    const ScopedLimit count(segmentation::MaxPromptPhrases(), 1u << 20);
-    return EncodedRequestBytes(SmallRequest(0, phrases));
-  }();
-  const std::string valid_request = EncodedRequestBytes(SmallRequest(1));
-  hostile.emplace_back([&] {
-    RawClient client(port);
-    while (!attack_stop.load()) {
-      huge_prompt.Add(CodeName(client.Call(prompt_request)));
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-  });
-  auto flood_client = std::make_shared<RawClient>(port);
-  for (int t = 0; t < 24; ++t) {
-    hostile.emplace_back([&] {
-      while (!attack_stop.load()) {
-        const grpc::StatusCode code = flood_client->Call(valid_request);
-        flood.Add(CodeName(code));
-        if (code != grpc::StatusCode::OK)
-          std::this_thread::sleep_for(std::chrono::milliseconds(10));
-      }
-    });
-  }
-  for (int t = 0; t < 2; ++t) {
-    hostile.emplace_back([&] {
-      RawClient client(port);
-      while (!attack_stop.load()) {
-        leaving.Add(CodeName(client.Call(valid_request, 0.005)));
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-      }
-    });
-  }
+  HostileOutcomes h;
+  std::vector<std::thread> hostile = StartHostileClients(port, attack_stop, h);
   std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
   attack_stop = true;
   for (std::thread& t : hostile) t.join();
-  const double rss_attack_end = RssMb();
-  stop = true;
+  rss.attack_end = RssMb();
+  v.stop = true;
   for (std::thread& t : valid) t.join();
   sampler.join();
   const ServerStats stats = server.stats();
   server.Shutdown();
 
-  double rss_idle_max = 0.0, rss_attack_max = 0.0;
-  for (const auto& [t, mb] : rss) {
-    double& max = t <= seconds ? rss_idle_max : rss_attack_max;
+  for (const auto& [t, mb] : rss.samples) {
+    double& max = t <= seconds ? rss.idle_max : rss.attack_max;
     max = std::max(max, mb);
   }
-  const double p50_idle = Percentile(idle_ms, 0.50), p99_idle = Percentile(idle_ms, 0.99);
-  const double p50_attack = Percentile(attack_ms, 0.50), p99_attack = Percentile(attack_ms, 0.99);
-  std::printf(
-      "mixed load: 4 valid clients (oracle, 320 x 240, one request at a time), %.0f s idle "
-      "then %.0f s under attack; server: 2 workers, default limits\n",
-      seconds, seconds);
-  std::printf("  valid, idle:         %zu requests, p50 %.1f ms, p99 %.1f ms\n", idle_ms.size(),
-              p50_idle, p99_idle);
-  std::printf("  valid, under attack: %zu requests, p50 %.1f ms, p99 %.1f ms (p99 %.2fx idle)\n",
-              attack_ms.size(), p50_attack, p99_attack, p99_attack / std::max(p99_idle, 1e-9));
-  std::printf("  valid errors: %llu%s%s\n", static_cast<unsigned long long>(valid_errors.load()),
-              first_valid_error.empty() ? "" : ", first: ", first_valid_error.c_str());
-  std::printf("  hostile, 20000 x 20000 declared: %s\n", huge_image.Describe().c_str());
-  std::printf("  hostile, 100000-phrase prompt:   %s\n", huge_prompt.Describe().c_str());
-  std::printf("  hostile, flood (24 in flight):   %s\n", flood.Describe().c_str());
-  std::printf("  hostile, leave after 5 ms:       %s\n", leaving.Describe().c_str());
-  std::printf(
-      "  server: %llu answered, %llu refused (%llu over budget, %llu queue full, %llu "
-      "expired in the queue, %llu stopped while running)\n",
-      static_cast<unsigned long long>(stats.infer_ok),
-      static_cast<unsigned long long>(stats.infer_failed),
-      static_cast<unsigned long long>(stats.infer_over_budget),
-      static_cast<unsigned long long>(stats.infer_queue_full),
-      static_cast<unsigned long long>(stats.infer_expired),
-      static_cast<unsigned long long>(stats.infer_interrupted));
-  std::printf(
-      "  RSS: %.0f MB at the end of idle (max %.0f), max %.0f MB under attack, %.0f MB "
-      "at its end\n",
-      rss_idle_end, rss_idle_max, rss_attack_max, rss_attack_end);
-  std::printf("  RSS over time (s: MB):");
-  for (size_t i = 0; i < rss.size(); i += 10)
-    std::printf(" %.0f:%.0f", rss[i].first, rss[i].second);
-  std::printf("\n");
-
-  std::vector<bench::BenchRecord> records;
-  records.push_back(bench::MakeRecord("mixed/valid_p50_idle", p50_idle, "ms"));
-  records.push_back(bench::MakeRecord("mixed/valid_p99_idle", p99_idle, "ms"));
-  records.push_back(bench::MakeRecord("mixed/valid_p50_attack", p50_attack, "ms", "idle", p50_idle,
-                                      p50_idle / std::max(p50_attack, 1e-9)));
-  records.push_back(bench::MakeRecord("mixed/valid_p99_attack", p99_attack, "ms", "idle", p99_idle,
-                                      p99_idle / std::max(p99_attack, 1e-9), ">=0.5x"));
-  records.push_back(bench::MakeRecord("mixed/valid_errors", static_cast<double>(valid_errors),
-                                      "requests", std::nullopt, std::nullopt, std::nullopt, "<=0"));
-  const auto refused_pct = [](Outcomes& o) {
-    const uint64_t total = o.Total();
-    return total == 0 ? 0.0
-                      : 100.0 * static_cast<double>(o.Count("RESOURCE_EXHAUSTED")) /
-                            static_cast<double>(total);
-  };
-  records.push_back(bench::MakeRecord("mixed/huge_image_refused", refused_pct(huge_image), "%",
-                                      std::nullopt, std::nullopt, std::nullopt, ">=100"));
-  records.push_back(bench::MakeRecord("mixed/huge_prompt_refused", refused_pct(huge_prompt), "%",
-                                      std::nullopt, std::nullopt, std::nullopt, ">=100"));
-  records.push_back(bench::MakeRecord("mixed/flood_refused", refused_pct(flood), "%"));
-  records.push_back(bench::MakeRecord("mixed/rss_max_idle", rss_idle_max, "MB"));
-  records.push_back(bench::MakeRecord("mixed/rss_max_attack", rss_attack_max, "MB", "idle",
-                                      rss_idle_max, rss_idle_max / std::max(rss_attack_max, 1e-9),
-                                      ">=0.5x"));
+  PrintMixedLoad(seconds, v, h, rss, stats);
+  const std::vector<bench::BenchRecord> records = MixedLoadRecords(v, h, rss);
   if (!json_path.empty() && !bench::WriteBenchRecords(json_path, records)) return 1;
   return 0;
 }
