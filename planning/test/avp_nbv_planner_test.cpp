@@ -49,14 +49,18 @@ void SetFruit(mapping::SemanticMap& m, const VoxelKey& k, float confidence) {
 
 double Hb(double p) { return -(p * std::log2(p) + (1 - p) * std::log2(1 - p)); }
 
-TEST(AvpRayGainTest, HandComputedRay) {
-  // Along +x through voxel centres: free, free, unknown, unknown, fruit (c = 0.7), then more.
+/// Along +x through voxel centres: free, free, unknown, unknown, fruit (c = 0.7), then more.
+mapping::SemanticMap HandRayMap() {
   mapping::SemanticMap map = MakeMap();
   SetFree(map, {0, 0, 0});
   SetFree(map, {1, 0, 0});
   SetFruit(map, {4, 0, 0}, 0.7f);
   SetFree(map, {5, 0, 0});  // behind the fruit: never reached
-  const Box3 roi(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
+  return map;
+}
+
+/// The options HandComputedRay starts from.
+AvpNbvOptions HandRayOptions() {
   AvpNbvOptions o;
   o.p_unknown = 0.5;               // so that the visibilities below are powers of 1/2
   o.occlusion_voxel_size_m = 0.0;  // per voxel of this 1 cm map, as given; rescaling is below
@@ -65,6 +69,13 @@ TEST(AvpRayGainTest, HandComputedRay) {
   o.unknown_occlusion_sigma_m = 0.0;  // flat p_unknown first; its fall-off is checked below
   o.w_unknown_near_target = 1.0;
   o.grid.near_target_radius_m = 0.025;  // voxels 2 and 3 are 2 and 1 voxels from the fruit
+  return o;
+}
+
+TEST(AvpRayGainTest, HandComputedRay) {
+  mapping::SemanticMap map = HandRayMap();
+  const Box3 roi(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
+  AvpNbvOptions o = HandRayOptions();
   auto grid = GainGrid::Build(map, SemanticClass::kFruit, roi, o.grid);
   ASSERT_TRUE(grid.ok()) << grid.status().ToString();
   const Eigen::Vector3d from(0.005, 0.005, 0.005), to(0.305, 0.005, 0.005);
@@ -144,8 +155,15 @@ TEST(AvpRayGainTest, HandComputedRay) {
   EXPECT_NEAR(AvpRayGainReference(map, from, to, SemanticClass::kFruit, roi, o),
               o.w_unknown_roi * 0.5 + 0.25 * Hb(c), 1e-9);
   o.min_gain_range_m = 0.0;
+}
 
-  // An occupied non-fruit voxel ends the ray without gain.
+TEST(AvpRayGainTest, AnOccupiedNonFruitVoxelEndsTheRayWithoutGain) {
+  mapping::SemanticMap map = HandRayMap();
+  const Box3 roi(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
+  AvpNbvOptions o = HandRayOptions();
+  o.grid.near_target_radius_m = 0.005;
+  o.roi_axis_sigma_m = 0.0;
+  const Eigen::Vector3d from(0.005, 0.005, 0.005), to(0.305, 0.005, 0.005);
   ASSERT_TRUE(map.grid().SetLogOdds({2, 0, 0}, 2.0f));
   auto blocked = GainGrid::Build(map, SemanticClass::kFruit, roi, o.grid);
   ASSERT_TRUE(blocked.ok());
