@@ -80,9 +80,10 @@ const std::map<std::string, std::set<std::string>> kAllowed = {
     {"recording",
      {"core", "io", "robot", "mapping", "segmentation", "planning", "pipeline", "rosmsg", "mcap",
       "recording"}},
+    // RunLiveToFolder (avp live, built with AVP_WITH_ROS2) drives the ROS 2 robot of live/.
     {"experiment",
      {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "pipeline", "eval",
-      "report", "mcap", "recording", "experiment"}},
+      "report", "mcap", "recording", "rosmsg", "ros2", "live", "experiment"}},
     // Zero-shot segmentation backends (ONNX Runtime) and the segmentation service (gRPC): both
     // implement segmentation's Segmenter and are registered with it by apps/. zsl runs its
     // networks on a model server through interop's tensor client (tensor_service.h, no gRPC
@@ -241,6 +242,57 @@ TEST(ArchitectureTest, ModulesLinkOnlyModulesBelowThem) {
                                              << module << " may not depend on " << target;
     }
   }
+}
+
+/// The lines of `text` (a source file) that use the integrator: name the type
+/// `mapping::Integrator` or call an `Integrate(` method, outside comments and string literals.
+std::vector<int> IntegratingLines(std::istream& text) {
+  const std::regex uses(R"(\bIntegrator\b|(\.|->)\s*Integrate\s*\()");
+  const std::regex literal(R"("([^"\\]|\\.)*")");
+  std::vector<int> lines;
+  int number = 0;
+  for (std::string line; std::getline(text, line);) {
+    ++number;
+    line = std::regex_replace(line, literal, "\"\"");
+    const size_t comment = line.find("//");
+    if (comment != std::string::npos) line.resize(comment);
+    if (std::regex_search(line, uses)) lines.push_back(number);
+  }
+  return lines;
+}
+
+// One loop: pipeline::ViewFusion is the only code that fuses a view into a map (the episode,
+// `avp replay` and `avp map build` all go through it). The integrator's own module and the
+// unit tests and benchmarks that measure it are the exceptions.
+TEST(ArchitectureTest, OnlyThePipelineIntegratesAView) {
+  std::vector<std::string> modules = {"apps"};
+  for (const auto& [module, allowed] : kAllowed) modules.push_back(module);
+  for (const std::string& module : modules) {
+    if (module == "mapping" || module == "pipeline") continue;
+    for (const auto& entry : fs::recursive_directory_iterator(kSourceRoot / module)) {
+      const std::string ext = entry.path().extension().string();
+      if ((ext != ".h" && ext != ".cpp") || entry.path().parent_path().filename() == "test") {
+        continue;
+      }
+      std::ifstream in(entry.path());
+      for (int line : IntegratingLines(in)) {
+        ADD_FAILURE() << entry.path().string() << ":" << line << " (module " << module
+                      << ") integrates into a map: fuse views through pipeline::ViewFusion "
+                         "(pipeline/view_fusion.h)";
+      }
+    }
+  }
+}
+
+TEST(ArchitectureTest, IntegratingLinesFindsAnIntegrator) {
+  std::istringstream text(
+      "const mapping::Integrator integrator(options);  // line 1\n"
+      "auto stats = integrator.Integrate(frame, &seg, map);\n"
+      "mapping::IntegratorOptions o;  // the options are fine\n"
+      "// a mapping::Integrator in a comment is fine\n"
+      "p->Integrate (frame, nullptr, map);\n"
+      "AddOption(\"--threads\", \"Integrator threads\");  // a string is fine\n");
+  EXPECT_THAT(IntegratingLines(text), ::testing::ElementsAre(1, 2, 5));
 }
 
 }  // namespace

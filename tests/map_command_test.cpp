@@ -1,4 +1,5 @@
-// End-to-end: `avp map build | gt | info | export | compare` as library calls: a map of a simulated
+// End-to-end: `avp map build | gt | info | export | compare` as library calls (experiment's
+// BuildMap and WriteGroundTruthOctree, mapping's map tools): a map of a simulated
 // plant is built, described, exported to OctoMap and PLY, and scored against the scene's fruit
 // ground truth; bad input gives messages that name the bad value.
 #include <algorithm>
@@ -11,15 +12,30 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <avp/apps/map_command.h>
+#include <avp/experiment/map_build.h>
 #include <avp/experiment/registries.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
+#include <avp/mapping/map_tools.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/test/temp_dir_test.h>
 
-namespace avp::apps {
+namespace avp {
 namespace {
+
+using experiment::MapBuildOptions;
+using experiment::MapBuildSummary;
+using experiment::MapBuildView;
+using experiment::MapGtOptions;
+using experiment::MapGtSummary;
+using mapping::FormatMapCompare;
+using mapping::FormatMapInfo;
+using mapping::MapCompareOptions;
+using mapping::MapCompareSummary;
+using mapping::MapExportFormat;
+using mapping::MapExportOptions;
+using mapping::MapExportSummary;
+using mapping::MapInfo;
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
@@ -42,37 +58,20 @@ class MapCommandTest : public test::TempDirTest {
   }
 };
 
-TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
-  MapBuildOptions build = SmallBuild();
-  std::vector<MapBuildView> progress;
-  build.on_view = [&](const MapBuildView& v) { progress.push_back(v); };
-  const Result<MapBuildSummary> built = RunMapBuild(build, scenarios_);
-  ASSERT_TRUE(built.ok()) << built.status().ToString();
-  ASSERT_EQ(progress.size(), 3u);
-  for (size_t i = 0; i < progress.size(); ++i) {
-    EXPECT_EQ(progress[i].index, static_cast<int>(i));
-    EXPECT_GT(progress[i].stats.endpoints, 1000u) << "view " << i;
-    if (i > 0) {
-      EXPECT_GE(progress[i].known_voxels, progress[i - 1].known_voxels);
-    }
-  }
-  EXPECT_GT(built->fruit_voxels, 50u);
-  EXPECT_GE(built->instances.size(), 1u);
-  EXPECT_TRUE(fs::exists(build.out));
-  EXPECT_EQ(built->file_bytes, fs::file_size(build.out));
-
-  // info
-  const Result<MapInfo> info = RunMapInfo(build.out);
-  ASSERT_TRUE(info.ok()) << info.status().ToString();
-  EXPECT_EQ(info->known_voxels, built->known_voxels);
-  EXPECT_EQ(info->occupied_voxels, built->occupied_voxels);
+/// `map info` of a built map: the build's counts, its options and its provenance note.
+MapInfo ExpectInfoOfBuiltMap(const MapBuildOptions& build, const MapBuildSummary& built) {
+  const Result<MapInfo> info = mapping::ReadMapInfo(build.out);
+  EXPECT_TRUE(info.ok()) << info.status().ToString();
+  if (!info.ok()) return {};
+  EXPECT_EQ(info->known_voxels, built.known_voxels);
+  EXPECT_EQ(info->occupied_voxels, built.occupied_voxels);
   EXPECT_EQ(info->free_voxels + info->occupied_voxels, info->known_voxels);
-  EXPECT_EQ(info->labelled_voxels, built->labelled_voxels);
+  EXPECT_EQ(info->labelled_voxels, built.labelled_voxels);
   EXPECT_EQ(info->occupied_by_class[static_cast<size_t>(SemanticClass::kFruit)],
-            built->fruit_voxels);
-  EXPECT_EQ(info->instances.size(), built->instances.size());
+            built.fruit_voxels);
+  EXPECT_EQ(info->instances.size(), built.instances.size());
   EXPECT_EQ(info->options.semantics.policy, mapping::FusionPolicy::kReferenceMax);
-  ASSERT_TRUE(info->options.grid.roi.has_value());
+  EXPECT_TRUE(info->options.grid.roi.has_value());
   const std::string text = FormatMapInfo(*info);
   EXPECT_THAT(text, HasSubstr("format version 2"));
   EXPECT_THAT(text, HasSubstr("voxel size   8 mm"));
@@ -80,37 +79,45 @@ TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
   EXPECT_THAT(text, HasSubstr("--scenario tomato-single-cluster --seed 1 --views 3"));
   EXPECT_THAT(text, HasSubstr("fruit"));
 
-  // export: bt, ot (format from the extension) and ply
+  return *info;
+}
+
+/// `map export` to bt, ot (format from the extension) and ply.
+void ExpectExports(const MapBuildOptions& build, const MapBuildSummary& built, const MapInfo& info,
+                   const fs::path& dir_) {
   MapExportOptions exp;
   exp.map = build.out;
   exp.format = "bt";
   exp.out = dir_ / "plant.bt";
-  Result<MapExportSummary> exported = RunMapExport(exp);
+  Result<MapExportSummary> exported = mapping::ExportMapFile(exp);
   ASSERT_TRUE(exported.ok()) << exported.status().ToString();
-  EXPECT_EQ(exported->occupied_voxels, built->occupied_voxels);
+  EXPECT_EQ(exported->occupied_voxels, built.occupied_voxels);
   const auto back = mapping::ImportOctomapOccupied(exp.out);
   ASSERT_TRUE(back.ok()) << back.status().ToString();
-  EXPECT_EQ(back->keys.size(), built->occupied_voxels);
+  EXPECT_EQ(back->keys.size(), built.occupied_voxels);
   exp.format.clear();
   exp.out = dir_ / "plant.ot";
-  exported = RunMapExport(exp);
+  exported = mapping::ExportMapFile(exp);
   ASSERT_TRUE(exported.ok()) << exported.status().ToString();
   EXPECT_EQ(exported->format, MapExportFormat::kOt);
   EXPECT_GT(exported->labelled_voxels, 0u);
   exp.format = "ply";
   exp.out = dir_ / "plant.ply";
-  exported = RunMapExport(exp);
+  exported = mapping::ExportMapFile(exp);
   ASSERT_TRUE(exported.ok()) << exported.status().ToString();
-  EXPECT_EQ(exported->labelled_voxels, info->occupied_by_class[1] + info->occupied_by_class[2] +
-                                           info->occupied_by_class[3] + info->occupied_by_class[4] +
-                                           info->occupied_by_class[5] + info->occupied_by_class[6]);
+  EXPECT_EQ(exported->labelled_voxels, info.occupied_by_class[1] + info.occupied_by_class[2] +
+                                           info.occupied_by_class[3] + info.occupied_by_class[4] +
+                                           info.occupied_by_class[5] + info.occupied_by_class[6]);
+}
 
-  // gt + compare: at 6 mm the GT is resampled onto the 8 mm map; at 8 mm it is not.
+/// `map gt` + `map compare`: at 6 mm the GT is resampled onto the 8 mm map; at 8 mm it is not.
+void ExpectComparisons(const MapBuildOptions& build, const MapBuildSummary& built,
+                       const sim::ScenarioRegistry& scenarios_, const fs::path& dir_) {
   MapGtOptions gt;
   gt.scene = build.scene;
   gt.voxel_size_m = 0.006;
   gt.out = dir_ / "gt6.bt";
-  const Result<MapGtSummary> gt_summary = RunMapGt(gt, scenarios_);
+  const Result<MapGtSummary> gt_summary = experiment::WriteGroundTruthOctree(gt, scenarios_);
   ASSERT_TRUE(gt_summary.ok()) << gt_summary.status().ToString();
   EXPECT_GT(gt_summary->voxels, 100u);
 
@@ -119,14 +126,14 @@ TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
   cmp.gt = gt.out;
   cmp.tolerance_voxels = 1;
   cmp.json_out = dir_ / "compare.json";
-  const Result<MapCompareSummary> compared = RunMapCompare(cmp);
+  const Result<MapCompareSummary> compared = mapping::CompareMapFiles(cmp);
   ASSERT_TRUE(compared.ok()) << compared.status().ToString();
   ASSERT_EQ(compared->results.size(), 2u);
   const auto& exact = compared->results[0];
   const auto& tol = compared->results[1];
   EXPECT_TRUE(exact.resampled);
   EXPECT_EQ(exact.gt_voxels_original, gt_summary->voxels);
-  EXPECT_EQ(exact.predicted, built->fruit_voxels);
+  EXPECT_EQ(exact.predicted, built.fruit_voxels);
   EXPECT_EQ(exact.tp + exact.fp, exact.predicted);
   EXPECT_EQ(exact.gt_found + exact.fn, exact.ground_truth);
   EXPECT_EQ(exact.tp, exact.gt_found);
@@ -146,15 +153,39 @@ TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
 
   gt.voxel_size_m = 0.008;
   gt.out = dir_ / "gt8.bt";
-  ASSERT_TRUE(RunMapGt(gt, scenarios_).ok());
+  ASSERT_TRUE(experiment::WriteGroundTruthOctree(gt, scenarios_).ok());
   cmp.gt = gt.out;
   cmp.tolerance_voxels = 0;
   cmp.json_out.clear();
-  const Result<MapCompareSummary> same = RunMapCompare(cmp);
+  const Result<MapCompareSummary> same = mapping::CompareMapFiles(cmp);
   ASSERT_TRUE(same.ok()) << same.status().ToString();
   ASSERT_EQ(same->results.size(), 1u);
   EXPECT_FALSE(same->results[0].resampled);
   EXPECT_THAT(FormatMapCompare(*same), Not(HasSubstr("resolutions differ")));
+}
+
+TEST_F(MapCommandTest, BuildInfoExportCompareEndToEnd) {
+  MapBuildOptions build = SmallBuild();
+  std::vector<MapBuildView> progress;
+  build.on_view = [&](const MapBuildView& v) { progress.push_back(v); };
+  const Result<MapBuildSummary> built = experiment::BuildMap(build, scenarios_);
+  ASSERT_TRUE(built.ok()) << built.status().ToString();
+  ASSERT_EQ(progress.size(), 3u);
+  for (size_t i = 0; i < progress.size(); ++i) {
+    EXPECT_EQ(progress[i].index, static_cast<int>(i));
+    EXPECT_GT(progress[i].stats.endpoints, 1000u) << "view " << i;
+    if (i > 0) {
+      EXPECT_GE(progress[i].known_voxels, progress[i - 1].known_voxels);
+    }
+  }
+  EXPECT_GT(built->fruit_voxels, 50u);
+  EXPECT_GE(built->instances.size(), 1u);
+  EXPECT_TRUE(fs::exists(build.out));
+  EXPECT_EQ(built->file_bytes, fs::file_size(build.out));
+
+  const MapInfo info = ExpectInfoOfBuiltMap(build, *built);
+  ExpectExports(build, *built, info, dir_);
+  ExpectComparisons(build, *built, scenarios_, dir_);
 }
 
 TEST_F(MapCommandTest, BayesianProjectiveSingleViewIsRecorded) {
@@ -162,8 +193,8 @@ TEST_F(MapCommandTest, BayesianProjectiveSingleViewIsRecorded) {
   build.views = 1;
   build.map.semantics.policy = mapping::FusionPolicy::kBayesian;
   build.integrator.carving = mapping::FreeSpaceCarving::kProjective;
-  ASSERT_TRUE(RunMapBuild(build, scenarios_).ok());
-  const Result<MapInfo> info = RunMapInfo(build.out);
+  ASSERT_TRUE(experiment::BuildMap(build, scenarios_).ok());
+  const Result<MapInfo> info = mapping::ReadMapInfo(build.out);
   ASSERT_TRUE(info.ok()) << info.status().ToString();
   EXPECT_EQ(info->options.semantics.policy, mapping::FusionPolicy::kBayesian);
   EXPECT_THAT(FormatMapInfo(*info), HasSubstr("bayesian"));
@@ -173,30 +204,30 @@ TEST_F(MapCommandTest, BayesianProjectiveSingleViewIsRecorded) {
 TEST_F(MapCommandTest, BadInputsNameTheBadValue) {
   MapBuildOptions build = SmallBuild();
   build.views = 0;
-  auto r = RunMapBuild(build, scenarios_);
+  auto r = experiment::BuildMap(build, scenarios_);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("views (0)"));
 
   build = SmallBuild();
   build.scene.scenario = "tomato-upside-down";
-  r = RunMapBuild(build, scenarios_);
+  r = experiment::BuildMap(build, scenarios_);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("tomato-upside-down"));
 
   build = SmallBuild();
   build.map.grid.voxel_size_m = 0.5;
-  r = RunMapBuild(build, scenarios_);
+  r = experiment::BuildMap(build, scenarios_);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("0.5"));
 
-  const auto info = RunMapInfo(dir_ / "none.avpmap");
+  const auto info = mapping::ReadMapInfo(dir_ / "none.avpmap");
   ASSERT_FALSE(info.ok());
   EXPECT_THAT(info.status().message(), HasSubstr("none.avpmap"));
 
   MapExportOptions exp;
   exp.map = dir_ / "none.avpmap";
   exp.out = dir_ / "out.xyz";
-  auto e = RunMapExport(exp);
+  auto e = mapping::ExportMapFile(exp);
   ASSERT_FALSE(e.ok());
   EXPECT_THAT(e.status().message(), HasSubstr("'xyz'"));
 
@@ -204,11 +235,11 @@ TEST_F(MapCommandTest, BadInputsNameTheBadValue) {
   cmp.map = dir_ / "none.avpmap";
   cmp.gt = dir_ / "none.bt";
   cmp.tolerance_voxels = -1;
-  auto c = RunMapCompare(cmp);
+  auto c = mapping::CompareMapFiles(cmp);
   ASSERT_FALSE(c.ok());
   EXPECT_THAT(c.status().message(), HasSubstr("tolerance_voxels (-1)"));
   cmp.tolerance_voxels = 1;
-  c = RunMapCompare(cmp);
+  c = mapping::CompareMapFiles(cmp);
   ASSERT_FALSE(c.ok());
   EXPECT_THAT(c.status().message(), HasSubstr("none.avpmap"));
 }
@@ -223,7 +254,7 @@ TEST_F(MapCommandTest, ExportNeverOverwritesItsInput) {
   for (const fs::path& out : {map, dir_ / "." / "plant.ply", dir_ / "link.ply"}) {
     if (out.filename() == "link.ply") fs::create_symlink(map, out);
     exp.out = out;
-    const Status s = RunMapExport(exp).status();
+    const Status s = mapping::ExportMapFile(exp).status();
     EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << out;
     EXPECT_THAT(s.message(), HasSubstr("is the map file '" + map.string() + "' it reads"));
     EXPECT_THAT(s.message(), HasSubstr("outputs never overwrite inputs"));
@@ -236,7 +267,7 @@ TEST_F(MapCommandTest, ExportNeverOverwritesItsInput) {
   cmp.gt = dir_ / "gt.bt";
   std::ofstream(cmp.gt) << "gt";
   cmp.json_out = cmp.gt;
-  EXPECT_THAT(RunMapCompare(cmp).status().message(),
+  EXPECT_THAT(mapping::CompareMapFiles(cmp).status().message(),
               HasSubstr("is the ground truth file '" + cmp.gt.string() + "'"));
 }
 
@@ -254,7 +285,8 @@ TEST_F(MapCommandTest, AFolderGivenForAMapIsNotSaidToBeMissing) {
   std::string expected = "'";
   expected.append(folder.string()).append("' is a folder, not a map file");
   for (const Status& s :
-       {RunMapInfo(folder).status(), RunMapExport(exp).status(), RunMapCompare(cmp).status()}) {
+       {mapping::ReadMapInfo(folder).status(), mapping::ExportMapFile(exp).status(),
+        mapping::CompareMapFiles(cmp).status()}) {
     EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
     EXPECT_THAT(s.message(), HasSubstr(expected));
     EXPECT_THAT(s.message(), Not(HasSubstr("does not exist")));
@@ -300,15 +332,15 @@ TEST_F(MapCommandTest, ARunsMapFilesScoreTheSameAgainstABtGroundTruth) {
   gt.scene.seed = c.seed;
   gt.voxel_size_m = 0.005;  // the run's map voxel size
   gt.out = dir_ / "gt.bt";
-  ASSERT_TRUE(RunMapGt(gt, scenarios_).ok());
+  ASSERT_TRUE(experiment::WriteGroundTruthOctree(gt, scenarios_).ok());
 
   MapCompareOptions cmp;
   cmp.gt = gt.out;
   cmp.map = o.out_dir / "map.avpmap";
-  const Result<MapCompareSummary> from_avpmap = RunMapCompare(cmp);
+  const Result<MapCompareSummary> from_avpmap = mapping::CompareMapFiles(cmp);
   ASSERT_TRUE(from_avpmap.ok()) << from_avpmap.status().ToString();
   cmp.map = o.out_dir / "map.ot";
-  const Result<MapCompareSummary> from_ot = RunMapCompare(cmp);
+  const Result<MapCompareSummary> from_ot = mapping::CompareMapFiles(cmp);
   ASSERT_TRUE(from_ot.ok()) << from_ot.status().ToString();
   ExpectSameScores(*from_avpmap, *from_ot);
   const auto& exact = from_avpmap->results[0];
@@ -325,7 +357,7 @@ TEST_F(MapCommandTest, ARunsMapFilesScoreTheSameAgainstABtGroundTruth) {
   EXPECT_THAT(report, Not(HasSubstr("resolutions differ")));
 
   // The run's map.avpmap is the whole map: info says what made it.
-  const Result<MapInfo> info = RunMapInfo(o.out_dir / "map.avpmap");
+  const Result<MapInfo> info = mapping::ReadMapInfo(o.out_dir / "map.avpmap");
   ASSERT_TRUE(info.ok()) << info.status().ToString();
   EXPECT_THAT(info->file.note, HasSubstr("avp run of tomato-single-cluster"));
   EXPECT_EQ(info->occupied_by_class[static_cast<size_t>(SemanticClass::kFruit)], exact.predicted);
@@ -333,17 +365,17 @@ TEST_F(MapCommandTest, ARunsMapFilesScoreTheSameAgainstABtGroundTruth) {
 
 TEST_F(MapCommandTest, InfoExportCompareReadEveryMapFormat) {
   const MapBuildOptions build = SmallBuild();
-  const Result<MapBuildSummary> built = RunMapBuild(build, scenarios_);
+  const Result<MapBuildSummary> built = experiment::BuildMap(build, scenarios_);
   ASSERT_TRUE(built.ok()) << built.status().ToString();
   MapExportOptions exp;
   exp.map = build.out;
   exp.out = dir_ / "plant.ot";
-  ASSERT_TRUE(RunMapExport(exp).ok());
+  ASSERT_TRUE(mapping::ExportMapFile(exp).ok());
   exp.out = dir_ / "plant.bt";
-  ASSERT_TRUE(RunMapExport(exp).ok());
+  ASSERT_TRUE(mapping::ExportMapFile(exp).ok());
 
   // info on .ot / .bt: the same voxels; classes from the colours of the .ot, none in the .bt.
-  const Result<MapInfo> ot = RunMapInfo(dir_ / "plant.ot");
+  const Result<MapInfo> ot = mapping::ReadMapInfo(dir_ / "plant.ot");
   ASSERT_TRUE(ot.ok()) << ot.status().ToString();
   EXPECT_EQ(ot->occupied_voxels, built->occupied_voxels);
   EXPECT_EQ(ot->known_voxels, built->known_voxels);
@@ -353,7 +385,7 @@ TEST_F(MapCommandTest, InfoExportCompareReadEveryMapFormat) {
   EXPECT_THAT(ot_text, HasSubstr("in a class colour (read as that class)"));
   EXPECT_THAT(ot_text, HasSubstr("not kept"));
   EXPECT_THAT(ot_text, HasSubstr("voxel size   8 mm"));
-  const Result<MapInfo> bt = RunMapInfo(dir_ / "plant.bt");
+  const Result<MapInfo> bt = mapping::ReadMapInfo(dir_ / "plant.bt");
   ASSERT_TRUE(bt.ok()) << bt.status().ToString();
   EXPECT_EQ(bt->occupied_voxels, built->occupied_voxels);
   EXPECT_EQ(bt->known_voxels, built->known_voxels);
@@ -363,7 +395,7 @@ TEST_F(MapCommandTest, InfoExportCompareReadEveryMapFormat) {
   // export .ot -> .avpmap (the format from the extension) and .bt -> .ot.
   exp.map = dir_ / "plant.ot";
   exp.out = dir_ / "from_ot.avpmap";
-  const Result<MapExportSummary> to_avpmap = RunMapExport(exp);
+  const Result<MapExportSummary> to_avpmap = mapping::ExportMapFile(exp);
   ASSERT_TRUE(to_avpmap.ok()) << to_avpmap.status().ToString();
   EXPECT_EQ(to_avpmap->format, MapExportFormat::kAvpMap);
   EXPECT_EQ(to_avpmap->occupied_voxels, built->occupied_voxels);
@@ -375,7 +407,7 @@ TEST_F(MapCommandTest, InfoExportCompareReadEveryMapFormat) {
   EXPECT_THAT(file.note, HasSubstr("plant.ot (ot, ColorOcTree)"));
   exp.map = dir_ / "plant.bt";
   exp.out = dir_ / "from_bt.ot";
-  const Result<MapExportSummary> to_ot = RunMapExport(exp);
+  const Result<MapExportSummary> to_ot = mapping::ExportMapFile(exp);
   ASSERT_TRUE(to_ot.ok()) << to_ot.status().ToString();
   EXPECT_EQ(to_ot->occupied_voxels, built->occupied_voxels);
   EXPECT_EQ(to_ot->labelled_voxels, 0u);
@@ -386,14 +418,14 @@ TEST_F(MapCommandTest, InfoExportCompareReadEveryMapFormat) {
   cmp.map = build.out;
   for (const fs::path& gt_path : {build.out, dir_ / "plant.ot", dir_ / "from_ot.avpmap"}) {
     cmp.gt = gt_path;
-    const Result<MapCompareSummary> self = RunMapCompare(cmp);
+    const Result<MapCompareSummary> self = mapping::CompareMapFiles(cmp);
     ASSERT_TRUE(self.ok()) << self.status().ToString();
     EXPECT_TRUE(self->gt_used_labels) << gt_path;
     EXPECT_DOUBLE_EQ(self->results[0].f1, 1.0) << gt_path;
     EXPECT_LT(self->best_shift_f1, 1.0) << gt_path;
   }
   cmp.gt = dir_ / "plant.bt";
-  const Result<MapCompareSummary> vs_bt = RunMapCompare(cmp);
+  const Result<MapCompareSummary> vs_bt = mapping::CompareMapFiles(cmp);
   ASSERT_TRUE(vs_bt.ok()) << vs_bt.status().ToString();
   EXPECT_FALSE(vs_bt->gt_used_labels);
   EXPECT_EQ(vs_bt->results[0].ground_truth, built->occupied_voxels);
@@ -411,7 +443,7 @@ TEST_F(MapCommandTest, InfoExportCompareReadEveryMapFormat) {
     }
     ASSERT_TRUE(mapping::ExportOctomapBinary(shifted, dir_ / "shifted.bt").ok());
     cmp.gt = dir_ / "shifted.bt";
-    const Result<MapCompareSummary> off = RunMapCompare(cmp);
+    const Result<MapCompareSummary> off = mapping::CompareMapFiles(cmp);
     ASSERT_TRUE(off.ok()) << off.status().ToString();
     EXPECT_LT(off->results[0].f1, 0.8);
     EXPECT_EQ(off->best_shift, (VoxelKey{0, 0, -1}));
@@ -422,24 +454,24 @@ TEST_F(MapCommandTest, InfoExportCompareReadEveryMapFormat) {
   }
   // The .bt as the map: no labels, nothing predicted.
   cmp.map = dir_ / "plant.bt";
-  const Result<MapCompareSummary> bt_map = RunMapCompare(cmp);
+  const Result<MapCompareSummary> bt_map = mapping::CompareMapFiles(cmp);
   ASSERT_TRUE(bt_map.ok()) << bt_map.status().ToString();
   EXPECT_EQ(bt_map->results[0].predicted, 0u);
 }
 
 TEST_F(MapCommandTest, CompareNamesResolutionMismatchesAndBrokenFiles) {
   const MapBuildOptions build = SmallBuild();  // 8 mm
-  ASSERT_TRUE(RunMapBuild(build, scenarios_).ok());
+  ASSERT_TRUE(experiment::BuildMap(build, scenarios_).ok());
   MapGtOptions gt;
   gt.scene = build.scene;
   gt.voxel_size_m = 0.006;
   gt.out = dir_ / "gt6.bt";
-  ASSERT_TRUE(RunMapGt(gt, scenarios_).ok());
+  ASSERT_TRUE(experiment::WriteGroundTruthOctree(gt, scenarios_).ok());
   MapCompareOptions cmp;
   cmp.map = build.out;
   cmp.gt = gt.out;
   cmp.json_out = dir_ / "cmp.json";
-  const Result<MapCompareSummary> r = RunMapCompare(cmp);
+  const Result<MapCompareSummary> r = mapping::CompareMapFiles(cmp);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_TRUE(r->results[0].resampled);
   const std::string text = FormatMapCompare(*r);
@@ -457,7 +489,7 @@ TEST_F(MapCommandTest, CompareNamesResolutionMismatchesAndBrokenFiles) {
   std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() - 5);
   cmp.gt = cut;
   cmp.json_out.clear();
-  Status s = RunMapCompare(cmp).status();
+  Status s = mapping::CompareMapFiles(cmp).status();
   EXPECT_EQ(s.code(), StatusCode::kParseError);
   EXPECT_THAT(s.message(), HasSubstr("cut.bt"));
   EXPECT_THAT(s.message(), HasSubstr("byte"));
@@ -465,12 +497,12 @@ TEST_F(MapCommandTest, CompareNamesResolutionMismatchesAndBrokenFiles) {
   const fs::path text_file = dir_ / "gt.ot";
   std::ofstream(text_file) << "x y z\n1 2 3\n";
   cmp.gt = text_file;
-  s = RunMapCompare(cmp).status();
+  s = mapping::CompareMapFiles(cmp).status();
   EXPECT_THAT(s.message(), HasSubstr("gt.ot"));
   EXPECT_THAT(s.message(), HasSubstr("'x y z"));
   cmp.gt = gt.out;
   cmp.map = cut;
-  s = RunMapInfo(cut).status();
+  s = mapping::ReadMapInfo(cut).status();
   EXPECT_THAT(s.message(), HasSubstr("cut.bt"));
 }
 
@@ -478,7 +510,7 @@ TEST(ArcViewPosesTest, ViewsLookAtTheTargetFromTheArc) {
   const Eigen::Vector3d target(0.6, 0.05, 0.8);
   const Eigen::Vector3d start(0.2, 0.05, 0.7);  // azimuth 180 deg, 0.4 m away
   std::vector<double> azimuths;
-  const auto poses = ArcViewPoses(target, start, 5, 120.0, 0.4, &azimuths);
+  const auto poses = experiment::ArcViewPoses(target, start, 5, 120.0, 0.4, &azimuths);
   ASSERT_EQ(poses.size(), 5u);
   EXPECT_NEAR(azimuths[0], 120.0, 1e-9);
   EXPECT_NEAR(azimuths[2], 180.0, 1e-9);
@@ -493,11 +525,11 @@ TEST(ArcViewPosesTest, ViewsLookAtTheTargetFromTheArc) {
     EXPECT_LT(X_WC.rotation().col(1).z(), 0.0);
   }
   azimuths.clear();
-  const auto ring = ArcViewPoses(target, start, 4, 360.0, 0.5, &azimuths);
+  const auto ring = experiment::ArcViewPoses(target, start, 4, 360.0, 0.5, &azimuths);
   ASSERT_EQ(ring.size(), 4u);
   EXPECT_NEAR(azimuths[1] - azimuths[0], 90.0, 1e-9);
   EXPECT_NEAR(azimuths[3] - azimuths[0], 270.0, 1e-9);
 }
 
 }  // namespace
-}  // namespace avp::apps
+}  // namespace avp

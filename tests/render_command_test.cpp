@@ -5,13 +5,13 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <avp/apps/render_command.h>
+#include <avp/experiment/render.h>
 #include <avp/io/depth.h>
 #include <avp/io/json.h>
 #include <avp/io/png.h>
 #include <avp/sim/scenario.h>
 
-namespace avp::apps {
+namespace avp::experiment {
 namespace {
 
 namespace fs = std::filesystem;
@@ -27,7 +27,7 @@ TEST(RenderCommandTest, DefaultScenarioWritesLabelledFruitPixels) {
   RenderOptions options;
   options.scene.scenario = std::string(sim::DefaultScenarioName());
   options.out_dir = TempDir("default");
-  const Result<RenderSummary> result = RunRender(options, sim::BuiltinScenarios());
+  const Result<RenderSummary> result = RenderToFolder(options, sim::BuiltinScenarios());
   ASSERT_TRUE(result.ok()) << result.status().ToString();
   EXPECT_GT(result->fruit_pixels, 500u);
   EXPECT_GE(result->visible_fruits, 2u);
@@ -72,7 +72,7 @@ TEST(RenderCommandTest, SameSeedGivesIdenticalFilesAndOtherSeedsDiffer) {
     options.scene.seed = seed;
     options.noise = true;
     options.out_dir = TempDir(name);
-    EXPECT_TRUE(RunRender(options, sim::BuiltinScenarios()).ok());
+    EXPECT_TRUE(RenderToFolder(options, sim::BuiltinScenarios()).ok());
     return std::make_pair(io::ReadPngRgb8(options.out_dir / "rgb.png").value(),
                           io::ReadPngGray16(options.out_dir / "depth.png").value());
   };
@@ -91,7 +91,7 @@ TEST(RenderCommandTest, EveryScenarioRendersItsStartView) {
     options.scene.scenario = info.name;
     options.scene.seed = 3;
     options.out_dir = TempDir("all_" + info.name);
-    const Result<RenderSummary> result = RunRender(options, sim::BuiltinScenarios());
+    const Result<RenderSummary> result = RenderToFolder(options, sim::BuiltinScenarios());
     ASSERT_TRUE(result.ok()) << info.name << ": " << result.status().ToString();
     EXPECT_GT(result->valid_depth_pixels, 1000u) << info.name;
     EXPECT_GT(result->total_fruits, 0u) << info.name;
@@ -102,33 +102,33 @@ TEST(RenderCommandTest, BadInputsNameTheBadValue) {
   RenderOptions options;
   options.out_dir = TempDir("bad");
   options.scene.scenario = "tomato-upside-down";
-  Result<RenderSummary> r = RunRender(options, sim::BuiltinScenarios());
+  Result<RenderSummary> r = RenderToFolder(options, sim::BuiltinScenarios());
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), StatusCode::kNotFound);
   EXPECT_THAT(r.status().message(), HasSubstr("tomato-upside-down"));
 
   options.scene.scenario = "tomato-multiple-clusters";
   options.joints_deg = std::vector<double>{0, 10, 20};
-  r = RunRender(options, sim::BuiltinScenarios());
+  r = RenderToFolder(options, sim::BuiltinScenarios());
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("6"));
   EXPECT_THAT(r.status().message(), HasSubstr("0, 10, 20"));
 
   options.joints_deg = std::vector<double>{0, -70, 60, 0, 47.5, 500};
-  r = RunRender(options, sim::BuiltinScenarios());
+  r = RenderToFolder(options, sim::BuiltinScenarios());
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("500"));
 
   options.joints_deg.reset();
   options.intrinsics.fx = -1;
-  r = RunRender(options, sim::BuiltinScenarios());
+  r = RenderToFolder(options, sim::BuiltinScenarios());
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("fx (-1)"));
 
   options.intrinsics = CameraIntrinsics::RealSenseD435();
   options.scene.scenario.clear();
   options.scene.scene_file = "/nonexistent/plant.yaml";
-  r = RunRender(options, sim::BuiltinScenarios());
+  r = RenderToFolder(options, sim::BuiltinScenarios());
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("/nonexistent/plant.yaml"));
 }
@@ -140,7 +140,7 @@ TEST(RenderCommandTest, CameraPoseOverridesTheArm) {
   // expressed through LookAt in the library; here: a pose from the command line).
   options.camera_pose = std::vector<double>{1.3, 0.0, 0.75, -90.0, 0.0, 90.0};
   options.out_dir = TempDir("pose");
-  const Result<RenderSummary> r = RunRender(options, sim::BuiltinScenarios());
+  const Result<RenderSummary> r = RenderToFolder(options, sim::BuiltinScenarios());
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_TRUE(r->joints_deg.empty());
   EXPECT_NEAR(r->X_WC.translation().x(), 1.3, 1e-12);
@@ -150,4 +150,4 @@ TEST(RenderCommandTest, CameraPoseOverridesTheArm) {
 }
 
 }  // namespace
-}  // namespace avp::apps
+}  // namespace avp::experiment

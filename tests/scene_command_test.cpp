@@ -7,14 +7,14 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include <avp/apps/scene_command.h>
 #include <avp/sim/mesh_builder.h>
 #include <avp/sim/scenario.h>
 #include <avp/sim/scene_file.h>
+#include <avp/sim/scene_report.h>
 #include <avp/test/run_command.h>
 #include <avp/test/temp_dir_test.h>
 
-namespace avp::apps {
+namespace avp::sim {
 namespace {
 
 using ::testing::HasSubstr;
@@ -194,4 +194,4 @@ TEST_F(SceneCommandTest, ExportWritesAScenarioAsASceneFileThatLoadsBack) {
 }
 
 }  // namespace
-}  // namespace avp::apps
+}  // namespace avp::sim

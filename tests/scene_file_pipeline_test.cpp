@@ -15,9 +15,10 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <avp/apps/map_command.h>
 #include <avp/experiment/bench.h>
+#include <avp/experiment/map_build.h>
 #include <avp/io/json.h>
+#include <avp/mapping/map_tools.h>
 #include <avp/sim/scene_file.h>
 #include <avp/test/plant_mesh_files.h>
 #include <avp/test/run_command.h>
@@ -122,28 +123,30 @@ TEST_P(SceneFileFormatTest, BenchMapBuildGtAndCompare) {
   }
 
   // avp map build / gt / compare on the same file.
-  apps::MapBuildOptions build;
+  experiment::MapBuildOptions build;
   build.scene.scene_file = yaml;
   build.views = 3;
   build.map.grid.voxel_size_m = 0.008;
   build.out = dir_ / "maps" / "plant.avpmap";
-  const Result<apps::MapBuildSummary> built = apps::RunMapBuild(build, registries_.scenarios);
+  const Result<experiment::MapBuildSummary> built =
+      experiment::BuildMap(build, registries_.scenarios);
   ASSERT_TRUE(built.ok()) << built.status().ToString();
   EXPECT_EQ(built->scene_name, name);
   EXPECT_EQ(built->total_fruits, 7u);
   EXPECT_GT(built->fruit_voxels, 100u);
-  apps::MapGtOptions gt;
+  experiment::MapGtOptions gt;
   gt.scene.scene_file = yaml;
   gt.voxel_size_m = 0.008;
   gt.out = dir_ / "maps" / "gt.bt";
-  const Result<apps::MapGtSummary> written = apps::RunMapGt(gt, registries_.scenarios);
+  const Result<experiment::MapGtSummary> written =
+      experiment::WriteGroundTruthOctree(gt, registries_.scenarios);
   ASSERT_TRUE(written.ok()) << written.status().ToString();
   EXPECT_EQ(written->fruits, 7u);
   EXPECT_GT(written->voxels, 300u);
-  apps::MapCompareOptions compare;
+  mapping::MapCompareOptions compare;
   compare.map = build.out;
   compare.gt = gt.out;
-  const Result<apps::MapCompareSummary> c = apps::RunMapCompare(compare);
+  const Result<mapping::MapCompareSummary> c = mapping::CompareMapFiles(compare);
   ASSERT_TRUE(c.ok()) << c.status().ToString();
   ASSERT_GE(c->results.size(), 2u);
   // The map sees the fruit's near halves from a 120-degree arc: precise, half the surface found.

@@ -11,6 +11,7 @@
 
 #include <avp/core/error.h>
 #include <avp/core/text.h>
+#include <avp/mapping/voxel_grid.h>
 
 namespace avp::apps {
 
@@ -133,6 +134,26 @@ CLI::Option* AddArrangementOption(CLI::App& cmd, std::string& value) {
                   "(plant-x/y/z=M, plant-yaw=DEG, start-yaw=DEG, cluster-gap=M; "
                   "docs/scene-format.md, Arrangements)")
       ->type_name("SPEC");
+}
+
+void AddSceneFlags(CLI::App& cmd, SceneFlags& flags, const std::string& seed_doc) {
+  cmd.add_option(
+      "--scenario", flags.scenario,
+      fmt::format("Built-in scenario (see `avp scenes`); default: {}", sim::DefaultScenarioName()));
+  cmd.add_option("--scene", flags.scene_file,
+                 "YAML scene file instead of a scenario (docs/scene-format.md)");
+  AddArrangementOption(cmd, flags.arrangement);
+  AddNumberOption(cmd, "--seed", flags.seed, uint64_t{0}, MaxOf<uint64_t>(), seed_doc);
+}
+
+CLI::Option* AddVoxelSizeOption(CLI::App& cmd, double& value) {
+  value = mapping::GridOptions{}.voxel_size_m;
+  return AddNumberOption(cmd, "--voxel-size", value, 0.0, 1e6,
+                         "Voxel edge in metres (map option grid.voxel_size_m)");
+}
+
+void LogSceneWarnings(const sim::Scene& scene) {
+  for (const std::string& w : scene.warnings) spdlog::warn("scene '{}': {}", scene.name, w);
 }
 
 CLI::Option* AddKeyValueOption(CLI::App& cmd, const std::string& name,

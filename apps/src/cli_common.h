@@ -11,9 +11,12 @@
 
 #include <CLI/CLI.hpp>
 
-#include <avp/apps/commands.h>
 #include <avp/core/options.h>
 #include <avp/core/status.h>
+#include <avp/sim/scenario.h>
+#include <avp/sim/scene.h>
+
+#include "commands.h"
 
 namespace avp::apps {
 
@@ -87,6 +90,29 @@ constexpr T MaxOf() {
 /// "--arrangement SPEC" bound to `value`: how a scene file's plant is arranged
 /// (sim::ParseArrangement; checked when the scene is loaded).
 CLI::Option* AddArrangementOption(CLI::App& cmd, std::string& value);
+
+/// The flags of every command that loads a scene: --scenario, --scene, --arrangement, --seed.
+struct SceneFlags {
+  std::string scenario;
+  std::string scene_file;
+  std::string arrangement;
+  uint64_t seed = 0;
+  /// The scene they name (what sim::LoadScene reads).
+  sim::SceneSource Source() const { return {scenario, scene_file, seed, arrangement}; }
+};
+
+/// Adds --scenario, --scene, --arrangement and --seed to `cmd`, bound to `flags`; `seed_doc`
+/// says what the seed seeds.
+void AddSceneFlags(CLI::App& cmd, SceneFlags& flags, const std::string& seed_doc);
+
+/// "--voxel-size M" bound to `value` (set to the map's default first): the map option
+/// grid.voxel_size_m, whose default mapping::GridOptions holds (the one voxel size of every
+/// command).
+CLI::Option* AddVoxelSizeOption(CLI::App& cmd, double& value);
+
+/// Logs each of the scene's warnings (sim::Scene::warnings) with spdlog::warn, for the commands
+/// that load a scene.
+void LogSceneWarnings(const sim::Scene& scene);
 
 /// Repeatable "--<name> KEY=VALUE" option bound to `values`.
 CLI::Option* AddKeyValueOption(CLI::App& cmd, const std::string& name,

@@ -7,9 +7,10 @@
 
 #include <CLI/CLI.hpp>
 
-#include <avp/apps/commands.h>
 #include <avp/core/limits.h>
 #include <avp/core/status.h>
+
+#include "commands.h"
 
 namespace avp::apps {
 

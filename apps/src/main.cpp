@@ -3,11 +3,11 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
-#include <avp/apps/commands.h>
 #include <avp/experiment/registries.h>
 #include <avp/interop/remote_segmenter.h>
 #include <avp/zsl/register.h>
 
+#include "commands.h"
 #include "limits_cli.h"
 
 int main(int argc, char** argv) {

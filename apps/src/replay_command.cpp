@@ -9,13 +9,13 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include <avp/apps/commands.h>
 #include <avp/experiment/replay.h>
 #include <avp/experiment/run_config.h>
 #include <avp/io/yaml.h>
 #include <avp/report/progress.h>
 
 #include "cli_common.h"
+#include "commands.h"
 
 namespace avp::apps {
 

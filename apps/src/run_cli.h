@@ -14,6 +14,8 @@
 #include <avp/experiment/run_config.h>
 #include <avp/pipeline/episode.h>
 
+#include "cli_common.h"
+
 namespace avp::apps {
 
 /// The flags of `avp run`. Shorthand flags apply only when given, over --config; then the
@@ -21,9 +23,8 @@ namespace avp::apps {
 struct RunCli {
   std::string config_file;
   bool print_config = false;
-  std::string scenario, scene, arrangement, planner, segmenter, prompt, policy, carving, gt,
-      out = "out/run";
-  uint64_t seed = 0;
+  SceneFlags scene;
+  std::string planner, segmenter, prompt, policy, carving, gt, out = "out/run";
   int views = 0, threads = 0;
   double voxel_size_m = 0.0;
   bool no_noise = false, oracle_regret = false, force = false;

@@ -10,7 +10,6 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include <avp/apps/scene_command.h>
 #include <avp/experiment/run_config.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/options_yaml.h>
@@ -52,10 +51,10 @@ void ReplaceSourceAndComponents(const CLI::App& cmd, const RunCli& cli, experime
 
 Status ApplyShorthands(const CLI::App& cmd, const RunCli& cli, experiment::RunConfig& c) {
   ReplaceSourceAndComponents(cmd, cli, c);
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scenario", c, "scenario", cli.scenario));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scene", c, "scene_file", cli.scene));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--arrangement", c, "arrangement", cli.arrangement));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--seed", c, "seed", std::to_string(cli.seed)));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scenario", c, "scenario", cli.scene.scenario));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scene", c, "scene_file", cli.scene.scene_file));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--arrangement", c, "arrangement", cli.scene.arrangement));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--seed", c, "seed", std::to_string(cli.scene.seed)));
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--planner", c, "planner.name", cli.planner));
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--segmenter", c, "segmenter.name", cli.segmenter));
   AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--views", c, "episode.views", std::to_string(cli.views)));
@@ -220,11 +219,7 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
                  "Run configuration YAML (as --print-config writes it); flags apply over it");
   cmd.add_flag("--print-config", cli.print_config,
                "Print the effective configuration as YAML (--config reads it back) and exit");
-  cmd.add_option("--scenario", cli.scenario, "Built-in scenario (see avp scenes)");
-  cmd.add_option("--scene", cli.scene, "YAML scene file instead of a scenario");
-  AddArrangementOption(cmd, cli.arrangement);
-  AddNumberOption(cmd, "--seed", cli.seed, uint64_t{0}, MaxOf<uint64_t>(),
-                  "Seed of the plant, the noise and every choice");
+  AddSceneFlags(cmd, cli.scene, "Seed of the plant, the noise and every choice");
   cmd.add_option("--planner", cli.planner, "View planner; `--planner help` lists them")
       ->default_str(d.planner.name);
   cmd.add_option("--segmenter", cli.segmenter, "Segmenter; `--segmenter help` lists them")
@@ -232,8 +227,7 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
   AddNumberOption(cmd, "--views", cli.views, 0, MaxOf<int>(), "Fused views, start view included")
       ->default_str(std::to_string(d.episode.views));
   cmd.add_option("--prompt", cli.prompt, "Text prompt")->default_str(d.episode.prompt);
-  AddNumberOption(cmd, "--voxel-size", cli.voxel_size_m, 0.0, 1e6, "Voxel edge in metres")
-      ->default_str(fmt::format("{}", d.map.grid.voxel_size_m));
+  AddVoxelSizeOption(cmd, cli.voxel_size_m);
   cmd.add_option("--policy", cli.policy, "Semantic fusion: bayesian or reference-max")
       ->default_str(std::string(mapping::ToString(d.map.semantics.policy)));
   cmd.add_option("--carving", cli.carving, "Free space: projective, raycast or none")

@@ -1,3 +1,5 @@
+#include "serve_command.h"
+
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -12,7 +14,6 @@
 #include <pthread.h>
 #include <spdlog/spdlog.h>
 
-#include <avp/apps/serve_command.h>
 #include <avp/io/file.h>
 #include <avp/zsl/register.h>
 #ifdef AVP_WITH_ONNX
@@ -233,15 +234,11 @@ int ServeModels(const ServeModelsCli& cli) {
 #endif
 }
 
-}  // namespace
-
-void AddServeCommand(CLI::App& app, CommandContext& context) {
-  CLI::App* serve_cmd = app.add_subcommand("serve", "Network services");
-  serve_cmd->require_subcommand(1);
+void AddServeSegmentation(CLI::App& serve_cmd, CommandContext& context) {
   auto cli = std::make_shared<ServeCli>();
   interop::ServerOptions& server = cli->options.server;
   server.host = "0.0.0.0";
-  CLI::App* cmd = serve_cmd->add_subcommand(
+  CLI::App* cmd = serve_cmd.add_subcommand(
       "segmentation",
       "The segmentation service: KServe v2 / Open Inference Protocol over gRPC "
       "(docs/segmentation-service.md); runs until SIGINT / SIGTERM");
@@ -322,9 +319,11 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
       return ServeSegmentationAndReport(std::move(o));
     });
   });
+}
 
+void AddServeModels(CLI::App& serve_cmd, CommandContext& context) {
   auto models = std::make_shared<ServeModelsCli>();
-  CLI::App* models_cmd = serve_cmd->add_subcommand(
+  CLI::App* models_cmd = serve_cmd.add_subcommand(
       "models",
       "Serve the ONNX networks of a model directory (its manifest.json) through ONNX Runtime over "
       "KServe v2 / the Open Inference Protocol (gRPC), each named by its manifest role, for ywes "
@@ -370,6 +369,15 @@ void AddServeCommand(CLI::App& app, CommandContext& context) {
                          "Write the bound port to this file once listening");
   models_cmd->callback(
       [models, &context] { RunGuarded(context, [&] { return ServeModels(*models); }); });
+}
+
+}  // namespace
+
+void AddServeCommand(CLI::App& app, CommandContext& context) {
+  CLI::App* serve_cmd = app.add_subcommand("serve", "Network services");
+  serve_cmd->require_subcommand(1);
+  AddServeSegmentation(*serve_cmd, context);
+  AddServeModels(*serve_cmd, context);
 }
 
 }  // namespace avp::apps

@@ -9,13 +9,14 @@
 #include <fmt/format.h>
 
 #include <avp/core/rng.h>
+#include <avp/core/stopwatch.h>
 #include <avp/core/text.h>
 #include <avp/eval/ground_truth_io.h>
 #include <avp/eval/metrics.h>
 #include <avp/experiment/episode_runner.h>
 #include <avp/experiment/replay.h>
 #include <avp/io/yaml.h>
-#include <avp/mapping/integrator.h>
+#include <avp/pipeline/view_fusion.h>
 #include <avp/recording/encode.h>
 #include <avp/recording/layout.h>
 #include <avp/report/metrics_csv.h>
@@ -24,16 +25,8 @@ namespace avp::experiment {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using Clock = SteadyClock;
 using json = nlohmann::json;
-
-double MsSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-// The map's counts as pipeline::RunEpisode records them.
-using pipeline::CountTargetInstances;
-using pipeline::CountTargetVoxels;
 
 bool SameValue(double a, double b) {
   return (std::isnan(a) && std::isnan(b)) ||
@@ -148,13 +141,13 @@ Result<RunConfig> BagRunConfig(const recording::Bag& bag) {
   return config;
 }
 
-Result<ReplaySummary> ReplayToFolder(const recording::Bag& bag, RunConfig config,
-                                     const Registries& registries, const ReplayOptions& options) {
-  ReplaySummary summary;
-  summary.views = bag.views.size();
-  if (bag.views.empty()) return InvalidArgumentError(bag.path.string() + ": no view to replay");
+namespace {
 
-  // The segmenter.
+/// Whether the replay uses the recording's masks (else config.segmenter, set from
+/// options.segmenter); summary.segmenter names the choice. Errors: "recorded" for a view
+/// without masks, an oracle segmenter for a view without simulator labels.
+Result<bool> ChooseSegmenter(const recording::Bag& bag, const ReplayOptions& options,
+                             RunConfig& config, ReplaySummary& summary) {
   const bool recorded = options.segmenter == kRecordedSegmenter ||
                         (options.segmenter.empty() && bag.avp_recording && AllRecorded(bag));
   if (recorded) {
@@ -166,58 +159,238 @@ Result<ReplaySummary> ReplayToFolder(const recording::Bag& bag, RunConfig config
       }
     }
     summary.segmenter = std::string(kRecordedSegmenter);
-  } else {
-    if (!options.segmenter.empty() && options.segmenter != config.segmenter.name) {
-      config.segmenter = {options.segmenter, {}};
-    }
-    summary.segmenter = config.segmenter.name;
-    if (summary.segmenter.starts_with("oracle")) {
-      for (const recording::BagView& v : bag.views) {
-        if (!v.observation.labels) {
-          return InvalidArgumentError(fmt::format(
-              "{}: the '{}' segmenter needs the simulator's label images ({}, {}), and view {} "
-              "has none (a real robot's bag never has them): use --segmenter recorded (an avp "
-              "recording's masks) or a real segmenter (color, ywes, lsam, remote://...)",
-              bag.path.string(), summary.segmenter, recording::kSimInstanceTopic,
-              recording::kSimClassTopic, v.index));
-        }
+    return true;
+  }
+  if (!options.segmenter.empty() && options.segmenter != config.segmenter.name) {
+    config.segmenter = {options.segmenter, {}};
+  }
+  summary.segmenter = config.segmenter.name;
+  if (summary.segmenter.starts_with("oracle")) {
+    for (const recording::BagView& v : bag.views) {
+      if (!v.observation.labels) {
+        return InvalidArgumentError(fmt::format(
+            "{}: the '{}' segmenter needs the simulator's label images ({}, {}), and view {} "
+            "has none (a real robot's bag never has them): use --segmenter recorded (an avp "
+            "recording's masks) or a real segmenter (color, ywes, lsam, remote://...)",
+            bag.path.string(), summary.segmenter, recording::kSimInstanceTopic,
+            recording::kSimClassTopic, v.index));
       }
     }
   }
-  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  return false;
+}
 
-  // The ground truth and the ROI of the coverage metric.
-  std::optional<eval::GroundTruth> gt;
-  if (bag.ground_truth) {
-    Result<eval::GroundTruth> read = eval::GroundTruthFromJson(*bag.ground_truth);
-    if (!read.ok()) {
-      return read.status().WithContext(
-          fmt::format("{}: attachment {}", bag.path.string(), recording::kGroundTruthAttachment));
-    }
-    if (std::abs(read->voxel_size_m - config.map.grid.voxel_size_m) > 1e-12) {
-      summary.notes.push_back(
-          fmt::format("the ground truth has {} m voxels but the map {} m: no metrics",
-                      read->voxel_size_m, config.map.grid.voxel_size_m));
-    } else {
-      gt = std::move(*read);
-    }
+/// The bag's ground truth when it has one of the map's voxel size (else a note says why not).
+Result<std::optional<eval::GroundTruth>> BagGroundTruth(const recording::Bag& bag,
+                                                        const RunConfig& config,
+                                                        ReplaySummary& summary) {
+  if (!bag.ground_truth) return std::optional<eval::GroundTruth>();
+  Result<eval::GroundTruth> read = eval::GroundTruthFromJson(*bag.ground_truth);
+  if (!read.ok()) {
+    return read.status().WithContext(
+        fmt::format("{}: attachment {}", bag.path.string(), recording::kGroundTruthAttachment));
   }
+  if (std::abs(read->voxel_size_m - config.map.grid.voxel_size_m) > 1e-12) {
+    summary.notes.push_back(
+        fmt::format("the ground truth has {} m voxels but the map {} m: no metrics",
+                    read->voxel_size_m, config.map.grid.voxel_size_m));
+    return std::optional<eval::GroundTruth>();
+  }
+  return std::optional<eval::GroundTruth>(std::move(*read));
+}
+
+/// The plant a replay is of: an avp recording's scene when it loads (its name, description and
+/// the ROI of the coverage metric), else the bag's name and an empty ROI.
+struct ReplayScene {
   Box3 roi;
-  std::string scene_name = bag.path.stem().string();
-  std::string scene_description = "replay of " + bag.path.string();
-  if (auto s = bag.avp_metadata.find("scene"); s != bag.avp_metadata.end()) scene_name = s->second;
+  std::string name;
+  std::string description;
+};
+
+ReplayScene SceneOfBag(const recording::Bag& bag, const RunConfig& config,
+                       const Registries& registries, bool have_truth, ReplaySummary& summary) {
+  ReplayScene out{Box3(), bag.path.stem().string(), "replay of " + bag.path.string()};
+  if (auto s = bag.avp_metadata.find("scene"); s != bag.avp_metadata.end()) out.name = s->second;
   if (bag.avp_recording && (!config.scenario.empty() || !config.scene_file.empty())) {
     Result<sim::Scene> scene = LoadScene(config, registries);
     if (scene.ok()) {
-      roi = scene->plant_bounds.Inflated(config.roi_margin_m);
-      scene_name = scene->name;
-      scene_description = scene->description;
-    } else if (gt) {
+      out.roi = scene->plant_bounds.Inflated(config.roi_margin_m);
+      out.name = scene->name;
+      out.description = scene->description;
+    } else if (have_truth) {
       summary.notes.push_back(
           fmt::format("the recording's scene could not be loaded ({}): roi_coverage is 0",
                       scene.status().message()));
     }
   }
+  return out;
+}
+
+/// record.json's "replay" section.
+json ReplayRecord(const recording::Bag& bag, const ReplaySummary& summary) {
+  const json notes = summary.notes;
+  return json{{"replay",
+               {{"bag", bag.path.string()},
+                {"avp_recording", bag.avp_recording},
+                {"recorded_with", bag.avp_metadata},
+                {"segmenter", summary.segmenter},
+                {"views", bag.views.size()},
+                {"damage", bag.damage.ok() ? json(nullptr) : json(bag.damage.ToString())},
+                {"intact_bytes", bag.intact_bytes},
+                {"file_bytes", bag.file_bytes},
+                {"pairs", bag.pairs},
+                {"pairs_thinned", bag.pairs_thinned},
+                {"skipped", bag.skipped},
+                {"skipped_count", bag.skipped_count},
+                {"metrics_compared", summary.metrics_compared},
+                {"metrics_differ", summary.metrics_differ},
+                {"first_difference", summary.first_difference},
+                {"notes", notes}}}};
+}
+
+/// The episode of a replay: each view of the bag fused through the pipeline (pipeline::ViewFusion,
+/// as the episode fused it), evaluated against the ground truth when there is one, with the plan
+/// the recorded episode made after it.
+class ReplayEpisode {
+ public:
+  ReplayEpisode(const recording::Bag& bag, const RunConfig& config,
+                const pipeline::EpisodeOptions& eo, const eval::GroundTruth* gt, const Box3& roi,
+                segmentation::Segmenter* segmenter, ReplaySummary& summary)
+      : bag_(bag), config_(config), eo_(eo), gt_(gt), segmenter_(segmenter), summary_(summary) {
+    eval_options_.roi = roi;
+  }
+
+  Result<RunResult> Run(const std::vector<pipeline::EpisodeObserver*>& observers,
+                        std::unique_ptr<mapping::SemanticMap>* map_out, std::stop_token stop) {
+    auto map = std::make_unique<mapping::SemanticMap>(config_.map);
+    pipeline::ViewFusion fusion(*map, eo_);
+    pipeline::EpisodeResult& episode = result_.episode;
+    const auto t_episode = Clock::now();
+    const int total = static_cast<int>(bag_.views.size());
+    for (int i = 0; i < total; ++i) {
+      if (stop.stop_requested()) {
+        episode.end = pipeline::EpisodeEnd::kInterrupted;
+        episode.end_reason = fmt::format("stop requested before view {}", i);
+        break;
+      }
+      ReplayView(i, fusion, stop, observers);
+    }
+    EndOfReplay(episode);
+    episode.total_ms = MsSince(t_episode);
+    pipeline::NotifyEnd(observers, episode, *map);
+    if (gt_ != nullptr) {
+      result_.gt_voxels = gt_->voxels.size();
+      result_.gt_fruits = gt_->fruits.size();
+      result_.fruits = fruits_.Result();
+    }
+    *map_out = std::move(map);
+    return std::move(result_);
+  }
+
+ private:
+  /// The view's observation as the episode's source handed it to the segmenter: the
+  /// configuration's depth range (CameraInfo carries none) and the ground truth's fruits in the
+  /// labels.
+  robot::Observation ObservationOf(const recording::BagView& view) const {
+    robot::Observation obs = view.observation;
+    obs.frame.K.min_depth_m = config_.camera.min_depth_m;
+    obs.frame.K.max_depth_m = config_.camera.max_depth_m;
+    if (obs.labels && gt_ != nullptr) {
+      obs.labels->fruits.clear();
+      for (const sim::FruitTruth& f : gt_->fruits) {
+        obs.labels->fruits.push_back({f.instance_id, f.center_W, f.mean_radius_m()});
+      }
+    }
+    return obs;
+  }
+
+  void ReplayView(int i, pipeline::ViewFusion& fusion, const std::stop_token& stop,
+                  const std::vector<pipeline::EpisodeObserver*>& observers) {
+    const recording::BagView& view = bag_.views[static_cast<size_t>(i)];
+    const auto t_step = Clock::now();
+    pipeline::StepRecord step;
+    step.view = i;
+    step.views_total = static_cast<int>(bag_.views.size());
+    step.X_WC = view.observation.frame.X_WC;
+    step.q = view.q;
+    pipeline::ViewSeen seen;
+    if (segmenter_ == nullptr) {
+      const auto t0 = Clock::now();
+      std::optional<Segmentation> masks = *view.segmentation;
+      step.times.segment_ms = MsSince(t0);
+      fusion.Fuse(ObservationOf(view), std::move(masks), step, seen);
+    } else {
+      fusion.Segment(ObservationOf(view), *segmenter_, static_cast<uint64_t>(view.index), stop,
+                     step, seen);
+    }
+    if (gt_ != nullptr) Evaluate(i, view, *seen.observation, fusion.map(), step);
+    // The plan the recorded episode made after this view (not rerun): record.json, the report
+    // and metrics.csv show it as the episode had it.
+    planning::PlanResult plan;
+    if (bag_.avp_recording && RecordedPlan(view.step, eo_.record_top_candidates, step, plan)) {
+      seen.plan = std::move(plan);
+    }
+    step.times.total_ms = MsSince(t_step);
+    result_.episode.steps.push_back(step);
+    pipeline::NotifyStep(observers, result_.episode.steps.back(), seen.Data(), fusion.map());
+  }
+
+  /// The step's metrics against the ground truth (as `avp run` computes them), the fruits' state,
+  /// and for an avp recording the comparison with the recorded metrics.
+  void Evaluate(int i, const recording::BagView& view, const robot::Observation& obs,
+                const mapping::SemanticMap& map, pipeline::StepRecord& step) {
+    const auto t0 = Clock::now();
+    std::vector<eval::FruitResult> now;
+    result_.final_metrics = eval::EvaluateMap(map, *gt_, eval_options_, &now);
+    std::optional<std::unordered_map<uint16_t, double>> visible;
+    if (obs.labels) visible = VisibleFractions(obs, gt_->fruits, eo_.integrator.max_range_m);
+    fruits_.AfterView(i, std::move(now), visible);
+    step.metrics = report::MetricsRow(result_.final_metrics);
+    step.times.metrics_ms = MsSince(t0);
+    if (!bag_.avp_recording || view.step.is_null()) return;
+    ++summary_.metrics_compared;
+    const std::string difference = CompareMetrics(view.step, step);
+    if (!difference.empty() && summary_.metrics_differ++ == 0) {
+      summary_.first_difference = fmt::format("view {}: {}", view.index, difference);
+    }
+  }
+
+  /// How the replay ended: interrupted by a stop or the bag's damage, else all its views.
+  void EndOfReplay(pipeline::EpisodeResult& episode) const {
+    if (episode.end != pipeline::EpisodeEnd::kInterrupted && !bag_.damage.ok()) {
+      episode.end = pipeline::EpisodeEnd::kInterrupted;
+      episode.end_reason =
+          fmt::format("the recording is damaged ({}): replayed the {} intact views",
+                      bag_.damage.message(), bag_.views.size());
+    } else if (episode.end == pipeline::EpisodeEnd::kBudgetReached) {
+      episode.end_reason = fmt::format("replayed {} views of {}", episode.steps.size(),
+                                       bag_.path.filename().string());
+    }
+  }
+
+  const recording::Bag& bag_;
+  const RunConfig& config_;
+  const pipeline::EpisodeOptions& eo_;
+  const eval::GroundTruth* gt_;
+  segmentation::Segmenter* segmenter_;  ///< null: the recorded masks
+  ReplaySummary& summary_;
+  eval::EvalOptions eval_options_;
+  eval::FruitTracker fruits_;
+  RunResult result_;
+};
+
+}  // namespace
+
+Result<ReplaySummary> ReplayToFolder(const recording::Bag& bag, RunConfig config,
+                                     const Registries& registries, const ReplayOptions& options) {
+  ReplaySummary summary;
+  summary.views = bag.views.size();
+  if (bag.views.empty()) return InvalidArgumentError(bag.path.string() + ": no view to replay");
+  AVP_ASSIGN_OR_RETURN(const bool recorded, ChooseSegmenter(bag, options, config, summary));
+  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  AVP_ASSIGN_OR_RETURN(const std::optional<eval::GroundTruth> gt,
+                       BagGroundTruth(bag, config, summary));
+  const ReplayScene scene = SceneOfBag(bag, config, registries, gt.has_value(), summary);
 
   pipeline::EpisodeOptions eo = config.episode;
   eo.integrator.num_threads = config.threads;
@@ -228,172 +401,18 @@ Result<ReplaySummary> ReplayToFolder(const recording::Bag& bag, RunConfig config
                                         config.segmenter.name, segmenter_options,
                                         {.seed = Rng(config.seed).Fork("segmenter").NextU64()}));
   }
+  ReplayEpisode episode(bag, config, eo, gt ? &*gt : nullptr, scene.roi, segmenter.get(), summary);
 
   FolderRun run;
   run.command = "avp replay";
-  run.scene_name = scene_name;
-  run.scene_description = scene_description;
+  run.scene_name = scene.name;
+  run.scene_description = scene.description;
   run.gt = gt ? &*gt : nullptr;
-  run.extra = [&]() {
-    json notes = summary.notes;
-    return json{{"replay",
-                 {{"bag", bag.path.string()},
-                  {"avp_recording", bag.avp_recording},
-                  {"recorded_with", bag.avp_metadata},
-                  {"segmenter", summary.segmenter},
-                  {"views", bag.views.size()},
-                  {"damage", bag.damage.ok() ? json(nullptr) : json(bag.damage.ToString())},
-                  {"intact_bytes", bag.intact_bytes},
-                  {"file_bytes", bag.file_bytes},
-                  {"pairs", bag.pairs},
-                  {"pairs_thinned", bag.pairs_thinned},
-                  {"skipped", bag.skipped},
-                  {"skipped_count", bag.skipped_count},
-                  {"metrics_compared", summary.metrics_compared},
-                  {"metrics_differ", summary.metrics_differ},
-                  {"first_difference", summary.first_difference},
-                  {"notes", notes}}}};
-  };
+  run.extra = [&]() { return ReplayRecord(bag, summary); };
   run.run = [&](const std::vector<pipeline::EpisodeObserver*>& observers,
                 std::unique_ptr<mapping::SemanticMap>* map_out,
                 std::stop_token stop) -> Result<RunResult> {
-    auto map = std::make_unique<mapping::SemanticMap>(config.map);
-    const mapping::Integrator integrator(eo.integrator);
-    eval::EvalOptions eval_options;
-    eval_options.roi = roi;
-    eval::FruitTracker fruits;
-    RunResult result;
-    pipeline::EpisodeResult& episode = result.episode;
-    const auto t_episode = Clock::now();
-    size_t known = map->grid().CountKnownVoxels();
-    size_t target = CountTargetVoxels(map->grid(), eo.target_class);
-    const int total = static_cast<int>(bag.views.size());
-    for (int i = 0; i < total; ++i) {
-      if (stop.stop_requested()) {
-        episode.end = pipeline::EpisodeEnd::kInterrupted;
-        episode.end_reason = fmt::format("stop requested before view {}", i);
-        break;
-      }
-      const recording::BagView& view = bag.views[static_cast<size_t>(i)];
-      const auto t_step = Clock::now();
-      pipeline::StepRecord step;
-      step.view = i;
-      step.views_total = total;
-      step.X_WC = view.observation.frame.X_WC;
-      step.q = view.q;
-      // Labels with the ground truth's fruits (what the simulator's source hands the oracle).
-      robot::Observation obs = view.observation;
-      // CameraInfo carries no depth range: the configuration's camera's.
-      obs.frame.K.min_depth_m = config.camera.min_depth_m;
-      obs.frame.K.max_depth_m = config.camera.max_depth_m;
-      if (obs.labels && gt) {
-        obs.labels->fruits.clear();
-        for (const sim::FruitTruth& f : gt->fruits) {
-          obs.labels->fruits.push_back({f.instance_id, f.center_W, f.mean_radius_m()});
-        }
-      }
-      std::optional<Segmentation> seg;
-      auto t0 = Clock::now();
-      if (recorded) {
-        seg = *view.segmentation;
-      } else {
-        segmentation::SegmentationRequest request;
-        request.frame = &obs.frame;
-        request.prompt = eo.prompt;
-        request.score_threshold = eo.score_threshold;
-        request.labels = obs.labels ? &*obs.labels : nullptr;
-        request.frame_index = static_cast<uint64_t>(view.index);
-        Result<Segmentation> r = InternalError("segmenter not called");
-        try {
-          r = segmenter->Segment(request);
-        } catch (const std::exception& e) {
-          r = InternalError(fmt::format("segmenter '{}' threw: {}", segmenter->name(), e.what()));
-        }
-        if (r.ok()) {
-          if (Status v = r->ValidateFor(obs.frame.depth_m.width(), obs.frame.depth_m.height());
-              !v.ok()) {
-            r = InternalError(fmt::format("segmenter '{}' returned an invalid segmentation: {}",
-                                          segmenter->name(), v.ToString()));
-          }
-        }
-        if (r.ok()) {
-          seg = std::move(*r);
-        } else {
-          step.segment_status = r.status();
-        }
-      }
-      step.times.segment_ms = MsSince(t0);
-      if (seg) step.masks = seg->instances.size();
-      t0 = Clock::now();
-      Result<mapping::IntegrationStats> stats =
-          integrator.Integrate(obs.frame, seg ? &*seg : nullptr, *map);
-      step.times.integrate_ms = MsSince(t0);
-      if (stats.ok()) {
-        step.integration = *stats;
-      } else {
-        step.integrate_status = stats.status();
-      }
-      step.known_voxels = map->grid().CountKnownVoxels();
-      step.occupied_voxels = map->grid().CountOccupiedVoxels();
-      step.target_voxels = CountTargetVoxels(map->grid(), eo.target_class);
-      step.instances = CountTargetInstances(*map, eo.target_class);
-      step.known_delta = static_cast<int64_t>(step.known_voxels) - static_cast<int64_t>(known);
-      step.target_delta = static_cast<int64_t>(step.target_voxels) - static_cast<int64_t>(target);
-      known = step.known_voxels;
-      target = step.target_voxels;
-      if (gt) {
-        t0 = Clock::now();
-        std::vector<eval::FruitResult> now;
-        result.final_metrics = eval::EvaluateMap(*map, *gt, eval_options, &now);
-        std::optional<std::unordered_map<uint16_t, double>> visible;
-        if (obs.labels) visible = VisibleFractions(obs, gt->fruits, eo.integrator.max_range_m);
-        fruits.AfterView(i, std::move(now), visible);
-        step.metrics = report::MetricsRow(result.final_metrics);
-        step.times.metrics_ms = MsSince(t0);
-        if (bag.avp_recording && !view.step.is_null()) {
-          ++summary.metrics_compared;
-          const std::string difference = CompareMetrics(view.step, step);
-          if (!difference.empty()) {
-            if (summary.metrics_differ++ == 0) {
-              summary.first_difference = fmt::format("view {}: {}", view.index, difference);
-            }
-          }
-        }
-      }
-      // The plan the recorded episode made after this view (not rerun): record.json, the
-      // report and metrics.csv show it as the episode had it.
-      planning::PlanResult plan;
-      const bool planned =
-          bag.avp_recording && RecordedPlan(view.step, eo.record_top_candidates, step, plan);
-      step.times.total_ms = MsSince(t_step);
-      episode.steps.push_back(step);
-      const pipeline::StepData data{&obs, seg ? &*seg : nullptr, planned ? &plan : nullptr};
-      for (pipeline::EpisodeObserver* o : observers) {
-        if (o == nullptr) continue;
-        o->OnView(episode.steps.back(), data, *map);
-        o->OnStep(episode.steps.back(), *map);
-      }
-    }
-    if (episode.end != pipeline::EpisodeEnd::kInterrupted && !bag.damage.ok()) {
-      episode.end = pipeline::EpisodeEnd::kInterrupted;
-      episode.end_reason =
-          fmt::format("the recording is damaged ({}): replayed the {} intact views",
-                      bag.damage.message(), bag.views.size());
-    } else if (episode.end == pipeline::EpisodeEnd::kBudgetReached) {
-      episode.end_reason = fmt::format("replayed {} views of {}", episode.steps.size(),
-                                       bag.path.filename().string());
-    }
-    episode.total_ms = MsSince(t_episode);
-    for (pipeline::EpisodeObserver* o : observers) {
-      if (o != nullptr) o->OnEnd(episode, *map);
-    }
-    if (gt) {
-      result.gt_voxels = gt->voxels.size();
-      result.gt_fruits = gt->fruits.size();
-      result.fruits = fruits.Result();
-    }
-    *map_out = std::move(map);
-    return result;
+    return episode.Run(observers, map_out, std::move(stop));
   };
   RunFolderOptions folder = options.folder;
   folder.inputs.emplace_back(bag.path, "bag");

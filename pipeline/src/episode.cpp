@@ -7,18 +7,16 @@
 
 #include <fmt/format.h>
 
+#include <avp/core/stopwatch.h>
 #include <avp/core/text.h>
 #include <avp/pipeline/episode.h>
+#include <avp/pipeline/view_fusion.h>
 
 namespace avp::pipeline {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+using Clock = SteadyClock;
 
 }  // namespace
 
@@ -42,104 +40,21 @@ namespace {
 
 // ---- Stages of RunEpisode -----------------------------------------------------------------------
 
-/// The segmenter's answer for one observation; a throw or an invalid segmentation becomes an
-/// Internal error naming the segmenter.
-Result<Segmentation> CheckedSegmentation(segmentation::Segmenter& segmenter,
-                                         const robot::Observation& obs,
-                                         const EpisodeOptions& options, int view,
-                                         const std::stop_token& stop) {
-  segmentation::SegmentationRequest request;
-  if (stop.stop_possible()) {
-    request.interrupt = [stop]() -> Status {
-      return stop.stop_requested() ? CancelledError("stop requested while segmenting")
-                                   : Status::Ok();
-    };
-  }
-  request.frame = &obs.frame;
-  request.prompt = options.prompt;
-  request.score_threshold = options.score_threshold;
-  request.labels = obs.labels ? &*obs.labels : nullptr;
-  request.frame_index = static_cast<uint64_t>(view);
-  Result<Segmentation> seg = InternalError("segmenter not called");
-  try {
-    seg = segmenter.Segment(request);
-  } catch (const std::exception& e) {
-    seg = InternalError(fmt::format("segmenter '{}' threw: {}", segmenter.name(), e.what()));
-  }
-  if (seg.ok()) {
-    if (Status v = seg->ValidateFor(obs.frame.depth_m.width(), obs.frame.depth_m.height());
-        !v.ok()) {
-      seg = InternalError(fmt::format("segmenter '{}' returned an invalid segmentation: {}",
-                                      segmenter.name(), v.ToString()));
-    }
-  }
-  return seg;
-}
-
-/// What one view saw, kept for the observers (StepData).
-struct ViewSeen {
-  std::optional<robot::Observation> observation;
-  std::optional<Segmentation> segmentation;
-  std::optional<planning::PlanResult> plan;
-
-  StepData Data() const {
-    return StepData{observation ? &*observation : nullptr, segmentation ? &*segmentation : nullptr,
-                    plan ? &*plan : nullptr};
-  }
-};
-
-/// Senses at step.X_WC, segments and integrates the view into the map (depth only when
-/// segmentation failed; nothing when the capture failed), recording statuses, counts and times
-/// in `step` and what was seen in `seen`.
-void FuseView(const EpisodeComponents& c, const EpisodeOptions& options,
-              const mapping::Integrator& integrator, int view, StepRecord& step, ViewSeen& seen) {
+/// Senses at step.X_WC, segments and fuses the view into the map (depth only when segmentation
+/// failed; nothing when the capture failed), recording statuses, counts and times in `step` and
+/// what was seen in `seen`.
+void SenseAndFuse(const EpisodeComponents& c, ViewFusion& fusion, int view, StepRecord& step,
+                  ViewSeen& seen) {
   const int64_t stamp_ns = static_cast<int64_t>(view) * 1'000'000'000;
-  auto t0 = Clock::now();
+  const auto t0 = Clock::now();
   Result<robot::Observation> obs = c.source->Capture(step.X_WC, stamp_ns);
   step.times.capture_ms = MsSince(t0);
   if (!obs.ok()) {
     step.capture_status = obs.status();
+    fusion.RecordMap(step);
     return;
   }
-  t0 = Clock::now();
-  Result<Segmentation> seg = CheckedSegmentation(*c.segmenter, *obs, options, view, c.stop);
-  step.times.segment_ms = MsSince(t0);
-  if (seg.ok()) {
-    step.masks = seg->instances.size();
-  } else {
-    step.segment_status = seg.status();
-  }
-  seen.observation = std::move(*obs);
-  if (seg.ok()) seen.segmentation = std::move(*seg);
-  t0 = Clock::now();
-  Result<mapping::IntegrationStats> stats = integrator.Integrate(
-      seen.observation->frame, seen.segmentation ? &*seen.segmentation : nullptr, *c.map);
-  step.times.integrate_ms = MsSince(t0);
-  if (stats.ok()) {
-    step.integration = *stats;
-  } else {
-    step.integrate_status = stats.status();
-  }
-}
-
-/// Known and target voxels of the map after the previous view.
-struct MapTally {
-  size_t known = 0;
-  size_t target = 0;
-};
-
-/// The map after this view in `step`, and its change from `previous` (then updated to it).
-void RecordMapAfterView(const mapping::SemanticMap& map, SemanticClass target, MapTally& previous,
-                        StepRecord& step) {
-  step.known_voxels = map.grid().CountKnownVoxels();
-  step.occupied_voxels = map.grid().CountOccupiedVoxels();
-  step.target_voxels = CountTargetVoxels(map.grid(), target);
-  step.instances = CountTargetInstances(map, target);
-  step.known_delta = static_cast<int64_t>(step.known_voxels) - static_cast<int64_t>(previous.known);
-  step.target_delta =
-      static_cast<int64_t>(step.target_voxels) - static_cast<int64_t>(previous.target);
-  previous.known = step.known_voxels;
-  previous.target = step.target_voxels;
+  fusion.Segment(std::move(*obs), *c.segmenter, static_cast<uint64_t>(view), c.stop, step, seen);
 }
 
 /// A status that ends the episode at once: the robot did not do what it was asked (it did not
@@ -376,8 +291,8 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
                                             c.planner ? "" : " planner", c.map ? "" : " map"));
   }
   AVP_RETURN_IF_ERROR(options.Validate());
-  const mapping::Integrator integrator(options.integrator);
   mapping::SemanticMap& map = *c.map;
+  ViewFusion fusion(map, options);
   robot::Arm& arm = *c.arm;
   const Rng root(options.seed);
 
@@ -390,8 +305,6 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
                              arm.CurrentJoints(),
                              arm.CurrentCameraPose()};
   std::vector<RigidTransform> fused;
-  MapTally tally{map.grid().CountKnownVoxels(),
-                 CountTargetVoxels(map.grid(), options.target_class)};
 
   int segment_failures_in_a_row = 0;
   for (int view = 0; view < options.views; ++view) {
@@ -406,9 +319,8 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
     step.q = arm.CurrentJoints();
     step.X_WC = arm.CurrentCameraPose();
     ViewSeen seen;
-    FuseView(c, options, integrator, view, step, seen);
+    SenseAndFuse(c, fusion, view, step, seen);
     fused.push_back(step.X_WC);
-    RecordMapAfterView(map, options.target_class, tally, step);
     if (metrics) {
       const auto t0 = Clock::now();
       step.metrics = metrics(map);
@@ -429,18 +341,11 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
         (view + 1 < options.views && PlanAndMove(next, view, fused, step, result, seen));
     step.times.total_ms = MsSince(t_step);
     result.steps.push_back(step);
-    const StepData data = seen.Data();
-    for (EpisodeObserver* o : observers) {
-      if (o == nullptr) continue;
-      o->OnView(result.steps.back(), data, map);
-      o->OnStep(result.steps.back(), map);
-    }
+    NotifyStep(observers, result.steps.back(), seen.Data(), map);
     if (stop) break;
   }
   result.total_ms = MsSince(t_episode);
-  for (EpisodeObserver* o : observers) {
-    if (o != nullptr) o->OnEnd(result, map);
-  }
+  NotifyEnd(observers, result, map);
   return result;
 }
 

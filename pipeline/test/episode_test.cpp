@@ -9,6 +9,7 @@
 
 #include <avp/core/camera.h>
 #include <avp/pipeline/episode.h>
+#include <avp/pipeline/view_fusion.h>
 #include <avp/robot/arm.h>
 #include <avp/robot/arm_model.h>
 #include <avp/sim/sim_arm.h>
@@ -542,6 +543,84 @@ TEST_F(EpisodeTest, CameraDeadlineIsRecordedAndTheLoopGoesOn) {
   EXPECT_EQ(r->end, EpisodeEnd::kBudgetReached);
   EXPECT_EQ(r->views_fused(), 4);
   EXPECT_EQ(r->steps[1].capture_status.code(), StatusCode::kDeadlineExceeded);
+}
+
+// ---- ViewFusion: the one place a view is fused (RunEpisode, avp replay, avp map build) ---------
+
+TEST_F(EpisodeTest, ViewFusionGivesTheEpisodesMapAndCounts) {
+  // Two views fused through ViewFusion by hand equal the first two steps of an episode whose
+  // planner keeps the camera where it is.
+  options_.views = 2;
+  planner_.script = {{model_->home_joints()}};
+  const Result<EpisodeResult> episode = Run();
+  ASSERT_TRUE(episode.ok()) << episode.status().ToString();
+  ASSERT_EQ(episode->steps.size(), 2u);
+
+  mapping::SemanticMap map;
+  ViewFusion fusion(map, options_);
+  WallSource source;
+  HalfSegmenter segmenter;
+  for (int view = 0; view < 2; ++view) {
+    const StepRecord& expected = episode->steps[static_cast<size_t>(view)];
+    Result<robot::Observation> obs = source.Capture(expected.X_WC, view * 1'000'000'000LL);
+    ASSERT_TRUE(obs.ok());
+    StepRecord step;
+    ViewSeen seen;
+    fusion.Segment(std::move(*obs), segmenter, static_cast<uint64_t>(view), {}, step, seen);
+    EXPECT_TRUE(step.segment_status.ok());
+    EXPECT_EQ(step.masks, 1u);
+    ASSERT_TRUE(seen.observation.has_value());
+    ASSERT_TRUE(seen.segmentation.has_value());
+    EXPECT_EQ(step.integration.endpoints, expected.integration.endpoints);
+    EXPECT_EQ(step.known_voxels, expected.known_voxels);
+    EXPECT_EQ(step.occupied_voxels, expected.occupied_voxels);
+    EXPECT_EQ(step.target_voxels, expected.target_voxels);
+    EXPECT_EQ(step.instances, expected.instances);
+    EXPECT_EQ(step.known_delta, expected.known_delta);
+    EXPECT_EQ(step.target_delta, expected.target_delta);
+  }
+  EXPECT_GT(map.grid().CountKnownVoxels(), 0u);
+  EXPECT_EQ(map.grid().CountKnownVoxels(), map_.grid().CountKnownVoxels());
+}
+
+TEST_F(EpisodeTest, ViewFusionFusesDepthOnlyWhenTheSegmenterFails) {
+  mapping::SemanticMap map;
+  ViewFusion fusion(map, options_);
+  segmenter_.fail_frames = {0};
+  segmenter_.throw_instead = true;
+  Result<robot::Observation> obs = source_.Capture(arm_->CurrentCameraPose(), 0);
+  ASSERT_TRUE(obs.ok());
+  StepRecord step;
+  ViewSeen seen;
+  fusion.Segment(std::move(*obs), segmenter_, 0, {}, step, seen);
+  EXPECT_EQ(step.segment_status.code(), StatusCode::kInternal);
+  EXPECT_NE(step.segment_status.message().find("segmenter 'half' threw: model crashed"),
+            std::string::npos)
+      << step.segment_status.ToString();
+  EXPECT_FALSE(seen.segmentation.has_value());
+  EXPECT_EQ(step.masks, 0u);
+  EXPECT_GT(step.known_voxels, 0u);   // the depth was fused
+  EXPECT_EQ(step.target_voxels, 0u);  // without semantics
+  EXPECT_EQ(step.known_delta, static_cast<int64_t>(step.known_voxels));
+}
+
+TEST_F(EpisodeTest, ViewFusionRefusesMasksThatDoNotFitTheFrame) {
+  // A recorded segmentation of another size: the integrator's error is the step's, nothing fused.
+  mapping::SemanticMap map;
+  ViewFusion fusion(map, options_);
+  Result<robot::Observation> obs = source_.Capture(arm_->CurrentCameraPose(), 0);
+  ASSERT_TRUE(obs.ok());
+  Segmentation wrong;
+  wrong.width = 10;
+  wrong.height = 10;
+  StepRecord step;
+  ViewSeen seen;
+  fusion.Fuse(std::move(*obs), wrong, step, seen);
+  EXPECT_FALSE(step.integrate_status.ok());
+  EXPECT_EQ(step.known_voxels, 0u);
+  // The next view's change is counted from the map as it was.
+  fusion.RecordMap(step);
+  EXPECT_EQ(step.known_delta, 0);
 }
 
 }  // namespace
