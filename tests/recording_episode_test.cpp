@@ -98,26 +98,9 @@ T Decoded(const mcap::Message* m) {
 
 class RecordingTest : public test::TempDirTest {};
 
-TEST_F(RecordingTest, EveryTopicEqualsWhatTheEpisodeSaw) {
-  const experiment::RunConfig c = Config();
-  const sim::Scene scene = sim::MakeScenario(c.scenario, c.seed).value();
-  const eval::GroundTruth gt = experiment::GroundTruthFor(c, scene).value();
-  const fs::path path = dir_ / "episode.mcap";
-  auto recorder = experiment::OpenEpisodeRecording(
-                      path, c, Registries(), {.command = "avp run", .scene = scene.name, .gt = &gt})
-                      .value();
-  Keeper keeper;
-  const experiment::RunResult result =
-      experiment::RunEpisodeOnScene(c, Registries(), scene, gt, {&keeper, recorder.get()}).value();
-  ASSERT_TRUE(recorder->Close().ok()) << recorder->status().ToString();
-  const size_t views = static_cast<size_t>(result.episode.views_fused());
-  ASSERT_EQ(views, 3u);
-  ASSERT_EQ(keeper.seen.size(), views);
-  EXPECT_EQ(recorder->views(), 3);
-
-  const mcap::File f = mcap::ReadIndexed(path).value();
-  EXPECT_EQ(f.profile, "ros2");
-  // Every topic once per view (the oracle's source has simulator labels).
+/// Every topic once per view, with its type, QoS, type hash and schema.
+void ExpectEveryTopicOncePerView(const mcap::File& f, size_t views) {
+  // The oracle's source has simulator labels.
   const std::pair<std::string_view, std::string_view> topics[] = {
       {rec::kColorTopic, "sensor_msgs/msg/Image"},
       {rec::kDepthTopic, "sensor_msgs/msg/Image"},
@@ -146,8 +129,11 @@ TEST_F(RecordingTest, EveryTopicEqualsWhatTheEpisodeSaw) {
     EXPECT_EQ(f.statistics.channel_message_counts.at(ch->id), views);
   }
   EXPECT_EQ(f.statistics.message_count, views * std::size(topics));
+}
 
-  // Metadata and the ground truth, exact.
+/// The "avp" metadata and the ground truth attachment, exact.
+void ExpectMetadataAndGroundTruth(const mcap::File& f, const sim::Scene& scene,
+                                  const eval::GroundTruth& gt) {
   ASSERT_EQ(f.metadata.size(), 1u);
   EXPECT_EQ(f.metadata[0].name, "avp");
   const auto& md = f.metadata[0].metadata;
@@ -162,101 +148,137 @@ TEST_F(RecordingTest, EveryTopicEqualsWhatTheEpisodeSaw) {
   EXPECT_EQ(f.attachments[0].name, "ground_truth.json");
   EXPECT_EQ(f.attachments[0].media_type, "application/json");
   EXPECT_EQ(f.attachments[0].data, eval::GroundTruthToJson(gt).dump());
+}
 
+/// View v's camera topics: colour, depth, CameraInfo, TF and joints, as the episode saw them.
+void ExpectCameraTopics(const mcap::File& f, size_t v, const Seen& s) {
+  const RgbdFrame& frame = s.obs->frame;
+  const uint64_t t = static_cast<uint64_t>(frame.stamp_ns);
+  EXPECT_EQ(On(f, rec::kColorTopic)[v]->log_time, t);
+  EXPECT_EQ(On(f, rec::kStepTopic)[v]->publish_time, t);
+
+  const auto color = Decoded<rosmsg::Image>(On(f, rec::kColorTopic)[v]);
+  EXPECT_EQ(color.header.frame_id, frame.frame_id);
+  EXPECT_EQ(color.header.stamp.ToNanoseconds(), frame.stamp_ns);
+  EXPECT_EQ(rec::ColorFromMsg(color).value(), frame.rgb);
+  const auto depth = Decoded<rosmsg::Image>(On(f, rec::kDepthTopic)[v]);
+  EXPECT_EQ(depth.encoding, "32FC1");
+  EXPECT_EQ(rec::DepthFromMsg(depth).value(), frame.depth_m);  // bit-exact floats
+  const auto info = Decoded<rosmsg::CameraInfo>(On(f, rec::kCameraInfoTopic)[v]);
+  EXPECT_EQ(info.k[0], frame.K.fx);
+  EXPECT_EQ(info.k[5], frame.K.cy);
+  EXPECT_EQ(info.width, static_cast<uint32_t>(frame.K.width));
+
+  const auto tf = Decoded<rosmsg::TFMessage>(On(f, rec::kTfTopic)[v]);
+  ASSERT_EQ(tf.transforms.size(), 1u);
+  EXPECT_EQ(tf.transforms[0].header.frame_id, "igus_rebel_base_link");
+  EXPECT_EQ(tf.transforms[0].child_frame_id, frame.frame_id);
+  EXPECT_EQ(tf.transforms[0].transform.translation.x, frame.X_WC.translation().x());
+  const RigidTransform tf_pose = rosmsg::FromTransformMsg(tf.transforms[0].transform).value();
+  EXPECT_TRUE(tf_pose.rotation().isApprox(frame.X_WC.rotation(), 1e-12));
+
+  const auto joints = Decoded<rosmsg::JointState>(On(f, rec::kJointStatesTopic)[v]);
+  ASSERT_EQ(joints.position.size(), static_cast<size_t>(s.step.q.size()));
+  for (size_t k = 0; k < joints.position.size(); ++k) {
+    EXPECT_EQ(joints.position[k], s.step.q[static_cast<Eigen::Index>(k)]);
+    EXPECT_FALSE(joints.name[k].empty());
+  }
+}
+
+/// View v's masks: the instance image, the instances JSON and the simulator's labels.
+void ExpectSegmentationTopics(const mcap::File& f, size_t v, const Seen& s) {
+  const auto ids = Decoded<rosmsg::Image>(On(f, rec::kInstanceImageTopic)[v]);
+  EXPECT_EQ(ids.encoding, "mono16");
+  EXPECT_EQ(rec::U16FromMsg(ids).value(), rec::InstanceIdImage(*s.seg));
+  const Segmentation masks =
+      rec::InstancesFromJson(
+          nlohmann::json::parse(Decoded<rosmsg::String>(On(f, rec::kInstancesTopic)[v]).data))
+          .value();
+  ASSERT_EQ(masks.instances.size(), s.seg->instances.size());
+  EXPECT_GT(masks.instances.size(), 0u);
+  for (size_t i = 0; i < masks.instances.size(); ++i) {
+    const InstanceMask& a = s.seg->instances[i];
+    const InstanceMask& b = masks.instances[i];
+    EXPECT_EQ(b.confidence, a.confidence);
+    EXPECT_EQ(b.semantic_class, a.semantic_class);
+    ASSERT_TRUE(b.mask.SameSizeAs(a.mask));
+    for (size_t p = 0; p < a.mask.data().size(); ++p) {
+      ASSERT_EQ(b.mask.data()[p] != 0, a.mask.data()[p] != 0) << "instance " << i;
+    }
+  }
+  ASSERT_TRUE(s.obs->labels.has_value());
+  EXPECT_EQ(rec::U16FromMsg(Decoded<rosmsg::Image>(On(f, rec::kSimInstanceTopic)[v])).value(),
+            s.obs->labels->instance_ids);
+  EXPECT_EQ(rec::ClassFromMsg(Decoded<rosmsg::Image>(On(f, rec::kSimClassTopic)[v])).value(),
+            s.obs->labels->class_ids);
+}
+
+/// View v's map, candidates and step record.
+void ExpectMapAndStepTopics(const mcap::File& f, size_t v, size_t views, const Seen& s,
+                            const experiment::RunConfig& c) {
+  const auto octomap = Decoded<rosmsg::Octomap>(On(f, rec::kMapTopic)[v]);
+  EXPECT_TRUE(octomap.binary);
+  EXPECT_EQ(octomap.id, "OcTree");
+  EXPECT_EQ(octomap.resolution, c.map.grid.voxel_size_m);
+  EXPECT_EQ(std::string(octomap.data.begin(), octomap.data.end()), s.octree);
+
+  const auto markers = Decoded<rosmsg::MarkerArray>(On(f, rec::kCandidatesTopic)[v]);
+  const nlohmann::json step =
+      nlohmann::json::parse(Decoded<rosmsg::String>(On(f, rec::kStepTopic)[v]).data);
+  EXPECT_EQ(step["view"], static_cast<int>(v));
+  const RigidTransform X = rec::PoseFromJson(step["X_WC"]).value();
+  EXPECT_EQ(X.rotation(), s.step.X_WC.rotation());  // exact
+  EXPECT_EQ(X.translation(), s.step.X_WC.translation());
+  EXPECT_EQ(step["known_voxels"], s.step.known_voxels);
+  EXPECT_EQ(step["chosen_rank"], s.step.chosen_rank);
+  ASSERT_EQ(step["metrics"].size(), s.step.metrics.size());
+  for (size_t k = 0; k < s.step.metrics.size(); ++k) {
+    EXPECT_EQ(step["metrics"][k][0], s.step.metrics[k].first);
+    EXPECT_EQ(step["metrics"][k][1].get<double>(), s.step.metrics[k].second);
+  }
+  ASSERT_EQ(step["candidates"].size(), s.ranked.size());
+  if (v + 1 < views) {
+    ASSERT_GT(s.ranked.size(), 0u);
+    EXPECT_EQ(step["candidates"][0]["utility"].get<double>(), s.ranked[0].utility);
+    const RigidTransform best = rec::PoseFromJson(step["candidates"][0]["X_WC"]).value();
+    EXPECT_EQ(best.translation(), s.ranked[0].X_WC.translation());
+    // DELETEALL, one arrow per ranked candidate, the chosen one's text.
+    EXPECT_EQ(markers.markers.size(), s.ranked.size() + 2);
+    EXPECT_GE(s.step.chosen_rank, 0);
+  } else {
+    EXPECT_EQ(markers.markers.size(), 1u);  // after the last view: no plan
+  }
+}
+
+TEST_F(RecordingTest, EveryTopicEqualsWhatTheEpisodeSaw) {
+  const experiment::RunConfig c = Config();
+  const sim::Scene scene = sim::MakeScenario(c.scenario, c.seed).value();
+  const eval::GroundTruth gt = experiment::GroundTruthFor(c, scene).value();
+  const fs::path path = dir_ / "episode.mcap";
+  auto recorder = experiment::OpenEpisodeRecording(
+                      path, c, Registries(), {.command = "avp run", .scene = scene.name, .gt = &gt})
+                      .value();
+  Keeper keeper;
+  const experiment::RunResult result =
+      experiment::RunEpisodeOnScene(c, Registries(), scene, gt, {&keeper, recorder.get()}).value();
+  ASSERT_TRUE(recorder->Close().ok()) << recorder->status().ToString();
+  const size_t views = static_cast<size_t>(result.episode.views_fused());
+  ASSERT_EQ(views, 3u);
+  ASSERT_EQ(keeper.seen.size(), views);
+  EXPECT_EQ(recorder->views(), 3);
+
+  const mcap::File f = mcap::ReadIndexed(path).value();
+  EXPECT_EQ(f.profile, "ros2");
+  ExpectEveryTopicOncePerView(f, views);
+  ExpectMetadataAndGroundTruth(f, scene, gt);
   for (size_t v = 0; v < views; ++v) {
     SCOPED_TRACE("view " + std::to_string(v));
     const Seen& s = keeper.seen[v];
     ASSERT_TRUE(s.obs.has_value());
     ASSERT_TRUE(s.seg.has_value());
-    const RgbdFrame& frame = s.obs->frame;
-    const uint64_t t = static_cast<uint64_t>(frame.stamp_ns);
-    EXPECT_EQ(On(f, rec::kColorTopic)[v]->log_time, t);
-    EXPECT_EQ(On(f, rec::kStepTopic)[v]->publish_time, t);
-
-    const auto color = Decoded<rosmsg::Image>(On(f, rec::kColorTopic)[v]);
-    EXPECT_EQ(color.header.frame_id, frame.frame_id);
-    EXPECT_EQ(color.header.stamp.ToNanoseconds(), frame.stamp_ns);
-    EXPECT_EQ(rec::ColorFromMsg(color).value(), frame.rgb);
-    const auto depth = Decoded<rosmsg::Image>(On(f, rec::kDepthTopic)[v]);
-    EXPECT_EQ(depth.encoding, "32FC1");
-    EXPECT_EQ(rec::DepthFromMsg(depth).value(), frame.depth_m);  // bit-exact floats
-    const auto info = Decoded<rosmsg::CameraInfo>(On(f, rec::kCameraInfoTopic)[v]);
-    EXPECT_EQ(info.k[0], frame.K.fx);
-    EXPECT_EQ(info.k[5], frame.K.cy);
-    EXPECT_EQ(info.width, static_cast<uint32_t>(frame.K.width));
-
-    const auto tf = Decoded<rosmsg::TFMessage>(On(f, rec::kTfTopic)[v]);
-    ASSERT_EQ(tf.transforms.size(), 1u);
-    EXPECT_EQ(tf.transforms[0].header.frame_id, "igus_rebel_base_link");
-    EXPECT_EQ(tf.transforms[0].child_frame_id, frame.frame_id);
-    EXPECT_EQ(tf.transforms[0].transform.translation.x, frame.X_WC.translation().x());
-    const RigidTransform tf_pose = rosmsg::FromTransformMsg(tf.transforms[0].transform).value();
-    EXPECT_TRUE(tf_pose.rotation().isApprox(frame.X_WC.rotation(), 1e-12));
-
-    const auto joints = Decoded<rosmsg::JointState>(On(f, rec::kJointStatesTopic)[v]);
-    ASSERT_EQ(joints.position.size(), static_cast<size_t>(s.step.q.size()));
-    for (size_t k = 0; k < joints.position.size(); ++k) {
-      EXPECT_EQ(joints.position[k], s.step.q[static_cast<Eigen::Index>(k)]);
-      EXPECT_FALSE(joints.name[k].empty());
-    }
-
-    const auto ids = Decoded<rosmsg::Image>(On(f, rec::kInstanceImageTopic)[v]);
-    EXPECT_EQ(ids.encoding, "mono16");
-    EXPECT_EQ(rec::U16FromMsg(ids).value(), rec::InstanceIdImage(*s.seg));
-    const Segmentation masks =
-        rec::InstancesFromJson(
-            nlohmann::json::parse(Decoded<rosmsg::String>(On(f, rec::kInstancesTopic)[v]).data))
-            .value();
-    ASSERT_EQ(masks.instances.size(), s.seg->instances.size());
-    EXPECT_GT(masks.instances.size(), 0u);
-    for (size_t i = 0; i < masks.instances.size(); ++i) {
-      const InstanceMask& a = s.seg->instances[i];
-      const InstanceMask& b = masks.instances[i];
-      EXPECT_EQ(b.confidence, a.confidence);
-      EXPECT_EQ(b.semantic_class, a.semantic_class);
-      ASSERT_TRUE(b.mask.SameSizeAs(a.mask));
-      for (size_t p = 0; p < a.mask.data().size(); ++p) {
-        ASSERT_EQ(b.mask.data()[p] != 0, a.mask.data()[p] != 0) << "instance " << i;
-      }
-    }
-    ASSERT_TRUE(s.obs->labels.has_value());
-    EXPECT_EQ(rec::U16FromMsg(Decoded<rosmsg::Image>(On(f, rec::kSimInstanceTopic)[v])).value(),
-              s.obs->labels->instance_ids);
-    EXPECT_EQ(rec::ClassFromMsg(Decoded<rosmsg::Image>(On(f, rec::kSimClassTopic)[v])).value(),
-              s.obs->labels->class_ids);
-
-    const auto octomap = Decoded<rosmsg::Octomap>(On(f, rec::kMapTopic)[v]);
-    EXPECT_TRUE(octomap.binary);
-    EXPECT_EQ(octomap.id, "OcTree");
-    EXPECT_EQ(octomap.resolution, c.map.grid.voxel_size_m);
-    EXPECT_EQ(std::string(octomap.data.begin(), octomap.data.end()), s.octree);
-
-    const auto markers = Decoded<rosmsg::MarkerArray>(On(f, rec::kCandidatesTopic)[v]);
-    const nlohmann::json step =
-        nlohmann::json::parse(Decoded<rosmsg::String>(On(f, rec::kStepTopic)[v]).data);
-    EXPECT_EQ(step["view"], static_cast<int>(v));
-    const RigidTransform X = rec::PoseFromJson(step["X_WC"]).value();
-    EXPECT_EQ(X.rotation(), s.step.X_WC.rotation());  // exact
-    EXPECT_EQ(X.translation(), s.step.X_WC.translation());
-    EXPECT_EQ(step["known_voxels"], s.step.known_voxels);
-    EXPECT_EQ(step["chosen_rank"], s.step.chosen_rank);
-    ASSERT_EQ(step["metrics"].size(), s.step.metrics.size());
-    for (size_t k = 0; k < s.step.metrics.size(); ++k) {
-      EXPECT_EQ(step["metrics"][k][0], s.step.metrics[k].first);
-      EXPECT_EQ(step["metrics"][k][1].get<double>(), s.step.metrics[k].second);
-    }
-    ASSERT_EQ(step["candidates"].size(), s.ranked.size());
-    if (v + 1 < views) {
-      ASSERT_GT(s.ranked.size(), 0u);
-      EXPECT_EQ(step["candidates"][0]["utility"].get<double>(), s.ranked[0].utility);
-      const RigidTransform best = rec::PoseFromJson(step["candidates"][0]["X_WC"]).value();
-      EXPECT_EQ(best.translation(), s.ranked[0].X_WC.translation());
-      // DELETEALL, one arrow per ranked candidate, the chosen one's text.
-      EXPECT_EQ(markers.markers.size(), s.ranked.size() + 2);
-      EXPECT_GE(s.step.chosen_rank, 0);
-    } else {
-      EXPECT_EQ(markers.markers.size(), 1u);  // after the last view: no plan
-    }
+    ExpectCameraTopics(f, v, s);
+    ExpectSegmentationTopics(f, v, s);
+    ExpectMapAndStepTopics(f, v, views, s, c);
   }
   // The streaming reader finds the same.
   const mcap::StreamResult streamed = mcap::ReadStreaming(path);

@@ -728,9 +728,8 @@ TEST_F(RunCommandTest, BenchFolderHasTheLifecycleAndRefusesReruns) {
   EXPECT_TRUE(fs::exists(ro.out_dir / "record.json"));
 }
 
-TEST_F(RunCommandTest, BenchConditionsRunOneBenchEachAndCompareThem) {
-  const fs::path yaml = dir_ / "conditions.yaml";
-  std::ofstream(yaml) << R"(description: two conditions
+/// A bench of two conditions: as it is, and with avp-nbv stopping early and smaller masks.
+constexpr const char* kTwoConditions = R"(description: two conditions
 scenarios: [tomato-single-cluster]
 planners: [avp-nbv, predefined]
 seeds: [0, 1]
@@ -742,6 +741,10 @@ conditions:
     run: {segmenter: {options: {boundary_offset_px: -1}}}
     planner_options: {avp-nbv: {min_gain_fraction: 0.99}}
 )";
+
+TEST_F(RunCommandTest, BenchConditionsRunOneBenchEachAndCompareThem) {
+  const fs::path yaml = dir_ / "conditions.yaml";
+  std::ofstream(yaml) << kTwoConditions;
   auto config = LoadBenchConfig(yaml);
   ASSERT_TRUE(config.ok()) << config.status().ToString();
   ASSERT_EQ(config->conditions.size(), 2u);
@@ -805,8 +808,15 @@ conditions:
   plain_bench.force = true;
   EXPECT_THAT(RunBench(plain_bench, registries_).status().message(),
               HasSubstr("not an avp bench folder"));
+}
 
-  // Bad conditions are named before anything runs.
+TEST_F(RunCommandTest, BadBenchConditionsAreNamedBeforeAnythingRuns) {
+  const fs::path yaml = dir_ / "conditions.yaml";
+  std::ofstream(yaml) << kTwoConditions;
+  auto config = LoadBenchConfig(yaml);
+  ASSERT_TRUE(config.ok()) << config.status().ToString();
+  config->out_dir = dir_ / "out";
+  config->progress = false;
   BenchConfig bad = *config;
   bad.out_dir = dir_ / "bad";
   bad.conditions[0].name = "../up";
