@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <avp/core/stopwatch.h>
 #include <avp/zsl/lsam_segmenter.h>
 
 #include "detections.h"
@@ -23,11 +24,7 @@ namespace avp::zsl {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
+using Clock = SteadyClock;
 
 LoadedModel Take(LoadedBackend& backend, const char* role) {
   auto node = backend.models.extract(role);

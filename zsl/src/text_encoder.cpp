@@ -16,6 +16,8 @@
 
 #include <fmt/format.h>
 
+#include <avp/core/stopwatch.h>
+
 #include "clip_tokenizer.h"
 #include "lru_cache.h"
 #include "manifest.h"
@@ -24,11 +26,6 @@
 namespace avp::zsl {
 
 namespace {
-
-double MsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-      .count();
-}
 
 /// Divides `row` by its L2 norm (unless `normalized_in_graph`); InvalidArgument for a zero or
 /// non-finite norm.

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include <avp/core/stopwatch.h>
 #include <avp/zsl/ywes_segmenter.h>
 
 #include "detections.h"
@@ -24,11 +25,7 @@ namespace avp::zsl {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
+using Clock = SteadyClock;
 
 /// Moves the model of `role` out of a ready backend (LoadBackend guarantees it is there).
 LoadedModel Take(LoadedBackend& backend, const char* role) {
