@@ -1,7 +1,9 @@
 # The two commands (see README.md):
-#   make demo   set up, build, run the main job (a simulated view of the default scenario)
+#   make demo   set up, build the avp program, run the main job (a simulated episode of the
+#               default scenario)
 #   make test   set up, build, run every test
-# Also: make build, make bench (benchmark programs, one JSON file each under bench-results/),
+# Also: make build (everything, tests included), make build-avp (the program only),
+# make bench (benchmark programs, one JSON file each under bench-results/),
 # make format, make fuzz, make sanitize (docs/limits.md, "Fuzzing and sanitizers").
 
 BUILD_DIR  ?= build
@@ -29,7 +31,7 @@ SAN_ALL_TESTS ?= avp_core_test avp_io_test avp_rosmsg_test avp_robot_test avp_si
   avp_episode_end_to_end_test avp_remote_segmenter_e2e_test avp_extending_examples_test \
   avp_scenario_start_pose_test
 
-.PHONY: all setup configure build test demo bench format check-format clean \
+.PHONY: all setup configure build build-avp test demo bench format check-format clean \
         sanitize-configure fuzz-build fuzz-test sanitize-test fuzz sanitize
 
 all: build
@@ -44,6 +46,11 @@ configure: setup
 
 build: configure
 	@cmake --build $(BUILD_DIR) -j $(JOBS)
+
+# Only the avp program and the libraries it links: what the demo runs (no test or benchmark
+# program), so that a newcomer's first result does not wait for the ~150 test objects.
+build-avp: configure
+	@cmake --build $(BUILD_DIR) -j $(JOBS) --target avp
 
 # Every test of the normal build (with the replay tests of the fuzz corpora), then each fuzzer
 # briefly, then the suites of SAN_TESTS under ASan + UBSan.
@@ -80,7 +87,7 @@ sanitize: sanitize-configure
 	@FUZZ_JOBS=$(JOBS) ./fuzz/run_sanitized_tests.sh $(SAN_DIR) $(SAN_ALL_TESTS)
 	@FUZZ_JOBS=$(JOBS) ./fuzz/run_fuzzers.sh $(SAN_DIR) $(FUZZ_TEST_SECONDS)
 
-demo: build
+demo: build-avp
 	@./scripts/demo $(BUILD_DIR) $(DEMO_OUT)
 
 # One JSON file of records per program under bench-results/ (docs/benchmarks.md). Pass options to
