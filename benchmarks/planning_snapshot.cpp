@@ -104,31 +104,20 @@ Box3 PlanningSnapshot::box() const {
                   s);
 }
 
-PlanningSnapshot::RayCounts PlanningSnapshot::CastRay(const Eigen::Vector3d& from,
-                                                      const Eigen::Vector3d& to) const {
-  RayCounts c;
-  if (cells_.empty()) return c;
-  const RayWalker w(from, to, voxel_size_m_);
-  if (!w.ok()) return c;
-  int64_t left = w.remaining();  // voxels to visit: the start voxel up to (excluding) the end's
-  if (left == 0) return c;
-  if (w.exhausted_tie_) return CastRayGuarded(w);
+namespace {
 
-  // RayWalker's decisions on three pairwise differences d_ij = N_i A_j - N_j A_i (axis i steps
-  // before j iff d_ij <= 0; a step along i adds 2^16 A_j to d_ij and subtracts it from d_ji).
-  // No exhaustion guard is needed: an exhausted axis's next crossing lies beyond the end point
-  // (t > 1; the t == 1 tie went to the guarded loop above), every pending crossing at t <= 1, and
-  // the loop stops after exactly remaining() steps.
-  int64_t dxy = w.diff_[0], dxz = w.diff_[1], dyz = w.diff_[2];
-  const int64_t ax = w.inc_[1][0], ay = w.inc_[0][1], az = w.inc_[0][2];  // 2^16 A_i
-  const int64_t sx = w.step_[0], sy = w.step_[1], sz = w.step_[2];
-  const int64_t total = left;
-  // Each key coordinate is monotone along the ray, so the ray meets the box in one run of voxels
-  // at most: walk up to it, walk through it, and count everything after it as unknown.
-  int64_t relx = int64_t{w.key_[0]} - min_.x, rely = int64_t{w.key_[1]} - min_.y,
-          relz = int64_t{w.key_[2]} - min_.z;
-  const int64_t nx = dims_.x(), ny = dims_.y(), nz = dims_.z();
-  const auto step = [&] {
+/// RayWalker's decisions on three pairwise differences d_ij = N_i A_j - N_j A_i (axis i steps
+/// before j iff d_ij <= 0; a step along i adds 2^16 A_j to d_ij and subtracts it from d_ji), with
+/// the key relative to the snapshot's box. No exhaustion guard is needed: an exhausted axis's next
+/// crossing lies beyond the end point (t > 1; the t == 1 tie goes to CastRayGuarded), every
+/// pending crossing at t <= 1, and the walk stops after exactly remaining() steps.
+struct Dda {
+  int64_t dxy, dxz, dyz;
+  int64_t ax, ay, az;  ///< 2^16 A_i
+  int64_t sx, sy, sz;
+  int64_t relx, rely, relz;
+
+  [[gnu::always_inline]] void Step() {
     const bool x_first = (dxy <= 0) & (dxz <= 0);
     const bool y_first = !x_first & (dyz <= 0);
     const int64_t mx = -static_cast<int64_t>(x_first), my = -static_cast<int64_t>(y_first),
@@ -139,20 +128,58 @@ PlanningSnapshot::RayCounts PlanningSnapshot::CastRay(const Eigen::Vector3d& fro
     dxy += (ay & mx) - (ax & my);
     dxz += (az & mx) - (ax & mz);
     dyz += (az & my) - (ay & mz);
-  };
-  while (!(static_cast<uint64_t>(relx) < static_cast<uint64_t>(nx) &&
-           static_cast<uint64_t>(rely) < static_cast<uint64_t>(ny) &&
-           static_cast<uint64_t>(relz) < static_cast<uint64_t>(nz))) {
-    // Outside, before the box: stop as soon as one coordinate is outside on the side the ray
-    // moves away to (or does not move): it never enters.
-    const bool never = (relx < 0 && sx <= 0) || (relx >= nx && sx >= 0) || (rely < 0 && sy <= 0) ||
-                       (rely >= ny && sy >= 0) || (relz < 0 && sz <= 0) || (relz >= nz && sz >= 0);
-    if (never || --left == 0) {
-      c.visited = c.unknown = static_cast<uint32_t>(total);
-      return c;
-    }
-    step();
   }
+
+  /// Each key coordinate is monotone along the ray, so the ray meets the box in one run of voxels
+  /// at most: walks up to it. False when the ray never enters the box or `left` runs out first.
+  [[gnu::always_inline]] bool WalkToBox(int64_t nx, int64_t ny, int64_t nz, int64_t& left) {
+    while (!(static_cast<uint64_t>(relx) < static_cast<uint64_t>(nx) &&
+             static_cast<uint64_t>(rely) < static_cast<uint64_t>(ny) &&
+             static_cast<uint64_t>(relz) < static_cast<uint64_t>(nz))) {
+      // Outside, before the box: stop as soon as one coordinate is outside on the side the ray
+      // moves away to (or does not move): it never enters.
+      const bool never = (relx < 0 && sx <= 0) || (relx >= nx && sx >= 0) ||
+                         (rely < 0 && sy <= 0) || (rely >= ny && sy >= 0) ||
+                         (relz < 0 && sz <= 0) || (relz >= nz && sz >= 0);
+      if (never || --left == 0) return false;
+      Step();
+    }
+    return true;
+  }
+};
+
+}  // namespace
+
+PlanningSnapshot::RayCounts PlanningSnapshot::CastRay(const Eigen::Vector3d& from,
+                                                      const Eigen::Vector3d& to) const {
+  RayCounts c;
+  if (cells_.empty()) return c;
+  const RayWalker w(from, to, voxel_size_m_);
+  if (!w.ok()) return c;
+  int64_t left = w.remaining();  // voxels to visit: the start voxel up to (excluding) the end's
+  if (left == 0) return c;
+  if (w.exhausted_tie_) return CastRayGuarded(w);
+
+  Dda d{w.diff_[0],
+        w.diff_[1],
+        w.diff_[2],
+        w.inc_[1][0],
+        w.inc_[0][1],
+        w.inc_[0][2],
+        w.step_[0],
+        w.step_[1],
+        w.step_[2],
+        int64_t{w.key_[0]} - min_.x,
+        int64_t{w.key_[1]} - min_.y,
+        int64_t{w.key_[2]} - min_.z};
+  const int64_t total = left;
+  if (!d.WalkToBox(dims_.x(), dims_.y(), dims_.z(), left)) {
+    c.visited = c.unknown = static_cast<uint32_t>(total);
+    return c;
+  }
+  int64_t dxy = d.dxy, dxz = d.dxz, dyz = d.dyz;
+  const int64_t ax = d.ax, ay = d.ay, az = d.az, sx = d.sx, sy = d.sy, sz = d.sz;
+  const int64_t relx = d.relx, rely = d.rely, relz = d.relz;
 
   // Inside: the cell offset is a sum of three per-axis table entries, walked by pointer; leaving
   // the box lands on a kOutsideOffset entry, so one compare tests the box. The walk goes in

@@ -116,6 +116,53 @@ struct Out {
   }
 };
 
+/// The channels of a robot's bag the dump writes every step.
+struct RobotChannels {
+  uint16_t image = 0;
+  uint16_t info = 0;
+  uint16_t tf = 0;
+  uint16_t joints = 0;
+};
+
+/// Step `step`'s colour image, CameraInfo, moving transform and joint states.
+void WriteRobotStep(Out& out, const RobotChannels& ch, uint32_t step) {
+  const uint64_t t = 1'700'000'000'000'000'000ull + 200'000'000ull * step + 1;
+  const rm::Time stamp = rm::Time::FromNanoseconds(static_cast<int64_t>(t));
+  rm::Image img;
+  img.header = {stamp, "camera_color_optical_frame"};
+  img.height = 6;
+  img.width = 8;
+  img.encoding = "rgb8";
+  img.step = 24;
+  img.data.resize(6 * 24);
+  for (size_t i = 0; i < img.data.size(); ++i) img.data[i] = static_cast<uint8_t>(i * 7 + step);
+  out.Write(ch.image, t, img);
+
+  rm::CameraInfo ci;
+  ci.header = img.header;
+  ci.height = 6;
+  ci.width = 8;
+  ci.distortion_model = "plumb_bob";
+  ci.d = {0.1, -0.05, 0.001, 0.0, 0.0};
+  ci.k = {5.5, 0, 4, 0, 5.5, 3, 0, 0, 1};
+  ci.r = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  ci.p = {5.5, 0, 4, 0, 0, 5.5, 3, 0, 0, 0, 1, 0};
+  out.Write(ch.info, t, ci);
+
+  rm::TFMessage moving;
+  moving.transforms.resize(1);
+  moving.transforms[0].header = {stamp, "base_link"};
+  moving.transforms[0].child_frame_id = "tool0";
+  moving.transforms[0].transform.translation = {0.3 + 0.01 * step, 0.1, 0.6};
+  out.Write(ch.tf, t, moving);
+
+  rm::JointState js;
+  js.header = {stamp, ""};
+  js.name = {"joint_1", "joint_2", "joint_3"};
+  js.position = {0.1 * step, -0.25, 1.5 + 0.125 * step};
+  out.Write(ch.joints, t, js);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -152,11 +199,12 @@ int main(int argc, char** argv) {
                                           {"log_time", std::to_string(attachment.log_time)},
                                           {"create_time", std::to_string(attachment.create_time)},
                                           {"data", attachment.data}}});
-  const uint16_t image = out.Channel<rm::Image>("/camera/camera/color/image_raw");
-  const uint16_t info = out.Channel<rm::CameraInfo>("/camera/camera/color/camera_info");
-  const uint16_t tf = out.Channel<rm::TFMessage>("/tf");
+  RobotChannels channels;
+  channels.image = out.Channel<rm::Image>("/camera/camera/color/image_raw");
+  channels.info = out.Channel<rm::CameraInfo>("/camera/camera/color/camera_info");
+  channels.tf = out.Channel<rm::TFMessage>("/tf");
   const uint16_t tf_static = out.Channel<rm::TFMessage>("/tf_static", true);
-  const uint16_t joints = out.Channel<rm::JointState>("/joint_states");
+  channels.joints = out.Channel<rm::JointState>("/joint_states");
 
   rm::TFMessage fixed;
   fixed.transforms.resize(1);
@@ -166,43 +214,7 @@ int main(int argc, char** argv) {
   fixed.transforms[0].transform.rotation = {-0.5, 0.5, -0.5, 0.5};
   out.Write(tf_static, 1'700'000'000'000'000'000ull, fixed);
 
-  for (uint32_t step = 0; step < 6; ++step) {
-    const uint64_t t = 1'700'000'000'000'000'000ull + 200'000'000ull * step + 1;
-    const rm::Time stamp = rm::Time::FromNanoseconds(static_cast<int64_t>(t));
-    rm::Image img;
-    img.header = {stamp, "camera_color_optical_frame"};
-    img.height = 6;
-    img.width = 8;
-    img.encoding = "rgb8";
-    img.step = 24;
-    img.data.resize(6 * 24);
-    for (size_t i = 0; i < img.data.size(); ++i) img.data[i] = static_cast<uint8_t>(i * 7 + step);
-    out.Write(image, t, img);
-
-    rm::CameraInfo ci;
-    ci.header = img.header;
-    ci.height = 6;
-    ci.width = 8;
-    ci.distortion_model = "plumb_bob";
-    ci.d = {0.1, -0.05, 0.001, 0.0, 0.0};
-    ci.k = {5.5, 0, 4, 0, 5.5, 3, 0, 0, 1};
-    ci.r = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    ci.p = {5.5, 0, 4, 0, 0, 5.5, 3, 0, 0, 0, 1, 0};
-    out.Write(info, t, ci);
-
-    rm::TFMessage moving;
-    moving.transforms.resize(1);
-    moving.transforms[0].header = {stamp, "base_link"};
-    moving.transforms[0].child_frame_id = "tool0";
-    moving.transforms[0].transform.translation = {0.3 + 0.01 * step, 0.1, 0.6};
-    out.Write(tf, t, moving);
-
-    rm::JointState js;
-    js.header = {stamp, ""};
-    js.name = {"joint_1", "joint_2", "joint_3"};
-    js.position = {0.1 * step, -0.25, 1.5 + 0.125 * step};
-    out.Write(joints, t, js);
-  }
+  for (uint32_t step = 0; step < 6; ++step) WriteRobotStep(out, channels, step);
   const avp::Status closed = writer->Close();
   if (!closed.ok()) {
     std::fprintf(stderr, "%s\n", closed.ToString().c_str());

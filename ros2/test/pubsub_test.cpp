@@ -230,6 +230,80 @@ TEST(PubSub, ReceivedRawBytesAreXcdr1WithTheEncapsulationHeader) {
   EXPECT_TRUE(std::equal(expected.begin(), expected.end(), got[0].begin()));
 }
 
+/// avp's Image and TFMessage bytes as idlc-typed Cyclone readers deserialise them.
+void ExpectTypedReadersDecodeAvp(Publisher<rosmsg::Image>& pub,
+                                 Publisher<rosmsg::TFMessage>& tf_pub, dds_entity_t img_reader,
+                                 dds_entity_t tf_reader) {
+  const rosmsg::Image image = References<rosmsg::Image>()[1];
+  ASSERT_TRUE(pub.Publish(image).ok());
+  void* samples[1] = {nullptr};
+  dds_sample_info_t infos[1];
+  ASSERT_TRUE(WaitFor([&] { return dds_take(img_reader, samples, infos, 1, 1) == 1; }))
+      << "the idlc-typed reader got nothing (or could not deserialise avp's bytes)";
+  {
+    const auto* im = static_cast<const sensor_msgs_msg_dds__Image_*>(samples[0]);
+    EXPECT_EQ(im->header.stamp.sec, image.header.stamp.sec);
+    EXPECT_EQ(im->header.stamp.nanosec, image.header.stamp.nanosec);
+    EXPECT_EQ(std::string(im->header.frame_id), image.header.frame_id);
+    EXPECT_EQ(im->height, image.height);
+    EXPECT_EQ(im->width, image.width);
+    EXPECT_EQ(std::string(im->encoding), image.encoding);
+    EXPECT_EQ(im->is_bigendian, image.is_bigendian);
+    EXPECT_EQ(im->step, image.step);
+    ASSERT_EQ(im->data._length, image.data.size());
+    EXPECT_TRUE(std::equal(image.data.begin(), image.data.end(), im->data._buffer));
+    dds_return_loan(img_reader, samples, 1);
+  }
+  const rosmsg::TFMessage tf = References<rosmsg::TFMessage>().back();
+  ASSERT_TRUE(tf_pub.Publish(tf).ok());
+  samples[0] = nullptr;
+  ASSERT_TRUE(WaitFor([&] { return dds_take(tf_reader, samples, infos, 1, 1) == 1; }));
+  {
+    const auto* m = static_cast<const tf2_msgs_msg_dds__TFMessage_*>(samples[0]);
+    ASSERT_EQ(m->transforms._length, tf.transforms.size());
+    for (size_t i = 0; i < tf.transforms.size(); ++i) {
+      const auto& c = m->transforms._buffer[i];
+      const auto& t = tf.transforms[i];
+      EXPECT_EQ(std::string(c.header.frame_id), t.header.frame_id);
+      EXPECT_EQ(std::string(c.child_frame_id), t.child_frame_id);
+      EXPECT_EQ(c.transform.translation.x, t.transform.translation.x);
+      EXPECT_EQ(c.transform.rotation.w, t.transform.rotation.w);
+    }
+    dds_return_loan(tf_reader, samples, 1);
+  }
+}
+
+/// An idlc-typed writer's Image as avp decodes it.
+void ExpectAvpDecodesTypedWriter(dds_entity_t typed_writer, std::mutex& mutex,
+                                 const std::vector<rosmsg::Image>& avp_got) {
+  sensor_msgs_msg_dds__Image_ c{};
+  c.header.stamp.sec = 7;
+  c.header.stamp.nanosec = 8;
+  c.header.frame_id = const_cast<char*>("camera_color_optical_frame");
+  c.height = 2;
+  c.width = 3;
+  c.encoding = const_cast<char*>("mono8");
+  c.step = 3;
+  uint8_t data[6] = {1, 2, 3, 4, 5, 6};
+  c.data._buffer = data;
+  c.data._length = 6;
+  c.data._maximum = 6;
+  ASSERT_EQ(dds_write(typed_writer, &c), DDS_RETCODE_OK);
+  ASSERT_TRUE(WaitFor([&] {
+    std::lock_guard lock(mutex);
+    return !avp_got.empty();
+  })) << "avp got nothing from the idlc-typed writer";
+  {
+    std::lock_guard lock(mutex);
+    const rosmsg::Image& m = avp_got[0];
+    EXPECT_EQ(m.header.stamp.sec, 7);
+    EXPECT_EQ(m.header.frame_id, "camera_color_optical_frame");
+    EXPECT_EQ(m.encoding, "mono8");
+    EXPECT_EQ(m.step, 3u);
+    EXPECT_EQ(m.data, (std::vector<uint8_t>{1, 2, 3, 4, 5, 6}));
+  }
+}
+
 // An independent check of the layout: a Cyclone reader typed by idlc's descriptor (from
 // ros2/idl/) deserialises avp's bytes itself, and an idlc-typed writer's bytes decode in avp.
 TEST(PubSub, IdlTypedCycloneReaderAndWriterAgreeWithAvp) {
@@ -281,72 +355,8 @@ TEST(PubSub, IdlTypedCycloneReaderAndWriterAgreeWithAvp) {
            typed_status.current_count == 1;
   }));
 
-  // avp -> idlc-typed reader.
-  const rosmsg::Image image = References<rosmsg::Image>()[1];
-  ASSERT_TRUE(pub->Publish(image).ok());
-  void* samples[1] = {nullptr};
-  dds_sample_info_t infos[1];
-  ASSERT_TRUE(WaitFor([&] { return dds_take(img_reader, samples, infos, 1, 1) == 1; }))
-      << "the idlc-typed reader got nothing (or could not deserialise avp's bytes)";
-  {
-    const auto* im = static_cast<const sensor_msgs_msg_dds__Image_*>(samples[0]);
-    EXPECT_EQ(im->header.stamp.sec, image.header.stamp.sec);
-    EXPECT_EQ(im->header.stamp.nanosec, image.header.stamp.nanosec);
-    EXPECT_EQ(std::string(im->header.frame_id), image.header.frame_id);
-    EXPECT_EQ(im->height, image.height);
-    EXPECT_EQ(im->width, image.width);
-    EXPECT_EQ(std::string(im->encoding), image.encoding);
-    EXPECT_EQ(im->is_bigendian, image.is_bigendian);
-    EXPECT_EQ(im->step, image.step);
-    ASSERT_EQ(im->data._length, image.data.size());
-    EXPECT_TRUE(std::equal(image.data.begin(), image.data.end(), im->data._buffer));
-    dds_return_loan(img_reader, samples, 1);
-  }
-  const rosmsg::TFMessage tf = References<rosmsg::TFMessage>().back();
-  ASSERT_TRUE(tf_pub->Publish(tf).ok());
-  samples[0] = nullptr;
-  ASSERT_TRUE(WaitFor([&] { return dds_take(tf_reader, samples, infos, 1, 1) == 1; }));
-  {
-    const auto* m = static_cast<const tf2_msgs_msg_dds__TFMessage_*>(samples[0]);
-    ASSERT_EQ(m->transforms._length, tf.transforms.size());
-    for (size_t i = 0; i < tf.transforms.size(); ++i) {
-      const auto& c = m->transforms._buffer[i];
-      const auto& t = tf.transforms[i];
-      EXPECT_EQ(std::string(c.header.frame_id), t.header.frame_id);
-      EXPECT_EQ(std::string(c.child_frame_id), t.child_frame_id);
-      EXPECT_EQ(c.transform.translation.x, t.transform.translation.x);
-      EXPECT_EQ(c.transform.rotation.w, t.transform.rotation.w);
-    }
-    dds_return_loan(tf_reader, samples, 1);
-  }
-
-  // idlc-typed writer -> avp.
-  sensor_msgs_msg_dds__Image_ c{};
-  c.header.stamp.sec = 7;
-  c.header.stamp.nanosec = 8;
-  c.header.frame_id = const_cast<char*>("camera_color_optical_frame");
-  c.height = 2;
-  c.width = 3;
-  c.encoding = const_cast<char*>("mono8");
-  c.step = 3;
-  uint8_t data[6] = {1, 2, 3, 4, 5, 6};
-  c.data._buffer = data;
-  c.data._length = 6;
-  c.data._maximum = 6;
-  ASSERT_EQ(dds_write(typed_writer, &c), DDS_RETCODE_OK);
-  ASSERT_TRUE(WaitFor([&] {
-    std::lock_guard lock(mutex);
-    return !avp_got.empty();
-  })) << "avp got nothing from the idlc-typed writer";
-  {
-    std::lock_guard lock(mutex);
-    const rosmsg::Image& m = avp_got[0];
-    EXPECT_EQ(m.header.stamp.sec, 7);
-    EXPECT_EQ(m.header.frame_id, "camera_color_optical_frame");
-    EXPECT_EQ(m.encoding, "mono8");
-    EXPECT_EQ(m.step, 3u);
-    EXPECT_EQ(m.data, (std::vector<uint8_t>{1, 2, 3, 4, 5, 6}));
-  }
+  ExpectTypedReadersDecodeAvp(*pub, *tf_pub, img_reader, tf_reader);
+  ExpectAvpDecodesTypedWriter(typed_writer, mutex, avp_got);
   EXPECT_EQ(sub->malformed(), 0u);
   dds_delete(pp);
 }

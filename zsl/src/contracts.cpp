@@ -239,88 +239,82 @@ int64_t ContractBinding::Dim(const std::string& symbol) const {
   return it == dims.end() ? kDynamicDim : it->second;
 }
 
-Result<ContractBinding> CheckContract(std::string_view role, const ModelIo& io,
-                                      const Contract& contract, const ModelIo* declared,
-                                      const ContractCheckOptions& options) {
-  std::vector<std::string> errors;
-  // The shapes checked against the contract: the graph's, with each dimension it leaves dynamic
-  // and the manifest states filled in from the manifest.
+namespace {
+
+/// The shapes checked against the contract: the graph's, with each dimension it leaves dynamic
+/// and the manifest states filled in from the manifest (whose statements are checked first).
+ModelIo EffectiveShapes(std::string_view role, const ModelIo& io, const ModelIo* declared,
+                        std::vector<std::string>& errors) {
   ModelIo effective = io;
-  if (declared != nullptr) {
-    CheckDeclared(role, "input", io.inputs, declared->inputs, /*require_all=*/true, errors);
-    CheckDeclared(role, "output", io.outputs, declared->outputs, /*require_all=*/false, errors);
-    const auto narrow = [](std::vector<TensorInfo>& tensors,
-                           const std::vector<TensorInfo>& stated) {
-      for (TensorInfo& t : tensors) {
-        for (const TensorInfo& d : stated) {
-          if (d.name != t.name || d.shape.size() != t.shape.size()) continue;
-          for (size_t i = 0; i < t.shape.size(); ++i) {
-            if (t.shape[i] == kDynamicDim) t.shape[i] = d.shape[i];
-          }
+  if (declared == nullptr) return effective;
+  CheckDeclared(role, "input", io.inputs, declared->inputs, /*require_all=*/true, errors);
+  CheckDeclared(role, "output", io.outputs, declared->outputs, /*require_all=*/false, errors);
+  const auto narrow = [](std::vector<TensorInfo>& tensors, const std::vector<TensorInfo>& stated) {
+    for (TensorInfo& t : tensors) {
+      for (const TensorInfo& d : stated) {
+        if (d.name != t.name || d.shape.size() != t.shape.size()) continue;
+        for (size_t i = 0; i < t.shape.size(); ++i) {
+          if (t.shape[i] == kDynamicDim) t.shape[i] = d.shape[i];
         }
       }
-    };
-    narrow(effective.inputs, declared->inputs);
-    narrow(effective.outputs, declared->outputs);
-  }
-
-  ContractBinding binding;
-  binding.contract = contract.id;
-  Symbols symbols;
-
-  struct Side {
-    const char* kind;
-    const std::vector<TensorSpec>& specs;
-    const std::vector<TensorInfo>& tensors;
+    }
   };
-  const Side sides[] = {{"input", contract.inputs, effective.inputs},
-                        {"output", contract.outputs, effective.outputs}};
-  for (const Side& side : sides) {
-    for (const TensorSpec& spec : side.specs) {
-      const TensorInfo* t = FindByNames(side.tensors, spec);
-      if (t == nullptr) {
-        errors.push_back(
-            fmt::format("{}: {} '{}' is missing (the model has {}); {} expects {} {} {}", role,
-                        side.kind, spec.name, Quoted(side.tensors), contract.id, SpecNames(spec),
-                        ToString(spec.type), ShapeToString(spec.shape)));
-        continue;
-      }
-      binding.names[spec.name] = t->name;
-      if (t->type != spec.type) {
-        errors.push_back(fmt::format("{}: {} '{}' is {}; {} expects {}", role, side.kind, t->name,
-                                     ToString(t->type), contract.id, ToString(spec.type)));
-      }
-      const bool transposed = options.transposed_layout && !spec.transposed_shape.empty();
-      const std::vector<DimSpec>& expected = transposed ? spec.transposed_shape : spec.shape;
-      if (t->shape.size() != expected.size()) {
-        errors.push_back(fmt::format("{}: {} '{}' has rank {} ({}); {} expects rank {} {}", role,
-                                     side.kind, t->name, t->shape.size(), ShapeToString(t->shape),
-                                     contract.id, expected.size(), ShapeToString(expected)));
-        continue;
-      }
-      const Symbols before = symbols;
-      const std::string where = fmt::format("{} '{}'", side.kind, t->name);
-      const std::vector<std::string> problems = MatchDims(t->shape, expected, where, symbols);
-      if (problems.empty()) {
-        if (transposed) binding.transposed = true;
-        continue;
-      }
-      std::string line = fmt::format("{}: {} '{}' has shape {}; {} expects {} ({})", role,
-                                     side.kind, t->name, ShapeToString(t->shape), contract.id,
-                                     ShapeToString(expected), fmt::join(problems, ", "));
-      if (!spec.transposed_shape.empty()) {
-        const std::vector<DimSpec>& other = transposed ? spec.shape : spec.transposed_shape;
-        if (Matches(t->shape, other, before)) {
-          line += transposed ? "; the manifest declares postprocess.layout \"[A,4+N]\" but this is "
-                               "the [4+N,A] layout"
-                             : "; this is the transposed [A,4+N] layout: declare it with "
-                               "postprocess.layout \"[A,4+N]\"";
-        }
-      }
-      errors.push_back(std::move(line));
+  narrow(effective.inputs, declared->inputs);
+  narrow(effective.outputs, declared->outputs);
+  return effective;
+}
+
+/// One tensor of the contract against the model's: present (binding its name), of the type, rank
+/// and shape the contract expects (binding its symbols), or an error line naming what differs.
+void CheckTensor(std::string_view role, const char* kind, const TensorSpec& spec,
+                 const std::vector<TensorInfo>& tensors, const Contract& contract,
+                 const ContractCheckOptions& options, Symbols& symbols, ContractBinding& binding,
+                 std::vector<std::string>& errors) {
+  const TensorInfo* t = FindByNames(tensors, spec);
+  if (t == nullptr) {
+    errors.push_back(fmt::format("{}: {} '{}' is missing (the model has {}); {} expects {} {} {}",
+                                 role, kind, spec.name, Quoted(tensors), contract.id,
+                                 SpecNames(spec), ToString(spec.type), ShapeToString(spec.shape)));
+    return;
+  }
+  binding.names[spec.name] = t->name;
+  if (t->type != spec.type) {
+    errors.push_back(fmt::format("{}: {} '{}' is {}; {} expects {}", role, kind, t->name,
+                                 ToString(t->type), contract.id, ToString(spec.type)));
+  }
+  const bool transposed = options.transposed_layout && !spec.transposed_shape.empty();
+  const std::vector<DimSpec>& expected = transposed ? spec.transposed_shape : spec.shape;
+  if (t->shape.size() != expected.size()) {
+    errors.push_back(fmt::format("{}: {} '{}' has rank {} ({}); {} expects rank {} {}", role, kind,
+                                 t->name, t->shape.size(), ShapeToString(t->shape), contract.id,
+                                 expected.size(), ShapeToString(expected)));
+    return;
+  }
+  const Symbols before = symbols;
+  const std::string where = fmt::format("{} '{}'", kind, t->name);
+  const std::vector<std::string> problems = MatchDims(t->shape, expected, where, symbols);
+  if (problems.empty()) {
+    if (transposed) binding.transposed = true;
+    return;
+  }
+  std::string line = fmt::format("{}: {} '{}' has shape {}; {} expects {} ({})", role, kind,
+                                 t->name, ShapeToString(t->shape), contract.id,
+                                 ShapeToString(expected), fmt::join(problems, ", "));
+  if (!spec.transposed_shape.empty()) {
+    const std::vector<DimSpec>& other = transposed ? spec.shape : spec.transposed_shape;
+    if (Matches(t->shape, other, before)) {
+      line += transposed ? "; the manifest declares postprocess.layout \"[A,4+N]\" but this is "
+                           "the [4+N,A] layout"
+                         : "; this is the transposed [A,4+N] layout: declare it with "
+                           "postprocess.layout \"[A,4+N]\"";
     }
   }
-  // A required input the contract does not know cannot be fed.
+  errors.push_back(std::move(line));
+}
+
+/// A required input the contract does not know cannot be fed: an error line for each.
+void CheckUnknownInputs(std::string_view role, const ModelIo& io, const Contract& contract,
+                        std::vector<std::string>& errors) {
   for (const TensorInfo& t : io.inputs) {
     bool known = false;
     for (const TensorSpec& spec : contract.inputs) {
@@ -337,7 +331,26 @@ Result<ContractBinding> CheckContract(std::string_view role, const ModelIo& io,
                                    contract.id, fmt::join(names, ", ")));
     }
   }
+}
 
+}  // namespace
+
+Result<ContractBinding> CheckContract(std::string_view role, const ModelIo& io,
+                                      const Contract& contract, const ModelIo* declared,
+                                      const ContractCheckOptions& options) {
+  std::vector<std::string> errors;
+  const ModelIo effective = EffectiveShapes(role, io, declared, errors);
+  ContractBinding binding;
+  binding.contract = contract.id;
+  Symbols symbols;
+  for (const TensorSpec& spec : contract.inputs) {
+    CheckTensor(role, "input", spec, effective.inputs, contract, options, symbols, binding, errors);
+  }
+  for (const TensorSpec& spec : contract.outputs) {
+    CheckTensor(role, "output", spec, effective.outputs, contract, options, symbols, binding,
+                errors);
+  }
+  CheckUnknownInputs(role, io, contract, errors);
   if (!errors.empty()) return InvalidArgumentError(fmt::format("{}", fmt::join(errors, "; ")));
   // Every symbol of the contract gets a value: kDynamicDim when no occurrence is static.
   for (const std::vector<TensorSpec>* side : {&contract.inputs, &contract.outputs}) {

@@ -26,6 +26,27 @@ namespace {
 
 using Clock = SteadyClock;
 
+/// Pads an encoded prompt to an export's fixed length L: pad tokens, zero positions and types,
+/// no attention, and a token mask that lets each pad token see only itself.
+template <class Pad>
+void PadGroundingText(GroundingText& text, int length, Pad pad_id) {
+  const size_t old_l = static_cast<size_t>(text.length);
+  const size_t new_l = static_cast<size_t>(length);
+  text.input_ids.resize(new_l, pad_id);
+  text.position_ids.resize(new_l, 0);
+  text.token_type_ids.resize(new_l, 0);
+  text.attention_mask.resize(new_l, 0);
+  std::vector<uint8_t> mask(new_l * new_l, 0);
+  for (size_t i = 0; i < new_l; ++i) {
+    for (size_t j = 0; j < new_l; ++j) {
+      mask[i * new_l + j] = i < old_l && j < old_l ? text.text_token_mask[i * old_l + j]
+                                                   : static_cast<uint8_t>(i == j);
+    }
+  }
+  text.text_token_mask = std::move(mask);
+  text.length = length;
+}
+
 LoadedModel Take(LoadedBackend& backend, const char* role) {
   auto node = backend.models.extract(role);
   return std::move(node.mapped());
@@ -70,20 +91,9 @@ std::vector<float> GroundingTensor(const ImageRgb8& rgb, const Preprocess& p) {
 }  // namespace
 
 Status LsamOptions::Validate() const {
-  std::vector<std::string> bad;
-  if (!(box_threshold >= 0.f && box_threshold <= 1.f)) {
-    bad.push_back(fmt::format("box_threshold ({}) must be in [0, 1]", box_threshold));
-  }
-  if (!(text_threshold >= 0.f && text_threshold <= 1.f)) {
-    bad.push_back(fmt::format("text_threshold ({}) must be in [0, 1]", text_threshold));
-  }
-  if (max_detections <= 0) {
-    bad.push_back(fmt::format("max_detections ({}) must be > 0", max_detections));
-  }
-  const Status session_status = ToSessionOptions(session).Validate();
-  if (!session_status.ok()) bad.push_back(session_status.message());
-  if (bad.empty()) return Status::Ok();
-  return InvalidArgumentError(fmt::format("invalid lsam options: {}", fmt::join(bad, "; ")));
+  return internal::ValidateBackendOptions(
+      "lsam", {{"box_threshold", box_threshold}, {"text_threshold", text_threshold}},
+      max_detections, session);
 }
 
 struct LsamSegmenter::Impl {
@@ -189,23 +199,7 @@ Result<Grounding> LsamSegmenter::Ground(const ImageRgb8& rgb, std::string_view p
   if (!encoded.ok()) return encoded.status().WithContext(kName);
   GroundingText text = std::move(encoded).value();
   const int length = m.static_length > 0 ? m.static_length : text.length;
-  if (length > text.length) {  // pad to the export's fixed L
-    const size_t old_l = static_cast<size_t>(text.length);
-    const size_t new_l = static_cast<size_t>(length);
-    text.input_ids.resize(new_l, m.tokenizer.pad_id());
-    text.position_ids.resize(new_l, 0);
-    text.token_type_ids.resize(new_l, 0);
-    text.attention_mask.resize(new_l, 0);
-    std::vector<uint8_t> mask(new_l * new_l, 0);
-    for (size_t i = 0; i < new_l; ++i) {
-      for (size_t j = 0; j < new_l; ++j) {
-        mask[i * new_l + j] = i < old_l && j < old_l ? text.text_token_mask[i * old_l + j]
-                                                     : static_cast<uint8_t>(i == j);
-      }
-    }
-    text.text_token_mask = std::move(mask);
-    text.length = length;
-  }
+  if (length > text.length) PadGroundingText(text, length, m.tokenizer.pad_id());
   out.timings.push_back({"tokenize", MsSince(start)});
 
   // 2. Image.

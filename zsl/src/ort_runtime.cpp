@@ -479,6 +479,92 @@ Result<OrtModel> OrtModel::LoadFromBuffer(std::span<const std::byte> model_bytes
   return Create({}, model_bytes, options, label);
 }
 
+namespace {
+
+/// A try to make a CUDA session: the session, or why not and at which stage.
+struct CudaAttempt {
+  std::unique_ptr<Ort::Session> session;
+  std::string reason;
+  CudaStage failed_stage = CudaStage::kNone;
+};
+
+/// Collects this thread's ORT log lines until the attempt is over, whatever happens.
+class LogCapture {
+ public:
+  explicit LogCapture(std::vector<std::string>* lines) { t_log_capture = lines; }
+  ~LogCapture() { t_log_capture = nullptr; }
+  LogCapture(const LogCapture&) = delete;
+  LogCapture& operator=(const LogCapture&) = delete;
+};
+
+CudaAttempt TryCudaSession(Ort::Env& env, const ModelSource& source,
+                           const SessionOptions& options) {
+  ++g_cuda_attempts;
+  CudaAttempt attempt;
+  std::vector<std::string> log;
+  std::optional<LogCapture> capture(std::in_place, &log);
+  CudaStage stage = CudaStage::kAppend;
+  try {
+    Ort::SessionOptions so = BaseOptions(options);
+    OrtCUDAProviderOptions cuda;  // the V1 path (§3): V2 reports "not enabled in this build"
+    cuda.device_id = options.cuda_device_id;
+    so.AppendExecutionProvider_CUDA(cuda);
+    stage = CudaStage::kSession;
+    attempt.session = NewSession(env, source, so);
+  } catch (const Ort::Exception& e) {
+    attempt.reason = CudaReason(log, e.what());
+    attempt.failed_stage = stage;
+  } catch (const std::exception& e) {
+    attempt.reason = OneLine(e.what());
+    attempt.failed_stage = stage;
+  }
+  capture.reset();
+  if (attempt.failed_stage == CudaStage::kNone) {
+    // CUDA works: what ORT said meanwhile (e.g. nodes placed on CPU) is printed as usual.
+    for (const std::string& line : log) {
+      std::fprintf(stderr, "onnxruntime: %s\n", CleanOrtMessage(line).c_str());
+    }
+  }
+  return attempt;
+}
+
+/// The CPU session, when CUDA was not tried or failed.
+Result<std::unique_ptr<Ort::Session>> CpuSession(Ort::Env& env, const ModelSource& source,
+                                                 const SessionOptions& options,
+                                                 const std::string& label) {
+  try {
+    return NewSession(env, source, BaseOptions(options));
+  } catch (const Ort::Exception& e) {
+    // Not a CUDA problem (CPU fails too): do not blame CUDA for it.
+    return InvalidArgumentError(fmt::format("{}: ONNX Runtime cannot load {}: {}", label,
+                                            source.Describe(), CleanOrtMessage(e.what())));
+  } catch (const std::exception& e) {
+    return InternalError(
+        fmt::format("{}: cannot load {}: {}", label, source.Describe(), OneLine(e.what())));
+  }
+}
+
+/// device auto on CPU: remembers a CUDA failure for the process and logs the fallback once.
+/// Returns why this model runs on CPU ("" when CUDA was never found wanting).
+std::string RecordCpuFallback(const CudaAttempt& attempt, const std::string& known_reason) {
+  CudaProbe& probe = Probe();
+  std::lock_guard<std::mutex> lock(probe.mutex);
+  if (attempt.failed_stage != CudaStage::kNone) {
+    probe.failed = true;
+    probe.reason = attempt.reason;
+  }
+  const std::string reason =
+      attempt.failed_stage != CudaStage::kNone ? attempt.reason : known_reason;
+  if (!probe.logged && !reason.empty()) {
+    probe.logged = true;
+    std::fprintf(stderr, "avp zsl: CUDA is not available, running on CPU (%s=auto): %s\n",
+                 kDeviceEnvVar, reason.c_str());
+  }
+  return reason;
+}
+
+}  // namespace
+
 Result<OrtModel> OrtModel::Create(const std::filesystem::path& file,
                                   std::span<const std::byte> bytes, const SessionOptions& options,
                                   const std::string& label) {
@@ -503,81 +589,29 @@ Result<OrtModel> OrtModel::Create(const std::filesystem::path& file,
       known_reason = probe.reason;
     }
   }
-
-  std::string cuda_reason;
-  CudaStage failed_stage = CudaStage::kNone;
+  CudaAttempt cuda;
   if (try_cuda) {
-    ++g_cuda_attempts;
-    std::vector<std::string> log;
-    // Collects this thread's ORT log lines until the attempt is over, whatever happens.
-    struct Capture {
-      explicit Capture(std::vector<std::string>* lines) { t_log_capture = lines; }
-      ~Capture() { t_log_capture = nullptr; }
-      Capture(const Capture&) = delete;
-      Capture& operator=(const Capture&) = delete;
-    };
-    std::optional<Capture> capture(std::in_place, &log);
-    CudaStage stage = CudaStage::kAppend;
-    try {
-      Ort::SessionOptions so = BaseOptions(options);
-      OrtCUDAProviderOptions cuda;  // the V1 path (§3): V2 reports "not enabled in this build"
-      cuda.device_id = options.cuda_device_id;
-      so.AppendExecutionProvider_CUDA(cuda);
-      stage = CudaStage::kSession;
-      impl->session = NewSession(*env, source, so);
-      impl->provider = kCudaProvider;
-      impl->device = Device::kCuda;
-    } catch (const Ort::Exception& e) {
-      cuda_reason = CudaReason(log, e.what());
-      failed_stage = stage;
-    } catch (const std::exception& e) {
-      cuda_reason = OneLine(e.what());
-      failed_stage = stage;
+    cuda = TryCudaSession(*env, source, options);
+    if (cuda.failed_stage == CudaStage::kAppend && options.device == Device::kCuda) {
+      return FailedPreconditionError(
+          fmt::format("{}: AVP_ZSL_DEVICE=cuda but the CUDA execution provider cannot be used: {}",
+                      label, cuda.reason));
     }
-    capture.reset();
-    if (failed_stage == CudaStage::kNone) {
-      // CUDA works: what ORT said meanwhile (e.g. nodes placed on CPU) is printed as usual.
-      for (const std::string& line : log) {
-        std::fprintf(stderr, "onnxruntime: %s\n", CleanOrtMessage(line).c_str());
-      }
-    }
-    if (failed_stage != CudaStage::kNone && options.device == Device::kCuda) {
-      if (failed_stage == CudaStage::kAppend) {
-        return FailedPreconditionError(fmt::format(
-            "{}: AVP_ZSL_DEVICE=cuda but the CUDA execution provider cannot be used: {}", label,
-            cuda_reason));
-      }
+    if (cuda.failed_stage != CudaStage::kNone && options.device == Device::kCuda) {
       return FailedPreconditionError(fmt::format("{}: cannot create a CUDA session for {}: {}",
-                                                 label, source.Describe(), cuda_reason));
+                                                 label, source.Describe(), cuda.reason));
     }
   }
-
-  if (impl->session == nullptr) {
-    try {
-      impl->session = NewSession(*env, source, BaseOptions(options));
-      impl->provider = kCpuProvider;
-      impl->device = Device::kCpu;
-    } catch (const Ort::Exception& e) {
-      // Not a CUDA problem (CPU fails too): do not blame CUDA for it.
-      return InvalidArgumentError(fmt::format("{}: ONNX Runtime cannot load {}: {}", label,
-                                              source.Describe(), CleanOrtMessage(e.what())));
-    } catch (const std::exception& e) {
-      return InternalError(
-          fmt::format("{}: cannot load {}: {}", label, source.Describe(), OneLine(e.what())));
-    }
+  if (cuda.session != nullptr) {
+    impl->session = std::move(cuda.session);
+    impl->provider = kCudaProvider;
+    impl->device = Device::kCuda;
+  } else {
+    AVP_ASSIGN_OR_RETURN(impl->session, CpuSession(*env, source, options, label));
+    impl->provider = kCpuProvider;
+    impl->device = Device::kCpu;
     if (options.device == Device::kAuto) {
-      CudaProbe& probe = Probe();
-      std::lock_guard<std::mutex> lock(probe.mutex);
-      if (failed_stage != CudaStage::kNone) {
-        probe.failed = true;
-        probe.reason = cuda_reason;
-      }
-      impl->cuda_fallback_reason = failed_stage != CudaStage::kNone ? cuda_reason : known_reason;
-      if (!probe.logged && !impl->cuda_fallback_reason.empty()) {
-        probe.logged = true;
-        std::fprintf(stderr, "avp zsl: CUDA is not available, running on CPU (%s=auto): %s\n",
-                     kDeviceEnvVar, impl->cuda_fallback_reason.c_str());
-      }
+      impl->cuda_fallback_reason = RecordCpuFallback(cuda, known_reason);
     }
   }
 

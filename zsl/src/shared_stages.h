@@ -4,10 +4,12 @@
 // used by both backends and zsl's unit tests.
 
 #include <filesystem>
+#include <initializer_list>
 #include <memory>
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <avp/core/image.h>
@@ -74,6 +76,13 @@ namespace internal {
 /// The request checks every zsl backend makes, as statuses starting with "<backend>: ": frame not
 /// null, image not empty, RgbdFrame::Validate, score_threshold in [0, 1].
 Status ValidateRequest(std::string_view backend, const segmentation::SegmentationRequest& request);
+
+/// One check of a backend's options (YwesOptions::Validate, LsamOptions::Validate): each named
+/// threshold in [0, 1], max_detections > 0 and the session settings; every bad field named at
+/// once: "invalid <backend> options: nms_iou (1.5) must be in [0, 1]; ...".
+Status ValidateBackendOptions(std::string_view backend,
+                              std::initializer_list<std::pair<const char*, float>> thresholds,
+                              int max_detections, const RuntimeOptions& session);
 
 /// LoadBackend(backend, model_dir, {session, verify_sha256, warm_up}) when it ends READY; else its
 /// status, with the message "<backend>: model directory '<dir>' is <STATE>: <reason>".

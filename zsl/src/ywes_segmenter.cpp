@@ -126,6 +126,24 @@ void AppendInstances(const std::vector<BoxCandidate>& candidates, SamBoxMasks ma
   }
 }
 
+Status ValidateBackendOptions(std::string_view backend,
+                              std::initializer_list<std::pair<const char*, float>> thresholds,
+                              int max_detections, const RuntimeOptions& session) {
+  std::vector<std::string> bad;
+  for (const auto& [name, value] : thresholds) {
+    if (!(value >= 0.f && value <= 1.f)) {
+      bad.push_back(fmt::format("{} ({}) must be in [0, 1]", name, value));
+    }
+  }
+  if (max_detections <= 0) {
+    bad.push_back(fmt::format("max_detections ({}) must be > 0", max_detections));
+  }
+  const Status session_status = ToSessionOptions(session).Validate();
+  if (!session_status.ok()) bad.push_back(session_status.message());
+  if (bad.empty()) return Status::Ok();
+  return InvalidArgumentError(fmt::format("invalid {} options: {}", backend, fmt::join(bad, "; ")));
+}
+
 }  // namespace internal
 
 // ---- SamBoxSegmenter
@@ -293,20 +311,9 @@ const TensorModel& SamBoxSegmenter::decoder() const { return impl_->decoder.mode
 // -------------------------------------------------------------------------------
 
 Status YwesOptions::Validate() const {
-  std::vector<std::string> bad;
-  if (!(score_threshold >= 0.f && score_threshold <= 1.f)) {
-    bad.push_back(fmt::format("score_threshold ({}) must be in [0, 1]", score_threshold));
-  }
-  if (!(nms_iou >= 0.f && nms_iou <= 1.f)) {
-    bad.push_back(fmt::format("nms_iou ({}) must be in [0, 1]", nms_iou));
-  }
-  if (max_detections <= 0) {
-    bad.push_back(fmt::format("max_detections ({}) must be > 0", max_detections));
-  }
-  const Status session_status = ToSessionOptions(session).Validate();
-  if (!session_status.ok()) bad.push_back(session_status.message());
-  if (bad.empty()) return Status::Ok();
-  return InvalidArgumentError(fmt::format("invalid ywes options: {}", fmt::join(bad, "; ")));
+  return internal::ValidateBackendOptions(
+      "ywes", {{"score_threshold", score_threshold}, {"nms_iou", nms_iou}}, max_detections,
+      session);
 }
 
 struct YwesSegmenter::Impl {
