@@ -18,6 +18,7 @@
 #include <avp/io/json.h>
 #include <avp/mapping/map_tools.h>
 #include <avp/mapping/octomap_io.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp {
@@ -258,8 +259,7 @@ TEST_F(MapCommandTest, ExportNeverOverwritesItsInput) {
     EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << out;
     EXPECT_THAT(s.message(), HasSubstr("is the map file '" + map.string() + "' it reads"));
     EXPECT_THAT(s.message(), HasSubstr("outputs never overwrite inputs"));
-    std::ifstream in(map, std::ios::binary);
-    EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), bytes) << out;
+    EXPECT_EQ(test::ReadWholeFile(map), bytes) << out;
   }
   // compare --json is an output too.
   MapCompareOptions cmp;
@@ -291,11 +291,6 @@ TEST_F(MapCommandTest, AFolderGivenForAMapIsNotSaidToBeMissing) {
     EXPECT_THAT(s.message(), HasSubstr(expected));
     EXPECT_THAT(s.message(), Not(HasSubstr("does not exist")));
   }
-}
-
-std::string ReadBytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), {}};
 }
 
 /// The exact and tolerant scores of two comparisons are the same.
@@ -484,7 +479,7 @@ TEST_F(MapCommandTest, CompareNamesResolutionMismatchesAndBrokenFiles) {
   EXPECT_EQ((*json)["best_one_voxel_shift"].size(), 3u);
 
   // A truncated ground truth: the file and the byte are named.
-  const std::string bytes = ReadBytes(gt.out);
+  const std::string bytes = test::ReadWholeFile(gt.out);
   const fs::path cut = dir_ / "cut.bt";
   std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() - 5);
   cmp.gt = cut;

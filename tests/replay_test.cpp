@@ -26,6 +26,7 @@
 #include <avp/recording/bag_reader.h>
 #include <avp/recording/layout.h>
 #include <avp/rosmsg/messages.h>
+#include <avp/test/read_file.h>
 #include <avp/test/run_command.h>
 
 namespace avp {
@@ -40,14 +41,9 @@ const experiment::Registries& Registries() {
   return *registries;
 }
 
-std::string ReadText(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
 /// metrics.csv without the time columns (capture_ms ... step_ms): what a replay must reproduce.
 std::vector<std::string> CsvWithoutTimes(const fs::path& p) {
-  std::istringstream in(ReadText(p));
+  std::istringstream in(test::ReadWholeFile(p));
   std::vector<std::string> rows;
   std::vector<size_t> drop;
   for (std::string line; std::getline(in, line);) {
@@ -75,7 +71,7 @@ std::string MapBytes(const fs::path& avpmap, const fs::path& scratch) {
   EXPECT_TRUE(map.ok()) << map.status().ToString();
   if (!map.ok()) return {};
   EXPECT_TRUE(mapping::SaveMap(*map, scratch, {.note = "same"}).ok());
-  return ReadText(scratch);
+  return test::ReadWholeFile(scratch);
 }
 
 class ReplayTest : public ::testing::Test {
@@ -136,7 +132,7 @@ class ReplayTest : public ::testing::Test {
       }
     }
     EXPECT_EQ(CsvWithoutTimes(Run() / "metrics.csv"), CsvWithoutTimes(out / "metrics.csv"));
-    EXPECT_EQ(ReadText(Run() / "map.ot"), ReadText(out / "map.ot"));
+    EXPECT_EQ(test::ReadWholeFile(Run() / "map.ot"), test::ReadWholeFile(out / "map.ot"));
     const std::string original = MapBytes(Run() / "map.avpmap", *dir_ / (name + "_a.avpmap"));
     EXPECT_GT(original.size(), 100000u);
     EXPECT_TRUE(original == MapBytes(out / "map.avpmap", *dir_ / (name + "_b.avpmap")));
@@ -231,7 +227,7 @@ TEST_F(ReplayTest, TruncatedRecordingReplaysItsIntactViewsAndNamesTheOffset) {
 TEST_F(ReplayTest, CorruptChunkReplaysTheViewsBeforeIt) {
   const fs::path bad = *dir_ / "corrupt.mcap";
   fs::copy_file(Bag(), bad, fs::copy_options::overwrite_existing);
-  std::string bytes = ReadText(bad);
+  std::string bytes = test::ReadWholeFile(bad);
   // A byte in the middle of the file (inside a later view's chunk: the recorder writes a chunk
   // per view).
   bytes[bytes.size() * 70 / 100] ^= 0x5a;

@@ -20,6 +20,7 @@
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
 #include <avp/sim/rgbd_renderer.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::experiment {
@@ -795,8 +796,7 @@ TEST_F(RunCommandTest, BenchConditionsRunOneBenchEachAndCompareThem) {
   EXPECT_EQ(t.leads[0].versus, "predefined");
   EXPECT_EQ(t.leads[0].f1.n, 2u);
   EXPECT_NEAR(t.leads[0].f1.mean, t.cells[0].f1.mean - t.cells[1].f1.mean, 1e-12);
-  std::ifstream md(config->out_dir / "conditions.md");
-  const std::string text((std::istreambuf_iterator<char>(md)), {});
+  const std::string text = test::ReadWholeFile(config->out_dir / "conditions.md");
   EXPECT_THAT(text, HasSubstr("| stop-early | `"));
   EXPECT_THAT(text, HasSubstr("## tomato-single-cluster"));
 

@@ -21,6 +21,7 @@
 #include <avp/mapping/map_tools.h>
 #include <avp/sim/scene_file.h>
 #include <avp/test/plant_mesh_files.h>
+#include <avp/test/read_file.h>
 #include <avp/test/run_command.h>
 #include <avp/test/temp_dir_test.h>
 
@@ -108,8 +109,7 @@ TEST_P(SceneFileFormatTest, BenchMapBuildGtAndCompare) {
     EXPECT_EQ(l.substr(l.rfind(',') + 1), "2") << l;  // two seeds
   }
   EXPECT_EQ(f1_rows, 2);  // two views
-  std::ifstream md(bench.out_dir / "summary.md");
-  EXPECT_THAT(std::string(std::istreambuf_iterator<char>(md), {}), HasSubstr(name));
+  EXPECT_THAT(test::ReadWholeFile(bench.out_dir / "summary.md"), HasSubstr(name));
   for (int seed : {0, 1}) {
     const fs::path run =
         bench.out_dir / "runs" / name / "predefined" / ("seed-" + std::to_string(seed));

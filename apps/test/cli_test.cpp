@@ -11,6 +11,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/test/read_file.h>
 #include <avp/test/run_command.h>
 #include <avp/test/temp_dir_test.h>
 
@@ -30,11 +31,6 @@ using test::Ran;
 /// Runs `env avp args` through the shell, stdout and stderr together.
 Ran Avp(const std::string& args, const std::string& env = "") {
   return test::RunShell(env + " '" AVP_BINARY "' " + args + " 2>&1");
-}
-
-std::string ReadAll(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
 class CliTest : public test::TempDirTest {};
@@ -160,7 +156,7 @@ TEST_F(CliTest, MapExportRefusesToOverwriteItsInput) {
   const Ran r = Avp("map export " + map.string() + " --out " + map.string());
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("outputs never overwrite inputs"));
-  EXPECT_EQ(ReadAll(map), bytes);
+  EXPECT_EQ(test::ReadWholeFile(map), bytes);
 }
 
 TEST_F(CliTest, AFolderIsNotAMissingFile) {
@@ -191,7 +187,7 @@ TEST_F(CliTest, BenchCompareTabulatesBenchFoldersAndRunsNoBench) {
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("plant"));
   EXPECT_THAT(r.output, HasSubstr("avp-nbv vs predefined     +0.200 ± 0.000  ahead"));
-  EXPECT_THAT(ReadAll(dir_ / "table" / "conditions.md"), HasSubstr("| dry |"));
+  EXPECT_THAT(test::ReadWholeFile(dir_ / "table" / "conditions.md"), HasSubstr("| dry |"));
   EXPECT_FALSE(fs::exists(dir_ / "out")) << "avp bench compare also ran a bench";
   const Ran bad = Avp("bench compare " + dir_.string() + " --out " + (dir_ / "t2").string());
   EXPECT_EQ(bad.exit_code, 1) << bad.output;
@@ -211,12 +207,12 @@ TEST_F(CliTest, RunIntoAFolderWithResultsRefusesAtOnce) {
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("already holds the results of a complete avp run"));
   EXPECT_THAT(r.output, HasSubstr("--force"));
-  EXPECT_EQ(ReadAll(out / "record.json"), "{}");
+  EXPECT_EQ(test::ReadWholeFile(out / "record.json"), "{}");
   std::ofstream(out / "thesis.tex") << "mine";
   r = Avp("run --views 2 --force --out " + out.string());
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("so --force does not empty it"));
-  EXPECT_EQ(ReadAll(out / "thesis.tex"), "mine");
+  EXPECT_EQ(test::ReadWholeFile(out / "thesis.tex"), "mine");
 }
 
 }  // namespace

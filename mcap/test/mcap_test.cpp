@@ -9,6 +9,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::mcap {
@@ -17,8 +18,8 @@ namespace {
 using ::testing::HasSubstr;
 
 std::vector<uint8_t> Slurp(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  const std::string bytes = test::ReadWholeFile(p);
+  return {bytes.begin(), bytes.end()};
 }
 void Spit(const std::filesystem::path& p, const std::vector<uint8_t>& bytes) {
   std::ofstream out(p, std::ios::binary | std::ios::trunc);

@@ -39,6 +39,7 @@
 #include <zlib.h>
 
 #include <avp/core/error.h>
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 #include "sha256.h"
@@ -53,11 +54,6 @@ const std::filesystem::path kFixture =
 
 constexpr int32_t kSot = 562;
 constexpr int32_t kEot = 563;
-
-std::string ReadFile(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
 
 void WriteGzip(const std::filesystem::path& path, const std::string& bytes) {
   gzFile file = gzopen(path.c_str(), "wb");
@@ -294,7 +290,7 @@ class ClipMergesFileTest : public test::TempDirTest {};
 
 TEST_F(ClipMergesFileTest, GzipFileGivesTheSameTokenizer) {
   const std::filesystem::path gz = dir_ / "merges.txt.gz";
-  WriteGzip(gz, ReadFile(kFixture));
+  WriteGzip(gz, test::ReadWholeFile(kFixture));
   auto tokenizer = ClipTokenizer::FromMergesFile(gz);
   ASSERT_TRUE(tokenizer.ok()) << tokenizer.status().ToString();
   EXPECT_EQ(tokenizer->vocab_size(), 564u);
@@ -359,8 +355,8 @@ TEST_F(ClipMergesFileTest, EmptyFileIsAParseError) {
 
 TEST_F(ClipMergesFileTest, TruncatedGzipIsAnIoError) {
   const std::filesystem::path whole = dir_ / "whole.txt.gz";
-  WriteGzip(whole, ReadFile(kFixture));
-  const std::string bytes = ReadFile(whole);
+  WriteGzip(whole, test::ReadWholeFile(kFixture));
+  const std::string bytes = test::ReadWholeFile(whole);
   const std::filesystem::path path = Write("truncated.txt.gz", bytes.substr(0, bytes.size() / 2));
   auto tokenizer = ClipTokenizer::FromMergesFile(path);
   ASSERT_FALSE(tokenizer.ok());

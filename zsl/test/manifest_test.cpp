@@ -14,6 +14,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
 namespace avp::zsl {
@@ -267,9 +268,8 @@ TEST(ManifestParseTest, OptionalSectionsOverrideTheDefaults) {
 
 TEST(ManifestParseTest, TheDocumentedExampleParses) {
   const fs::path doc = fs::path(AVP_CONFIG_DIR).parent_path() / "docs" / "zero-shot-models.md";
-  std::ifstream in(doc);
-  ASSERT_TRUE(in) << doc;
-  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string text = test::ReadWholeFile(doc);
+  ASSERT_FALSE(text.empty()) << doc;
   const size_t section = text.find("## Model directory and manifest");
   ASSERT_NE(section, std::string::npos);
   const size_t begin = text.find("```json\n", section);

@@ -18,6 +18,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/test/read_file.h>
+
 #if defined(__SANITIZE_ADDRESS__)
 // ONNX Runtime 1.29 leaks 14 bytes once per process when an Ort::Env is created (even one that is
 // destroyed properly: checked with a bare Ort::Env under ASan). Not ours to fix, so LeakSanitizer
@@ -185,8 +187,8 @@ TEST(OrtModelTest, TruncatedFileFailsNamingTheModelNotThrowing) {
 }
 
 TEST(OrtModelTest, LoadsFromAnInMemoryBuffer) {
-  std::ifstream in(kStubs / "ywes/segmenter/evitsam_stub_decoder_single.onnx", std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes =
+      test::ReadWholeFile(kStubs / "ywes/segmenter/evitsam_stub_decoder_single.onnx");
   ASSERT_FALSE(bytes.empty());
   Result<OrtModel> m = OrtModel::LoadFromBuffer(
       std::as_bytes(std::span<const char>(bytes.data(), bytes.size())), Cpu(), "decoder");
