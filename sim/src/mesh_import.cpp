@@ -37,13 +37,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string LowerExtension(const fs::path& p) {
-  std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
-}
-
 Eigen::Matrix4d ToEigen(const aiMatrix4x4& m) {
   Eigen::Matrix4d out;
   for (unsigned r = 0; r < 4; ++r) {

@@ -18,7 +18,6 @@
 #include <avp/sim/scene_file.h>
 
 namespace avp::sim::internal {
-namespace {
 
 namespace fs = std::filesystem;
 
@@ -28,6 +27,8 @@ std::string LowerExtension(const fs::path& p) {
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return ext;
 }
+
+namespace {
 
 int HexValue(char c) {
   if (c >= '0' && c <= '9') return c - '0';

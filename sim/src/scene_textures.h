@@ -21,6 +21,9 @@ struct aiMesh;
 
 namespace avp::sim::internal {
 
+/// A file's extension in lower case, with its dot (".obj"); empty when it has none.
+std::string LowerExtension(const std::filesystem::path& p);
+
 /// Finds, decodes and attaches the textures of one imported mesh file. Not thread-safe; one per
 /// import.
 class TextureLoader {
