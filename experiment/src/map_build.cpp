@@ -110,9 +110,10 @@ Status FuseArcView(const sim::RgbdRenderer& renderer, const MapBuildOptions& opt
   AVP_RETURN_IF_ERROR(step.integrate_status);
   view.stats = step.integration;
   view.integrate_ms = step.times.integrate_ms;
+  // ViewFusion counted the known and occupied voxels; the labels of every class are counted here.
   const mapping::SemanticMap& map = fusion.map();
-  view.known_voxels = map.grid().CountKnownVoxels();
-  view.occupied_voxels = map.grid().CountOccupiedVoxels();
+  view.known_voxels = step.known_voxels;
+  view.occupied_voxels = step.occupied_voxels;
   view.labelled_voxels = map.grid().CountSemanticVoxels();
   view.instances = map.Instances().size();
   return Status::Ok();
@@ -180,9 +181,10 @@ Result<MapBuildSummary> BuildMap(const MapBuildOptions& options,
     summary.views.push_back(view);
   }
 
-  summary.known_voxels = map.grid().CountKnownVoxels();
-  summary.occupied_voxels = map.grid().CountOccupiedVoxels();
-  summary.labelled_voxels = map.grid().CountSemanticVoxels();
+  // The map after the last view (views >= 1: ValidateBuildOptions).
+  summary.known_voxels = summary.views.back().known_voxels;
+  summary.occupied_voxels = summary.views.back().occupied_voxels;
+  summary.labelled_voxels = summary.views.back().labelled_voxels;
   summary.fruit_voxels = pipeline::CountTargetVoxels(map.grid(), SemanticClass::kFruit);
   summary.instances = map.Instances();
 
