@@ -21,12 +21,12 @@ FUZZ_TARGETS ?=
 # The suites make test runs under ASan + UBSan: the modules that read untrusted input. Less the
 # integrator's four long scene comparisons (thread counts, carving against ray casting: 250 s
 # under the sanitizers, most of the pass; they run in the normal build and in make sanitize).
-SAN_TESTS  ?= avp_core_test avp_io_test avp_rosmsg_test avp_mapping_test avp_interop_test
+SAN_TESTS  ?= avp_core_test avp_io_test avp_ros_msg_test avp_mapping_test avp_segmentation_service_test
 SAN_TEST_FILTER ?= -IntegratorSceneTest.ThreadCountDoesNotChangeTheMap*:IntegratorSceneTest.ProjectiveCarvingEqualsRayCasting*
 # make sanitize: every suite of the sanitizer build.
-SAN_ALL_TESTS ?= avp_core_test avp_io_test avp_rosmsg_test avp_robot_test avp_sim_scene_test \
+SAN_ALL_TESTS ?= avp_core_test avp_io_test avp_ros_msg_test avp_robot_test avp_sim_scene_test \
   avp_sim_render_test avp_mapping_test avp_segmentation_test avp_planning_test avp_pipeline_test \
-  avp_eval_test avp_report_test avp_experiment_test avp_interop_test avp_zsl_text_test \
+  avp_eval_test avp_report_test avp_experiment_test avp_segmentation_service_test avp_zsl_text_test \
   avp_zsl_geometry_test avp_architecture_test avp_run_command_test avp_planner_contract_test \
   avp_episode_end_to_end_test avp_remote_segmenter_e2e_test avp_extending_examples_test \
   avp_scenario_start_pose_test

@@ -42,6 +42,7 @@
 #include <unistd.h>
 
 #include <avp/core/camera.h>
+#include <avp/core/parallel.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/core/transform.h>
 #include <avp/core/voxel_key.h>
@@ -490,7 +491,7 @@ std::optional<double> AvpRssDeltaInChild(const std::vector<View>& views, double 
       OccupancyGrid grid(go);
       IntegratorOptions io;
       io.max_range_m = kMaxRangeM;
-      io.num_threads = 1;
+      const ThreadScope one_thread(1);
       const Integrator integrator(io);
       bool ok = true;
       for (const View& v : views) {
@@ -838,10 +839,8 @@ class Benchmark {
     PrintContext();
     const sim::Scene plant_only = SyntheticPlant(PlantBackground::kTableTop);
     const sim::Scene full_image = SyntheticPlant(PlantBackground::kFloorAndBackdrop);
-    sim::RendererOptions render_options;
-    render_options.num_threads = 0;
-    const sim::RgbdRenderer plant_renderer(plant_only, render_options);
-    const sim::RgbdRenderer full_renderer(full_image, render_options);
+    const sim::RgbdRenderer plant_renderer(plant_only);  // on the hardware's threads
+    const sim::RgbdRenderer full_renderer(full_image);
 
     for (const MapCase& c : o_.cases) {
       Camera cam = c.hd ? Hd() : Vga();
@@ -1034,7 +1033,7 @@ class Benchmark {
       IntegratorOptions io;
       io.max_range_m = kMaxRangeM;
       io.carving = carving;
-      io.num_threads = threads;
+      const ThreadScope scope(threads);
       const Integrator integrator(io);
       RepBudget reps(o_.reps, o_.rep_budget_s);
       for (int rep = 0; reps.Continue(rep); ++rep) {

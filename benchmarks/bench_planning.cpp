@@ -32,6 +32,7 @@
 
 #include <benchmark/benchmark.h>
 
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/pipeline/episode.h>
@@ -101,7 +102,6 @@ const Fixture& GetFixture() {
     eo.roi = f->scene.plant_bounds.Inflated(0.05);
     eo.integrator.carving = mapping::FreeSpaceCarving::kProjective;
     eo.integrator.max_range_m = 1.5;
-    eo.integrator.num_threads = 0;
     eo.seed = kSeed;
     pipeline::EpisodeComponents components{&source,  segmenter->get(), &sim_arm,
                                            &planner, f->map.get(),     {}};
@@ -154,13 +154,9 @@ double Ms(std::chrono::steady_clock::duration d) {
   return std::chrono::duration<double, std::milli>(d).count();
 }
 
-/// avp-nbv's defaults with the benchmark's thread count (its argument) for the gains and the IK.
-AvpNbvOptions ThreadedOptions(const benchmark::State& state) {
-  AvpNbvOptions options;
-  options.num_threads = static_cast<int>(state.range(0));
-  options.candidates.num_threads = options.num_threads;
-  return options;
-}
+/// The benchmark's thread count (its argument) for the gains and the IK: avp's one parallelism
+/// setting, for the benchmark's scope (core/parallel.h).
+int BenchThreads(const benchmark::State& state) { return static_cast<int>(state.range(0)); }
 
 /// The plan-step benchmarks' runs: 1 and 2 threads, 2 iterations each, wall time in ms.
 void PlanStepRuns(benchmark::internal::Benchmark* b) {
@@ -174,7 +170,8 @@ void PlanStepRuns(benchmark::internal::Benchmark* b) {
 
 void BM_AvpNbvPlan(benchmark::State& state) {
   const Fixture& f = GetFixture();
-  const AvpNbvOptions options = ThreadedOptions(state);
+  const ThreadScope threads(BenchThreads(state));
+  const AvpNbvOptions options{};
   AvpNbvPlanner planner(options);
   AvpNbvPlanner dense(DenseOptions(options));
   PlanResult result, reference;
@@ -201,7 +198,7 @@ void BM_AvpNbvPlan(benchmark::State& state) {
     return;
   }
   dense_ms /= static_cast<double>(state.iterations());
-  state.counters["threads"] = static_cast<double>(options.num_threads);
+  state.counters["threads"] = static_cast<double>(BenchThreads(state));
   state.counters["generated"] = static_cast<double>(result.generated);
   state.counters["reachable"] = static_cast<double>(result.reachable);
   state.counters["dense_ms"] = dense_ms;
@@ -216,7 +213,8 @@ BENCHMARK(BM_AvpNbvPlan)->Apply(PlanStepRuns);
 // pass that coarse to fine replaces; same_choice = 1 when both choose the same view.
 void BM_AvpNbvPlanEveryRay(benchmark::State& state) {
   const Fixture& f = GetFixture();
-  const AvpNbvOptions options = ThreadedOptions(state);
+  const ThreadScope threads(BenchThreads(state));
+  const AvpNbvOptions options{};
   AvpNbvOptions every = options;
   every.coarse_ray_stride_px = 0;
   AvpNbvPlanner planner(every);
@@ -232,7 +230,7 @@ void BM_AvpNbvPlanEveryRay(benchmark::State& state) {
   }
   Rng rng = f.rng;
   const PlanResult c2f = AvpNbvPlanner(options).Plan(f.request, rng);
-  state.counters["threads"] = static_cast<double>(options.num_threads);
+  state.counters["threads"] = static_cast<double>(BenchThreads(state));
   state.counters["reachable"] = static_cast<double>(result.reachable);
   state.counters["same_choice"] = c2f.status.ok() && c2f.ranked.front().X_WC.translation() ==
                                                          result.ranked.front().X_WC.translation()

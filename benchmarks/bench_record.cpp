@@ -3,7 +3,7 @@
 // The episode: the built-in scenario tomato-multiple-clusters, seed 3, the settings of `avp run`
 // (avp-nbv, oracle segmenter, 640x480 camera, 2 threads), kViews views. Each iteration runs the
 // episode twice, alternating: plain (the run folder's observers aside, nothing observes it), and
-// with a recording::McapRecorder writing every topic of the layout to a file in the temporary
+// with a ros::bag::McapRecorder writing every topic of the layout to a file in the temporary
 // folder (a chunk flushed per view, then closed).
 //
 // Counters (per fused view):
@@ -29,7 +29,7 @@
 
 #include <avp/experiment/episode_recording.h>
 #include <avp/experiment/episode_runner.h>
-#include <avp/recording/mcap_recorder.h>
+#include <avp/ros/bag/mcap_recorder.h>
 #include <avp/sim/scenario.h>
 
 #include "bench_report.h"
@@ -75,7 +75,7 @@ Fixture& TheFixture() {
 /// Times the recorder's OnView (it runs on the episode's thread, before OnStep).
 class Timed final : public pipeline::EpisodeObserver {
  public:
-  explicit Timed(recording::McapRecorder& r) : r_(r) {}
+  explicit Timed(ros::bag::McapRecorder& r) : r_(r) {}
   double seconds = 0.0;
   void OnView(const pipeline::StepRecord& s, const pipeline::StepData& d,
               const mapping::SemanticMap& map) override {
@@ -88,7 +88,7 @@ class Timed final : public pipeline::EpisodeObserver {
   }
 
  private:
-  recording::McapRecorder& r_;
+  ros::bag::McapRecorder& r_;
 };
 
 double Seconds(Clock::time_point t0) {
@@ -101,7 +101,8 @@ void BM_RecordStep(benchmark::State& state) {
   int views = 0;
   for (auto _ : state) {
     auto t0 = Clock::now();
-    auto plain = experiment::RunEpisodeOnScene(f.config, f.registries, *f.scene, *f.gt);
+    auto plain = experiment::RunEpisodeOnScene(
+        experiment::CheckedRunConfig::Check(f.config, f.registries).value(), *f.scene, *f.gt);
     if (!plain.ok()) Die(plain.status());
     plain_s += Seconds(t0);
 
@@ -111,8 +112,9 @@ void BM_RecordStep(benchmark::State& state) {
         {.command = "avp run", .scene = f.scene->name, .gt = &*f.gt});
     if (!recorder.ok()) Die(recorder.status());
     Timed timed(**recorder);
-    auto recorded =
-        experiment::RunEpisodeOnScene(f.config, f.registries, *f.scene, *f.gt, {&timed});
+    auto recorded = experiment::RunEpisodeOnScene(
+        experiment::CheckedRunConfig::Check(f.config, f.registries).value(), *f.scene, *f.gt,
+        {&timed});
     if (!recorded.ok()) Die(recorded.status());
     if (Status s = (*recorder)->Close(); !s.ok()) Die(s);
     record_s += Seconds(t0);

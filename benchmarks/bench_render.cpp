@@ -19,6 +19,7 @@
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
+#include <avp/core/parallel.h>
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/scenario.h>
 
@@ -45,7 +46,7 @@ double ProcessCpuSeconds() {
 
 void RunRender(benchmark::State& state, const Scene& scene, int threads, int packet) {
   RendererOptions options;
-  options.num_threads = threads;
+  const ThreadScope scope(threads);
   options.ray_packet_size = packet;
   const RgbdRenderer renderer(scene, options);
   const CameraIntrinsics K = CameraIntrinsics::RealSenseD435();

@@ -5,7 +5,7 @@
 // views, written once into the temporary folder. Each iteration reads the MCAP file and replays
 // it into a run folder (record.json, metrics.csv, map.avpmap, map.ot, PLY, SVG, report.html), as
 // the command does:
-//   BM_ReadBag                 reading only (recording::ReadBag: decode every view)
+//   BM_ReadBag                 reading only (ros::bag::ReadBag: decode every view)
 //   BM_Replay/recorded         read + the recorded masks + integrate + evaluate + write the folder
 //   BM_Replay/oracle           the same with the oracle segmenter rerun on the recorded labels
 //   BM_Replay/robot_bag        the file read as a robot's bag (images, CameraInfo, TF) + oracle
@@ -25,7 +25,7 @@
 
 #include <avp/experiment/replay.h>
 #include <avp/experiment/run_folder.h>
-#include <avp/recording/bag_reader.h>
+#include <avp/ros/bag/bag_reader.h>
 
 #include "bench_report.h"
 
@@ -57,7 +57,8 @@ struct Fixture {
     experiment::RunFolderOptions o;
     o.out_dir = dir / "run";
     o.record = true;
-    Result<experiment::RunSummary> run = experiment::RunToFolder(config, registries, o);
+    Result<experiment::RunSummary> run =
+        experiment::RunToFolder(experiment::CheckedRunConfig::Check(config, registries).value(), o);
     if (!run.ok()) Die(run.status());
     bag = o.out_dir / "episode.mcap";
     episode_ms_per_view = run->result.episode.total_ms / run->result.episode.views_fused();
@@ -86,7 +87,7 @@ void BM_ReadBag(benchmark::State& state) {
   size_t views = 0;
   for (auto _ : state) {
     const auto t0 = Clock::now();
-    Result<recording::Bag> bag = recording::ReadBag(f.bag);
+    Result<ros::bag::Bag> bag = ros::bag::ReadBag(f.bag);
     if (!bag.ok()) Die(bag.status());
     seconds += Seconds(t0);
     views += bag->views.size();
@@ -101,7 +102,7 @@ BENCHMARK(BM_ReadBag)->Unit(benchmark::kMillisecond)->Iterations(3)->UseRealTime
 /// mode 0: recorded masks; 1: the oracle; 2: the file read as a robot's bag, oracle.
 void BM_Replay(benchmark::State& state, int mode) {
   Fixture& f = TheFixture();
-  recording::BagReadOptions read;
+  ros::bag::BagReadOptions read;
   if (mode == 2) {
     read.as_robot_bag = true;
     read.frame_rate_hz = 0.0;
@@ -110,7 +111,7 @@ void BM_Replay(benchmark::State& state, int mode) {
   size_t views = 0;
   for (auto _ : state) {
     const auto t0 = Clock::now();
-    Result<recording::Bag> bag = recording::ReadBag(f.bag, read);
+    Result<ros::bag::Bag> bag = ros::bag::ReadBag(f.bag, read);
     if (!bag.ok()) Die(bag.status());
     Result<experiment::RunConfig> config = experiment::BagRunConfig(*bag);
     if (!config.ok()) Die(config.status());

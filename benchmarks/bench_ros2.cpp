@@ -30,12 +30,13 @@
 
 #include <avp/experiment/episode_runner.h>
 #include <avp/experiment/registries.h>
-#include <avp/live/ros2_arm.h>
-#include <avp/live/ros2_rgbd_source.h>
-#include <avp/live/tf_listener.h>
 #include <avp/robot/arm_model.h>
-#include <avp/ros2/node.h>
-#include <avp/simrobot/sim_ros2_robot.h>
+#include <avp/ros/dds/node.h>
+#include <avp/ros/live/ros2_arm.h>
+#include <avp/ros/live/ros2_rgbd_source.h>
+#include <avp/ros/live/tf_listener.h>
+#include <avp/ros/msg/images.h>
+#include <avp/ros/simrobot/sim_ros2_robot.h>
 
 #include "bench_report.h"
 
@@ -69,16 +70,16 @@ double CpuSeconds(int who) {
          static_cast<double>(u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
 }
 
-ros2::NodeOptions Loopback(const std::string& name, int domain) {
-  ros2::NodeOptions o;
+ros::dds::NodeOptions Loopback(const std::string& name, int domain) {
+  ros::dds::NodeOptions o;
   o.name = name;
   o.domain_id = domain;
   o.loopback = true;
   return o;
 }
 
-rosmsg::Image Pattern(const std::string& encoding, int bpp) {
-  rosmsg::Image m;
+ros::msg::Image Pattern(const std::string& encoding, int bpp) {
+  ros::msg::Image m;
   m.header.frame_id = "camera_color_optical_frame";
   m.width = 640;
   m.height = 480;
@@ -91,10 +92,12 @@ rosmsg::Image Pattern(const std::string& encoding, int bpp) {
 
 /// Child: publishes `frames` pairs at 30 Hz once the reader matched, then exits.
 [[noreturn]] void PublishPairs(int domain, int frames) {
-  auto node = ros2::Node::Create(Loopback("bench_camera", domain));
+  auto node = ros::dds::Node::Create(Loopback("bench_camera", domain));
   if (!node.ok()) _exit(2);
-  auto color = (*node)->CreatePublisher<rosmsg::Image>("/bench/color", ros2::QosProfile::Default());
-  auto depth = (*node)->CreatePublisher<rosmsg::Image>("/bench/depth", ros2::QosProfile::Default());
+  auto color =
+      (*node)->CreatePublisher<ros::msg::Image>("/bench/color", ros::dds::QosProfile::Default());
+  auto depth =
+      (*node)->CreatePublisher<ros::msg::Image>("/bench/depth", ros::dds::QosProfile::Default());
   if (!color.ok() || !depth.ok()) _exit(3);
   const auto deadline = Clock::now() + std::chrono::seconds(20);
   while (((*color)->matched_subscriptions() == 0 || (*depth)->matched_subscriptions() == 0) &&
@@ -102,11 +105,11 @@ rosmsg::Image Pattern(const std::string& encoding, int bpp) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  rosmsg::Image c = Pattern("rgb8", 3);
-  rosmsg::Image d = Pattern("16UC1", 2);
+  ros::msg::Image c = Pattern("rgb8", 3);
+  ros::msg::Image d = Pattern("16UC1", 2);
   auto next = Clock::now();
   for (int i = 0; i < frames; ++i) {
-    const rosmsg::Time stamp = rosmsg::Time::FromNanoseconds(live::NowNs());
+    const ros::msg::Time stamp = ros::msg::Time::FromNanoseconds(ros::live::NowNs());
     c.header.stamp = d.header.stamp = stamp;
     (void)(*color)->Publish(c);
     (void)(*depth)->Publish(d);
@@ -128,21 +131,21 @@ double Percentile(std::vector<double> v, double p) {
 void TransportLatency(int domain, int frames, std::vector<bench::BenchRecord>& records) {
   std::mutex mutex;
   std::map<int64_t, std::pair<int64_t, int64_t>> arrivals;  // stamp -> (colour, depth) receipt
-  auto node = ros2::Node::Create(Loopback("bench_loop", domain));
+  auto node = ros::dds::Node::Create(Loopback("bench_loop", domain));
   if (!node.ok()) throw Error(node.status().ToString());
   auto on = [&](bool is_color) {
-    return [&, is_color](rosmsg::Image&& m, const ros2::SampleInfo&) {
-      const int64_t now = live::NowNs();
+    return [&, is_color](ros::msg::Image&& m, const ros::dds::SampleInfo&) {
+      const int64_t now = ros::live::NowNs();
       // What the loop does with a pair: decode (done) and convert.
       std::lock_guard lock(mutex);
       auto& a = arrivals[m.header.stamp.ToNanoseconds()];
       (is_color ? a.first : a.second) = now;
     };
   };
-  auto color = (*node)->CreateSubscription<rosmsg::Image>("/bench/color",
-                                                          ros2::QosProfile::Default(), on(true));
-  auto depth = (*node)->CreateSubscription<rosmsg::Image>("/bench/depth",
-                                                          ros2::QosProfile::Default(), on(false));
+  auto color = (*node)->CreateSubscription<ros::msg::Image>(
+      "/bench/color", ros::dds::QosProfile::Default(), on(true));
+  auto depth = (*node)->CreateSubscription<ros::msg::Image>(
+      "/bench/depth", ros::dds::QosProfile::Default(), on(false));
   if (!color.ok() || !depth.ok()) throw Error("subscriptions failed");
   const pid_t child = SpawnSelf("--child-camera", {std::to_string(domain), std::to_string(frames)});
   int status = 0;
@@ -167,13 +170,13 @@ void TransportLatency(int domain, int frames, std::vector<bench::BenchRecord>& r
               latency_ms.size(), frames, Percentile(latency_ms, 0.5), Percentile(latency_ms, 0.99),
               WEXITSTATUS(status));
   // The conversion the live source does per pair.
-  const rosmsg::Image c = Pattern("rgb8", 3);
-  const rosmsg::Image d = Pattern("16UC1", 2);
+  const ros::msg::Image c = Pattern("rgb8", 3);
+  const ros::msg::Image d = Pattern("16UC1", 2);
   std::vector<double> convert_ms;
   for (int i = 0; i < 50; ++i) {
     const auto t0 = Clock::now();
-    auto rgb = live::Ros2RgbdSource::ColorFromMessage(c, "/bench/color");
-    auto z = live::Ros2RgbdSource::DepthFromMessage(d, "/bench/depth");
+    auto rgb = ros::msg::ColorFromImage(c, "/bench/color");
+    auto z = ros::msg::DepthFromImage(d, "/bench/depth");
     if (!rgb.ok() || !z.ok()) throw Error("conversion failed");
     convert_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
   }
@@ -190,14 +193,14 @@ void TransportLatency(int domain, int frames, std::vector<bench::BenchRecord>& r
   auto scene = experiment::LoadScene(config, registries);
   auto model = robot::LoadDefaultArm();
   if (!scene.ok() || !model.ok()) _exit(2);
-  auto node = ros2::Node::Create(Loopback("bench_sim", domain));
+  auto node = ros::dds::Node::Create(Loopback("bench_sim", domain));
   if (!node.ok()) _exit(2);
-  simrobot::SimRobotOptions o;
+  ros::simrobot::SimRobotOptions o;
   o.time_scale = 0.0;
   o.camera_rate_hz = 15.0;
-  auto robot = simrobot::SimRos2Robot::Create(**node, *scene, *model,
-                                              experiment::StartJoints(*scene, *model),
-                                              config.camera, config.depth_noise, config.seed, o);
+  auto robot = ros::simrobot::SimRos2Robot::Create(
+      **node, *scene, *model, experiment::StartJoints(*scene, *model), config.camera,
+      config.depth_noise, config.seed, o);
   if (!robot.ok()) _exit(3);
   std::stop_source stop;
   (void)(*robot)->Run(stop.get_token(), 30.0 + 15.0 * views);
@@ -218,7 +221,8 @@ void LiveOverhead(int domain, int views, std::vector<bench::BenchRecord>& record
   if (!gt.ok()) throw Error(gt.status().ToString());
 
   double cpu0 = CpuSeconds(RUSAGE_SELF);
-  auto run = experiment::RunEpisodeOnScene(config, registries, *scene, *gt);
+  auto run = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(config, registries).value(), *scene, *gt);
   if (!run.ok()) throw Error(run.status().ToString());
   const double run_cpu = (CpuSeconds(RUSAGE_SELF) - cpu0) / views;
 
@@ -229,25 +233,26 @@ void LiveOverhead(int domain, int views, std::vector<bench::BenchRecord>& record
   cpu0 = CpuSeconds(RUSAGE_SELF);
   double live_cpu = 0.0;
   {
-    auto node = ros2::Node::Create(Loopback("bench_live", domain));
+    auto node = ros::dds::Node::Create(Loopback("bench_live", domain));
     if (!node.ok()) throw Error(node.status().ToString());
-    live::TfBuffer tf;
-    auto listener = live::TfListener::Create(**node, tf);
-    live::ArmTopicsOptions arm_options;
+    ros::msg::TfBuffer tf;
+    auto listener = ros::live::TfListener::Create(**node, tf);
+    ros::live::ArmTopicsOptions arm_options;
     arm_options.min_duration_s = 0.0;
     arm_options.max_joint_speed_rad_s = 100.0;
     arm_options.state_timeout_s = 20.0;
-    live::CameraTopicsOptions camera_options;
-    camera_options.labels_prefix = "/avp/sim/labels";
+    ros::live::CameraTopicsOptions camera_options;
+    camera_options.labels_prefix = std::string(ros::msg::kSimLabelsPrefix);
     camera_options.frame_timeout_s = 20.0;
-    auto arm = live::Ros2Arm::Create(**node, tf, *model, arm_options);
+    auto arm = ros::live::Ros2Arm::Create(**node, tf, *model, arm_options);
     if (!arm.ok()) throw Error(arm.status().ToString());
-    auto source = live::Ros2RgbdSource::Create(**node, tf, camera_options, config.camera);
+    auto source = ros::live::Ros2RgbdSource::Create(**node, tf, camera_options, config.camera);
     if (!source.ok()) throw Error(source.status().ToString());
     cpu0 = CpuSeconds(RUSAGE_SELF);
-    auto live = experiment::RunEpisodeWithRobot(config, registries, {source->get(), arm->get(), {}},
-                                                scene->plant_bounds.Inflated(config.roi_margin_m),
-                                                {&*scene, &*gt});
+    auto live = experiment::RunEpisodeWithRobot(
+        experiment::CheckedRunConfig::Check(config, registries).value(),
+        {source->get(), arm->get(), {}}, scene->plant_bounds.Inflated(config.roi_margin_m),
+        {&*scene, &*gt});
     if (!live.ok()) throw Error(live.status().ToString());
     live_cpu = CpuSeconds(RUSAGE_SELF) - cpu0;
     for (const pipeline::StepRecord& step : live->episode.steps) {

@@ -44,16 +44,16 @@
 #include <grpcpp/grpcpp.h>
 
 #include <avp/core/limits.h>
-#include <avp/interop/remote_segmenter.h>
-#include <avp/interop/segmentation_codec.h>
-#include <avp/interop/segmentation_server.h>
 #include <avp/segmentation/segmenter_registry.h>
+#include <avp/segmentation_service/remote_segmenter.h>
+#include <avp/segmentation_service/segmentation_codec.h>
+#include <avp/segmentation_service/segmentation_server.h>
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/scenario.h>
 
 #include "bench_report.h"
 
-namespace avp::interop {
+namespace avp::segmentation_service {
 namespace {
 
 /// The built-in segmenters the benchmark serves and compares against (never freed: the server
@@ -697,7 +697,7 @@ int MixedLoad(double seconds, const std::string& json_path) {
 }
 
 }  // namespace
-}  // namespace avp::interop
+}  // namespace avp::segmentation_service
 
 int main(int argc, char** argv) {
   bool mixed = false, clients = false;
@@ -718,6 +718,6 @@ int main(int argc, char** argv) {
   argc = kept;
   if (!mixed && !clients) return avp::bench::GoogleBenchmarkMain(argc, argv, {});
   const std::string json = avp::bench::TakeJsonPathArgument(argc, argv);
-  if (clients) return avp::interop::Clients(seconds, json);
-  return avp::interop::MixedLoad(seconds, json);
+  if (clients) return avp::segmentation_service::Clients(seconds, json);
+  return avp::segmentation_service::MixedLoad(seconds, json);
 }

@@ -22,9 +22,9 @@
 // "tomato, leaf, stem".
 //
 // --serve-clients [--seconds=S] (instead of the cases above): dynamic batching in `avp serve
-// models` (interop/tensor_batcher.h). The text model of the `ywes_heavy_text` stubs (the CLIP
-// text contract, input_ids [B,77], with about 0.6 GMAC of residual MLP blocks per prompt: the
-// work of a small transformer, not its accuracy) served on 127.0.0.1 with 16 gRPC threads:
+// models` (segmentation_service/tensor_batcher.h). The text model of the `ywes_heavy_text` stubs
+// (the CLIP text contract, input_ids [B,77], with about 0.6 GMAC of residual MLP blocks per prompt:
+// the work of a small transformer, not its accuracy) served on 127.0.0.1 with 16 gRPC threads:
 // without batching (1 ONNX Runtime thread per run, runs side by side, one per request), and with
 // it (up to 16 rows per run, 2 ms wait) as 2 batches at once of 1 ORT thread each (batched_2x1)
 // or 1 batch at a time of 2 ORT threads (batched_1x2); 1, 4 and 16 clients, each its own
@@ -56,9 +56,9 @@
 #include <avp/core/camera.h>
 #include <avp/core/options.h>
 #include <avp/core/rgbd_frame.h>
-#include <avp/interop/tensor_service.h>
 #include <avp/io/image_codec.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/segmentation_service/tensor_service.h>
 #include <avp/zsl/lsam_segmenter.h>
 #include <avp/zsl/model_service.h>
 #include <avp/zsl/ywes_segmenter.h>
@@ -328,14 +328,15 @@ int ServeClients(double seconds, const std::string& json_path) {
         batched ? fmt::format("batched_{}x{}", instances, ort_threads) : "unbatched";
     std::printf("  %s (%s)\n", mode.c_str(), service->server->batching().at("text").c_str());
     for (const int clients : {1, 4, 16}) {
-      const interop::TensorServerStats before = service->server->stats();
+      const segmentation_service::TensorServerStats before = service->server->stats();
       const std::string address = service->server->address();
       const bench::ClientLoad load = bench::RunClientLoad(clients, seconds, [&](int c) {
-        interop::TensorClientOptions co;
+        segmentation_service::TensorClientOptions co;
         co.address = address;
         co.model = "text";
-        std::shared_ptr<interop::TensorClient> client;
-        if (Result<std::unique_ptr<interop::TensorClient>> made = interop::TensorClient::Create(co);
+        std::shared_ptr<segmentation_service::TensorClient> client;
+        if (Result<std::unique_ptr<segmentation_service::TensorClient>> made =
+                segmentation_service::TensorClient::Create(co);
             made.ok()) {
           client = std::move(made).value();
         }
@@ -351,18 +352,19 @@ int ServeClients(double seconds, const std::string& json_path) {
             *state = *state * 6364136223846793005ull + 1442695040888963407ull;
             id = static_cast<int64_t>((*state >> 33) % 49408);
           }
-          interop::InferRequest request;
-          request.inputs.push_back(interop::MakeTensor<int64_t>(
-              "input_ids", interop::DataType::kInt64, {1, 77}, std::span<const int64_t>(ids)));
-          const Result<interop::InferResponse> out = client->Infer(std::move(request));
+          segmentation_service::InferRequest request;
+          request.inputs.push_back(segmentation_service::MakeTensor<int64_t>(
+              "input_ids", segmentation_service::DataType::kInt64, {1, 77},
+              std::span<const int64_t>(ids)));
+          const Result<segmentation_service::InferResponse> out = client->Infer(std::move(request));
           if (!out.ok()) error = out.status().ToString();
           return out.ok();
         };
       });
       double per_run = 1.0;
       if (batched) {
-        const interop::BatchingStats& b0 = before.batching.at("text");
-        const interop::BatchingStats b1 = service->server->stats().batching.at("text");
+        const segmentation_service::BatchingStats& b0 = before.batching.at("text");
+        const segmentation_service::BatchingStats b1 = service->server->stats().batching.at("text");
         per_run = b1.batches > b0.batches ? static_cast<double>(b1.requests - b0.requests) /
                                                 static_cast<double>(b1.batches - b0.batches)
                                           : 0.0;

@@ -32,7 +32,9 @@ function(avp_set_test_code_options target)
 endfunction()
 
 # avp_add_library(<module> SOURCES ... PUBLIC_DEPS ... PRIVATE_DEPS ...)
-# Creates avp_<module> with the alias avp::<module>; public headers live in <module>/include/avp/<module>/.
+# Creates avp_<module> with the alias avp::<module>; public headers live in
+# <folder>/include/avp/<folder>/, where <module> is the folder with "_" for "/" (the ROS wing's
+# ros/msg is avp_ros_msg, its headers avp/ros/msg/*.h).
 function(avp_add_library module)
   cmake_parse_arguments(ARG "" "" "SOURCES;PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
   set(target avp_${module})

@@ -14,9 +14,9 @@
 
 #include <google/protobuf/stubs/logging.h>
 
-#include <avp/interop/segmentation_codec.h>
-#include <avp/interop/tensor.h>
 #include <avp/segmentation/segmenter_registry.h>
+#include <avp/segmentation_service/segmentation_codec.h>
+#include <avp/segmentation_service/tensor.h>
 
 #include "fuzz_target.h"
 #include "grpc_predict_v2.pb.h"
@@ -24,7 +24,7 @@
 
 namespace {
 
-using namespace avp::interop;
+using namespace avp::segmentation_service;
 
 // protobuf logs every string field with invalid UTF-8 it parses: quiet, so that findings stand out.
 void IgnoreProtobufLog(google::protobuf::LogLevel, const char*, int, const std::string&) {}

@@ -19,11 +19,11 @@
 #include <avp/core/rgbd_frame.h>
 #include <avp/core/segmentation.h>
 #include <avp/core/simulator_labels.h>
-#include <avp/interop/segmentation_codec.h>
 #include <avp/io/image_codec.h>
 #include <avp/mapping/map_file.h>
 #include <avp/mapping/octomap_io.h>
 #include <avp/mapping/semantic_map.h>
+#include <avp/segmentation_service/segmentation_codec.h>
 
 #include "grpc_predict_v2.pb.h"
 #include "proto_convert.h"
@@ -201,18 +201,19 @@ void RequestCorpus(const fs::path& dir) {
   struct Variant {
     std::string name;
     std::string model;
-    interop::ImageEncoding image;
+    segmentation_service::ImageEncoding image;
     bool depth;
     bool with_labels;
     std::string prompt;
   };
   const std::vector<Variant> variants = {
-      {"color-raw", "color", interop::ImageEncoding::kRaw, true, false, "tomato"},
-      {"color-png", "color", interop::ImageEncoding::kPng, false, false, "red tomato, leaf"},
-      {"color-jpeg", "color", interop::ImageEncoding::kJpeg, false, false, "tomato"},
-      {"oracle-raw", "oracle", interop::ImageEncoding::kRaw, true, true, "tomato"},
-      {"oracle-perfect-png", "oracle-perfect", interop::ImageEncoding::kPng, true, true,
-       "tomato, leaf"},
+      {"color-raw", "color", segmentation_service::ImageEncoding::kRaw, true, false, "tomato"},
+      {"color-png", "color", segmentation_service::ImageEncoding::kPng, false, false,
+       "red tomato, leaf"},
+      {"color-jpeg", "color", segmentation_service::ImageEncoding::kJpeg, false, false, "tomato"},
+      {"oracle-raw", "oracle", segmentation_service::ImageEncoding::kRaw, true, true, "tomato"},
+      {"oracle-perfect-png", "oracle-perfect", segmentation_service::ImageEncoding::kPng, true,
+       true, "tomato, leaf"},
   };
   for (const Variant& v : variants) {
     segmentation::SegmentationRequest request;
@@ -221,16 +222,16 @@ void RequestCorpus(const fs::path& dir) {
     request.score_threshold = 0.1f;
     request.labels = v.with_labels ? &labels : nullptr;
     request.frame_index = 3;
-    interop::RequestEncodeOptions options;
+    segmentation_service::RequestEncodeOptions options;
     options.model_name = v.model;
     options.seed = 11;
     options.image = v.image;
     options.send_depth = v.depth;
-    auto encoded = interop::EncodeSegmentationRequest(request, options);
+    auto encoded = segmentation_service::EncodeSegmentationRequest(request, options);
     Check(encoded.status(), "EncodeSegmentationRequest " + v.name);
     if (!encoded.ok()) continue;
     inference::ModelInferRequest proto;
-    interop::internal::ToProto(*encoded, &proto);
+    segmentation_service::internal::ToProto(*encoded, &proto);
     Write(dir / ("gen-" + v.name + ".pb"), proto.SerializeAsString());
     if (v.name == "color-raw") {
       // Near-valid: the rgb tensor one row short; an unknown requested output.
@@ -266,32 +267,32 @@ Segmentation TestSegmentation() {
 }
 
 void ResponseCorpus(const fs::path& dir) {
-  auto response = interop::EncodeSegmentation(TestSegmentation());
+  auto response = segmentation_service::EncodeSegmentation(TestSegmentation());
   Check(response.status(), "EncodeSegmentation");
   if (!response.ok()) return;
   response->model_name = "color";
   response->id = "camera@1";
   inference::ModelInferResponse proto;
-  interop::internal::ToProto(*response, &proto);
+  segmentation_service::internal::ToProto(*response, &proto);
   Write(dir / "gen-two-instances.pb", proto.SerializeAsString());
   // The compact mask formats (mask_format rle and instance_ids).
   for (const auto& [format, name] :
-       {std::pair{interop::MaskFormat::kRle, "gen-two-instances-rle.pb"},
-        std::pair{interop::MaskFormat::kInstanceIds, "gen-two-instances-ids.pb"}}) {
-    auto compact = interop::EncodeSegmentation(TestSegmentation(), format);
+       {std::pair{segmentation_service::MaskFormat::kRle, "gen-two-instances-rle.pb"},
+        std::pair{segmentation_service::MaskFormat::kInstanceIds, "gen-two-instances-ids.pb"}}) {
+    auto compact = segmentation_service::EncodeSegmentation(TestSegmentation(), format);
     Check(compact.status(), "EncodeSegmentation " + std::string(name));
     if (!compact.ok()) continue;
     inference::ModelInferResponse p;
-    interop::internal::ToProto(*compact, &p);
+    segmentation_service::internal::ToProto(*compact, &p);
     Write(dir / name, p.SerializeAsString());
   }
   Segmentation none;
   none.width = 8;
   none.height = 6;
-  auto empty = interop::EncodeSegmentation(none);
+  auto empty = segmentation_service::EncodeSegmentation(none);
   if (empty.ok()) {
     inference::ModelInferResponse p;
-    interop::internal::ToProto(*empty, &p);
+    segmentation_service::internal::ToProto(*empty, &p);
     Write(dir / "gen-no-instances.pb", p.SerializeAsString());
   }
   // Typed contents instead of raw ones (scores as fp32_contents, labels as bytes_contents).

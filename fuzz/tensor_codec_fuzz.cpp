@@ -1,7 +1,7 @@
 // Fuzz target: the tensor codec as a client meets it: a serialized inference::ModelInferResponse
 // (what a segmentation server, or anything pretending to be one, sends back) -> FromProto ->
 // every output through CheckTensor, ReadBytesElements / ReadValues, every parameter through the
-// typed getters -> DecodeSegmentation (interop/tensor.h, segmentation_codec.h).
+// typed getters -> DecodeSegmentation (segmentation_service/tensor.h, segmentation_codec.h).
 // Property: a Segmentation that decodes is valid, and encoding it decodes to the same instances.
 
 #include <cstddef>
@@ -10,8 +10,8 @@
 
 #include <google/protobuf/stubs/logging.h>
 
-#include <avp/interop/segmentation_codec.h>
-#include <avp/interop/tensor.h>
+#include <avp/segmentation_service/segmentation_codec.h>
+#include <avp/segmentation_service/tensor.h>
 
 #include "fuzz_target.h"
 #include "grpc_predict_v2.pb.h"
@@ -19,7 +19,7 @@
 
 namespace {
 
-using namespace avp::interop;
+using namespace avp::segmentation_service;
 
 // protobuf logs every string field with invalid UTF-8 it parses: quiet, so that findings stand out.
 void IgnoreProtobufLog(google::protobuf::LogLevel, const char*, int, const std::string&) {}

@@ -1,6 +1,6 @@
 // Checks the dependency rules of docs/architecture.md: by reading every source file's includes
-// (modules include only modules below them, and only apps/ and interop/ may include command-line,
-// middleware or network headers), and by reading the link graph CMake writes
+// (modules include only modules below them, and only apps/ and the modules that wrap them may
+// include command-line, middleware or network headers), and by reading the link graph CMake writes
 // (avp_link_graph.txt: what linking each module pulls in), so that, e.g., the loop a real robot
 // runs (avp::pipeline) links no simulator, no Embree and no assimp.
 #include <filesystem>
@@ -76,41 +76,68 @@ const std::map<std::string, std::set<std::string>> kAllowed = {
     {"pipeline", {"core", "io", "robot", "segmentation", "mapping", "planning", "pipeline"}},
     {"eval", {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "eval"}},
     {"report", {"core", "io", "mapping", "pipeline", "eval", "report"}},
-    // Episodes as MCAP recordings (the recorder; the replay's bag reader).
-    {"recording",
-     {"core", "io", "robot", "mapping", "segmentation", "planning", "pipeline", "rosmsg", "mcap",
-      "recording"}},
-    // RunLiveToFolder (avp live, built with AVP_WITH_ROS2) drives the ROS 2 robot of live/.
+    // The segmentation service, KServe v2 over gRPC: the `remote://` segmenter and `avp serve`.
+    // Zero-shot segmentation backends (ONNX Runtime): zsl runs its networks on a model server
+    // through the service's tensor client (tensor_service.h, no gRPC header), and serves them with
+    // its tensor server (avp serve models). Both implement segmentation's Segmenter and are
+    // registered with it by apps/.
+    {"segmentation_service", {"core", "io", "segmentation", "segmentation_service"}},
+    {"zsl", {"core", "io", "segmentation", "segmentation_service", "zsl"}},
+    // The ROS wing (ros/): the messages and all their conversions (no middleware), the MCAP
+    // container, the bag (avp's recording layout: the recorder and the replay's reader), the DDS
+    // transport, the live robot (no simulator) and the simulator as a ROS 2 robot.
+    {"ros/msg", {"core", "ros/msg"}},
+    // The MCAP container links core only; its npm read-back test writes ros/msg messages.
+    {"ros/mcap", {"core", "io", "ros/msg", "ros/mcap"}},
+    {"ros/bag",
+     {"core", "io", "robot", "mapping", "segmentation", "planning", "pipeline", "ros/msg",
+      "ros/mcap", "ros/bag"}},
+    {"ros/dds", {"core", "ros/msg", "ros/dds"}},
+    {"ros/live",
+     {"core", "io", "robot", "segmentation", "mapping", "planning", "pipeline", "ros/msg",
+      "ros/dds", "ros/live"}},
+    {"ros/simrobot",
+     {"core", "io", "robot", "sim", "ros/msg", "ros/dds", "ros/live", "ros/simrobot"}},
+    // RunLiveToFolder (avp live, built with AVP_WITH_ROS2) drives the ROS 2 robot of ros/live/.
     {"experiment",
      {"core", "io", "sim", "robot", "segmentation", "mapping", "planning", "pipeline", "eval",
-      "report", "mcap", "recording", "rosmsg", "ros2", "live", "experiment"}},
-    // Zero-shot segmentation backends (ONNX Runtime) and the segmentation service (gRPC): both
-    // implement segmentation's Segmenter and are registered with it by apps/. zsl runs its
-    // networks on a model server through interop's tensor client (tensor_service.h, no gRPC
-    // header), and serves them with its tensor server (avp serve models).
-    {"interop", {"core", "io", "segmentation", "interop"}},
-    {"zsl", {"core", "io", "segmentation", "interop", "zsl"}},
-    // ROS 2: the messages (no middleware), the DDS transport, the live robot (no simulator) and
-    // the simulator as a ROS 2 robot.
-    {"rosmsg", {"core", "rosmsg"}},
-    {"ros2", {"core", "rosmsg", "ros2"}},
-    // MCAP recordings: the container links core only; its npm read-back test writes rosmsg
-    // messages.
-    {"mcap", {"core", "io", "rosmsg", "mcap"}},
-    {"live",
-     {"core", "io", "robot", "segmentation", "mapping", "planning", "pipeline", "rosmsg", "ros2",
-      "live"}},
-    {"simrobot", {"core", "io", "robot", "sim", "rosmsg", "ros2", "live", "simrobot"}},
+      "report", "ros/mcap", "ros/bag", "ros/msg", "ros/dds", "ros/live", "experiment"}},
 };
 
 // The external headers a module may include although they are in kForbiddenPrefixes.
 const std::map<std::string, std::set<std::string>> kAllowedExternal = {
     {"zsl", {"onnxruntime"}},
-    {"interop", {"grpc", "grpcpp/"}},
-    {"ros2", {"dds/", "ddsc/", "spdlog/"}},
-    {"live", {"spdlog/"}},
-    {"simrobot", {"spdlog/"}},
+    {"segmentation_service", {"grpc", "grpcpp/"}},
+    {"ros/dds", {"dds/", "ddsc/", "spdlog/"}},
+    {"ros/live", {"spdlog/"}},
+    {"ros/simrobot", {"spdlog/"}},
 };
+
+/// A module's library target: its folder with "_" for "/" ("ros/msg" -> "avp_ros_msg").
+std::string TargetOf(const std::string& module) {
+  std::string target = "avp_" + module;
+  for (char& c : target) c = c == '/' ? '_' : c;
+  return target;
+}
+
+/// The module a library target belongs to ("avp_ros_msg" -> "ros/msg"); "" for other targets.
+std::string ModuleOfTarget(const std::string& target) {
+  for (const auto& [module, allowed] : kAllowed) {
+    if (TargetOf(module) == target) return module;
+  }
+  return "";
+}
+
+/// The module whose headers `header` ("avp/ros/msg/images.h") is among: the longest module
+/// folder it starts with ("ros/msg"); else its first folder after avp/.
+std::string ModuleOfHeader(const std::string& header) {
+  const std::string path = header.substr(4);
+  std::string best;
+  for (const auto& [module, allowed] : kAllowed) {
+    if (path.rfind(module + "/", 0) == 0 && module.size() > best.size()) best = module;
+  }
+  return best.empty() ? path.substr(0, path.find('/')) : best;
+}
 
 const std::vector<std::string> kForbiddenPrefixes = {"CLI/",  "grpc",        "grpcpp/", "dds/",
                                                      "ddsc/", "rclcpp",      "ros/",    "httplib",
@@ -146,7 +173,7 @@ TEST(ArchitectureTest, ModulesIncludeOnlyModulesBelowThem) {
     ASSERT_FALSE(includes.empty()) << "no sources found for module " << module;
     for (const Include& inc : includes) {
       if (inc.header.rfind("avp/", 0) != 0) continue;
-      const std::string target = inc.header.substr(4, inc.header.find('/', 4) - 4);
+      const std::string target = ModuleOfHeader(inc.header);
       // Unit tests (<module>/test/) may also use the shared test support (tests/support/) and
       // the simulator, which renders their analytic test scenes (a test-only dependency: the
       // library itself still may not include sim).
@@ -167,7 +194,7 @@ TEST(ArchitectureTest, CoreModulesIncludeNoMiddlewareOrCommandLineHeaders) {
         if (exempt != kAllowedExternal.end() && exempt->second.count(prefix) > 0) continue;
         EXPECT_NE(inc.header.rfind(prefix, 0), 0u)
             << inc.file.string() << ":" << inc.line << " includes <" << inc.header
-            << ">: only apps/ and interop/ may include " << prefix << "* headers";
+            << ">: only apps/ and the modules that wrap them may include " << prefix << "* headers";
       }
     }
   }
@@ -187,13 +214,13 @@ TEST(ArchitectureTest, ThePipelineLinksNoSimulator) {
 
 TEST(ArchitectureTest, TheLiveRobotLinksNoSimulator) {
   const LinkGraph& graph = TheLinkGraph();
-  if (!graph.count("avp_live")) {
-    GTEST_SKIP() << "built without AVP_WITH_ROS2: no avp_live in " << AVP_LINK_GRAPH_FILE;
+  if (!graph.count("avp_ros_live")) {
+    GTEST_SKIP() << "built without AVP_WITH_ROS2: no avp_ros_live in " << AVP_LINK_GRAPH_FILE;
   }
-  EXPECT_THAT(ForbiddenLinks(graph, "avp_live", {"avp_sim", "embree", "assimp"}),
+  EXPECT_THAT(ForbiddenLinks(graph, "avp_ros_live", {"avp_sim", "embree", "assimp"}),
               ::testing::IsEmpty())
-      << "avp::live drives a real robot: it may not link the simulator";
-  EXPECT_THAT(ForbiddenLinks(graph, "avp_simrobot", {"avp_sim"}),
+      << "avp::ros::live drives a real robot: it may not link the simulator";
+  EXPECT_THAT(ForbiddenLinks(graph, "avp_ros_simrobot", {"avp_sim"}),
               ::testing::ElementsAre("avp_sim"));
 }
 
@@ -225,20 +252,40 @@ std::set<std::string> TransitivelyAllowed(const std::string& module) {
   return reached;
 }
 
+TEST(ArchitectureTest, HeadersAndTargetsNameTheirModules) {
+  EXPECT_EQ(ModuleOfHeader("avp/ros/msg/images.h"), "ros/msg");
+  EXPECT_EQ(ModuleOfHeader("avp/ros/bag/bag_reader.h"), "ros/bag");
+  EXPECT_EQ(ModuleOfHeader("avp/pipeline/view_fusion.h"), "pipeline");
+  EXPECT_EQ(ModuleOfHeader("avp/nowhere/x.h"), "nowhere");  // not a module: the rules refuse it
+  EXPECT_EQ(TargetOf("ros/simrobot"), "avp_ros_simrobot");
+  EXPECT_EQ(ModuleOfTarget("avp_ros_dds"), "ros/dds");
+  EXPECT_EQ(ModuleOfTarget("avp_opencv"), "");
+}
+
+// Every library CMake builds is a module the rules know: a new module must be placed in kAllowed.
+TEST(ArchitectureTest, EveryLibraryIsAModuleOfTheRules) {
+  const LinkGraph& graph = TheLinkGraph();
+  ASSERT_FALSE(graph.empty()) << "no link graph at " << AVP_LINK_GRAPH_FILE;
+  for (const auto& [target, closure] : graph) {
+    EXPECT_NE(ModuleOfTarget(target), "")
+        << target << " is a library but not a module of kAllowed (tests/architecture_test.cpp)";
+  }
+}
+
 TEST(ArchitectureTest, ModulesLinkOnlyModulesBelowThem) {
   const LinkGraph& graph = TheLinkGraph();
   for (const auto& [module, direct] : kAllowed) {
     const std::set<std::string> allowed = TransitivelyAllowed(module);
-    const auto it = graph.find("avp_" + module);
+    const auto it = graph.find(TargetOf(module));
     // The ROS 2 modules are built only with AVP_WITH_ROS2 (Cyclone DDS found).
-    const bool optional = module == "ros2" || module == "live" || module == "simrobot";
+    const bool optional = module == "ros/dds" || module == "ros/live" || module == "ros/simrobot";
     if (it == graph.end() && optional) continue;
-    ASSERT_NE(it, graph.end()) << "avp_" << module << " is not in the link graph";
+    ASSERT_NE(it, graph.end()) << TargetOf(module) << " is not in the link graph";
     for (const std::string& item : it->second) {
       if (item.rfind("avp_", 0) != 0) continue;
-      const std::string target = item.substr(4);
-      if (kAllowed.count(target) == 0) continue;  // helpers: avp_opencv, avp_interop_proto
-      EXPECT_TRUE(allowed.count(target) > 0) << "avp_" << module << " links " << item << ", but "
+      const std::string target = ModuleOfTarget(item);
+      if (target.empty()) continue;  // helpers: avp_opencv, avp_segmentation_service_proto
+      EXPECT_TRUE(allowed.count(target) > 0) << TargetOf(module) << " links " << item << ", but "
                                              << module << " may not depend on " << target;
     }
   }

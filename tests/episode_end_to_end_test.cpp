@@ -45,7 +45,8 @@ TEST(EpisodeEndToEndTest, AvpNbvRaisesF1AboveTheFloor) {
   auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok()) << gt.status().ToString();
   ASSERT_GT(gt->voxels.size(), 500u);
-  auto r = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
+  auto r = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   ASSERT_EQ(r->episode.views_fused(), 4) << r->episode.end_reason;
   const double f1_first = r->episode.steps.front().Metric("f1");
@@ -57,7 +58,8 @@ TEST(EpisodeEndToEndTest, AvpNbvRaisesF1AboveTheFloor) {
   EXPECT_GT(r->final_metrics.fruits.found, 0u);
   EXPECT_EQ(r->final_metrics.exact.f1, f1_last);
 
-  auto again = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
+  auto again = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(again.ok());
   ExpectSameEpisode(*again, *r);
 }
@@ -68,7 +70,8 @@ TEST(EpisodeEndToEndTest, PredefinedRunsTheSameLoop) {
   ASSERT_TRUE(scene.ok());
   auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok());
-  auto r = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
+  auto r = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(r->episode.views_fused(), 4) << r->episode.end_reason;
   EXPECT_GE(r->episode.steps.back().Metric("f1"), r->episode.steps.front().Metric("f1"));
@@ -89,12 +92,14 @@ TEST(EpisodeEndToEndTest, OracleDetectKnowsTheTruthAndIsDeterministic) {
   ASSERT_TRUE(scene.ok());
   auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok());
-  auto r = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
+  auto r = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   ASSERT_EQ(r->episode.views_fused(), 3) << r->episode.end_reason;
   EXPECT_GT(r->final_metrics.fruits.found,
             static_cast<size_t>(r->episode.steps.front().Metric("fruits_found")));
-  auto again = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
+  auto again = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(again.ok());
   ExpectSameEpisode(*again, *r);
 }
@@ -106,13 +111,15 @@ TEST(EpisodeEndToEndTest, OracleRegretMeasuresEachPlanWithoutChangingTheEpisode)
   ASSERT_TRUE(scene.ok());
   auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok());
-  auto plain = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
+  auto plain = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(plain.ok()) << plain.status().ToString();
   EXPECT_TRUE(plain->regret.empty());
   c.oracle_regret = true;
   // Recording the gain's parts changes no choice either.
   c.planner.options.emplace_back("record_gain_terms", "true");
-  auto probed = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
+  auto probed = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(probed.ok()) << probed.status().ToString();
   ExpectSameEpisode(*probed, *plain);
   size_t plans = 0;

@@ -191,8 +191,8 @@ TEST(ExtendingExamplesTest, AScenarioAndARuleRunAWholeEpisode) {
   const Result<eval::GroundTruth> gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok()) << gt.status().ToString();
   std::unique_ptr<mapping::SemanticMap> map;
-  const Result<experiment::RunResult> r =
-      experiment::RunEpisodeOnScene(c, registries, *scene, *gt, {}, &map);
+  const Result<experiment::RunResult> r = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, registries).value(), *scene, *gt, {}, &map);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(r->episode.views_fused(), 3);
   EXPECT_EQ(r->final_metrics.fruits.total, 1u);

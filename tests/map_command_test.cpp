@@ -315,7 +315,8 @@ TEST_F(MapCommandTest, ARunsMapFilesScoreTheSameAgainstABtGroundTruth) {
   c.threads = 2;
   experiment::RunFolderOptions o;
   o.out_dir = dir_ / "run";
-  const auto run = experiment::RunToFolder(c, experiment::BuiltinRegistries(), o);
+  const auto run = experiment::RunToFolder(
+      experiment::CheckedRunConfig::Check(c, experiment::BuiltinRegistries()).value(), o);
   ASSERT_TRUE(run.ok()) << run.status().ToString();
   ASSERT_TRUE(fs::exists(o.out_dir / "map.avpmap"));
   ASSERT_TRUE(fs::exists(o.out_dir / "map.ot"));

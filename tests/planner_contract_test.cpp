@@ -75,7 +75,7 @@ class PlannerContractTest : public ::testing::TestWithParam<std::string> {
     const planning::PlannerEntry* entry = Registries().planners.Find(GetParam());
     EXPECT_NE(entry, nullptr);
     if (entry == nullptr) return nullptr;
-    planning::PlannerContext context{.threads = 2, .truth = nullptr};
+    planning::PlannerContext context{.truth = nullptr};
     if (entry->needs_ground_truth) context.truth = &TheTruth();
     auto p = Registries().planners.Make(GetParam(), entry->options, context);
     EXPECT_TRUE(p.ok()) << p.status().ToString();

@@ -1,6 +1,6 @@
-// avp's MCAP recordings of real simulated episodes: every topic of the layout (recording/layout.h)
-// read back with mcap::ReadIndexed and decoded with rosmsg equals what the episode saw (frames,
-// labels, masks, poses, joints, maps, steps: exactly), one message per view and topic; the
+// avp's MCAP recordings of real simulated episodes: every topic of the layout (ros/bag/layout.h)
+// read back with ros::mcap::ReadIndexed and decoded with ros/msg equals what the episode saw
+// (frames, labels, masks, poses, joints, maps, steps: exactly), one message per view and topic; the
 // metadata and the ground-truth attachment are there; a recording cut off after its last flushed
 // view keeps every view; a write error (a full disk) stops the episode and names the file.
 #include <csignal>
@@ -20,12 +20,13 @@
 #include <avp/experiment/episode_runner.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/mapping/octomap_io.h>
-#include <avp/mcap/mcap.h>
-#include <avp/recording/encode.h>
-#include <avp/recording/layout.h>
-#include <avp/recording/mcap_recorder.h>
-#include <avp/rosmsg/convert.h>
-#include <avp/rosmsg/messages.h>
+#include <avp/ros/bag/encode.h>
+#include <avp/ros/bag/layout.h>
+#include <avp/ros/bag/mcap_recorder.h>
+#include <avp/ros/mcap/mcap.h>
+#include <avp/ros/msg/convert.h>
+#include <avp/ros/msg/images.h>
+#include <avp/ros/msg/messages.h>
 #include <avp/sim/scenario.h>
 #include <avp/test/temp_dir_test.h>
 
@@ -33,7 +34,7 @@ namespace avp {
 namespace {
 
 namespace fs = std::filesystem;
-namespace rec = recording;
+namespace rec = ros::bag;
 using ::testing::HasSubstr;
 
 const experiment::Registries& Registries() {
@@ -77,21 +78,21 @@ class Keeper final : public pipeline::EpisodeObserver {
 };
 
 /// Messages of `topic`, in log-time order.
-std::vector<const mcap::Message*> On(const mcap::File& f, std::string_view topic) {
+std::vector<const ros::mcap::Message*> On(const ros::mcap::File& f, std::string_view topic) {
   uint16_t id = 0xFFFF;
-  for (const mcap::Channel& c : f.channels) {
+  for (const ros::mcap::Channel& c : f.channels) {
     if (c.topic == topic) id = c.id;
   }
-  std::vector<const mcap::Message*> out;
-  for (const mcap::Message& m : f.messages) {
+  std::vector<const ros::mcap::Message*> out;
+  for (const ros::mcap::Message& m : f.messages) {
     if (m.channel_id == id) out.push_back(&m);
   }
   return out;
 }
 
 template <class T>
-T Decoded(const mcap::Message* m) {
-  Result<T> r = rosmsg::Decode<T>(m->data);
+T Decoded(const ros::mcap::Message* m) {
+  Result<T> r = ros::msg::Decode<T>(m->data);
   EXPECT_TRUE(r.ok()) << r.status().ToString();
   return r.ok() ? *r : T{};
 }
@@ -99,7 +100,7 @@ T Decoded(const mcap::Message* m) {
 class RecordingTest : public test::TempDirTest {};
 
 /// Every topic once per view, with its type, QoS, type hash and schema.
-void ExpectEveryTopicOncePerView(const mcap::File& f, size_t views) {
+void ExpectEveryTopicOncePerView(const ros::mcap::File& f, size_t views) {
   // The oracle's source has simulator labels.
   const std::pair<std::string_view, std::string_view> topics[] = {
       {rec::kColorTopic, "sensor_msgs/msg/Image"},
@@ -119,11 +120,11 @@ void ExpectEveryTopicOncePerView(const mcap::File& f, size_t views) {
     SCOPED_TRACE(std::string(topic));
     EXPECT_EQ(On(f, topic).size(), views);
     const auto ch = std::find_if(f.channels.begin(), f.channels.end(),
-                                 [&](const mcap::Channel& x) { return x.topic == topic; });
+                                 [&](const ros::mcap::Channel& x) { return x.topic == topic; });
     ASSERT_NE(ch, f.channels.end());
     EXPECT_EQ(ch->message_encoding, "cdr");
     EXPECT_THAT(ch->metadata.at("offered_qos_profiles"), HasSubstr("reliability: 1"));
-    EXPECT_EQ(ch->metadata.at("topic_type_hash"), rosmsg::TypeHashOf(type).value());
+    EXPECT_EQ(ch->metadata.at("topic_type_hash"), ros::msg::TypeHashOf(type).value());
     EXPECT_EQ(f.schemas.at(ch->schema_id - 1).name, type);
     EXPECT_EQ(f.schemas.at(ch->schema_id - 1).encoding, "ros2msg");
     EXPECT_EQ(f.statistics.channel_message_counts.at(ch->id), views);
@@ -132,7 +133,7 @@ void ExpectEveryTopicOncePerView(const mcap::File& f, size_t views) {
 }
 
 /// The "avp" metadata and the ground truth attachment, exact.
-void ExpectMetadataAndGroundTruth(const mcap::File& f, const sim::Scene& scene,
+void ExpectMetadataAndGroundTruth(const ros::mcap::File& f, const sim::Scene& scene,
                                   const eval::GroundTruth& gt) {
   ASSERT_EQ(f.metadata.size(), 1u);
   EXPECT_EQ(f.metadata[0].name, "avp");
@@ -151,33 +152,34 @@ void ExpectMetadataAndGroundTruth(const mcap::File& f, const sim::Scene& scene,
 }
 
 /// View v's camera topics: colour, depth, CameraInfo, TF and joints, as the episode saw them.
-void ExpectCameraTopics(const mcap::File& f, size_t v, const Seen& s) {
+void ExpectCameraTopics(const ros::mcap::File& f, size_t v, const Seen& s) {
   const RgbdFrame& frame = s.obs->frame;
   const uint64_t t = static_cast<uint64_t>(frame.stamp_ns);
   EXPECT_EQ(On(f, rec::kColorTopic)[v]->log_time, t);
   EXPECT_EQ(On(f, rec::kStepTopic)[v]->publish_time, t);
 
-  const auto color = Decoded<rosmsg::Image>(On(f, rec::kColorTopic)[v]);
+  const auto color = Decoded<ros::msg::Image>(On(f, rec::kColorTopic)[v]);
   EXPECT_EQ(color.header.frame_id, frame.frame_id);
   EXPECT_EQ(color.header.stamp.ToNanoseconds(), frame.stamp_ns);
-  EXPECT_EQ(rec::ColorFromMsg(color).value(), frame.rgb);
-  const auto depth = Decoded<rosmsg::Image>(On(f, rec::kDepthTopic)[v]);
+  EXPECT_EQ(ros::msg::ColorFromImage(color, rec::kColorTopic).value(), frame.rgb);
+  const auto depth = Decoded<ros::msg::Image>(On(f, rec::kDepthTopic)[v]);
   EXPECT_EQ(depth.encoding, "32FC1");
-  EXPECT_EQ(rec::DepthFromMsg(depth).value(), frame.depth_m);  // bit-exact floats
-  const auto info = Decoded<rosmsg::CameraInfo>(On(f, rec::kCameraInfoTopic)[v]);
+  EXPECT_EQ(ros::msg::DepthFromImage(depth, rec::kDepthTopic).value(),
+            frame.depth_m);  // bit-exact floats
+  const auto info = Decoded<ros::msg::CameraInfo>(On(f, rec::kCameraInfoTopic)[v]);
   EXPECT_EQ(info.k[0], frame.K.fx);
   EXPECT_EQ(info.k[5], frame.K.cy);
   EXPECT_EQ(info.width, static_cast<uint32_t>(frame.K.width));
 
-  const auto tf = Decoded<rosmsg::TFMessage>(On(f, rec::kTfTopic)[v]);
+  const auto tf = Decoded<ros::msg::TFMessage>(On(f, rec::kTfTopic)[v]);
   ASSERT_EQ(tf.transforms.size(), 1u);
   EXPECT_EQ(tf.transforms[0].header.frame_id, "igus_rebel_base_link");
   EXPECT_EQ(tf.transforms[0].child_frame_id, frame.frame_id);
   EXPECT_EQ(tf.transforms[0].transform.translation.x, frame.X_WC.translation().x());
-  const RigidTransform tf_pose = rosmsg::FromTransformMsg(tf.transforms[0].transform).value();
+  const RigidTransform tf_pose = ros::msg::FromTransformMsg(tf.transforms[0].transform).value();
   EXPECT_TRUE(tf_pose.rotation().isApprox(frame.X_WC.rotation(), 1e-12));
 
-  const auto joints = Decoded<rosmsg::JointState>(On(f, rec::kJointStatesTopic)[v]);
+  const auto joints = Decoded<ros::msg::JointState>(On(f, rec::kJointStatesTopic)[v]);
   ASSERT_EQ(joints.position.size(), static_cast<size_t>(s.step.q.size()));
   for (size_t k = 0; k < joints.position.size(); ++k) {
     EXPECT_EQ(joints.position[k], s.step.q[static_cast<Eigen::Index>(k)]);
@@ -186,13 +188,14 @@ void ExpectCameraTopics(const mcap::File& f, size_t v, const Seen& s) {
 }
 
 /// View v's masks: the instance image, the instances JSON and the simulator's labels.
-void ExpectSegmentationTopics(const mcap::File& f, size_t v, const Seen& s) {
-  const auto ids = Decoded<rosmsg::Image>(On(f, rec::kInstanceImageTopic)[v]);
+void ExpectSegmentationTopics(const ros::mcap::File& f, size_t v, const Seen& s) {
+  const auto ids = Decoded<ros::msg::Image>(On(f, rec::kInstanceImageTopic)[v]);
   EXPECT_EQ(ids.encoding, "mono16");
-  EXPECT_EQ(rec::U16FromMsg(ids).value(), rec::InstanceIdImage(*s.seg));
+  EXPECT_EQ(ros::msg::InstanceIdsFromImage(ids, rec::kInstanceImageTopic).value(),
+            rec::InstanceIdImage(*s.seg));
   const Segmentation masks =
       rec::InstancesFromJson(
-          nlohmann::json::parse(Decoded<rosmsg::String>(On(f, rec::kInstancesTopic)[v]).data))
+          nlohmann::json::parse(Decoded<ros::msg::String>(On(f, rec::kInstancesTopic)[v]).data))
           .value();
   ASSERT_EQ(masks.instances.size(), s.seg->instances.size());
   EXPECT_GT(masks.instances.size(), 0u);
@@ -207,24 +210,29 @@ void ExpectSegmentationTopics(const mcap::File& f, size_t v, const Seen& s) {
     }
   }
   ASSERT_TRUE(s.obs->labels.has_value());
-  EXPECT_EQ(rec::U16FromMsg(Decoded<rosmsg::Image>(On(f, rec::kSimInstanceTopic)[v])).value(),
-            s.obs->labels->instance_ids);
-  EXPECT_EQ(rec::ClassFromMsg(Decoded<rosmsg::Image>(On(f, rec::kSimClassTopic)[v])).value(),
+  EXPECT_EQ(
+      ros::msg::InstanceIdsFromImage(Decoded<ros::msg::Image>(On(f, rec::kSimInstanceTopic)[v]),
+                                     rec::kInstanceImageTopic)
+          .value(),
+      s.obs->labels->instance_ids);
+  EXPECT_EQ(ros::msg::ClassIdsFromImage(Decoded<ros::msg::Image>(On(f, rec::kSimClassTopic)[v]),
+                                        rec::kSimClassTopic)
+                .value(),
             s.obs->labels->class_ids);
 }
 
 /// View v's map, candidates and step record.
-void ExpectMapAndStepTopics(const mcap::File& f, size_t v, size_t views, const Seen& s,
+void ExpectMapAndStepTopics(const ros::mcap::File& f, size_t v, size_t views, const Seen& s,
                             const experiment::RunConfig& c) {
-  const auto octomap = Decoded<rosmsg::Octomap>(On(f, rec::kMapTopic)[v]);
+  const auto octomap = Decoded<ros::msg::Octomap>(On(f, rec::kMapTopic)[v]);
   EXPECT_TRUE(octomap.binary);
   EXPECT_EQ(octomap.id, "OcTree");
   EXPECT_EQ(octomap.resolution, c.map.grid.voxel_size_m);
   EXPECT_EQ(std::string(octomap.data.begin(), octomap.data.end()), s.octree);
 
-  const auto markers = Decoded<rosmsg::MarkerArray>(On(f, rec::kCandidatesTopic)[v]);
+  const auto markers = Decoded<ros::msg::MarkerArray>(On(f, rec::kCandidatesTopic)[v]);
   const nlohmann::json step =
-      nlohmann::json::parse(Decoded<rosmsg::String>(On(f, rec::kStepTopic)[v]).data);
+      nlohmann::json::parse(Decoded<ros::msg::String>(On(f, rec::kStepTopic)[v]).data);
   EXPECT_EQ(step["view"], static_cast<int>(v));
   const RigidTransform X = rec::PoseFromJson(step["X_WC"]).value();
   EXPECT_EQ(X.rotation(), s.step.X_WC.rotation());  // exact
@@ -260,14 +268,16 @@ TEST_F(RecordingTest, EveryTopicEqualsWhatTheEpisodeSaw) {
                       .value();
   Keeper keeper;
   const experiment::RunResult result =
-      experiment::RunEpisodeOnScene(c, Registries(), scene, gt, {&keeper, recorder.get()}).value();
+      experiment::RunEpisodeOnScene(experiment::CheckedRunConfig::Check(c, Registries()).value(),
+                                    scene, gt, {&keeper, recorder.get()})
+          .value();
   ASSERT_TRUE(recorder->Close().ok()) << recorder->status().ToString();
   const size_t views = static_cast<size_t>(result.episode.views_fused());
   ASSERT_EQ(views, 3u);
   ASSERT_EQ(keeper.seen.size(), views);
   EXPECT_EQ(recorder->views(), 3);
 
-  const mcap::File f = mcap::ReadIndexed(path).value();
+  const ros::mcap::File f = ros::mcap::ReadIndexed(path).value();
   EXPECT_EQ(f.profile, "ros2");
   ExpectEveryTopicOncePerView(f, views);
   ExpectMetadataAndGroundTruth(f, scene, gt);
@@ -281,7 +291,7 @@ TEST_F(RecordingTest, EveryTopicEqualsWhatTheEpisodeSaw) {
     ExpectMapAndStepTopics(f, v, views, s, c);
   }
   // The streaming reader finds the same.
-  const mcap::StreamResult streamed = mcap::ReadStreaming(path);
+  const ros::mcap::StreamResult streamed = ros::mcap::ReadStreaming(path);
   ASSERT_TRUE(streamed.status.ok()) << streamed.status.ToString();
   EXPECT_EQ(streamed.file.messages.size(), f.messages.size());
   EXPECT_EQ(streamed.file.attachments, f.attachments);
@@ -295,16 +305,19 @@ TEST_F(RecordingTest, AKilledRunKeepsItsFinishedViews) {
   const fs::path path = dir_ / "live.mcap";
   auto recorder =
       experiment::OpenEpisodeRecording(path, c, Registries(), {.scene = scene.name}).value();
-  ASSERT_TRUE(experiment::RunEpisodeOnScene(c, Registries(), scene, gt, {recorder.get()}).ok());
+  ASSERT_TRUE(
+      experiment::RunEpisodeOnScene(experiment::CheckedRunConfig::Check(c, Registries()).value(),
+                                    scene, gt, {recorder.get()})
+          .ok());
   // The process dies here (the recorder is never closed): the file as it is on disk.
   const fs::path cut = dir_ / "cut.mcap";
   fs::copy_file(path, cut);
-  const mcap::StreamResult s = mcap::ReadStreaming(cut);
+  const ros::mcap::StreamResult s = ros::mcap::ReadStreaming(cut);
   EXPECT_THAT(s.status.message(), HasSubstr("without a Data End record"));
   EXPECT_EQ(s.file.messages.size(), 3u * 12u);  // every view, every topic
   EXPECT_EQ(s.file.metadata.size(), 1u);
   EXPECT_TRUE(s.file.attachments.empty());  // no ground truth given
-  EXPECT_THAT(mcap::ReadIndexed(cut).status().message(), HasSubstr("no closing magic"));
+  EXPECT_THAT(ros::mcap::ReadIndexed(cut).status().message(), HasSubstr("no closing magic"));
   ASSERT_TRUE(recorder->Close().ok());
 }
 
@@ -314,12 +327,13 @@ TEST_F(RecordingTest, RunFolderRecordsAndAWriteErrorStopsTheRunNamingTheFile) {
   experiment::RunFolderOptions options;
   options.out_dir = dir_ / "run";
   options.record = true;
-  const auto summary = experiment::RunToFolder(c, Registries(), options);
+  const auto summary = experiment::RunToFolder(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), options);
   ASSERT_TRUE(summary.ok()) << summary.status().ToString();
   const fs::path mcap_path = options.out_dir / "episode.mcap";
   EXPECT_NE(std::find(summary->files.begin(), summary->files.end(), mcap_path),
             summary->files.end());
-  const mcap::File f = mcap::ReadIndexed(mcap_path).value();
+  const ros::mcap::File f = ros::mcap::ReadIndexed(mcap_path).value();
   EXPECT_EQ(On(f, rec::kStepTopic).size(), 2u);
   ASSERT_EQ(f.attachments.size(), 1u);  // the run's ground truth
   EXPECT_EQ(
@@ -344,7 +358,8 @@ TEST_F(RecordingTest, RunFolderRecordsAndAWriteErrorStopsTheRunNamingTheFile) {
   struct rlimit small = old;
   small.rlim_cur = 6'000'000;
   ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
-  const auto failed = experiment::RunToFolder(c, Registries(), options);
+  const auto failed = experiment::RunToFolder(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), options);
   ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &old), 0);
   ASSERT_FALSE(failed.ok());
   EXPECT_EQ(failed.status().code(), StatusCode::kIoError);
@@ -357,7 +372,7 @@ TEST_F(RecordingTest, RunFolderRecordsAndAWriteErrorStopsTheRunNamingTheFile) {
   EXPECT_GE(lines, 2u);
   EXPECT_LE(lines, 3u);
   // What was flushed before the failure is readable.
-  const mcap::StreamResult cut = mcap::ReadStreaming(options.out_dir / "episode.mcap");
+  const ros::mcap::StreamResult cut = ros::mcap::ReadStreaming(options.out_dir / "episode.mcap");
   EXPECT_FALSE(cut.status.ok());
   EXPECT_EQ(cut.file.metadata.size(), 1u);
 }
@@ -378,7 +393,7 @@ TEST_F(RecordingTest, BenchRecordsEveryEpisodeInItsRunFolder) {
     SCOPED_TRACE(planner);
     const fs::path path =
         bench.out_dir / "runs" / "tomato-single-cluster" / planner / "seed-5" / "episode.mcap";
-    const mcap::File f = mcap::ReadIndexed(path).value();
+    const ros::mcap::File f = ros::mcap::ReadIndexed(path).value();
     EXPECT_EQ(On(f, rec::kStepTopic).size(), 2u);
     EXPECT_EQ(On(f, rec::kColorTopic).size(), 2u);
     ASSERT_EQ(f.metadata.size(), 1u);

@@ -8,8 +8,8 @@
 #include <gtest/gtest.h>
 
 #include <avp/experiment/episode_runner.h>
-#include <avp/interop/remote_segmenter.h>
-#include <avp/interop/segmentation_server.h>
+#include <avp/segmentation_service/remote_segmenter.h>
+#include <avp/segmentation_service/segmentation_server.h>
 #include <avp/sim/scenario.h>
 
 namespace avp {
@@ -19,19 +19,19 @@ namespace {
 const experiment::Registries& Registries() {
   static const auto* registries = [] {
     auto* r = new experiment::Registries(experiment::BuiltinRegistries());
-    interop::RegisterRemoteSegmenter(r->segmenters);
+    segmentation_service::RegisterRemoteSegmenter(r->segmenters);
     return r;
   }();
   return *registries;
 }
 
 TEST(RemoteSegmenterEndToEndTest, RemoteEpisodeEqualsInProcessEpisode) {
-  interop::ServerOptions so;
+  segmentation_service::ServerOptions so;
   so.segmenters = &Registries().segmenters;
   so.port = 0;
   so.backends = {"oracle"};
   so.threads = 2;
-  auto server = interop::SegmentationServer::Start(so);
+  auto server = segmentation_service::SegmentationServer::Start(so);
   ASSERT_TRUE(server.ok()) << server.status().ToString();
 
   experiment::RunConfig local;
@@ -49,9 +49,11 @@ TEST(RemoteSegmenterEndToEndTest, RemoteEpisodeEqualsInProcessEpisode) {
   ASSERT_TRUE(scene.ok()) << scene.status().ToString();
   auto gt = experiment::GroundTruthFor(local, *scene);
   ASSERT_TRUE(gt.ok()) << gt.status().ToString();
-  auto a = experiment::RunEpisodeOnScene(local, Registries(), *scene, *gt);
+  auto a = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(local, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(a.ok()) << a.status().ToString();
-  auto b = experiment::RunEpisodeOnScene(remote, Registries(), *scene, *gt);
+  auto b = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(remote, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(b.ok()) << b.status().ToString();
 
   ASSERT_EQ(a->episode.steps.size(), 3u);
@@ -75,10 +77,10 @@ TEST(RemoteSegmenterEndToEndTest, RemoteEpisodeEqualsInProcessEpisode) {
 TEST(RemoteSegmenterEndToEndTest, ServerDownEndsTheEpisodeAsASegmenterFaultNamingTheAddress) {
   int port = 0;
   {
-    interop::ServerOptions so;
+    segmentation_service::ServerOptions so;
     so.segmenters = &Registries().segmenters;
     so.port = 0;
-    auto server = interop::SegmentationServer::Start(so);
+    auto server = segmentation_service::SegmentationServer::Start(so);
     ASSERT_TRUE(server.ok());
     port = (*server)->port();
   }
@@ -93,7 +95,8 @@ TEST(RemoteSegmenterEndToEndTest, ServerDownEndsTheEpisodeAsASegmenterFaultNamin
   ASSERT_TRUE(scene.ok());
   auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok());
-  auto r = experiment::RunEpisodeOnScene(c, Registries(), *scene, *gt);
+  auto r = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   // Not three views of empty masks: the episode ends at the first view, as a segmenter fault
   // whose reason names the service's address; that view is kept (depth fused).

@@ -22,10 +22,10 @@
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
 #include <avp/mapping/map_file.h>
-#include <avp/mcap/mcap.h>
-#include <avp/recording/bag_reader.h>
-#include <avp/recording/layout.h>
-#include <avp/rosmsg/messages.h>
+#include <avp/ros/bag/bag_reader.h>
+#include <avp/ros/bag/layout.h>
+#include <avp/ros/mcap/mcap.h>
+#include <avp/ros/msg/messages.h>
 #include <avp/test/read_file.h>
 #include <avp/test/run_command.h>
 
@@ -89,7 +89,8 @@ class ReplayTest : public ::testing::Test {
     experiment::RunFolderOptions o;
     o.out_dir = *dir_ / "run";
     o.record = true;
-    Result<experiment::RunSummary> run = experiment::RunToFolder(c, Registries(), o);
+    Result<experiment::RunSummary> run =
+        experiment::RunToFolder(experiment::CheckedRunConfig::Check(c, Registries()).value(), o);
     ASSERT_TRUE(run.ok()) << run.status().ToString();
     ASSERT_EQ(run->result.episode.views_fused(), 3);
   }
@@ -104,8 +105,8 @@ class ReplayTest : public ::testing::Test {
   /// Replays `bag` (read with `bag_options`) into dir_/name.
   static Result<experiment::ReplaySummary> Replay(const fs::path& bag, const std::string& name,
                                                   const std::string& segmenter = {},
-                                                  recording::BagReadOptions bag_options = {}) {
-    AVP_ASSIGN_OR_RETURN(const recording::Bag b, recording::ReadBag(bag, bag_options));
+                                                  ros::bag::BagReadOptions bag_options = {}) {
+    AVP_ASSIGN_OR_RETURN(const ros::bag::Bag b, ros::bag::ReadBag(bag, bag_options));
     AVP_ASSIGN_OR_RETURN(const experiment::RunConfig config, experiment::BagRunConfig(b));
     experiment::ReplayOptions o;
     o.segmenter = segmenter;
@@ -168,7 +169,7 @@ TEST_F(ReplayTest, TheOracleRerunOnTheRecordedLabelsGivesTheSameMasks) {
 }
 
 TEST_F(ReplayTest, ReadAsARobotBagThePosesComeFromTf) {
-  recording::BagReadOptions o;
+  ros::bag::BagReadOptions o;
   o.as_robot_bag = true;
   o.frame_rate_hz = 0.0;
   Result<experiment::ReplaySummary> r = Replay(Bag(), "robot", "oracle", o);
@@ -186,14 +187,14 @@ TEST_F(ReplayTest, ReadAsARobotBagThePosesComeFromTf) {
 }
 
 TEST_F(ReplayTest, TheOracleNeedsLabels) {
-  recording::BagReadOptions o;
+  ros::bag::BagReadOptions o;
   o.labels_prefix = "";  // as a real robot's bag: no label images
   Result<experiment::ReplaySummary> r = Replay(Bag(), "nolabels", "oracle", o);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(),
               HasSubstr("the 'oracle' segmenter needs the simulator's label images "
                         "(/avp/sim/instance, /avp/sim/class), and view 0 has none"));
-  recording::BagReadOptions robot;
+  ros::bag::BagReadOptions robot;
   robot.as_robot_bag = true;
   r = Replay(Bag(), "recorded-robot", "recorded", robot);
   ASSERT_FALSE(r.ok());
@@ -205,7 +206,7 @@ TEST_F(ReplayTest, TruncatedRecordingReplaysItsIntactViewsAndNamesTheOffset) {
   fs::copy_file(Bag(), cut, fs::copy_options::overwrite_existing);
   const auto size = fs::file_size(cut);
   fs::resize_file(cut, size * 75 / 100);
-  Result<recording::Bag> bag = recording::ReadBag(cut);
+  Result<ros::bag::Bag> bag = ros::bag::ReadBag(cut);
   ASSERT_TRUE(bag.ok()) << bag.status().ToString();
   EXPECT_FALSE(bag->damage.ok());
   EXPECT_THAT(bag->damage.message(), HasSubstr("offset"));
@@ -232,7 +233,7 @@ TEST_F(ReplayTest, CorruptChunkReplaysTheViewsBeforeIt) {
   // per view).
   bytes[bytes.size() * 70 / 100] ^= 0x5a;
   std::ofstream(bad, std::ios::binary) << bytes;
-  Result<recording::Bag> bag = recording::ReadBag(bad);
+  Result<ros::bag::Bag> bag = ros::bag::ReadBag(bad);
   ASSERT_TRUE(bag.ok()) << bag.status().ToString();
   EXPECT_THAT(bag->damage.message(), HasSubstr("CRC mismatch"));
   EXPECT_THAT(bag->damage.message(), HasSubstr("offset"));
@@ -240,11 +241,11 @@ TEST_F(ReplayTest, CorruptChunkReplaysTheViewsBeforeIt) {
 }
 
 TEST_F(ReplayTest, BadStepOrMasksSkipTheViewNamingTheValue) {
-  const mcap::File file = mcap::ReadIndexed(Bag()).value();
+  const ros::mcap::File file = ros::mcap::ReadIndexed(Bag()).value();
   uint16_t step_channel = 0, instances_channel = 0;
-  for (const mcap::Channel& c : file.channels) {
-    if (c.topic == recording::kStepTopic) step_channel = c.id;
-    if (c.topic == recording::kInstancesTopic) instances_channel = c.id;
+  for (const ros::mcap::Channel& c : file.channels) {
+    if (c.topic == ros::bag::kStepTopic) step_channel = c.id;
+    if (c.topic == ros::bag::kInstancesTopic) instances_channel = c.id;
   }
   const uint64_t view1 = 1'000'000'000;  // simulation stamps: view x 1 s
   struct Case {
@@ -253,9 +254,9 @@ TEST_F(ReplayTest, BadStepOrMasksSkipTheViewNamingTheValue) {
     std::string expected;
   };
   const json step1 = [&] {
-    for (const mcap::Message& m : file.messages) {
+    for (const ros::mcap::Message& m : file.messages) {
       if (m.channel_id == step_channel && m.log_time == view1) {
-        return json::parse(rosmsg::Decode<rosmsg::String>(m.data).value().data);
+        return json::parse(ros::msg::Decode<ros::msg::String>(m.data).value().data);
       }
     }
     return json();
@@ -276,23 +277,23 @@ TEST_F(ReplayTest, BadStepOrMasksSkipTheViewNamingTheValue) {
   };
   for (const Case& c : cases) {
     const fs::path path = *dir_ / "bad_step.mcap";
-    auto w = mcap::Writer::Open(path).value();
-    for (const mcap::Schema& s : file.schemas) {
+    auto w = ros::mcap::Writer::Open(path).value();
+    for (const ros::mcap::Schema& s : file.schemas) {
       ASSERT_TRUE(w->AddSchema(s.name, s.encoding, s.data).ok());
     }
-    for (const mcap::Channel& ch : file.channels) {
+    for (const ros::mcap::Channel& ch : file.channels) {
       ASSERT_TRUE(w->AddChannel(ch.schema_id, ch.topic, ch.message_encoding, ch.metadata).ok());
     }
-    for (const mcap::Attachment& a : file.attachments) ASSERT_TRUE(w->WriteAttachment(a).ok());
-    for (const mcap::Metadata& m : file.metadata) ASSERT_TRUE(w->WriteMetadata(m).ok());
-    for (mcap::Message m : file.messages) {
+    for (const ros::mcap::Attachment& a : file.attachments) ASSERT_TRUE(w->WriteAttachment(a).ok());
+    for (const ros::mcap::Metadata& m : file.metadata) ASSERT_TRUE(w->WriteMetadata(m).ok());
+    for (ros::mcap::Message m : file.messages) {
       if (m.channel_id == c.channel && m.log_time == view1) {
-        m.data = rosmsg::Encode(rosmsg::String{c.text});
+        m.data = ros::msg::Encode(ros::msg::String{c.text});
       }
       ASSERT_TRUE(w->Write(m).ok());
     }
     ASSERT_TRUE(w->Close().ok());
-    Result<recording::Bag> bag = recording::ReadBag(path);
+    Result<ros::bag::Bag> bag = ros::bag::ReadBag(path);
     ASSERT_TRUE(bag.ok()) << bag.status().ToString();
     ASSERT_EQ(bag->views.size(), 2u) << c.text;
     EXPECT_EQ(bag->views[1].index, 2);
@@ -304,10 +305,10 @@ TEST_F(ReplayTest, BadStepOrMasksSkipTheViewNamingTheValue) {
 TEST_F(ReplayTest, NotAnMcapFileIsAClearError) {
   const fs::path junk = *dir_ / "junk.mcap";
   std::ofstream(junk) << "not an mcap file at all";
-  Result<recording::Bag> bag = recording::ReadBag(junk);
+  Result<ros::bag::Bag> bag = ros::bag::ReadBag(junk);
   ASSERT_FALSE(bag.ok());
   EXPECT_THAT(bag.status().message(), HasSubstr("junk.mcap"));
-  EXPECT_FALSE(recording::ReadBag(*dir_ / "missing.mcap").ok());
+  EXPECT_FALSE(ros::bag::ReadBag(*dir_ / "missing.mcap").ok());
 }
 
 /// A robot's bag as the RealSense driver and a robot write it: 3 s at 30 Hz of 64 x 48 bgr8
@@ -315,26 +316,27 @@ TEST_F(ReplayTest, NotAnMcapFileIsAClearError) {
 /// /tf_static base -> mount and link -> optical frame, /tf mount -> link at 100 Hz (the arm
 /// turning slowly). Returns the path.
 fs::path WriteRobotBag(const fs::path& path) {
-  auto w = mcap::Writer::Open(path).value();
+  auto w = ros::mcap::Writer::Open(path).value();
   auto channel = [&](std::string_view type, std::string_view def, const std::string& topic) {
     const uint16_t schema = w->AddSchema(type, "ros2msg", def).value();
     return w
-        ->AddChannel(schema, topic, "cdr", {{"offered_qos_profiles", mcap::OfferedQosProfiles()}})
+        ->AddChannel(schema, topic, "cdr",
+                     {{"offered_qos_profiles", ros::mcap::OfferedQosProfiles()}})
         .value();
   };
-  using rosmsg::Image, rosmsg::CameraInfo, rosmsg::TFMessage;
-  const uint16_t color = channel(rosmsg::MessageTraits<Image>::kRosName,
-                                 rosmsg::Definition<Image>(), "/camera/camera/color/image_raw");
+  using ros::msg::Image, ros::msg::CameraInfo, ros::msg::TFMessage;
+  const uint16_t color = channel(ros::msg::MessageTraits<Image>::kRosName,
+                                 ros::msg::Definition<Image>(), "/camera/camera/color/image_raw");
   const uint16_t depth =
-      channel(rosmsg::MessageTraits<Image>::kRosName, rosmsg::Definition<Image>(),
+      channel(ros::msg::MessageTraits<Image>::kRosName, ros::msg::Definition<Image>(),
               "/camera/camera/aligned_depth_to_color/image_raw");
   const uint16_t info =
-      channel(rosmsg::MessageTraits<CameraInfo>::kRosName, rosmsg::Definition<CameraInfo>(),
+      channel(ros::msg::MessageTraits<CameraInfo>::kRosName, ros::msg::Definition<CameraInfo>(),
               "/camera/camera/color/camera_info");
-  const uint16_t tf =
-      channel(rosmsg::MessageTraits<TFMessage>::kRosName, rosmsg::Definition<TFMessage>(), "/tf");
-  const uint16_t tf_static = channel(rosmsg::MessageTraits<TFMessage>::kRosName,
-                                     rosmsg::Definition<TFMessage>(), "/tf_static");
+  const uint16_t tf = channel(ros::msg::MessageTraits<TFMessage>::kRosName,
+                              ros::msg::Definition<TFMessage>(), "/tf");
+  const uint16_t tf_static = channel(ros::msg::MessageTraits<TFMessage>::kRosName,
+                                     ros::msg::Definition<TFMessage>(), "/tf_static");
   const int64_t t0 = 1'700'000'000'000'000'000;
   uint32_t seq = 0;
   auto put = [&](uint16_t ch, int64_t t, const std::vector<uint8_t>& bytes) {
@@ -343,8 +345,8 @@ fs::path WriteRobotBag(const fs::path& path) {
   };
   auto edge = [](const std::string& parent, const std::string& child, const RigidTransform& X,
                  int64_t t) {
-    rosmsg::TransformStamped e;
-    e.header = {rosmsg::Time::FromNanoseconds(t), parent};
+    ros::msg::TransformStamped e;
+    e.header = {ros::msg::Time::FromNanoseconds(t), parent};
     e.child_frame_id = child;
     e.transform.translation = {X.translation().x(), X.translation().y(), X.translation().z()};
     const Eigen::Quaterniond q = X.quaternion();
@@ -355,20 +357,20 @@ fs::path WriteRobotBag(const fs::path& path) {
   const RigidTransform link_to_optical =
       RigidTransform::LookAt({0, 0, 0}, {1, 0, 0}, Eigen::Vector3d::UnitZ());
   put(tf_static, t0,
-      rosmsg::Encode(TFMessage{
+      ros::msg::Encode(TFMessage{
           {edge("igus_rebel_base_link", "mount", RigidTransform(Eigen::Vector3d(0, 0, 0.4)), t0),
            edge("link", "camera_color_optical_frame", link_to_optical, t0)}}));
   for (int64_t t = t0 - 20'000'000; t <= t0 + 3'100'000'000; t += 10'000'000) {
     const double s = static_cast<double>(t - t0) * 1e-9;
     put(tf, t,
-        rosmsg::Encode(TFMessage{
+        ros::msg::Encode(TFMessage{
             {edge("mount", "link", RigidTransform::FromRpy(0, 0, 0.05 * s, {0, 0, 0}), t)}}));
   }
   constexpr int kW = 64, kH = 48;
   for (int64_t i = 0; i < 90; ++i) {
     const int64_t t = t0 + i * int64_t{33'333'333};
     Image c;
-    c.header = {rosmsg::Time::FromNanoseconds(t), "camera_color_optical_frame"};
+    c.header = {ros::msg::Time::FromNanoseconds(t), "camera_color_optical_frame"};
     c.width = kW;
     c.height = kH;
     c.encoding = "bgr8";
@@ -391,9 +393,9 @@ fs::path WriteRobotBag(const fs::path& path) {
     k.width = kW;
     k.height = kH;
     k.k = {50.0, 0, 31.5, 0, 50.0, 23.5, 0, 0, 1};
-    put(color, t, rosmsg::Encode(c));
-    put(depth, t, rosmsg::Encode(d));
-    put(info, t, rosmsg::Encode(k));
+    put(color, t, ros::msg::Encode(c));
+    put(depth, t, ros::msg::Encode(d));
+    put(info, t, ros::msg::Encode(k));
   }
   EXPECT_TRUE(w->Close().ok());
   return path;
@@ -401,7 +403,7 @@ fs::path WriteRobotBag(const fs::path& path) {
 
 TEST_F(ReplayTest, ARobotsBagIntoARunFolder) {
   const fs::path bag = WriteRobotBag(*dir_ / "robot.mcap");
-  Result<recording::Bag> b = recording::ReadBag(bag);
+  Result<ros::bag::Bag> b = ros::bag::ReadBag(bag);
   ASSERT_TRUE(b.ok()) << b.status().ToString();
   EXPECT_FALSE(b->avp_recording);
   EXPECT_EQ(b->pairs, 90u);

@@ -131,7 +131,7 @@ TEST_F(RunCommandTest, RunWritesTheRunFolder) {
   o.out_dir = dir_ / "run";
   int steps = 0;
   o.on_step = [&](const pipeline::StepRecord&) { ++steps; };
-  auto r = RunToFolder(c, registries_, o);
+  auto r = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(steps, 3);
   for (const char* f :
@@ -192,7 +192,7 @@ TEST_F(RunCommandTest, EpisodeVisibilityOfEachFruitIsWhatTheRendererShows) {
   ASSERT_TRUE(scene.ok()) << scene.status().ToString();
   auto gt = GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok()) << gt.status().ToString();
-  auto r = RunEpisodeOnScene(c, registries_, *scene, *gt);
+  auto r = RunEpisodeOnScene(CheckedRunConfig::Check(c, registries_).value(), *scene, *gt);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   ASSERT_EQ(r->episode.views_fused(), 3);
   ASSERT_EQ(r->fruits.size(), scene->Fruits().size());
@@ -240,7 +240,7 @@ TEST_F(RunCommandTest, EpisodeVisibilityOfEachFruitIsWhatTheRendererShows) {
   // The default depth noise drops or moves depths: a dropped fruit pixel still counts (the
   // labels are ground truth), so the fractions stay within a few percent of the clean render.
   c.depth_noise.enabled = true;
-  auto noisy = RunEpisodeOnScene(c, registries_, *scene, *gt);
+  auto noisy = RunEpisodeOnScene(CheckedRunConfig::Check(c, registries_).value(), *scene, *gt);
   ASSERT_TRUE(noisy.ok()) << noisy.status().ToString();
   best = rendered_best(*noisy);
   for (const eval::FruitResult& f : noisy->fruits) {
@@ -252,14 +252,13 @@ TEST_F(RunCommandTest, RunRejectsBadInput) {
   RunConfig c;
   c.scenario = "tomato-nowhere";
   c.episode.views = 2;
-  RunFolderOptions o;
-  o.out_dir = dir_ / "bad";
-  auto r = RunToFolder(c, registries_, o);
+  // Refused at the door: no CheckedRunConfig, so nothing that runs an episode is reached.
+  Result<CheckedRunConfig> r = CheckedRunConfig::Check(c, registries_);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("unknown scenario 'tomato-nowhere' (known: "));
   c.scenario = "tomato-single-cluster";
   c.planner.name = "best";
-  r = RunToFolder(c, registries_, o);
+  r = CheckedRunConfig::Check(c, registries_);
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("unknown planner 'best'"));
 }
@@ -277,7 +276,7 @@ TEST_F(RunCommandTest, PlannerOptionsReachThePlannerAndTheRecord) {
   c.planner.options = *parsed;  // later ones win
   RunFolderOptions o;
   o.out_dir = dir_ / "opts";
-  auto r = RunToFolder(c, registries_, o);
+  auto r = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   auto record = io::ReadJsonFile(o.out_dir / "record.json");
   ASSERT_TRUE(record.ok());
@@ -296,16 +295,16 @@ TEST_F(RunCommandTest, PlannerOptionsReachThePlannerAndTheRecord) {
   EXPECT_GT(std::stoi(row[static_cast<size_t>(col)]), 0);
   EXPECT_LE(std::stoi(row[static_cast<size_t>(col)]), 40);
 
+  // Bad options are refused at the door (CheckedRunConfig::Check), before any episode.
   c.planner.options = {{"p_unknown", "1.5"}};
-  r = RunToFolder(c, registries_, o);
-  ASSERT_FALSE(r.ok());
-  EXPECT_THAT(r.status().message(), HasSubstr("p_unknown (1.5) must be in [0, 1)"));
+  EXPECT_THAT(CheckedRunConfig::Check(c, registries_).status().message(),
+              HasSubstr("p_unknown (1.5) must be in [0, 1)"));
   c.planner.options = {{"w_motoin", "0.1"}};
-  EXPECT_THAT(RunToFolder(c, registries_, o).status().message(),
+  EXPECT_THAT(CheckedRunConfig::Check(c, registries_).status().message(),
               HasSubstr("unknown avp-nbv option 'w_motoin'"));
   c.planner.options = {{"p_unknown", "0.1"}};
   c.planner.name = "predefined";
-  EXPECT_THAT(RunToFolder(c, registries_, o).status().message(),
+  EXPECT_THAT(CheckedRunConfig::Check(c, registries_).status().message(),
               HasSubstr("unknown predefined planner option 'p_unknown' (known: generic_"));
 
   // In an experiment file, under planner_options; only for planners of the bench.
@@ -551,7 +550,7 @@ TEST_F(RunCommandTest, RunFolderIsInProgressWhileItRunsAndCompleteAfter) {
     state_while_running = st.ok() ? st->state : st.status().ToString();
     fs::copy(o.out_dir, killed, fs::copy_options::recursive);
   };
-  const auto r = RunToFolder(c, registries_, o);
+  const auto r = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(state_while_running, "in-progress");
   const Result<FolderState> done = ReadFolderState(o.out_dir);
@@ -568,13 +567,13 @@ TEST_F(RunCommandTest, RunFolderIsInProgressWhileItRunsAndCompleteAfter) {
   // A rerun into the killed folder refuses, saying what it holds; --force starts clean.
   o.on_step = nullptr;
   o.out_dir = killed;
-  const Status refused = RunToFolder(c, registries_, o).status();
+  const Status refused = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).status();
   EXPECT_EQ(refused.code(), StatusCode::kFailedPrecondition);
   EXPECT_THAT(refused.message(), HasSubstr("output folder '" + killed.string() + "'"));
   EXPECT_THAT(refused.message(), HasSubstr("an avp run that did not finish"));
   EXPECT_THAT(refused.message(), HasSubstr("--force"));
   o.force = true;
-  const auto again = RunToFolder(c, registries_, o);
+  const auto again = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o);
   ASSERT_TRUE(again.ok()) << again.status().ToString();
   EXPECT_EQ(ReadFolderState(killed).value().state, "complete");
   EXPECT_EQ(Lines(killed / "metrics.csv").size(), 4u);  // header + 3 views, none of the old run
@@ -584,15 +583,15 @@ TEST_F(RunCommandTest, RerunIntoACompleteFolderRefusesAndForceReplacesIt) {
   RunConfig c = SmallRun();
   RunFolderOptions o;
   o.out_dir = dir_ / "run";
-  ASSERT_TRUE(RunToFolder(c, registries_, o).ok());
+  ASSERT_TRUE(RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).ok());
   const std::string first_record = ReadAll(o.out_dir / "record.json");
   c.seed = 5;
-  const Status refused = RunToFolder(c, registries_, o).status();
+  const Status refused = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).status();
   EXPECT_EQ(refused.code(), StatusCode::kFailedPrecondition);
   EXPECT_THAT(refused.message(), HasSubstr("the results of a complete avp run"));
   EXPECT_EQ(ReadAll(o.out_dir / "record.json"), first_record);  // untouched
   o.force = true;
-  ASSERT_TRUE(RunToFolder(c, registries_, o).ok());
+  ASSERT_TRUE(RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).ok());
   EXPECT_EQ(io::ReadJsonFile(o.out_dir / "record.json").value()["config"]["seed"], 5);
 }
 
@@ -603,7 +602,7 @@ TEST_F(RunCommandTest, ForceNeverEmptiesAFolderThatIsNotARunFolder) {
   fs::create_directories(o.out_dir);
   std::ofstream(o.out_dir / "chapter1.tex") << "precious";
   o.force = true;
-  const Status s = RunToFolder(c, registries_, o).status();
+  const Status s = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).status();
   EXPECT_EQ(s.code(), StatusCode::kFailedPrecondition);
   EXPECT_THAT(s.message(), HasSubstr("'chapter1.tex'"));
   EXPECT_THAT(s.message(), HasSubstr("not an avp run folder, so --force does not empty it"));
@@ -611,10 +610,11 @@ TEST_F(RunCommandTest, ForceNeverEmptiesAFolderThatIsNotARunFolder) {
   // Nor a run folder with something else in it.
   o.out_dir = dir_ / "run";
   o.force = false;
-  ASSERT_TRUE(RunToFolder(c, registries_, o).ok());
+  ASSERT_TRUE(RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).ok());
   std::ofstream(o.out_dir / "notes.txt") << "mine";
   o.force = true;
-  EXPECT_THAT(RunToFolder(c, registries_, o).status().message(), HasSubstr("'notes.txt'"));
+  EXPECT_THAT(RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).status().message(),
+              HasSubstr("'notes.txt'"));
   EXPECT_TRUE(fs::exists(o.out_dir / "notes.txt"));
   EXPECT_TRUE(fs::exists(o.out_dir / "record.json"));
 }
@@ -624,11 +624,11 @@ TEST_F(RunCommandTest, OutputsNeverOverwriteInputs) {
   RunConfig c = SmallRun();
   RunFolderOptions o;
   o.out_dir = dir_ / "run";
-  ASSERT_TRUE(RunToFolder(c, registries_, o).ok());
+  ASSERT_TRUE(RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).ok());
   c.ground_truth_file = o.out_dir / "map.ot";
   o.force = true;
   const std::string before = ReadAll(c.ground_truth_file);
-  const Status s = RunToFolder(c, registries_, o).status();
+  const Status s = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).status();
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_THAT(s.message(), HasSubstr("is the ground truth file"));
   EXPECT_THAT(s.message(), HasSubstr("outputs never overwrite inputs"));
@@ -636,7 +636,7 @@ TEST_F(RunCommandTest, OutputsNeverOverwriteInputs) {
   // A configuration file the run read, reached through another spelling of the path.
   c.ground_truth_file.clear();
   o.inputs = {{o.out_dir / "." / "record.json", "configuration file"}};
-  EXPECT_THAT(RunToFolder(c, registries_, o).status().message(),
+  EXPECT_THAT(RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).status().message(),
               HasSubstr("is the configuration file"));
 }
 
@@ -645,7 +645,8 @@ TEST_F(RunCommandTest, AWriteErrorStopsTheRunNamingTheFile) {
   std::ofstream(dir_ / "file") << "x";
   RunFolderOptions o;
   o.out_dir = dir_ / "file" / "run";
-  const Status s = RunToFolder(SmallRun(), registries_, o).status();
+  const Status s =
+      RunToFolder(CheckedRunConfig::Check(SmallRun(), registries_).value(), o).status();
   EXPECT_EQ(s.code(), StatusCode::kIoError);
   EXPECT_THAT(s.message(), HasSubstr(o.out_dir.string()));
   EXPECT_THAT(s.message(), HasSubstr("Not a directory"));
@@ -682,7 +683,7 @@ TEST_F(RunCommandTest, AFullDiskStopsTheRunAtTheStepNamingTheFile) {
   Status s;
   {
     const ScopedFileSizeLimit full(1500);  // metrics.csv's header and a few rows
-    s = RunToFolder(c, registries_, o).status();
+    s = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o).status();
   }
   EXPECT_EQ(s.code(), StatusCode::kIoError);
   EXPECT_THAT(s.message(), HasSubstr((o.out_dir / "metrics.csv").string()));
@@ -722,7 +723,7 @@ TEST_F(RunCommandTest, BenchFolderHasTheLifecycleAndRefusesReruns) {
   // A run folder is not a bench folder.
   RunFolderOptions ro;
   ro.out_dir = dir_ / "run";
-  ASSERT_TRUE(RunToFolder(SmallRun(), registries_, ro).ok());
+  ASSERT_TRUE(RunToFolder(CheckedRunConfig::Check(SmallRun(), registries_).value(), ro).ok());
   o.out_dir = ro.out_dir;
   EXPECT_THAT(RunBench(o, registries_).status().message(),
               HasSubstr("not an avp bench folder, so --force does not empty it"));

@@ -153,7 +153,7 @@ TEST_F(RunReportTest, ThePageHoldsWhatTheRunRecorded) {
   c.threads = 2;
   experiment::RunFolderOptions o;
   o.out_dir = dir_ / "run";
-  auto r = experiment::RunToFolder(c, registries_, o);
+  auto r = experiment::RunToFolder(experiment::CheckedRunConfig::Check(c, registries_).value(), o);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   const fs::path html = o.out_dir / "report.html";
   ASSERT_TRUE(fs::exists(html));
@@ -226,7 +226,8 @@ TEST_F(RunReportTest, TheDemosEpisodeFitsInTenMegabytes) {
   auto gt = experiment::GroundTruthFor(c, *scene);
   ASSERT_TRUE(gt.ok()) << gt.status().ToString();
   TimedCollector timed;
-  auto r = experiment::RunEpisodeOnScene(c, registries_, *scene, *gt, {&timed});
+  auto r = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, registries_).value(), *scene, *gt, {&timed});
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   RunReportInfo info;
   info.title = "demo";

@@ -15,7 +15,7 @@
 #include <avp/experiment/live_run.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/options_yaml.h>
-#include <avp/live/live_options.h>
+#include <avp/ros/live/live_options.h>
 
 #include "cli_common.h"
 #include "ros2_cli.h"
@@ -32,18 +32,18 @@ struct LiveCli {
 
 int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& registries) {
   YAML::Node section;
-  const Result<experiment::RunConfig> config = ResolveConfig(
+  const Result<experiment::CheckedRunConfig> config = ResolveConfig(
       cmd, cli.run, registries, {.name = "live", .node = &section, .default_scene = false});
   if (!config.ok()) return Failed("live", config.status());
-  const Result<live::LiveOptions> options =
-      ResolveSectionOptions(live::LiveOptionTable(), section, cli.live_options,
+  const Result<ros::live::LiveOptions> options =
+      ResolveSectionOptions(ros::live::LiveOptionTable(), section, cli.live_options,
                             cli.run.config_file + ": live", "live option");
   if (!options.ok()) return Failed("live", options.status());
   if (cli.run.print_config) {
-    Result<YAML::Node> yaml = experiment::RunConfigToYaml(*config, registries);
+    Result<YAML::Node> yaml = experiment::RunConfigToYaml(**config, registries);
     if (!yaml.ok()) return Failed("live", yaml.status());
-    (*yaml)["live"] = io::OptionsToYaml(live::LiveOptionTable().Values(*options),
-                                        live::LiveOptionTable().Info(*options));
+    (*yaml)["live"] = io::OptionsToYaml(ros::live::LiveOptionTable().Values(*options),
+                                        ros::live::LiveOptionTable().Info(*options));
     std::fputs(io::YamlText(*yaml).c_str(), stdout);
     return 0;
   }
@@ -61,7 +61,7 @@ int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& 
   }
   folder.on_step = PrintStep;
   const Result<experiment::RunSummary> summary = experiment::RunLiveToFolder(
-      *config, registries, *options, folder, stop, [](const experiment::LiveWaiting& w) {
+      *config, *options, folder, stop, [](const experiment::LiveWaiting& w) {
         std::printf("avp live: node %s on ROS_DOMAIN_ID %d; waiting for %s and %s\n",
                     w.node.c_str(), w.domain_id, w.camera_info_topic.c_str(),
                     w.joint_states_topic.c_str());
@@ -70,10 +70,10 @@ int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& 
   if (!summary.ok()) return Failed("live", summary.status());
   const pipeline::EpisodeResult& e = summary->result.episode;
   std::printf("%s with %s / %s: %d views (%s%s%s) in %.1f s", summary->scene_name.c_str(),
-              config->planner.name.c_str(), config->segmenter.name.c_str(), e.views_fused(),
+              (*config)->planner.name.c_str(), (*config)->segmenter.name.c_str(), e.views_fused(),
               std::string(pipeline::ToString(e.end)).c_str(), e.end_reason.empty() ? "" : ": ",
               e.end_reason.c_str(), summary->seconds);
-  if (!config->scenario.empty() || !config->scene_file.empty()) {  // scored against its truth
+  if (!(*config)->scenario.empty() || !(*config)->scene_file.empty()) {  // scored against its truth
     std::printf("; final F1 %.3f, fruits found %zu/%zu", summary->result.final_metrics.exact.f1,
                 summary->result.final_metrics.fruits.found,
                 summary->result.final_metrics.fruits.total);

@@ -4,7 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <avp/experiment/registries.h>
-#include <avp/interop/remote_segmenter.h>
+#include <avp/segmentation_service/remote_segmenter.h>
 #include <avp/zsl/register.h>
 
 #include "commands.h"
@@ -14,7 +14,7 @@ int main(int argc, char** argv) {
   avp::experiment::Registries registries = avp::experiment::BuiltinRegistries();
   // Every command and config also accepts remote://host:port[/model] as a segmenter, and ywes /
   // lsam (models from AVP_ZSL_MODEL_DIR), ywes://DIR, lsam://DIR.
-  avp::interop::RegisterRemoteSegmenter(registries.segmenters);
+  avp::segmentation_service::RegisterRemoteSegmenter(registries.segmenters);
   avp::zsl::RegisterZslSegmenters(registries.segmenters);
 
   CLI::App app{

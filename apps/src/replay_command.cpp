@@ -28,12 +28,12 @@ struct ReplayCli {
   std::string segmenter;
   std::string config_file;
   std::vector<std::string> set;
-  recording::BagReadOptions bag_options;
+  ros::bag::BagReadOptions bag_options;
   std::vector<std::string> bag_option_items;
 };
 
 /// The bag's run configuration, then --config, then --set (ReplayToFolder validates it).
-Result<experiment::RunConfig> ResolveReplayConfig(const recording::Bag& bag, const ReplayCli& cli) {
+Result<experiment::RunConfig> ResolveReplayConfig(const ros::bag::Bag& bag, const ReplayCli& cli) {
   AVP_ASSIGN_OR_RETURN(experiment::RunConfig config, experiment::BagRunConfig(bag));
   if (!cli.config_file.empty()) {
     AVP_ASSIGN_OR_RETURN(const YAML::Node root, io::LoadYamlFile(cli.config_file));
@@ -51,11 +51,11 @@ int Replay(const ReplayCli& cli_in, const experiment::Registries& registries) {
   {
     Result<OptionValues> items = ParseKeyValues(cli.bag_option_items, "--bag-option item");
     if (!items.ok()) return Failed("replay", items.status());
-    if (Status s = recording::BagReadOptionTable().SetAll(cli.bag_options, *items); !s.ok()) {
+    if (Status s = ros::bag::BagReadOptionTable().SetAll(cli.bag_options, *items); !s.ok()) {
       return Failed("replay", s);
     }
   }
-  const Result<recording::Bag> bag = recording::ReadBag(cli.bag, cli.bag_options);
+  const Result<ros::bag::Bag> bag = ros::bag::ReadBag(cli.bag, cli.bag_options);
   if (!bag.ok()) return Failed("replay", bag.status());
   if (!bag->damage.ok()) {
     spdlog::error("{}", bag->damage.ToString());
@@ -150,7 +150,7 @@ void AddReplayCommand(CLI::App& app, CommandContext& context) {
                   "segmenter options)");
   AddKeyValueOption(*cmd, "--set", cli->set,
                     "Any key of the run configuration over the recording's (repeatable)");
-  recording::BagReadOptions& b = cli->bag_options;
+  ros::bag::BagReadOptions& b = cli->bag_options;
   cmd->add_option("--color-topic", b.color_topic, "Colour images")->default_str(b.color_topic);
   cmd->add_option("--depth-topic", b.depth_topic, "Depth aligned to colour (32FC1 m, 16UC1 mm)")
       ->default_str(b.depth_topic);

@@ -51,9 +51,9 @@ struct ConfigSection {
 /// The configuration: the defaults, --config (without `section`), the shorthand flags, the
 /// --*-option items, --set; the default scenario when none is named (section.default_scene);
 /// validated (errors name the file).
-Result<experiment::RunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& cli,
-                                            const experiment::Registries& registries,
-                                            const ConfigSection& section = {});
+Result<experiment::CheckedRunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& cli,
+                                                   const experiment::Registries& registries,
+                                                   const ConfigSection& section = {});
 
 /// One line per fused view: pose, masks, F1 and fruits (when there is ground truth), stage times.
 void PrintStep(const pipeline::StepRecord& s);

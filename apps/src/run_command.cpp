@@ -82,9 +82,9 @@ Status ApplyKeyValues(const std::vector<std::string>& items, std::string_view wh
 
 }  // namespace
 
-Result<experiment::RunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& cli,
-                                            const experiment::Registries& registries,
-                                            const ConfigSection& section) {
+Result<experiment::CheckedRunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& cli,
+                                                   const experiment::Registries& registries,
+                                                   const ConfigSection& section) {
   experiment::RunConfig c;
   if (!cli.config_file.empty()) {
     AVP_ASSIGN_OR_RETURN(YAML::Node root, io::LoadYamlFile(cli.config_file));
@@ -103,10 +103,13 @@ Result<experiment::RunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& c
   if (section.default_scene && c.scenario.empty() && c.scene_file.empty()) {
     c.scenario = std::string(sim::DefaultScenarioName());
   }
-  if (Status s = c.Validate(registries); !s.ok()) {
-    return cli.config_file.empty() ? s : s.WithContext(cli.config_file);
+  // The one check of the configuration: what flows inward is valid (CheckedRunConfig).
+  Result<experiment::CheckedRunConfig> checked =
+      experiment::CheckedRunConfig::Check(std::move(c), registries);
+  if (!checked.ok() && !cli.config_file.empty()) {
+    return checked.status().WithContext(cli.config_file);
   }
-  return c;
+  return checked;
 }
 
 void PrintStep(const pipeline::StepRecord& s) { PrintStepWithProgress(s, {}); }
@@ -169,12 +172,12 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
                stdout);
     return 0;
   }
-  const Result<experiment::RunConfig> config = ResolveConfig(cmd, cli, registries);
+  const Result<experiment::CheckedRunConfig> config = ResolveConfig(cmd, cli, registries);
   if (!config.ok()) return Failed("run", config.status());
   if (cli.print_config) {
     // Only a valid configuration is printed (ResolveConfig validates), so that --config reads
     // back whatever is printed.
-    const Result<YAML::Node> yaml = experiment::RunConfigToYaml(*config, registries);
+    const Result<YAML::Node> yaml = experiment::RunConfigToYaml(**config, registries);
     if (!yaml.ok()) return Failed("run", yaml.status());
     std::fputs(io::YamlText(*yaml).c_str(), stdout);
     return 0;
@@ -198,10 +201,9 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
         s, report::FormatProgressTimes(static_cast<size_t>(s.view + 1),
                                        static_cast<size_t>(std::max(s.views_total, 0)), elapsed));
   };
-  const Result<experiment::RunSummary> summary =
-      experiment::RunToFolder(*config, registries, options);
+  const Result<experiment::RunSummary> summary = experiment::RunToFolder(*config, options);
   if (!summary.ok()) return Failed("run", summary.status());
-  PrintSummary(*config, *summary, options.out_dir);
+  PrintSummary(**config, *summary, options.out_dir);
   // An episode cut short by its segmenter (a service that is down) is a failure of the command,
   // its results saved.
   if (summary->result.episode.end == pipeline::EpisodeEnd::kSegmenterFault) {

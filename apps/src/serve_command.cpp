@@ -77,8 +77,8 @@ Status RunServeSegmentation(const ServeOptions& options) {
   // Before any server thread exists, so that every one inherits the mask and the signals reach
   // the Wait below instead of killing the process.
   const ScopedSignalBlock signals;
-  AVP_ASSIGN_OR_RETURN(std::unique_ptr<interop::SegmentationServer> server,
-                       interop::SegmentationServer::Start(options.server));
+  AVP_ASSIGN_OR_RETURN(std::unique_ptr<segmentation_service::SegmentationServer> server,
+                       segmentation_service::SegmentationServer::Start(options.server));
   log(ServeLogLevel::kInfo,
       fmt::format("serving segmentation (KServe v2 / Open Inference Protocol, gRPC) on {} with {} "
                   "worker threads; queue {} ({} per client); per request at most {} pixels, a "
@@ -88,7 +88,7 @@ Status RunServeSegmentation(const ServeOptions& options) {
                   options.server.max_prompt_bytes, options.server.max_prompt_phrases,
                   options.server.max_instances));
   int ready = 0;
-  for (const interop::ModelState& m : server->models()) {
+  for (const segmentation_service::ModelState& m : server->models()) {
     if (m.ready) {
       ++ready;
       log(ServeLogLevel::kInfo, fmt::format("model '{}': READY", m.name));
@@ -129,7 +129,7 @@ Status RunServeSegmentation(const ServeOptions& options) {
     std::error_code ignored;
     std::filesystem::remove(options.port_file, ignored);  // no stale port for the next script
   }
-  const interop::ServerStats stats = server->stats();
+  const segmentation_service::ServerStats stats = server->stats();
   log(ServeLogLevel::kInfo,
       fmt::format("stopped after {} answered and {} refused inference requests ({} expired in "
                   "the queue, {} stopped when their client left or their deadline passed, {} "
@@ -174,7 +174,7 @@ struct ServeCli {
 
 struct ServeModelsCli {
   std::string model_dir, port_file, device = "auto";
-  interop::TensorServerOptions server;
+  segmentation_service::TensorServerOptions server;
   int intra_op_threads = 0;
   int64_t batch_delay_us = 2000;
   bool verify_sha256 = false;
@@ -215,7 +215,7 @@ int ServeModels(const ServeModelsCli& cli) {
     std::error_code ignored;
     std::filesystem::remove(cli.port_file, ignored);
   }
-  const interop::TensorServerStats stats = service->server->stats();
+  const segmentation_service::TensorServerStats stats = service->server->stats();
   spdlog::info("stopped after {} answered and {} refused inference requests", stats.infer_ok,
                stats.infer_failed);
   for (const auto& [name, b] : stats.batching) {
@@ -236,7 +236,7 @@ int ServeModels(const ServeModelsCli& cli) {
 
 void AddServeSegmentation(CLI::App& serve_cmd, CommandContext& context) {
   auto cli = std::make_shared<ServeCli>();
-  interop::ServerOptions& server = cli->options.server;
+  segmentation_service::ServerOptions& server = cli->options.server;
   server.host = "0.0.0.0";
   CLI::App* cmd = serve_cmd.add_subcommand(
       "segmentation",

@@ -6,7 +6,7 @@
 #include <string>
 
 #include <avp/core/status.h>
-#include <avp/interop/segmentation_server.h>
+#include <avp/segmentation_service/segmentation_server.h>
 
 namespace avp::apps {
 
@@ -18,7 +18,7 @@ enum class ServeLogLevel { kInfo, kWarning };
 /// or SIGTERM, then a clean shutdown (running calls finish, for up to `grace_s`).
 struct ServeOptions {
   /// Host, port (0 = pick one), backends, threads, ... (the command's default host is 0.0.0.0).
-  interop::ServerOptions server;
+  segmentation_service::ServerOptions server;
   /// When set, the bound port is written there (one line, atomically) once the server listens:
   /// scripts wait for it instead of sleeping.
   std::filesystem::path port_file;

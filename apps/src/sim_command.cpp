@@ -11,9 +11,9 @@
 
 #include <avp/experiment/episode_runner.h>
 #include <avp/io/options_yaml.h>
-#include <avp/live/live_options.h>
 #include <avp/robot/arm_model.h>
-#include <avp/simrobot/sim_ros2_robot.h>
+#include <avp/ros/live/live_options.h>
+#include <avp/ros/simrobot/sim_ros2_robot.h>
 
 #include "cli_common.h"
 #include "ros2_cli.h"
@@ -34,11 +34,11 @@ struct SimCli {
 
 int SimRos2(const CLI::App& cmd, const SimCli& cli, const experiment::Registries& registries) {
   YAML::Node section;
-  const Result<experiment::RunConfig> config =
+  const Result<experiment::CheckedRunConfig> config =
       ResolveConfig(cmd, cli.run, registries, {.name = "sim", .node = &section});
   if (!config.ok()) return Failed("sim ros2", config.status());
-  const Result<simrobot::SimRobotOptions> options =
-      ResolveSectionOptions(simrobot::SimRobotOptionTable(), section, cli.sim_options,
+  const Result<ros::simrobot::SimRobotOptions> options =
+      ResolveSectionOptions(ros::simrobot::SimRobotOptionTable(), section, cli.sim_options,
                             cli.run.config_file + ": sim", "sim option");
   if (!options.ok()) return Failed("sim ros2", options.status());
   if (!(cli.duration_s >= 0.0 && cli.duration_s <= 1e7)) {
@@ -51,45 +51,45 @@ int SimRos2(const CLI::App& cmd, const SimCli& cli, const experiment::Registries
                                   "--distro '{}' must be humble or jazzy", cli.distro)));
   }
   if (cli.run.print_config) {
-    Result<YAML::Node> yaml = experiment::RunConfigToYaml(*config, registries);
+    Result<YAML::Node> yaml = experiment::RunConfigToYaml(**config, registries);
     if (!yaml.ok()) return Failed("sim ros2", yaml.status());
-    (*yaml)["sim"] = io::OptionsToYaml(simrobot::SimRobotOptionTable().Values(*options),
-                                       simrobot::SimRobotOptionTable().Info(*options));
+    (*yaml)["sim"] = io::OptionsToYaml(ros::simrobot::SimRobotOptionTable().Values(*options),
+                                       ros::simrobot::SimRobotOptionTable().Info(*options));
     std::fputs(io::YamlText(*yaml).c_str(), stdout);
     return 0;
   }
-  Result<sim::Scene> scene = experiment::LoadScene(*config, registries);
+  Result<sim::Scene> scene = experiment::LoadScene(**config, registries);
   if (!scene.ok()) return Failed("sim ros2", scene.status());
   Result<robot::ArmModel> model = robot::LoadDefaultArm();
   if (!model.ok()) return Failed("sim ros2", model.status());
-  ros2::NodeOptions node_options;
+  ros::dds::NodeOptions node_options;
   node_options.name = cli.node_name;
   node_options.domain_id = cli.domain_id;
   node_options.distro =
-      cli.distro == "jazzy" ? rosmsg::RosDistro::kJazzy : rosmsg::RosDistro::kHumble;
-  Result<std::unique_ptr<ros2::Node>> node = ros2::Node::Create(node_options);
+      cli.distro == "jazzy" ? ros::msg::RosDistro::kJazzy : ros::msg::RosDistro::kHumble;
+  Result<std::unique_ptr<ros::dds::Node>> node = ros::dds::Node::Create(node_options);
   if (!node.ok()) return Failed("sim ros2", node.status());
-  Result<std::unique_ptr<simrobot::SimRos2Robot>> robot = simrobot::SimRos2Robot::Create(
-      **node, *scene, *model, experiment::StartJoints(*scene, *model), config->camera,
-      config->depth_noise, config->seed, *options);
+  Result<std::unique_ptr<ros::simrobot::SimRos2Robot>> robot = ros::simrobot::SimRos2Robot::Create(
+      **node, *scene, *model, experiment::StartJoints(*scene, *model), (*config)->camera,
+      (*config)->depth_noise, (*config)->seed, *options);
   if (!robot.ok()) return Failed("sim ros2", robot.status());
 
   std::printf(
       "avp sim ros2: %s (seed %llu) as node %s on ROS_DOMAIN_ID %d: publishing %s, %s, %s, "
       "/tf, /tf_static and %s; obeying %s. Ctrl-C stops.\n",
-      scene->name.c_str(), static_cast<unsigned long long>(config->seed),
+      scene->name.c_str(), static_cast<unsigned long long>((*config)->seed),
       (*node)->fully_qualified_name().c_str(), (*node)->domain_id(), options->color_topic.c_str(),
       options->depth_topic.c_str(), options->camera_info_topic.c_str(),
       options->joint_states_topic.c_str(), options->trajectory_topic.c_str());
   std::fflush(stdout);
   std::stop_source stop;
-  simrobot::SimRos2Robot* r = robot->get();
+  ros::simrobot::SimRos2Robot* r = robot->get();
   uint64_t arrivals = 0, refused = 0;
   Status s = Status::Ok();
   {
     // Progress: a line per arrival and per refused goal.
     StopOnSignal stopper(stop, cli.duration_s, "avp sim ros2: stopping", [&] {
-      const simrobot::SimRobotCounters c = r->counters();
+      const ros::simrobot::SimRobotCounters c = r->counters();
       if (c.arrivals != arrivals) {
         arrivals = c.arrivals;
         std::printf("arrived at goal %llu (%llu frames rendered, %llu image sets published)\n",
@@ -107,7 +107,7 @@ int SimRos2(const CLI::App& cmd, const SimCli& cli, const experiment::Registries
     s = r->Run(stop.get_token());
   }
   if (!s.ok()) return Failed("sim ros2", s);
-  const simrobot::SimRobotCounters c = r->counters();
+  const ros::simrobot::SimRobotCounters c = r->counters();
   std::printf("avp sim ros2: stopped after %llu goals (%llu refused), %llu frames rendered\n",
               static_cast<unsigned long long>(c.goals_received),
               static_cast<unsigned long long>(c.goals_refused),

@@ -23,7 +23,7 @@ trap cleanup EXIT
 
 status=0
 timeout 200 "$AVP" live "${COMMON[@]}" --out "$WORK/live" \
-  --live-option camera.labels_prefix=/avp/sim/labels --live-option rviz.enabled=true \
+  --live-option camera.labels_prefix=/avp/sim --live-option rviz.enabled=true \
   --live-option arm.min_duration_s=0 --live-option arm.max_joint_speed_rad_s=100 \
   --live-option camera.frame_timeout_s=20 --live-option arm.state_timeout_s=20 \
   > "$WORK/live.log" 2>&1 || status=$?
@@ -73,7 +73,7 @@ PY
 SIM=$!
 trap cleanup EXIT
 "$AVP" live "${BASE[@]}" --views 8 --out "$WORK/interrupted" \
-  --live-option camera.labels_prefix=/avp/sim/labels --live-option rviz.enabled=false \
+  --live-option camera.labels_prefix=/avp/sim --live-option rviz.enabled=false \
   --live-option arm.min_duration_s=0 --live-option arm.max_joint_speed_rad_s=100 \
   --live-option camera.frame_timeout_s=20 > "$WORK/interrupted.log" 2>&1 &
 LIVE=$!

@@ -13,6 +13,7 @@
 #include <fmt/ranges.h>
 
 #include <avp/core/error.h>
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/core/semantic_class.h>
 #include <avp/eval/ground_truth.h>
@@ -171,12 +172,6 @@ void BuildVoxelMap(std::vector<KeyAndId>& pairs, GroundTruth& gt) {
   for (const auto& [key, id] : pairs) ++gt.voxels_per_fruit[id];
 }
 
-int ResolveThreads(int requested, size_t work) {
-  int n = requested;
-  if (n <= 0) n = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  return static_cast<int>(std::min<size_t>(static_cast<size_t>(n), std::max<size_t>(work, 1)));
-}
-
 }  // namespace
 
 const OptionTable<GroundTruthOptions>& GroundTruthOptionTable() {
@@ -204,7 +199,6 @@ const OptionTable<GroundTruthOptions>& GroundTruthOptionTable() {
         errors.push_back(fmt::format("max_range_m ({}) must be in (0, 100]", o.max_range_m));
       }
     });
-    t->Threads("num_threads", &G::num_threads);
     return t;
   }();
   return *table;
@@ -386,9 +380,7 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
   const CameraIntrinsics K_view = ObservationIntrinsics(K, options);
   AVP_RETURN_IF_ERROR(K_view.Validate().WithContext("observation view intrinsics"));
 
-  sim::RendererOptions renderer_options;
-  renderer_options.num_threads = 1;  // one view per worker
-  const sim::RgbdRenderer renderer(scene, renderer_options);
+  const sim::RgbdRenderer renderer(scene);  // one view per worker: each renders serially
   const Rng views_rng = Rng(options.seed).Fork("observable-ground-truth");
   std::unordered_map<uint16_t, GroundTruthFruit> truth;
   for (const sim::FruitTruth& f : gt.fruits) {
@@ -396,8 +388,9 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
   }
   const ViewContext ctx{K_view, options, fruit_spheres, renderer, truth};
 
-  const int threads = ResolveThreads(options.num_threads, views.size());
-  std::vector<ViewWorker> workers(static_cast<size_t>(threads));
+  const size_t threads =
+      std::min(static_cast<size_t>(Threads()), std::max<size_t>(views.size(), 1));
+  std::vector<ViewWorker> workers(threads);
   std::vector<uint8_t> reachable(views.size(), 0);  // written by the view's worker only
   std::atomic<size_t> next{0};
   const auto work = [&](size_t worker) {
@@ -412,14 +405,8 @@ Result<GroundTruth> ObservableGroundTruth(const sim::Scene& scene, const robot::
       ObserveView(views[i], ctx, w);
     }
   };
-  if (threads == 1) {
-    work(0);
-  } else {
-    std::vector<std::thread> pool;
-    pool.reserve(static_cast<size_t>(threads));
-    for (int t = 0; t < threads; ++t) pool.emplace_back(work, static_cast<size_t>(t));
-    for (std::thread& t : pool) t.join();
-  }
+  std::atomic<size_t> next_worker{0};
+  RunWorkers(threads, [&] { work(next_worker.fetch_add(1)); });
   MergeWorkers(workers, reachable, views, gt);
   return gt;
 }

@@ -26,9 +26,8 @@ bool IsTarget(const mapping::SemanticMap& map, const VoxelKey& k, SemanticClass 
 OracleNbvPlanner::OracleNbvPlanner(const sim::Scene& scene, const GroundTruth& gt,
                                    const OracleNbvOptions& options)
     : gt_(gt), options_(options) {
-  sim::RendererOptions ro;
-  ro.num_threads = 1;  // candidates are rendered in parallel instead
-  renderer_ = std::make_unique<sim::RgbdRenderer>(scene, ro);
+  // Candidates are rendered in parallel (ParallelFor), each on one thread.
+  renderer_ = std::make_unique<sim::RgbdRenderer>(scene);
 }
 
 OracleNbvPlanner::~OracleNbvPlanner() = default;
@@ -127,7 +126,7 @@ planning::PlanResult OracleNbvPlanner::Plan(const planning::PlanningRequest& req
     // depend on the thread count.
     const Rng ik_root = rng.Fork("observation-view-ik");
     const robot::IkOptions ik;
-    ParallelFor(candidates.size() - first, options_.num_threads, [&](size_t j) {
+    ParallelFor(candidates.size() - first, [&](size_t j) {
       planning::ViewCandidate& c = candidates[first + j];
       Rng r = ik_root.Fork(static_cast<uint64_t>(j));
       const robot::IkResult res = request.arm->SolveCameraIk(c.X_WC, request.q_current, r, ik);
@@ -141,7 +140,7 @@ planning::PlanResult OracleNbvPlanner::Plan(const planning::PlanningRequest& req
   const bool detections = options_.objective == OracleNbvOptions::Objective::kDetections;
   const std::unordered_set<uint16_t> found =
       detections ? FoundFruits(*request.map, request.target_class) : std::unordered_set<uint16_t>{};
-  ParallelFor(candidates.size(), options_.num_threads, [&](size_t i) {
+  ParallelFor(candidates.size(), [&](size_t i) {
     planning::ViewCandidate& c = candidates[i];
     if (!c.reachable) return;
     c.gain =
@@ -167,7 +166,7 @@ planning::PlanResult RegretProbe::Plan(const planning::PlanningRequest& request,
   const int call = calls_++;
   if (!result.status.ok() || result.ranked.empty()) return result;
   std::vector<double> truth(result.ranked.size(), 0.0), predicted(result.ranked.size(), 0.0);
-  ParallelFor(result.ranked.size(), num_threads_, [&](size_t i) {
+  ParallelFor(result.ranked.size(), [&](size_t i) {
     truth[i] = static_cast<double>(
         oracle_.TrueGain(*request.map, request.target_class, request.K, result.ranked[i].X_WC));
   });
@@ -233,8 +232,6 @@ void RegisterOraclePlanners(planning::PlannerRegistry& registry) {
           if (truth == nullptr) {
             return FailedPreconditionError("the oracle planners need eval::PlannerTruth");
           }
-          o.num_threads = c.threads;
-          o.candidates.num_threads = c.threads;
           if (o.objective == OracleNbvOptions::Objective::kDetections) o.detector = truth->detector;
           return std::unique_ptr<planning::ViewPlanner>(
               std::make_unique<OracleNbvPlanner>(truth->scene, truth->gt, o));

@@ -80,6 +80,14 @@ using internal::kManifestName;
 using internal::ReadManifest;
 using internal::SecondsSince;
 
+/// fn(i) for every i in [0, n) on config.jobs threads (0: the hardware's); each job runs
+/// serially inside (core/parallel.h).
+template <typename Fn>
+void InJobs(const BenchConfig& config, size_t n, Fn&& fn) {
+  const ThreadScope jobs(config.jobs);
+  ParallelFor(n, std::forward<Fn>(fn));
+}
+
 /// The scene of each scene-file entry of `list`: every file read once, then arranged once per
 /// entry (in parallel); fills the entries' display names. Registered scenarios get nullptr (they
 /// are built per seed). Two entries with the same display name (or the same run folder name) are
@@ -94,7 +102,7 @@ Result<std::vector<std::shared_ptr<const sim::Scene>>> LoadSceneFiles(
     }
   }
   std::vector<Result<sim::Scene>> read(files.size(), InternalError("not read"));
-  ParallelFor(files.size(), config.jobs, [&](size_t i) { read[i] = sim::LoadSceneFile(files[i]); });
+  InJobs(config, files.size(), [&](size_t i) { read[i] = sim::LoadSceneFile(files[i]); });
   // What the loader warns about (a placeholder material, fruit fragments, a plant under the
   // ground...), once per file, before hours of episodes (docs/scene-format.md, "Warnings").
   for (size_t i = 0; i < files.size(); ++i) {
@@ -104,7 +112,7 @@ Result<std::vector<std::shared_ptr<const sim::Scene>>> LoadSceneFiles(
     }
   }
   std::vector<Result<sim::Scene>> arranged(list.size(), InternalError("not arranged"));
-  ParallelFor(list.size(), config.jobs, [&](size_t i) {
+  InJobs(config, list.size(), [&](size_t i) {
     const BenchScenario& b = list[i];
     if (b.scene_file.empty()) return;
     const size_t f =
@@ -164,7 +172,7 @@ Status ComputeGroundTruth(const BenchConfig& config, const Registries& registrie
   }
   std::vector<Status> scene_status(groups.size());
   report::Progress bar(report::ProgressOn(stderr, "ground truth", todo.size(), config.progress));
-  ParallelFor(todo.size(), config.jobs, [&](size_t t) {
+  InJobs(config, todo.size(), [&](size_t t) {
     const size_t i = todo[t];
     Group& g = groups[i];
     if (g.scene == nullptr) {
@@ -215,6 +223,26 @@ class WriteFailure {
   std::stop_source stop_;
 };
 
+/// The episode's per-view metrics, plan times, per-fruit results and regret into the bench's row.
+void TakeResults(const RunResult& r, report::BenchEpisode& j) {
+  for (const pipeline::StepRecord& s : r.episode.steps) {
+    j.metrics.push_back(s.metrics);
+    if (s.planned) j.plan_ms.push_back(s.times.plan_ms);
+  }
+  for (const eval::FruitResult& f : r.fruits) {
+    j.fruits.push_back({.best_visible_fraction = f.best_visible_fraction,
+                        .episode_visible_fraction = f.episode_visible_fraction,
+                        .found = f.found});
+  }
+  for (const eval::StepRegret& step : r.regret) {
+    j.regret.push_back({.step = step.step,
+                        .candidates = step.candidates,
+                        .regret = step.regret,
+                        .chosen_true_rank = step.chosen_true_rank,
+                        .rank_correlation = step.rank_correlation});
+  }
+}
+
 /// One episode into runs/<scenario>/<planner>/seed-<n>/: metrics.csv as it goes, record.json,
 /// avp-state.json around them. A file that cannot be written fails the bench (WriteFailure).
 report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registries, const Group& g,
@@ -228,7 +256,9 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
     j.status = CancelledError("not run: the bench stopped (a result could not be written)");
     return j;
   }
-  const RunConfig c = JobConfig(config, *g.source, g.seed, planner);
+  // The job's configuration (the bench's, this scenario, seed and planner), checked once here.
+  const Result<CheckedRunConfig> checked =
+      CheckedRunConfig::Check(JobConfig(config, *g.source, g.seed, planner), registries);
   const fs::path dir = config.out_dir / report::BenchRunFolder(j.scenario, j.planner, j.seed);
   const auto fail = [&](const Status& s) {
     failure.Set(s);
@@ -244,14 +274,20 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
     return j;
   }
   if (Status s = MarkInProgress(dir, RunFolderKind(), "avp bench"); !s.ok()) return fail(s);
+  if (!checked.ok()) {  // as an episode that failed: the bench goes on
+    MarkFailed(dir, RunFolderKind(), "avp bench", checked.status());
+    j.status = checked.status();
+    return j;
+  }
+  const RunConfig& c = **checked;
   Result<std::unique_ptr<report::MetricsCsvWriter>> csv =
       report::MetricsCsvWriter::Open(dir / "metrics.csv");
   if (!csv.ok()) return fail(csv.status());
   (*csv)->StopOnError(failure.stop());
   std::vector<pipeline::EpisodeObserver*> observers = {csv->get()};
-  std::unique_ptr<recording::McapRecorder> recorder;
+  std::unique_ptr<ros::bag::McapRecorder> recorder;
   if (config.record) {
-    Result<std::unique_ptr<recording::McapRecorder>> opened =
+    Result<std::unique_ptr<ros::bag::McapRecorder>> opened =
         OpenEpisodeRecording(dir / "episode.mcap", c, registries,
                              {.command = "avp bench", .scene = j.scenario, .gt = &*g.gt});
     if (!opened.ok()) return fail(opened.status());
@@ -260,8 +296,8 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
     observers.push_back(recorder.get());
   }
   const auto te = Clock::now();
-  Result<RunResult> r = RunEpisodeOnScene(c, registries, *g.scene, *g.gt, observers, nullptr,
-                                          failure.stop().get_token());
+  Result<RunResult> r =
+      RunEpisodeOnScene(*checked, *g.scene, *g.gt, observers, nullptr, failure.stop().get_token());
   j.episode_s = SecondsSince(te);
   if (Status s = (*csv)->Close(); !s.ok()) return fail(s);
   if (recorder != nullptr) {
@@ -272,22 +308,7 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
     j.status = r.status();
     return j;
   }
-  for (const pipeline::StepRecord& s : r->episode.steps) {
-    j.metrics.push_back(s.metrics);
-    if (s.planned) j.plan_ms.push_back(s.times.plan_ms);
-  }
-  for (const eval::FruitResult& f : r->fruits) {
-    j.fruits.push_back({.best_visible_fraction = f.best_visible_fraction,
-                        .episode_visible_fraction = f.episode_visible_fraction,
-                        .found = f.found});
-  }
-  for (const eval::StepRegret& step : r->regret) {
-    j.regret.push_back({.step = step.step,
-                        .candidates = step.candidates,
-                        .regret = step.regret,
-                        .chosen_true_rank = step.chosen_true_rank,
-                        .rank_correlation = step.rank_correlation});
-  }
+  TakeResults(*r, j);
   const planning::PlannerEntry* entry = registries.planners.Find(planner);
   const nlohmann::json options = io::OptionsToJson(
       c.planner.options, entry != nullptr ? entry->options.Info() : std::vector<OptionInfo>{});
@@ -432,7 +453,7 @@ Status RunPendingJobs(const BenchConfig& config, const Registries& registries,
   WriteFailure failure;
   {
     report::Progress bar(report::ProgressOn(stderr, "episodes", pending.size(), config.progress));
-    ParallelFor(pending.size(), config.jobs, [&](size_t t) {
+    InJobs(config, pending.size(), [&](size_t t) {
       const JobRef& r = refs[pending[t]];
       const report::BenchEpisode e =
           RunJob(config, registries, groups[r.group], r.planner, revision, failure);

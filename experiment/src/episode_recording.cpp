@@ -6,16 +6,16 @@
 
 #include <avp/eval/ground_truth_io.h>
 #include <avp/io/options_yaml.h>
-#include <avp/recording/layout.h>
 #include <avp/report/provenance.h>
 #include <avp/robot/arm_model.h>
+#include <avp/ros/bag/layout.h>
 
 namespace avp::experiment {
 
-Result<std::unique_ptr<recording::McapRecorder>> OpenEpisodeRecording(
+Result<std::unique_ptr<ros::bag::McapRecorder>> OpenEpisodeRecording(
     const std::filesystem::path& path, const RunConfig& config, const Registries& registries,
     const RecordingInfo& info) {
-  recording::RecorderOptions options;
+  ros::bag::RecorderOptions options;
   options.base_frame = info.base_frame;
   AVP_ASSIGN_OR_RETURN(const robot::ArmModel arm, robot::LoadDefaultArm());
   options.joint_names = arm.joint_names();
@@ -35,11 +35,11 @@ Result<std::unique_ptr<recording::McapRecorder>> OpenEpisodeRecording(
                                                .count());
     options.attachments.push_back({.log_time = 0,
                                    .create_time = now,
-                                   .name = std::string(recording::kGroundTruthAttachment),
-                                   .media_type = std::string(recording::kGroundTruthMediaType),
+                                   .name = std::string(ros::bag::kGroundTruthAttachment),
+                                   .media_type = std::string(ros::bag::kGroundTruthMediaType),
                                    .data = eval::GroundTruthToJson(*info.gt).dump()});
   }
-  return recording::McapRecorder::Open(path, std::move(options));
+  return ros::bag::McapRecorder::Open(path, std::move(options));
 }
 
 }  // namespace avp::experiment

@@ -6,6 +6,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/core/semantic_class.h>
 #include <avp/experiment/episode_runner.h>
@@ -135,15 +136,15 @@ Status CheckSceneAndTruth(const RunConfig& config, const sim::Scene& scene,
   return Status::Ok();
 }
 
-Result<EpisodeParts> BuildParts(const RunConfig& config, const Registries& registries,
-                                const EpisodeTruth& truth) {
+Result<EpisodeParts> BuildParts(const CheckedRunConfig& checked, const EpisodeTruth& truth) {
+  const RunConfig& config = *checked;
+  const Registries& registries = checked.registries();
+  const AnyOptions& segmenter_options = checked.segmenter_options();
   EpisodeParts e;
-  AVP_ASSIGN_OR_RETURN(const AnyOptions segmenter_options, SegmenterOptions(config, registries));
-  AVP_ASSIGN_OR_RETURN(const AnyOptions planner_options, PlannerOptions(config, registries));
   AVP_ASSIGN_OR_RETURN(const planning::PlannerEntry* entry,
                        registries.planners.Get(config.planner.name));
   const bool known_truth = truth.scene != nullptr && truth.gt != nullptr;
-  planning::PlannerContext context{.threads = config.threads, .truth = nullptr};
+  planning::PlannerContext context{.truth = nullptr};
   if (entry->needs_ground_truth) {
     if (!known_truth) {
       return InvalidArgumentError(
@@ -154,22 +155,20 @@ Result<EpisodeParts> BuildParts(const RunConfig& config, const Registries& regis
                                                    DetectorModel(segmenter_options));
     context.truth = e.truth.get();
   }
-  AVP_ASSIGN_OR_RETURN(e.planner,
-                       registries.planners.Make(config.planner.name, planner_options, context));
+  AVP_ASSIGN_OR_RETURN(
+      e.planner, registries.planners.Make(config.planner.name, checked.planner_options(), context));
   AVP_ASSIGN_OR_RETURN(e.segmenter, registries.segmenters.Make(
                                         config.segmenter.name, segmenter_options,
                                         {.seed = Rng(config.seed).Fork("segmenter").NextU64()}));
-  AVP_RETURN_IF_ERROR(config.map.Validate());
   e.map = std::make_unique<mapping::SemanticMap>(config.map);
   if (config.oracle_regret) {
     if (!known_truth) {
       return InvalidArgumentError(
           "oracle_regret needs the ground truth, and this episode has none");
     }
-    eval::OracleNbvOptions o;
-    o.num_threads = config.threads;
-    e.probe_oracle = std::make_unique<eval::OracleNbvPlanner>(*truth.scene, *truth.gt, o);
-    e.probe = std::make_unique<eval::RegretProbe>(*e.planner, *e.probe_oracle, config.threads);
+    e.probe_oracle =
+        std::make_unique<eval::OracleNbvPlanner>(*truth.scene, *truth.gt, eval::OracleNbvOptions{});
+    e.probe = std::make_unique<eval::RegretProbe>(*e.planner, *e.probe_oracle);
   }
   return e;
 }
@@ -190,27 +189,26 @@ Result<eval::GroundTruth> GroundTruthFor(const RunConfig& config, const sim::Sce
   o.voxel_size_m = config.map.grid.voxel_size_m;
   o.max_range_m = config.episode.integrator.max_range_m;
   o.seed = Rng(config.seed).Fork("ground-truth").NextU64();
-  o.num_threads = config.threads;
+  const ThreadScope threads(config.threads);
   return eval::ObservableGroundTruth(scene, arm, StartJoints(scene, arm), config.camera, o);
 }
 
-Result<RunResult> RunEpisodeWithRobot(const RunConfig& config, const Registries& registries,
-                                      const RobotSide& robot, const Box3& roi,
-                                      const EpisodeTruth& truth,
+Result<RunResult> RunEpisodeWithRobot(const CheckedRunConfig& checked, const RobotSide& robot,
+                                      const Box3& roi, const EpisodeTruth& truth,
                                       const std::vector<pipeline::EpisodeObserver*>& observers,
                                       std::unique_ptr<mapping::SemanticMap>* map_out) {
-  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  const RunConfig& config = *checked;
+  const ThreadScope threads(config.threads);
   if ((truth.scene == nullptr) != (truth.gt == nullptr)) {
     return InvalidArgumentError(
         "RunEpisodeWithRobot: give the scene and its ground truth, or neither");
   }
   if (truth.scene != nullptr)
     AVP_RETURN_IF_ERROR(CheckSceneAndTruth(config, *truth.scene, *truth.gt));
-  AVP_ASSIGN_OR_RETURN(EpisodeParts e, BuildParts(config, registries, truth));
+  AVP_ASSIGN_OR_RETURN(EpisodeParts e, BuildParts(checked, truth));
 
   pipeline::EpisodeOptions eo = config.episode;
   eo.roi = roi;
-  eo.integrator.num_threads = config.threads;
   eo.seed = config.seed;
   eval::EvalOptions eval_options;
   eval_options.roi = eo.roi;
@@ -251,19 +249,19 @@ Result<RunResult> RunEpisodeWithRobot(const RunConfig& config, const Registries&
   return result;
 }
 
-Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const Registries& registries,
-                                    const sim::Scene& scene, const eval::GroundTruth& gt,
+Result<RunResult> RunEpisodeOnScene(const CheckedRunConfig& checked, const sim::Scene& scene,
+                                    const eval::GroundTruth& gt,
                                     const std::vector<pipeline::EpisodeObserver*>& observers,
                                     std::unique_ptr<mapping::SemanticMap>* map_out,
                                     std::stop_token stop) {
-  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  const RunConfig& config = *checked;
   AVP_RETURN_IF_ERROR(CheckSceneAndTruth(config, scene, gt));
   AVP_ASSIGN_OR_RETURN(const robot::ArmModel arm_model, robot::LoadDefaultArm());
   const Eigen::VectorXd q0 = StartJoints(scene, arm_model);
   AVP_RETURN_IF_ERROR(arm_model.CheckJoints(q0));
   sim::SimArm arm(arm_model, q0);
   sim::SimRgbdSource source(scene, config.camera, config.depth_noise, config.seed);
-  return RunEpisodeWithRobot(config, registries, {&source, &arm, stop},
+  return RunEpisodeWithRobot(checked, {&source, &arm, stop},
                              scene.plant_bounds.Inflated(config.roi_margin_m), {&scene, &gt},
                              observers, map_out);
 }

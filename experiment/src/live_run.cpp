@@ -10,11 +10,11 @@
 #include <avp/experiment/live_run.h>
 #include <avp/experiment/output_folder.h>
 #include <avp/io/options_yaml.h>
-#include <avp/live/ros2_arm.h>
-#include <avp/live/ros2_rgbd_source.h>
-#include <avp/live/rviz_publisher.h>
-#include <avp/live/tf_listener.h>
 #include <avp/robot/arm_model.h>
+#include <avp/ros/live/ros2_arm.h>
+#include <avp/ros/live/ros2_rgbd_source.h>
+#include <avp/ros/live/rviz_publisher.h>
+#include <avp/ros/live/tf_listener.h>
 
 namespace avp::experiment {
 
@@ -30,7 +30,7 @@ struct LivePlant {
 };
 
 Result<LivePlant> PlantOf(const RunConfig& config, const Registries& registries,
-                          const live::LiveOptions& live) {
+                          const ros::live::LiveOptions& live) {
   LivePlant plant;
   if (config.scenario.empty() && config.scene_file.empty()) {
     AVP_ASSIGN_OR_RETURN(plant.roi, live.Roi());
@@ -46,40 +46,43 @@ Result<LivePlant> PlantOf(const RunConfig& config, const Registries& registries,
 
 /// The robot's side on ROS 2: the node, TF, the arm, the camera and the RViz publisher.
 struct LiveRobot {
-  std::unique_ptr<ros2::Node> node;
-  live::TfBuffer tf;
-  std::unique_ptr<live::TfListener> listener;
-  std::unique_ptr<live::Ros2Arm> arm;
-  std::unique_ptr<live::Ros2RgbdSource> source;
-  std::unique_ptr<live::RvizPublisher> rviz;
+  std::unique_ptr<ros::dds::Node> node;
+  ros::msg::TfBuffer tf;
+  std::unique_ptr<ros::live::TfListener> listener;
+  std::unique_ptr<ros::live::Ros2Arm> arm;
+  std::unique_ptr<ros::live::Ros2RgbdSource> source;
+  std::unique_ptr<ros::live::RvizPublisher> rviz;
 };
 
-Status Connect(const RunConfig& config, const live::LiveOptions& live, const std::stop_token& stop,
+Status Connect(const RunConfig& config, const ros::live::LiveOptions& live,
+               const std::stop_token& stop,
                const std::function<void(const LiveWaiting&)>& on_waiting, LiveRobot& robot) {
-  AVP_ASSIGN_OR_RETURN(robot.node, ros2::Node::Create(live::NodeOptionsOf(live)));
-  AVP_ASSIGN_OR_RETURN(robot.listener, live::TfListener::Create(*robot.node, robot.tf));
+  AVP_ASSIGN_OR_RETURN(robot.node, ros::dds::Node::Create(ros::live::NodeOptionsOf(live)));
+  AVP_ASSIGN_OR_RETURN(robot.listener,
+                       ros::live::TfListener::Create(*robot.node, robot.tf, live.camera.tf_topic,
+                                                     live.camera.tf_static_topic));
   if (on_waiting) {
     on_waiting({robot.node->fully_qualified_name(), robot.node->domain_id(),
                 live.camera.camera_info_topic, live.arm.joint_states_topic});
   }
   AVP_ASSIGN_OR_RETURN(const robot::ArmModel model, robot::LoadDefaultArm());
   AVP_ASSIGN_OR_RETURN(robot.arm,
-                       live::Ros2Arm::Create(*robot.node, robot.tf, model, live.arm, stop));
-  AVP_ASSIGN_OR_RETURN(robot.source, live::Ros2RgbdSource::Create(
+                       ros::live::Ros2Arm::Create(*robot.node, robot.tf, model, live.arm, stop));
+  AVP_ASSIGN_OR_RETURN(robot.source, ros::live::Ros2RgbdSource::Create(
                                          *robot.node, robot.tf, live.camera, config.camera, stop));
   if (live.rviz.enabled) {
-    AVP_ASSIGN_OR_RETURN(robot.rviz, live::RvizPublisher::Create(*robot.node, live.rviz,
-                                                                 config.episode.target_class));
+    AVP_ASSIGN_OR_RETURN(robot.rviz, ros::live::RvizPublisher::Create(*robot.node, live.rviz,
+                                                                      config.episode.target_class));
   }
   return Status::Ok();
 }
 
 /// record.json's "live" section: the options, the node, and what each topic delivered.
-nlohmann::json LiveRecord(const live::LiveOptions& o, const LiveRobot& robot) {
-  const live::SourceCounters c = robot.source->counters();
+nlohmann::json LiveRecord(const ros::live::LiveOptions& o, const LiveRobot& robot) {
+  const ros::live::SourceCounters c = robot.source->counters();
   return {
-      {"options",
-       io::OptionsToJson(live::LiveOptionTable().Values(o), live::LiveOptionTable().Info(o))},
+      {"options", io::OptionsToJson(ros::live::LiveOptionTable().Values(o),
+                                    ros::live::LiveOptionTable().Info(o))},
       {"node", robot.node->fully_qualified_name()},
       {"domain_id", robot.node->domain_id()},
       {"camera",
@@ -98,13 +101,14 @@ nlohmann::json LiveRecord(const live::LiveOptions& o, const LiveRobot& robot) {
 
 }  // namespace
 
-Result<RunSummary> RunLiveToFolder(const RunConfig& config, const Registries& registries,
-                                   const live::LiveOptions& live, const RunFolderOptions& folder,
-                                   std::stop_source stop,
+Result<RunSummary> RunLiveToFolder(const CheckedRunConfig& checked,
+                                   const ros::live::LiveOptions& live,
+                                   const RunFolderOptions& folder, std::stop_source stop,
                                    const std::function<void(const LiveWaiting&)>& on_waiting) {
+  const RunConfig& config = *checked;
   // A run folder that holds results is refused before the robot is waited for.
   AVP_RETURN_IF_ERROR(CheckOutputFolder(folder.out_dir, RunFolderKind(), folder.force));
-  AVP_ASSIGN_OR_RETURN(const LivePlant plant, PlantOf(config, registries, live));
+  AVP_ASSIGN_OR_RETURN(const LivePlant plant, PlantOf(config, checked.registries(), live));
   LiveRobot robot;
   AVP_RETURN_IF_ERROR(Connect(config, live, stop.get_token(), on_waiting, robot));
 
@@ -122,13 +126,13 @@ Result<RunSummary> RunLiveToFolder(const RunConfig& config, const Registries& re
     const std::stop_callback forward(write_failed, [&] { stop.request_stop(); });
     const EpisodeTruth truth{plant.scene ? &*plant.scene : nullptr,
                              plant.gt ? &*plant.gt : nullptr};
-    return RunEpisodeWithRobot(config, registries, side, plant.roi, truth, observers, map);
+    return RunEpisodeWithRobot(checked, side, plant.roi, truth, observers, map);
   };
   RunFolderOptions options = folder;
   options.record_base_frame = live.camera.base_frame;
   std::vector<pipeline::EpisodeObserver*> observers;
   if (robot.rviz) observers.push_back(robot.rviz.get());
-  return RunEpisodeToFolder(config, registries, options, run, observers);
+  return RunEpisodeToFolder(checked, options, run, observers);
 }
 
 }  // namespace avp::experiment

@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/core/segmentation.h>
 #include <avp/core/stopwatch.h>
@@ -139,9 +140,9 @@ Result<MapBuildSummary> BuildMap(const MapBuildOptions& options,
     map_options.grid.roi = scene.plant_bounds.Inflated(options.roi_margin_m);
   }
   AVP_RETURN_IF_ERROR(map_options.Validate());
-  mapping::IntegratorOptions integrator_options = options.integrator;
-  integrator_options.num_threads = options.threads;
+  const mapping::IntegratorOptions& integrator_options = options.integrator;
   AVP_RETURN_IF_ERROR(integrator_options.Validate());
+  const ThreadScope threads(options.threads);
 
   MapBuildSummary summary;
   summary.scene_name = scene.name;

@@ -8,6 +8,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/core/stopwatch.h>
 #include <avp/core/text.h>
@@ -17,9 +18,9 @@
 #include <avp/experiment/replay.h>
 #include <avp/io/yaml.h>
 #include <avp/pipeline/view_fusion.h>
-#include <avp/recording/encode.h>
-#include <avp/recording/layout.h>
 #include <avp/report/metrics_csv.h>
+#include <avp/ros/bag/encode.h>
+#include <avp/ros/bag/layout.h>
 
 namespace avp::experiment {
 
@@ -89,7 +90,7 @@ bool RecordedPlan(const json& step, int keep_top, pipeline::StepRecord& s,
   if (candidates == step.end() || !candidates->is_array()) return false;
   for (const json& c : *candidates) {
     if (!c.is_object() || !c.contains("X_WC")) return false;
-    Result<RigidTransform> X = recording::PoseFromJson(c.at("X_WC"));
+    Result<RigidTransform> X = ros::bag::PoseFromJson(c.at("X_WC"));
     if (!X.ok()) return false;
     planning::ViewCandidate v;
     v.X_WC = *X;
@@ -124,14 +125,14 @@ bool RecordedPlan(const json& step, int keep_top, pipeline::StepRecord& s,
 }
 
 /// Whether every view has the recording's masks.
-bool AllRecorded(const recording::Bag& bag) {
+bool AllRecorded(const ros::bag::Bag& bag) {
   return std::all_of(bag.views.begin(), bag.views.end(),
-                     [](const recording::BagView& v) { return v.segmentation.has_value(); });
+                     [](const ros::bag::BagView& v) { return v.segmentation.has_value(); });
 }
 
 }  // namespace
 
-Result<RunConfig> BagRunConfig(const recording::Bag& bag) {
+Result<RunConfig> BagRunConfig(const ros::bag::Bag& bag) {
   RunConfig config;
   const auto it = bag.avp_metadata.find("run_config");
   if (it == bag.avp_metadata.end()) return config;
@@ -146,16 +147,16 @@ namespace {
 /// Whether the replay uses the recording's masks (else config.segmenter, set from
 /// options.segmenter); summary.segmenter names the choice. Errors: "recorded" for a view
 /// without masks, an oracle segmenter for a view without simulator labels.
-Result<bool> ChooseSegmenter(const recording::Bag& bag, const ReplayOptions& options,
+Result<bool> ChooseSegmenter(const ros::bag::Bag& bag, const ReplayOptions& options,
                              RunConfig& config, ReplaySummary& summary) {
   const bool recorded = options.segmenter == kRecordedSegmenter ||
                         (options.segmenter.empty() && bag.avp_recording && AllRecorded(bag));
   if (recorded) {
-    for (const recording::BagView& v : bag.views) {
+    for (const ros::bag::BagView& v : bag.views) {
       if (!v.segmentation) {
         return InvalidArgumentError(
             fmt::format("{}: view {} has no recorded masks ({}): give --segmenter NAME",
-                        bag.path.string(), v.index, recording::kInstancesTopic));
+                        bag.path.string(), v.index, ros::bag::kInstancesTopic));
       }
     }
     summary.segmenter = std::string(kRecordedSegmenter);
@@ -166,14 +167,14 @@ Result<bool> ChooseSegmenter(const recording::Bag& bag, const ReplayOptions& opt
   }
   summary.segmenter = config.segmenter.name;
   if (summary.segmenter.starts_with("oracle")) {
-    for (const recording::BagView& v : bag.views) {
+    for (const ros::bag::BagView& v : bag.views) {
       if (!v.observation.labels) {
         return InvalidArgumentError(fmt::format(
             "{}: the '{}' segmenter needs the simulator's label images ({}, {}), and view {} "
             "has none (a real robot's bag never has them): use --segmenter recorded (an avp "
             "recording's masks) or a real segmenter (color, ywes, lsam, remote://...)",
-            bag.path.string(), summary.segmenter, recording::kSimInstanceTopic,
-            recording::kSimClassTopic, v.index));
+            bag.path.string(), summary.segmenter, ros::bag::kSimInstanceTopic,
+            ros::bag::kSimClassTopic, v.index));
       }
     }
   }
@@ -181,14 +182,14 @@ Result<bool> ChooseSegmenter(const recording::Bag& bag, const ReplayOptions& opt
 }
 
 /// The bag's ground truth when it has one of the map's voxel size (else a note says why not).
-Result<std::optional<eval::GroundTruth>> BagGroundTruth(const recording::Bag& bag,
+Result<std::optional<eval::GroundTruth>> BagGroundTruth(const ros::bag::Bag& bag,
                                                         const RunConfig& config,
                                                         ReplaySummary& summary) {
   if (!bag.ground_truth) return std::optional<eval::GroundTruth>();
   Result<eval::GroundTruth> read = eval::GroundTruthFromJson(*bag.ground_truth);
   if (!read.ok()) {
     return read.status().WithContext(
-        fmt::format("{}: attachment {}", bag.path.string(), recording::kGroundTruthAttachment));
+        fmt::format("{}: attachment {}", bag.path.string(), ros::bag::kGroundTruthAttachment));
   }
   if (std::abs(read->voxel_size_m - config.map.grid.voxel_size_m) > 1e-12) {
     summary.notes.push_back(
@@ -207,7 +208,7 @@ struct ReplayScene {
   std::string description;
 };
 
-ReplayScene SceneOfBag(const recording::Bag& bag, const RunConfig& config,
+ReplayScene SceneOfBag(const ros::bag::Bag& bag, const RunConfig& config,
                        const Registries& registries, bool have_truth, ReplaySummary& summary) {
   ReplayScene out{Box3(), bag.path.stem().string(), "replay of " + bag.path.string()};
   if (auto s = bag.avp_metadata.find("scene"); s != bag.avp_metadata.end()) out.name = s->second;
@@ -227,7 +228,7 @@ ReplayScene SceneOfBag(const recording::Bag& bag, const RunConfig& config,
 }
 
 /// record.json's "replay" section.
-json ReplayRecord(const recording::Bag& bag, const ReplaySummary& summary) {
+json ReplayRecord(const ros::bag::Bag& bag, const ReplaySummary& summary) {
   const json notes = summary.notes;
   return json{{"replay",
                {{"bag", bag.path.string()},
@@ -253,7 +254,7 @@ json ReplayRecord(const recording::Bag& bag, const ReplaySummary& summary) {
 /// the recorded episode made after it.
 class ReplayEpisode {
  public:
-  ReplayEpisode(const recording::Bag& bag, const RunConfig& config,
+  ReplayEpisode(const ros::bag::Bag& bag, const RunConfig& config,
                 const pipeline::EpisodeOptions& eo, const eval::GroundTruth* gt, const Box3& roi,
                 segmentation::Segmenter* segmenter, ReplaySummary& summary)
       : bag_(bag), config_(config), eo_(eo), gt_(gt), segmenter_(segmenter), summary_(summary) {
@@ -291,7 +292,7 @@ class ReplayEpisode {
   /// The view's observation as the episode's source handed it to the segmenter: the
   /// configuration's depth range (CameraInfo carries none) and the ground truth's fruits in the
   /// labels.
-  robot::Observation ObservationOf(const recording::BagView& view) const {
+  robot::Observation ObservationOf(const ros::bag::BagView& view) const {
     robot::Observation obs = view.observation;
     obs.frame.K.min_depth_m = config_.camera.min_depth_m;
     obs.frame.K.max_depth_m = config_.camera.max_depth_m;
@@ -306,7 +307,7 @@ class ReplayEpisode {
 
   void ReplayView(int i, pipeline::ViewFusion& fusion, const std::stop_token& stop,
                   const std::vector<pipeline::EpisodeObserver*>& observers) {
-    const recording::BagView& view = bag_.views[static_cast<size_t>(i)];
+    const ros::bag::BagView& view = bag_.views[static_cast<size_t>(i)];
     const auto t_step = Clock::now();
     pipeline::StepRecord step;
     step.view = i;
@@ -337,7 +338,7 @@ class ReplayEpisode {
 
   /// The step's metrics against the ground truth (as `avp run` computes them), the fruits' state,
   /// and for an avp recording the comparison with the recorded metrics.
-  void Evaluate(int i, const recording::BagView& view, const robot::Observation& obs,
+  void Evaluate(int i, const ros::bag::BagView& view, const robot::Observation& obs,
                 const mapping::SemanticMap& map, pipeline::StepRecord& step) {
     const auto t0 = Clock::now();
     std::vector<eval::FruitResult> now;
@@ -368,7 +369,7 @@ class ReplayEpisode {
     }
   }
 
-  const recording::Bag& bag_;
+  const ros::bag::Bag& bag_;
   const RunConfig& config_;
   const pipeline::EpisodeOptions& eo_;
   const eval::GroundTruth* gt_;
@@ -381,27 +382,28 @@ class ReplayEpisode {
 
 }  // namespace
 
-Result<ReplaySummary> ReplayToFolder(const recording::Bag& bag, RunConfig config,
+Result<ReplaySummary> ReplayToFolder(const ros::bag::Bag& bag, RunConfig config,
                                      const Registries& registries, const ReplayOptions& options) {
   ReplaySummary summary;
   summary.views = bag.views.size();
   if (bag.views.empty()) return InvalidArgumentError(bag.path.string() + ": no view to replay");
   AVP_ASSIGN_OR_RETURN(const bool recorded, ChooseSegmenter(bag, options, config, summary));
-  AVP_RETURN_IF_ERROR(config.Validate(registries));
-  AVP_ASSIGN_OR_RETURN(const std::optional<eval::GroundTruth> gt,
-                       BagGroundTruth(bag, config, summary));
-  const ReplayScene scene = SceneOfBag(bag, config, registries, gt.has_value(), summary);
+  // Checked once, here: the bag has chosen the segmenter.
+  AVP_ASSIGN_OR_RETURN(const CheckedRunConfig checked,
+                       CheckedRunConfig::Check(std::move(config), registries));
+  const RunConfig& c = *checked;
+  const ThreadScope threads(c.threads);
+  AVP_ASSIGN_OR_RETURN(const std::optional<eval::GroundTruth> gt, BagGroundTruth(bag, c, summary));
+  const ReplayScene scene = SceneOfBag(bag, c, registries, gt.has_value(), summary);
 
-  pipeline::EpisodeOptions eo = config.episode;
-  eo.integrator.num_threads = config.threads;
+  const pipeline::EpisodeOptions& eo = c.episode;
   std::unique_ptr<segmentation::Segmenter> segmenter;
   if (!recorded) {
-    AVP_ASSIGN_OR_RETURN(const AnyOptions segmenter_options, SegmenterOptions(config, registries));
-    AVP_ASSIGN_OR_RETURN(segmenter, registries.segmenters.Make(
-                                        config.segmenter.name, segmenter_options,
-                                        {.seed = Rng(config.seed).Fork("segmenter").NextU64()}));
+    AVP_ASSIGN_OR_RETURN(
+        segmenter, registries.segmenters.Make(c.segmenter.name, checked.segmenter_options(),
+                                              {.seed = Rng(c.seed).Fork("segmenter").NextU64()}));
   }
-  ReplayEpisode episode(bag, config, eo, gt ? &*gt : nullptr, scene.roi, segmenter.get(), summary);
+  ReplayEpisode episode(bag, c, eo, gt ? &*gt : nullptr, scene.roi, segmenter.get(), summary);
 
   FolderRun run;
   run.command = "avp replay";
@@ -416,7 +418,7 @@ Result<ReplaySummary> ReplayToFolder(const recording::Bag& bag, RunConfig config
   };
   RunFolderOptions folder = options.folder;
   folder.inputs.emplace_back(bag.path, "bag");
-  AVP_ASSIGN_OR_RETURN(summary.run, RunEpisodeToFolder(config, registries, folder, run));
+  AVP_ASSIGN_OR_RETURN(summary.run, RunEpisodeToFolder(checked, folder, run));
   return summary;
 }
 

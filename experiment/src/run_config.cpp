@@ -137,6 +137,20 @@ Status RunConfig::Validate(const Registries& registries) const {
       fmt::format("invalid run configuration: {}", fmt::join(errors, "; ")));
 }
 
+CheckedRunConfig::CheckedRunConfig(RunConfig config, const Registries& registries,
+                                   AnyOptions planner, AnyOptions segmenter)
+    : config_(std::move(config)),
+      registries_(&registries),
+      planner_options_(std::move(planner)),
+      segmenter_options_(std::move(segmenter)) {}
+
+Result<CheckedRunConfig> CheckedRunConfig::Check(RunConfig config, const Registries& registries) {
+  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  AVP_ASSIGN_OR_RETURN(AnyOptions planner, PlannerOptions(config, registries));
+  AVP_ASSIGN_OR_RETURN(AnyOptions segmenter, SegmenterOptions(config, registries));
+  return CheckedRunConfig(std::move(config), registries, std::move(planner), std::move(segmenter));
+}
+
 Result<YAML::Node> RunConfigToYaml(const RunConfig& config, const Registries& registries) {
   AVP_ASSIGN_OR_RETURN(const AnyOptions planner, PlannerOptions(config, registries));
   AVP_ASSIGN_OR_RETURN(const AnyOptions segmenter, SegmenterOptions(config, registries));

@@ -99,9 +99,8 @@ Status WriteRunReport(const RunConfig& config, const FolderRun& run, const RunRe
   return report::WriteRunReportHtml(path, collector, info);
 }
 
-Result<json> RecordJson(const RunConfig& config, const Registries& registries, const FolderRun& run,
-                        const RunResult& result) {
-  AVP_ASSIGN_OR_RETURN(json config_json, RunConfigJson(config, registries));
+json RecordJson(const CheckedRunConfig& config, const FolderRun& run, const RunResult& result) {
+  json config_json = RunConfigJson(config);
   json steps = json::array();
   for (const pipeline::StepRecord& s : result.episode.steps) steps.push_back(report::StepJson(s));
   json record{{"avp", run.command},
@@ -134,12 +133,11 @@ Result<json> RecordJson(const RunConfig& config, const Registries& registries, c
 
 }  // namespace
 
-Result<json> RunConfigJson(const RunConfig& config, const Registries& registries) {
-  AVP_ASSIGN_OR_RETURN(const AnyOptions planner, PlannerOptions(config, registries));
-  AVP_ASSIGN_OR_RETURN(const AnyOptions segmenter, SegmenterOptions(config, registries));
+json RunConfigJson(const CheckedRunConfig& checked) {
+  const RunConfig& config = *checked;
   json out = io::OptionsToJson(RunConfigTable().Values(config), RunConfigTable().Info(config));
-  out["planner"] = ComponentJson(config.planner.name, planner);
-  out["segmenter"] = ComponentJson(config.segmenter.name, segmenter);
+  out["planner"] = ComponentJson(config.planner.name, checked.planner_options());
+  out["segmenter"] = ComponentJson(config.segmenter.name, checked.segmenter_options());
   return out;
 }
 
@@ -173,9 +171,10 @@ Status CheckOutputsAreNotInputs(const RunConfig& config, const RunFolderOptions&
 }
 
 /// The episode and every result, into a prepared folder.
-Result<RunSummary> WriteRunFolder(const RunConfig& config, const Registries& registries,
-                                  const RunFolderOptions& options, const FolderRun& run,
+Result<RunSummary> WriteRunFolder(const CheckedRunConfig& checked, const RunFolderOptions& options,
+                                  const FolderRun& run,
                                   const std::vector<pipeline::EpisodeObserver*>& observers) {
+  const RunConfig& config = *checked;
   RunSummary summary;
   summary.scene_name = run.scene_name;
   const fs::path csv_path = options.out_dir / "metrics.csv";
@@ -190,11 +189,11 @@ Result<RunSummary> WriteRunFolder(const RunConfig& config, const Registries& reg
   std::vector<pipeline::EpisodeObserver*> all = {csv.get(), &progress, &report_data};
   all.insert(all.end(), observers.begin(), observers.end());
   // --record: the episode as MCAP, a chunk per view; a write error stops the episode as above.
-  std::unique_ptr<recording::McapRecorder> recorder;
+  std::unique_ptr<ros::bag::McapRecorder> recorder;
   const fs::path mcap_path =
       options.record_path.empty() ? options.out_dir / "episode.mcap" : options.record_path;
   if (options.record) {
-    AVP_ASSIGN_OR_RETURN(recorder, OpenEpisodeRecording(mcap_path, config, registries,
+    AVP_ASSIGN_OR_RETURN(recorder, OpenEpisodeRecording(mcap_path, config, checked.registries(),
                                                         {.command = run.command,
                                                          .scene = run.scene_name,
                                                          .base_frame = options.record_base_frame,
@@ -215,7 +214,7 @@ Result<RunSummary> WriteRunFolder(const RunConfig& config, const Registries& reg
   AVP_RETURN_IF_ERROR(WriteRunReport(config, run, result, report_data, report_path));
   summary.files.push_back(report_path);
 
-  AVP_ASSIGN_OR_RETURN(const json record, RecordJson(config, registries, run, result));
+  const json record = RecordJson(checked, run, result);
   const fs::path record_path = options.out_dir / "record.json";
   AVP_RETURN_IF_ERROR(io::WriteJsonFile(record_path, record));
   summary.files.insert(summary.files.begin(), record_path);
@@ -225,17 +224,17 @@ Result<RunSummary> WriteRunFolder(const RunConfig& config, const Registries& reg
 
 }  // namespace
 
-Result<RunSummary> RunEpisodeToFolder(const RunConfig& config, const Registries& registries,
+Result<RunSummary> RunEpisodeToFolder(const CheckedRunConfig& checked,
                                       const RunFolderOptions& options, const FolderRun& run,
                                       const std::vector<pipeline::EpisodeObserver*>& observers) {
   const auto t0 = Clock::now();
-  AVP_RETURN_IF_ERROR(config.Validate(registries));
+  const RunConfig& config = *checked;
   if (options.out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
   if (!run.run) return InvalidArgumentError("RunEpisodeToFolder: no episode to run");
   AVP_RETURN_IF_ERROR(CheckOutputsAreNotInputs(config, options));
   AVP_RETURN_IF_ERROR(PrepareOutputFolder(options.out_dir, RunFolderKind(), options.force));
   AVP_RETURN_IF_ERROR(MarkInProgress(options.out_dir, RunFolderKind(), run.command));
-  Result<RunSummary> summary = WriteRunFolder(config, registries, options, run, observers);
+  Result<RunSummary> summary = WriteRunFolder(checked, options, run, observers);
   if (!summary.ok()) {
     MarkFailed(options.out_dir, RunFolderKind(), run.command, summary.status());
     return summary.status();
@@ -245,14 +244,13 @@ Result<RunSummary> RunEpisodeToFolder(const RunConfig& config, const Registries&
   return summary;
 }
 
-Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& registries,
-                               const RunFolderOptions& options) {
-  AVP_RETURN_IF_ERROR(config.Validate(registries));
+Result<RunSummary> RunToFolder(const CheckedRunConfig& checked, const RunFolderOptions& options) {
+  const RunConfig& config = *checked;
   if (options.out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
   // Refused at once, before the scene's ground truth is computed.
   AVP_RETURN_IF_ERROR(CheckOutputsAreNotInputs(config, options));
   AVP_RETURN_IF_ERROR(CheckOutputFolder(options.out_dir, RunFolderKind(), options.force));
-  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(config, registries));
+  AVP_ASSIGN_OR_RETURN(const sim::Scene scene, LoadScene(config, checked.registries()));
   if (options.on_scene) options.on_scene(scene);
   const auto t_gt = Clock::now();
   AVP_ASSIGN_OR_RETURN(const eval::GroundTruth gt, GroundTruthFor(config, scene));
@@ -263,9 +261,9 @@ Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& regist
   run.gt_seconds = SecondsSince(t_gt);
   run.run = [&](const std::vector<pipeline::EpisodeObserver*>& observers,
                 std::unique_ptr<mapping::SemanticMap>* map, std::stop_token stop) {
-    return RunEpisodeOnScene(config, registries, scene, gt, observers, map, stop);
+    return RunEpisodeOnScene(checked, scene, gt, observers, map, stop);
   };
-  return RunEpisodeToFolder(config, registries, options, run);
+  return RunEpisodeToFolder(checked, options, run);
 }
 
 }  // namespace avp::experiment

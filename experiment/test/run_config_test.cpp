@@ -83,6 +83,28 @@ TEST(RunConfigTest, PrintedYamlReadsBackUnchanged) {
       << "oracle-perfect's defaults";
 }
 
+TEST(RunConfigTest, CheckedOnceAtTheDoor) {
+  // A CheckedRunConfig is only made by Check: valid, its components' options resolved.
+  RunConfig c;
+  ASSERT_TRUE(SetRunConfigKey(c, "planner.options.p_unknown", "0.25").ok());
+  ASSERT_TRUE(SetRunConfigKey(c, "threads", "3").ok());
+  const Result<CheckedRunConfig> checked = CheckedRunConfig::Check(c, TheRegistries());
+  ASSERT_TRUE(checked.ok()) << checked.status().ToString();
+  EXPECT_EQ((*checked)->threads, 3);
+  EXPECT_EQ(&checked->registries(), &TheRegistries());
+  EXPECT_EQ(checked->planner_options().As<planning::AvpNbvOptions>().p_unknown, 0.25);
+  EXPECT_EQ(checked->segmenter_options().As<segmentation::OracleOptions>().p_merge,
+            SegmenterOptions(c, TheRegistries())->As<segmentation::OracleOptions>().p_merge);
+  // Every problem at once, as Validate names them; no CheckedRunConfig is made.
+  ASSERT_TRUE(SetRunConfigKey(c, "planner.options.p_unknown", "1.5").ok());
+  c.scenario = "no-such-plant";
+  const Result<CheckedRunConfig> bad = CheckedRunConfig::Check(c, TheRegistries());
+  ASSERT_FALSE(bad.ok());
+  EXPECT_THAT(bad.status().message(), HasSubstr("invalid run configuration"));
+  EXPECT_THAT(bad.status().message(), HasSubstr("unknown scenario 'no-such-plant'"));
+  EXPECT_THAT(bad.status().message(), HasSubstr("p_unknown (1.5)"));
+}
+
 TEST(RunConfigTest, UnknownKeysAndBadValuesAreNamed) {
   RunConfig c;
   Status s = SetRunConfigKey(c, "map.grid.voxel_sise_m", "0.01");

@@ -10,6 +10,7 @@
 #include <fmt/ranges.h>
 
 #include <avp/core/error.h>
+#include <avp/core/parallel.h>
 #include <avp/mapping/integrator.h>
 #include <avp/mapping/ray_traversal.h>
 
@@ -45,11 +46,6 @@ const OptionTable<IntegratorOptions>& IntegratorOptionTable() {
                {FreeSpaceCarving::kRayCast, "raycast"},
                {FreeSpaceCarving::kNone, "none"}},
               "how free space is carved (docs/mapping.md)");
-    t->AddRule([](const IntegratorOptions& o, std::vector<std::string>& errors) {
-      if (o.num_threads < 0 || o.num_threads > 256) {
-        errors.push_back(fmt::format("num_threads ({}) must be in [0, 256]", o.num_threads));
-      }
-    });
     return t;
   }();
   return *table;
@@ -77,12 +73,6 @@ struct RayEnd {
   int32_t label = -1;  ///< mask index of the pixel (hits only), -1 outside every mask
 };
 
-int ResolveThreads(int requested) {
-  if (requested > 0) return requested;
-  const unsigned hw = std::thread::hardware_concurrency();
-  return hw == 0 ? 1 : static_cast<int>(hw);
-}
-
 /// Runs fn(thread_index) on `n` threads (the calling thread is thread 0).
 template <typename F>
 void RunParallel(int n, F&& fn) {
@@ -90,11 +80,10 @@ void RunParallel(int n, F&& fn) {
     fn(0);
     return;
   }
-  std::vector<std::thread> threads;
-  threads.reserve(static_cast<size_t>(n - 1));
-  for (int t = 1; t < n; ++t) threads.emplace_back([&fn, t] { fn(t); });
-  fn(0);
-  for (auto& th : threads) th.join();
+  std::atomic<int> next{0};
+  RunWorkers(static_cast<size_t>(n), [&] {
+    for (int t = next.fetch_add(1); t < n; t = next.fetch_add(1)) fn(t);
+  });
 }
 
 /// Ray i belongs to thread (i / kChunk) % n: interleaved chunks balance near and far rays.
@@ -844,7 +833,7 @@ Result<IntegrationStats> Integrator::Integrate(const RgbdFrame& frame,
   const bool semantics = segmentation != nullptr;
   std::vector<std::pair<VoxelKey, int32_t>> sem_hits;
   ApplyHits(rays, grid, semantics, stats, sem_hits);
-  const int threads = ResolveThreads(options_.num_threads);
+  const int threads = Threads();
   switch (options_.carving) {
     case FreeSpaceCarving::kRayCast:
       CarveRays(rays, origin, grid, threads, stats);
@@ -906,7 +895,7 @@ Result<IntegrationStats> Integrator::IntegratePointCloud(std::span<const Eigen::
   std::vector<std::pair<VoxelKey, int32_t>> unused;
   ApplyHits(rays, grid, false, stats, unused);
   if (options_.carving == FreeSpaceCarving::kRayCast) {
-    CarveRays(rays, origin_W, grid, ResolveThreads(options_.num_threads), stats);
+    CarveRays(rays, origin_W, grid, Threads(), stats);
   }
   stats.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return stats;

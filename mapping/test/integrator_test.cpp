@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 #include <octomap/OcTree.h>
 
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/mapping/integrator.h>
 #include <avp/mapping/map_file.h>
@@ -139,13 +140,34 @@ MapOptions DefaultMap() {
   return o;
 }
 
-IntegratorOptions Options(FreeSpaceCarving carving = FreeSpaceCarving::kRayCast, int threads = 1) {
+IntegratorOptions Options(FreeSpaceCarving carving = FreeSpaceCarving::kRayCast) {
   IntegratorOptions o;
   o.max_range_m = kMaxRange;
   o.carving = carving;
-  o.num_threads = threads;
   return o;
 }
+
+/// Integrator(Options(carving)) whose calls run on `threads` threads (avp's one parallelism
+/// setting, a ThreadScope: core/parallel.h).
+class ThreadedIntegrator {
+ public:
+  ThreadedIntegrator(FreeSpaceCarving carving, int threads)
+      : integrator_(Options(carving)), threads_(threads) {}
+  template <typename... Args>
+  auto Integrate(Args&&... args) const {
+    const ThreadScope scope(threads_);
+    return integrator_.Integrate(std::forward<Args>(args)...);
+  }
+  template <typename... Args>
+  auto IntegratePointCloud(Args&&... args) const {
+    const ThreadScope scope(threads_);
+    return integrator_.IntegratePointCloud(std::forward<Args>(args)...);
+  }
+
+ private:
+  Integrator integrator_;
+  int threads_;
+};
 
 using VoxelList = std::vector<std::pair<VoxelKey, float>>;
 
@@ -468,9 +490,6 @@ TEST(IntegratorTest, OptionsValidation) {
   EXPECT_THAT(o.Validate().message(), HasSubstr("max_range_m (0 m)"));
   o.max_range_m = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THAT(o.Validate().message(), HasSubstr("max_range_m (nan)"));
-  o = {};
-  o.num_threads = -1;
-  EXPECT_THAT(o.Validate().message(), HasSubstr("num_threads (-1)"));
   EXPECT_THROW(Integrator{o}, Error);
   for (const auto c :
        {FreeSpaceCarving::kRayCast, FreeSpaceCarving::kProjective, FreeSpaceCarving::kNone}) {
@@ -661,7 +680,7 @@ TEST(IntegratorTest, PointCloudAndDepthImageGiveIdenticalMaps) {
   }
   for (const int threads : {1, 2}) {
     SCOPED_TRACE("threads " + std::to_string(threads));
-    const Integrator integrator(Options(FreeSpaceCarving::kRayCast, threads));
+    const ThreadedIntegrator integrator(FreeSpaceCarving::kRayCast, threads);
     SemanticMap from_image(DefaultMap());
     OccupancyGrid from_cloud(DefaultMap().grid);
     for (int frame = 0; frame < 2; ++frame) {
@@ -683,9 +702,9 @@ TEST(IntegratorTest, PointCloudAndDepthImageGiveIdenticalMaps) {
 
 TEST_F(IntegratorSceneTest, ThreadCountDoesNotChangeTheMap) {
   SemanticMap one(DefaultMap()), two(DefaultMap()), all(DefaultMap());
-  const Integrator i1(Options(FreeSpaceCarving::kRayCast, 1));
-  const Integrator i2(Options(FreeSpaceCarving::kRayCast, 2));
-  const Integrator i0(Options(FreeSpaceCarving::kRayCast, 0));
+  const ThreadedIntegrator i1(FreeSpaceCarving::kRayCast, 1);
+  const ThreadedIntegrator i2(FreeSpaceCarving::kRayCast, 2);
+  const ThreadedIntegrator i0(FreeSpaceCarving::kRayCast, 0);
   for (const RigidTransform& X : Poses()) {
     const sim::RenderedFrame f = Render(X);
     const auto s1 = i1.Integrate(f.rgbd, nullptr, one);
@@ -712,9 +731,9 @@ TEST_F(IntegratorSceneTest, ThreadCountDoesNotChangeTheMapFile) {
   for (const FreeSpaceCarving carving :
        {FreeSpaceCarving::kRayCast, FreeSpaceCarving::kProjective}) {
     SemanticMap one(DefaultMap()), two(DefaultMap()), four(DefaultMap());
-    const Integrator i1(Options(carving, 1));
-    const Integrator i2(Options(carving, 2));
-    const Integrator i4(Options(carving, 4));
+    const ThreadedIntegrator i1(carving, 1);
+    const ThreadedIntegrator i2(carving, 2);
+    const ThreadedIntegrator i4(carving, 4);
     for (const RigidTransform& X : Poses()) {
       const sim::RenderedFrame f = Render(X);
       ASSERT_TRUE(i1.Integrate(f.rgbd, nullptr, one).ok());
@@ -790,9 +809,9 @@ struct CarvingDifference {
 CarvingDifference CompareCarving(const RgbdFrame& f, int threads = 1) {
   SemanticMap rc(DefaultMap()), pj(DefaultMap());
   EXPECT_TRUE(
-      Integrator(Options(FreeSpaceCarving::kRayCast, threads)).Integrate(f, nullptr, rc).ok());
+      ThreadedIntegrator(FreeSpaceCarving::kRayCast, threads).Integrate(f, nullptr, rc).ok());
   const auto sp =
-      Integrator(Options(FreeSpaceCarving::kProjective, threads)).Integrate(f, nullptr, pj);
+      ThreadedIntegrator(FreeSpaceCarving::kProjective, threads).Integrate(f, nullptr, pj);
   EXPECT_TRUE(sp.ok()) << sp.status().ToString();
   const VoxelList a = Contents(rc.grid()), b = Contents(pj.grid());
   CarvingDifference out;
@@ -903,7 +922,7 @@ TEST_F(IntegratorSceneTest, RoiRejectsEndpointsOutsideIt) {
   m.grid = g;
   SemanticMap map(m);
   const sim::RenderedFrame f = Render(Poses()[0]);
-  const auto s = Integrator(Options()).Integrate(f.rgbd, nullptr, map);
+  const auto s = ThreadedIntegrator(FreeSpaceCarving::kRayCast, 1).Integrate(f.rgbd, nullptr, map);
   ASSERT_TRUE(s.ok());
   // Every endpoint on the wall (x = 0.7012) is rejected; those on the sphere are kept.
   size_t wall_points = 0;
@@ -920,7 +939,7 @@ TEST_F(IntegratorSceneTest, RoiRejectsEndpointsOutsideIt) {
   // The parallel path honours the ROI the same way.
   SemanticMap parallel(m);
   const auto s2 =
-      Integrator(Options(FreeSpaceCarving::kRayCast, 2)).Integrate(f.rgbd, nullptr, parallel);
+      ThreadedIntegrator(FreeSpaceCarving::kRayCast, 2).Integrate(f.rgbd, nullptr, parallel);
   ASSERT_TRUE(s2.ok());
   EXPECT_EQ(s2->rejected_points, s->rejected_points);
   EXPECT_EQ(s2->free_updates, s->free_updates);

@@ -271,7 +271,6 @@ const OptionTable<AvpNbvOptions>& AvpNbvOptionTable() {
                         o.coarse_ray_stride_px, o.ray_stride_px));
       }
     });
-    t->Threads("num_threads", &O::num_threads);
     return t;
   }();
   return *table;
@@ -298,9 +297,7 @@ Status AvpNbvOptions::Validate() const { return AvpNbvOptionTable().Validate(*th
 PlannerEntry AvpNbvPlannerEntry() {
   return MakePlannerEntry<AvpNbvOptions>(
       "avp-nbv", "avp's occlusion-aware next-best view (docs/planning.md)", AvpNbvOptionTable(),
-      AvpNbvOptions{}, [](AvpNbvOptions o, const PlannerContext& c) {
-        o.num_threads = c.threads;
-        o.candidates.num_threads = c.threads;
+      AvpNbvOptions{}, [](AvpNbvOptions o, const PlannerContext&) {
         return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<AvpNbvPlanner>(o));
       });
 }
@@ -458,7 +455,7 @@ double ScoreCandidates(const PlanningRequest& request, const GainGrid& grid,
   // Gains of the candidates `which` indexes, over `dirs` times `scale`.
   auto gains = [&](const std::vector<size_t>& which, const std::vector<Eigen::Vector3d>& dirs,
                    double scale) {
-    ParallelFor(which.size(), options.num_threads, [&](size_t j) {
+    ParallelFor(which.size(), [&](size_t j) {
       ViewCandidate& c = candidates[which[j]];
       c.gain = ViewGain(grid, prior, params, options, c, dirs, scale);
     });

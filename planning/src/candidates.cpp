@@ -362,7 +362,7 @@ std::vector<ViewCandidate> GenerateShellCandidates(const PlanningRequest& reques
   const Rng ik_root = rng.Fork("ik");
   robot::IkOptions ik;
   ik.max_restarts = std::max(0, options.ik_restarts);
-  ParallelFor(out.size(), options.num_threads, [&](size_t i) {
+  ParallelFor(out.size(), [&](size_t i) {
     Rng r = ik_root.Fork(static_cast<uint64_t>(i));
     const robot::IkResult res = request.arm->SolveCameraIk(out[i].X_WC, request.q_current, r, ik);
     if (res.ok()) {
@@ -408,7 +408,6 @@ const OptionTable<ShellCandidateOptions>& ShellCandidateOptionTable() {
             "edge of the ROI cubes for unseen_targets");
     t->Integer("ik_restarts", &O::ik_restarts, "", ValueRange::Closed(0, 32),
                "IK restarts per candidate after the attempt from the current joints");
-    t->Threads("num_threads", &O::num_threads);
     return t;
   }();
   return *table;

@@ -54,7 +54,6 @@ PlanResult FarthestViewPlanner::Plan(const PlanningRequest& request, Rng& rng) {
     return result;
   }
   ShellCandidateOptions shells = options_.candidates;
-  shells.num_threads = options_.num_threads;
   const std::vector<ViewTarget> targets = FindViewTargets(request, *grid, shells);
   std::vector<ViewCandidate> candidates =
       GenerateShellCandidates(request, *grid, targets, shells, rng);
@@ -79,8 +78,7 @@ PlannerEntry FarthestViewPlannerEntry() {
       "a coverage baseline: the reachable shell view farthest from every fused view "
       "(docs/extending.md)",
       FarthestViewOptionTable(), FarthestViewOptions{},
-      [](FarthestViewOptions o, const PlannerContext& c) {
-        o.num_threads = c.threads;
+      [](FarthestViewOptions o, const PlannerContext&) {
         return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<FarthestViewPlanner>(o));
       });
 }

@@ -398,7 +398,6 @@ const OptionTable<IslerPlannerOptions>& IslerPlannerOptionTable() {
     t->Nested("rays", &O::rays, IslerRayOptionTable());
     t->Real("gain_weight", &O::gain_weight, "", ValueRange::AtLeast(0), "w_ig of U");
     t->Real("cost_weight", &O::cost_weight, "", ValueRange::AtLeast(0), "w_c of U");
-    t->Threads("num_threads", &O::num_threads);
     return t;
   }();
   return *table;
@@ -418,9 +417,7 @@ std::vector<PlannerEntry> IslerPlannerEntries() {
         "isler-" + std::string(ToString(utility)),
         fmt::format("Isler et al.'s {} utility on avp-nbv's candidate shells (a baseline)",
                     kDescriptions[static_cast<size_t>(utility)]),
-        IslerPlannerOptionTable(), defaults, [](IslerPlannerOptions o, const PlannerContext& c) {
-          o.num_threads = c.threads;
-          o.candidates.num_threads = c.threads;
+        IslerPlannerOptionTable(), defaults, [](IslerPlannerOptions o, const PlannerContext&) {
           return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<IslerPlanner>(o));
         }));
   }
@@ -462,7 +459,7 @@ PlanResult IslerPlanner::Plan(const PlanningRequest& request, Rng& rng) {
 
   const std::vector<Eigen::Vector3d> dirs = RayDirections(request.K, options_.rays.ray_stride_px);
   const ProximityField* prox = proximity ? &*proximity : nullptr;
-  ParallelFor(candidates.size(), options_.num_threads, [&](size_t i) {
+  ParallelFor(candidates.size(), [&](size_t i) {
     ViewCandidate& c = candidates[i];
     if (!c.reachable) return;
     c.gain = ViewGainWith(options_.utility, c.X_WC, dirs, options_.rays.max_range_m,

@@ -27,8 +27,7 @@ PlannerEntry RandomPlannerEntry() {
   return MakePlannerEntry<ShellCandidateOptions>(
       "random", "random reachable views from avp-nbv's candidate shells (a baseline)",
       ShellCandidateOptionTable(), ShellCandidateOptions{},
-      [](ShellCandidateOptions o, const PlannerContext& c) {
-        o.num_threads = c.threads;
+      [](ShellCandidateOptions o, const PlannerContext&) {
         return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<RandomPlanner>(o));
       });
 }

@@ -49,7 +49,6 @@ const OptionTable<ReferenceNbvOptions>& ReferenceNbvOptionTable() {
             "candidates this close to a fused view are dropped");
     t->Real("fused_angle_tol_rad", &O::fused_angle_tol_rad, "rad", non_negative,
             "... and this close in angle");
-    t->Threads("num_threads", &O::num_threads);
     return t;
   }();
   return *table;
@@ -61,8 +60,7 @@ PlannerEntry ReferenceNbvPlannerEntry() {
   return MakePlannerEntry<ReferenceNbvOptions>(
       "reference-nbv", "the paper's planner with its bugs fixed (docs/planning.md)",
       ReferenceNbvOptionTable(), ReferenceNbvOptions{},
-      [](ReferenceNbvOptions o, const PlannerContext& c) {
-        o.num_threads = c.threads;
+      [](ReferenceNbvOptions o, const PlannerContext&) {
         return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<ReferenceNbvPlanner>(o));
       });
 }
@@ -249,7 +247,7 @@ PlanResult ReferenceNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   }
   const FullAttentionRoi roi = ComputeFullAttentionRoi(map, request.X_WC_start, options_);
   const std::vector<ReferenceTarget> targets = ReferenceTargets(map, request.target_class, roi);
-  ParallelFor(kept.size(), options_.num_threads, [&](size_t i) {
+  ParallelFor(kept.size(), [&](size_t i) {
     ViewCandidate& c = kept[i];
     if (!c.reachable) return;
     const ReferenceViewEvaluation e =

@@ -13,6 +13,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/core/segmentation.h>
 #include <avp/mapping/integrator.h>
@@ -390,12 +391,14 @@ TEST_F(AvpNbvPlannerTest, RanksReachableCandidatesDeterministicallyBySeed) {
 }
 
 TEST_F(AvpNbvPlannerTest, ThreadCountDoesNotChangeTheResult) {
-  AvpNbvOptions one, two;
-  one.num_threads = 1;
-  two.num_threads = 2;
-  Rng a(3), b(3);
-  const PlanResult r1 = AvpNbvPlanner(one).Plan(Request(), a);
-  const PlanResult r2 = AvpNbvPlanner(two).Plan(Request(), b);
+  // One parallelism setting (core/parallel.h): 1 thread, then 2.
+  const auto plan = [&](int threads) {
+    const ThreadScope scope(threads);
+    Rng rng(3);
+    return AvpNbvPlanner(AvpNbvOptions{}).Plan(Request(), rng);
+  };
+  const PlanResult r1 = plan(1);
+  const PlanResult r2 = plan(2);
   ASSERT_EQ(r1.ranked.size(), r2.ranked.size());
   for (size_t i = 0; i < r1.ranked.size(); ++i) ASSERT_EQ(r1.ranked[i].gain, r2.ranked[i].gain);
 }

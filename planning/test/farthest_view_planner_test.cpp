@@ -88,7 +88,7 @@ TEST_F(FarthestViewPlannerTest, IsRegisteredWithItsOptions) {
       registry.Options("farthest-view", {{"w_motion", "0"}, {"candidates.max_targets", "3"}});
   ASSERT_TRUE(options.ok()) << options.status().ToString();
   EXPECT_EQ(options->As<FarthestViewOptions>().candidates.max_targets, 3);
-  auto planner = registry.Make("farthest-view", *options, {.threads = 1, .truth = nullptr});
+  auto planner = registry.Make("farthest-view", *options, {.truth = nullptr});
   ASSERT_TRUE(planner.ok());
   EXPECT_EQ((*planner)->name(), "farthest-view");
   EXPECT_THAT(

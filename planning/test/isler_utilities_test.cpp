@@ -9,6 +9,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/mapping/sensor_model.h>
 #include <avp/planning/isler_utilities.h>
@@ -357,7 +358,10 @@ TEST(IslerUtilitiesTest, PlannerRanksByWeightedLinearUtilityDeterministically) {
     options.rays.ray_stride_px = 40;
     IslerPlanner planner(options);
     Rng rng(21);
-    const PlanResult plan = planner.Plan(request, rng);
+    const PlanResult plan = [&] {
+      const ThreadScope one(1);
+      return planner.Plan(request, rng);
+    }();
     ASSERT_TRUE(plan.status.ok()) << plan.status.ToString();
     ASSERT_GT(plan.ranked.size(), 3u) << ToString(u);
     double sum_g = 0.0, sum_c = 0.0;
@@ -385,9 +389,9 @@ TEST(IslerUtilitiesTest, PlannerRanksByWeightedLinearUtilityDeterministically) {
     EXPECT_DOUBLE_EQ(plan.ranked[0].gain,
                      IslerViewGain(u, *grid, &*prox, plan.ranked[0].X_WC, request.K, options.rays));
     // Same seed, more threads: the same plan.
-    options.num_threads = 3;
     IslerPlanner threaded(options);
     Rng rng2(21);
+    const ThreadScope three(3);
     const PlanResult again = threaded.Plan(request, rng2);
     ASSERT_EQ(again.ranked.size(), plan.ranked.size());
     for (size_t i = 0; i < plan.ranked.size(); ++i) {

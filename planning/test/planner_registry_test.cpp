@@ -83,7 +83,7 @@ TEST(PlannerRegistryTest, PlannersThatNeedTheTruthAreNotBuiltWithoutIt) {
   EXPECT_EQ(made.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_THAT(made.status().message(), HasSubstr("needs the true scene"));
   const PlannerTruth truth;
-  EXPECT_TRUE(r.Make("needs-truth", e.options, {.threads = 1, .truth = &truth}).ok());
+  EXPECT_TRUE(r.Make("needs-truth", e.options, {.truth = &truth}).ok());
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/mapping/ray_traversal.h>
 #include <avp/planning/reference_nbv_planner.h>
@@ -284,7 +285,10 @@ TEST(ReferenceNbvPlannerTest, PlansDeterministicallyAndNeverReturnsUnreachableOr
   ReferenceNbvPlanner planner;
   EXPECT_EQ(planner.name(), "reference-nbv");
   Rng rng(11);
-  const PlanResult plan = planner.Plan(request, rng);
+  const PlanResult plan = [&] {
+    const ThreadScope one(1);
+    return planner.Plan(request, rng);
+  }();
   ASSERT_TRUE(plan.status.ok()) << plan.status.ToString();
   EXPECT_EQ(plan.generated, 180u);
   EXPECT_GT(plan.reachable, 40u);
@@ -301,10 +305,11 @@ TEST(ReferenceNbvPlannerTest, PlansDeterministicallyAndNeverReturnsUnreachableOr
 
   // The same seed gives the same plan; multi-threaded evaluation changes nothing.
   Rng rng2(11);
-  ReferenceNbvOptions threaded;
-  threaded.num_threads = 3;
-  ReferenceNbvPlanner threaded_planner(threaded);
-  const PlanResult again = threaded_planner.Plan(request, rng2);
+  ReferenceNbvPlanner threaded_planner{ReferenceNbvOptions{}};
+  const PlanResult again = [&] {
+    const ThreadScope three(3);
+    return threaded_planner.Plan(request, rng2);
+  }();
   ASSERT_EQ(again.ranked.size(), plan.ranked.size());
   for (size_t i = 0; i < plan.ranked.size(); ++i) {
     EXPECT_EQ(again.ranked[i].X_WC.translation(), plan.ranked[i].X_WC.translation());

@@ -200,9 +200,7 @@ TEST(ColorSegmenterTest, RenderedRedApplesAreFoundOnFruitPixels) {
   // reference's red range 0-10 misses.)
   auto scene = sim::MakeScenario("espalier-multiple-fruits", 4);
   ASSERT_TRUE(scene.ok()) << scene.status().ToString();
-  sim::RendererOptions render_options;
-  render_options.num_threads = 1;
-  const sim::RgbdRenderer renderer(*scene, render_options);
+  const sim::RgbdRenderer renderer(*scene);
   const sim::RenderedFrame f =
       renderer.Render(CameraIntrinsics::RealSenseD435().Scaled(0.5), scene->X_WC_start);
   SegmentationRequest request;

@@ -525,9 +525,7 @@ TEST(OracleSegmenterTest, BadGroundTruthFruitsAreErrorsNamingThem) {
 TEST(OracleSegmenterTest, RenderedTomatoPlantGivesPlausibleDetections) {
   auto scene = sim::MakeScenario("tomato-single-cluster", 4);
   ASSERT_TRUE(scene.ok()) << scene.status().ToString();
-  sim::RendererOptions render_options;
-  render_options.num_threads = 1;
-  const sim::RgbdRenderer renderer(*scene, render_options);
+  const sim::RgbdRenderer renderer(*scene);
   const CameraIntrinsics K = CameraIntrinsics::RealSenseD435().Scaled(0.5);  // 320 x 240
   const sim::RenderedFrame f = renderer.Render(K, scene->X_WC_start);
   SimulatorLabels labels{f.instance_ids, f.class_ids, {}};

@@ -42,6 +42,7 @@
 #include <vector>
 
 #include <avp/core/error.h>
+#include <avp/core/parallel.h>
 #include <avp/core/rng.h>
 #include <avp/sim/rgbd_renderer.h>
 
@@ -645,7 +646,6 @@ RgbdRenderer::RgbdRenderer(const Scene& scene, RendererOptions options)
     : impl_(std::make_unique<Impl>()) {
   const Status valid = scene.Validate();
   if (!valid.ok()) throw Error("RgbdRenderer: invalid scene: " + valid.ToString());
-  AVP_THROW_UNLESS(options.num_threads >= 0, options.num_threads);
   AVP_THROW_UNLESS(options.ray_packet_size == 1 || options.ray_packet_size == 4 ||
                        options.ray_packet_size == 8 || options.ray_packet_size == 16,
                    options.ray_packet_size);
@@ -705,11 +705,6 @@ RenderedFrame RgbdRenderer::Render(const CameraIntrinsics& K, const RigidTransfo
                            out.class_ids.data().data(), out.rgbd.rgb.data().data()};
 
   const int num_bands = (K.height + kBandRows - 1) / kBandRows;
-  int threads = m.options.num_threads > 0
-                    ? m.options.num_threads
-                    : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  threads = std::clamp(threads, 1, num_bands);
-
   std::atomic<int> next_band{0};
   auto work = [&] {
     const ScopedFlushDenormals flush_denormals;
@@ -730,11 +725,7 @@ RenderedFrame RgbdRenderer::Render(const CameraIntrinsics& K, const RigidTransfo
       }
     }
   };
-  std::vector<std::thread> pool;
-  pool.reserve(threads - 1);
-  for (int i = 1; i < threads; ++i) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
+  RunWorkers(static_cast<size_t>(num_bands), work);
   return out;
 }
 

@@ -609,9 +609,7 @@ bool AnyWarningHas(const std::vector<std::string>& warnings,
 /// Fruit-class pixels of the start view whose colour is red (r > 2 g and r > 2 b), and all
 /// fruit-class pixels.
 std::pair<size_t, size_t> RedFruitPixels(const Scene& scene) {
-  RendererOptions options;
-  options.num_threads = 2;
-  const RgbdRenderer renderer(scene, options);
+  const RgbdRenderer renderer(scene);
   const RenderedFrame f =
       renderer.Render(CameraIntrinsics::RealSenseD435().Scaled(0.5), scene.X_WC_start);
   size_t red = 0, fruit = 0;

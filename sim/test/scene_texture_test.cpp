@@ -103,7 +103,7 @@ char ColorName(const ImageRgb8& rgb, int u, int v) {
 /// The quadrants of the rendered quad, as "TL TR BL BR" colour names, each the name every pixel
 /// of a 5 x 5 block at the quadrant's centre shares ('?' when they differ).
 std::string RenderedQuadrants(const Scene& scene) {
-  const RgbdRenderer renderer(scene, RendererOptions{.num_threads = 1});
+  const RgbdRenderer renderer(scene);
   const RenderedFrame f = renderer.Render(Camera(), CameraPose());
   // The quad spans u, v in about [52, 107] x [32, 87]; quadrant centres at 66 / 93, 46 / 73.
   std::string out;

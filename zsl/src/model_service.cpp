@@ -30,7 +30,7 @@ Result<ModelService> ServeModels(const std::filesystem::path& model_dir,
     return InvalidArgumentError(fmt::format("{} lists no model to serve", manifest.file.string()));
   }
   const SessionOptions session = ToSessionOptions(options.runtime);
-  std::vector<std::shared_ptr<const interop::TensorModelHandler>> handlers;
+  std::vector<std::shared_ptr<const segmentation_service::TensorModelHandler>> handlers;
   ModelService service;
   for (const auto& [role, entry] : manifest.models) {
     AVP_RETURN_IF_ERROR(CheckFiles(entry, options.verify_sha256));
@@ -39,11 +39,11 @@ Result<ModelService> ServeModels(const std::filesystem::path& model_dir,
     AVP_ASSIGN_OR_RETURN(std::shared_ptr<const OrtModelHandler> h,
                          OrtModelHandler::Make(entry.ServedName(),
                                                std::make_shared<const OrtModel>(std::move(model))));
-    const auto list = [](const std::vector<interop::TensorSpec>& specs) {
+    const auto list = [](const std::vector<segmentation_service::TensorSpec>& specs) {
       std::vector<std::string> out;
-      for (const interop::TensorSpec& t : specs) {
-        out.push_back(fmt::format("'{}' {} {}", t.name, interop::ToString(t.datatype),
-                                  interop::ShapeToString(t.shape)));
+      for (const segmentation_service::TensorSpec& t : specs) {
+        out.push_back(fmt::format("'{}' {} {}", t.name, segmentation_service::ToString(t.datatype),
+                                  segmentation_service::ShapeToString(t.shape)));
       }
       return fmt::format("{}", fmt::join(out, ", "));
     };
@@ -52,7 +52,8 @@ Result<ModelService> ServeModels(const std::filesystem::path& model_dir,
          fmt::format("inputs {}; outputs {}", list(h->inputs()), list(h->outputs()))});
     handlers.push_back(std::move(h));
   }
-  AVP_ASSIGN_OR_RETURN(service.server, interop::TensorServer::Start(options.server, handlers));
+  AVP_ASSIGN_OR_RETURN(service.server,
+                       segmentation_service::TensorServer::Start(options.server, handlers));
   return service;
 }
 

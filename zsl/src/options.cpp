@@ -14,7 +14,7 @@
 #include <fmt/ranges.h>
 
 #include <avp/core/options.h>
-#include <avp/interop/tensor_service.h>
+#include <avp/segmentation_service/tensor_service.h>
 #include <avp/zsl/register.h>
 #include <avp/zsl/zsl.h>
 
@@ -23,7 +23,7 @@ namespace avp::zsl {
 namespace {
 
 constexpr int kMaxThreads = 1024;
-const int kMaxDelayUs = static_cast<int>(interop::BatchingOptions::kMaxDelay.count());
+const int kMaxDelayUs = static_cast<int>(segmentation_service::BatchingOptions::kMaxDelay.count());
 
 /// The fields and rule of BackendSettings, added to the table of T (BackendSettings or a type
 /// derived from it) under the same keys, so every backend's table checks them alike.
@@ -44,7 +44,7 @@ void AddBackendSettings(OptionTable<T>& t) {
             ValueRange::Closed(0, kMaxThreads),
             "intra-op threads of each ONNX Runtime session; 0 = ORT's default (one per core)");
   t.Integer("max_batch", static_cast<int T::*>(&B::max_batch), "rows",
-            ValueRange::Closed(1, interop::BatchingOptions::kMaxBatch),
+            ValueRange::Closed(1, segmentation_service::BatchingOptions::kMaxBatch),
             "in process: stack concurrent calls of a network with a batch axis, shared by the "
             "instances, up to this many rows per run; 1 = off (env AVP_ZSL_MAX_BATCH)");
   t.Integer("batch_delay_us", static_cast<int T::*>(&B::batch_delay_us), "us",
@@ -53,7 +53,7 @@ void AddBackendSettings(OptionTable<T>& t) {
             "AVP_ZSL_BATCH_DELAY_US)");
   t.AddRule([](const T& o, std::vector<std::string>& problems) {
     if (o.model_server.empty()) return;
-    const Result<std::string> address = interop::ParseGrpcAddress(o.model_server);
+    const Result<std::string> address = segmentation_service::ParseGrpcAddress(o.model_server);
     if (!address.ok()) problems.push_back("model_server: " + address.status().message());
   });
 }
@@ -111,7 +111,7 @@ Result<BackendSettings> BackendSettingsFromEnvironment() {
   std::vector<std::string> problems;
   if (std::optional<std::string> dir = FromEnvironment(kModelDirEnvVar)) s.model_dir = *dir;
   if (std::optional<std::string> server = FromEnvironment(kModelServerEnvVar)) {
-    const Result<std::string> address = interop::ParseGrpcAddress(*server);
+    const Result<std::string> address = segmentation_service::ParseGrpcAddress(*server);
     if (address.ok()) {
       s.model_server = *server;
     } else {
@@ -134,8 +134,8 @@ Result<BackendSettings> BackendSettingsFromEnvironment() {
           fmt::format("{}='{}' must be one of auto, cpu, cuda", kDeviceEnvVar, *device));
     }
   }
-  IntegerFromEnvironment(kMaxBatchEnvVar, 1, interop::BatchingOptions::kMaxBatch, s.max_batch,
-                         problems);
+  IntegerFromEnvironment(kMaxBatchEnvVar, 1, segmentation_service::BatchingOptions::kMaxBatch,
+                         s.max_batch, problems);
   IntegerFromEnvironment(kBatchDelayEnvVar, 0, kMaxDelayUs, s.batch_delay_us, problems);
   if (!problems.empty()) {
     return InvalidArgumentError(fmt::format("{}", fmt::join(problems, "; ")));

@@ -8,7 +8,7 @@
 
 #include <fmt/format.h>
 
-#include <avp/interop/tensor_batcher.h>
+#include <avp/segmentation_service/tensor_batcher.h>
 
 #include "remote_model.h"
 
@@ -18,9 +18,9 @@ Result<std::shared_ptr<const OrtModelHandler>> OrtModelHandler::Make(
     std::string name, std::shared_ptr<const OrtModel> model) {
   auto h = std::shared_ptr<OrtModelHandler>(new OrtModelHandler(std::move(name), std::move(model)));
   const auto convert = [&](const std::vector<TensorInfo>& infos,
-                           std::vector<interop::TensorSpec>& out) -> Status {
+                           std::vector<segmentation_service::TensorSpec>& out) -> Status {
     for (const TensorInfo& t : infos) {
-      const std::optional<interop::DataType> d = DataTypeOf(t.type);
+      const std::optional<segmentation_service::DataType> d = DataTypeOf(t.type);
       if (!d) {
         return InvalidArgumentError(fmt::format("{}: tensor '{}' is {}, which cannot be served",
                                                 h->name_, t.name, ToString(t.type)));
@@ -34,7 +34,8 @@ Result<std::shared_ptr<const OrtModelHandler>> OrtModelHandler::Make(
   return std::shared_ptr<const OrtModelHandler>(std::move(h));
 }
 
-Result<interop::InferResponse> OrtModelHandler::Infer(const interop::InferRequest& request) const {
+Result<segmentation_service::InferResponse> OrtModelHandler::Infer(
+    const segmentation_service::InferRequest& request) const {
   // Host copies the sessions read.
   std::vector<std::vector<float>> f32;
   std::vector<std::vector<int64_t>> i64;
@@ -43,22 +44,22 @@ Result<interop::InferResponse> OrtModelHandler::Infer(const interop::InferReques
   i64.reserve(request.inputs.size());
   b8.reserve(request.inputs.size());
   std::vector<InputTensor> inputs;
-  for (const interop::Tensor& t : request.inputs) {
+  for (const segmentation_service::Tensor& t : request.inputs) {
     switch (t.datatype) {
-      case interop::DataType::kFp32: {
-        AVP_ASSIGN_OR_RETURN(std::vector<float> v, interop::ReadValues<float>(t));
+      case segmentation_service::DataType::kFp32: {
+        AVP_ASSIGN_OR_RETURN(std::vector<float> v, segmentation_service::ReadValues<float>(t));
         f32.push_back(std::move(v));
         inputs.push_back(InputTensor::Float32(t.name, f32.back(), t.shape));
         break;
       }
-      case interop::DataType::kInt64: {
-        AVP_ASSIGN_OR_RETURN(std::vector<int64_t> v, interop::ReadValues<int64_t>(t));
+      case segmentation_service::DataType::kInt64: {
+        AVP_ASSIGN_OR_RETURN(std::vector<int64_t> v, segmentation_service::ReadValues<int64_t>(t));
         i64.push_back(std::move(v));
         inputs.push_back(InputTensor::Int64(t.name, i64.back(), t.shape));
         break;
       }
-      case interop::DataType::kBool: {
-        AVP_ASSIGN_OR_RETURN(std::vector<uint8_t> v, interop::ReadValues<uint8_t>(t));
+      case segmentation_service::DataType::kBool: {
+        AVP_ASSIGN_OR_RETURN(std::vector<uint8_t> v, segmentation_service::ReadValues<uint8_t>(t));
         b8.push_back(std::move(v));
         inputs.push_back(InputTensor::Bool(t.name, b8.back(), t.shape));
         break;
@@ -70,9 +71,9 @@ Result<interop::InferResponse> OrtModelHandler::Infer(const interop::InferReques
   }
   AVP_ASSIGN_OR_RETURN(const std::vector<OutputTensor> outputs,
                        model_->Run(inputs, request.requested_outputs));
-  interop::InferResponse response;
+  segmentation_service::InferResponse response;
   for (const OutputTensor& o : outputs) {
-    AVP_ASSIGN_OR_RETURN(interop::Tensor t, ToWire(o));
+    AVP_ASSIGN_OR_RETURN(segmentation_service::Tensor t, ToWire(o));
     response.outputs.push_back(std::move(t));
   }
   return response;
@@ -84,7 +85,7 @@ struct BatchedEntry {
   std::string label;
   std::filesystem::path file;
   std::weak_ptr<const TensorModel> model;
-  std::weak_ptr<const interop::BatchingHandler> batcher;
+  std::weak_ptr<const segmentation_service::BatchingHandler> batcher;
 };
 
 std::mutex& RegistryMutex() {
@@ -134,9 +135,10 @@ Result<ModelRef> LoadBatchedOrtModel(const std::filesystem::path& file,
   auto model = std::make_shared<const OrtModel>(std::move(loaded));
   AVP_ASSIGN_OR_RETURN(std::shared_ptr<const OrtModelHandler> handler,
                        OrtModelHandler::Make(label, model));
-  if (interop::WhyNotBatchable(*handler)) return ModelRef(model);  // this caller's alone
-  AVP_ASSIGN_OR_RETURN(std::shared_ptr<interop::BatchingHandler> batcher,
-                       interop::BatchingHandler::Make(handler, options.batching));
+  if (segmentation_service::WhyNotBatchable(*handler))
+    return ModelRef(model);  // this caller's alone
+  AVP_ASSIGN_OR_RETURN(std::shared_ptr<segmentation_service::BatchingHandler> batcher,
+                       segmentation_service::BatchingHandler::Make(handler, options.batching));
   ModelRef batched = HandlerModel(batcher, label, model->io(), model->provider());
   registry[key] = BatchedEntry{label, file, batched.shared(), batcher};
   return batched;
@@ -148,7 +150,7 @@ std::vector<BatchedModelInfo> BatchedModels() {
   const std::lock_guard lock(RegistryMutex());
   std::vector<BatchedModelInfo> out;
   for (const auto& [key, e] : Registry()) {
-    if (std::shared_ptr<const interop::BatchingHandler> b = e.batcher.lock()) {
+    if (std::shared_ptr<const segmentation_service::BatchingHandler> b = e.batcher.lock()) {
       if (!e.model.expired()) out.push_back({e.label, e.file, b->options(), b->stats()});
     }
   }

@@ -16,7 +16,7 @@
 #include <onnxruntime_cxx_api.h>
 #include <onnxruntime_session_options_config_keys.h>
 
-#include <avp/interop/tensor_service.h>
+#include <avp/segmentation_service/tensor_service.h>
 
 namespace avp::zsl {
 
@@ -101,7 +101,7 @@ Status SessionOptions::Validate() const {
     errors.push_back(fmt::format("cuda_device_id ({}) must be >= 0", cuda_device_id));
   }
   if (!model_server.empty()) {
-    if (Result<std::string> a = interop::ParseGrpcAddress(model_server); !a.ok()) {
+    if (Result<std::string> a = segmentation_service::ParseGrpcAddress(model_server); !a.ok()) {
       errors.push_back(a.status().message());
     }
   }

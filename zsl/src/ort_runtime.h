@@ -47,7 +47,7 @@ struct SessionOptions {
   std::string model_server;
   /// Dynamic batching of the networks run in process (RuntimeOptions::batching); max_batch 1 =
   /// off. Ignored with a model_server (the server batches, or not).
-  interop::BatchingOptions batching;
+  segmentation_service::BatchingOptions batching;
 
   /// OK, or InvalidArgument listing every bad field: "intra_op_threads (-1) must be >= 0".
   Status Validate() const;

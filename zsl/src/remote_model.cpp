@@ -8,19 +8,20 @@
 
 #include <fmt/format.h>
 
-#include <avp/interop/tensor_service.h>
+#include <avp/segmentation_service/tensor_service.h>
 
 namespace avp::zsl {
 
 namespace {
 
-using interop::DataType;
+using segmentation_service::DataType;
 
 /// A network run through KServe v2 tensors: on a server (a TensorClient) or in this process (a
 /// TensorModelHandler, e.g. the batcher in front of an OrtModel). `call` is thread-safe.
 class WireModel final : public TensorModel {
  public:
-  using Call = std::function<Result<interop::InferResponse>(interop::InferRequest)>;
+  using Call = std::function<Result<segmentation_service::InferResponse>(
+      segmentation_service::InferRequest)>;
   WireModel(Call call, std::string label, ModelIo io, std::string provider)
       : call_(std::move(call)),
         label_(std::move(label)),
@@ -33,18 +34,18 @@ class WireModel final : public TensorModel {
 
   Result<std::vector<OutputTensor>> Run(std::span<const InputTensor> inputs,
                                         std::span<const std::string> output_names) const override {
-    interop::InferRequest request;
+    segmentation_service::InferRequest request;
     for (const InputTensor& in : inputs) {
       const TensorInfo* info = io_.FindInput(in.name);
       if (info == nullptr) {
         return InvalidArgumentError(
             fmt::format("{}: the model has no input '{}'", label_, in.name));
       }
-      AVP_ASSIGN_OR_RETURN(interop::Tensor t, ToWire(in));
+      AVP_ASSIGN_OR_RETURN(segmentation_service::Tensor t, ToWire(in));
       request.inputs.push_back(std::move(t));
     }
     for (const std::string& name : output_names) request.requested_outputs.push_back(name);
-    Result<interop::InferResponse> response = call_(std::move(request));
+    Result<segmentation_service::InferResponse> response = call_(std::move(request));
     if (!response.ok()) {
       return Status(response.status().code(),
                     fmt::format("{}: {}", label_, response.status().message()));
@@ -56,7 +57,7 @@ class WireModel final : public TensorModel {
     std::vector<OutputTensor> out;
     out.reserve(wanted.size());
     for (const std::string& name : wanted) {
-      const interop::Tensor* t = response->FindOutput(name);
+      const segmentation_service::Tensor* t = response->FindOutput(name);
       if (t == nullptr) {
         return InvalidArgumentError(
             fmt::format("{}: the answer ({}) has no output '{}'", label_, provider_, name));
@@ -133,14 +134,14 @@ std::optional<DataType> DataTypeOf(ElementType type) {
   }
 }
 
-Result<interop::Tensor> ToWire(const InputTensor& in) {
+Result<segmentation_service::Tensor> ToWire(const InputTensor& in) {
   switch (in.type) {
     case ElementType::kFloat32:
-      return interop::MakeTensor<float>(
+      return segmentation_service::MakeTensor<float>(
           in.name, DataType::kFp32, in.shape,
           std::span<const float>(static_cast<const float*>(in.data), in.count));
     case ElementType::kInt64:
-      return interop::MakeTensor<int64_t>(
+      return segmentation_service::MakeTensor<int64_t>(
           in.name, DataType::kInt64, in.shape,
           std::span<const int64_t>(static_cast<const int64_t*>(in.data), in.count));
     case ElementType::kBool: {
@@ -148,8 +149,8 @@ Result<interop::Tensor> ToWire(const InputTensor& in) {
       const auto* b = static_cast<const uint8_t*>(in.data);
       std::vector<uint8_t> v(b, b + in.count);
       for (uint8_t& x : v) x = x != 0 ? 1 : 0;
-      return interop::MakeTensor<uint8_t>(in.name, DataType::kBool, in.shape,
-                                          std::span<const uint8_t>(v));
+      return segmentation_service::MakeTensor<uint8_t>(in.name, DataType::kBool, in.shape,
+                                                       std::span<const uint8_t>(v));
     }
     default:
       return InvalidArgumentError(
@@ -159,28 +160,30 @@ Result<interop::Tensor> ToWire(const InputTensor& in) {
   }
 }
 
-Result<OutputTensor> FromWire(const interop::Tensor& t) {
-  AVP_RETURN_IF_ERROR(interop::CheckTensor(t, "output"));
+Result<OutputTensor> FromWire(const segmentation_service::Tensor& t) {
+  AVP_RETURN_IF_ERROR(segmentation_service::CheckTensor(t, "output"));
   OutputTensor o;
   o.name = t.name;
   o.shape = t.shape;
   o.type = ElementTypeOf(t.datatype);
   switch (t.datatype) {
     case DataType::kFp32: {
-      AVP_ASSIGN_OR_RETURN(o.f32, interop::ReadValues<float>(t));
+      AVP_ASSIGN_OR_RETURN(o.f32, segmentation_service::ReadValues<float>(t));
       return o;
     }
     case DataType::kInt64: {
-      AVP_ASSIGN_OR_RETURN(o.i64, interop::ReadValues<int64_t>(t));
+      AVP_ASSIGN_OR_RETURN(o.i64, segmentation_service::ReadValues<int64_t>(t));
       return o;
     }
     case DataType::kInt32: {
-      AVP_ASSIGN_OR_RETURN(const std::vector<int32_t> v, interop::ReadValues<int32_t>(t));
+      AVP_ASSIGN_OR_RETURN(const std::vector<int32_t> v,
+                           segmentation_service::ReadValues<int32_t>(t));
       o.i64.assign(v.begin(), v.end());
       return o;
     }
     case DataType::kBool: {
-      AVP_ASSIGN_OR_RETURN(const std::vector<uint8_t> v, interop::ReadValues<uint8_t>(t));
+      AVP_ASSIGN_OR_RETURN(const std::vector<uint8_t> v,
+                           segmentation_service::ReadValues<uint8_t>(t));
       o.i64.reserve(v.size());
       for (uint8_t x : v) o.i64.push_back(x != 0 ? 1 : 0);
       return o;
@@ -191,25 +194,25 @@ Result<OutputTensor> FromWire(const interop::Tensor& t) {
   }
 }
 
-Result<interop::Tensor> ToWire(const OutputTensor& o) {
+Result<segmentation_service::Tensor> ToWire(const OutputTensor& o) {
   switch (o.type) {
     case ElementType::kFloat32:
-      return interop::MakeTensor<float>(o.name, DataType::kFp32, o.shape,
-                                        std::span<const float>(o.f32));
+      return segmentation_service::MakeTensor<float>(o.name, DataType::kFp32, o.shape,
+                                                     std::span<const float>(o.f32));
     case ElementType::kInt64:
-      return interop::MakeTensor<int64_t>(o.name, DataType::kInt64, o.shape,
-                                          std::span<const int64_t>(o.i64));
+      return segmentation_service::MakeTensor<int64_t>(o.name, DataType::kInt64, o.shape,
+                                                       std::span<const int64_t>(o.i64));
     case ElementType::kInt32: {
       std::vector<int32_t> v(o.i64.begin(), o.i64.end());
-      return interop::MakeTensor<int32_t>(o.name, DataType::kInt32, o.shape,
-                                          std::span<const int32_t>(v));
+      return segmentation_service::MakeTensor<int32_t>(o.name, DataType::kInt32, o.shape,
+                                                       std::span<const int32_t>(v));
     }
     case ElementType::kBool: {
       std::vector<uint8_t> v;
       v.reserve(o.i64.size());
       for (int64_t x : o.i64) v.push_back(x != 0 ? 1 : 0);
-      return interop::MakeTensor<uint8_t>(o.name, DataType::kBool, o.shape,
-                                          std::span<const uint8_t>(v));
+      return segmentation_service::MakeTensor<uint8_t>(o.name, DataType::kBool, o.shape,
+                                                       std::span<const uint8_t>(v));
     }
     default:
       return InvalidArgumentError(
@@ -220,22 +223,22 @@ Result<interop::Tensor> ToWire(const OutputTensor& o) {
 Result<ModelRef> ConnectRemoteModel(std::string_view server, const std::string& model,
                                     const std::string& label_in, double deadline_s) {
   const std::string label = label_in.empty() ? model : label_in;
-  AVP_ASSIGN_OR_RETURN(const std::string address, interop::ParseGrpcAddress(server));
-  interop::TensorClientOptions options;
+  AVP_ASSIGN_OR_RETURN(const std::string address, segmentation_service::ParseGrpcAddress(server));
+  segmentation_service::TensorClientOptions options;
   options.address = address;
   options.model = model;
   options.deadline_s = deadline_s;
-  AVP_ASSIGN_OR_RETURN(std::unique_ptr<interop::TensorClient> client,
-                       interop::TensorClient::Create(options));
-  Result<interop::TensorModelMetadata> meta = client->Metadata();
+  AVP_ASSIGN_OR_RETURN(std::unique_ptr<segmentation_service::TensorClient> client,
+                       segmentation_service::TensorClient::Create(options));
+  Result<segmentation_service::TensorModelMetadata> meta = client->Metadata();
   if (!meta.ok()) {
     return Status(meta.status().code(), fmt::format("{}: on model server {}: {}", model, server,
                                                     meta.status().message()));
   }
   ModelIo io;
-  const auto convert = [&](const std::vector<interop::TensorSpec>& specs,
+  const auto convert = [&](const std::vector<segmentation_service::TensorSpec>& specs,
                            std::vector<TensorInfo>& out) -> Status {
-    for (const interop::TensorSpec& s : specs) {
+    for (const segmentation_service::TensorSpec& s : specs) {
       const ElementType type = ElementTypeOf(s.datatype);
       if (type == ElementType::kOther) {
         return InvalidArgumentError(fmt::format("{}: model server {} declares tensor '{}' as {}",
@@ -249,16 +252,18 @@ Result<ModelRef> ConnectRemoteModel(std::string_view server, const std::string& 
   };
   AVP_RETURN_IF_ERROR(convert(meta->inputs, io.inputs));
   AVP_RETURN_IF_ERROR(convert(meta->outputs, io.outputs));
-  std::shared_ptr<interop::TensorClient> shared(std::move(client));
+  std::shared_ptr<segmentation_service::TensorClient> shared(std::move(client));
   return ModelRef(std::make_shared<const WireModel>(
-      [shared](interop::InferRequest request) { return shared->Infer(std::move(request)); }, model,
-      std::move(io), fmt::format("remote {}/{}", server, model)));
+      [shared](segmentation_service::InferRequest request) {
+        return shared->Infer(std::move(request));
+      },
+      model, std::move(io), fmt::format("remote {}/{}", server, model)));
 }
 
-ModelRef HandlerModel(std::shared_ptr<const interop::TensorModelHandler> handler, std::string label,
-                      ModelIo io, std::string provider) {
+ModelRef HandlerModel(std::shared_ptr<const segmentation_service::TensorModelHandler> handler,
+                      std::string label, ModelIo io, std::string provider) {
   return ModelRef(std::make_shared<const WireModel>(
-      [handler](interop::InferRequest request) { return handler->Infer(request); },
+      [handler](segmentation_service::InferRequest request) { return handler->Infer(request); },
       std::move(label), std::move(io), std::move(provider)));
 }
 

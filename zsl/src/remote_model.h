@@ -1,16 +1,16 @@
 #pragma once
 // Internal to avp_zsl: a network on a KServe v2 / Open Inference Protocol server (avp serve
-// models, Triton, OpenVINO Model Server, KServe), run through interop::TensorClient with the
-// tensors the in-process OrtModel takes and gives (docs/zero-shot-models.md, "The networks on an
-// inference server").
+// models, Triton, OpenVINO Model Server, KServe), run through segmentation_service::TensorClient
+// with the tensors the in-process OrtModel takes and gives (docs/zero-shot-models.md, "The networks
+// on an inference server").
 
 #include <memory>
 #include <string>
 #include <string_view>
 
 #include <avp/core/status.h>
-#include <avp/interop/tensor.h>
-#include <avp/interop/tensor_service.h>
+#include <avp/segmentation_service/tensor.h>
+#include <avp/segmentation_service/tensor_service.h>
 
 #include "ort_runtime.h"
 
@@ -24,23 +24,23 @@ namespace avp::zsl {
 Result<ModelRef> ConnectRemoteModel(std::string_view server, const std::string& model,
                                     const std::string& label = "", double deadline_s = 60.0);
 
-/// A network run in this process through `handler` (e.g. an interop::BatchingHandler in front of
-/// an OrtModel), with the same tensor conversions as a remote one; `io` and `provider` are the
-/// network's own. Thread-safe as `handler` is.
-ModelRef HandlerModel(std::shared_ptr<const interop::TensorModelHandler> handler, std::string label,
-                      ModelIo io, std::string provider);
+/// A network run in this process through `handler` (e.g. an segmentation_service::BatchingHandler
+/// in front of an OrtModel), with the same tensor conversions as a remote one; `io` and `provider`
+/// are the network's own. Thread-safe as `handler` is.
+ModelRef HandlerModel(std::shared_ptr<const segmentation_service::TensorModelHandler> handler,
+                      std::string label, ModelIo io, std::string provider);
 
 /// KServe datatype <-> ONNX element type (FP32 <-> float32, INT64 <-> int64, INT32, BOOL, FP16,
 /// FP64, UINT8, INT8, INT16). kOther / kUndefined for the rest, nullopt the other way.
-ElementType ElementTypeOf(interop::DataType datatype);
-std::optional<interop::DataType> DataTypeOf(ElementType type);
+ElementType ElementTypeOf(segmentation_service::DataType datatype);
+std::optional<segmentation_service::DataType> DataTypeOf(ElementType type);
 
 /// An input as the wire carries it (little-endian, row-major; bool as one byte).
-Result<interop::Tensor> ToWire(const InputTensor& input);
+Result<segmentation_service::Tensor> ToWire(const InputTensor& input);
 /// An output as OrtModel::Run gives it: FP32 into f32; INT64, INT32 and BOOL into i64 (bool 0/1).
 /// InvalidArgument naming the tensor for another datatype or contents that do not fill the shape.
-Result<OutputTensor> FromWire(const interop::Tensor& tensor);
+Result<OutputTensor> FromWire(const segmentation_service::Tensor& tensor);
 /// The other way, for a server: f32 as FP32, i64 as INT64 / INT32 / BOOL after `type`.
-Result<interop::Tensor> ToWire(const OutputTensor& output);
+Result<segmentation_service::Tensor> ToWire(const OutputTensor& output);
 
 }  // namespace avp::zsl

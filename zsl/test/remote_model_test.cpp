@@ -22,8 +22,8 @@
 
 #include <avp/core/camera.h>
 #include <avp/core/rgbd_frame.h>
-#include <avp/interop/tensor_service.h>
 #include <avp/segmentation/segmenter.h>
+#include <avp/segmentation_service/tensor_service.h>
 #include <avp/zsl/lsam_segmenter.h>
 #include <avp/zsl/model_service.h>
 #include <avp/zsl/ywes_segmenter.h>
@@ -206,7 +206,7 @@ TEST(RemoteModelTest, YwesOnABatchingModelServerEqualsYwesInProcess) {
   const std::vector<Segmentation> answers = SegmentAtOnce(robots, frame, prompts);
   const size_t instances = ExpectSameAsReference(**in_process, frame, prompts, answers);
   EXPECT_GT(instances, 2u);  // the planted anchors fired: real masks were compared
-  const interop::BatchingStats text = service->server->stats().batching.at("text");
+  const segmentation_service::BatchingStats text = service->server->stats().batching.at("text");
   EXPECT_EQ(text.requests, 4u);
   EXPECT_EQ(text.batches, 1u);
   EXPECT_EQ(text.largest, 4);
@@ -244,7 +244,7 @@ TEST(RemoteModelTest, InProcessBatchingSharesANetworkAndStacksItsCalls) {
     ASSERT_EQ(text_batchers().size(), 1u);  // one text encoder for the four instances
     EXPECT_EQ(text_batchers()[0].label, "text");
     answers = SegmentAtOnce(instances, Frame(640, 480, {200, 50, 10}), prompts);
-    const interop::BatchingStats stats = text_batchers().at(0).stats;
+    const segmentation_service::BatchingStats stats = text_batchers().at(0).stats;
     EXPECT_EQ(stats.requests, 4u);
     EXPECT_EQ(stats.batches, 1u);
     EXPECT_EQ(stats.largest, 4);

@@ -137,15 +137,6 @@ class OptionTable {
   /// Every field and rule of `sub` (a table of U), under "<prefix>." keys.
   template <typename U>
   OptionTable& Nested(const std::string& prefix, U T::*field, const OptionTable<U>& sub);
-  /// A thread count (0 = all hardware threads): an execution setting, not a key of the table
-  /// (the caller's budget, e.g. PlannerContext::threads), checked to be >= 0.
-  OptionTable& Threads(std::string key, int T::*field) {
-    return AddRule([key = std::move(key), field](const T& o, std::vector<std::string>& problems) {
-      if (o.*field < 0) {
-        problems.push_back(key + " (" + std::to_string(o.*field) + ") must be >= 0");
-      }
-    });
-  }
   /// A check spanning fields, run by Problems() after the per-field ones.
   OptionTable& AddRule(Rule rule) {
     rules_.push_back(std::move(rule));

@@ -47,8 +47,6 @@ struct GroundTruthOptions {
   double max_range_m = mapping::IntegratorOptions{}.max_range_m;
   /// Seed of the IK restarts (each view draws from its own stream of it).
   uint64_t seed = 0;
-  /// Worker threads (0 = all hardware threads). The result does not depend on it.
-  int num_threads = 0;
 
   /// OK, or InvalidArgument naming every bad field and its value.
   Status Validate() const;
@@ -56,7 +54,8 @@ struct GroundTruthOptions {
 
 /// The fields of GroundTruthOptions that describe the observation views (radii_m, azimuths,
 /// elevations_deg, azimuth_half_range_deg, image_width, image_height); voxel_size_m, max_range_m,
-/// seed and num_threads come from the run and are checked by a rule.
+/// and seed come from the run and are checked by a rule. The views are rendered on
+/// avp::Threads() threads (core/parallel.h); the result does not depend on it.
 const OptionTable<GroundTruthOptions>& GroundTruthOptionTable();
 
 /// The visible-fraction levels at which `avp run` (record.json) and `avp bench` (summary.md)

@@ -52,7 +52,6 @@ struct OracleNbvOptions {
   double render_scale = 0.25;
   /// Motion cost weight, as avp-nbv's: U = G / max G - w_motion |dq| / max |dq|.
   double w_motion = 0.1;
-  int num_threads = 0;
 };
 
 /// The configurable fields of OracleNbvOptions: candidates.*, render_scale and w_motion (the
@@ -159,8 +158,8 @@ struct StepRegret {
 class RegretProbe final : public planning::ViewPlanner {
  public:
   /// `inner` and `oracle` must outlive the probe.
-  RegretProbe(planning::ViewPlanner& inner, const OracleNbvPlanner& oracle, int num_threads = 0)
-      : inner_(inner), oracle_(oracle), num_threads_(num_threads) {}
+  RegretProbe(planning::ViewPlanner& inner, const OracleNbvPlanner& oracle)
+      : inner_(inner), oracle_(oracle) {}
   std::string_view name() const override { return inner_.name(); }
   planning::PlanResult Plan(const planning::PlanningRequest& request, Rng& rng) override;
   /// One entry per plan call that returned candidates, in order.
@@ -169,7 +168,6 @@ class RegretProbe final : public planning::ViewPlanner {
  private:
   planning::ViewPlanner& inner_;
   const OracleNbvPlanner& oracle_;
-  int num_threads_ = 0;
   int calls_ = 0;
   std::vector<StepRegret> steps_;
 };

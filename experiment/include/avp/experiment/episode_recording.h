@@ -10,7 +10,7 @@
 #include <avp/eval/ground_truth.h>
 #include <avp/experiment/registries.h>
 #include <avp/experiment/run_config.h>
-#include <avp/recording/mcap_recorder.h>
+#include <avp/ros/bag/mcap_recorder.h>
 
 namespace avp::experiment {
 
@@ -26,7 +26,7 @@ struct RecordingInfo {
 /// seed, planner, segmenter, prompt, views, base_frame, run_config = RunConfigToYaml's text),
 /// the ground truth as the attachment ground_truth.json (eval::GroundTruthToJson), the default
 /// arm's joint names. Errors name the file.
-Result<std::unique_ptr<recording::McapRecorder>> OpenEpisodeRecording(
+Result<std::unique_ptr<ros::bag::McapRecorder>> OpenEpisodeRecording(
     const std::filesystem::path& path, const RunConfig& config, const Registries& registries,
     const RecordingInfo& info);
 

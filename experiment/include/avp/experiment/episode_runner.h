@@ -63,11 +63,11 @@ struct EpisodeTruth {
 };
 
 /// Runs one episode of `config` with `robot` (the registered planner and segmenter with their
-/// options, a map of config.map), planning inside `roi`. Observers see every step as it
-/// completes; `map_out`, when given, receives the final map.
-Result<RunResult> RunEpisodeWithRobot(const RunConfig& config, const Registries& registries,
-                                      const RobotSide& robot, const Box3& roi,
-                                      const EpisodeTruth& truth,
+/// options, a map of config.map), planning inside `roi`, on config.threads threads (a
+/// ThreadScope: core/parallel.h). Observers see every step as it completes; `map_out`, when
+/// given, receives the final map.
+Result<RunResult> RunEpisodeWithRobot(const CheckedRunConfig& config, const RobotSide& robot,
+                                      const Box3& roi, const EpisodeTruth& truth,
                                       const std::vector<pipeline::EpisodeObserver*>& observers = {},
                                       std::unique_ptr<mapping::SemanticMap>* map_out = nullptr);
 
@@ -89,8 +89,8 @@ Eigen::VectorXd StartJoints(const sim::Scene& scene, const robot::ArmModel& arm)
 /// (sim::SimRgbdSource, sim::SimArm), the registered planner and segmenter with their options.
 /// `map_out`, when given, receives the final map. Observers see every step as it completes; a stop
 /// requested through `stop` ends the episode as interrupted (a result could not be written).
-Result<RunResult> RunEpisodeOnScene(const RunConfig& config, const Registries& registries,
-                                    const sim::Scene& scene, const eval::GroundTruth& gt,
+Result<RunResult> RunEpisodeOnScene(const CheckedRunConfig& config, const sim::Scene& scene,
+                                    const eval::GroundTruth& gt,
                                     const std::vector<pipeline::EpisodeObserver*>& observers = {},
                                     std::unique_ptr<mapping::SemanticMap>* map_out = nullptr,
                                     std::stop_token stop = {});

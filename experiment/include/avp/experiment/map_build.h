@@ -52,7 +52,8 @@ struct MapBuildOptions {
   /// the library's defaults, as `avp run` uses them; the ROI is set from roi_margin_m.
   mapping::MapOptions map;
   mapping::IntegratorOptions integrator;
-  /// Threads of the integrator (0 = all hardware threads); the map does not depend on it.
+  /// Threads of the integrator (0 = all hardware threads; a ThreadScope, core/parallel.h); the
+  /// map does not depend on it.
   int threads = 0;
   /// Confidence given to every ground-truth mask (the segmenter's calibrated score).
   float mask_confidence = 0.9f;

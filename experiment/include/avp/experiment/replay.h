@@ -13,7 +13,7 @@
 #include <avp/experiment/run_config.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/pipeline/episode.h>
-#include <avp/recording/bag_reader.h>
+#include <avp/ros/bag/bag_reader.h>
 
 namespace avp::experiment {
 
@@ -24,7 +24,7 @@ inline constexpr std::string_view kRecordedSegmenter = "recorded";
 /// YAML `avp run --print-config` prints) over the defaults, or the defaults when the bag has
 /// none (a robot's bag). Not validated (the caller applies its own --config / --set first).
 /// InvalidArgument naming the bag and the key when run_config does not read back.
-Result<RunConfig> BagRunConfig(const recording::Bag& bag);
+Result<RunConfig> BagRunConfig(const ros::bag::Bag& bag);
 
 struct ReplayOptions {
   /// "recorded": the recording's masks (every view must have them); a registered segmenter name
@@ -60,7 +60,7 @@ struct ReplaySummary {
 /// A damaged bag replays its intact views and the episode ends "interrupted" naming the damage.
 /// Errors: invalid configuration, "recorded" without masks, an oracle segmenter without labels,
 /// a bad ground_truth.json, the folder's.
-Result<ReplaySummary> ReplayToFolder(const recording::Bag& bag, RunConfig config,
+Result<ReplaySummary> ReplayToFolder(const ros::bag::Bag& bag, RunConfig config,
                                      const Registries& registries, const ReplayOptions& options);
 
 }  // namespace avp::experiment

@@ -71,6 +71,33 @@ struct RunConfig {
   Status Validate(const Registries& registries) const;
 };
 
+/// A run configuration checked at the door: validated once (RunConfig::Validate), with the
+/// registries it was checked against and its planner's and segmenter's options resolved. Only
+/// Check makes one and it cannot be changed afterwards, so the functions that take it (RunToFolder,
+/// RunEpisodeOnScene, RunEpisodeWithRobot, RunEpisodeToFolder, RunLiveToFolder) check nothing
+/// again. The registries must outlive it.
+class CheckedRunConfig {
+ public:
+  /// InvalidArgument "invalid run configuration: ..." with every problem (RunConfig::Validate).
+  static Result<CheckedRunConfig> Check(RunConfig config, const Registries& registries);
+
+  const RunConfig& config() const { return config_; }
+  const RunConfig& operator*() const { return config_; }
+  const RunConfig* operator->() const { return &config_; }
+  const Registries& registries() const { return *registries_; }
+  /// The planner's and the segmenter's options: registered defaults + the overrides, valid.
+  const AnyOptions& planner_options() const { return planner_options_; }
+  const AnyOptions& segmenter_options() const { return segmenter_options_; }
+
+ private:
+  CheckedRunConfig(RunConfig config, const Registries& registries, AnyOptions planner,
+                   AnyOptions segmenter);
+  RunConfig config_;
+  const Registries* registries_;
+  AnyOptions planner_options_;
+  AnyOptions segmenter_options_;
+};
+
 /// The fields of RunConfig that do not depend on the registries: everything but `planner` and
 /// `segmenter` (camera.*, depth_noise.*, map.*, episode.*, ground_truth.*, ...).
 const OptionTable<RunConfig>& RunConfigTable();

@@ -63,8 +63,7 @@ struct RunSummary {
 ///   report.html       the episode in 3D, step by step: the map, the ground-truth fruit, each
 ///                     view's frustum, masks and candidates, the curves (one file, offline;
 ///                     docs/report.md)
-Result<RunSummary> RunToFolder(const RunConfig& config, const Registries& registries,
-                               const RunFolderOptions& options);
+Result<RunSummary> RunToFolder(const CheckedRunConfig& config, const RunFolderOptions& options);
 
 /// What a run folder records besides the configuration: how the episode is run, on what, and
 /// what it is scored against. RunToFolder fills it for the simulator; `avp live` for a robot.
@@ -94,11 +93,11 @@ struct FolderRun {
 /// the episode (through the stop token handed to run.run) and is the error, naming the file; the
 /// folder is then marked "failed".
 Result<RunSummary> RunEpisodeToFolder(
-    const RunConfig& config, const Registries& registries, const RunFolderOptions& options,
-    const FolderRun& run, const std::vector<pipeline::EpisodeObserver*>& observers = {});
+    const CheckedRunConfig& config, const RunFolderOptions& options, const FolderRun& run,
+    const std::vector<pipeline::EpisodeObserver*>& observers = {});
 
 /// record.json's "config": the effective configuration (RunConfigToYaml's tree) as JSON, numbers
 /// and flags typed.
-Result<nlohmann::json> RunConfigJson(const RunConfig& config, const Registries& registries);
+nlohmann::json RunConfigJson(const CheckedRunConfig& config);
 
 }  // namespace avp::experiment

@@ -36,9 +36,6 @@ struct IntegratorOptions {
   /// kProjective: kRayCast's result, much faster on depth images (IntegratePointCloud always
   /// traces rays).
   FreeSpaceCarving carving = FreeSpaceCarving::kProjective;
-  /// Threads for one frame (0 = all hardware threads). Results do not depend on it. An execution
-  /// setting, not part of the table: the caller's thread budget.
-  int num_threads = 1;
   Status Validate() const;
 };
 

@@ -98,16 +98,13 @@ struct AvpNbvOptions {
   /// summing to its gain): the data to calibrate the weights on (`--oracle-regret` records them
   /// beside the true gain). Changes no choice.
   bool record_gain_terms = false;
-  /// Threads over candidates (0 = all hardware threads). Results do not depend on it. An
-  /// execution setting (PlannerContext::threads), not part of the table.
-  int num_threads = 0;
   Status Validate() const;
 };
 
 /// The fields of AvpNbvOptions by name (docs/planning.md): every scalar field ("p_unknown",
 /// "w_diversity", "ray_stride_px", ...), the candidate shells' as "candidates.<field>"
-/// (ShellCandidateOptionTable) and the gain grid's as "grid.<field>" (GainGridOptionTable);
-/// num_threads is the caller's (PlannerContext::threads).
+/// (ShellCandidateOptionTable) and the gain grid's as "grid.<field>" (GainGridOptionTable).
+/// Candidates are scored on avp::Threads() threads (core/parallel.h).
 const OptionTable<AvpNbvOptions>& AvpNbvOptionTable();
 
 /// avp-nbv's registry entry (RegisterBuiltinPlanners).

@@ -66,15 +66,12 @@ struct ShellCandidateOptions {
   double unseen_cell_m = 0.1;
   /// IK restarts per candidate after the attempt from the current joints.
   int ik_restarts = 1;
-  /// Threads for the IK checks (0 = all hardware threads); the result does not depend on it.
-  /// An execution setting (PlannerContext::threads), not part of the table.
-  int num_threads = 0;
 
   /// Names every bad value (ShellCandidateOptionTable).
   Status Validate() const;
 };
 
-/// The fields of ShellCandidateOptions (all but num_threads).
+/// The fields of ShellCandidateOptions. The IK checks run on avp::Threads() threads.
 const OptionTable<ShellCandidateOptions>& ShellCandidateOptionTable();
 
 /// Where candidates look: target points with a label ("fruit-shell", "frontier", "roi").

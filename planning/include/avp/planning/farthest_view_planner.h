@@ -16,9 +16,6 @@ struct FarthestViewOptions {
   ShellCandidateOptions candidates;
   /// Motion cost weight: U = d / max d - w_motion |dq| / max |dq|.
   double w_motion = 0.1;
-  /// Threads for the IK checks (0 = all hardware threads). An execution setting
-  /// (PlannerContext::threads), not part of the table.
-  int num_threads = 0;
 
   Status Validate() const;
 };

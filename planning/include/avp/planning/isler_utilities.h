@@ -149,13 +149,11 @@ struct IslerPlannerOptions {
   /// over the reachable candidates (a term is 0 when its sum is 0). w_ig, w_c >= 0.
   double gain_weight = 1.0;
   double cost_weight = 0.1;
-  /// Threads evaluating candidates (0 = all hardware threads); results do not depend on it.
-  int num_threads = 1;
   Status Validate() const;
 };
 
-/// The fields of IslerPlannerOptions but `utility` (the planner's name chooses it) and
-/// num_threads: candidates.*, grid.*, rays.*, gain_weight, cost_weight.
+/// The fields of IslerPlannerOptions but `utility` (the planner's name chooses it):
+/// candidates.*, grid.*, rays.*, gain_weight, cost_weight.
 const OptionTable<IslerPlannerOptions>& IslerPlannerOptionTable();
 
 /// "isler-ae", "isler-oa", "isler-uv", "isler-rsv", "isler-rse", "isler-pc"

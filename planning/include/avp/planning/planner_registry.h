@@ -22,8 +22,6 @@ class PlannerTruth {
 
 /// What a planner's factory gets besides its options.
 struct PlannerContext {
-  /// Threads the planner may use (0 = all hardware threads). Results do not depend on it.
-  int threads = 0;
   /// The truth, for planners registered with needs_ground_truth; null otherwise.
   const PlannerTruth* truth = nullptr;
 };

@@ -41,8 +41,6 @@ struct ReferenceNbvOptions {
   /// Candidates within these tolerances of a fused view (or of the current pose) are dropped.
   double fused_position_tol_m = 0.02;
   double fused_angle_tol_rad = 0.1745;
-  /// Threads evaluating candidates (0 = all hardware threads); results do not depend on it.
-  int num_threads = 1;
   /// The gain grid the rays are walked on (the near-target radius is unused here).
   GainGridOptions grid{.near_target_radius_m = 0.0};
 
@@ -50,7 +48,7 @@ struct ReferenceNbvOptions {
   Status Validate() const;
 };
 
-/// The fields of ReferenceNbvOptions (all but num_threads and the gain grid's).
+/// The fields of ReferenceNbvOptions (all but the gain grid's).
 const OptionTable<ReferenceNbvOptions>& ReferenceNbvOptionTable();
 
 /// "reference-nbv"'s registry entry (RegisterBuiltinPlanners).

@@ -31,7 +31,7 @@ struct MoveResult {
 /// called with validated, in-limit requests.
 ///
 /// Implementations: sim::SimArm (teleports; tests and simulation). A real arm (ROS 2 / MoveIt)
-/// lives in interop/.
+/// is ros::live::Ros2Arm (ros/live/).
 class Arm {
  public:
   virtual ~Arm() = default;

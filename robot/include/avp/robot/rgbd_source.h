@@ -19,7 +19,7 @@ struct Observation {
 };
 
 /// Where frames come from: a simulated camera (sim::SimRgbdSource), a recording, or a real
-/// camera (interop/).
+/// camera (ros/live/).
 class RgbdSource {
  public:
   virtual ~RgbdSource() = default;

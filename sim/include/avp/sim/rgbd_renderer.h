@@ -19,8 +19,6 @@ struct RenderedFrame {
 };
 
 struct RendererOptions {
-  /// Threads used to render one frame (0 = all hardware threads).
-  int num_threads = 0;
   /// Colour of pixels with no return, linear RGB in [0, 1].
   Eigen::Vector3f background_rgb = Eigen::Vector3f(0.80f, 0.86f, 0.93f);
   /// Rays traced together: 1 (rtcIntersect1), 4 (2x2 pixels), 8 (4x2) or 16 (4x4 pixels).
@@ -33,7 +31,8 @@ struct RendererOptions {
 class RgbdRenderer {
  public:
   /// @throws avp::Error if the scene fails Scene::Validate() or the options are invalid
-  /// (num_threads < 0, ray_packet_size not 1/4/8/16, background colour not finite).
+  /// (ray_packet_size not 1/4/8/16, background colour not finite). A frame is rendered on
+  /// avp::Threads() threads (core/parallel.h).
   explicit RgbdRenderer(const Scene& scene, RendererOptions options = {});
   ~RgbdRenderer();
   RgbdRenderer(RgbdRenderer&&) noexcept;

@@ -11,13 +11,13 @@
 #include <vector>
 
 #include <avp/core/status.h>
-#include <avp/interop/tensor_service.h>
+#include <avp/segmentation_service/tensor_service.h>
 #include <avp/zsl/zsl.h>
 
 namespace avp::zsl {
 
 struct ModelServiceOptions {
-  interop::TensorServerOptions server;
+  segmentation_service::TensorServerOptions server;
   /// The sessions' device and threads (model_server must be empty: a server runs its own).
   RuntimeOptions runtime;
   /// Check each file's sha256 against the manifest before loading it.
@@ -26,7 +26,7 @@ struct ModelServiceOptions {
 
 /// A running model service and what it serves.
 struct ModelService {
-  std::unique_ptr<interop::TensorServer> server;
+  std::unique_ptr<segmentation_service::TensorServer> server;
   struct Served {
     std::string name;      ///< the role
     std::string provider;  ///< where it runs ("CPUExecutionProvider")

@@ -7,7 +7,7 @@
 
 #include <avp/core/options.h>
 #include <avp/core/status.h>
-#include <avp/interop/tensor_service.h>  // BatchingOptions
+#include <avp/segmentation_service/tensor_service.h>  // BatchingOptions
 
 namespace avp::zsl {
 
@@ -52,9 +52,10 @@ struct RuntimeOptions {
   std::string model_server;
   /// In process (no model_server), max_batch > 1: each network whose inputs and outputs all have
   /// a dynamic leading axis is loaded once per process and shared by every backend instance
-  /// with the same file and settings, its concurrent calls stacked (interop::BatchingHandler).
-  /// The registered "ywes" / "lsam" take max_batch and max_delay from BackendSettings.
-  interop::BatchingOptions batching;
+  /// with the same file and settings, its concurrent calls stacked
+  /// (segmentation_service::BatchingHandler). The registered "ywes" / "lsam" take max_batch and
+  /// max_delay from BackendSettings.
+  segmentation_service::BatchingOptions batching;
 };
 
 // ---- The registered backends' shared settings (the "ywes" / "lsam" option tables) -------------
@@ -83,10 +84,10 @@ struct BackendSettings {
   /// Intra-op threads of each ONNX Runtime session, [0, 1024]; 0 = ORT's default.
   int threads = 0;
   /// Rows one batched network run stacks, [1, 1024]; 1 = no batching (AVP_ZSL_MAX_BATCH).
-  int max_batch = interop::BatchingOptions{}.max_batch;
+  int max_batch = segmentation_service::BatchingOptions{}.max_batch;
   /// How long a batched call waits for others, microseconds, [0, 1000000]
   /// (AVP_ZSL_BATCH_DELAY_US).
-  int batch_delay_us = static_cast<int>(interop::BatchingOptions{}.max_delay.count());
+  int batch_delay_us = static_cast<int>(segmentation_service::BatchingOptions{}.max_delay.count());
 
   /// The sessions' RuntimeOptions: threads, device, model_server, batching (max_batch,
   /// max_delay = batch_delay_us, the other batching fields at their defaults).
@@ -111,8 +112,8 @@ Result<BackendSettings> BackendSettingsFromEnvironment();
 struct BatchedNetwork {
   std::string role;  ///< its manifest role ("text")
   std::string file;  ///< the .onnx file
-  interop::BatchingOptions options;
-  interop::BatchingStats stats;
+  segmentation_service::BatchingOptions options;
+  segmentation_service::BatchingStats stats;
 };
 /// The batched networks alive now (none in a build without ONNX Runtime).
 std::vector<BatchedNetwork> BatchedNetworks();
