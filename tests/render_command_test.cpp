@@ -5,6 +5,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <avp/experiment/output_folder.h>
 #include <avp/experiment/render.h>
 #include <avp/io/depth.h>
 #include <avp/io/json.h>
@@ -131,6 +132,36 @@ TEST(RenderCommandTest, BadInputsNameTheBadValue) {
   r = RenderToFolder(options, sim::BuiltinScenarios());
   ASSERT_FALSE(r.ok());
   EXPECT_THAT(r.status().message(), HasSubstr("/nonexistent/plant.yaml"));
+}
+
+TEST(RenderCommandTest, AnEarlierRenderIsReplacedOnlyWithForceAndNoOtherFolderEver) {
+  RenderOptions options;
+  options.scene.scenario = "tomato-single-cluster";
+  options.intrinsics = CameraIntrinsics::RealSenseD435().Scaled(0.25);
+  options.out_dir = TempDir("again");
+  ASSERT_TRUE(RenderToFolder(options, sim::BuiltinScenarios()).ok());
+  EXPECT_EQ(ReadFolderState(options.out_dir)->state, "complete");
+  EXPECT_EQ(ReadFolderState(options.out_dir)->kind, "render");
+  // The same folder again: refused, saying what it holds and that --force replaces it.
+  Result<RenderSummary> again = RenderToFolder(options, sim::BuiltinScenarios());
+  ASSERT_FALSE(again.ok());
+  EXPECT_THAT(again.status().message(), HasSubstr("the results of a complete avp render"));
+  EXPECT_THAT(again.status().message(), HasSubstr("--force to replace it"));
+  options.force = true;
+  EXPECT_TRUE(RenderToFolder(options, sim::BuiltinScenarios()).ok());
+  // A finished run's folder is never written into, with or without --force, and --force is not
+  // offered.
+  const fs::path run = TempDir("into_run");
+  ASSERT_TRUE(PrepareOutputFolder(run, RunFolderKind(), false).ok());
+  ASSERT_TRUE(MarkComplete(run, RunFolderKind(), "avp run").ok());
+  options.out_dir = run;
+  for (const bool force : {false, true}) {
+    options.force = force;
+    const Result<RenderSummary> r = RenderToFolder(options, sim::BuiltinScenarios());
+    ASSERT_FALSE(r.ok());
+    EXPECT_THAT(r.status().message(), HasSubstr("not an avp render folder"));
+    EXPECT_FALSE(fs::exists(run / "rgb.png"));
+  }
 }
 
 TEST(RenderCommandTest, CameraPoseOverridesTheArm) {

@@ -248,6 +248,27 @@ TEST_F(RunCommandTest, EpisodeVisibilityOfEachFruitIsWhatTheRendererShows) {
   }
 }
 
+TEST_F(RunCommandTest, ARunThatFindsNothingSaysWhy) {
+  // The README's example of the paper's planner: from an unoriented start it sees no fruit, its
+  // gains are all zero and it finds nothing; record.json says why (issue 32).
+  RunConfig c;
+  c.scenario = "tomato-unoriented-start";
+  c.planner.name = "reference-nbv";
+  c.episode.views = 3;
+  RunFolderOptions o;
+  o.out_dir = dir_ / "ref";
+  const auto r = RunToFolder(CheckedRunConfig::Check(c, registries_).value(), o);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->result.final_metrics.fruits.found, 0u);
+  const auto record = io::ReadJsonFile(o.out_dir / "record.json");
+  ASSERT_TRUE(record.ok());
+  const nlohmann::json& why = (*record)["nothing_found"];
+  ASSERT_TRUE(why.is_array()) << why.dump();
+  ASSERT_GE(why.size(), 2u) << why.dump();
+  EXPECT_THAT(why.dump(), HasSubstr("no view returned a mask"));
+  EXPECT_THAT(why.dump(), HasSubstr("zero gain"));
+}
+
 TEST_F(RunCommandTest, RunRejectsBadInput) {
   RunConfig c;
   c.scenario = "tomato-nowhere";

@@ -10,6 +10,7 @@
 #include <avp/core/options.h>
 #include <avp/core/text.h>
 #include <avp/experiment/map_build.h>
+#include <avp/experiment/output_folder.h>
 #include <avp/experiment/run_config.h>
 #include <avp/mapping/map_tools.h>
 #include <avp/report/progress.h>
@@ -172,6 +173,7 @@ void AddMapBuild(CLI::App& map_cmd, CommandContext& context) {
                   "Integrator threads (0 = all)");
   cmd->add_flag("--noise", b.noise, "Apply the seeded D435-like depth noise model");
   cmd->add_option("--out", cli->out, "Output map file (.avpmap)")->default_val(cli->out);
+  cmd->add_flag("--force", cli->options.force, "Replace an existing --out file");
   cmd->callback([cli, &context] {
     RunGuarded(context, [&] {
       MapBuildOptions o = cli->options;
@@ -191,6 +193,7 @@ void AddMapGt(CLI::App& map_cmd, CommandContext& context) {
   AddSceneFlags(*cmd, *scene, "Seed of the procedural plant");
   AddVoxelSizeOption(*cmd, gt->voxel_size_m);
   cmd->add_option("--out", *out, "Output .bt file")->default_val(*out);
+  cmd->add_flag("--force", gt->force, "Replace an existing --out file");
   cmd->callback([gt, out, scene, &context] {
     RunGuarded(context, [&] {
       MapGtOptions o = *gt;
@@ -213,6 +216,7 @@ void AddMapInfo(CLI::App& map_cmd, CommandContext& context) {
 struct MapExportCli {
   MapExportOptions options;
   std::string map, out;
+  bool force = false;
 };
 
 void AddMapExport(CLI::App& map_cmd, CommandContext& context) {
@@ -226,6 +230,7 @@ void AddMapExport(CLI::App& map_cmd, CommandContext& context) {
   cmd->add_option("--format", cli->options.format, "avpmap, bt, ot or ply (default: from --out)")
       ->check(CLI::IsMember({"avpmap", "bt", "ot", "ply"}));
   cmd->add_option("--out", cli->out, "Output file")->required();
+  cmd->add_flag("--force", cli->force, "Replace an existing --out file");
   cmd->add_flag("--ascii", cli->options.ply_ascii, "PLY: ASCII instead of binary little-endian");
   cmd->add_flag("--all-labelled", cli->options.ply_all_labelled,
                 "PLY: every labelled voxel, not only occupied ones");
@@ -234,6 +239,10 @@ void AddMapExport(CLI::App& map_cmd, CommandContext& context) {
       MapExportOptions o = cli->options;
       o.map = cli->map;
       o.out = cli->out;
+      // The output rule of every command that writes (experiment/output_folder.h).
+      if (Status s = experiment::CheckOutputFile(o.out, cli->force); !s.ok()) {
+        return Failed("map export", s);
+      }
       return MapExportAndReport(o);
     });
   });

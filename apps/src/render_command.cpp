@@ -66,6 +66,9 @@ void AddRenderCommand(CLI::App& app, CommandContext& context) {
                   "Arm config YAML (default: configs/arms/igus_rebel_d435.yaml)");
   cmd->add_flag("--noise", cli->options.noise, "Apply the seeded D435-like depth noise model");
   cmd->add_option("--out", cli->out_dir, "Output folder")->default_val(cli->out_dir);
+  cmd->add_flag("--force", cli->options.force,
+                "Replace an earlier render's files in --out (another command's folder is never "
+                "written into)");
   cmd->callback([cli, &context] {
     RunGuarded(context, [&] {
       RenderOptions o = cli->options;

@@ -151,6 +151,9 @@ void PrintSummary(const experiment::RunConfig& config, const experiment::RunSumm
       std::string(pipeline::ToString(r.episode.end)).c_str(),
       r.episode.end_reason.empty() ? "" : ": ", r.episode.end_reason.c_str(), summary.seconds,
       r.final_metrics.exact.f1, r.final_metrics.fruits.found, r.final_metrics.fruits.total);
+  for (const std::string& why : experiment::WhyNothingFound(config, r)) {
+    std::printf("no fruit found: %s\n", why.c_str());
+  }
   if (!r.regret.empty()) {
     std::printf(
         "oracle regret per plan step (1 - true gain of the choice / best true gain; true "

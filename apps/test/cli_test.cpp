@@ -153,10 +153,17 @@ TEST_F(CliTest, MapExportRefusesToOverwriteItsInput) {
   const fs::path map = dir_ / "plant.ot";
   const std::string bytes = "not a map, but mine";
   std::ofstream(map) << bytes;
-  const Ran r = Avp("map export " + map.string() + " --out " + map.string());
+  // An existing file is refused (the output rule); with --force, the input still is.
+  Ran r = Avp("map export " + map.string() + " --out " + map.string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("already exists: give another --out, or --force"));
+  r = Avp("map export " + map.string() + " --out " + map.string() + " --force");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("outputs never overwrite inputs"));
   EXPECT_EQ(test::ReadWholeFile(map), bytes);
+  // A folder as --out is named as one.
+  r = Avp("map export " + map.string() + " --out " + dir_.string());
+  EXPECT_THAT(r.output, HasSubstr("is a folder: give a file name"));
 }
 
 TEST_F(CliTest, AFolderIsNotAMissingFile) {
@@ -213,6 +220,51 @@ TEST_F(CliTest, RunIntoAFolderWithResultsRefusesAtOnce) {
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_THAT(r.output, HasSubstr("so --force does not empty it"));
   EXPECT_EQ(test::ReadWholeFile(out / "thesis.tex"), "mine");
+}
+
+TEST_F(CliTest, MisspeltNamesGetTheNearestOne) {
+  Ran r = Avp("rendr --scenario tomato-single-cluster");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("unknown command 'rendr'; did you mean 'render'?"));
+  r = Avp("map biuld --out x.avpmap");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("unknown command 'biuld'; did you mean 'build'?"));
+  r = Avp("run --print-config --set episode.view=6");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("did you mean 'episode.views'?"));
+  r = Avp("run --print-config --planner-option p_unkown=0.1");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("did you mean 'p_unknown'?"));
+  r = Avp("run --print-config --planner avp-nvb");
+  EXPECT_THAT(r.output, HasSubstr("did you mean 'avp-nbv'?"));
+  r = Avp("run --print-config --scenario tomato-single-clustr");
+  EXPECT_THAT(r.output, HasSubstr("did you mean 'tomato-single-cluster'?"));
+  // Far from every name: no guess.
+  r = Avp("run --print-config --planner zzzzzzzz");
+  EXPECT_THAT(r.output, Not(HasSubstr("did you mean")));
+}
+
+TEST_F(CliTest, HelpNamesACommand) {
+  Ran r = Avp("help");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("render"));
+  r = Avp("help map build");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("--voxel-size"));
+  r = Avp("help mapp");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("did you mean 'map'?"));
+}
+
+TEST_F(CliTest, MapFilesAreReplacedOnlyWithForce) {
+  const fs::path gt = dir_ / "gt.bt";
+  const std::string args =
+      "map gt --scenario tomato-single-cluster --voxel-size 0.01 --out " + gt.string();
+  ASSERT_EQ(Avp(args).exit_code, 0);
+  const Ran again = Avp(args);
+  EXPECT_EQ(again.exit_code, 1) << again.output;
+  EXPECT_THAT(again.output, HasSubstr("already exists: give another --out, or --force"));
+  EXPECT_EQ(Avp(args + " --force").exit_code, 0);
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -37,6 +38,12 @@ bool ValidName(std::string_view name) {
     if (!((c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_')) return false;
   }
   return true;
+}
+
+std::vector<std::string> LimitNames(const Registry& r) {
+  std::vector<std::string> names;
+  for (const auto& [name, entry] : r.entries) names.push_back(name);
+  return names;
 }
 
 std::string KnownNames(const Registry& r) {
@@ -93,8 +100,8 @@ Status SetLimit(std::string_view name, uint64_t value) {
   const std::lock_guard<std::mutex> lock(r.mutex);
   const auto it = r.entries.find(name);
   if (it == r.entries.end()) {
-    return NotFoundError(
-        fmt::format("unknown limit {} (known: {})", QuoteText(name), KnownNames(r)));
+    return NotFoundError(fmt::format("unknown limit {} (known: {}){}", QuoteText(name),
+                                     KnownNames(r), DidYouMean(name, LimitNames(r))));
   }
   if (value == 0) {
     return InvalidArgumentError(fmt::format("limit {} must be >= 1", it->first));

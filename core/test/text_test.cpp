@@ -1,4 +1,5 @@
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -86,6 +87,23 @@ TEST(LimitsTest, SetLimitsParsesStrictlyAndScopedLimitRestores) {
   }
   EXPECT_EQ(TestLimit().value(), 10u);
   EXPECT_THROW(Limit("test_widgets", 5, "", ""), Error);
+}
+
+TEST(TextTest, NearestNameFindsSlipsOfTheKeyboardOnly) {
+  const std::vector<std::string> commands = {"scenes", "render", "map", "run", "replay", "bench"};
+  EXPECT_EQ(NearestName("rendr", commands), "render");
+  EXPECT_EQ(NearestName("Render", commands), "render");  // case counts as no edit
+  EXPECT_EQ(NearestName("rnu", commands), "run");        // a swap counts once
+  EXPECT_EQ(NearestName("bnech", commands), "bench");
+  EXPECT_EQ(NearestName("run", commands), "");  // known
+  EXPECT_EQ(NearestName("zzzzzz", commands), "");
+  EXPECT_EQ(NearestName("", commands), "");
+  EXPECT_EQ(NearestName(std::string(1000, 'r'), commands), "");
+  const std::vector<std::string> keys = {"episode.views", "episode.prompt", "p_unknown"};
+  EXPECT_EQ(NearestName("episode.view", keys), "episode.views");
+  EXPECT_EQ(NearestName("p_unkown", keys), "p_unknown");
+  EXPECT_EQ(DidYouMean("p_unkown", keys), "; did you mean 'p_unknown'?");
+  EXPECT_EQ(DidYouMean("q", keys), "");
 }
 
 }  // namespace

@@ -175,6 +175,52 @@ Result<EpisodeParts> BuildParts(const CheckedRunConfig& checked, const EpisodeTr
 
 }  // namespace
 
+std::vector<std::string> WhyNothingFound(const RunConfig& config, const RunResult& result) {
+  const std::vector<pipeline::StepRecord>& steps = result.episode.steps;
+  const eval::FruitScores& fruits = result.final_metrics.fruits;
+  std::vector<std::string> why;
+  if (steps.empty() || result.gt_fruits == 0 || fruits.found > 0) return why;
+  size_t masks = 0, failed = 0, planned = 0, zero_gain = 0;
+  for (const pipeline::StepRecord& s : steps) {
+    masks += s.masks;
+    failed += s.segment_status.ok() ? 0 : 1;
+    if (s.planned && s.chosen_rank >= 0) {
+      ++planned;
+      zero_gain += s.chosen.gain == 0.0 ? 1 : 0;
+    }
+  }
+  if (failed > 0) {
+    why.push_back(fmt::format("the segmenter failed at {} of {} views ({})", failed, steps.size(),
+                              config.segmenter.name));
+  }
+  if (masks == 0 && failed < steps.size()) {
+    why.push_back(fmt::format(
+        "no view returned a mask: the segmenter '{}' found nothing for the prompt '{}' in {} "
+        "views",
+        config.segmenter.name, config.episode.prompt, steps.size()));
+  } else if (masks > 0) {
+    why.push_back(fmt::format(
+        "{} masks were segmented in {} views, but none made a fruit's voxels (masks without "
+        "valid depth, or on something else)",
+        masks, steps.size()));
+  }
+  const double coverage = result.final_metrics.roi_coverage;
+  if (coverage < 0.05) {
+    why.push_back(fmt::format(
+        "the views saw {:.1f} % of the region of interest around the plant (the camera looked "
+        "past it)",
+        100.0 * coverage));
+  }
+  if (planned > 0 && zero_gain == planned) {
+    why.push_back(fmt::format(
+        "every one of the {} views planner '{}' chose had zero gain: it had nothing to aim at "
+        "(a planner that scores views by the fruit already seen finds none when the start view "
+        "sees none)",
+        planned, config.planner.name));
+  }
+  return why;
+}
+
 Result<sim::Scene> LoadScene(const RunConfig& config, const Registries& registries) {
   return sim::LoadScene({config.scenario, config.scene_file, config.seed, config.arrangement},
                         registries.scenarios);

@@ -13,6 +13,7 @@
 #include <avp/core/segmentation.h>
 #include <avp/core/stopwatch.h>
 #include <avp/experiment/map_build.h>
+#include <avp/experiment/output_folder.h>
 #include <avp/experiment/run_config.h>
 #include <avp/io/file.h>
 #include <avp/mapping/map_file.h>
@@ -127,6 +128,7 @@ Result<MapBuildSummary> BuildMap(const MapBuildOptions& options,
   const auto t_start = Clock::now();
   AVP_RETURN_IF_ERROR(ValidateBuildOptions(options));
   AVP_RETURN_IF_ERROR(options.intrinsics.Validate());
+  AVP_RETURN_IF_ERROR(CheckOutputFile(options.out, options.force));
   AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out, "map file (--out)",
                                                 options.scene.scene_file, "scene file"));
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
@@ -220,6 +222,7 @@ Result<MapBuildSummary> BuildMap(const MapBuildOptions& options,
 
 Result<MapGtSummary> WriteGroundTruthOctree(const MapGtOptions& options,
                                             const sim::ScenarioRegistry& scenarios) {
+  AVP_RETURN_IF_ERROR(CheckOutputFile(options.out, options.force));
   AVP_RETURN_IF_ERROR(io::CheckOutputIsNotInput(options.out, "ground truth file (--out)",
                                                 options.scene.scene_file, "scene file"));
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));

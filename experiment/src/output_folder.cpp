@@ -101,6 +101,17 @@ const OutputFolderKind& BenchFolderKind() {
   return kind;
 }
 
+const OutputFolderKind& RenderFolderKind() {
+  static const OutputFolderKind kind{
+      "render", [](const std::string& name) {
+        static const std::vector<std::string> files = {
+            std::string(kStateFileName), "rgb.png",     "depth.png",  "instance.png", "class.png",
+            "labels_preview.png",        "camera.json", "fruits.json"};
+        return std::find(files.begin(), files.end(), name) != files.end() || IsTempOf(name, files);
+      }};
+  return kind;
+}
+
 OutputFolderKind ConditionsFolderKind(std::vector<std::string> condition_names) {
   return {"bench-conditions", [names = std::move(condition_names)](const std::string& name) {
             static const std::vector<std::string> files = {std::string(kStateFileName),
@@ -195,11 +206,19 @@ Result<FolderVerdict> Inspect(const fs::path& dir, const OutputFolderKind& kind,
   } else {
     holds = fmt::format("files ({})", Listed(entries));
   }
-  if (!force) {
+  // --force empties only a folder of this kind holding nothing but what avp writes: it is
+  // offered only where it works.
+  const bool force_works = foreign.empty() && (marked || legacy);
+  if (!force && force_works) {
     verdict.refusal = FailedPreconditionError(fmt::format(
         "output folder '{}' already holds {}: give another --out, or --force to replace it",
         dir.string(), holds));
-  } else if (!foreign.empty() || !(marked || legacy)) {
+  } else if (!force) {
+    verdict.refusal = FailedPreconditionError(
+        fmt::format("output folder '{}' already holds {}; it is not an avp {} folder (--force "
+                    "would not empty it): give another --out",
+                    dir.string(), holds, kind.kind));
+  } else if (!force_works) {
     verdict.refusal = FailedPreconditionError(fmt::format(
         "output folder '{}' holds {}; it is not an avp {} folder, so --force does not empty it: "
         "give another --out",
@@ -242,6 +261,30 @@ Status PrepareOutputFolder(const fs::path& dir, const OutputFolderKind& kind, bo
   if (ec) {
     return IoError(fmt::format("--force: cannot remove '{}': {}",
                                (dir / std::string(kStateFileName)).string(), ec.message()));
+  }
+  return Status::Ok();
+}
+
+Status CheckOutputFile(const fs::path& file, bool force) {
+  if (file.empty()) return InvalidArgumentError("the output file (--out) is empty");
+  std::error_code ec;
+  const fs::file_status st = fs::status(file, ec);
+  if (fs::is_directory(st)) {
+    return InvalidArgumentError(fmt::format("output '{}' is a folder: give a file name (e.g. {})",
+                                            file.string(),
+                                            (file / ("out" + file.extension().string())).string()));
+  }
+  const fs::path parent = file.has_parent_path() ? file.parent_path() : fs::path(".");
+  if (const Result<FolderState> state = ReadFolderState(parent); state.ok()) {
+    return FailedPreconditionError(fmt::format(
+        "output file '{}' would go into '{}', the folder of an {} ({}): avp writes nothing into "
+        "another command's results; give an --out outside it",
+        file.string(), parent.string(), state->command, state->kind));
+  }
+  if (fs::exists(st) && !force) {
+    return FailedPreconditionError(
+        fmt::format("output file '{}' already exists: give another --out, or --force to replace it",
+                    file.string()));
   }
   return Status::Ok();
 }

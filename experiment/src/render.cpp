@@ -10,6 +10,7 @@
 
 #include <avp/core/rng.h>
 #include <avp/core/semantic_class.h>
+#include <avp/experiment/output_folder.h>
 #include <avp/experiment/render.h>
 #include <avp/io/depth.h>
 #include <avp/io/file.h>
@@ -186,6 +187,7 @@ Status WriteRenderFiles(const RenderOptions& options, const sim::Scene& scene,
 Result<RenderSummary> RenderToFolder(const RenderOptions& options,
                                      const sim::ScenarioRegistry& scenarios) {
   AVP_RETURN_IF_ERROR(CheckOptions(options));
+  AVP_RETURN_IF_ERROR(CheckOutputFolder(options.out_dir, RenderFolderKind(), options.force));
   AVP_ASSIGN_OR_RETURN(const sim::Scene scene, sim::LoadScene(options.scene, scenarios));
   if (options.on_scene) options.on_scene(scene);
   RenderSummary summary;
@@ -206,7 +208,13 @@ Result<RenderSummary> RenderToFolder(const RenderOptions& options,
   const std::map<uint16_t, size_t> fruit_pixels = CountPixels(frame, summary);
   summary.total_fruits = scene.Fruits().size();
   summary.visible_fruits = fruit_pixels.size();
-  AVP_RETURN_IF_ERROR(WriteRenderFiles(options, scene, frame, fruit_pixels, summary));
+  AVP_RETURN_IF_ERROR(PrepareOutputFolder(options.out_dir, RenderFolderKind(), options.force));
+  AVP_RETURN_IF_ERROR(MarkInProgress(options.out_dir, RenderFolderKind(), "avp render"));
+  if (Status s = WriteRenderFiles(options, scene, frame, fruit_pixels, summary); !s.ok()) {
+    MarkFailed(options.out_dir, RenderFolderKind(), "avp render", s);
+    return s;
+  }
+  AVP_RETURN_IF_ERROR(MarkComplete(options.out_dir, RenderFolderKind(), "avp render"));
   return summary;
 }
 

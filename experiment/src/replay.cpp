@@ -51,8 +51,9 @@ std::string CompareMetrics(const json& step, const pipeline::StepRecord& s) {
     const double recorded = m[1].is_null() ? std::nan("") : m[1].get<double>();
     if (m[0].get<std::string>() != s.metrics[i].first ||
         !SameValue(recorded, s.metrics[i].second)) {
-      return fmt::format("{} = {} recorded, {} = {} replayed", EscapeText(m[0].get<std::string>()),
-                         recorded, s.metrics[i].first, s.metrics[i].second);
+      // Six significant digits: enough to see the difference, not 16 digits of noise.
+      return fmt::format("{} = {:.6g} recorded, {:.6g} replayed",
+                         EscapeText(m[0].get<std::string>()), recorded, s.metrics[i].second);
     }
   }
   return {};
@@ -352,7 +353,8 @@ class ReplayEpisode {
     ++summary_.metrics_compared;
     const std::string difference = CompareMetrics(view.step, step);
     if (!difference.empty() && summary_.metrics_differ++ == 0) {
-      summary_.first_difference = fmt::format("view {}: {}", view.index, difference);
+      // 1-based, as the progress lines and the report number views.
+      summary_.first_difference = fmt::format("view {}: {}", view.index + 1, difference);
     }
   }
 

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include <avp/core/text.h>
 #include <avp/experiment/run_config.h>
 #include <avp/io/options_yaml.h>
 #include <avp/io/yaml.h>
@@ -97,9 +98,12 @@ Status SetRunConfigKey(RunConfig& config, std::string_view key, std::string_view
     return status;
   }
   if (!RunConfigTable().Has(key)) {
+    std::vector<std::string> keys = RunConfigTable().Keys();
+    const std::vector<std::string> top = TopLevelKeys();
+    keys.insert(keys.end(), top.begin(), top.end());
     return InvalidArgumentError(fmt::format(
-        "unknown run configuration key '{}' (known: {}; avp run --print-config shows them all)",
-        key, fmt::join(TopLevelKeys(), ", ")));
+        "unknown run configuration key '{}' (known: {}; avp run --print-config shows them all){}",
+        key, fmt::join(TopLevelKeys(), ", "), DidYouMean(key, keys)));
   }
   return RunConfigTable().Set(config, key, value);
 }
@@ -115,8 +119,9 @@ Result<AnyOptions> SegmenterOptions(const RunConfig& config, const Registries& r
 Status RunConfig::Validate(const Registries& registries) const {
   std::vector<std::string> errors = RunConfigTable().Problems(*this);
   if (!scenario.empty() && registries.scenarios.Find(scenario) == nullptr) {
-    errors.push_back(fmt::format("unknown scenario '{}' (known: {})", scenario,
-                                 fmt::join(registries.scenarios.Names(), ", ")));
+    errors.push_back(fmt::format("unknown scenario '{}' (known: {}){}", scenario,
+                                 fmt::join(registries.scenarios.Names(), ", "),
+                                 DidYouMean(scenario, registries.scenarios.Names())));
   }
   if (const Result<sim::Arrangement> a = sim::ParseArrangement(arrangement); !a.ok()) {
     errors.push_back(a.status().message());

@@ -103,27 +103,30 @@ json RecordJson(const CheckedRunConfig& config, const FolderRun& run, const RunR
   json config_json = RunConfigJson(config);
   json steps = json::array();
   for (const pipeline::StepRecord& s : result.episode.steps) steps.push_back(report::StepJson(s));
-  json record{{"avp", run.command},
-              {"config", std::move(config_json)},
-              {"scene",
-               {{"name", run.scene_name},
-                {"description", run.scene_description},
-                {"fruits", run.gt != nullptr ? json(run.gt->fruits.size()) : json(nullptr)}}},
-              {"ground_truth", run.gt != nullptr ? report::GroundTruthJson(*run.gt, run.gt_seconds)
-                                                 : json(nullptr)},
-              {"git_revision", report::SourceRevision()},
-              {"host", report::HostDescription()},
-              {"end", std::string(pipeline::ToString(result.episode.end))},
-              {"end_reason", result.episode.end_reason},
-              {"views_fused", result.episode.views_fused()},
-              {"episode_seconds", result.episode.total_ms / 1e3},
-              {"final_metrics",
-               run.gt != nullptr ? report::MetricsJson(result.final_metrics) : json(nullptr)},
-              // Every ground-truth fruit: found or not, from which view, how visible, its
-              // errors; null without a ground truth, [] for one without fruits (a file).
-              {"fruits", run.gt != nullptr ? report::FruitsJson(result.fruits) : json(nullptr)},
-              {"oracle_regret", report::RegretJson(result.regret)},
-              {"steps", steps}};
+  json record{
+      {"avp", run.command},
+      {"config", std::move(config_json)},
+      {"scene",
+       {{"name", run.scene_name},
+        {"description", run.scene_description},
+        {"fruits", run.gt != nullptr ? json(run.gt->fruits.size()) : json(nullptr)}}},
+      {"ground_truth",
+       run.gt != nullptr ? report::GroundTruthJson(*run.gt, run.gt_seconds) : json(nullptr)},
+      {"git_revision", report::SourceRevision()},
+      {"host", report::HostDescription()},
+      {"end", std::string(pipeline::ToString(result.episode.end))},
+      {"end_reason", result.episode.end_reason},
+      {"views_fused", result.episode.views_fused()},
+      {"episode_seconds", result.episode.total_ms / 1e3},
+      {"final_metrics",
+       run.gt != nullptr ? report::MetricsJson(result.final_metrics) : json(nullptr)},
+      // Every ground-truth fruit: found or not, from which view, how visible, its
+      // errors; null without a ground truth, [] for one without fruits (a file).
+      {"fruits", run.gt != nullptr ? report::FruitsJson(result.fruits) : json(nullptr)},
+      // Why no fruit was found ([] when one was; null without a ground truth).
+      {"nothing_found", run.gt != nullptr ? json(WhyNothingFound(*config, result)) : json(nullptr)},
+      {"oracle_regret", report::RegretJson(result.regret)},
+      {"steps", steps}};
   if (run.extra) {
     const json extra = run.extra();
     for (const auto& [key, value] : extra.items()) record[key] = value;

@@ -112,6 +112,54 @@ TEST_F(OutputFolderTest, ForceNeverRemovesWhatAvpDidNotWrite) {
   EXPECT_TRUE(fs::is_empty(old));
 }
 
+TEST_F(OutputFolderTest, ForceIsOfferedOnlyWhereItWorks) {
+  // A folder of someone else's files: --force would not empty it, so the refusal does not offer
+  // it.
+  const fs::path d = dir_ / "data";
+  fs::create_directories(d);
+  std::ofstream(d / "notes.txt") << "mine";
+  const Status s = CheckOutputFolder(d, RunFolderKind(), false);
+  EXPECT_EQ(s.code(), StatusCode::kFailedPrecondition);
+  EXPECT_THAT(s.message(), HasSubstr("--force would not empty it): give another --out"));
+  EXPECT_THAT(s.message(), Not(HasSubstr("or --force to replace it")));
+  // A finished run: --force works there, and is offered.
+  const fs::path run = dir_ / "run";
+  ASSERT_TRUE(PrepareOutputFolder(run, RunFolderKind(), false).ok());
+  ASSERT_TRUE(MarkComplete(run, RunFolderKind(), "avp run").ok());
+  EXPECT_THAT(CheckOutputFolder(run, RunFolderKind(), false).message(),
+              HasSubstr("or --force to replace it"));
+  // A render into that run folder is refused, without offering --force, and with it.
+  EXPECT_THAT(CheckOutputFolder(run, RenderFolderKind(), false).message(),
+              HasSubstr("not an avp render folder (--force would not empty it)"));
+  EXPECT_THAT(CheckOutputFolder(run, RenderFolderKind(), true).message(),
+              HasSubstr("not an avp render folder, so --force does not empty it"));
+}
+
+TEST_F(OutputFolderTest, OneOutputFileRule) {
+  const fs::path map = dir_ / "occl.avpmap";
+  EXPECT_TRUE(CheckOutputFile(map, false).ok());  // missing: written
+  std::ofstream(map) << "x";
+  Status s = CheckOutputFile(map, false);
+  EXPECT_EQ(s.code(), StatusCode::kFailedPrecondition);
+  EXPECT_THAT(s.message(), HasSubstr("'" + map.string() + "' already exists"));
+  EXPECT_THAT(s.message(), HasSubstr("or --force to replace it"));
+  EXPECT_TRUE(CheckOutputFile(map, true).ok());
+  // A folder is named as one (not "unknown export format ''").
+  s = CheckOutputFile(dir_, true);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.message(), HasSubstr("is a folder: give a file name"));
+  // Never into another command's results, even with --force.
+  const fs::path run = dir_ / "run";
+  ASSERT_TRUE(PrepareOutputFolder(run, RunFolderKind(), false).ok());
+  ASSERT_TRUE(MarkInProgress(run, RunFolderKind(), "avp run").ok());
+  s = CheckOutputFile(run / "map.ot", true);
+  EXPECT_EQ(s.code(), StatusCode::kFailedPrecondition);
+  EXPECT_THAT(s.message(), HasSubstr("the folder of an avp run (run)"));
+  EXPECT_THAT(CheckOutputFile(run / "extra.ply", false).message(),
+              HasSubstr("give an --out outside it"));
+  EXPECT_EQ(CheckOutputFile("", false).code(), StatusCode::kInvalidArgument);
+}
+
 TEST_F(OutputFolderTest, AFileOrAPathThroughAFileIsNamed) {
   std::ofstream(dir_ / "file") << "x";
   Status s = PrepareOutputFolder(dir_ / "file", RunFolderKind(), true);

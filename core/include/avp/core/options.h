@@ -22,6 +22,7 @@
 
 #include <avp/core/error.h>
 #include <avp/core/status.h>
+#include <avp/core/text.h>
 
 namespace avp {
 
@@ -530,7 +531,8 @@ Status OptionTable<T>::Set(T& options, std::string_view key, std::string_view va
   const Field* f = Find(key);
   if (f == nullptr) {
     return InvalidArgumentError("unknown " + noun_ + " '" + std::string(key) +
-                                "' (known: " + options_internal::Join(Keys(), ", ") + ")");
+                                "' (known: " + options_internal::Join(Keys(), ", ") + ")" +
+                                DidYouMean(key, Keys()));
   }
   const std::string expected = f->set(options, value);
   if (expected.empty()) return Status::Ok();

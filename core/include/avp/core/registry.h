@@ -7,6 +7,7 @@
 
 #include <avp/core/options.h>
 #include <avp/core/status.h>
+#include <avp/core/text.h>
 
 namespace avp {
 
@@ -47,8 +48,8 @@ class NamedRegistry {
   /// The entry, or NotFound "unknown <kind> 'x' (known: a, b, ...)".
   Result<const Entry*> Get(std::string_view spec) const {
     if (const Entry* e = Find(spec)) return e;
-    return NotFoundError("unknown " + kind_ + " '" + std::string(spec) +
-                         "' (known: " + options_internal::Join(Names(), ", ") + ")");
+    return NotFoundError("unknown " + kind_ + " '" + std::string(spec) + "' (known: " +
+                         options_internal::Join(Names(), ", ") + ")" + DidYouMean(spec, Names()));
   }
   /// For entries with options (an AnyOptions `options` member): the defaults of `spec`'s entry,
   /// then `overrides` (KEY=VALUE) applied and validated. Errors: NotFound (unknown name),

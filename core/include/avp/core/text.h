@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace avp {
 
@@ -20,5 +21,14 @@ std::string EscapeText(std::string_view text, size_t max_chars = kQuotedTextMaxC
 
 /// EscapeText in single quotes: "'abc\x1b[2J...(300 bytes)'".
 std::string QuoteText(std::string_view text, size_t max_chars = kQuotedTextMaxChars);
+
+/// The name of `known` nearest to `name` (case-insensitive edit distance, a swap of two
+/// neighbouring letters counting once) when it is close enough to be a slip of the keyboard: at
+/// most 1 edit for names of up to 4 letters, 2 up to 8, else a quarter of the length; ties go to
+/// the earlier name. Empty when none is, or `name` is itself known.
+std::string NearestName(std::string_view name, const std::vector<std::string>& known);
+
+/// "; did you mean 'x'?" for NearestName, or "" (appended to "unknown ..." messages).
+std::string DidYouMean(std::string_view name, const std::vector<std::string>& known);
 
 }  // namespace avp

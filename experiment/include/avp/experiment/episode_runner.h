@@ -81,6 +81,15 @@ std::unordered_map<uint16_t, double> VisibleFractions(const robot::Observation& 
                                                       const std::vector<sim::FruitTruth>& fruits,
                                                       double max_range_m);
 
+/// Why an episode with a ground truth found no fruit, one line per cause its steps show, in a
+/// researcher's words: no view returned a mask (the prompt, the segmenter); the segmenter failed;
+/// the views saw almost none of the region of interest; every plan's chosen view had zero gain
+/// (the planner had nothing to aim at, e.g. the paper's planner, which scores views by the fruit
+/// already seen, from a start that sees none); masks without fruit voxels. Empty when a fruit was
+/// found or there is no ground truth. `avp run` prints it and record.json holds it
+/// ("nothing_found").
+std::vector<std::string> WhyNothingFound(const RunConfig& config, const RunResult& result);
+
 /// The scene's start joints, or the arm's home when the scene names none.
 Eigen::VectorXd StartJoints(const sim::Scene& scene, const robot::ArmModel& arm);
 

@@ -68,6 +68,8 @@ struct MapBuildOptions {
   /// Apply the seeded D435-like depth noise model (seeded from scene.seed and the view index).
   bool noise = false;
   std::filesystem::path out = "out/map.avpmap";
+  /// Replace an existing file (output_folder.h's CheckOutputFile: refused otherwise).
+  bool force = false;
   /// Called once with the loaded scene (e.g. to print its warnings); may be empty.
   std::function<void(const sim::Scene&)> on_scene;
   /// Called after each view is fused (progress lines); may be empty.
@@ -113,6 +115,8 @@ struct MapGtOptions {
   /// system's ground-truth octrees (reference-system.md).
   double voxel_size_m = mapping::GridOptions{}.voxel_size_m;
   std::filesystem::path out = "out/gt.bt";
+  /// Replace an existing file (output_folder.h's CheckOutputFile: refused otherwise).
+  bool force = false;
   /// Called once with the loaded scene (e.g. to print its warnings); may be empty.
   std::function<void(const sim::Scene&)> on_scene;
 };

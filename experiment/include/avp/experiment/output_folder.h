@@ -35,6 +35,9 @@ const OutputFolderKind& RunFolderKind();
 /// A bench folder: bench.json, summary.md, summary.csv, f1_*.svg, fruits_*.svg, report.html, runs/.
 const OutputFolderKind& BenchFolderKind();
 
+/// An `avp render` folder: rgb.png, depth.png, instance.png, class.png, labels_preview.png,
+/// camera.json, fruits.json.
+const OutputFolderKind& RenderFolderKind();
 /// A bench folder of conditions (`avp bench` with a config's `conditions`): conditions.md,
 /// conditions.csv and one bench folder per condition, named as the conditions are.
 OutputFolderKind ConditionsFolderKind(std::vector<std::string> condition_names);
@@ -67,6 +70,13 @@ Status PrepareOutputFolder(const std::filesystem::path& dir, const OutputFolderK
 /// truth) so that a refusal comes at once.
 Status CheckOutputFolder(const std::filesystem::path& dir, const OutputFolderKind& kind,
                          bool force);
+
+/// The rule for a command that writes one file (`avp map build / gt / export --out FILE`): OK
+/// when `file` may be written. Refused (FailedPrecondition naming the file and the fix): an
+/// existing file unless `force`; a folder; a file inside the folder of another avp command (a
+/// run, bench or render folder: its avp-state.json), even with `force`. A missing parent folder
+/// is created by the writer.
+Status CheckOutputFile(const std::filesystem::path& file, bool force);
 
 /// Writes `dir`/avp-state.json "in-progress" (atomically), with the command and the start time.
 Status MarkInProgress(const std::filesystem::path& dir, const OutputFolderKind& kind,

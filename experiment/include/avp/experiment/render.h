@@ -29,6 +29,9 @@ struct RenderOptions {
   /// Apply the seeded D435-like depth noise model (seeded from scene.seed).
   bool noise = false;
   std::filesystem::path out_dir = "out/render";
+  /// Replace an earlier render's files in out_dir (the output rule: a folder holding anything is
+  /// refused otherwise, and another command's folder always).
+  bool force = false;
   /// Called once with the loaded scene (e.g. to print its warnings); may be empty.
   std::function<void(const sim::Scene&)> on_scene;
 };
@@ -46,7 +49,9 @@ struct RenderSummary {
 };
 
 /// Renders and writes rgb.png, depth.png (uint16 mm), instance.png (uint16), class.png (uint8),
-/// labels_preview.png, camera.json and fruits.json. Errors name the bad value (unknown scenario,
+/// labels_preview.png, camera.json and fruits.json, between avp-state.json's "in-progress" and
+/// "complete" (output_folder.h: a folder holding anything is refused before anything is
+/// rendered, unless force and it is a render folder). Errors name the bad value (unknown scenario,
 /// wrong joint count, unreachable or out-of-limit joints, unwritable folder ...).
 Result<RenderSummary> RenderToFolder(const RenderOptions& options,
                                      const sim::ScenarioRegistry& scenarios);
