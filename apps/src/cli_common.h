@@ -101,6 +101,10 @@ struct SceneFlags {
   sim::SceneSource Source() const { return {scenario, scene_file, seed, arrangement}; }
 };
 
+/// `avp scenes`: the registered scenarios, one line each (also `--scenario help`,
+/// `--scenarios help`). Returns 0.
+int ListScenes(const sim::ScenarioRegistry& scenarios);
+
 /// Adds --scenario, --scene, --arrangement and --seed to `cmd`, bound to `flags`; `seed_doc`
 /// says what the seed seeds.
 void AddSceneFlags(CLI::App& cmd, SceneFlags& flags, const std::string& seed_doc);

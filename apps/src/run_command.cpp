@@ -168,6 +168,8 @@ void PrintSummary(const experiment::RunConfig& config, const experiment::RunSumm
 }
 
 int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& registries) {
+  // `help` wherever a name is expected.
+  if (cli.scene.scenario == "help") return ListScenes(registries.scenarios);
   if (cli.planner == "help" || cli.segmenter == "help") {
     std::fputs(cli.planner == "help"
                    ? DescribeComponents("planners", registries.planners.entries()).c_str()

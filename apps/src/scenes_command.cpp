@@ -8,8 +8,6 @@
 
 namespace avp::apps {
 
-namespace {
-
 int ListScenes(const sim::ScenarioRegistry& scenarios) {
   size_t width = 0;
   for (const sim::ScenarioEntry& s : scenarios.entries()) width = std::max(width, s.name.size());
@@ -22,8 +20,6 @@ int ListScenes(const sim::ScenarioRegistry& scenarios) {
       "Any seed gives a different plant of the same kind: avp render --scenario NAME --seed N\n");
   return 0;
 }
-
-}  // namespace
 
 void AddScenesCommand(CLI::App& app, CommandContext& context) {
   CLI::App* cmd =

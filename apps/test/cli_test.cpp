@@ -256,6 +256,20 @@ TEST_F(CliTest, HelpNamesACommand) {
   EXPECT_THAT(r.output, HasSubstr("did you mean 'map'?"));
 }
 
+TEST_F(CliTest, HelpIsAcceptedWhereANameIsExpected) {
+  for (const char* args : {"run --scenario help", "bench --scenarios help"}) {
+    const Ran r = Avp(args);
+    EXPECT_EQ(r.exit_code, 0) << args << ": " << r.output;
+    EXPECT_THAT(r.output, HasSubstr("tomato-full-occlusion")) << args;
+  }
+  Ran r = Avp("bench --planners help");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("reference-nbv"));
+  r = Avp("bench --segmenter help");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("oracle"));
+}
+
 TEST_F(CliTest, MapFilesAreReplacedOnlyWithForce) {
   const fs::path gt = dir_ / "gt.bt";
   const std::string args =

@@ -2,6 +2,7 @@
 #include <fstream>
 #include <numbers>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -64,6 +65,36 @@ TEST_F(YamlFileTest, MalformedFileReportsFileLineAndColumn) {
 }
 
 // ---- RejectUnknownKeys --------------------------------------------------------------------------
+
+TEST_F(YamlFileTest, AFileOfAnotherKindIsNamed) {
+  // A mesh, an image, a map or a recording given where YAML is expected: named, not parsed.
+  const std::vector<std::pair<std::string, std::string>> files = {
+      {"photo.png", std::string("\x89PNG\r\n\x1a\n\0\0\0\rIHDR", 16)},
+      {"photo.jpg", "\xff\xd8\xff\xe0JFIF"},
+      {"episode.mcap", "\x89MCAP0\r\n"},
+      {"gt.bt", "# Octomap OcTree binary file\nid OcTree\n"},
+      {"plant.obj",
+       "# Blender 4.0 https://www.blender.org\nmtllib plant.mtl\no Leaf\n"
+       "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+      {"plant.ply", "ply\nformat ascii 1.0\n"},
+      {"blob.bin", std::string("ab\0cd", 5)}};
+  for (const auto& [name, bytes] : files) {
+    const fs::path p = dir_ / name;
+    std::ofstream(p, std::ios::binary) << bytes;
+    const Result<YAML::Node> r = LoadYamlFile(p);
+    ASSERT_FALSE(r.ok()) << name;
+    EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument) << name;
+    EXPECT_THAT(r.status().message(), HasSubstr("not a YAML file")) << name;
+  }
+  EXPECT_THAT(LoadYamlFile(dir_ / "photo.png").status().message(), HasSubstr("is a PNG image"));
+  EXPECT_THAT(LoadYamlFile(dir_ / "plant.obj").status().message(),
+              HasSubstr("is a Wavefront OBJ mesh"));
+  EXPECT_THAT(LoadYamlFile(dir_ / "episode.mcap").status().message(),
+              HasSubstr("is an MCAP recording"));
+  // YAML that only looks a little like an OBJ is still YAML.
+  std::ofstream(dir_ / "ok.yaml") << "# a scene\nv: 1\nf: [1, 2, 3]\n";
+  EXPECT_TRUE(LoadYamlFile(dir_ / "ok.yaml").ok());
+}
 
 TEST(YamlTest, RejectUnknownKeysListsUnknownAndAllowedKeys) {
   const YAML::Node node = YAML::Load("class: fruit\ncolour: red\nfile: a.obj\nsize: 3\n");
