@@ -199,14 +199,7 @@ int BenchConditions(const experiment::BenchConfig& bench,
 
 int Bench(const CLI::App& cmd, const BenchCli& cli, const experiment::Registries& registries) {
   // `help` wherever a name is expected, as `avp run --planner help`.
-  if (cli.scenarios == "help") return ListScenes(registries.scenarios);
-  if (cli.planners == "help" || cli.segmenter == "help") {
-    std::fputs(cli.planners == "help"
-                   ? DescribeComponents("planners", registries.planners.entries()).c_str()
-                   : DescribeComponents("segmenters", registries.segmenters.entries()).c_str(),
-               stdout);
-    return 0;
-  }
+  if (PrintHelpForNames(registries, cli.scenarios, cli.planners, cli.segmenter)) return 0;
   const Result<experiment::BenchConfig> bench = ResolveBench(cmd, cli, registries);
   if (!bench.ok()) return Failed("bench", bench.status());
   if (!bench->conditions.empty()) return BenchConditions(*bench, registries);

@@ -105,6 +105,12 @@ struct SceneFlags {
 /// `--scenarios help`). Returns 0.
 int ListScenes(const sim::ScenarioRegistry& scenarios);
 
+/// `help` where a name is expected (`--scenario help`, `--planner(s) help`, `--segmenter help`):
+/// prints the scenario list or the planners' or segmenters' descriptions with their options.
+/// True when it printed (the command then ends, successfully).
+bool PrintHelpForNames(const experiment::Registries& registries, std::string_view scenario,
+                       std::string_view planner, std::string_view segmenter);
+
 /// Adds --scenario, --scene, --arrangement and --seed to `cmd`, bound to `flags`; `seed_doc`
 /// says what the seed seeds.
 void AddSceneFlags(CLI::App& cmd, SceneFlags& flags, const std::string& seed_doc);

@@ -169,14 +169,7 @@ void PrintSummary(const experiment::RunConfig& config, const experiment::RunSumm
 
 int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& registries) {
   // `help` wherever a name is expected.
-  if (cli.scene.scenario == "help") return ListScenes(registries.scenarios);
-  if (cli.planner == "help" || cli.segmenter == "help") {
-    std::fputs(cli.planner == "help"
-                   ? DescribeComponents("planners", registries.planners.entries()).c_str()
-                   : DescribeComponents("segmenters", registries.segmenters.entries()).c_str(),
-               stdout);
-    return 0;
-  }
+  if (PrintHelpForNames(registries, cli.scene.scenario, cli.planner, cli.segmenter)) return 0;
   const Result<experiment::CheckedRunConfig> config = ResolveConfig(cmd, cli, registries);
   if (!config.ok()) return Failed("run", config.status());
   if (cli.print_config) {

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cstdio>
 
+#include <avp/experiment/registries.h>
 #include <avp/sim/scenario.h>
 
 #include "cli_common.h"
@@ -19,6 +20,20 @@ int ListScenes(const sim::ScenarioRegistry& scenarios) {
   std::printf(
       "Any seed gives a different plant of the same kind: avp render --scenario NAME --seed N\n");
   return 0;
+}
+
+bool PrintHelpForNames(const experiment::Registries& registries, std::string_view scenario,
+                       std::string_view planner, std::string_view segmenter) {
+  if (scenario == "help") {
+    ListScenes(registries.scenarios);
+  } else if (planner == "help") {
+    std::fputs(DescribeComponents("planners", registries.planners.entries()).c_str(), stdout);
+  } else if (segmenter == "help") {
+    std::fputs(DescribeComponents("segmenters", registries.segmenters.entries()).c_str(), stdout);
+  } else {
+    return false;
+  }
+  return true;
 }
 
 void AddScenesCommand(CLI::App& app, CommandContext& context) {
