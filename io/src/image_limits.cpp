@@ -167,12 +167,16 @@ Status CheckJpegScans(std::span<const uint8_t> b, std::string_view what) {
   if (b.size() < 2 || b[0] != 0xFF || b[1] != 0xD8) return Status::Ok();
   size_t at = 2;
   size_t scans = 0;
+  bool ended = false;  // the end-of-image marker was seen
   while (at + 4 <= b.size()) {
     if (b[at] != 0xFF) break;  // not a marker: the decoder says what is wrong
     while (at < b.size() && b[at] == 0xFF) ++at;
     if (at >= b.size()) break;
     const uint8_t marker = b[at++];
-    if (marker == 0xD9) break;  // EOI
+    if (marker == 0xD9) {  // EOI
+      ended = true;
+      break;
+    }
     if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD8)) continue;
     if (at + 2 > b.size()) break;
     const uint32_t length = Be16(b, at);
@@ -189,6 +193,17 @@ Status CheckJpegScans(std::span<const uint8_t> b, std::string_view what) {
            !(b[at] == 0xFF && b[at + 1] != 0x00 && !(b[at + 1] >= 0xD0 && b[at + 1] <= 0xD7))) {
       ++at;
     }
+  }
+  // A file cut short (a partial download or copy) loses its end-of-image marker: libjpeg decodes
+  // it anyway, grey below the cut, with only a warning. Refused, as a truncated PNG is.
+  for (size_t i = std::min(at, b.size()); !ended && i + 1 < b.size(); ++i) {
+    ended = b[i] == 0xFF && b[i + 1] == 0xD9;
+  }
+  if (scans > 0 && !ended) {
+    return InvalidArgumentError(fmt::format(
+        "JPEG {} is truncated: its {} bytes end before the end-of-image marker (a partial "
+        "download or copy?)",
+        what, b.size()));
   }
   return Status::Ok();
 }

@@ -1,11 +1,14 @@
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include <fmt/format.h>
 #include <yaml-cpp/depthguard.h>
+#include <yaml-cpp/eventhandler.h>
+#include <yaml-cpp/parser.h>
 
 #include <avp/core/text.h>
 #include <avp/io/file.h>
@@ -235,11 +238,84 @@ Status CheckYamlDepth(std::string_view text, std::string_view name) {
   return Status::Ok();
 }
 
+namespace {
+
+/// Finds a key given twice in one map, from the parser's events (aliases are not expanded, so an
+/// alias bomb costs nothing here). yaml-cpp keeps both entries and every lookup finds the first:
+/// a later value would be ignored silently.
+class DuplicateKeyFinder final : public YAML::EventHandler {
+ public:
+  /// "key 'a' is given twice (lines 1 and 3)", or "" when every map's keys differ.
+  const std::string& problem() const { return problem_; }
+
+  void OnDocumentStart(const YAML::Mark&) override {}
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark& mark, YAML::anchor_t) override { Element(mark, nullptr); }
+  void OnAlias(const YAML::Mark& mark, YAML::anchor_t) override { Element(mark, nullptr); }
+  void OnScalar(const YAML::Mark& mark, const std::string&, YAML::anchor_t,
+                const std::string& value) override {
+    Element(mark, &value);
+  }
+  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {
+    frames_.push_back({false, true, {}});
+  }
+  void OnSequenceEnd() override { End(); }
+  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                  YAML::EmitterStyle::value) override {
+    frames_.push_back({true, true, {}});
+  }
+  void OnMapEnd() override { End(); }
+
+ private:
+  struct Frame {
+    bool is_map;
+    bool expecting_key;
+    std::vector<std::pair<std::string, int>> keys;  ///< scalar keys and their lines (1-based)
+  };
+
+  /// A complete element of the enclosing collection: a key or a value of a map alternately.
+  void Element(const YAML::Mark& mark, const std::string* scalar) {
+    if (frames_.empty() || !frames_.back().is_map) return;
+    Frame& f = frames_.back();
+    if (f.expecting_key && scalar != nullptr && problem_.empty()) {
+      for (const auto& [key, line] : f.keys) {
+        if (key == *scalar) {
+          problem_ = fmt::format("key {} is given twice (lines {} and {})", QuoteText(key), line,
+                                 mark.line + 1);
+        }
+      }
+      f.keys.emplace_back(*scalar, mark.line + 1);
+    }
+    f.expecting_key = !f.expecting_key;
+  }
+
+  void End() {
+    if (!frames_.empty()) frames_.pop_back();
+    Element(YAML::Mark(), nullptr);  // the collection was an element of its parent
+  }
+
+  std::vector<Frame> frames_;
+  std::string problem_;
+};
+
+}  // namespace
+
 Result<YAML::Node> ParseYaml(std::string_view text, std::string_view name) {
   AVP_RETURN_IF_ERROR(
       MaxYamlBytes().Check(fmt::format("YAML {} of {} bytes", name, text.size()), text.size()));
   AVP_RETURN_IF_ERROR(CheckYamlDepth(text, name));
   try {
+    std::istringstream in{std::string(text)};
+    YAML::Parser parser(in);
+    DuplicateKeyFinder duplicates;
+    while (parser.HandleNextDocument(duplicates)) {
+    }
+    if (!duplicates.problem().empty()) {
+      return InvalidArgumentError(
+          fmt::format("YAML {}: {}; remove one (YAML would keep the first and ignore the other)",
+                      name, duplicates.problem()));
+    }
     return YAML::Load(std::string(text));
   } catch (const YAML::DeepRecursion& e) {
     return ResourceExhaustedError(

@@ -128,6 +128,32 @@ TEST_F(ImageIoTest, UndecodableBytesSayHowMany) {
             "undecodable image (" + std::to_string(png.size()) + " bytes)");
 }
 
+TEST_F(ImageIoTest, ATruncatedJpegIsRefusedAsATruncatedPngIs) {
+  ImageRgb8 big(160, 120);  // entropy-coded data of several kB: the cuts land in it
+  for (int v = 0; v < big.height(); ++v) {
+    for (int u = 0; u < big.width(); ++u) {
+      big.at(u, v, 0) = static_cast<uint8_t>(u * 7 + v * 13);
+      big.at(u, v, 1) = static_cast<uint8_t>(u * v);
+      big.at(u, v, 2) = 90;
+    }
+  }
+  const Result<std::vector<uint8_t>> jpeg = EncodeJpeg(big, 90);
+  ASSERT_TRUE(jpeg.ok());
+  EXPECT_TRUE(DecodeImage(*jpeg).ok());
+  // Cut in the entropy-coded data, and just before the end-of-image marker.
+  for (const size_t keep : {jpeg->size() * 3 / 4, jpeg->size() - 2}) {
+    const std::vector<uint8_t> cut(jpeg->begin(), jpeg->begin() + static_cast<long>(keep));
+    const Result<ImageRgb8> r = DecodeImage(cut);
+    ASSERT_FALSE(r.ok()) << keep;
+    EXPECT_THAT(r.status().message(), HasSubstr("is truncated")) << keep;
+    EXPECT_THAT(r.status().message(), HasSubstr(std::to_string(keep) + " bytes")) << keep;
+  }
+  // Bytes after the end-of-image marker (some cameras append metadata) are fine.
+  std::vector<uint8_t> padded = *jpeg;
+  padded.insert(padded.end(), {0, 0, 0, 0});
+  EXPECT_TRUE(DecodeImage(padded).ok());
+}
+
 TEST_F(ImageIoTest, EncodeAndWriteErrors) {
   const auto empty = EncodePng(ImageRgb8());
   ASSERT_FALSE(empty.ok());

@@ -96,6 +96,22 @@ TEST_F(YamlFileTest, AFileOfAnotherKindIsNamed) {
   EXPECT_TRUE(LoadYamlFile(dir_ / "ok.yaml").ok());
 }
 
+TEST(YamlTest, AKeyGivenTwiceInOneMapIsRefused) {
+  // yaml-cpp keeps both and every lookup finds the first: the second value would be ignored.
+  Result<YAML::Node> r = ParseYaml("seed: 1\nviews: 8\nseed: 2\n", "'run.yaml'");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(r.status().message(),
+              HasSubstr("'run.yaml': key 'seed' is given twice (lines 1 and 3)"));
+  r = ParseYaml("episode:\n  views: 8\n  prompt: tomato\n  views: 6\n", "x");
+  ASSERT_FALSE(r.ok());
+  EXPECT_THAT(r.status().message(), HasSubstr("key 'views' is given twice (lines 2 and 4)"));
+  EXPECT_FALSE(ParseYaml("{a: 1, a: 2}", "x").ok());
+  // The same key in different maps, in a list of maps, after a nested map, or as a value: fine.
+  EXPECT_TRUE(ParseYaml("a: {x: 1}\nb: {x: 2}\nc: [{x: 1}, {x: 2}]\nd: a\ne: a\n", "x").ok());
+  EXPECT_TRUE(ParseYaml("base: &b {x: 1}\none: *b\ntwo: *b\n", "x").ok());
+}
+
 TEST(YamlTest, RejectUnknownKeysListsUnknownAndAllowedKeys) {
   const YAML::Node node = YAML::Load("class: fruit\ncolour: red\nfile: a.obj\nsize: 3\n");
   const Status status =
