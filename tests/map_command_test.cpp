@@ -9,6 +9,7 @@
 #include <numbers>
 #include <string>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -79,6 +80,10 @@ MapInfo ExpectInfoOfBuiltMap(const MapBuildOptions& build, const MapBuildSummary
   EXPECT_THAT(text, HasSubstr("reference-max"));
   EXPECT_THAT(text, HasSubstr("--scenario tomato-single-cluster --seed 1 --views 3"));
   EXPECT_THAT(text, HasSubstr("fruit"));
+  if (!info->instances.empty()) {
+    EXPECT_THAT(text, HasSubstr(fmt::format("instances    {} (segments of the fused masks",
+                                            info->instances.size())));
+  }
 
   return *info;
 }

@@ -128,7 +128,13 @@ std::string FormatMapInfo(const MapInfo& info) {
                      : fmt::format("{} - {} m (known voxels)", FormatPoint(info.known_bounds.min()),
                                    FormatPoint(info.known_bounds.max())));
   line("memory", HumanBytes(info.memory_bytes) + " (blocks, semantic payload, hash table)");
-  line("instances", std::to_string(info.instances.size()));
+  // Instances are not fruit: say what they are, so that 31 instances of 15 fruit is no puzzle.
+  line("instances", info.instances.empty()
+                        ? std::string("0")
+                        : fmt::format("{} (segments of the fused masks: a fruit seen in pieces, or "
+                                      "a false detection, is an instance of its own; avp map "
+                                      "compare --gt counts the fruit found)",
+                                      info.instances.size()));
   if (!info.instances.empty()) {
     out += fmt::format("  {:>5}  {:<8} {:>7}  {:<26} {}\n", "id", "class", "voxels", "centroid (m)",
                        "mean confidence");
