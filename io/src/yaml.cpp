@@ -3,6 +3,7 @@
 #include <sstream>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <vector>
 
 #include <fmt/format.h>
@@ -271,7 +272,9 @@ class DuplicateKeyFinder final : public YAML::EventHandler {
   struct Frame {
     bool is_map;
     bool expecting_key;
-    std::vector<std::pair<std::string, int>> keys;  ///< scalar keys and their lines (1-based)
+    /// Scalar keys and their lines (1-based): one hash lookup per key, so that a map of many
+    /// keys (as many as MaxYamlBytes allows) costs linear time, not quadratic.
+    std::unordered_map<std::string, int> keys;
   };
 
   /// A complete element of the enclosing collection: a key or a value of a map alternately.
@@ -279,13 +282,11 @@ class DuplicateKeyFinder final : public YAML::EventHandler {
     if (frames_.empty() || !frames_.back().is_map) return;
     Frame& f = frames_.back();
     if (f.expecting_key && scalar != nullptr && problem_.empty()) {
-      for (const auto& [key, line] : f.keys) {
-        if (key == *scalar) {
-          problem_ = fmt::format("key {} is given twice (lines {} and {})", QuoteText(key), line,
-                                 mark.line + 1);
-        }
+      const auto [it, added] = f.keys.emplace(*scalar, mark.line + 1);
+      if (!added) {
+        problem_ = fmt::format("key {} is given twice (lines {} and {})", QuoteText(*scalar),
+                               it->second, mark.line + 1);
       }
-      f.keys.emplace_back(*scalar, mark.line + 1);
     }
     f.expecting_key = !f.expecting_key;
   }
