@@ -44,6 +44,57 @@ std::string G9(const nlohmann::json& v) {
   return buf;
 }
 
+/// Every row of summary.csv (scenario,planner,segmenter,view,metric,mean,ci_lo,ci_hi,n,versus)
+/// is in the page: the per-view rows in its planners, the lead's rows (versus set) in its leads.
+void ExpectSummaryCsvEqualsPage(
+    const fs::path& csv, const nlohmann::json& data,
+    const std::map<std::pair<std::string, std::string>, const nlohmann::json*>& planners) {
+  // The lead's paired differences, by (scenario, versus).
+  std::map<std::pair<std::string, std::string>, const nlohmann::json*> leads;
+  for (const nlohmann::json& s : data["scenarios"]) {
+    ASSERT_EQ(s["leads"].size(), 1u);
+    for (const nlohmann::json& l : s["leads"]) {
+      leads[{s["name"].get<std::string>(), l["versus"].get<std::string>()}] = &l;
+    }
+  }
+  // summary.csv: scenario,planner,segmenter,view,metric,mean,ci_lo,ci_hi,n,versus; every row is in
+  // the page, the lead's rows (versus set) too.
+  size_t rows = 0, lead_rows = 0;
+  for (std::vector<std::string> c : CsvRows(csv)) {
+    if (c.size() == 9) c.emplace_back();  // CsvRows drops a trailing empty field (no `versus`)
+    ASSERT_EQ(c.size(), 10u);
+    const std::string where = c[0] + " " + c[1] + " " + c[4] + " " + c[3];
+    if (!c[9].empty()) {
+      const nlohmann::json& l = *leads.at({c[0], c[9]});
+      const nlohmann::json& d = c[4] == "f1_lead" ? l["f1"] : l["found"];
+      EXPECT_EQ(c[3], "3") << where;
+      EXPECT_EQ(G9(d["mean"]), c[5]) << where;
+      EXPECT_EQ(G9(d["ci_lo"]), c[6]) << where;
+      EXPECT_EQ(G9(d["ci_hi"]), c[7]) << where;
+      EXPECT_EQ(std::to_string(d["n"].get<size_t>()), c[8]) << where;
+      ++lead_rows;
+      continue;
+    }
+    const nlohmann::json& pv = (*planners.at({c[0], c[1]}))["per_view"];
+    ASSERT_TRUE(pv.contains(c[4])) << c[4];
+    const size_t v = std::stoul(c[3]) - 1;
+    EXPECT_EQ(G9(pv[c[4]]["mean"][v]), c[5]) << where;
+    EXPECT_EQ(G9(pv[c[4]]["ci_lo"][v]), c[6]) << where;
+    EXPECT_EQ(G9(pv[c[4]]["ci_hi"][v]), c[7]) << where;
+    EXPECT_EQ(std::to_string(pv[c[4]]["n"][v].get<size_t>()), c[8]);
+    // A fraction's interval stays within [0, 1].
+    if (c[4] == "f1" || c[4] == "fruits_found_fraction") {
+      EXPECT_GE(std::stod(c[6]), 0.0) << where;
+      EXPECT_LE(std::stod(c[7]), 1.0) << where;
+    }
+    ++rows;
+  }
+  // 4 (scenario, planner) x the metrics x 3 views; per scenario the lead's F1 and found rows.
+  EXPECT_EQ(rows, 4u * data["metrics"].size() * 3u);
+  EXPECT_EQ(lead_rows, 2u * 2u);
+  EXPECT_GT(rows, 4u * 3u * 10u);
+}
+
 class BenchReportTest : public test::TempDirTest {
  protected:
   const Registries registries_ = BuiltinRegistries();
@@ -87,21 +138,10 @@ TEST_F(BenchReportTest, ReportDataEqualsTheSummaryAndLinksEveryRun) {
     }
   }
 
-  // summary.csv: scenario,planner,segmenter,view,metric,mean,ci95,n; every row is in the page.
-  size_t rows = 0;
-  for (const std::vector<std::string>& c : CsvRows(o.out_dir / "summary.csv")) {
-    ASSERT_EQ(c.size(), 8u);
-    const nlohmann::json& pv = (*planners.at({c[0], c[1]}))["per_view"];
-    ASSERT_TRUE(pv.contains(c[4])) << c[4];
-    const size_t v = std::stoul(c[3]) - 1;
-    EXPECT_EQ(G9(pv[c[4]]["mean"][v]), c[5]) << c[0] << " " << c[1] << " " << c[4] << " " << c[3];
-    EXPECT_EQ(G9(pv[c[4]]["ci95"][v]), c[6]) << c[0] << " " << c[1] << " " << c[4] << " " << c[3];
-    EXPECT_EQ(std::to_string(pv[c[4]]["n"][v].get<size_t>()), c[7]);
-    ++rows;
-  }
-  // 4 (scenario, planner) x the metrics x 3 views.
-  EXPECT_EQ(rows, 4u * (*data)["metrics"].size() * 3u);
-  EXPECT_GT(rows, 4u * 3u * 10u);
+  ASSERT_NO_FATAL_FAILURE(ExpectSummaryCsvEqualsPage(o.out_dir / "summary.csv", *data, planners));
+  ASSERT_EQ(r->leads.size(), 2u);
+  EXPECT_EQ(r->leads[0].f1.n, 2u);
+  EXPECT_THAT(r->leads[0].verdict, testing::AnyOf("ahead", "tied", "behind"));
 
   // fruits_by_visibility.csv, bin by bin.
   std::map<std::pair<std::string, std::string>, size_t> next_bin;
@@ -126,9 +166,11 @@ TEST_F(BenchReportTest, ReportDataEqualsTheSummaryAndLinksEveryRun) {
   for (const report::BenchCell& cell : r->cells) {
     const nlohmann::json& f = (*planners.at({cell.scenario, cell.planner}))["final"];
     EXPECT_DOUBLE_EQ(f["f1"]["mean"].get<double>(), cell.final_f1_mean);
-    EXPECT_DOUBLE_EQ(f["f1"]["ci95"].get<double>(), cell.final_f1_ci95);
+    EXPECT_EQ(G9(f["f1"]["ci_lo"]), G9(cell.final_f1_lo));
+    EXPECT_EQ(G9(f["f1"]["ci_hi"]), G9(cell.final_f1_hi));
     EXPECT_DOUBLE_EQ(f["fruits_found_fraction"]["mean"].get<double>(), cell.final_found_mean);
-    EXPECT_DOUBLE_EQ(f["fruits_found_fraction"]["ci95"].get<double>(), cell.final_found_ci95);
+    EXPECT_EQ(G9(f["fruits_found_fraction"]["ci_lo"]), G9(cell.final_found_lo));
+    EXPECT_EQ(G9(f["fruits_found_fraction"]["ci_hi"]), G9(cell.final_found_hi));
     EXPECT_DOUBLE_EQ(f["plan_ms_mean"].get<double>(), cell.plan_ms_mean);
   }
 }

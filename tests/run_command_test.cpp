@@ -19,6 +19,7 @@
 #include <avp/experiment/output_folder.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
+#include <avp/report/run_html.h>
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
@@ -267,6 +268,28 @@ TEST_F(RunCommandTest, ARunThatFindsNothingSaysWhy) {
   ASSERT_GE(why.size(), 2u) << why.dump();
   EXPECT_THAT(why.dump(), HasSubstr("no view returned a mask"));
   EXPECT_THAT(why.dump(), HasSubstr("zero gain"));
+  // The page says it too, among its facts.
+  const auto page = report::ReadRunReportData(o.out_dir / "report.html");
+  ASSERT_TRUE(page.ok()) << page.status().ToString();
+  EXPECT_THAT(page->dump(), HasSubstr("why no fruit was found"));
+  EXPECT_THAT(page->dump(), HasSubstr("no view returned a mask"));
+}
+
+TEST(SegmenterFailedEveryViewTest, OnlyWhenNoViewWasSegmented) {
+  RunResult r;
+  EXPECT_TRUE(SegmenterFailedEveryView(r).ok());  // no views
+  for (int v = 0; v < 3; ++v) {
+    pipeline::StepRecord s;
+    s.view = v;
+    s.segment_status = InvalidArgumentError(fmt::format("degenerate fruit at view {}", v + 1));
+    r.episode.steps.push_back(s);
+  }
+  const Status all = SegmenterFailedEveryView(r);
+  EXPECT_EQ(all.code(), StatusCode::kUnavailable);
+  EXPECT_THAT(all.message(), HasSubstr("the segmenter failed at every one of the 3 views"));
+  EXPECT_THAT(all.message(), HasSubstr("degenerate fruit at view 1"));
+  r.episode.steps[1].segment_status = Status::Ok();
+  EXPECT_TRUE(SegmenterFailedEveryView(r).ok());
 }
 
 TEST_F(RunCommandTest, RunRejectsBadInput) {
@@ -383,18 +406,18 @@ TEST_F(RunCommandTest, BenchWritesLongFormatSummaryAndPlots) {
   EXPECT_EQ(r->failed, 0u);
   const auto lines = Lines(o.out_dir / "summary.csv");
   ASSERT_GT(lines.size(), 1u);
-  EXPECT_EQ(lines[0], "scenario,planner,segmenter,view,metric,mean,ci95,n");
+  EXPECT_EQ(lines[0], "scenario,planner,segmenter,view,metric,mean,ci_lo,ci_hi,n,versus");
   int f1_rows = 0;
   for (const std::string& l : lines) {
     if (l.find(",f1,") != std::string::npos) {
       ++f1_rows;
-      EXPECT_EQ(l.substr(l.rfind(',') + 1), "2") << l;  // two seeds
+      EXPECT_TRUE(l.ends_with(",2,")) << l;  // two seeds, no `versus`
       EXPECT_THAT(l, HasSubstr("tomato-single-cluster,"));
       EXPECT_THAT(l, HasSubstr(",oracle,"));
     }
   }
   EXPECT_EQ(f1_rows, 4);  // 2 planners x 2 views
-  EXPECT_THAT(ReadAll(o.out_dir / "summary.md"), HasSubstr("| avp-nbv | 2 |"));
+  EXPECT_THAT(ReadAll(o.out_dir / "summary.md"), HasSubstr("| avp-nbv | 2 (small) |"));
   EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
               HasSubstr("Run configuration over its defaults: `episode.views = 2`."));
   EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
@@ -477,15 +500,15 @@ TEST_F(RunCommandTest, BenchOracleRegretIsSummarisedPerScenario) {
   }
   const std::string csv = ReadAll(o.out_dir / "summary.csv");
   EXPECT_THAT(csv, HasSubstr(fmt::format(
-                       "tomato-single-cluster,avp-nbv,oracle,2,oracle_regret,{:.9g},0,1\n",
+                       "tomato-single-cluster,avp-nbv,oracle,2,oracle_regret,{:.9g},nan,nan,1,\n",
                        steps[0]["regret"].get<double>())));
   EXPECT_THAT(csv, HasSubstr(fmt::format(
                        "tomato-single-cluster,avp-nbv,oracle,0,oracle_regret,{:.9g},", sum / 2.0)));
   EXPECT_THAT(csv, HasSubstr(fmt::format(
-                       "tomato-single-cluster,avp-nbv,oracle,3,oracle_chosen_rank,{},0,1\n",
+                       "tomato-single-cluster,avp-nbv,oracle,3,oracle_chosen_rank,{},nan,nan,1,\n",
                        steps[1]["chosen_true_rank"].get<int>())));
   EXPECT_THAT(ReadAll(o.out_dir / "summary.md"),
-              HasSubstr(fmt::format("| avp-nbv | 2 | {:.0f} | {:.3f} ± ",
+              HasSubstr(fmt::format("| avp-nbv | 2 | {:.0f} | {:.3f} [",
                                     0.5 * (steps[0]["candidates"].get<double>() +
                                            steps[1]["candidates"].get<double>()),
                                     sum / 2.0)));

@@ -186,6 +186,18 @@ TEST_F(SceneCommandTest, ExportWritesAScenarioAsASceneFileThatLoadsBack) {
   const Result<sim::Scene> moved = sim::LoadSceneFile(*arranged);
   ASSERT_TRUE(moved.ok()) << moved.status().ToString();
   EXPECT_NEAR(moved->Fruits()[0].center_W.y() - original->Fruits()[0].center_W.y(), 0.4, 1e-3);
+  // The files are there: a second export is refused unless forced.
+  for (const std::filesystem::path& f : ExportedSceneFiles(*yaml)) {
+    EXPECT_TRUE(std::filesystem::exists(f)) << f;
+  }
+  const Result<std::filesystem::path> again =
+      ExportScene(sim::SceneSource{"tomato-single-cluster", {}, 4, {}}, scenarios, dir_ / "export");
+  ASSERT_FALSE(again.ok());
+  EXPECT_EQ(again.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_THAT(again.status().message(), HasSubstr("or --force to replace the exported scene"));
+  EXPECT_TRUE(ExportScene(sim::SceneSource{"tomato-single-cluster", {}, 4, {}}, scenarios,
+                          dir_ / "export", /*force=*/true)
+                  .ok());
   // Unknown scenario: the error names it.
   const Result<std::filesystem::path> bad =
       ExportScene(sim::SceneSource{"tomatoe", {}, 0, {}}, scenarios, dir_ / "bad");

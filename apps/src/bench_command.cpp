@@ -11,30 +11,34 @@
 #include <fmt/ranges.h>
 
 #include <avp/core/text.h>
+#include <avp/eval/statistics.h>
 #include <avp/experiment/bench.h>
 #include <avp/report/conditions.h>
 
 #include "cli_common.h"
+#include "run_cli.h"
 
 namespace avp::apps {
 
 namespace {
 
 struct BenchCli {
-  std::string config, scenarios, planners, seeds, segmenter, conditions, shard, out = "out/bench";
-  int views = 0, jobs = 0;
-  bool force = false, resume = false;
-  bool record = false, oracle_regret = false;
-  std::vector<std::string> planner_options, set;
+  std::string config, scenarios, planners, seeds, seed, conditions, shard, out = "out/bench";
+  EpisodeFlags episode;
+  int jobs = 0;
+  bool force = false, resume = false, record = false;
+  std::vector<std::string> planner_options;
 };
 
-/// "N" for 0..N-1 (N >= 1), or a list "0,1,5" (no empty item). InvalidArgument naming the text
-/// otherwise; at most kMaxBenchSeeds seeds, checked before the list is made.
-Result<std::vector<uint64_t>> ParseSeeds(const std::string& text) {
+/// --seeds: "N" for 0..N-1 (N >= 1), or a list "0,1,5" (no empty item); --seed (`count` false):
+/// the seeds themselves, "5" is seed 5. InvalidArgument naming the text otherwise; at most
+/// kMaxBenchSeeds seeds, checked before the list is made.
+Result<std::vector<uint64_t>> ParseSeeds(const std::string& text, bool count) {
+  const char* option = count ? "--seeds" : "--seed";
   AVP_ASSIGN_OR_RETURN(const std::vector<std::string> items,
-                       ParseCliList("--seeds", text, experiment::kMaxBenchSeeds));
+                       ParseCliList(option, text, experiment::kMaxBenchSeeds));
   std::vector<uint64_t> seeds;
-  if (items.size() == 1 && text.find(',') == std::string::npos) {
+  if (count && items.size() == 1 && text.find(',') == std::string::npos) {
     AVP_ASSIGN_OR_RETURN(const uint64_t n,
                          ParseCliUnsigned("--seeds (a count N for seeds 0..N-1)", items[0], 1,
                                           experiment::kMaxBenchSeeds));
@@ -42,8 +46,8 @@ Result<std::vector<uint64_t>> ParseSeeds(const std::string& text) {
     return seeds;
   }
   for (const std::string& item : items) {
-    AVP_ASSIGN_OR_RETURN(const uint64_t s,
-                         ParseCliUnsigned("--seeds: a seed", item, 0, MaxOf<uint64_t>()));
+    AVP_ASSIGN_OR_RETURN(const uint64_t s, ParseCliUnsigned(fmt::format("{}: a seed", option), item,
+                                                            0, MaxOf<uint64_t>()));
     seeds.push_back(s);
   }
   return seeds;
@@ -93,8 +97,6 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   if (!cli.config.empty()) {
     AVP_ASSIGN_OR_RETURN(b, experiment::LoadBenchConfig(cli.config));
   }
-  if (cmd.get_option("--views")->count() > 0) b.base.episode.views = cli.views;
-  if (cmd.get_option("--segmenter")->count() > 0) b.base.segmenter.name = cli.segmenter;
   // A list given on the command line is used as given: an empty one is an error, never "the
   // defaults" (those apply only when neither the option nor --config names the list).
   if (cmd.get_option("--scenarios")->count() > 0) {
@@ -103,8 +105,16 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   if (cmd.get_option("--planners")->count() > 0) {
     AVP_ASSIGN_OR_RETURN(b.planners, ParseCliList("--planners", cli.planners));
   }
+  if (cmd.get_option("--seeds")->count() > 0 && cmd.get_option("--seed")->count() > 0) {
+    return InvalidArgumentError(
+        "--seeds and --seed both given: --seeds N runs seeds 0..N-1, --seed S,T runs those seeds; "
+        "give one");
+  }
   if (cmd.get_option("--seeds")->count() > 0) {
-    AVP_ASSIGN_OR_RETURN(b.seeds, ParseSeeds(cli.seeds));
+    AVP_ASSIGN_OR_RETURN(b.seeds, ParseSeeds(cli.seeds, true));
+  }
+  if (cmd.get_option("--seed")->count() > 0) {
+    AVP_ASSIGN_OR_RETURN(b.seeds, ParseSeeds(cli.seed, false));
   }
   if (cli.config.empty()) {
     if (b.scenarios.empty()) b.scenarios = registries.scenarios.Names();
@@ -114,17 +124,13 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
     }
   }
   AVP_RETURN_IF_ERROR(ApplyPlannerOptions(cli.planner_options, b));
-  AVP_ASSIGN_OR_RETURN(const OptionValues set, ParseKeyValues(cli.set, "--set item"));
-  for (const auto& [key, value] : set) {
-    AVP_RETURN_IF_ERROR(experiment::SetRunConfigKey(b.base, key, value));
-  }
+  AVP_RETURN_IF_ERROR(ApplyEpisodeFlags(cmd, cli.episode, b.base));
   b.jobs = cli.jobs;
   b.out_dir = cli.out;
   b.force = cli.force;
   b.resume = cli.resume;
   if (cmd.get_option("--shard")->count() > 0) AVP_RETURN_IF_ERROR(ParseShard(cli.shard, b));
   b.record = cli.record;
-  if (cli.oracle_regret) b.base.oracle_regret = true;
   if (cmd.get_option("--conditions")->count() > 0) {
     AVP_ASSIGN_OR_RETURN(const std::vector<std::string> names,
                          ParseCliList("--conditions", cli.conditions));
@@ -149,17 +155,35 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
 }
 
 void PrintBench(const std::filesystem::path& out_dir, const experiment::BenchSummary& s) {
-  std::printf("%zu episodes (%zu failed) in %.1f s. Final view, mean ± 95 %% CI over the seeds:\n",
-              s.episodes, s.failed, s.seconds);
-  size_t width = 28;
-  for (const auto& c : s.cells) width = std::max(width, c.scenario.size());
-  const int w = static_cast<int>(width);
-  std::printf("  %-*s %-16s %-17s %-17s %s\n", w, "scenario", "planner", "F1 (exact)",
-              "fruits found", "plan ms/step");
+  std::printf(
+      "%zu episode%s (%zu failed) in %.1f s. Final view, mean over the seeds [95 %% interval]:\n",
+      s.episodes, s.episodes == 1 ? "" : "s", s.failed, s.seconds);
+  size_t scenario_w = 8, planner_w = 7;
   for (const auto& c : s.cells) {
-    std::printf("  %-*s %-16s %.3f ± %.3f     %.3f ± %.3f     %.0f\n", w, c.scenario.c_str(),
-                c.planner.c_str(), c.final_f1_mean, c.final_f1_ci95, c.final_found_mean,
-                c.final_found_ci95, c.plan_ms_mean);
+    scenario_w = std::max(scenario_w, c.scenario.size());
+    planner_w = std::max(planner_w, c.planner.size());
+  }
+  std::printf("  %-*s  %-*s  %-4s  %-30s  %-30s  %s\n", static_cast<int>(scenario_w), "scenario",
+              static_cast<int>(planner_w), "planner", "n", "F1 (exact)", "fraction found",
+              "plan ms/step");
+  for (const auto& c : s.cells) {
+    std::printf(
+        "  %-*s  %-*s  %-4zu  %-30s  %-30s  %.0f\n", static_cast<int>(scenario_w),
+        c.scenario.c_str(), static_cast<int>(planner_w), c.planner.c_str(), c.runs,
+        eval::FormatMeanInterval(c.final_f1_mean, c.final_f1_lo, c.final_f1_hi, c.runs).c_str(),
+        eval::FormatMeanInterval(c.final_found_mean, c.final_found_lo, c.final_found_hi, c.runs)
+            .c_str(),
+        c.plan_ms_mean);
+  }
+  if (!s.leads.empty()) {
+    std::printf(
+        "Lead of %s, paired by seed (its final F1 minus the other's, mean [95 %% interval]):\n",
+        s.leads.front().planner.c_str());
+    for (const report::PairedLead& l : s.leads) {
+      std::printf("  %-*s  vs %-*s  %-34s  %s\n", static_cast<int>(scenario_w), l.scenario.c_str(),
+                  static_cast<int>(planner_w), l.versus.c_str(),
+                  eval::FormatMeanInterval(l.f1, 3, true).c_str(), l.verdict.c_str());
+    }
   }
   std::printf("wrote %s and the per-run records under %s\n", s.files.front().string().c_str(),
               (out_dir / "runs").string().c_str());
@@ -168,11 +192,11 @@ void PrintBench(const std::filesystem::path& out_dir, const experiment::BenchSum
 
 /// The lead planner's paired differences, one line each, and where the tables are.
 void PrintConditions(const report::ConditionTables& t) {
-  std::printf("Lead over each planner, final F1, paired by seed (mean ± 95 %% CI):\n");
+  std::printf("Lead over each planner, final F1, paired by seed (mean [95 %% interval]):\n");
   for (const report::ConditionLead& l : t.leads) {
-    std::printf("  %-22s %-28s %s vs %-14s %+.3f ± %.3f  %s\n", l.condition.c_str(),
-                l.scenario.c_str(), l.planner.c_str(), l.versus.c_str(), l.f1.mean,
-                std::isfinite(l.f1.ci95) ? l.f1.ci95 : 0.0, l.verdict.c_str());
+    std::printf("  %-22s %-28s %s vs %-14s %-34s  %s\n", l.condition.c_str(), l.scenario.c_str(),
+                l.planner.c_str(), l.versus.c_str(),
+                eval::FormatMeanInterval(l.f1, 3, true).c_str(), l.verdict.c_str());
   }
   std::printf("wrote %s and %s\n", t.files.at(0).string().c_str(), t.files.at(1).string().c_str());
 }
@@ -199,7 +223,10 @@ int BenchConditions(const experiment::BenchConfig& bench,
 
 int Bench(const CLI::App& cmd, const BenchCli& cli, const experiment::Registries& registries) {
   // `help` wherever a name is expected, as `avp run --planner help`.
-  if (PrintHelpForNames(registries, cli.scenarios, cli.planners, cli.segmenter)) return 0;
+  if (int code = 0;
+      PrintHelpForNames(registries, cli.scenarios, cli.planners, cli.episode.segmenter, &code)) {
+    return code;
+  }
   const Result<experiment::BenchConfig> bench = ResolveBench(cmd, cli, registries);
   if (!bench.ok()) return Failed("bench", bench.status());
   if (!bench->conditions.empty()) return BenchConditions(*bench, registries);
@@ -263,37 +290,32 @@ int Compare(const CompareCli& cli) {
 
 void AddBenchCommand(CLI::App& app, CommandContext& context) {
   auto cli = std::make_shared<BenchCli>();
-  const experiment::RunConfig d;
   CLI::App* cmd = app.add_subcommand(
       "bench", "Scenarios x planners x seeds in parallel, with summary tables and plots");
   cmd->add_option("--config", cli->config, "Experiment YAML (e.g. configs/experiments/paper.yaml)");
-  cmd->add_option("--scenarios", cli->scenarios,
+  // avp run's singular spellings are accepted too: --scenario and --planner as aliases, --seed as
+  // a list of seeds (never a count).
+  cmd->add_option("--scenarios,--scenario", cli->scenarios,
                   "Comma-separated scenarios and scene files (FILE.yaml, relative to the current "
                   "folder), each optionally @ARRANGEMENT (FILE.yaml@paper: the four paper "
-                  "arrangements); overrides the config");
-  cmd->add_option("--planners", cli->planners, "Comma-separated planners (overrides the config)");
+                  "arrangements); `help` lists them; overrides the config");
+  cmd->add_option("--planners,--planner", cli->planners,
+                  "Comma-separated planners (overrides the config); `help` lists them");
   cmd->add_option("--seeds", cli->seeds,
-                  "Comma-separated seeds, or N for 0..N-1 (overrides the config)");
-  AddNumberOption(*cmd, "--views", cli->views, 0, MaxOf<int>(), "Fused views per episode")
-      ->default_str(std::to_string(d.episode.views));
-  cmd->add_option("--segmenter", cli->segmenter, "Segmenter")->default_str(d.segmenter.name);
+                  "N for seeds 0..N-1, or comma-separated seeds (overrides the config)");
+  cmd->add_option("--seed", cli->seed, "Comma-separated seeds, \"5\" being seed 5 (not a count)");
+  AddEpisodeFlags(*cmd, cli->episode);
   AddNumberOption(*cmd, "--jobs", cli->jobs, 0, experiment::kMaxThreads,
                   "Episodes at once (0 = hardware threads)");
   AddKeyValueOption(*cmd, "--planner-option", cli->planner_options,
                     "PLANNER:KEY=VALUE for that planner's episodes (repeatable; KEY=VALUE when "
                     "the bench has one planner); over the config's planner_options");
-  AddKeyValueOption(*cmd, "--set", cli->set,
-                    "Any key of the episodes' run configuration (avp run --print-config)");
   cmd->add_option("--out", cli->out, "Output folder")->default_str(cli->out);
   cmd->add_flag("--force", cli->force,
                 "Replace the results an earlier bench left in --out (only an avp bench folder)");
   cmd->add_flag("--record", cli->record,
                 "Record every episode as MCAP: runs/<scenario>/<planner>/seed-<n>/episode.mcap "
                 "(docs/recording.md)");
-  cmd->add_flag("--oracle-regret", cli->oracle_regret,
-                "Measure each plan step's regret and rank correlation with the truth (summary.csv "
-                "and summary.md per scenario, record.json per run; the episodes are unchanged, "
-                "plans take longer)");
   cmd->add_option("--shard", cli->shard,
                   "K/N: run only the K-th of N deterministic slices of the job list (jobs dealt "
                   "round-robin); merge the shard folders with avp bench merge (docs/cluster.md)");

@@ -1,6 +1,5 @@
 #include "cli_common.h"
 
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
@@ -118,9 +117,9 @@ Result<double> ParseCliReal(std::string_view option, std::string_view text, doub
   }
   const std::string t(text);
   char* end = nullptr;
-  errno = 0;
   const double v = std::strtod(t.c_str(), &end);
-  if (end != t.c_str() + t.size() || errno == ERANGE || !std::isfinite(v) || v < min || v > max) {
+  // An underflow ("1e-320", ERANGE) is the nearest double; an overflow is infinite, refused.
+  if (end != t.c_str() + t.size() || !std::isfinite(v) || v < min || v > max) {
     return bad();
   }
   return v;
@@ -136,9 +135,10 @@ CLI::Option* AddArrangementOption(CLI::App& cmd, std::string& value) {
       ->type_name("SPEC");
 }
 
-void AddSceneFlags(CLI::App& cmd, SceneFlags& flags, const std::string& seed_doc) {
+void AddSceneFlags(CLI::App& cmd, SceneFlags& flags, const std::string& seed_doc,
+                   const std::string& scenario_names) {
   cmd.add_option(
-      "--scenario", flags.scenario,
+      scenario_names, flags.scenario,
       fmt::format("Built-in scenario (see `avp scenes`); default: {}", sim::DefaultScenarioName()));
   cmd.add_option("--scene", flags.scene_file,
                  "YAML scene file instead of a scenario (docs/scene-format.md)");

@@ -1,6 +1,8 @@
 // Helpers the command files share (internal to apps/).
 #pragma once
 
+#include <algorithm>
+#include <cstdio>
 #include <functional>
 #include <limits>
 #include <string>
@@ -10,9 +12,12 @@
 #include <vector>
 
 #include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <avp/core/options.h>
 #include <avp/core/status.h>
+#include <avp/core/text.h>
 #include <avp/sim/scenario.h>
 #include <avp/sim/scene.h>
 
@@ -106,14 +111,17 @@ struct SceneFlags {
 int ListScenes(const sim::ScenarioRegistry& scenarios);
 
 /// `help` where a name is expected (`--scenario help`, `--planner(s) help`, `--segmenter help`):
-/// prints the scenario list or the planners' or segmenters' descriptions with their options.
-/// True when it printed (the command then ends, successfully).
+/// prints the scenario list or the planners' or segmenters' names and descriptions;
+/// `help:NAME` (`--planner help:avp-nbv`) prints that one's description and options. True when it
+/// printed (the command then ends: `*exit_code` is 0, or 2 for an unknown NAME).
 bool PrintHelpForNames(const experiment::Registries& registries, std::string_view scenario,
-                       std::string_view planner, std::string_view segmenter);
+                       std::string_view planner, std::string_view segmenter, int* exit_code);
 
 /// Adds --scenario, --scene, --arrangement and --seed to `cmd`, bound to `flags`; `seed_doc`
-/// says what the seed seeds.
-void AddSceneFlags(CLI::App& cmd, SceneFlags& flags, const std::string& seed_doc);
+/// says what the seed seeds; `scenario_names` are the scenario option's names (CLI11's
+/// "--scenario,--scenarios" for an alias).
+void AddSceneFlags(CLI::App& cmd, SceneFlags& flags, const std::string& seed_doc,
+                   const std::string& scenario_names = "--scenario");
 
 /// "--voxel-size M" bound to `value` (set to the map's default first): the map option
 /// grid.voxel_size_m, whose default mapping::GridOptions holds (the one voxel size of every
@@ -128,21 +136,39 @@ void LogSceneWarnings(const sim::Scene& scene);
 CLI::Option* AddKeyValueOption(CLI::App& cmd, const std::string& name,
                                std::vector<std::string>& values, const std::string& description);
 
-/// The registered components (planners or segmenters) with their descriptions and options, for
-/// `--planner help` / `--segmenter help`: "name  description" then one line per option.
+/// The registered components (planners or segmenters) for `--planner help` / `--segmenter help`:
+/// one aligned line each, "name  description", and how to see one's options.
 template <typename Entry>
-std::string DescribeComponents(std::string_view what, const std::vector<Entry>& entries) {
+std::string ListComponents(std::string_view what, std::string_view flag,
+                           const std::vector<Entry>& entries) {
+  size_t width = 0;
+  for (const Entry& e : entries) width = std::max(width, e.name.size());
   std::string out = std::string(what) + ":\n";
-  for (const Entry& e : entries) {
-    out += "  " + e.name + "  " + e.description + "\n";
-    const std::vector<OptionInfo> info = e.options.Info();
-    if (info.empty()) {
-      out += "      (no options)\n";
-    } else {
-      out += FormatOptionHelp(info, "      ");
-    }
-  }
+  for (const Entry& e : entries) out += fmt::format("  {:<{}}  {}\n", e.name, width, e.description);
+  out += fmt::format("`{} help:NAME` lists one's options with their defaults and ranges.\n", flag);
   return out;
+}
+
+/// One component for `--planner help:NAME`: its name, description and options (an unknown name is
+/// named, with the nearest one). Returns the exit code (0, or 2 for an unknown name).
+template <typename Entry>
+int DescribeComponent(std::string_view what, std::string_view name,
+                      const std::vector<Entry>& entries) {
+  std::vector<std::string> names;
+  for (const Entry& e : entries) {
+    names.push_back(e.name);
+    if (e.name != name) continue;
+    std::string out = e.name + "  " + e.description + "\n";
+    const std::vector<OptionInfo> info = e.options.Info();
+    out += info.empty()
+               ? "  (no options)\n"
+               : "options (KEY=DEFAULT  [unit, range]  meaning):\n" + FormatOptionHelp(info, "  ");
+    std::fputs(out.c_str(), stdout);
+    return 0;
+  }
+  std::fprintf(stderr, "unknown %s %s (%s)%s\n", std::string(what).c_str(), QuoteText(name).c_str(),
+               fmt::format("{}", fmt::join(names, ", ")).c_str(), DidYouMean(name, names).c_str());
+  return 2;
 }
 
 }  // namespace avp::apps

@@ -37,12 +37,14 @@ int MapBuildAndReport(const MapBuildOptions& options, const sim::ScenarioRegistr
   // Each view's line ends with the rate, the time elapsed and the time left (report::Progress's
   // words).
   const auto t0 = std::chrono::steady_clock::now();
-  o.on_view = [t0](const MapBuildView& v) {
+  auto unit = std::make_shared<report::RateUnit>(report::RateUnit::kAuto);  // one per build
+  o.on_view = [t0, unit](const MapBuildView& v) {
     const Eigen::Vector3d eye = v.X_WC.translation();
     const double elapsed =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    const std::string progress = report::FormatProgressTimes(
-        static_cast<size_t>(v.index + 1), static_cast<size_t>(std::max(v.views, 0)), elapsed);
+    const std::string progress =
+        report::FormatProgressTimes(static_cast<size_t>(v.index + 1),
+                                    static_cast<size_t>(std::max(v.views, 0)), elapsed, &*unit);
     std::printf(
         "view %d/%d  azimuth %6.1f deg  eye (%.3f, %.3f, %.3f)  %zu endpoints, %zu fruit px in "
         "%zu masks -> known %zu, occupied %zu, labelled %zu, instances %zu  (render %.0f ms, "
@@ -171,7 +173,9 @@ void AddMapBuild(CLI::App& map_cmd, CommandContext& context) {
                   "Horizontal camera distance from the plant centre, m (0 = the start camera's)");
   AddNumberOption(*cmd, "--threads", b.threads, 0, experiment::kMaxThreads,
                   "Integrator threads (0 = all)");
-  cmd->add_flag("--noise", b.noise, "Apply the seeded D435-like depth noise model");
+  cmd->add_flag("--noise,!--no-noise", b.noise,
+                "The seeded D435-like depth noise model (on by default, as in avp run; --no-noise: "
+                "noise-free depth)");
   cmd->add_option("--out", cli->out, "Output map file (.avpmap)")->default_val(cli->out);
   cmd->add_flag("--force", cli->options.force, "Replace an existing --out file");
   cmd->callback([cli, &context] {

@@ -64,7 +64,9 @@ void AddRenderCommand(CLI::App& app, CommandContext& context) {
   cli->joints_opt->excludes(cli->pose_opt);
   cmd->add_option("--arm", cli->arm_config,
                   "Arm config YAML (default: configs/arms/igus_rebel_d435.yaml)");
-  cmd->add_flag("--noise", cli->options.noise, "Apply the seeded D435-like depth noise model");
+  cmd->add_flag("--noise,!--no-noise", cli->options.noise,
+                "The seeded D435-like depth noise model (on by default, as in avp run; --no-noise: "
+                "noise-free depth)");
   cmd->add_option("--out", cli->out_dir, "Output folder")->default_val(cli->out_dir);
   cmd->add_flag("--force", cli->options.force,
                 "Replace an earlier render's files in --out (another command's folder is never "

@@ -18,17 +18,37 @@
 
 namespace avp::apps {
 
+/// The flags of an episode's configuration that `avp run` and `avp bench` share (a bench applies
+/// them to every episode), each applied only when given: --segmenter, --views, --prompt,
+/// --voxel-size, --policy, --carving, --no-noise, --oracle-regret, then the --segmenter-option,
+/// --map-option and --set items, in that order.
+struct EpisodeFlags {
+  std::string segmenter, prompt, policy, carving;
+  int views = 0;
+  double voxel_size_m = 0.0;
+  bool no_noise = false, oracle_regret = false;
+  std::vector<std::string> segmenter_options, map_options, set;
+};
+
+/// Adds EpisodeFlags' options to `cmd`.
+void AddEpisodeFlags(CLI::App& cmd, EpisodeFlags& flags);
+
+/// The given EpisodeFlags over `config` (a --segmenter naming another segmenter first drops the
+/// options `config` gave the previous one: they were its).
+Status ApplyEpisodeFlags(const CLI::App& cmd, const EpisodeFlags& flags,
+                         experiment::RunConfig& config);
+
 /// The flags of `avp run`. Shorthand flags apply only when given, over --config; then the
 /// --*-option and --set items, in that order.
 struct RunCli {
   std::string config_file;
   bool print_config = false;
   SceneFlags scene;
-  std::string planner, segmenter, prompt, policy, carving, gt, out = "out/run";
-  int views = 0, threads = 0;
-  double voxel_size_m = 0.0;
-  bool no_noise = false, oracle_regret = false, force = false;
-  std::vector<std::string> planner_options, segmenter_options, map_options, set;
+  EpisodeFlags episode;
+  std::string planner, gt, out = "out/run";
+  int threads = 0;
+  bool force = false;
+  std::vector<std::string> planner_options;
   /// --record [FILE] (avp run, avp live; given: the command's count("--record")): its file, empty
   /// for RUN_DIR/episode.mcap.
   std::string record_file;

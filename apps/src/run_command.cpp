@@ -32,44 +32,6 @@ Status ApplyIfGiven(const CLI::App& cmd, const char* flag, experiment::RunConfig
   return experiment::SetRunConfigKey(config, key, value);
 }
 
-/// `--scenario` / `--scene` replace the scene source a --config named, and `--planner` /
-/// `--segmenter` naming another component drop the options the file gave the previous one (they
-/// were that component's).
-void ReplaceSourceAndComponents(const CLI::App& cmd, const RunCli& cli, experiment::RunConfig& c) {
-  if (cmd.get_option("--scenario")->count() > 0) {
-    c.scene_file.clear();
-    c.arrangement.clear();  // a scenario is arranged by its generator
-  }
-  if (cmd.get_option("--scene")->count() > 0) c.scenario.clear();
-  if (cmd.get_option("--planner")->count() > 0 && cli.planner != c.planner.name) {
-    c.planner.options.clear();
-  }
-  if (cmd.get_option("--segmenter")->count() > 0 && cli.segmenter != c.segmenter.name) {
-    c.segmenter.options.clear();
-  }
-}
-
-Status ApplyShorthands(const CLI::App& cmd, const RunCli& cli, experiment::RunConfig& c) {
-  ReplaceSourceAndComponents(cmd, cli, c);
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scenario", c, "scenario", cli.scene.scenario));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scene", c, "scene_file", cli.scene.scene_file));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--arrangement", c, "arrangement", cli.scene.arrangement));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--seed", c, "seed", std::to_string(cli.scene.seed)));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--planner", c, "planner.name", cli.planner));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--segmenter", c, "segmenter.name", cli.segmenter));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--views", c, "episode.views", std::to_string(cli.views)));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--prompt", c, "episode.prompt", cli.prompt));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--voxel-size", c, "map.grid.voxel_size_m",
-                                   fmt::format("{}", cli.voxel_size_m)));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--policy", c, "map.semantics.policy", cli.policy));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--carving", c, "episode.integrator.carving", cli.carving));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--gt", c, "ground_truth_file", cli.gt));
-  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--threads", c, "threads", std::to_string(cli.threads)));
-  if (cli.no_noise) c.depth_noise.enabled = false;
-  if (cli.oracle_regret) c.oracle_regret = true;
-  return Status::Ok();
-}
-
 /// KEY=VALUE items of a --<section>-option flag, each set as "<prefix>KEY".
 Status ApplyKeyValues(const std::vector<std::string>& items, std::string_view what,
                       std::string_view prefix, experiment::RunConfig& c) {
@@ -80,7 +42,97 @@ Status ApplyKeyValues(const std::vector<std::string>& items, std::string_view wh
   return Status::Ok();
 }
 
+/// `--scenario` / `--scene` replace the scene source a --config named, and `--planner` naming
+/// another planner drops the options the file gave the previous one (they were that planner's).
+void ReplaceSourceAndPlanner(const CLI::App& cmd, const RunCli& cli, experiment::RunConfig& c) {
+  if (cmd.get_option("--scenario")->count() > 0) {
+    c.scene_file.clear();
+    c.arrangement.clear();  // a scenario is arranged by its generator
+  }
+  if (cmd.get_option("--scene")->count() > 0) c.scenario.clear();
+  if (cmd.get_option("--planner")->count() > 0 && cli.planner != c.planner.name) {
+    c.planner.options.clear();
+  }
+}
+
+/// `avp run` runs one episode: `--planners a,b` or `--scenarios a,b` (bench's spellings, accepted
+/// as aliases) naming several is sent to `avp bench`.
+Status CheckOneName(const CLI::App& cmd, const char* flag, const std::string& value) {
+  if (cmd.get_option(flag)->count() == 0 || value.find(',') == std::string::npos) {
+    return Status::Ok();
+  }
+  return InvalidArgumentError(
+      fmt::format("{} {}: avp run runs one episode, with one of them; avp bench {}s {} runs "
+                  "each of them",
+                  flag, QuoteText(value), flag, EscapeText(value)));
+}
+
+Status ApplyShorthands(const CLI::App& cmd, const RunCli& cli, experiment::RunConfig& c) {
+  AVP_RETURN_IF_ERROR(CheckOneName(cmd, "--planner", cli.planner));
+  AVP_RETURN_IF_ERROR(CheckOneName(cmd, "--scenario", cli.scene.scenario));
+  ReplaceSourceAndPlanner(cmd, cli, c);
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scenario", c, "scenario", cli.scene.scenario));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--scene", c, "scene_file", cli.scene.scene_file));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--arrangement", c, "arrangement", cli.scene.arrangement));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--seed", c, "seed", std::to_string(cli.scene.seed)));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--planner", c, "planner.name", cli.planner));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--gt", c, "ground_truth_file", cli.gt));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--threads", c, "threads", std::to_string(cli.threads)));
+  return ApplyKeyValues(cli.planner_options, "planner option", "planner.options.", c);
+}
+
 }  // namespace
+
+Status ApplyEpisodeFlags(const CLI::App& cmd, const EpisodeFlags& flags, experiment::RunConfig& c) {
+  if (cmd.get_option("--segmenter")->count() > 0 && flags.segmenter != c.segmenter.name) {
+    c.segmenter.options.clear();  // they were the previous segmenter's
+  }
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--segmenter", c, "segmenter.name", flags.segmenter));
+  AVP_RETURN_IF_ERROR(
+      ApplyIfGiven(cmd, "--views", c, "episode.views", std::to_string(flags.views)));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--prompt", c, "episode.prompt", flags.prompt));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--voxel-size", c, "map.grid.voxel_size_m",
+                                   fmt::format("{}", flags.voxel_size_m)));
+  AVP_RETURN_IF_ERROR(ApplyIfGiven(cmd, "--policy", c, "map.semantics.policy", flags.policy));
+  AVP_RETURN_IF_ERROR(
+      ApplyIfGiven(cmd, "--carving", c, "episode.integrator.carving", flags.carving));
+  if (flags.no_noise) c.depth_noise.enabled = false;
+  if (flags.oracle_regret) c.oracle_regret = true;
+  AVP_RETURN_IF_ERROR(
+      ApplyKeyValues(flags.segmenter_options, "segmenter option", "segmenter.options.", c));
+  AVP_RETURN_IF_ERROR(ApplyKeyValues(flags.map_options, "map option", "map.", c));
+  return ApplyKeyValues(flags.set, "--set item", "", c);
+}
+
+void AddEpisodeFlags(CLI::App& cmd, EpisodeFlags& flags) {
+  const experiment::RunConfig d;
+  cmd.add_option("--segmenter", flags.segmenter, "Segmenter; `--segmenter help` lists them")
+      ->default_str(d.segmenter.name);
+  AddNumberOption(cmd, "--views", flags.views, 0, MaxOf<int>(),
+                  "Fused views per episode, start view included")
+      ->default_str(std::to_string(d.episode.views));
+  cmd.add_option("--prompt", flags.prompt, "Text prompt")->default_str(d.episode.prompt);
+  AddVoxelSizeOption(cmd, flags.voxel_size_m);
+  cmd.add_option("--policy", flags.policy, "Semantic fusion: bayesian or reference-max")
+      ->default_str(std::string(mapping::ToString(d.map.semantics.policy)));
+  cmd.add_option("--carving", flags.carving, "Free space: projective, raycast or none")
+      ->default_str(std::string(mapping::ToString(d.episode.integrator.carving)));
+  cmd.add_flag("--no-noise", flags.no_noise,
+               "Noise-free depth (the seeded D435-like depth noise is on by default in every "
+               "command)");
+  AddKeyValueOption(cmd, "--segmenter-option", flags.segmenter_options,
+                    "Segmenter option over its defaults (repeatable; `--segmenter help` lists "
+                    "them)");
+  AddKeyValueOption(cmd, "--map-option", flags.map_options,
+                    "Map option (repeatable): grid.voxel_size_m, semantics.policy, ...");
+  AddKeyValueOption(cmd, "--set", flags.set,
+                    "Any key of the run configuration, as avp run --print-config names it "
+                    "(repeatable)");
+  cmd.add_flag("--oracle-regret", flags.oracle_regret,
+               "Measure each plan step's regret and rank correlation with the truth (record.json "
+               "oracle_regret; bench: summary.csv and summary.md per scenario); the episodes are "
+               "unchanged, the plan times include it");
+}
 
 Result<experiment::CheckedRunConfig> ResolveConfig(const CLI::App& cmd, const RunCli& cli,
                                                    const experiment::Registries& registries,
@@ -95,11 +147,7 @@ Result<experiment::CheckedRunConfig> ResolveConfig(const CLI::App& cmd, const Ru
     AVP_RETURN_IF_ERROR(experiment::ReadRunConfigYaml(root, cli.config_file, c));
   }
   AVP_RETURN_IF_ERROR(ApplyShorthands(cmd, cli, c));
-  AVP_RETURN_IF_ERROR(ApplyKeyValues(cli.planner_options, "planner option", "planner.options.", c));
-  AVP_RETURN_IF_ERROR(
-      ApplyKeyValues(cli.segmenter_options, "segmenter option", "segmenter.options.", c));
-  AVP_RETURN_IF_ERROR(ApplyKeyValues(cli.map_options, "map option", "map.", c));
-  AVP_RETURN_IF_ERROR(ApplyKeyValues(cli.set, "--set item", "", c));
+  AVP_RETURN_IF_ERROR(ApplyEpisodeFlags(cmd, cli.episode, c));
   if (section.default_scene && c.scenario.empty() && c.scene_file.empty()) {
     c.scenario = std::string(sim::DefaultScenarioName());
   }
@@ -169,7 +217,10 @@ void PrintSummary(const experiment::RunConfig& config, const experiment::RunSumm
 
 int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& registries) {
   // `help` wherever a name is expected.
-  if (PrintHelpForNames(registries, cli.scene.scenario, cli.planner, cli.segmenter)) return 0;
+  if (int code = 0; PrintHelpForNames(registries, cli.scene.scenario, cli.planner,
+                                      cli.episode.segmenter, &code)) {
+    return code;
+  }
   const Result<experiment::CheckedRunConfig> config = ResolveConfig(cmd, cli, registries);
   if (!config.ok()) return Failed("run", config.status());
   if (cli.print_config) {
@@ -192,12 +243,14 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   // Each view's line ends with the rate, the time elapsed and the time left (report::Progress's
   // words), so that a long run shows how far it is.
   const auto t0 = std::chrono::steady_clock::now();
-  options.on_step = [t0](const pipeline::StepRecord& s) {
+  // One rate unit for the whole run (the first view's).
+  auto unit = std::make_shared<report::RateUnit>(report::RateUnit::kAuto);
+  options.on_step = [t0, unit](const pipeline::StepRecord& s) {
     const double elapsed =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    PrintStepWithProgress(
-        s, report::FormatProgressTimes(static_cast<size_t>(s.view + 1),
-                                       static_cast<size_t>(std::max(s.views_total, 0)), elapsed));
+    PrintStepWithProgress(s, report::FormatProgressTimes(
+                                 static_cast<size_t>(s.view + 1),
+                                 static_cast<size_t>(std::max(s.views_total, 0)), elapsed, &*unit));
   };
   const Result<experiment::RunSummary> summary = experiment::RunToFolder(*config, options);
   if (!summary.ok()) return Failed("run", summary.status());
@@ -207,6 +260,10 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   if (summary->result.episode.end == pipeline::EpisodeEnd::kSegmenterFault) {
     return Failed("run", UnavailableError(fmt::format("segmenter fault: {}",
                                                       summary->result.episode.end_reason)));
+  }
+  // So is one whose segmenter failed at every view: nothing it mapped was segmented.
+  if (const Status failed = experiment::SegmenterFailedEveryView(summary->result); !failed.ok()) {
+    return Failed("run", failed);
   }
   return 0;
 }
@@ -219,20 +276,13 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
                  "Run configuration YAML (as --print-config writes it); flags apply over it");
   cmd.add_flag("--print-config", cli.print_config,
                "Print the effective configuration as YAML (--config reads it back) and exit");
-  AddSceneFlags(cmd, cli.scene, "Seed of the plant, the noise and every choice");
-  cmd.add_option("--planner", cli.planner, "View planner; `--planner help` lists them")
+  // avp bench's plural spellings are accepted too (one name: avp run runs one episode).
+  AddSceneFlags(cmd, cli.scene, "Seed of the plant, the noise and every choice",
+                "--scenario,--scenarios");
+  cmd.add_option("--planner,--planners", cli.planner,
+                 "View planner; `--planner help` lists them, `--planner help:NAME` explains one")
       ->default_str(d.planner.name);
-  cmd.add_option("--segmenter", cli.segmenter, "Segmenter; `--segmenter help` lists them")
-      ->default_str(d.segmenter.name);
-  AddNumberOption(cmd, "--views", cli.views, 0, MaxOf<int>(), "Fused views, start view included")
-      ->default_str(std::to_string(d.episode.views));
-  cmd.add_option("--prompt", cli.prompt, "Text prompt")->default_str(d.episode.prompt);
-  AddVoxelSizeOption(cmd, cli.voxel_size_m);
-  cmd.add_option("--policy", cli.policy, "Semantic fusion: bayesian or reference-max")
-      ->default_str(std::string(mapping::ToString(d.map.semantics.policy)));
-  cmd.add_option("--carving", cli.carving, "Free space: projective, raycast or none")
-      ->default_str(std::string(mapping::ToString(d.episode.integrator.carving)));
-  cmd.add_flag("--no-noise", cli.no_noise, "Noise-free depth");
+  AddEpisodeFlags(cmd, cli.episode);
   cmd.add_option(
       "--gt", cli.gt,
       "Ground truth from a map file instead of the observable fruit surface: an OctoMap .bt / .ot "
@@ -241,15 +291,6 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
                   "Threads (0 = all; results do not depend on it)");
   AddKeyValueOption(cmd, "--planner-option", cli.planner_options,
                     "Planner option over its defaults (repeatable; `--planner help` lists them)");
-  AddKeyValueOption(cmd, "--segmenter-option", cli.segmenter_options,
-                    "Segmenter option over its defaults (repeatable)");
-  AddKeyValueOption(cmd, "--map-option", cli.map_options,
-                    "Map option (repeatable): grid.voxel_size_m, semantics.policy, ...");
-  AddKeyValueOption(cmd, "--set", cli.set,
-                    "Any key of the configuration, as --print-config names it (repeatable)");
-  cmd.add_flag("--oracle-regret", cli.oracle_regret,
-               "Measure each plan step's regret with the truth (record.json oracle_regret; "
-               "the plan times include it)");
   cmd.add_option("--out", cli.out, "Run folder")->default_str(cli.out);
   cmd.add_flag("--force", cli.force,
                "Replace the results an earlier run left in --out (only an avp run folder)");

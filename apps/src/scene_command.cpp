@@ -39,6 +39,7 @@ void AddSceneCommand(CLI::App& app, CommandContext& context) {
   struct ExportCli {
     SceneFlags scene;
     std::string out;
+    bool force = false;
   };
   auto ex = std::make_shared<ExportCli>();
   CLI::App* export_cmd = scene_cmd->add_subcommand(
@@ -48,12 +49,15 @@ void AddSceneCommand(CLI::App& app, CommandContext& context) {
       "back with --scene)");
   AddSceneFlags(*export_cmd, ex->scene, "Seed of the procedural plant");
   export_cmd->add_option("--out", ex->out, "Output folder")->required();
+  export_cmd->add_flag("--force", ex->force, "Replace the files an earlier export left in --out");
   export_cmd->callback([&context, ex] {
     RunGuarded(context, [&] {
       const Result<std::filesystem::path> yaml = sim::ExportScene(
-          ex->scene.Source(), context.registries->scenarios, ex->out, LogSceneWarnings);
+          ex->scene.Source(), context.registries->scenarios, ex->out, ex->force, LogSceneWarnings);
       if (!yaml.ok()) return Failed("scene export", yaml.status());
-      std::printf("wrote %s\n", yaml->string().c_str());
+      const std::vector<std::filesystem::path> files = sim::ExportedSceneFiles(*yaml);
+      std::printf("wrote %zu files to %s:\n", files.size(), ex->out.c_str());
+      for (const std::filesystem::path& f : files) std::printf("  %s\n", f.string().c_str());
       return 0;
     });
   });

@@ -23,13 +23,23 @@ int ListScenes(const sim::ScenarioRegistry& scenarios) {
 }
 
 bool PrintHelpForNames(const experiment::Registries& registries, std::string_view scenario,
-                       std::string_view planner, std::string_view segmenter) {
+                       std::string_view planner, std::string_view segmenter, int* exit_code) {
+  constexpr std::string_view kOne = "help:";
+  *exit_code = 0;
   if (scenario == "help") {
     ListScenes(registries.scenarios);
   } else if (planner == "help") {
-    std::fputs(DescribeComponents("planners", registries.planners.entries()).c_str(), stdout);
+    std::fputs(ListComponents("planners", "--planner", registries.planners.entries()).c_str(),
+               stdout);
+  } else if (planner.starts_with(kOne)) {
+    *exit_code =
+        DescribeComponent("planner", planner.substr(kOne.size()), registries.planners.entries());
   } else if (segmenter == "help") {
-    std::fputs(DescribeComponents("segmenters", registries.segmenters.entries()).c_str(), stdout);
+    std::fputs(ListComponents("segmenters", "--segmenter", registries.segmenters.entries()).c_str(),
+               stdout);
+  } else if (segmenter.starts_with(kOne)) {
+    *exit_code = DescribeComponent("segmenter", segmenter.substr(kOne.size()),
+                                   registries.segmenters.entries());
   } else {
     return false;
   }

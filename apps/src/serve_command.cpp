@@ -315,6 +315,16 @@ void AddServeSegmentation(CLI::App& serve_cmd, CommandContext& context) {
       ServeOptions o = cli->options;
       o.server.segmenters = &*segmenters;
       o.server.backends = SplitCommaList(cli->backends);
+      // A name that is no segmenter is a typo, refused before anything listens (a backend whose
+      // models are missing is served NOT READY, so that clients learn why).
+      for (const std::string& entry : o.server.backends) {
+        const segmentation_service::ServedBackend served =
+            segmentation_service::ParseServedBackend(entry);
+        if (const auto known = segmenters->Get(served.spec); !known.ok()) {
+          return Failed("serve segmentation",
+                        known.status().WithContext(fmt::format("--backend {}", QuoteText(entry))));
+        }
+      }
       o.port_file = cli->port_file;
       return ServeSegmentationAndReport(std::move(o));
     });

@@ -193,7 +193,8 @@ TEST_F(CliTest, BenchCompareTabulatesBenchFoldersAndRunsNoBench) {
   const Ran r = Avp("bench compare wet dry --out table", "cd '" + dir_.string() + "' &&");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("plant"));
-  EXPECT_THAT(r.output, HasSubstr("avp-nbv vs predefined     +0.200 ± 0.000  ahead"));
+  EXPECT_THAT(r.output, HasSubstr("avp-nbv vs predefined     +0.200 [+0.200, +0.200]"));
+  EXPECT_THAT(r.output, HasSubstr("  ahead\n"));
   EXPECT_THAT(test::ReadWholeFile(dir_ / "table" / "conditions.md"), HasSubstr("| dry |"));
   EXPECT_FALSE(fs::exists(dir_ / "out")) << "avp bench compare also ran a bench";
   const Ran bad = Avp("bench compare " + dir_.string() + " --out " + (dir_ / "t2").string());
@@ -268,6 +269,101 @@ TEST_F(CliTest, HelpIsAcceptedWhereANameIsExpected) {
   r = Avp("bench --segmenter help");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_THAT(r.output, HasSubstr("oracle"));
+}
+
+TEST_F(CliTest, UnknownOptionsGetTheNearestOneAndTheCommandThatHasThem) {
+  Ran r = Avp("run --seeds 3 --print-config");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("avp run: unknown option '--seeds'; did you mean '--seed'? "
+                                  "(--seeds is an option of avp bench)"));
+  r = Avp("run --print-config --seed 3 4");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("avp run: unexpected argument '4'"));
+  r = Avp("serve");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("avp serve: a command is required: segmentation, models"));
+}
+
+TEST_F(CliTest, RunAndBenchShareSpellingsAndOptions) {
+  // avp run takes bench's plural spellings for one name, and sends several to avp bench.
+  Ran r = Avp("run --print-config --planners predefined --scenarios tomato-single-cluster");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("name: predefined"));
+  r = Avp("run --print-config --planners avp-nbv,predefined");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("avp bench --planners avp-nbv,predefined runs each of them"));
+  // avp bench takes run's singular spellings and every episode flag run has.
+  const Ran help = Avp("help bench");
+  for (const char* flag :
+       {"--scenarios,--scenario", "--planners,--planner", "--seed ", "--voxel-size", "--prompt",
+        "--policy", "--carving", "--segmenter-option", "--map-option", "--no-noise",
+        "--oracle-regret", "--set"}) {
+    EXPECT_THAT(help.output, HasSubstr(flag)) << flag;
+  }
+  const fs::path out = dir_ / "bench";
+  r =
+      Avp("bench --planner predefined --scenario tomato-single-cluster --seed 4 --views 1 "
+          "--voxel-size 0.01 --no-noise --prompt tomato --jobs 1 --out " +
+          out.string());
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  const std::string md = test::ReadWholeFile(out / "summary.md");
+  EXPECT_THAT(md, HasSubstr("1 seed(s)"));
+  EXPECT_THAT(md, HasSubstr("10 mm voxels"));
+  EXPECT_THAT(md, HasSubstr("`depth_noise.enabled = false`"));
+  EXPECT_TRUE(fs::exists(out / "runs/tomato-single-cluster/predefined/seed-4/record.json"));
+  // --seed is the seeds themselves, --seeds a count: both at once is refused.
+  r = Avp("bench --seed 4 --seeds 2 --out " + (dir_ / "b2").string());
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("--seeds and --seed both given"));
+}
+
+TEST_F(CliTest, LimitsAndListsAnywhereOnTheLine) {
+  // --limit after the command, as before it.
+  Ran r = Avp("run --print-config --limit max_yaml_bytes=1000000");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  r = Avp("run --print-config --limit nope=1");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("unknown limit 'nope'"));
+  // A list with spaces, negative numbers included, as with commas.
+  const fs::path out = dir_ / "render";
+  r = Avp("render --scenario tomato-single-cluster --joints 0 -70 60 0 47.5 0 --no-noise --out " +
+          out.string());
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(out / "rgb.png"));
+}
+
+TEST_F(CliTest, PerComponentHelpAndSubnormalNumbers) {
+  Ran r = Avp("run --planner help");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("`--planner help:NAME` lists one's options"));
+  EXPECT_THAT(r.output, Not(HasSubstr("ray_stride_px")));
+  r = Avp("run --planner help:avp-nbv");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("ray_stride_px=20"));
+  r = Avp("bench --segmenter help:orcale");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("did you mean 'oracle'?"));
+  // 1e-320 is a (subnormal) number, not "not a finite number".
+  r = Avp("run --print-config --planner-option p_unknown=1e-320");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+}
+
+TEST_F(CliTest, ConfigurationErrorsAreFoundBeforeAnythingIsWritten) {
+  // A model folder that is not there: refused before the run folder exists.
+  const fs::path out = dir_ / "ywes";
+  Ran r = Avp("run --segmenter ywes://" + (dir_ / "no-models").string() + " --out " + out.string());
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("no-models"));
+  EXPECT_FALSE(fs::exists(out)) << r.output;
+  // A segmentation service naming a segmenter that does not exist does not start.
+  r = Avp("serve segmentation --port 0 --backend orcale");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("--backend 'orcale': unknown segmenter 'orcale'"));
+  EXPECT_THAT(r.output, HasSubstr("did you mean 'oracle'?"));
+  // A file of another kind is named by what it is.
+  r = Avp("scene check " + std::string(AVP_SOURCE_DIR) + "/configs/scenes/example_plant.obj");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, HasSubstr("is a Wavefront OBJ mesh, not a YAML file"));
 }
 
 TEST_F(CliTest, MapFilesAreReplacedOnlyWithForce) {

@@ -50,9 +50,10 @@ grep -q "unknown avp-nbv option 'nope' (known: ray_stride_px" "$dir/out.txt" || 
 # The registries, with their options.
 "$avp" run --planner help > "$dir/planners.txt"
 for name in avp-nbv predefined reference-nbv random isler-pc oracle-nbv oracle-detect; do
-  grep -q "^  $name  " "$dir/planners.txt" || fail "planner $name not listed"
+  grep -q "^  $name " "$dir/planners.txt" || fail "planner $name not listed"
 done
-grep -q "p_unknown=0.05" "$dir/planners.txt" || fail "avp-nbv's options not listed"
+"$avp" run --planner help:avp-nbv > "$dir/avp-nbv.txt"
+grep -q "p_unknown=0.05" "$dir/avp-nbv.txt" || fail "avp-nbv's options not listed"
 "$avp" run --segmenter help > "$dir/segmenters.txt"
 for name in oracle oracle-perfect color ywes lsam "remote://"; do
   grep -q "^  $name" "$dir/segmenters.txt" || fail "segmenter $name not listed"

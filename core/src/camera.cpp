@@ -1,4 +1,5 @@
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include <fmt/format.h>
@@ -35,6 +36,13 @@ CameraIntrinsics CameraIntrinsics::RealSenseD435() {
   return K;
 }
 
+namespace {
+/// Focal lengths and principal points a camera can have, in pixels.
+constexpr double kMinFocalPx = 1e-2;
+constexpr double kMaxFocalPx = 1e6;
+constexpr double kMaxPrincipalPx = 1e6;
+}  // namespace
+
 const OptionTable<CameraIntrinsics>& CameraIntrinsicsTable() {
   static const auto* table = [] {
     using K = CameraIntrinsics;
@@ -49,6 +57,21 @@ const OptionTable<CameraIntrinsics>& CameraIntrinsicsTable() {
     t->Real("max_depth_m", &K::max_depth_m, "m", ValueRange::Any(),
             "farthest valid depth (> min_depth_m)");
     t->AddRule([](const K& k, std::vector<std::string>& errors) {
+      // Finite values past bounds no camera reaches (a crop's principal point may lie outside its
+      // window, so they are absolute): past them a value is a unit or field mix-up that would make
+      // every ray degenerate or overflow.
+      for (const auto& [name, f] : {std::pair{"fx", k.fx}, std::pair{"fy", k.fy}}) {
+        if (std::isfinite(f) && f > 0 && !(f >= kMinFocalPx && f <= kMaxFocalPx)) {
+          errors.push_back(fmt::format("{} ({:.6g} px) must be in [{:g}, {:g}] px", name, f,
+                                       kMinFocalPx, kMaxFocalPx));
+        }
+      }
+      for (const auto& [name, c] : {std::pair{"cx", k.cx}, std::pair{"cy", k.cy}}) {
+        if (std::isfinite(c) && std::abs(c) > kMaxPrincipalPx) {
+          errors.push_back(fmt::format("{} ({:.6g} px) must be in [-{:g}, {:g}] px", name, c,
+                                       kMaxPrincipalPx, kMaxPrincipalPx));
+        }
+      }
       if (!(std::isfinite(k.max_depth_m) && k.max_depth_m > k.min_depth_m)) {
         errors.push_back(fmt::format("max_depth_m ({}) must be finite and > min_depth_m ({})",
                                      k.max_depth_m, k.min_depth_m));

@@ -1,5 +1,4 @@
 #include <algorithm>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
@@ -44,9 +43,10 @@ std::optional<double> ParseReal(std::string_view text) {
   const std::string t(text);
   if (t.empty()) return std::nullopt;
   char* end = nullptr;
-  errno = 0;
   const double v = std::strtod(t.c_str(), &end);
-  if (end != t.c_str() + t.size() || errno == ERANGE || !std::isfinite(v)) return std::nullopt;
+  // ERANGE with a finite result is an underflow ("1e-320"): the nearest double (subnormal or 0)
+  // is that number; an overflow ("1e400") is infinite, refused.
+  if (end != t.c_str() + t.size() || !std::isfinite(v)) return std::nullopt;
   return v;
 }
 
@@ -119,15 +119,31 @@ Status AnyOptions::SetAll(const OptionValues& values, std::string_view component
 }
 
 std::string FormatOptionHelp(const std::vector<OptionInfo>& info, std::string_view indent) {
-  size_t width = 0;
-  for (const OptionInfo& i : info)
-    width = std::max(width, i.key.size() + 1 + i.default_value.size());
-  std::string out;
+  // Three aligned columns: KEY=DEFAULT, [unit, range], meaning. A cell wider than its column's
+  // cap (a long default list) keeps its line and the next columns start on the line below, so
+  // that one long entry does not push every description far to the right.
+  constexpr size_t kMaxKeyColumn = 40, kMaxBoundsColumn = 30;
+  std::vector<std::string> keys, bounds;
+  size_t key_w = 0, bounds_w = 0;
   for (const OptionInfo& i : info) {
-    std::string bounds = i.unit;
-    if (!i.range.empty()) bounds += (bounds.empty() ? "" : ", ") + i.range;
-    out += fmt::format("{}{:<{}}  {}{}\n", indent, i.key + "=" + i.default_value, width + 1,
-                       bounds.empty() ? "" : "[" + bounds + "]  ", i.doc);
+    keys.push_back(i.key + "=" + i.default_value);
+    std::string b = i.unit;
+    if (!i.range.empty()) b += (b.empty() ? "" : ", ") + i.range;
+    bounds.push_back(b.empty() ? std::string() : "[" + b + "]");
+    if (keys.back().size() <= kMaxKeyColumn) key_w = std::max(key_w, keys.back().size());
+    if (bounds.back().size() <= kMaxBoundsColumn)
+      bounds_w = std::max(bounds_w, bounds.back().size());
+  }
+  std::string out;
+  for (size_t k = 0; k < info.size(); ++k) {
+    std::string line = fmt::format("{}{:<{}}  ", indent, keys[k], key_w);
+    if (keys[k].size() > key_w) {
+      out += fmt::format("{}{}\n", indent, keys[k]);
+      line = fmt::format("{}{:<{}}  ", indent, "", key_w);
+    }
+    line += fmt::format("{:<{}}  {}", bounds[k], bounds_w, info[k].doc);
+    while (!line.empty() && line.back() == ' ') line.pop_back();
+    out += line + "\n";
   }
   return out;
 }

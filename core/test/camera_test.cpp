@@ -193,6 +193,22 @@ TEST(CameraTest, ValidateAcceptsGoodIntrinsics) {
   EXPECT_TRUE(K.Validate().ok());
 }
 
+TEST(CameraTest, AbsurdFocalLengthsAndPrincipalPointsAreNamed) {
+  // A request's intrinsics as a hostile client sends them: finite, yet no camera's.
+  CameraIntrinsics K = CameraIntrinsics::RealSenseD435();
+  K.fx = 1e-300;
+  K.cx = 1e300;
+  const std::string message = K.Validate().message();
+  EXPECT_THAT(message, HasSubstr("fx (1e-300 px) must be in [0.01, 1e+06] px"));
+  EXPECT_THAT(message, HasSubstr("cx (1e+300 px) must be in [-1e+06, 1e+06] px"));
+  // A crop's principal point may lie outside its window.
+  CameraIntrinsics crop = CameraIntrinsics::RealSenseD435();
+  crop.width = 8;
+  crop.height = 8;
+  crop.cx = -300.0;
+  EXPECT_TRUE(crop.Validate().ok());
+}
+
 TEST(CameraTest, ValidateListsEveryBadFieldWithItsValue) {
   CameraIntrinsics K = CameraIntrinsics::RealSenseD435();
   K.width = -13;

@@ -63,6 +63,33 @@ const OptionTable<Example>& ExampleTable() {
   return *table;
 }
 
+TEST(OptionHelpTest, ColumnsStayAlignedWhenOneDefaultIsLong) {
+  std::vector<OptionInfo> info(3);
+  const auto set = [](OptionInfo& i, std::string key, std::string unit, std::string range,
+                      std::string doc, std::string default_value) {
+    i.key = std::move(key);
+    i.unit = std::move(unit);
+    i.range = std::move(range);
+    i.doc = std::move(doc);
+    i.default_value = std::move(default_value);
+  };
+  set(info[0], "p", "m", "[0, 1]", "a probability", "0.5");
+  set(info[1], "words", "", "", "many words", std::string(60, 'w'));
+  set(info[2], "count", "", ">= 1", "a count", "3");
+  const std::string help = FormatOptionHelp(info, "  ");
+  std::vector<std::string> lines;
+  for (size_t pos = 0, end; (end = help.find('\n', pos)) != std::string::npos; pos = end + 1) {
+    lines.push_back(help.substr(pos, end - pos));
+  }
+  ASSERT_EQ(lines.size(), 4u) << help;  // the long default alone on its line
+  EXPECT_EQ(lines[1], "  words=" + std::string(60, 'w'));
+  // Every meaning starts in the same column, however long the long default is.
+  const size_t column = lines[0].find("a probability");
+  EXPECT_EQ(lines[2].find("many words"), column) << help;
+  EXPECT_EQ(lines[3].find("a count"), column) << help;
+  EXPECT_LT(column, 40u);
+}
+
 TEST(ValueRangeTest, ContainsAndPrints) {
   EXPECT_TRUE(ValueRange::HalfOpen(0, 1).Contains(0.0));
   EXPECT_FALSE(ValueRange::HalfOpen(0, 1).Contains(1.0));

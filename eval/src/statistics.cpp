@@ -1,8 +1,15 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <numeric>
+#include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
+
+#include <fmt/format.h>
 
 #include <avp/eval/statistics.h>
 
@@ -31,6 +38,45 @@ std::vector<double> Ranks(std::span<const double> v) {
     i = j + 1;
   }
   return rank;
+}
+
+/// SplitMix64: a fixed, portable stream (the same draws with every compiler and library,
+/// which std::uniform_int_distribution does not promise).
+uint64_t SplitMix64(uint64_t& state) {
+  uint64_t z = (state += 0x9e3779b97f4a7c15ULL);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+/// A uniform index in [0, n), without modulo bias.
+size_t UniformIndex(uint64_t& state, size_t n) {
+  const uint64_t range = static_cast<uint64_t>(n);
+  const uint64_t limit =
+      std::numeric_limits<uint64_t>::max() - std::numeric_limits<uint64_t>::max() % range;
+  uint64_t x = SplitMix64(state);
+  while (x >= limit) x = SplitMix64(state);
+  return static_cast<size_t>(x % range);
+}
+
+/// The percentile bootstrap's 95 % interval of the mean of `v` (n >= 2): the 2.5 % and 97.5 %
+/// quantiles of kBootstrapResamples resampled means, nearest rank; the seed is fixed, so equal
+/// samples give equal intervals.
+std::pair<double, double> BootstrapMeanInterval95(const std::vector<double>& v) {
+  uint64_t state = 0x61767062'6f6f7473ULL;  // "avpboots"
+  std::vector<double> means(kBootstrapResamples);
+  for (double& m : means) {
+    double sum = 0.0;
+    for (size_t i = 0; i < v.size(); ++i) sum += v[UniformIndex(state, v.size())];
+    m = sum / static_cast<double>(v.size());
+  }
+  std::sort(means.begin(), means.end());
+  const auto at = [&](double q) {
+    const double rank = std::ceil(q * static_cast<double>(means.size()));
+    return means[static_cast<size_t>(std::clamp(rank, 1.0, static_cast<double>(means.size()))) - 1];
+  };
+  // The resampled means lie within [min, max] of v; so do their quantiles.
+  return {at(0.025), at(0.975)};
 }
 
 }  // namespace
@@ -91,8 +137,39 @@ Summary Summarize(std::span<const double> values) {
     if (std::isfinite(v)) squares += (v - s.mean) * (v - s.mean);
   }
   s.sd = std::sqrt(squares / static_cast<double>(s.n - 1));
-  s.ci95 = StudentT975(s.n - 1) * s.sd / std::sqrt(static_cast<double>(s.n));
+  std::vector<double> finite;
+  finite.reserve(s.n);
+  for (double v : values) {
+    if (std::isfinite(v)) finite.push_back(v);
+  }
+  std::tie(s.ci_lo, s.ci_hi) = BootstrapMeanInterval95(finite);
   return s;
+}
+
+std::string FormatMeanInterval(const Summary& s, int decimals, bool sign) {
+  if (s.n == 0) return "–";
+  const auto num = [&](double v) {
+    return sign ? fmt::format("{:+.{}f}", v, decimals) : fmt::format("{:.{}f}", v, decimals);
+  };
+  if (!s.has_interval()) return fmt::format("{} (n = {}, no interval)", num(s.mean), s.n);
+  return fmt::format("{} [{}, {}]", num(s.mean), num(s.ci_lo), num(s.ci_hi));
+}
+
+std::string FormatMeanInterval(double mean, double ci_lo, double ci_hi, size_t n, int decimals,
+                               bool sign) {
+  Summary s;
+  s.n = n;
+  s.mean = mean;
+  s.ci_lo = ci_lo;
+  s.ci_hi = ci_hi;
+  return FormatMeanInterval(s, decimals, sign);
+}
+
+std::string PairedVerdict(const Summary& d) {
+  if (!d.has_interval()) return "n/a";
+  if (d.ci_lo > 0.0) return "ahead";
+  if (d.ci_hi < 0.0) return "behind";
+  return "tied";
 }
 
 }  // namespace avp::eval

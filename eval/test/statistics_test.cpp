@@ -39,7 +39,48 @@ TEST(StatisticsTest, SummaryOfKnownSample) {
   EXPECT_DOUBLE_EQ(s.mean, 5.0);
   // Sum of squared deviations 32, sample variance 32 / 7.
   EXPECT_NEAR(s.sd, std::sqrt(32.0 / 7.0), 1e-12);
-  EXPECT_NEAR(s.ci95, 2.364624 * std::sqrt(32.0 / 7.0) / std::sqrt(8.0), 1e-6);
+  // The bootstrap interval holds the mean, lies within the sample, and is the same every time.
+  EXPECT_LT(s.ci_lo, s.mean);
+  EXPECT_GT(s.ci_hi, s.mean);
+  EXPECT_GE(s.ci_lo, 2.0);
+  EXPECT_LE(s.ci_hi, 9.0);
+  // Close to the normal theory's at this n: mean +- 1.96 sd / sqrt(n) = 5 +- 1.48.
+  EXPECT_NEAR(s.ci_lo, 5.0 - 1.96 * s.sd * std::sqrt(7.0 / 8.0) / std::sqrt(8.0), 0.35);
+  EXPECT_NEAR(s.ci_hi, 5.0 + 1.96 * s.sd * std::sqrt(7.0 / 8.0) / std::sqrt(8.0), 0.35);
+  const Summary again = Summarize(v);
+  EXPECT_EQ(again.ci_lo, s.ci_lo);
+  EXPECT_EQ(again.ci_hi, s.ci_hi);
+}
+
+TEST(StatisticsTest, IntervalsOfFractionsStayWithinZeroAndOne) {
+  // Three seeds of a fraction found: Student's t gives 0.333 +- 1.434, far outside [0, 1].
+  const std::vector<double> found = {0.0, 0.0, 1.0};
+  const Summary s = Summarize(found);
+  EXPECT_NEAR(s.mean, 1.0 / 3.0, 1e-12);
+  EXPECT_GE(s.ci_lo, 0.0);
+  EXPECT_LE(s.ci_hi, 1.0);
+  EXPECT_DOUBLE_EQ(s.ci_lo, 0.0);
+  EXPECT_DOUBLE_EQ(s.ci_hi, 1.0);
+  // Two values: the resampled means are a, (a + b) / 2 and b, a quarter of them at each end.
+  const Summary two = Summarize(std::vector<double>{0.2, 0.6});
+  EXPECT_DOUBLE_EQ(two.ci_lo, 0.2);
+  EXPECT_DOUBLE_EQ(two.ci_hi, 0.6);
+  // Paired differences of fractions stay within [-1, 1].
+  const Summary d = Summarize(std::vector<double>{-1.0, 1.0, 1.0, -1.0});
+  EXPECT_GE(d.ci_lo, -1.0);
+  EXPECT_LE(d.ci_hi, 1.0);
+}
+
+TEST(StatisticsTest, MeanIntervalTextAndPairedVerdicts) {
+  EXPECT_EQ(FormatMeanInterval(Summarize(std::vector<double>{0.2, 0.6})), "0.400 [0.200, 0.600]");
+  EXPECT_EQ(FormatMeanInterval(Summarize(std::vector<double>{0.7})), "0.700 (n = 1, no interval)");
+  EXPECT_EQ(FormatMeanInterval(Summarize({})), "–");
+  EXPECT_EQ(FormatMeanInterval(Summarize(std::vector<double>{0.1, 0.3}), 2, true),
+            "+0.20 [+0.10, +0.30]");
+  EXPECT_EQ(PairedVerdict(Summarize(std::vector<double>{0.1, 0.3, 0.2})), "ahead");
+  EXPECT_EQ(PairedVerdict(Summarize(std::vector<double>{-0.1, -0.3, -0.2})), "behind");
+  EXPECT_EQ(PairedVerdict(Summarize(std::vector<double>{-0.1, 0.3, 0.2})), "tied");
+  EXPECT_EQ(PairedVerdict(Summarize(std::vector<double>{0.5})), "n/a");
 }
 
 TEST(StatisticsTest, FiveSeedsOfF1) {
@@ -48,7 +89,10 @@ TEST(StatisticsTest, FiveSeedsOfF1) {
   EXPECT_NEAR(s.mean, 0.61, 1e-12);
   // Deviations 0, -0.03, 0.05, 0.02, -0.04: squares sum 0.0054, variance 0.00135.
   EXPECT_NEAR(s.sd, std::sqrt(0.00135), 1e-12);
-  EXPECT_NEAR(s.ci95, 2.776445 * std::sqrt(0.00135 / 5.0), 1e-7);
+  EXPECT_GE(s.ci_lo, 0.57);
+  EXPECT_LE(s.ci_hi, 0.66);
+  EXPECT_LT(s.ci_lo, 0.61);
+  EXPECT_GT(s.ci_hi, 0.61);
 }
 
 TEST(StatisticsTest, LargeSampleUsesNormalQuantile) {
@@ -57,7 +101,9 @@ TEST(StatisticsTest, LargeSampleUsesNormalQuantile) {
   const Summary s = Summarize(v);
   EXPECT_DOUBLE_EQ(s.mean, 2.0);
   EXPECT_NEAR(s.sd, std::sqrt(40.0 / 39.0), 1e-12);
-  EXPECT_NEAR(s.ci95, 1.96 * s.sd / std::sqrt(40.0), 1e-12);
+  // At n = 40 the bootstrap agrees with the normal theory: 2 +- 1.96 * 1.0 / sqrt(40) = 2 +- 0.31.
+  EXPECT_NEAR(s.ci_lo, 2.0 - 1.96 / std::sqrt(40.0), 0.05);
+  EXPECT_NEAR(s.ci_hi, 2.0 + 1.96 / std::sqrt(40.0), 0.05);
 }
 
 TEST(StatisticsTest, EdgeCases) {
@@ -65,14 +111,16 @@ TEST(StatisticsTest, EdgeCases) {
   EXPECT_EQ(empty.n, 0u);
   EXPECT_TRUE(std::isnan(empty.mean));
   EXPECT_TRUE(std::isnan(empty.sd));
-  EXPECT_TRUE(std::isnan(empty.ci95));
+  EXPECT_TRUE(std::isnan(empty.ci_lo));
+  EXPECT_FALSE(empty.has_interval());
 
   const std::vector<double> one = {0.7};
   const Summary single = Summarize(one);
   EXPECT_EQ(single.n, 1u);
   EXPECT_DOUBLE_EQ(single.mean, 0.7);
   EXPECT_TRUE(std::isnan(single.sd));
-  EXPECT_TRUE(std::isnan(single.ci95));
+  EXPECT_TRUE(std::isnan(single.ci_lo));
+  EXPECT_TRUE(std::isnan(single.ci_hi));
 
   const std::vector<double> with_nan = {1.0, kNaN, 3.0, std::numeric_limits<double>::infinity()};
   const Summary s = Summarize(with_nan);
@@ -80,12 +128,14 @@ TEST(StatisticsTest, EdgeCases) {
   EXPECT_EQ(s.skipped, 2u);
   EXPECT_DOUBLE_EQ(s.mean, 2.0);
   EXPECT_NEAR(s.sd, std::sqrt(2.0), 1e-12);
-  EXPECT_NEAR(s.ci95, 12.706205 * std::sqrt(2.0) / std::sqrt(2.0), 1e-6);
+  EXPECT_DOUBLE_EQ(s.ci_lo, 1.0);
+  EXPECT_DOUBLE_EQ(s.ci_hi, 3.0);
 
   const std::vector<double> constant = {0.25, 0.25, 0.25};
   const Summary c = Summarize(constant);
   EXPECT_DOUBLE_EQ(c.sd, 0.0);
-  EXPECT_DOUBLE_EQ(c.ci95, 0.0);
+  EXPECT_DOUBLE_EQ(c.ci_lo, 0.25);
+  EXPECT_DOUBLE_EQ(c.ci_hi, 0.25);
 }
 
 }  // namespace

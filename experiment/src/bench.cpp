@@ -57,6 +57,7 @@ Result<BenchSummary> WriteSummaryAndReport(const fs::path& out_dir,
       html, report::BenchReportJson(description, episodes, seconds, out_dir)));
   BenchSummary summary;
   summary.cells = std::move(tables.cells);
+  summary.leads = std::move(tables.leads);
   summary.files = std::move(tables.files);
   summary.files.push_back(html);
   summary.report_html = html;

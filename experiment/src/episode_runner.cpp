@@ -175,6 +175,18 @@ Result<EpisodeParts> BuildParts(const CheckedRunConfig& checked, const EpisodeTr
 
 }  // namespace
 
+Status SegmenterFailedEveryView(const RunResult& result) {
+  const std::vector<pipeline::StepRecord>& steps = result.episode.steps;
+  if (steps.empty()) return Status::Ok();
+  for (const pipeline::StepRecord& s : steps) {
+    if (s.segment_status.ok()) return Status::Ok();
+  }
+  return UnavailableError(fmt::format(
+      "the segmenter failed at every one of the {} views (view 1: {}); the run folder holds what "
+      "was mapped without masks",
+      steps.size(), steps.front().segment_status.ToString()));
+}
+
 std::vector<std::string> WhyNothingFound(const RunConfig& config, const RunResult& result) {
   const std::vector<pipeline::StepRecord>& steps = result.episode.steps;
   const eval::FruitScores& fruits = result.final_metrics.fruits;

@@ -206,7 +206,7 @@ Result<MapBuildSummary> BuildMap(const MapBuildOptions& options,
       options.scene.seed, options.views, options.map.grid.voxel_size_m,
       mapping::ToString(options.map.semantics.policy),
       mapping::ToString(options.integrator.carving), options.arc_deg, summary.radius_m,
-      options.noise ? " --noise" : "");
+      options.noise ? " --noise" : " --no-noise");
   // Every other map option that differs from the defaults (the header stores them all).
   for (const auto& [key, value] : mapping::MapOptionTable().Differences(options.map, {})) {
     if (key != "grid.voxel_size_m" && key != "semantics.policy") {

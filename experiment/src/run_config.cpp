@@ -136,6 +136,9 @@ Status RunConfig::Validate(const Registries& registries) const {
   }
   if (Result<AnyOptions> s = SegmenterOptions(*this, registries); !s.ok()) {
     errors.push_back(s.status().message());
+  } else if (Status ready = registries.segmenters.Check(segmenter.name, *s); !ready.ok()) {
+    // A missing model directory, found before a run folder exists.
+    errors.push_back(ready.message());
   }
   if (errors.empty()) return Status::Ok();
   return InvalidArgumentError(

@@ -1,6 +1,7 @@
 #include <chrono>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <avp/experiment/episode_recording.h>
 #include <avp/experiment/output_folder.h>
@@ -94,6 +95,10 @@ Status WriteRunReport(const RunConfig& config, const FolderRun& run, const RunRe
     info.facts.emplace_back("fruits found",
                             fmt::format("{} of {}", result.final_metrics.fruits.found,
                                         result.final_metrics.fruits.total));
+    // A run that finds nothing says why on its page too, as in the log and record.json.
+    if (const std::vector<std::string> why = WhyNothingFound(config, result); !why.empty()) {
+      info.facts.emplace_back("why no fruit was found", fmt::format("{}", fmt::join(why, "; ")));
+    }
   }
   info.fruits = run.gt != nullptr ? report::FruitsJson(result.fruits) : json(nullptr);
   return report::WriteRunReportHtml(path, collector, info);

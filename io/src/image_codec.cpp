@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <avp/io/file.h>
+#include <avp/io/file_kind.h>
 #include <avp/io/image_codec.h>
 #include <avp/io/image_limits.h>
 
@@ -35,7 +36,14 @@ Result<ImageRgb8> DecodeToRgb(std::span<const uint8_t> encoded, std::string_view
                     encoded.size(), std::numeric_limits<int>::max()));
   }
   Result<ImageHeader> header = ReadImageHeader(encoded);
-  if (!header.ok()) return undecodable(header.status().message());
+  if (!header.ok()) {
+    // Another kind of file where an image was expected is named ("an MCAP recording").
+    const std::string kind = DescribeFileKind(
+        std::string_view(reinterpret_cast<const char*>(encoded.data()), encoded.size()));
+    return undecodable(kind.empty() || kind == "a binary file"
+                           ? header.status().message()
+                           : fmt::format("{} (it is {})", header.status().message(), kind));
+  }
   AVP_RETURN_IF_ERROR(
       CheckImageSize(header->width, header->height, fmt::format("{} {}", header->format, what)));
   if (header->format == "JPEG") AVP_RETURN_IF_ERROR(CheckJpegScans(encoded, what));

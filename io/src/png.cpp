@@ -12,6 +12,7 @@
 
 #include <avp/core/text.h>
 #include <avp/io/file.h>
+#include <avp/io/file_kind.h>
 #include <avp/io/image_limits.h>
 #include <avp/io/png.h>
 
@@ -106,8 +107,12 @@ Result<Decoded> Decode(const std::filesystem::path& path, Want want) {
         fmt::format("cannot open '{}' for reading: {}", path.string(), std::strerror(errno)));
   }
   uint8_t signature[8] = {};
-  if (std::fread(signature, 1, 8, file.get()) != 8 || png_sig_cmp(signature, 0, 8) != 0) {
-    return ParseError(fmt::format("'{}' is not a PNG file (bad signature)", path.string()));
+  const size_t got = std::fread(signature, 1, 8, file.get());
+  if (got != 8 || png_sig_cmp(signature, 0, 8) != 0) {
+    const std::string kind =
+        DescribeFileKind(std::string_view(reinterpret_cast<const char*>(signature), got));
+    return ParseError(fmt::format("'{}' is not a PNG file (bad signature{})", path.string(),
+                                  kind.empty() ? "" : "; it is " + kind));
   }
   ErrorState state;
   png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &state, OnPngError, OnPngWarning);

@@ -13,6 +13,7 @@
 
 #include <avp/core/text.h>
 #include <avp/io/file.h>
+#include <avp/io/file_kind.h>
 #include <avp/io/yaml.h>
 
 namespace avp::io {
@@ -75,41 +76,6 @@ bool IsSpace(char c) { return c == ' ' || c == '\t'; }
 /// What a file that is not YAML is, from its first bytes ("a PNG image"), or "" for text that may
 /// be YAML: so that a mesh, an image, a map or a recording given where a scene file or a
 /// configuration is expected is named, not met with a parser's error.
-std::string NotYamlKind(std::string_view text) {
-  const auto starts = [&](std::string_view magic) { return text.substr(0, magic.size()) == magic; };
-  const std::string_view head = text.substr(0, 4096);
-  if (starts("\x89PNG\r\n\x1a\n")) return "a PNG image";
-  if (starts("\xff\xd8\xff")) return "a JPEG image";
-  if (starts("\x89MCAP")) return "an MCAP recording";
-  if (starts("\x89"
-             "AVPMAP\n"))
-    return "an avp map (.avpmap)";
-  if (starts("SQLite format 3")) return "an SQLite database (a rosbag2 .db3?)";
-  if (starts("# Octomap OcTree")) return "an OctoMap map (.bt / .ot)";
-  if (starts("ply\n") || starts("ply\r\n")) return "a PLY mesh or point cloud";
-  if (starts("glTF")) return "a binary glTF mesh (.glb)";
-  if (starts("PK\x03\x04")) return "a zip archive";
-  if (head.find("<COLLADA") != std::string_view::npos) return "a COLLADA mesh (.dae)";
-  if (starts("solid ") && head.find("facet normal") != std::string_view::npos) {
-    return "an STL mesh";
-  }
-  if (head.find('\0') != std::string_view::npos) return "a binary file";
-  // A Wavefront OBJ: lines "v x y z", "f a b c", "mtllib ...", none with a YAML colon.
-  size_t obj_lines = 0, lines = 0;
-  for (size_t pos = 0; pos < head.size() && lines < 64; ++lines) {
-    const size_t end = std::min(head.find('\n', pos), head.size());
-    const std::string_view line = head.substr(pos, end - pos);
-    pos = end + 1;
-    if (!line.empty() && line[0] == '#') continue;  // comments (an exporter's URL) say nothing
-    if (line.find(':') != std::string_view::npos) return "";
-    for (const std::string_view tag : {"v ", "vn ", "vt ", "f ", "mtllib ", "usemtl ", "o "}) {
-      if (line.substr(0, tag.size()) == tag) ++obj_lines;
-    }
-  }
-  if (obj_lines >= 3) return "a Wavefront OBJ mesh";
-  return "";
-}
-
 }  // namespace
 
 namespace {
@@ -335,7 +301,7 @@ Result<YAML::Node> LoadYamlFile(const std::filesystem::path& path) {
   AVP_RETURN_IF_ERROR(
       MaxYamlBytes().Check(fmt::format("YAML file '{}' of {} bytes", path.string(), size), size));
   AVP_ASSIGN_OR_RETURN(const std::string text, ReadFileBounded(path, "YAML file"));
-  if (const std::string kind = NotYamlKind(text); !kind.empty()) {
+  if (const std::string kind = DescribeFileKind(text); !kind.empty()) {
     return InvalidArgumentError(fmt::format(
         "'{}' is {}, not a YAML file (scene files, run and bench configurations and arm configs "
         "are YAML; docs/scene-format.md, docs/experiments.md)",

@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <avp/io/file.h>
+#include <avp/io/file_kind.h>
 #include <avp/test/read_file.h>
 #include <avp/test/temp_dir_test.h>
 
@@ -187,6 +188,25 @@ TEST_F(SameFileTest, TellsEverySpellingOfTheSameFile) {
   EXPECT_THAT(s.message(), HasSubstr("outputs never overwrite inputs"));
   EXPECT_TRUE(CheckOutputIsNotInput(dir_ / "out.ply", "export file", map, "map file").ok());
   EXPECT_TRUE(CheckOutputIsNotInput(dir_ / "out.ply", "export file", "", "map file").ok());
+}
+
+TEST(FileKindTest, FilesAreNamedByTheirFirstBytes) {
+  using namespace std::string_literals;
+  EXPECT_EQ(DescribeFileKind("\x89PNG\r\n\x1a\n\0\0\0\rIHDR"s), "a PNG image");
+  EXPECT_EQ(DescribeFileKind("\xff\xd8\xff\xe0"), "a JPEG image");
+  EXPECT_EQ(DescribeFileKind("\x89MCAP0\r\n"), "an MCAP recording");
+  EXPECT_EQ(DescribeFileKind("SQLite format 3\0"s), "an SQLite database (a rosbag2 .db3?)");
+  EXPECT_EQ(DescribeFileKind("# Octomap OcTree binary file\n"), "an OctoMap map (.bt / .ot)");
+  EXPECT_EQ(DescribeFileKind("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"), "a Wavefront OBJ mesh");
+  EXPECT_EQ(DescribeFileKind("{\n  \"end\": \"done\",\n  \"end_reason\": \"\",\n  "
+                             "\"planner\": \"avp-nbv\"\n}"),
+            "an avp run record (record.json)");
+  EXPECT_EQ(DescribeFileKind("{\"bench\": {}, \"format\": \"avp-bench 1\"}"),
+            "an avp bench record (bench.json)");
+  // Text it does not know is left to the reader (YAML, another program's JSON).
+  EXPECT_EQ(DescribeFileKind("scenario: tomato-single-cluster\nseed: 3\n"), "");
+  EXPECT_EQ(DescribeFileKind("{\"scenario\": \"tomato-single-cluster\"}"), "");
+  EXPECT_EQ(DescribeFileKind(""), "");
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 
 #include <avp/core/text.h>
 #include <avp/io/file.h>
+#include <avp/io/file_kind.h>
 #include <avp/mapping/map_reader.h>
 
 namespace avp::mapping {
@@ -64,12 +65,15 @@ Result<LoadedMap> LoadAnyMapBytes(const std::string& bytes, const fs::path& path
                                   const LoadAnyMapOptions& options) {
   const std::optional<MapFileFormat> format = DetectMapFileFormat(bytes);
   if (!format) {
+    // Named by what it is where that is known ("a PNG image"), else by its first bytes.
+    const std::string kind = io::DescribeFileKind(bytes);
     return ParseError(fmt::format(
-        "'{}' is not a map file avp can read: it starts with {}; expected avp's map magic "
-        "(\\x89AVPMAP, .avpmap), '{}' (.bt) or '{}' (.ot)",
+        "'{}' is not a map file avp can read: {}; expected avp's map magic (\\x89AVPMAP, "
+        ".avpmap), '{}' (.bt) or '{}' (.ot)",
         path.string(),
-        bytes.empty() ? std::string("nothing (an empty file)")
-                      : QuoteText(std::string_view(bytes).substr(0, 32), 40),
+        !kind.empty()   ? "it is " + kind
+        : bytes.empty() ? std::string("it is empty")
+                        : "it starts with " + QuoteText(std::string_view(bytes).substr(0, 32), 40),
         kOctomapBinaryLine, kOctomapTreeLine));
   }
   MapSource source;

@@ -46,9 +46,6 @@ inline double MeanOf(const std::vector<double>& xs) {
   return xs.empty() ? 0.0 : s / static_cast<double>(xs.size());
 }
 
-/// No interval (one seed) reads 0, as in summary.csv.
-inline double Ci(double c) { return std::isfinite(c) ? c : 0.0; }
-
 /// An episode that ended early keeps its last map, so its last metrics carry on to the remaining
 /// views.
 inline BenchAggregates Aggregate(const std::vector<BenchEpisode>& episodes, int views) {

@@ -20,16 +20,15 @@ namespace fs = std::filesystem;
 namespace {
 
 using internal::BenchKey;
-using internal::Ci;
 
 constexpr std::string_view kDataId = "avp-bench-data";
 
 /// A number for the page: non-finite ones are null.
 nlohmann::json Num(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
 
-/// {mean, ci95, n} of one view, as summary.csv has it.
+/// {mean, ci_lo, ci_hi, n} of one view, as summary.csv has it (null ends: no interval).
 nlohmann::json StatJson(const eval::Summary& s) {
-  return {{"mean", Num(s.mean)}, {"ci95", Num(Ci(s.ci95))}, {"n", s.n}};
+  return {{"mean", Num(s.mean)}, {"ci_lo", Num(s.ci_lo)}, {"ci_hi", Num(s.ci_hi)}, {"n", s.n}};
 }
 
 /// The files a run folder holds (at most 32, sorted); empty when it does not exist.
@@ -50,15 +49,16 @@ nlohmann::json PlannerJson(const internal::BenchAggregates& a, const BenchDescri
   const BenchKey key{scenario, planner};
   nlohmann::json per_view = nlohmann::json::object();
   for (const std::string& metric : a.metric_order) {
-    nlohmann::json mean = nlohmann::json::array(), ci = nlohmann::json::array(),
-                   n = nlohmann::json::array();
+    nlohmann::json mean = nlohmann::json::array(), lo = nlohmann::json::array(),
+                   hi = nlohmann::json::array(), n = nlohmann::json::array();
     for (int v = 0; v < bench.views; ++v) {
       const eval::Summary s = a.Stat(key, metric, v);
       mean.push_back(Num(s.mean));
-      ci.push_back(Num(Ci(s.ci95)));
+      lo.push_back(Num(s.ci_lo));
+      hi.push_back(Num(s.ci_hi));
       n.push_back(s.n);
     }
-    per_view[metric] = {{"mean", mean}, {"ci95", ci}, {"n", n}};
+    per_view[metric] = {{"mean", mean}, {"ci_lo", lo}, {"ci_hi", hi}, {"n", n}};
   }
   const int last = bench.views - 1;
   const auto plan = a.plan_ms.find(key);
@@ -139,10 +139,19 @@ nlohmann::json BenchReportJson(const BenchDescription& bench,
     for (const std::string& p : bench.planners) {
       planners.push_back(PlannerJson(a, bench, episodes, s, p, bench_dir));
     }
+    nlohmann::json leads = nlohmann::json::array();
+    for (const PairedLead& l : PairedLeads(episodes, s, bench.planners)) {
+      leads.push_back({{"planner", l.planner},
+                       {"versus", l.versus},
+                       {"f1", StatJson(l.f1)},
+                       {"found", StatJson(l.found)},
+                       {"verdict", l.verdict}});
+    }
     scenarios.push_back({{"name", s},
                          {"file_name", SafeFileName(s)},
                          {"visibility", visibility},
-                         {"planners", planners}});
+                         {"planners", planners},
+                         {"leads", leads}});
   }
   return {{"format", "avp-bench-report"},
           {"version", 1},

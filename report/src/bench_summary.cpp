@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <tuple>
 
 #include <fmt/format.h>
@@ -22,7 +23,6 @@ namespace fs = std::filesystem;
 namespace {
 
 using internal::Aggregate;
-using internal::Ci;
 using internal::MeanOf;
 using Aggregates = internal::BenchAggregates;
 using Key = internal::BenchKey;
@@ -34,16 +34,56 @@ std::string FormatG9(double v) {
   return buf;
 }
 
+/// summary.csv's columns after the metric's name: "mean,ci_lo,ci_hi,n,versus".
+std::string CsvStat(const eval::Summary& s, const std::string& versus = {}) {
+  return fmt::format("{},{},{},{},{}", FormatG9(s.mean), FormatG9(s.ci_lo), FormatG9(s.ci_hi), s.n,
+                     versus);
+}
+
+/// "n" of a table, marked when the interval rests on few seeds.
+std::string SampleSize(size_t n) {
+  return n < eval::kSmallSample && n > 0 ? fmt::format("{} (small)", n) : std::to_string(n);
+}
+
+/// The lead's paired differences of one scenario: a markdown table and summary.csv's rows.
+std::string LeadTable(const std::vector<PairedLead>& leads, const BenchDescription& bench) {
+  if (leads.empty()) return "";
+  std::string md = fmt::format(
+      "\nLead of `{}` over each planner at view {}, paired by seed (its value minus the other's "
+      "on the same seeds, mean and 95 % interval): **ahead** when the whole F1 interval is above "
+      "0, behind when below, tied when it holds 0:\n\n| versus | seeds | F1 lead | found "
+      "fraction lead | verdict |\n|---|---|---|---|---|\n",
+      leads.front().planner, bench.views);
+  for (const PairedLead& l : leads) {
+    md += fmt::format("| {} | {} | {} | {} | {} |\n", l.versus, SampleSize(l.f1.n),
+                      eval::FormatMeanInterval(l.f1, 3, true),
+                      eval::FormatMeanInterval(l.found, 3, true),
+                      l.verdict == "ahead" ? "**ahead**" : l.verdict);
+  }
+  return md;
+}
+
+std::string LeadCsv(const std::vector<PairedLead>& leads, const BenchDescription& bench) {
+  std::string csv;
+  for (const PairedLead& l : leads) {
+    csv += fmt::format("{},{},{},{},f1_lead,{}\n", l.scenario, l.planner, bench.segmenter,
+                       bench.views, CsvStat(l.f1, l.versus));
+    csv += fmt::format("{},{},{},{},found_lead,{}\n", l.scenario, l.planner, bench.segmenter,
+                       bench.views, CsvStat(l.found, l.versus));
+  }
+  return csv;
+}
+
 std::string SummaryCsv(const Aggregates& a, const BenchDescription& bench) {
-  std::string csv = "scenario,planner,segmenter,view,metric,mean,ci95,n\n";
+  std::string csv = "scenario,planner,segmenter,view,metric,mean,ci_lo,ci_hi,n,versus\n";
   for (const auto& [key, metrics] : a.values) {
     for (const std::string& name : a.metric_order) {
       auto it = metrics.find(name);
       if (it == metrics.end()) continue;
       for (int v = 0; v < bench.views; ++v) {
         const eval::Summary s = eval::Summarize(it->second[static_cast<size_t>(v)]);
-        csv += fmt::format("{},{},{},{},{},{},{},{}\n", key.scenario, key.planner, bench.segmenter,
-                           v + 1, name, FormatG9(s.mean), FormatG9(Ci(s.ci95)), s.n);
+        csv += fmt::format("{},{},{},{},{},{}\n", key.scenario, key.planner, bench.segmenter, v + 1,
+                           name, CsvStat(s));
       }
     }
   }
@@ -93,8 +133,8 @@ std::string RegretCsv(const std::vector<BenchEpisode>& episodes, const BenchDesc
         for (int v = 0; v <= bench.views; ++v) {
           if (v == 1) continue;
           const eval::Summary st = eval::Summarize(samples[m][static_cast<size_t>(v)]);
-          csv += fmt::format("{},{},{},{},{},{},{},{}\n", s, p, bench.segmenter, v,
-                             kRegretMetrics[m], FormatG9(st.mean), FormatG9(Ci(st.ci95)), st.n);
+          csv += fmt::format("{},{},{},{},{},{}\n", s, p, bench.segmenter, v, kRegretMetrics[m],
+                             CsvStat(st));
         }
       }
     }
@@ -110,12 +150,15 @@ std::string RegretTable(const std::vector<BenchEpisode>& episodes, const BenchDe
     const RegretSummary r = SummarizeRegret(episodes, scenario, p);
     if (r.plans == 0) continue;
     const std::string correlation =
-        r.correlated == 0 ? "– | –"
-                          : fmt::format("{:.3f} | {:.3f} ± {:.3f}", r.rank_correlation_median,
-                                        r.rank_correlation_mean, r.rank_correlation_ci95);
-    rows += fmt::format("| {} | {} | {:.0f} | {:.3f} ± {:.3f} | {} / {} | {:.0f} | {} |\n", p,
-                        r.plans, r.candidates_median, r.regret_mean, r.regret_ci95, r.best_chosen,
-                        r.plans, r.chosen_rank_median, correlation);
+        r.correlated == 0
+            ? "– | –"
+            : fmt::format("{:.3f} | {}", r.rank_correlation_median,
+                          eval::FormatMeanInterval(r.rank_correlation_mean, r.rank_correlation_lo,
+                                                   r.rank_correlation_hi, r.correlated));
+    rows += fmt::format("| {} | {} | {:.0f} | {} | {} / {} | {:.0f} | {} |\n", p, r.plans,
+                        r.candidates_median,
+                        eval::FormatMeanInterval(r.regret_mean, r.regret_lo, r.regret_hi, r.plans),
+                        r.best_chosen, r.plans, r.chosen_rank_median, correlation);
   }
   if (rows.empty()) return "";
   return "\nOracle regret of each plan step (`--oracle-regret`; every seed's plans pooled): regret "
@@ -130,10 +173,12 @@ std::string RegretTable(const std::vector<BenchEpisode>& episodes, const BenchDe
 std::string MarkdownHeader(const BenchDescription& bench, double seconds) {
   std::string md = fmt::format(
       "# avp bench\n\n{} scenario(s) x {} planner(s) x {} seed(s), {} fused views, segmenter "
-      "`{}`, {} mm voxels; revision `{}`; {:.0f} s.\n\nMean ± 95 % CI over seeds (Student's "
-      "t). `found` = fruits found / all fruits of the scene (docs/evaluation.md).\n",
+      "`{}`, {} mm voxels; revision `{}`; {:.0f} s.\n\nMean over seeds [95 % interval: a "
+      "percentile bootstrap of the mean, within the metric's range; none below 2 seeds, "
+      "\"(small)\" below {}]. `found` = fruits found / all fruits of the scene "
+      "(docs/evaluation.md).\n",
       bench.scenarios.size(), bench.planners.size(), bench.seeds, bench.views, bench.segmenter,
-      bench.voxel_size_m * 1e3, bench.revision, seconds);
+      bench.voxel_size_m * 1e3, bench.revision, seconds, eval::kSmallSample);
   if (!bench.description.empty()) md += fmt::format("\n{}.\n", bench.description);
   if (!bench.run_options.empty()) {
     std::string text;
@@ -176,18 +221,19 @@ std::string FinalViewTable(const Aggregates& a, const BenchDescription& bench,
     cell.planner = p;
     cell.runs = f1.n;
     cell.final_f1_mean = f1.mean;
-    cell.final_f1_ci95 = Ci(f1.ci95);
+    cell.final_f1_lo = f1.ci_lo;
+    cell.final_f1_hi = f1.ci_hi;
     cell.final_found_mean = frac.mean;
-    cell.final_found_ci95 = Ci(frac.ci95);
+    cell.final_found_lo = frac.ci_lo;
+    cell.final_found_hi = frac.ci_hi;
     cell.fruits_total_mean = total.mean;
     cell.plan_ms_mean = plan == a.plan_ms.end() ? 0.0 : MeanOf(plan->second);
     cell.episode_s_mean = episode == a.episode_s.end() ? 0.0 : MeanOf(episode->second);
     cell.failed = failed == a.failed.end() ? 0 : failed->second;
-    md += fmt::format(
-        "| {} | {} | {:.3f} ± {:.3f} | {:.3f} ± {:.3f} | {:.1f} / {:.1f} | {:.3f} ± {:.3f} | "
-        "{:.0f} | {:.2f} | {} |\n",
-        p, f1.n, f1.mean, Ci(f1.ci95), f1t.mean, Ci(f1t.ci95), found.mean, total.mean, frac.mean,
-        Ci(frac.ci95), cell.plan_ms_mean, cell.episode_s_mean, cell.failed);
+    md += fmt::format("| {} | {} | {} | {} | {:.1f} / {:.1f} | {} | {:.0f} | {:.2f} | {} |\n", p,
+                      SampleSize(f1.n), eval::FormatMeanInterval(f1), eval::FormatMeanInterval(f1t),
+                      found.mean, total.mean, eval::FormatMeanInterval(frac), cell.plan_ms_mean,
+                      cell.episode_s_mean, cell.failed);
     cells.push_back(cell);
   }
   return md;
@@ -279,7 +325,7 @@ std::string F1PerViewTable(const Aggregates& a, const BenchDescription& bench,
   return md;
 }
 
-/// Plots in the style of the paper's Fig. 3: one series per planner, +-95 % CI band.
+/// Plots in the style of the paper's Fig. 3: one series per planner, its 95 % interval as a band.
 Status WriteScenarioPlots(const fs::path& out_dir, const Aggregates& a,
                           const BenchDescription& bench, const std::string& scenario,
                           std::vector<fs::path>& files) {
@@ -287,19 +333,25 @@ Status WriteScenarioPlots(const fs::path& out_dir, const Aggregates& a,
        {std::tuple{"f1", "voxel F1 (exact)", "f1"},
         std::tuple{"fruits_found_fraction", "fraction of fruits found", "fruits"}}) {
     LinePlot plot;
-    plot.title = fmt::format("{}: {} ({} seeds, mean ± 95 % CI)", scenario, label, bench.seeds);
+    plot.title =
+        fmt::format("{}: {} ({} seeds, mean and 95 % interval)", scenario, label, bench.seeds);
     plot.x_label = "fused views";
     plot.y_label = label;
     plot.y_min = 0.0;
     plot.y_max = 1.0;
     for (const std::string& p : bench.planners) {
       LineSeries series;
-      series.name = p;
+      // The legend says when the band rests on few seeds (or there is none).
+      const size_t n = a.Stat({scenario, p}, metric, std::max(bench.views - 1, 0)).n;
+      series.name = n < eval::kSmallSample
+                        ? fmt::format("{} (n = {}{})", p, n, n < 2 ? ", no interval" : ", small")
+                        : p;
       for (int v = 0; v < bench.views; ++v) {
         const eval::Summary st = a.Stat({scenario, p}, metric, v);
         series.x.push_back(v + 1);
         series.y.push_back(st.mean);
-        series.band.push_back(Ci(st.ci95));
+        series.band_lo.push_back(st.ci_lo);
+        series.band_hi.push_back(st.ci_hi);
       }
       plot.series.push_back(series);
     }
@@ -383,15 +435,60 @@ RegretSummary SummarizeRegret(const std::vector<BenchEpisode>& episodes,
   if (out.plans == 0) return out;
   const eval::Summary rs = eval::Summarize(regret);
   out.regret_mean = rs.mean;
-  out.regret_ci95 = Ci(rs.ci95);
+  out.regret_lo = rs.ci_lo;
+  out.regret_hi = rs.ci_hi;
   out.chosen_rank_median = eval::Median(rank);
   out.candidates_median = eval::Median(candidates);
   out.correlated = correlation.size();
   const eval::Summary cs = eval::Summarize(correlation);
   out.rank_correlation_mean = cs.mean;
-  out.rank_correlation_ci95 = Ci(cs.ci95);
+  out.rank_correlation_lo = cs.ci_lo;
+  out.rank_correlation_hi = cs.ci_hi;
   out.rank_correlation_median = eval::Median(correlation);
   return out;
+}
+
+std::vector<PairedLead> PairedLeads(const std::vector<BenchEpisode>& episodes,
+                                    const std::string& scenario,
+                                    const std::vector<std::string>& planners) {
+  std::vector<PairedLead> leads;
+  if (planners.size() < 2) return leads;
+  // seed -> (F1, found fraction) at the final view, per planner, successful episodes only.
+  const auto finals = [&](const std::string& planner) {
+    std::map<uint64_t, std::pair<double, double>> out;
+    for (const BenchEpisode& e : episodes) {
+      if (e.scenario != scenario || e.planner != planner || !e.status.ok() || e.metrics.empty()) {
+        continue;
+      }
+      double f1 = std::numeric_limits<double>::quiet_NaN(), found = f1;
+      for (const auto& [name, value] : e.metrics.back()) {
+        if (name == "f1") f1 = value;
+        if (name == "fruits_found_fraction") found = value;
+      }
+      out[e.seed] = {f1, found};
+    }
+    return out;
+  };
+  const auto lead = finals(planners.front());
+  for (size_t i = 1; i < planners.size(); ++i) {
+    const auto other = finals(planners[i]);
+    std::vector<double> d_f1, d_found;
+    for (const auto& [seed, a] : lead) {
+      const auto b = other.find(seed);
+      if (b == other.end()) continue;
+      d_f1.push_back(a.first - b->second.first);
+      d_found.push_back(a.second - b->second.second);
+    }
+    PairedLead l;
+    l.scenario = scenario;
+    l.planner = planners.front();
+    l.versus = planners[i];
+    l.f1 = eval::Summarize(d_f1);
+    l.found = eval::Summarize(d_found);
+    l.verdict = eval::PairedVerdict(l.f1);
+    leads.push_back(std::move(l));
+  }
+  return leads;
 }
 
 std::string SafeFileName(std::string s) {
@@ -406,15 +503,26 @@ Result<BenchTables> WriteBenchSummary(const fs::path& out_dir, const BenchDescri
   const Aggregates a = Aggregate(episodes, bench.views);
   BenchTables tables;
   tables.failed = a.failed_total;
+  std::string lead_csv;
+  for (const std::string& s : bench.scenarios) {
+    const std::vector<PairedLead> leads = PairedLeads(episodes, s, bench.planners);
+    lead_csv += LeadCsv(leads, bench);
+    tables.leads.insert(tables.leads.end(), leads.begin(), leads.end());
+  }
   const fs::path csv_path = out_dir / "summary.csv";
   AVP_RETURN_IF_ERROR(
-      io::WriteFileAtomic(csv_path, SummaryCsv(a, bench) + RegretCsv(episodes, bench)));
+      io::WriteFileAtomic(csv_path, SummaryCsv(a, bench) + RegretCsv(episodes, bench) + lead_csv));
   const fs::path visibility_csv = out_dir / "fruits_by_visibility.csv";
   AVP_RETURN_IF_ERROR(io::WriteFileAtomic(visibility_csv, VisibilityCsv(episodes, bench)));
   std::vector<fs::path> plots;
   std::string md = MarkdownHeader(bench, seconds);
   for (const std::string& s : bench.scenarios) {
     md += FinalViewTable(a, bench, s, tables.cells);
+    std::vector<PairedLead> leads;
+    for (const PairedLead& l : tables.leads) {
+      if (l.scenario == s) leads.push_back(l);
+    }
+    md += LeadTable(leads, bench);
     md += VisibilityLine(bench, s);
     md += VisibilityTable(episodes, bench, s);
     md += F1PerViewTable(a, bench, s);

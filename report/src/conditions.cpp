@@ -166,13 +166,9 @@ Status CheckCsvName(std::string_view what, const std::string& name) {
 }
 
 std::string Num(double v) { return std::isfinite(v) ? fmt::format("{:.3f}", v) : "nan"; }
-std::string Signed(double v) { return std::isfinite(v) ? fmt::format("{:+.3f}", v) : "nan"; }
-std::string MeanCi(const eval::Summary& s) {
-  if (s.n == 0) return "–";
-  return std::isfinite(s.ci95) ? fmt::format("{} ± {}", Num(s.mean), Num(s.ci95)) : Num(s.mean);
-}
+std::string MeanCi(const eval::Summary& s) { return eval::FormatMeanInterval(s); }
 std::string Csv(const eval::Summary& s) {
-  return fmt::format("{:.9g},{:.9g},{}", s.mean, std::isfinite(s.ci95) ? s.ci95 : 0.0, s.n);
+  return fmt::format("{:.9g},{:.9g},{:.9g},{}", s.mean, s.ci_lo, s.ci_hi, s.n);
 }
 
 }  // namespace
@@ -272,13 +268,6 @@ Result<BenchEpisode> ReadBenchEpisode(const fs::path& dir, const std::string& sc
   }
   AVP_RETURN_IF_ERROR(ReadAllMetrics(dir / "metrics.csv", e));
   return e;
-}
-
-std::string LeadVerdict(const eval::Summary& d) {
-  if (d.n < 2 || !std::isfinite(d.ci95)) return "tied";
-  if (d.mean - d.ci95 > 0.0) return "ahead";
-  if (d.mean + d.ci95 < 0.0) return "behind";
-  return "tied";
 }
 
 namespace {
@@ -399,14 +388,14 @@ ConditionLead Lead(const std::string& condition, const std::string& scenario,
   l.versus = versus;
   l.f1 = eval::Summarize(d_f1);
   l.found = eval::Summarize(d_found);
-  l.verdict = LeadVerdict(l.f1);
+  l.verdict = eval::PairedVerdict(l.f1);
   return l;
 }
 
 /// The cells and leads of every (scenario, condition), into `t`; returns conditions.csv.
 std::string ScoreConditions(const ConditionRuns& all, const std::vector<ConditionBench>& conditions,
                             const std::string& lead, ConditionTables& t) {
-  std::string csv = "condition,scenario,planner,versus,metric,mean,ci95,n\n";
+  std::string csv = "condition,scenario,planner,versus,metric,mean,ci_lo,ci_hi,n\n";
   for (const std::string& s : all.scenarios) {
     for (const ConditionBench& c : conditions) {
       for (const std::string& p : all.planners) {
@@ -478,8 +467,7 @@ std::string ScenarioTable(const ConditionTables& t, const std::string& s,
     for (size_t i = 1; i < planners.size(); ++i) {
       const ConditionLead* l = FindLead(t, c.name, s, planners[i]);
       md += l == nullptr ? " – |"
-                         : fmt::format(" {} ± {} {} |", Signed(l->f1.mean),
-                                       Num(std::isfinite(l->f1.ci95) ? l->f1.ci95 : 0.0),
+                         : fmt::format(" {} {} |", eval::FormatMeanInterval(l->f1, 3, true),
                                        l->verdict == "ahead" ? "**ahead**" : l->verdict);
     }
     const ConditionCell* x = FindCell(t, c.name, s, lead);
@@ -500,10 +488,9 @@ std::string LeadSummary(const ConditionTables& t, const std::string& lead) {
   if (not_ahead.empty()) return md + "\n";
   md += " Not ahead:\n\n";
   for (const ConditionLead* l : not_ahead) {
-    md += fmt::format(
-        "- {}, {}, vs {}: F1 {} ± {} ({}), found {} ± {}\n", l->condition, l->scenario, l->versus,
-        Signed(l->f1.mean), Num(std::isfinite(l->f1.ci95) ? l->f1.ci95 : 0.0), l->verdict,
-        Signed(l->found.mean), Num(std::isfinite(l->found.ci95) ? l->found.ci95 : 0.0));
+    md += fmt::format("- {}, {}, vs {}: F1 {} ({}), found {}\n", l->condition, l->scenario,
+                      l->versus, eval::FormatMeanInterval(l->f1, 3, true), l->verdict,
+                      eval::FormatMeanInterval(l->found, 3, true));
   }
   return md;
 }
@@ -514,10 +501,10 @@ std::string ConditionMarkdown(const ConditionTables& t, const ConditionRuns& all
                               const std::string& lead) {
   std::string md = "# avp bench: conditions\n\n";
   md += fmt::format(
-      "{} condition(s), {} scenario(s), planners {}. Final view, mean ± 95 % CI over seeds; the "
-      "lead of `{}` is its F1 minus the other planner's, seed by seed (paired; Student's t): "
-      "**ahead** when its 95 % interval is above 0, **behind** when below, else tied. `found` = "
-      "fraction of the fruits found.\n\n",
+      "{} condition(s), {} scenario(s), planners {}. Final view, mean over seeds [95 % interval, "
+      "a percentile bootstrap of the mean]; the lead of `{}` is its F1 minus the other planner's, "
+      "seed by seed (paired): **ahead** when its 95 % interval is above 0, behind when below, "
+      "tied when it holds 0, n/a below two seeds. `found` = fraction of the fruits found.\n\n",
       conditions.size(), all.scenarios.size(), fmt::join(all.planners, ", "), lead);
   md += "| condition | bench folder | what |\n|---|---|---|\n";
   for (const ConditionBench& c : conditions) {

@@ -39,17 +39,30 @@ std::string FormatProgressDuration(double seconds) {
   return fmt::format("{:.1f} h", seconds / 3600.0);
 }
 
-std::string FormatProgressRate(size_t done, double elapsed_s) {
+std::string FormatProgressRate(size_t done, double elapsed_s, RateUnit* unit) {
   if (done == 0 || !(elapsed_s > 0.0) || !std::isfinite(elapsed_s)) return {};
   const double per_s = static_cast<double>(done) / elapsed_s;
-  if (per_s >= 0.95) return fmt::format("{:.1f}/s", per_s);
-  if (per_s * 60.0 >= 0.95) return fmt::format("{:.1f}/min", per_s * 60.0);
-  return fmt::format("{:.1f}/h", per_s * 3600.0);
+  RateUnit chosen = unit != nullptr ? *unit : RateUnit::kAuto;
+  if (chosen == RateUnit::kAuto) {
+    chosen = per_s >= 0.95          ? RateUnit::kPerSecond
+             : per_s * 60.0 >= 0.95 ? RateUnit::kPerMinute
+                                    : RateUnit::kPerHour;
+    if (unit != nullptr) *unit = chosen;
+  }
+  const double value = chosen == RateUnit::kPerSecond   ? per_s
+                       : chosen == RateUnit::kPerMinute ? per_s * 60.0
+                                                        : per_s * 3600.0;
+  const char* name = chosen == RateUnit::kPerSecond   ? "s"
+                     : chosen == RateUnit::kPerMinute ? "min"
+                                                      : "h";
+  // Two significant digits below 1 in a kept unit ("0.42/s"), one decimal otherwise.
+  return value >= 0.95 ? fmt::format("{:.1f}/{}", value, name)
+                       : fmt::format("{:.2g}/{}", value, name);
 }
 
-std::string FormatProgressTimes(size_t done, size_t total, double elapsed_s) {
+std::string FormatProgressTimes(size_t done, size_t total, double elapsed_s, RateUnit* unit) {
   std::string out;
-  const std::string rate = FormatProgressRate(done, elapsed_s);
+  const std::string rate = FormatProgressRate(done, elapsed_s, unit);
   if (!rate.empty()) out = rate + ", ";
   out += FormatProgressDuration(elapsed_s) + " elapsed";
   if (!rate.empty() && done < total) {
@@ -59,10 +72,10 @@ std::string FormatProgressTimes(size_t done, size_t total, double elapsed_s) {
   return out;
 }
 
-std::string FormatProgressCounts(size_t done, size_t total, double elapsed_s) {
+std::string FormatProgressCounts(size_t done, size_t total, double elapsed_s, RateUnit* unit) {
   const size_t percent = total == 0 ? 100 : std::min<size_t>(done, total) * 100 / total;
   return fmt::format("{}/{} ({} %) {}", done, total, percent,
-                     FormatProgressTimes(done, total, elapsed_s));
+                     FormatProgressTimes(done, total, elapsed_s, unit));
 }
 
 ProgressOptions ProgressOn(std::FILE* stream, std::string what, size_t total, bool enabled) {
@@ -118,7 +131,8 @@ void Progress::Done(std::string_view label) {
   const double now = Now();
   const double elapsed = now - start_s_;
   if (options_.style == ProgressStyle::kLines) {
-    std::string line = options_.what + " " + FormatProgressCounts(done_, options_.total, elapsed);
+    std::string line =
+        options_.what + " " + FormatProgressCounts(done_, options_.total, elapsed, &unit_);
     if (!label.empty()) line += fmt::format(": {}", label);
     line += "\n";
     Write(line);
@@ -134,7 +148,7 @@ void Progress::DrawBar(double elapsed_s) {
   const size_t width = static_cast<size_t>(options_.bar_width);
   const size_t filled =
       total == 0 ? width : std::min(done_, total) * width / std::max<size_t>(total, 1);
-  const std::string counts = FormatProgressCounts(done_, total, elapsed_s);
+  const std::string counts = FormatProgressCounts(done_, total, elapsed_s, &unit_);
   const std::string full(filled, '#'), empty(width - filled, '-');
   std::string text = "\r" + options_.what + " [";
   if (options_.color) {

@@ -94,9 +94,12 @@ std::pair<double, double> DataRange(const LinePlot& plot, bool right) {
     if (s.right_axis != right) continue;
     for (size_t i = 0; i < s.y.size(); ++i) {
       if (!std::isfinite(s.y[i])) continue;
-      const double b = i < s.band.size() && std::isfinite(s.band[i]) ? s.band[i] : 0.0;
-      lo = std::min(lo, s.y[i] - b);
-      hi = std::max(hi, s.y[i] + b);
+      lo = std::min(lo, s.y[i]);
+      hi = std::max(hi, s.y[i]);
+      if (i < s.band_lo.size() && std::isfinite(s.band_lo[i]) && std::isfinite(s.band_hi[i])) {
+        lo = std::min(lo, s.band_lo[i]);
+        hi = std::max(hi, s.band_hi[i]);
+      }
     }
   }
   if (lo > hi) return {0.0, 1.0};
@@ -315,22 +318,22 @@ std::vector<std::string> SeriesColors(const LinePlot& plot) {
   return colors;
 }
 
-/// One polygon per run of finite values and bands: y + band forwards, y - band backwards.
+/// One polygon per run of finite values and bands: the upper ends forwards, the lower backwards.
 void AppendSeriesBands(const LinePlot& plot, const PlotLayout& a,
                        const std::vector<std::string>& colors, std::string& svg) {
   for (size_t k = 0; k < plot.series.size(); ++k) {
     const LineSeries& s = plot.series[k];
-    if (s.band.empty()) continue;
-    const auto ok = [&](size_t i) { return std::isfinite(s.y[i]) && std::isfinite(s.band[i]); };
+    if (s.band_lo.empty()) continue;
+    const auto ok = [&](size_t i) {
+      return std::isfinite(s.y[i]) && std::isfinite(s.band_lo[i]) && std::isfinite(s.band_hi[i]);
+    };
     for (const auto& [lo, hi] : Runs(s.y.size(), ok)) {
       std::string points;
       for (size_t i = lo; i <= hi; ++i) {
-        points +=
-            fmt::format("{},{} ", Num(a.px(s.x[i])), Num(a.py(s.y[i] + s.band[i], s.right_axis)));
+        points += fmt::format("{},{} ", Num(a.px(s.x[i])), Num(a.py(s.band_hi[i], s.right_axis)));
       }
       for (size_t i = hi + 1; i-- > lo;) {
-        points +=
-            fmt::format("{},{} ", Num(a.px(s.x[i])), Num(a.py(s.y[i] - s.band[i], s.right_axis)));
+        points += fmt::format("{},{} ", Num(a.px(s.x[i])), Num(a.py(s.band_lo[i], s.right_axis)));
       }
       points.pop_back();
       svg += fmt::format(
@@ -340,12 +343,17 @@ void AppendSeriesBands(const LinePlot& plot, const PlotLayout& a,
   }
 }
 
+/// The stroke width of series `k`: each narrower than the one before (3.5, 2.5, 1.5 px, at least
+/// 1.25), so that two series with equal values stay visible, the later one inside the earlier.
+double StrokeWidth(size_t k) { return std::max(1.25, 3.5 - static_cast<double>(k)); }
+
 /// One polyline per run of finite values (dashed on the right axis), with markers if asked for.
 void AppendSeriesLines(const LinePlot& plot, const PlotLayout& a,
                        const std::vector<std::string>& colors, std::string& svg) {
   for (size_t k = 0; k < plot.series.size(); ++k) {
     const LineSeries& s = plot.series[k];
     const std::string dash = s.right_axis ? " stroke-dasharray=\"6 3\"" : "";
+    const double width = StrokeWidth(k);
     const auto ok = [&](size_t i) { return std::isfinite(s.y[i]); };
     for (const auto& [lo, hi] : Runs(s.y.size(), ok)) {
       std::string points;
@@ -354,12 +362,13 @@ void AppendSeriesLines(const LinePlot& plot, const PlotLayout& a,
       }
       points.pop_back();
       svg += fmt::format(
-          "<polyline points=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"2\"{}/>\n", points,
-          colors[k], dash);
+          "<polyline points=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"{}\"{}/>\n", points,
+          colors[k], Num(width), dash);
       if (!s.markers) continue;
       for (size_t i = lo; i <= hi; ++i) {
-        svg += fmt::format("<circle cx=\"{}\" cy=\"{}\" r=\"3\" fill=\"{}\"/>\n", Num(a.px(s.x[i])),
-                           Num(a.py(s.y[i], s.right_axis)), colors[k]);
+        svg +=
+            fmt::format("<circle cx=\"{}\" cy=\"{}\" r=\"{}\" fill=\"{}\"/>\n", Num(a.px(s.x[i])),
+                        Num(a.py(s.y[i], s.right_axis)), Num(width * 0.5 + 1.5), colors[k]);
       }
     }
   }
@@ -373,7 +382,7 @@ void AppendLegend(const LinePlot& plot, const PlotLayout& a, const std::vector<s
   for (const LegendEntry& e : a.legend) {
     const LineSeries& s = plot.series[e.series];
     const double y = a.bottom + kAxisBelow + 4.0 + e.row * kLegendRow;
-    if (!s.band.empty()) {
+    if (!s.band_lo.empty()) {
       svg += fmt::format(
           "<rect x=\"{}\" y=\"{}\" width=\"26\" height=\"10\" fill=\"{}\" "
           "fill-opacity=\"0.18\"/>\n",
@@ -381,9 +390,9 @@ void AppendLegend(const LinePlot& plot, const PlotLayout& a, const std::vector<s
     }
     svg += fmt::format(
         "<line x1=\"{0}\" y1=\"{2}\" x2=\"{1}\" y2=\"{2}\" stroke=\"{3}\" "
-        "stroke-width=\"2\"{4}/>\n",
+        "stroke-width=\"{5}\"{4}/>\n",
         Num(e.x), Num(e.x + 26.0), Num(y), colors[e.series],
-        s.right_axis ? " stroke-dasharray=\"6 3\"" : "");
+        s.right_axis ? " stroke-dasharray=\"6 3\"" : "", Num(StrokeWidth(e.series)));
     svg += fmt::format("<text x=\"{}\" y=\"{}\" fill=\"#333333\">{}{}</text>\n", Num(e.x + 32.0),
                        Num(y + 4.0), EscapeXml(s.name), s.right_axis ? " (right)" : "");
   }
@@ -443,8 +452,10 @@ Status LinePlot::Validate() const {
     if (s.x.size() != s.y.size()) {
       errors.push_back(fmt::format("{}: x has {} values, y {}", who, s.x.size(), s.y.size()));
     }
-    if (!s.band.empty() && s.band.size() != s.y.size()) {
-      errors.push_back(fmt::format("{}: band has {} values, y {}", who, s.band.size(), s.y.size()));
+    if ((!s.band_lo.empty() || !s.band_hi.empty()) &&
+        (s.band_lo.size() != s.y.size() || s.band_hi.size() != s.y.size())) {
+      errors.push_back(fmt::format("{}: band_lo has {} values, band_hi {}, y {}", who,
+                                   s.band_lo.size(), s.band_hi.size(), s.y.size()));
     }
     for (size_t i = 0; i < s.x.size(); ++i) {
       if (!std::isfinite(s.x[i])) {
@@ -452,9 +463,10 @@ Status LinePlot::Validate() const {
         break;
       }
     }
-    for (size_t i = 0; i < s.band.size(); ++i) {
-      if (s.band[i] < 0.0) {
-        errors.push_back(fmt::format("{}: band[{}] ({}) must be >= 0", who, i, s.band[i]));
+    for (size_t i = 0; i < std::min(s.band_lo.size(), s.band_hi.size()); ++i) {
+      if (s.band_lo[i] > s.band_hi[i]) {
+        errors.push_back(fmt::format("{}: band_lo[{}] ({}) must be <= band_hi[{}] ({})", who, i,
+                                     s.band_lo[i], i, s.band_hi[i]));
         break;
       }
     }

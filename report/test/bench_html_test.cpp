@@ -33,6 +33,7 @@ std::vector<std::string> Split(const std::string& line) {
   std::stringstream ss(line);
   std::string cell;
   while (std::getline(ss, cell, ',')) out.push_back(cell);
+  if (!line.empty() && line.back() == ',') out.emplace_back();  // a trailing empty field
   return out;
 }
 
@@ -108,26 +109,34 @@ class BenchHtmlTest : public test::TempDirTest {
 /// The report's planners by (scenario, planner).
 using PlannerData = std::map<std::pair<std::string, std::string>, const nlohmann::json*>;
 
-/// Every row of summary.csv (scenario,planner,segmenter,view,metric,mean,ci95,n) equals the
-/// report's per-view numbers: 4 (scenario, planner) x 6 metrics x 3 views.
+/// Every row of summary.csv (scenario,planner,segmenter,view,metric,mean,ci_lo,ci_hi,n,versus)
+/// equals the report's per-view numbers: 4 (scenario, planner) x 6 metrics x 3 views; the lead's
+/// paired rows (versus set) are counted.
 void ExpectSummaryCsvEqualsReport(const fs::path& file, const PlannerData& planners) {
   std::istringstream csv(ReadAll(file));
   std::string line;
   std::getline(csv, line);
-  ASSERT_EQ(line, "scenario,planner,segmenter,view,metric,mean,ci95,n");
-  size_t rows = 0;
+  ASSERT_EQ(line, "scenario,planner,segmenter,view,metric,mean,ci_lo,ci_hi,n,versus");
+  size_t rows = 0, lead_rows = 0;
   while (std::getline(csv, line)) {
     const std::vector<std::string> c = Split(line);
-    ASSERT_EQ(c.size(), 8u) << line;
+    ASSERT_EQ(c.size(), 10u) << line;
+    if (!c[9].empty()) {
+      EXPECT_THAT(c[4], testing::AnyOf("f1_lead", "found_lead")) << line;
+      ++lead_rows;
+      continue;
+    }
     const nlohmann::json& pv = (*planners.at({c[0], c[1]}))["per_view"];
     ASSERT_TRUE(pv.contains(c[4])) << line;
     const size_t v = std::stoul(c[3]) - 1;
     EXPECT_EQ(G9(pv[c[4]]["mean"][v]), c[5]) << line;
-    EXPECT_EQ(G9(pv[c[4]]["ci95"][v]), c[6]) << line;
-    EXPECT_EQ(std::to_string(pv[c[4]]["n"][v].get<size_t>()), c[7]) << line;
+    EXPECT_EQ(G9(pv[c[4]]["ci_lo"][v]), c[6]) << line;
+    EXPECT_EQ(G9(pv[c[4]]["ci_hi"][v]), c[7]) << line;
+    EXPECT_EQ(std::to_string(pv[c[4]]["n"][v].get<size_t>()), c[8]) << line;
     ++rows;
   }
   EXPECT_EQ(rows, 72u);
+  EXPECT_EQ(lead_rows, 4u);  // 2 scenarios x (F1, found) of the lead over the other planner
 }
 
 /// fruits_by_visibility.csv (scenario,planner,segmenter,visible_from,visible_to,fruits,found,
@@ -163,11 +172,12 @@ void ExpectCellsEqualReport(const std::vector<BenchCell>& cells, const PlannerDa
     EXPECT_EQ(p["n"].get<size_t>(), cell.runs);
     EXPECT_EQ(p["failed"].get<size_t>(), cell.failed);
     EXPECT_DOUBLE_EQ(p["final"]["f1"]["mean"].get<double>(), cell.final_f1_mean);
-    EXPECT_DOUBLE_EQ(p["final"]["f1"]["ci95"].get<double>(), cell.final_f1_ci95);
+    EXPECT_EQ(G9(p["final"]["f1"]["ci_lo"]), G9(cell.final_f1_lo));
+    EXPECT_EQ(G9(p["final"]["f1"]["ci_hi"]), G9(cell.final_f1_hi));
     EXPECT_DOUBLE_EQ(p["final"]["fruits_found_fraction"]["mean"].get<double>(),
                      cell.final_found_mean);
-    EXPECT_DOUBLE_EQ(p["final"]["fruits_found_fraction"]["ci95"].get<double>(),
-                     cell.final_found_ci95);
+    EXPECT_EQ(G9(p["final"]["fruits_found_fraction"]["ci_lo"]), G9(cell.final_found_lo));
+    EXPECT_EQ(G9(p["final"]["fruits_found_fraction"]["ci_hi"]), G9(cell.final_found_hi));
     EXPECT_DOUBLE_EQ(p["final"]["fruits_total"]["mean"].get<double>(), cell.fruits_total_mean);
     EXPECT_DOUBLE_EQ(p["final"]["plan_ms_mean"].get<double>(), cell.plan_ms_mean);
     EXPECT_DOUBLE_EQ(p["final"]["episode_s_mean"].get<double>(), cell.episode_s_mean);
@@ -202,19 +212,21 @@ TEST_F(BenchHtmlTest, EmbeddedNumbersEqualSummaryCsv) {
   ASSERT_EQ(planners.size(), 4u);
 
   ASSERT_NO_FATAL_FAILURE(ExpectSummaryCsvEqualsReport(dir / "summary.csv", planners));
-  // Spot checks by hand: s/a view 2 f1 = 0.35 + 0.037 s over seeds 0, 1 -> mean 0.3685, CI
-  // t(0.975, 1) * sd / sqrt(2) = 12.706205 * 0.0261630 / 1.4142136 = 0.235062.
+  // Spot checks by hand: s/a view 2 f1 = 0.35 + 0.037 s over seeds 0, 1 -> mean 0.3685; with two
+  // values the bootstrap interval is theirs, [0.35, 0.387] (never past them, as t's was).
   const nlohmann::json& sa = (*planners.at({"s", "a"}))["per_view"]["f1"];
   EXPECT_NEAR(sa["mean"][1].get<double>(), 0.3685, 1e-12);
-  EXPECT_NEAR(sa["ci95"][1].get<double>(), 12.706205 * 0.037 / 2.0, 1e-6);
+  EXPECT_NEAR(sa["ci_lo"][1].get<double>(), 0.35, 1e-12);
+  EXPECT_NEAR(sa["ci_hi"][1].get<double>(), 0.387, 1e-12);
   // s/b seed 1 ended after 2 views: its view-2 metrics count again at view 3.
   const nlohmann::json& sb = (*planners.at({"s", "b"}))["per_view"]["f1"];
   EXPECT_NEAR(sb["mean"][2].get<double>(), (0.2 + 0.3 + 0.1 + 0.2 + 0.15 + 0.1 + 0.037) / 2.0,
               1e-12);
-  // center_error_m is NaN at view 1 of seed 0: one sample, no interval (0, as summary.csv).
+  // center_error_m is NaN at view 1 of seed 0: one sample, no interval (null; nan in summary.csv).
   const nlohmann::json& ce = (*planners.at({"s", "a"}))["per_view"]["center_error_m"];
   EXPECT_EQ(ce["n"][0], 1);
-  EXPECT_EQ(ce["ci95"][0], 0.0);
+  EXPECT_TRUE(ce["ci_lo"][0].is_null());
+  EXPECT_TRUE(ce["ci_hi"][0].is_null());
   // t/a: two successful seeds, the failed third counted apart.
   EXPECT_EQ((*planners.at({"t", "a"}))["n"], 2);
   EXPECT_EQ((*planners.at({"t", "a"}))["failed"], 1);

@@ -97,13 +97,17 @@ TEST_F(ConditionTablesTest, PairsTheLeadWithEachPlannerSeedBySeed) {
   const std::string md = test::ReadWholeFile(dir_ / "conditions.md");
   EXPECT_THAT(md, HasSubstr("| easy | `"));
   EXPECT_THAT(md, HasSubstr("| nothing changed |"));
-  EXPECT_THAT(md, HasSubstr("| +0.300 ± 0.026 **ahead** |"));
+  // Paired interval of 0.30, 0.32, 0.28, 0.30: within [0.28, 0.32], above 0.
+  EXPECT_THAT(md, HasSubstr("| +0.300 [+0.2"));
+  EXPECT_THAT(md, HasSubstr("] **ahead** |"));
+  EXPECT_GE(easy_other.f1.ci_lo, 0.28);
+  EXPECT_LE(easy_other.f1.ci_hi, 0.32);
   EXPECT_THAT(md, HasSubstr("(1 failed)"));
   EXPECT_THAT(md, HasSubstr("`avp-nbv` is ahead in 2 of 4 comparisons"));
   EXPECT_THAT(md, HasSubstr("- hard, plant, vs other: F1 +0.017"));
   const std::string csv = test::ReadWholeFile(dir_ / "conditions.csv");
-  EXPECT_THAT(csv, HasSubstr("condition,scenario,planner,versus,metric,mean,ci95,n\n"));
-  EXPECT_THAT(csv, HasSubstr("\neasy,plant,avp-nbv,,views,3,0,4\n"));
+  EXPECT_THAT(csv, HasSubstr("condition,scenario,planner,versus,metric,mean,ci_lo,ci_hi,n\n"));
+  EXPECT_THAT(csv, HasSubstr("\neasy,plant,avp-nbv,,views,3,3,3,4\n"));
   EXPECT_THAT(csv, HasSubstr("\neasy,plant,avp-nbv,other,f1_lead,0.3,"));
   EXPECT_THAT(csv, HasSubstr("\nhard,plant,other,,f1,"));
 }
@@ -112,14 +116,17 @@ TEST(LeadVerdictTest, NeedsTheWholeIntervalOnOneSide) {
   eval::Summary d;
   d.n = 5;
   d.mean = 0.1;
-  d.ci95 = 0.05;
-  EXPECT_EQ(LeadVerdict(d), "ahead");
-  d.ci95 = 0.15;
-  EXPECT_EQ(LeadVerdict(d), "tied");
+  d.ci_lo = 0.05;
+  d.ci_hi = 0.15;
+  EXPECT_EQ(eval::PairedVerdict(d), "ahead");
+  d.ci_lo = -0.05;
+  EXPECT_EQ(eval::PairedVerdict(d), "tied");
   d.mean = -0.2;
-  EXPECT_EQ(LeadVerdict(d), "behind");
+  d.ci_lo = -0.3;
+  d.ci_hi = -0.1;
+  EXPECT_EQ(eval::PairedVerdict(d), "behind");
   d.n = 1;
-  EXPECT_EQ(LeadVerdict(d), "tied");
+  EXPECT_EQ(eval::PairedVerdict(d), "n/a");
 }
 
 TEST_F(ConditionTablesTest, BadFoldersAreErrorsNamingThem) {

@@ -56,6 +56,15 @@ TEST(ProgressFormatTest, DurationsRatesAndTimes) {
   EXPECT_EQ(FormatProgressRate(5, 2.0), "2.5/s");
   EXPECT_EQ(FormatProgressRate(12, 232.0), "3.1/min");
   EXPECT_EQ(FormatProgressRate(1, 7200.0), "0.5/h");
+  // One run keeps the unit of its first rate, as it slows down or speeds up.
+  RateUnit unit = RateUnit::kAuto;
+  EXPECT_EQ(FormatProgressRate(5, 2.0, &unit), "2.5/s");
+  EXPECT_EQ(unit, RateUnit::kPerSecond);
+  EXPECT_EQ(FormatProgressRate(6, 14.0, &unit), "0.43/s");
+  EXPECT_EQ(FormatProgressTimes(6, 8, 14.0, &unit), "0.43/s, 14 s elapsed, ~5 s left");
+  RateUnit slow = RateUnit::kAuto;
+  EXPECT_EQ(FormatProgressRate(1, 30.0, &slow), "2.0/min");
+  EXPECT_EQ(FormatProgressRate(30, 10.0, &slow), "180.0/min");
   EXPECT_EQ(FormatProgressCounts(12, 120, 232.0),
             "12/120 (10 %) 3.1/min, 4 min elapsed, ~35 min left");
   EXPECT_EQ(FormatProgressCounts(0, 4, 0.0), "0/4 (0 %) 0 s elapsed");
@@ -131,7 +140,8 @@ TEST(ProgressTest, BarRedrawsInPlaceRateLimitedAndEndsTheLine) {
             "\rviews [--------] 0/4 (0 %) 0 s elapsed"
             "\rviews [##------] 1/4 (25 %) 30.0/min, 2 s elapsed, ~6 s left"
             "\rviews [######--] 3/4 (75 %) 43.9/min, 4 s elapsed, ~1 s left"
-            "\rviews [########] 4/4 (100 %) 1.0/s, 4 s elapsed             \n");
+            // The bar keeps its first rate's unit as the rate passes one a second.
+            "\rviews [########] 4/4 (100 %) 57.1/min, 4 s elapsed          \n");
 }
 
 TEST(ProgressTest, ThreadSafeLinesOnePerJob) {

@@ -133,7 +133,11 @@ LinePlot Fig3Like() {
   a.name = "avp-nbv <ours>";
   a.x = {1, 2, 3, 4, 5, 6, 7, 8};
   a.y = {0.20, 0.35, 0.48, 0.55, 0.61, 0.64, 0.66, 0.67};
-  a.band = {0.02, 0.03, 0.03, 0.04, 0.03, 0.02, 0.02, 0.02};
+  for (size_t i = 0; i < a.y.size(); ++i) {
+    const double half = i == 3 ? 0.04 : i == 1 || i == 2 || i == 4 ? 0.03 : 0.02;
+    a.band_lo.push_back(a.y[i] - half);
+    a.band_hi.push_back(a.y[i] + half);
+  }
   LineSeries b;
   b.name = "predefined";
   b.x = a.x;
@@ -215,12 +219,12 @@ TEST(SvgPlotTest, EscapesEveryMarkupCharacter) {
 TEST_F(SvgPlotFileTest, RejectsBadPlotsNamingTheValue) {
   LinePlot plot = Fig3Like();
   plot.series[1].y.pop_back();
-  plot.series[0].band[2] = -0.1;
+  plot.series[0].band_lo[2] = plot.series[0].band_hi[2] + 0.1;
   plot.width_px = 50;
   const Status s = WriteLinePlotSvg(dir_ / "never.svg", plot);
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_THAT(s.message(), HasSubstr("series 1 ('predefined'): x has 8 values, y 7"));
-  EXPECT_THAT(s.message(), HasSubstr("band[2] (-0.1) must be >= 0"));
+  EXPECT_THAT(s.message(), HasSubstr("band_lo[2] ("));
   EXPECT_THAT(s.message(), HasSubstr("width_px (50)"));
   EXPECT_FALSE(fs::exists(dir_ / "never.svg"));
 

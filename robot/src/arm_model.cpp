@@ -28,6 +28,12 @@ namespace avp::robot {
 
 namespace {
 
+/// Degrees for a message: three decimals, or six significant digits past a million (a huge angle
+/// is not echoed as a 300-digit number).
+std::string DegreesText(double deg) {
+  return std::abs(deg) < 1e6 ? fmt::format("{:.3f}", deg) : fmt::format("{:.6g}", deg);
+}
+
 constexpr double kTwoPi = 2.0 * EIGEN_PI;
 
 // urdfdom reports parse errors through console_bridge (to stderr by default). While parsing, this
@@ -518,9 +524,9 @@ Status ArmModel::CheckJoints(const Eigen::VectorXd& q) const {
       const bool angular = impl_->joints[si].type != JointType::kPrismatic;
       return OutOfRangeError(
           angular
-              ? fmt::format("joint '{}' = {:.6g} rad ({:.3f} deg) is outside its limits "
+              ? fmt::format("joint '{}' = {:.6g} rad ({} deg) is outside its limits "
                             "[{:.6g}, {:.6g}] rad ([{:.3f}, {:.3f}] deg)",
-                            impl_->names[si], q[i], RadToDeg(q[i]), impl_->lower[i],
+                            impl_->names[si], q[i], DegreesText(RadToDeg(q[i])), impl_->lower[i],
                             impl_->upper[i], RadToDeg(impl_->lower[i]), RadToDeg(impl_->upper[i]))
               : fmt::format("joint '{}' = {:.6g} m is outside its limits [{:.6g}, {:.6g}] m",
                             impl_->names[si], q[i], impl_->lower[i], impl_->upper[i]));

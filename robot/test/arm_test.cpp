@@ -60,6 +60,11 @@ TEST(SimArmTest, RefusesOutOfLimitJointsNamingTheValue) {
   EXPECT_EQ(arm.CurrentJoints(), before);
   EXPECT_EQ(arm.num_moves(), 0);
   EXPECT_EQ(arm.num_refused_moves(), 1);
+  // A huge angle is named in six digits, not echoed as a 300-digit number.
+  const MoveResult huge = arm.MoveToJoints(Deg({1e300, 0, 0, 0, 0, 0}));
+  EXPECT_FALSE(huge.ok());
+  EXPECT_NE(huge.status.message().find("(1e+300 deg)"), std::string::npos) << huge.status.message();
+  EXPECT_LT(huge.status.message().size(), 300u) << huge.status.message();
 }
 
 TEST(SimArmTest, RefusesNaNAndWrongSize) {

@@ -64,7 +64,9 @@ Result<std::vector<std::string>> CheckedPromptPhrases(const SegmentationRequest&
   }
   if (request.labels == nullptr) {
     return FailedPreconditionError(
-        "oracle segmenter needs simulator labels, but request.labels is null (a real camera?)");
+        "the oracle segmenter reads the simulator's labels, and this frame has none (a real "
+        "camera's or a recording's without /avp/sim labels): pick a segmenter that reads "
+        "images (--segmenter color, ywes, lsam or remote://HOST:PORT)");
   }
   const SimulatorLabels& labels = *request.labels;
   const int w = frame.rgb.width();

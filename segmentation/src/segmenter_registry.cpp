@@ -32,6 +32,12 @@ Result<std::unique_ptr<Segmenter>> SegmenterRegistry::Make(std::string_view spec
   return Make(spec, entry->options, SegmenterContext{seed});
 }
 
+Status SegmenterRegistry::Check(std::string_view spec, const AnyOptions& options) const {
+  AVP_ASSIGN_OR_RETURN(const SegmenterEntry* entry, Get(spec));
+  AVP_RETURN_IF_ERROR(options.Validate());
+  return entry->check ? entry->check(spec, options) : Status::Ok();
+}
+
 void RegisterBuiltinSegmenters(SegmenterRegistry& registry) {
   std::vector<SegmenterEntry> entries;
   entries.push_back(OracleSegmenterEntry());

@@ -1,12 +1,20 @@
 #include "proto_convert.h"
 
+#include <cerrno>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 #include <type_traits>
 #include <utility>
 
 #include <fmt/format.h>
+#include <netdb.h>
+#include <sys/socket.h>
+#include <sys/types.h>
+#include <unistd.h>
+
+#include <avp/core/text.h>
 
 namespace avp::segmentation_service::internal {
 
@@ -307,6 +315,44 @@ Status TensorSpecsFromProto(const google::protobuf::RepeatedPtrField<
     out->push_back({t.name(), *datatype, {t.shape().begin(), t.shape().end()}, false});
   }
   return Status::Ok();
+}
+
+Status CheckCanListen(std::string_view who, const std::string& host, int port) {
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_STREAM;
+  hints.ai_flags = AI_PASSIVE;
+  addrinfo* found = nullptr;
+  const std::string service = std::to_string(port);
+  if (const int rc = getaddrinfo(host.c_str(), service.c_str(), &hints, &found); rc != 0) {
+    return InvalidArgumentError(
+        fmt::format("{}: --host {} is not an address or a name this "
+                    "machine resolves ({})",
+                    who, QuoteText(host), gai_strerror(rc)));
+  }
+  std::string reason = "no address";
+  bool ok = false;
+  for (const addrinfo* a = found; a != nullptr && !ok; a = a->ai_next) {
+    const int fd = socket(a->ai_family, a->ai_socktype, a->ai_protocol);
+    if (fd < 0) {
+      reason = std::strerror(errno);
+      continue;
+    }
+    const int on = 1;
+    setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &on, sizeof(on));
+    if (bind(fd, a->ai_addr, a->ai_addrlen) == 0) {
+      ok = true;
+    } else {
+      reason = errno == EADDRINUSE      ? "the port is in use"
+               : errno == EADDRNOTAVAIL ? "not an address of this machine"
+               : errno == EACCES        ? "a port below 1024 needs privileges"
+                                        : std::strerror(errno);
+    }
+    close(fd);
+  }
+  freeaddrinfo(found);
+  if (ok) return Status::Ok();
+  return IoError(fmt::format("{}: cannot listen on {}: {}", who, HostPort(host, port), reason));
 }
 
 std::string HostPort(const std::string& host, int port) {

@@ -36,6 +36,12 @@ void ToProto(const Parameters& in,
 /// "host:port", an IPv6 host in brackets ("[::1]:8001"): the address gRPC listens on or dials.
 std::string HostPort(const std::string& host, int port);
 
+/// Whether a server can listen on (host, port), asked of the system before gRPC is (whose own
+/// failure is a raw log line): `host` must resolve (getaddrinfo) and one of its addresses bind.
+/// InvalidArgument naming `who` and the host that does not resolve, IoError naming the address and
+/// the system's reason (address in use, not an address of this machine).
+Status CheckCanListen(std::string_view who, const std::string& host, int port);
+
 /// A ModelMetadata response's inputs and outputs. InvalidArgument "<who>: ModelMetadata lists
 /// tensor 'x' with unknown datatype 'Y'".
 Status TensorSpecsFromProto(const google::protobuf::RepeatedPtrField<

@@ -405,6 +405,8 @@ void RegisterRemoteSegmenter(segmentation::SegmenterRegistry& registry) {
     return std::unique_ptr<segmentation::Segmenter>(
         std::make_unique<RemoteSegmenter>(std::move(options)));
   };
+  // The spec is checked before a run starts (the server is asked only when the run needs it).
+  e.check = [](std::string_view spec, const AnyOptions&) { return ParseRemoteSpec(spec).status(); };
   std::vector<segmentation::SegmenterEntry> entries;
   entries.push_back(std::move(e));
   AddAll(registry, std::move(entries));

@@ -739,6 +739,7 @@ Result<std::unique_ptr<SegmentationServer>> SegmentationServer::Start(
       static_cast<size_t>(options.max_running_per_client > 0 ? options.max_running_per_client
                                                              : std::max(1, options.threads / 2)));
 
+  AVP_RETURN_IF_ERROR(internal::CheckCanListen("segmentation server", options.host, options.port));
   const std::string address = internal::HostPort(options.host, options.port);
   grpc::ServerBuilder builder;
   builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &impl->port);

@@ -222,6 +222,7 @@ Result<std::unique_ptr<TensorServer>> TensorServer::Start(
       return InvalidArgumentError(fmt::format("tensor server: two models are named '{}'", name));
     }
   }
+  AVP_RETURN_IF_ERROR(internal::CheckCanListen("tensor server", options.host, options.port));
   const std::string address = internal::HostPort(options.host, options.port);
   grpc::ServerBuilder builder;
   builder.AddListeningPort(address, grpc::InsecureServerCredentials(), &impl->port);

@@ -410,7 +410,7 @@ TEST_F(ServiceTest, MalformedRequestsAreRefusedAndTheServerGoesOn) {
          });
        },
        grpc::StatusCode::FAILED_PRECONDITION,
-       "model 'oracle': oracle segmenter needs simulator labels"},
+       "model 'oracle': the oracle segmenter reads the simulator's labels"},
       {"backend throws", [](InferRequest& r) { r.model_name = "test-throws"; },
        grpc::StatusCode::INTERNAL, "model 'test-throws' threw: backend exploded"},
   };
@@ -928,7 +928,21 @@ TEST(ServerLifecycleTest, BadOptionsAndBusyPorts) {
   ASSERT_FALSE(second.ok());
   EXPECT_EQ(second.status().code(), StatusCode::kIoError);
   EXPECT_THAT(second.status().message(),
-              HasSubstr(fmt::format("cannot listen on 127.0.0.1:{}", o.port)));
+              HasSubstr(fmt::format("cannot listen on 127.0.0.1:{}: the port is in use", o.port)));
+  // A host that does not resolve, or is not this machine's, is named before gRPC is asked.
+  o.port = 0;
+  o.host = "no-such-host.invalid";
+  auto unresolved = SegmentationServer::Start(o);
+  ASSERT_FALSE(unresolved.ok());
+  EXPECT_EQ(unresolved.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(unresolved.status().message(),
+              HasSubstr("--host 'no-such-host.invalid' is not an address or a name this machine "
+                        "resolves"));
+  o.host = "192.0.2.1";  // TEST-NET-1: never an address of this machine
+  auto foreign = SegmentationServer::Start(o);
+  ASSERT_FALSE(foreign.ok());
+  EXPECT_THAT(foreign.status().message(),
+              HasSubstr("cannot listen on 192.0.2.1:0: not an address of this machine"));
 }
 
 TEST(RemoteSpecTest, ParsesHostPortModelAndOptions) {

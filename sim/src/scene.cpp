@@ -233,12 +233,24 @@ Box3 TriangleMesh::Bounds() const {
   return box;
 }
 
+/// How far from the origin (the robot's base) a scene's vertex may lie, metres: a robot's scene is
+/// metres across; a vertex farther away is a wrong unit or pose, and would overflow the cameras'
+/// geometry long before it rendered.
+constexpr double kMaxVertexDistanceM = 1e4;
+
 Status TriangleMesh::Validate() const {
   const int n = static_cast<int>(vertices.size());
   for (size_t i = 0; i < vertices.size(); ++i) {
-    if (!vertices[i].allFinite()) {
-      return InvalidArgumentError(fmt::format("mesh vertex {} is not finite: ({}, {}, {})", i,
-                                              vertices[i].x(), vertices[i].y(), vertices[i].z()));
+    const Eigen::Vector3f& v = vertices[i];
+    if (!v.allFinite()) {
+      return InvalidArgumentError(
+          fmt::format("mesh vertex {} is not finite: ({}, {}, {})", i, v.x(), v.y(), v.z()));
+    }
+    if (v.cast<double>().cwiseAbs().maxCoeff() > kMaxVertexDistanceM) {
+      return InvalidArgumentError(fmt::format(
+          "mesh vertex {} at ({:.6g}, {:.6g}, {:.6g}) m is more than {:g} m from the robot's base: "
+          "a scene is in metres (a mesh in millimetres needs scale: 0.001; check its pose)",
+          i, v.x(), v.y(), v.z(), kMaxVertexDistanceM));
     }
   }
   for (size_t i = 0; i < triangles.size(); ++i) {

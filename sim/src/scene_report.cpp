@@ -241,8 +241,13 @@ Result<std::string> DescribeSceneFile(const fs::path& file, bool json) {
   return Text(file, scene, report);
 }
 
+std::vector<fs::path> ExportedSceneFiles(const fs::path& yaml) {
+  fs::path obj = yaml, mtl = yaml;
+  return {yaml, obj.replace_extension(".obj"), mtl.replace_extension(".mtl")};
+}
+
 Result<fs::path> ExportScene(const SceneSource& source, const ScenarioRegistry& scenarios,
-                             const fs::path& out_dir,
+                             const fs::path& out_dir, bool force,
                              const std::function<void(const Scene&)>& on_scene) {
   if (out_dir.empty()) return InvalidArgumentError("the output folder (--out) is empty");
   if (!source.scene_file.empty()) {
@@ -253,8 +258,18 @@ Result<fs::path> ExportScene(const SceneSource& source, const ScenarioRegistry& 
   if (on_scene) on_scene(scene);
   // The arrangement is baked into the exported geometry; the file is named without '@'.
   std::replace(scene.name.begin(), scene.name.end(), '@', '-');
+  const fs::path yaml = out_dir / (scene.name + ".yaml");
+  for (const fs::path& f : ExportedSceneFiles(yaml)) {
+    std::error_code ec;
+    if (!force && fs::exists(fs::symlink_status(f, ec))) {
+      return FailedPreconditionError(fmt::format(
+          "output file '{}' already exists: give another --out, or --force to replace the "
+          "exported scene",
+          f.string()));
+    }
+  }
   AVP_RETURN_IF_ERROR(SaveSceneFiles(scene, out_dir));
-  return out_dir / (scene.name + ".yaml");
+  return yaml;
 }
 
 }  // namespace avp::sim

@@ -2,6 +2,7 @@
 // key checked and every bad value named. LoadSceneFile (scene_file.cpp) builds the scene from
 // what these stages return.
 
+#include <cerrno>
 #include <cmath>
 #include <initializer_list>
 #include <iterator>
@@ -91,12 +92,25 @@ Result<fs::path> ResolveMeshFile(const std::string& file_text, const fs::path& b
   const fs::path file(file_text);
   const fs::path resolved = file.is_absolute() ? file : base_dir / file;
   std::error_code ec;
-  if (!fs::is_regular_file(resolved, ec)) {
-    return NotFoundError(fmt::format("{}.file: mesh file '{}' does not exist (given as {})",
-                                     context, EscapeText(resolved.lexically_normal().string(), 300),
-                                     QuoteText(file_text)));
+  if (fs::is_regular_file(resolved, ec)) return resolved;
+  // What is there instead, in the user's words: a folder, a device, a link loop, nothing.
+  const std::string shown = EscapeText(resolved.lexically_normal().string(), 300);
+  const fs::file_status link = fs::symlink_status(resolved, ec);
+  const fs::file_status target = fs::status(resolved, ec);
+  std::string what = "does not exist";
+  if (ec.value() == ELOOP) {
+    what = "is a symbolic link that loops (no file at its end)";
+  } else if (fs::is_directory(target)) {
+    what = "is a folder, not a mesh file";
+  } else if (fs::exists(target)) {
+    what = "is not a regular file (a device, pipe or socket)";
+  } else if (fs::is_symlink(link)) {
+    what = "is a symbolic link to nothing";
   }
-  return resolved;
+  const std::string message = fmt::format("{}.file: mesh file '{}' {} (given as {})", context,
+                                          shown, what, QuoteText(file_text));
+  if (fs::exists(target) || ec.value() == ELOOP) return InvalidArgumentError(message);
+  return NotFoundError(message);
 }
 
 /// `scale:` one number or [x, y, z], each > 0.

@@ -328,6 +328,40 @@ LoadedBackend Fail(LoadedBackend out, Status status) {
 
 }  // namespace
 
+Status CheckBackendFiles(std::string_view backend, const Manifest& manifest, bool verify_sha256,
+                         bool remote) {
+  AVP_ASSIGN_OR_RETURN(const std::vector<std::string> roles, BackendRoles(backend, manifest));
+
+  // 1. Every role is listed, with a contract that can serve it, and its files are there.
+  for (const std::string& role : roles) {
+    const ModelEntry* entry = manifest.Find(role);
+    const std::vector<std::string> accepted = ContractsFor(role);
+    if (entry == nullptr) {
+      std::vector<std::string> listed;
+      for (const auto& [r, e] : manifest.models) listed.push_back(r);
+      return NotFoundError(
+          fmt::format("{} needs model role '{}' ({}); {} lists {}", backend, role,
+                      fmt::join(accepted, " or "), manifest.file.string(),
+                      listed.empty() ? "none" : fmt::format("{}", fmt::join(listed, ", "))));
+    }
+    if (std::find(accepted.begin(), accepted.end(), entry->contract) == accepted.end()) {
+      return InvalidArgumentError(
+          fmt::format("{}: contract {} cannot serve this role (expected {})", role, entry->contract,
+                      fmt::join(accepted, " or ")));
+    }
+  }
+  for (const std::string& role : roles) {
+    Status files = CheckFiles(*manifest.Find(role), verify_sha256, !remote);
+    if (!files.ok()) return files;
+  }
+  return Status::Ok();
+}
+
+Status CheckBackendDir(std::string_view backend, const fs::path& model_dir, bool remote) {
+  AVP_ASSIGN_OR_RETURN(const Manifest manifest, ReadManifest(model_dir));
+  return CheckBackendFiles(backend, manifest, false, remote);
+}
+
 LoadedBackend LoadBackend(std::string_view backend, const fs::path& model_dir,
                           const BackendLoadOptions& options) {
   Result<Manifest> manifest = ReadManifest(model_dir);
@@ -347,31 +381,12 @@ LoadedBackend LoadBackend(std::string_view backend, const Manifest& manifest,
   out.model_dir = manifest.dir;
   Result<std::vector<std::string>> roles = BackendRoles(backend, manifest);
   if (!roles.ok()) return Fail(std::move(out), roles.status());
-
-  // 1. Every role is listed, with a contract that can serve it, and its files are there.
-  for (const std::string& role : *roles) {
-    const ModelEntry* entry = manifest.Find(role);
-    const std::vector<std::string> accepted = ContractsFor(role);
-    if (entry == nullptr) {
-      std::vector<std::string> listed;
-      for (const auto& [r, e] : manifest.models) listed.push_back(r);
-      return Fail(std::move(out),
-                  NotFoundError(fmt::format(
-                      "{} needs model role '{}' ({}); {} lists {}", backend, role,
-                      fmt::join(accepted, " or "), manifest.file.string(),
-                      listed.empty() ? "none" : fmt::format("{}", fmt::join(listed, ", ")))));
-    }
-    if (std::find(accepted.begin(), accepted.end(), entry->contract) == accepted.end()) {
-      return Fail(std::move(out), InvalidArgumentError(fmt::format(
-                                      "{}: contract {} cannot serve this role (expected {})", role,
-                                      entry->contract, fmt::join(accepted, " or "))));
-    }
-  }
   // With a model server the networks are there, not here: only the text files are needed.
   const bool remote = !options.session.model_server.empty();
-  for (const std::string& role : *roles) {
-    Status files = CheckFiles(*manifest.Find(role), options.verify_sha256, !remote);
-    if (!files.ok()) return Fail(std::move(out), files);
+  // 1. Every role is listed, with a contract that can serve it, and its files are there.
+  if (Status files = CheckBackendFiles(backend, manifest, options.verify_sha256, remote);
+      !files.ok()) {
+    return Fail(std::move(out), files);
   }
 
   // 2-3. One session (or one model of the server) per role, checked against its contract and

@@ -266,6 +266,15 @@ LoadedBackend LoadBackend(std::string_view backend, const std::filesystem::path&
 LoadedBackend LoadBackend(std::string_view backend, const Manifest& manifest,
                           const BackendLoadOptions& options = {});
 
+/// LoadBackend's first step, without loading a network: every role of `backend` is listed in the
+/// manifest with a contract that can serve it, and its files are there (sizes; sha256 on
+/// request; `remote`: the networks are a model server's, only the text files are checked).
+Status CheckBackendFiles(std::string_view backend, const Manifest& manifest, bool verify_sha256,
+                         bool remote);
+/// The same for a model directory: its manifest read, then CheckBackendFiles.
+Status CheckBackendDir(std::string_view backend, const std::filesystem::path& model_dir,
+                       bool remote);
+
 /// The model directory from `AVP_ZSL_MODEL_DIR`, or nullopt when unset or empty.
 std::optional<std::filesystem::path> ModelDirFromEnvironment();
 

@@ -15,6 +15,7 @@
 #include <avp/zsl/lsam_segmenter.h>
 #include <avp/zsl/ywes_segmenter.h>
 
+#include "manifest.h"
 #include "ort_handler.h"
 #endif
 
@@ -58,6 +59,22 @@ Result<std::unique_ptr<Segmenter>> MakeLsam(std::string_view spec, const LsamEnt
 #endif
 }
 
+/// What a run can know of `spec` before it builds the segmenter: its model directory exists and
+/// holds a manifest listing the backend's models, whose files are there (CheckBackendDir).
+template <typename Options>
+Status CheckModels(std::string_view backend, std::string_view spec, const Options& o) {
+#ifdef AVP_WITH_ONNX
+  AVP_ASSIGN_OR_RETURN(const std::filesystem::path dir,
+                       ModelDirForSpec(backend, spec, o.model_dir));
+  return CheckBackendDir(backend, dir, !o.model_server.empty())
+      .WithContext(fmt::format("segmenter '{}'", spec));
+#else
+  (void)backend;
+  (void)o;
+  return NoOnnxRuntime(spec);
+#endif
+}
+
 /// The entries "<backend>" and "<backend>://" with `defaults`; their factories return
 /// `environment` when it is an error (a bad environment variable read at registration).
 template <typename Options>
@@ -80,6 +97,11 @@ void AddEntries(std::vector<segmentation::SegmenterEntry>& entries, const std::s
           }
           return make(spec, o);
         }));
+    entries.back().check = [environment, backend](std::string_view spec,
+                                                  const AnyOptions& o) -> Status {
+      if (!environment.ok()) return environment.WithContext(fmt::format("segmenter '{}'", spec));
+      return CheckModels(backend, spec, o.As<Options>());
+    };
   }
 }
 

@@ -1,6 +1,6 @@
 // The bench report page (report.html of an `avp bench` folder, docs/report.md "Bench report"):
 // per scenario, F1 (exact and one-voxel tolerant) and the fraction of fruits found per fused view,
-// one line per planner with its 95 % CI band (mean and CI over seeds, as summary.csv), the final
+// one line per planner with its 95 % interval band (mean and CI over seeds, as summary.csv), the final
 // view's table (as summary.md), fruits found per visibility bin (Wilson 95 % intervals, as
 // fruits_by_visibility.csv), any other metric per view on demand, and links to every episode's
 // run folder. The data is the JSON the C++ writer embeds (report::BenchReportJson) in
@@ -37,6 +37,8 @@ td:first-child, th:first-child { text-align: left; }
 .plot { background: #fff; border: 1px solid #ddd; padding: 4px; }
 .ci { color: #666; }
 .failed { color: #b00; }
+.verdict-ahead { color: #1a7f37; font-weight: 600; }
+.verdict-behind { color: #b00; font-weight: 600; }
 .runs td { text-align: left; }
 .runs a { margin-right: 8px; }
 .muted { color: #777; }
@@ -62,10 +64,21 @@ function num(v, digits = 3) {
   return typeof v === 'number' && Number.isFinite(v) ? v.toFixed(digits) : '–';
 }
 
-/** "0.512 ± 0.031" as summary.md writes it. */
-function meanCi(stat, digits = 3) {
+/** "0.512 [0.480, 0.541]" as summary.md writes it (eval::FormatMeanInterval). */
+function meanCi(stat, digits = 3, sign = false) {
   if (!stat || stat.mean == null) return '–';
-  return `${num(stat.mean, digits)} ± ${num(stat.ci95, digits)}`;
+  const f = (v) => (sign && typeof v === 'number' && v >= 0 ? '+' : '') + num(v, digits);
+  if (stat.ci_lo == null || stat.ci_hi == null) {
+    return `${f(stat.mean)} (n = ${stat.n}, no interval)`;
+  }
+  return `${f(stat.mean)} [${f(stat.ci_lo)}, ${f(stat.ci_hi)}]`;
+}
+
+/** Below this many seeds an interval is marked small (eval::kSmallSample). */
+const SMALL_SAMPLE = 5;
+
+function sampleSize(n) {
+  return n > 0 && n < SMALL_SAMPLE ? `${n} (small)` : String(n);
 }
 
 function table(head, rows, cls) {
@@ -96,7 +109,7 @@ function isFraction(metric) {
     metric === 'roi_coverage';
 }
 
-/** One plot of `metric` per view for a scenario: a series per planner with its 95 % CI band. */
+/** One plot of `metric` per view for a scenario: a series per planner with its 95 % interval. */
 function metricPlot(container, data, scenario, metric) {
   const views = data.bench.views;
   const x = Array.from({ length: views }, (_, i) => i + 1);
@@ -106,9 +119,11 @@ function metricPlot(container, data, scenario, metric) {
     const pv = p.per_view[metric];
     if (!pv) continue;
     const y = pv.mean.map((v) => (v == null ? NaN : v));
-    const band = pv.ci95.map((v) => (v == null ? NaN : v));
+    const lo = pv.ci_lo.map((v) => (v == null ? NaN : v));
+    const hi = pv.ci_hi.map((v) => (v == null ? NaN : v));
     expectedPoints += y.filter(Number.isFinite).length;
-    const s = { name: `${p.name} (n=${p.n})`, x, y, band };
+    const small = p.n < 2 ? ', no interval' : p.n < SMALL_SAMPLE ? ', small' : '';
+    const s = { name: `${p.name} (n=${p.n}${small})`, x, y, lo, hi };
     if (metric === 'fruits_found_fraction' && p.per_view.fruits_found && p.per_view.fruits_total) {
       const found = p.per_view.fruits_found.mean;
       const total = p.per_view.fruits_total.mean;
@@ -120,10 +135,10 @@ function metricPlot(container, data, scenario, metric) {
   const plot = linePlot(container, {
     title: `${scenario.name}: ${metricLabel(metric)}`,
     xLabel: 'fused views',
-    yLabel: `${metricLabel(metric)} (mean ± 95 % CI)`,
+    yLabel: `${metricLabel(metric)} (mean, 95 % interval)`,
     yMin: frac ? 0 : undefined,
     yMax: frac ? 1 : undefined,
-    // As the SVG plots: a fraction's axis is [0, 1]; a CI band past it is clipped.
+    // As the SVG plots: a fraction's axis is [0, 1] (its intervals stay inside).
     yFixed: frac,
     width: 420,
     height: 300,
@@ -145,7 +160,9 @@ function header(data) {
     `; ${b.seconds == null ? '–' : b.seconds.toFixed(0)} s; ${b.episodes} episodes` +
     (b.failed ? `, ${b.failed} failed (left out of the statistics)` : '') + '.'));
   root.appendChild(h('p', { class: 'facts' },
-    "Mean ± 95 % CI over seeds (Student's t), as summary.md and summary.csv beside this page. " +
+    'Mean over seeds [95 % interval: a percentile bootstrap of the mean, within the ' +
+    "metric's range; none below 2 seeds, \"small\" below 5], as summary.md and summary.csv " +
+    'beside this page. ' +
     'found = fruits found / all fruits of the scene. Hover a plot for values; click a legend ' +
     'entry to hide a planner.'));
   const opts = Object.entries(b.run_options || {});
@@ -167,7 +184,7 @@ function finalTable(data, scenario) {
   const views = data.bench.views;
   const rows = scenario.planners.map((p) => {
     const f = p.final;
-    return [p.name, p.n, meanCi(f.f1), meanCi(f.f1_tol),
+    return [p.name, sampleSize(p.n), meanCi(f.f1), meanCi(f.f1_tol),
       `${num(f.fruits_found.mean, 1)} / ${num(f.fruits_total.mean, 1)}`,
       meanCi(f.fruits_found_fraction), num(f.plan_ms_mean, 0), num(f.episode_s_mean, 2),
       p.failed ? h('span', { class: 'failed', text: String(p.failed) }) : '0'];
@@ -207,9 +224,27 @@ function perViewTable(data, scenario, metric) {
   const rows = scenario.planners.map((p) => {
     const pv = p.per_view[metric];
     return [p.name, ...Array.from({ length: views }, (_, i) => (pv ? meanCi({ mean: pv.mean[i],
-      ci95: pv.ci95[i] }) : '–'))];
+      ci_lo: pv.ci_lo[i], ci_hi: pv.ci_hi[i], n: pv.n[i] }) : '–'))];
   });
   return table(head, rows);
+}
+
+/** The lead planner's paired differences over each other planner (two planners or more). */
+function leadTable(data, scenario) {
+  const leads = scenario.leads || [];
+  if (!leads.length) return null;
+  const box = h('div', { class: 'leads' });
+  box.appendChild(h('h3', { text: `Lead of ${leads[0].planner}, paired by seed (view ` +
+    `${data.bench.views})` }));
+  box.appendChild(h('p', { class: 'muted', text: 'Its value minus the other planner\'s on the ' +
+    'same seeds, mean [95 % interval]: ahead when the whole F1 interval is above 0, behind ' +
+    'when below, tied when it holds 0; as summary.md.' }));
+  const rows = leads.map((l) => [l.versus, sampleSize(l.f1.n), meanCi(l.f1, 3, true),
+    meanCi(l.found, 3, true), h('span', { class: `verdict-${l.verdict.replace('/', '')}`,
+      text: l.verdict })]);
+  box.appendChild(table(['versus', 'seeds', 'F1 lead', 'found fraction lead', 'verdict'], rows,
+    'lead'));
+  return box;
 }
 
 function runsTable(scenario) {
@@ -239,6 +274,8 @@ function scenarioSection(data, scenario, index) {
   const sec = h('section', { id: `scenario-${index}` });
   sec.appendChild(h('h2', { text: scenario.name }));
   sec.appendChild(finalTable(data, scenario));
+  const lead = leadTable(data, scenario);
+  if (lead) sec.appendChild(lead);
   const plots = h('div', { class: 'plots' });
   sec.appendChild(plots);
   for (const metric of ['f1', 'f1_tol', 'fruits_found_fraction']) {
@@ -268,7 +305,7 @@ function scenarioSection(data, scenario, index) {
     details.addEventListener('toggle', () => { if (details.open && !box.firstChild) draw(); });
     sec.appendChild(details);
   }
-  sec.appendChild(h('h3', { text: 'F1 (exact) per fused view (mean ± 95 % CI)' }));
+  sec.appendChild(h('h3', { text: 'F1 (exact) per fused view (mean [95 % interval])' }));
   sec.appendChild(perViewTable(data, scenario, 'f1'));
   sec.appendChild(runsTable(scenario));
   return sec;

@@ -212,6 +212,10 @@ export function linePlot(container, spec) {
   const lineLayer = el('g', { class: 'lines', 'clip-path': `url(#${clipId})` }, svg);
   let bandCount = 0;
   let pointCount = 0;
+  // Each series narrower than the one before, so that equal curves stay visible (the later one
+  // inside the earlier), as in the SVG files.
+  const strokeWidth = (k) => Math.max(1.25, 3.5 - k);
+  series.forEach((s, k) => { s.width = strokeWidth(k); });
   for (const s of series) {
     s.nodes = [];
     if (hasBand(s)) {
@@ -227,11 +231,11 @@ export function linePlot(container, spec) {
     }
     for (const r of runs(s.x.length, (i) => finite(s.x[i]) && finite(s.y[i]))) {
       const pl = el('polyline', { points: r.map((i) => `${X(s.x[i])},${Y(s.y[i])}`).join(' '),
-        fill: 'none', stroke: s.color, 'stroke-width': 2, class: 'line' }, lineLayer);
+        fill: 'none', stroke: s.color, 'stroke-width': s.width, class: 'line' }, lineLayer);
       pl.dataset.series = s.name;
       s.nodes.push(pl);
       for (const i of r) {
-        const c = el('circle', { cx: X(s.x[i]), cy: Y(s.y[i]), r: 2.5, fill: s.color,
+        const c = el('circle', { cx: X(s.x[i]), cy: Y(s.y[i]), r: s.width * 0.5 + 1.25, fill: s.color,
           class: 'point' }, lineLayer);
         s.nodes.push(c);
         ++pointCount;
@@ -257,7 +261,8 @@ export function linePlot(container, spec) {
     item.style.cssText = 'cursor:pointer;user-select:none;white-space:nowrap;';
     item.title = 'click to hide or show';
     const swatch = document.createElement('span');
-    swatch.style.cssText = `display:inline-block;width:14px;height:3px;background:${s.color};` +
+    swatch.style.cssText = `display:inline-block;width:14px;height:${s.width}px;` +
+      `background:${s.color};` +
       'vertical-align:middle;margin-right:5px;box-shadow:0 -4px 0 0 ' + s.color + '33, 0 4px 0 0 ' +
       s.color + '33;';
     item.appendChild(swatch);
@@ -296,7 +301,8 @@ export function linePlot(container, spec) {
       if (Array.isArray(s.band) && finite(s.band[i])) text += ` ± ${fmt(s.band[i])}`;
       else if (finite(lo) && finite(hi)) text += ` [${fmt(lo)}, ${fmt(hi)}]`;
       if (s.hoverExtra) text += s.hoverExtra(i);
-      rows.push({ name: s.name, color: s.color, text });
+      rows.push({ name: s.name, color: s.color, text,
+        y: finite(s.y[i]) ? Y(s.y[i]) : NaN });
     }
     guide.setAttribute('x1', X(best));
     guide.setAttribute('x2', X(best));
@@ -318,7 +324,11 @@ export function linePlot(container, spec) {
     tip.style.display = 'block';
     const left = X(best) + 12;
     tip.style.left = `${left + tip.offsetWidth > W ? X(best) - 12 - tip.offsetWidth : left}px`;
-    tip.style.top = `${m.top + 4}px`;
+    // Away from the values: at the bottom of the frame when they lie in its upper half (the
+    // final values of a rising curve), at the top otherwise.
+    const ys = rows.map((r) => r.y).filter(finite);
+    const upper = ys.length && ys.reduce((a, b) => a + b, 0) / ys.length < m.top + ph / 2;
+    tip.style.top = `${upper ? m.top + ph - 4 - tip.offsetHeight : m.top + 4}px`;
     return { x: best, rows };
   };
   const overlay = el('rect', { x: m.left, y: m.top, width: pw, height: ph, fill: 'transparent' },

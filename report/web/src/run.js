@@ -4,7 +4,7 @@
 // "avp-run-report" version 1: report/src/run_html.cpp).
 //
 // It shows the map as voxels (coloured by class, instance or confidence), the ground-truth fruit
-// (wire spheres: green found, red missed), every fused view's camera frustum numbered in order,
+// (wire spheres: green found, cyan missed: red is the fruit class's colour), every fused view's camera frustum numbered in order,
 // and a step slider: the map as the planner saw it after that view, the frustums so far, that
 // view's masks and the candidates the planner ranked (coloured by utility, the chosen one
 // highlighted), and the F1 / fruits-found curves.
@@ -212,7 +212,7 @@ function build(data) {
     const g = new THREE.WireframeGeometry(new THREE.SphereGeometry(f.radius_m, 14, 10));
     // Drawn through the leaves (no depth test): a missed fruit is usually a hidden one.
     const line = new THREE.LineSegments(g, new THREE.LineBasicMaterial({
-      color: f.found ? 0x12a012 : 0xe01010, transparent: true, opacity: 0.7, depthTest: false }));
+      color: f.found ? 0x12a012 : 0x00b7c7, transparent: true, opacity: 0.7, depthTest: false }));
     line.renderOrder = 5;
     line.position.set(...f.center_m);
     line.userData = f;
@@ -230,6 +230,7 @@ function build(data) {
   const frustumGroup = new THREE.Group();
   const frustums = [];
   const eyes = [];
+  const labelSpots = [];  // where the numbers are, so that two close views' numbers do not overlap
   steps.forEach((s, k) => {
     const cam = s.camera || {};
     const X = poseMatrix(cam.X_WC);
@@ -241,7 +242,14 @@ function build(data) {
     lines.applyMatrix4(X);
     const label = textSprite(String(k + 1), "#1a3f8a", labelSize);
     const eye = new THREE.Vector3().setFromMatrixPosition(X);
-    label.position.copy(eye);
+    // A view whose number would cover an earlier one's gets it raised above that one.
+    const spot = eye.clone();
+    for (let tries = 0; tries < 16 && labelSpots.some((p) => p.distanceTo(spot) < labelSize * 1.2);
+      ++tries) {
+      spot.z += labelSize * 1.2;
+    }
+    labelSpots.push(spot);
+    label.position.copy(spot);
     const g = new THREE.Group();
     g.add(lines);
     g.add(label);
@@ -408,7 +416,7 @@ function build(data) {
     }
     if (found + missed > 0) {
       item("#12a012", `found fruit (${found})`);
-      item("#e01010", `missed fruit (${missed})`);
+      item("#00b7c7", `missed fruit (${missed})`);
     }
   };
 

@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 
 #include <avp/io/file.h>
+#include <avp/io/file_kind.h>
 
 namespace avp::ros::mcap {
 namespace {
@@ -351,7 +352,10 @@ Status ReadHeader(std::span<const uint8_t> bytes, const std::string& where, File
   if (bytes.size() < kMagic.size() ||
       !std::equal(kMagic.begin(), kMagic.end(), bytes.begin(),
                   [](char a, uint8_t b) { return static_cast<uint8_t>(a) == b; })) {
-    return ParseError(fmt::format("{}: not an MCAP file: no magic at offset 0", where));
+    const std::string kind = io::DescribeFileKind(
+        std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+    return ParseError(fmt::format("{}: not an MCAP file{}: no magic at offset 0", where,
+                                  kind.empty() ? "" : " (it is " + kind + ")"));
   }
   AVP_ASSIGN_OR_RETURN(Record r, RecordAt(bytes, 8, 0, where));
   if (r.op != static_cast<uint8_t>(Opcode::kHeader)) {

@@ -127,6 +127,8 @@ Result<BenchConfig> LoadBenchConfig(const std::filesystem::path& yaml);
 
 struct BenchSummary {
   std::vector<report::BenchCell> cells;
+  /// Per scenario, the first planner's paired difference over each other one (summary.md).
+  std::vector<report::PairedLead> leads;
   /// summary.md first, then summary.csv, the plots and report.html.
   std::vector<std::filesystem::path> files;
   /// The bench's report.html (docs/report.md, "Bench report").

@@ -90,6 +90,11 @@ std::unordered_map<uint16_t, double> VisibleFractions(const robot::Observation& 
 /// ("nothing_found").
 std::vector<std::string> WhyNothingFound(const RunConfig& config, const RunResult& result);
 
+/// Unavailable naming the first view's error when the segmenter failed at every fused view (a
+/// degenerate scene, a backend that refuses every frame): the run mapped nothing it segmented,
+/// and `avp run` ends non-zero, its results saved. OK otherwise (no views: OK).
+Status SegmenterFailedEveryView(const RunResult& result);
+
 /// The scene's start joints, or the arm's home when the scene names none.
 Eigen::VectorXd StartJoints(const sim::Scene& scene, const robot::ArmModel& arm);
 

@@ -65,8 +65,9 @@ struct MapBuildOptions {
   /// The map's ROI is the plant bounds grown by this margin; negative = no ROI.
   double roi_margin_m = 0.1;
   CameraIntrinsics intrinsics = CameraIntrinsics::RealSenseD435();
-  /// Apply the seeded D435-like depth noise model (seeded from scene.seed and the view index).
-  bool noise = false;
+  /// Apply the seeded D435-like depth noise model (on by default, as in episodes; seeded from
+  /// scene.seed and the view index).
+  bool noise = true;
   std::filesystem::path out = "out/map.avpmap";
   /// Replace an existing file (output_folder.h's CheckOutputFile: refused otherwise).
   bool force = false;

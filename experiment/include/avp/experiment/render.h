@@ -26,8 +26,9 @@ struct RenderOptions {
   /// Arm configuration YAML; empty = the default igus ReBeL with a D435.
   std::filesystem::path arm_config;
   CameraIntrinsics intrinsics = CameraIntrinsics::RealSenseD435();
-  /// Apply the seeded D435-like depth noise model (seeded from scene.seed).
-  bool noise = false;
+  /// Apply the seeded D435-like depth noise model (on by default, as in episodes; seeded from
+  /// scene.seed).
+  bool noise = true;
   std::filesystem::path out_dir = "out/render";
   /// Replace an earlier render's files in out_dir (the output rule: a folder holding anything is
   /// refused otherwise, and another command's folder always).

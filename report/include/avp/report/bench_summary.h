@@ -12,6 +12,7 @@
 #include <avp/core/options.h>
 #include <avp/core/status.h>
 #include <avp/eval/ground_truth.h>
+#include <avp/eval/statistics.h>
 
 namespace avp::report {
 
@@ -58,7 +59,10 @@ struct RegretSummary {
   /// The median number of ranked candidates a plan had (1 for the predefined planner: its
   /// regret is 0 by definition, and its rank correlation undefined).
   double candidates_median = std::numeric_limits<double>::quiet_NaN();
-  double regret_mean = std::numeric_limits<double>::quiet_NaN(), regret_ci95 = 0.0;
+  /// The mean regret and its 95 % interval (eval::Summary's bootstrap; NaN below two plans).
+  double regret_mean = std::numeric_limits<double>::quiet_NaN();
+  double regret_lo = std::numeric_limits<double>::quiet_NaN();
+  double regret_hi = std::numeric_limits<double>::quiet_NaN();
   /// Plans whose choice was the truly best candidate (chosen_true_rank 1).
   size_t best_chosen = 0;
   double chosen_rank_median = std::numeric_limits<double>::quiet_NaN();
@@ -66,7 +70,8 @@ struct RegretSummary {
   size_t correlated = 0;
   double rank_correlation_median = std::numeric_limits<double>::quiet_NaN();
   double rank_correlation_mean = std::numeric_limits<double>::quiet_NaN();
-  double rank_correlation_ci95 = 0.0;
+  double rank_correlation_lo = std::numeric_limits<double>::quiet_NaN();
+  double rank_correlation_hi = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// RegretSummary of (scenario, planner); plans = 0 when no episode measured its regret.
@@ -123,33 +128,60 @@ struct BenchDescription {
   std::map<std::string, FruitVisibility> visibility;  ///< by scenario
 };
 
-/// The final view of one (scenario, planner): mean and 95 % CI over seeds.
+/// The final view of one (scenario, planner): the mean over seeds and its 95 % interval
+/// (eval::Summary's bootstrap, within [0, 1]; NaN below two seeds).
 struct BenchCell {
   std::string scenario, planner;
   size_t runs = 0;
-  double final_f1_mean = 0.0, final_f1_ci95 = 0.0;
-  double final_found_mean = 0.0, final_found_ci95 = 0.0;
+  double final_f1_mean = 0.0;
+  double final_f1_lo = std::numeric_limits<double>::quiet_NaN();
+  double final_f1_hi = std::numeric_limits<double>::quiet_NaN();
+  double final_found_mean = 0.0;
+  double final_found_lo = std::numeric_limits<double>::quiet_NaN();
+  double final_found_hi = std::numeric_limits<double>::quiet_NaN();
   double fruits_total_mean = 0.0;
   double plan_ms_mean = 0.0, episode_s_mean = 0.0;
   size_t failed = 0;
 };
 
+/// The lead planner (the bench's first) minus another one at the final view, seed by seed over
+/// the seeds both finished: F1 and the fraction of fruits found, each a mean with its 95 %
+/// interval (within [-1, 1]), and eval::PairedVerdict of the F1 difference.
+struct PairedLead {
+  std::string scenario, planner, versus;
+  eval::Summary f1, found;
+  /// "ahead", "tied", "behind" or "n/a" (below two paired seeds).
+  std::string verdict;
+};
+
+/// The lead's PairedLead over each other planner of `planners` in `scenario` (none with fewer than
+/// two planners); `planners.front()` leads.
+std::vector<PairedLead> PairedLeads(const std::vector<BenchEpisode>& episodes,
+                                    const std::string& scenario,
+                                    const std::vector<std::string>& planners);
+
 struct BenchTables {
   std::vector<BenchCell> cells;
+  /// Per scenario, the lead's paired difference over each other planner (two planners or more).
+  std::vector<PairedLead> leads;
   /// summary.md, summary.csv, fruits_by_visibility.csv, then the plots.
   std::vector<std::filesystem::path> files;
   size_t failed = 0;
 };
 
 /// Writes the bench's summary into `out_dir` (docs/experiments.md): summary.csv (long format:
-/// scenario, planner, segmenter, view, metric, mean, ci95, n; an episode that ended early keeps
+/// scenario, planner, versus, segmenter, view, metric, mean, ci_lo, ci_hi, n, the interval
+/// eval::Summary's bootstrap, nan below two seeds; with two planners or more, the lead's paired
+/// differences at the final view as rows with `versus` set: metrics f1 and
+/// fruits_found_fraction; an episode that ended early keeps
 /// its last metrics for the remaining views; with regret measured, also the metrics
 /// oracle_regret, oracle_rank_correlation and oracle_chosen_rank at the view each plan chose, and
 /// per (scenario, planner) the same three pooled over every plan at view 0),
 /// fruits_by_visibility.csv (FoundByVisibility per scenario, planner and bin), summary.md (the
 /// final view per planner, how hidden the fruits are, the fraction found per visibility bin, F1
 /// per view, the regret table when measured), and per scenario f1_<s>.svg and
-/// fruits_<s>.svg (mean +- 95 % CI per planner, the paper's Fig. 3). `seconds` is the bench's wall
+/// fruits_<s>.svg (mean and 95 % interval per planner, the paper's Fig. 3; small n marked), and
+/// the paired leads in summary.md. `seconds` is the bench's wall
 /// time so far.
 Result<BenchTables> WriteBenchSummary(const std::filesystem::path& out_dir,
                                       const BenchDescription& bench,

@@ -67,7 +67,7 @@ struct ConditionCell {
 struct ConditionLead {
   std::string condition, scenario, planner, versus;
   eval::Summary f1, found;
-  /// "ahead" (the 95 % interval of the F1 difference above 0), "behind" (below 0), "tied".
+  /// eval::PairedVerdict of the F1 difference: "ahead", "behind", "tied" or "n/a".
   std::string verdict;
 };
 
@@ -77,10 +77,6 @@ struct ConditionTables {
   /// conditions.md, conditions.csv.
   std::vector<std::filesystem::path> files;
 };
-
-/// The verdict of a paired difference: "ahead" when mean - ci95 > 0, "behind" when mean + ci95 <
-/// 0, else "tied" (also when fewer than two pairs give no interval).
-std::string LeadVerdict(const eval::Summary& difference);
 
 /// Reads each condition's bench folder (ReadBenchRuns) and writes into `out_dir`:
 ///   conditions.csv  condition,scenario,planner,versus,metric,mean,ci95,n — per planner the

@@ -40,16 +40,23 @@ ProgressStyle ProgressStyleFor(const ProgressEnvironment& environment);
 /// A duration for people: "52 s" (under 90 s), "8 min" (under 90 min), "1.5 h".
 std::string FormatProgressDuration(double seconds);
 
+/// The unit of a progress rate: chosen by the first rate shown, then kept, so that one run's
+/// lines do not switch from "/s" to "/min" as it slows down.
+enum class RateUnit { kAuto, kPerSecond, kPerMinute, kPerHour };
+
 /// `done` jobs in `elapsed_s` as a rate: "2.5/s" (at least one a second), "3.1/min", "0.5/h";
-/// empty when nothing is done or no time has passed.
-std::string FormatProgressRate(size_t done, double elapsed_s);
+/// empty when nothing is done or no time has passed. With `unit`: an automatic one is set by this
+/// rate, a set one is used ("0.42/s"); without, each rate picks its own.
+std::string FormatProgressRate(size_t done, double elapsed_s, RateUnit* unit = nullptr);
 
 /// "3.1/min, 52 s elapsed, ~8 min left" (no rate and no time left before the first job, no time
-/// left once done == total).
-std::string FormatProgressTimes(size_t done, size_t total, double elapsed_s);
+/// left once done == total); `unit` as FormatProgressRate.
+std::string FormatProgressTimes(size_t done, size_t total, double elapsed_s,
+                                RateUnit* unit = nullptr);
 
 /// "12/120 (10 %) 3.1/min, 52 s elapsed, ~8 min left".
-std::string FormatProgressCounts(size_t done, size_t total, double elapsed_s);
+std::string FormatProgressCounts(size_t done, size_t total, double elapsed_s,
+                                 RateUnit* unit = nullptr);
 
 struct ProgressOptions {
   /// What is counted ("episodes", "ground truth"), the start of every line.
@@ -101,6 +108,7 @@ class Progress {
   size_t last_width_ = 0;
   size_t drawn_done_ = 0;
   bool line_open_ = false;
+  RateUnit unit_ = RateUnit::kAuto;
 };
 
 }  // namespace avp::report

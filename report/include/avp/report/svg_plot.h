@@ -17,9 +17,10 @@ struct LineSeries {
   /// Points; x finite, a non-finite y breaks the line there.
   std::vector<double> x;
   std::vector<double> y;
-  /// Optional +- half-width per point (e.g. Summary::ci95), drawn as a translucent band; empty =
-  /// none, a non-finite entry leaves a gap. Entries must not be negative.
-  std::vector<double> band;
+  /// Optional interval per point, its lower and upper ends (e.g. eval::Summary's ci_lo and
+  /// ci_hi), drawn as a translucent band; both empty = none, else both as long as y; a non-finite
+  /// entry leaves a gap. band_lo[i] <= band_hi[i].
+  std::vector<double> band_lo, band_hi;
   /// SVG colour ("#1f77b4", "red"); empty = the next colour of the built-in palette.
   std::string color;
   /// Plotted against the right-hand y axis (LinePlot::y2_label), drawn dashed.

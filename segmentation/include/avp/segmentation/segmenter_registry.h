@@ -36,6 +36,11 @@ struct SegmenterEntry {
   std::function<Result<std::unique_ptr<Segmenter>>(std::string_view spec, const AnyOptions&,
                                                    const SegmenterContext&)>
       make;
+  /// Optional, cheap: checks `spec` with options of `options`' type (validated) without building
+  /// the segmenter (a model directory that exists and holds what the backend needs; a remote
+  /// spec that parses), so that a run refuses a bad one before it writes anything. Empty: nothing
+  /// beyond the options to check.
+  std::function<Status(std::string_view spec, const AnyOptions&)> check;
   bool is_scheme() const;
 
   /// The name, or (a scheme) a spec that starts with it.
@@ -75,6 +80,9 @@ class SegmenterRegistry : public NamedRegistry<SegmenterEntry> {
                                           const SegmenterContext& context) const;
   /// Builds `spec` with its entry's default options.
   Result<std::unique_ptr<Segmenter>> Make(std::string_view spec, uint64_t seed) const;
+  /// Checks `spec` with `options` (of its entry's type) as far as it can without building it
+  /// (SegmenterEntry::check): what Make would refuse at once, found before anything runs.
+  Status Check(std::string_view spec, const AnyOptions& options) const;
 };
 
 /// Registers this module's segmenters, in this order: "oracle" (OracleSegmenter with
