@@ -6,10 +6,14 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <memory>
 #include <optional>
 
 #include <fmt/format.h>
+#include <lz4frame.h>
+#include <zstd.h>
 
+#include <avp/core/text.h>
 #include <avp/io/file.h>
 #include <avp/io/file_kind.h>
 
@@ -265,7 +269,63 @@ Result<Metadata> ParseMetadata(const Record& r, const std::string& where) {
   return md;
 }
 
-/// A chunk's messages (the chunk record `r`), its CRC checked. `where` names the file.
+/// The records of a chunk compressed with `compression` ("zstd" or "lz4", the MCAP spec's names;
+/// lz4 is the LZ4 frame format), decompressed into `out`: exactly `size` bytes, or ParseError
+/// naming the chunk. The size a chunk claims is checked against max_file_bytes before anything is
+/// allocated (a damaged or hostile chunk cannot ask for more memory than a file could hold).
+Status Decompress(std::string_view compression, std::span<const uint8_t> in, uint64_t size,
+                  const std::string& where, uint64_t offset, std::vector<uint8_t>& out) {
+  const std::string chunk = fmt::format("{}: chunk at offset {} ({})", where, offset, compression);
+  AVP_RETURN_IF_ERROR(
+      io::MaxFileBytes().Check(fmt::format("{}: its uncompressed size", chunk), size));
+  out.assign(size, 0);
+  if (compression == "zstd") {
+    const size_t got = ZSTD_decompress(out.data(), out.size(), in.data(), in.size());
+    if (ZSTD_isError(got) != 0) {
+      return ParseError(fmt::format("{} does not decompress: {}", chunk, ZSTD_getErrorName(got)));
+    }
+    if (got != size) {
+      return ParseError(
+          fmt::format("{}: uncompressed_size {} but {} bytes decompressed", chunk, size, got));
+    }
+    return Status::Ok();
+  }
+  if (compression == "lz4") {
+    LZ4F_dctx* raw = nullptr;
+    if (LZ4F_isError(LZ4F_createDecompressionContext(&raw, LZ4F_VERSION)) != 0) {
+      return InternalError(fmt::format("{}: no lz4 decompression context", chunk));
+    }
+    const std::unique_ptr<LZ4F_dctx, decltype(&LZ4F_freeDecompressionContext)> ctx(
+        raw, &LZ4F_freeDecompressionContext);
+    size_t read = 0, written = 0, hint = 1;
+    while (hint != 0 && read < in.size()) {
+      size_t src = in.size() - read;
+      size_t dst = out.size() - written;
+      hint =
+          LZ4F_decompress(ctx.get(), out.data() + written, &dst, in.data() + read, &src, nullptr);
+      if (LZ4F_isError(hint) != 0) {
+        return ParseError(
+            fmt::format("{} does not decompress: {}", chunk, LZ4F_getErrorName(hint)));
+      }
+      read += src;
+      written += dst;
+      if (src == 0 && dst == 0) break;  // no progress: the frame wants more than there is
+    }
+    if (hint != 0 || written != size) {
+      return ParseError(fmt::format("{}: uncompressed_size {} but {} bytes decompressed{}", chunk,
+                                    size, written,
+                                    hint != 0 ? " (the lz4 frame is cut short)" : ""));
+    }
+    return Status::Ok();
+  }
+  return ParseError(fmt::format(
+      "{}: compression '{}' is not one avp reads (uncompressed, zstd or lz4, as ROS 2 recorders "
+      "write; `mcap decompress` turns any other into an uncompressed file)",
+      chunk, EscapeText(compression)));
+}
+
+/// A chunk's messages (the chunk record `r`), decompressed and its CRC checked. `where` names the
+/// file.
 Status ReadChunk(const Record& r, const std::string& where, const File& file,
                  std::vector<Message>& out, std::vector<Schema>* schemas,
                  std::vector<Channel>* channels) {
@@ -279,11 +339,11 @@ Status ReadChunk(const Record& r, const std::string& where, const File& file,
   const uint64_t records_offset = c.offset();
   auto records = c.Take(records_len, "records");
   if (!c.ok()) return Bad(where, c);
+  std::vector<uint8_t> decompressed;
   if (!compression.empty()) {
-    return ParseError(
-        fmt::format("{}: chunk at offset {} is compressed with '{}', which avp's "
-                    "reader does not read (only uncompressed chunks)",
-                    where, r.offset, compression));
+    AVP_RETURN_IF_ERROR(
+        Decompress(compression, records, uncompressed_size, where, r.offset, decompressed));
+    records = decompressed;
   }
   if (records.size() != uncompressed_size) {
     return ParseError(

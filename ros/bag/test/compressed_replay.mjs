@@ -1,0 +1,174 @@
+// Compressed MCAP as other recorders write it (issue 33): a real `avp run --record` is rewritten by
+// npm's @mcap/core McapWriter with zstd chunks (@foxglove/wasm-zstd) and with lz4 frame chunks
+// (lz4js), as Foxglove and the rosbag2 MCAP plugin write them; `avp replay` of each must give the
+// same map and metrics as the replay of the uncompressed original (map.ot byte for byte,
+// metrics.csv without its timing columns). Another implementation's compressor checks avp's reader
+// against the MCAP spec, not against avp's own writer.
+// Usage: node compressed_replay.mjs --avp <avp> --lockfile <tests/npm/package-lock.json> --out <dir>
+// The npm packages come from scripts/setup (tests/npm), as for readback.mjs.
+
+import { execFileSync } from "node:child_process";
+import { createHash } from "node:crypto";
+import { existsSync, readFileSync, rmSync, writeFileSync, mkdirSync } from "node:fs";
+import { createRequire } from "node:module";
+import { homedir } from "node:os";
+import { join } from "node:path";
+
+function arg(name) {
+  const i = process.argv.indexOf(name);
+  if (i < 0 || i + 1 >= process.argv.length) {
+    console.error(`compressed_replay.mjs: missing ${name} <value>`);
+    process.exit(2);
+  }
+  return process.argv[i + 1];
+}
+
+const avp = arg("--avp");
+const lockfile = arg("--lockfile");
+const outDir = arg("--out");
+const lockHash = createHash("sha256").update(readFileSync(lockfile)).digest("hex");
+const cacheRoot = process.env.XDG_CACHE_HOME || join(homedir(), ".cache");
+const installDir = process.env.AVP_NPM_TEST_DIR || join(cacheRoot, "avp", "npm-test", lockHash);
+const modules = join(installDir, "node_modules");
+for (const pkg of ["@mcap/core", "@foxglove/wasm-zstd", "lz4js"]) {
+  if (!existsSync(join(modules, pkg, "package.json"))) {
+    console.error(`compressed_replay: ${pkg} is not installed in ${modules}; run scripts/setup ` +
+                  `(it installs tests/npm/package-lock.json there with npm ci)`);
+    process.exit(1);
+  }
+}
+const require = createRequire(join(modules, "avp-compressed-replay.js"));
+const { McapIndexedReader, McapWriter } = require("@mcap/core");
+const zstd = require("@foxglove/wasm-zstd");
+const lz4 = require("lz4js");
+await zstd.isLoaded;
+
+rmSync(outDir, { recursive: true, force: true });
+mkdirSync(outDir, { recursive: true });
+const run = (args) => execFileSync(avp, args, { stdio: ["ignore", "ignore", "inherit"] });
+
+// ---- A real run, recorded, and its replay --------------------------------------------------------
+const runDir = join(outDir, "run");
+run(["run", "--scenario", "tomato-single-cluster", "--seed", "1", "--views", "3", "--threads", "2",
+     "--out", runDir, "--record"]);
+const original = new Uint8Array(readFileSync(join(runDir, "episode.mcap")));
+run(["replay", join(runDir, "episode.mcap"), "--out", join(outDir, "replay-original")]);
+
+const readable = (buf) => ({
+  size: async () => BigInt(buf.length),
+  read: async (offset, length) => buf.subarray(Number(offset), Number(offset + length)),
+});
+const reader = await McapIndexedReader.Initialize({ readable: readable(original) });
+
+/** The recording written again by @mcap/core with `compress` for every chunk. */
+async function rewrite(compress, chunkSize) {
+  const parts = [];
+  let position = 0n;
+  const writer = new McapWriter({
+    writable: {
+      position: () => position,
+      write: async (buffer) => {
+        parts.push(Buffer.from(buffer));
+        position += BigInt(buffer.byteLength);
+      },
+    },
+    chunkSize,
+    compressChunk: compress,
+  });
+  await writer.start({ profile: reader.header.profile, library: "@mcap/core (avp test)" });
+  const schemaIds = new Map();
+  for (const [id, s] of reader.schemasById) {
+    schemaIds.set(id, await writer.registerSchema({ name: s.name, encoding: s.encoding,
+                                                    data: s.data }));
+  }
+  const channelIds = new Map();
+  for (const [id, c] of reader.channelsById) {
+    channelIds.set(id, await writer.registerChannel({
+      topic: c.topic, schemaId: schemaIds.get(c.schemaId) ?? 0,
+      messageEncoding: c.messageEncoding, metadata: c.metadata }));
+  }
+  for await (const m of reader.readMessages()) {
+    await writer.addMessage({ ...m, channelId: channelIds.get(m.channelId) });
+  }
+  for await (const a of reader.readAttachments()) await writer.addAttachment(a);
+  for await (const md of reader.readMetadata()) await writer.addMetadata(md);
+  await writer.end();
+  return Buffer.concat(parts);
+}
+
+/** metrics.csv without the columns that time the work (they differ between any two runs). */
+function metricsWithoutTimes(dir) {
+  const rows = readFileSync(join(dir, "metrics.csv"), "utf8").trim().split("\n")
+    .map((l) => l.split(","));
+  const keep = rows[0].map((name, i) => (/_ms$/.test(name) ? -1 : i)).filter((i) => i >= 0);
+  return rows.map((r) => keep.map((i) => r[i]).join(",")).join("\n");
+}
+
+let failures = 0;
+const want = {
+  metrics: metricsWithoutTimes(join(outDir, "replay-original")),
+  map: readFileSync(join(outDir, "replay-original", "map.ot")),
+};
+const variants = [
+  ["zstd", (data) => ({ compression: "zstd", compressedData: zstd.compress(data, 3) })],
+  ["lz4", (data) => ({ compression: "lz4", compressedData: lz4.compress(data) })],
+];
+for (const [name, compress] of variants) {
+  // Small chunks too: many chunks per file, messages split across them.
+  for (const chunkSize of [4 * 1024 * 1024, 64 * 1024]) {
+    const label = `${name}, ${chunkSize / 1024} KiB chunks`;
+    const bytes = await rewrite(compress, chunkSize);
+    const check = await McapIndexedReader.Initialize({ readable: readable(new Uint8Array(bytes)) });
+    const kinds = new Set(check.chunkIndexes.map((c) => c.compression));
+    if (kinds.size !== 1 || !kinds.has(name)) {
+      console.error(`FAIL ${label}: the chunks are compressed ${[...kinds].join(", ")}`);
+      failures++;
+      continue;
+    }
+    const file = join(outDir, `${name}-${chunkSize}.mcap`);
+    writeFileSync(file, bytes);
+    const replayDir = join(outDir, `replay-${name}-${chunkSize}`);
+    run(["replay", file, "--out", replayDir]);
+    const metrics = metricsWithoutTimes(replayDir);
+    const map = readFileSync(join(replayDir, "map.ot"));
+    if (metrics !== want.metrics) {
+      console.error(`FAIL ${label}: metrics.csv differs from the uncompressed replay's`);
+      failures++;
+    } else if (!map.equals(want.map)) {
+      console.error(`FAIL ${label}: map.ot differs from the uncompressed replay's`);
+      failures++;
+    } else {
+      console.log(`ok ${label}: ${check.chunkIndexes.length} chunks, ${bytes.length} bytes ` +
+                  `(uncompressed ${original.length}); the same map and metrics`);
+    }
+  }
+}
+// A compression avp does not read, and a zstd chunk that does not decompress: refused, named.
+const refused = [
+  ["bz2", (data) => ({ compression: "bz2", compressedData: data }),
+   /compression 'bz2' is not one avp reads \(uncompressed, zstd or lz4.*mcap decompress/],
+  ["corrupt zstd", (data) => ({ compression: "zstd", compressedData: data.subarray(0, 64) }),
+   /\(zstd\) does not decompress/],
+];
+for (const [name, compress, message] of refused) {
+  const file = join(outDir, `${name.replace(" ", "-")}.mcap`);
+  writeFileSync(file, await rewrite(compress, 4 * 1024 * 1024));
+  let output = "";
+  try {
+    execFileSync(avp, ["replay", file, "--out", join(outDir, `replay-${name.replace(" ", "-")}`)],
+                 { stdio: ["ignore", "pipe", "pipe"] });
+  } catch (e) {
+    output = `${e.stdout}${e.stderr}`;
+  }
+  if (!message.test(output)) {
+    console.error(`FAIL ${name}: expected ${message}, got: ${output || "success"}`);
+    failures++;
+  } else {
+    console.log(`ok ${name}: refused (${output.trim().split("\n").pop().slice(0, 160)})`);
+  }
+}
+if (failures > 0) {
+  console.error(`compressed_replay: ${failures} failure(s)`);
+  process.exit(1);
+}
+console.log("compressed_replay: ok");
