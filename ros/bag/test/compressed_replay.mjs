@@ -1,6 +1,6 @@
 // Compressed MCAP as other recorders write it (issue 33): a real `avp run --record` is rewritten by
 // npm's @mcap/core McapWriter with zstd chunks (@foxglove/wasm-zstd) and with lz4 frame chunks
-// (lz4js), as Foxglove and the rosbag2 MCAP plugin write them; `avp replay` of each must give the
+// (lz4js), as Foxglove and the rosbag2 MCAP plugin write them, indexed or not; `avp replay` of each must give the
 // same map and metrics as the replay of the uncompressed original (map.ot byte for byte,
 // metrics.csv without its timing columns). Another implementation's compressor checks avp's reader
 // against the MCAP spec, not against avp's own writer.
@@ -60,8 +60,9 @@ const readable = (buf) => ({
 });
 const reader = await McapIndexedReader.Initialize({ readable: readable(original) });
 
-/** The recording written again by @mcap/core with `compress` for every chunk. */
-async function rewrite(compress, chunkSize) {
+/** The recording written again by @mcap/core with `compress` for every chunk; `indexed` false:
+ * no summary, no index of any kind (a reader must stream through the file). */
+async function rewrite(compress, chunkSize, indexed = true) {
   const parts = [];
   let position = 0n;
   const writer = new McapWriter({
@@ -74,6 +75,11 @@ async function rewrite(compress, chunkSize) {
     },
     chunkSize,
     compressChunk: compress,
+    ...(indexed ? {} : {
+      useStatistics: false, useSummaryOffsets: false, useChunkIndex: false,
+      useMessageIndex: false, useAttachmentIndex: false, useMetadataIndex: false,
+      repeatSchemas: false, repeatChannels: false,
+    }),
   });
   await writer.start({ profile: reader.header.profile, library: "@mcap/core (avp test)" });
   const schemaIds = new Map();
@@ -114,20 +120,26 @@ const variants = [
   ["lz4", (data) => ({ compression: "lz4", compressedData: lz4.compress(data) })],
 ];
 for (const [name, compress] of variants) {
-  // Small chunks too: many chunks per file, messages split across them.
-  for (const chunkSize of [4 * 1024 * 1024, 64 * 1024]) {
-    const label = `${name}, ${chunkSize / 1024} KiB chunks`;
-    const bytes = await rewrite(compress, chunkSize);
-    const check = await McapIndexedReader.Initialize({ readable: readable(new Uint8Array(bytes)) });
-    const kinds = new Set(check.chunkIndexes.map((c) => c.compression));
-    if (kinds.size !== 1 || !kinds.has(name)) {
-      console.error(`FAIL ${label}: the chunks are compressed ${[...kinds].join(", ")}`);
-      failures++;
-      continue;
+  // Small chunks too (many chunks per file), and a file without any index or summary.
+  for (const [chunkSize, indexed] of [[4 * 1024 * 1024, true], [64 * 1024, true],
+                                      [1024 * 1024, false]]) {
+    const label = `${name}, ${chunkSize / 1024} KiB chunks${indexed ? "" : ", no index"}`;
+    const bytes = await rewrite(compress, chunkSize, indexed);
+    let chunks = "unindexed";
+    if (indexed) {
+      const check = await McapIndexedReader.Initialize({
+        readable: readable(new Uint8Array(bytes)) });
+      const kinds = new Set(check.chunkIndexes.map((c) => c.compression));
+      if (kinds.size !== 1 || !kinds.has(name)) {
+        console.error(`FAIL ${label}: the chunks are compressed ${[...kinds].join(", ")}`);
+        failures++;
+        continue;
+      }
+      chunks = `${check.chunkIndexes.length} chunks`;
     }
-    const file = join(outDir, `${name}-${chunkSize}.mcap`);
+    const file = join(outDir, `${name}-${chunkSize}${indexed ? "" : "-unindexed"}.mcap`);
     writeFileSync(file, bytes);
-    const replayDir = join(outDir, `replay-${name}-${chunkSize}`);
+    const replayDir = join(outDir, `replay-${name}-${chunkSize}${indexed ? "" : "-unindexed"}`);
     run(["replay", file, "--out", replayDir]);
     const metrics = metricsWithoutTimes(replayDir);
     const map = readFileSync(join(replayDir, "map.ot"));
@@ -138,7 +150,7 @@ for (const [name, compress] of variants) {
       console.error(`FAIL ${label}: map.ot differs from the uncompressed replay's`);
       failures++;
     } else {
-      console.log(`ok ${label}: ${check.chunkIndexes.length} chunks, ${bytes.length} bytes ` +
+      console.log(`ok ${label}: ${chunks}, ${bytes.length} bytes ` +
                   `(uncompressed ${original.length}); the same map and metrics`);
     }
   }
