@@ -27,6 +27,7 @@ struct BenchCli {
   EpisodeFlags episode;
   int jobs = 0;
   bool force = false, resume = false, record = false;
+  std::string record_compression;
   std::vector<std::string> planner_options;
 };
 
@@ -131,6 +132,7 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   b.resume = cli.resume;
   if (cmd.get_option("--shard")->count() > 0) AVP_RETURN_IF_ERROR(ParseShard(cli.shard, b));
   b.record = cli.record;
+  b.record_compression = cli.record_compression;
   if (cmd.get_option("--conditions")->count() > 0) {
     AVP_ASSIGN_OR_RETURN(const std::vector<std::string> names,
                          ParseCliList("--conditions", cli.conditions));
@@ -313,9 +315,11 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
   cmd->add_option("--out", cli->out, "Output folder")->default_str(cli->out);
   cmd->add_flag("--force", cli->force,
                 "Replace the results an earlier bench left in --out (only an avp bench folder)");
-  cmd->add_flag("--record", cli->record,
-                "Record every episode as MCAP: runs/<scenario>/<planner>/seed-<n>/episode.mcap "
-                "(docs/recording.md)");
+  CLI::Option* record =
+      cmd->add_flag("--record", cli->record,
+                    "Record every episode as MCAP: runs/<scenario>/<planner>/seed-<n>/episode.mcap "
+                    "(docs/recording.md)");
+  AddRecordCompressionOption(*cmd, cli->record_compression, record);
   cmd->add_option("--shard", cli->shard,
                   "K/N: run only the K-th of N deterministic slices of the job list (jobs dealt "
                   "round-robin); merge the shard folders with avp bench merge (docs/cluster.md)");

@@ -132,6 +132,10 @@ CLI::Option* AddVoxelSizeOption(CLI::App& cmd, double& value);
 /// that load a scene.
 void LogSceneWarnings(const sim::Scene& scene);
 
+/// "--record-compression none|zstd|lz4" bound to `value` ("" for none), only with `record` (the
+/// --record option or flag): how the MCAP recording's chunks are stored (docs/recording.md).
+CLI::Option* AddRecordCompressionOption(CLI::App& cmd, std::string& value, CLI::Option* record);
+
 /// Repeatable "--<name> KEY=VALUE" option bound to `values`.
 CLI::Option* AddKeyValueOption(CLI::App& cmd, const std::string& name,
                                std::vector<std::string>& values, const std::string& description);

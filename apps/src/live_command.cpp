@@ -56,6 +56,7 @@ int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& 
   folder.force = cli.run.force;
   folder.record = cmd.count("--record") > 0;
   folder.record_path = cli.run.record_file;
+  folder.record_compression = cli.run.record_compression;
   if (!cli.run.config_file.empty()) {
     folder.inputs.emplace_back(cli.run.config_file, "configuration file");
   }

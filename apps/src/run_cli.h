@@ -52,9 +52,12 @@ struct RunCli {
   /// --record [FILE] (avp run, avp live; given: the command's count("--record")): its file, empty
   /// for RUN_DIR/episode.mcap.
   std::string record_file;
+  /// --record-compression: the recording's chunk compression ("" none, "zstd", "lz4").
+  std::string record_compression;
 };
 
-/// Adds --record [FILE] (an MCAP recording of the episode, docs/recording.md) to `cmd`.
+/// Adds --record [FILE] (an MCAP recording of the episode, docs/recording.md) and
+/// --record-compression to `cmd`.
 void AddRecordOption(CLI::App& cmd, RunCli& cli);
 
 /// Adds the run configuration's flags to `cmd`.

@@ -239,6 +239,7 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   options.force = cli.force;
   options.record = cmd.count("--record") > 0;
   options.record_path = cli.record_file;
+  options.record_compression = cli.record_compression;
   if (!cli.config_file.empty()) options.inputs.emplace_back(cli.config_file, "configuration file");
   // Each view's line ends with the rate, the time elapsed and the time left (report::Progress's
   // words), so that a long run shows how far it is.
@@ -297,12 +298,14 @@ void AddRunOptions(CLI::App& cmd, RunCli& cli) {
 }
 
 void AddRecordOption(CLI::App& cmd, RunCli& cli) {
-  cmd.add_option("--record", cli.record_file,
-                 "Record the episode as MCAP (ros2 profile; Foxglove, ros2 bag): every view's "
-                 "images, masks, TF, joints, candidates, map and step; FILE defaults to "
-                 "RUN_DIR/episode.mcap (docs/recording.md)")
-      ->expected(0, 1)
-      ->type_name("[FILE]");
+  CLI::Option* record =
+      cmd.add_option("--record", cli.record_file,
+                     "Record the episode as MCAP (ros2 profile; Foxglove, ros2 bag): every view's "
+                     "images, masks, TF, joints, candidates, map and step; FILE defaults to "
+                     "RUN_DIR/episode.mcap (docs/recording.md)")
+          ->expected(0, 1)
+          ->type_name("[FILE]");
+  AddRecordCompressionOption(cmd, cli.record_compression, record);
 }
 
 void AddRunCommand(CLI::App& app, CommandContext& context) {

@@ -366,6 +366,18 @@ TEST_F(CliTest, ConfigurationErrorsAreFoundBeforeAnythingIsWritten) {
   EXPECT_THAT(r.output, HasSubstr("is a Wavefront OBJ mesh, not a YAML file"));
 }
 
+TEST_F(CliTest, RecordCompressionIsNamedAndNeedsARecording) {
+  Ran r = Avp("run --print-config --record-compression zstd");
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("--record-compression requires --record"));
+  r = Avp("run --print-config --record --record-compression bz2");
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("bz2"));
+  EXPECT_THAT(r.output, HasSubstr("lz4"));
+  r = Avp("bench --record --record-compression lz4 --planners help");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+}
+
 TEST_F(CliTest, MapFilesAreReplacedOnlyWithForce) {
   const fs::path gt = dir_ / "gt.bt";
   const std::string args =

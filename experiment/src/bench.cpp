@@ -290,7 +290,10 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
   if (config.record) {
     Result<std::unique_ptr<ros::bag::McapRecorder>> opened =
         OpenEpisodeRecording(dir / "episode.mcap", c, registries,
-                             {.command = "avp bench", .scene = j.scenario, .gt = &*g.gt});
+                             {.command = "avp bench",
+                              .scene = j.scenario,
+                              .compression = config.record_compression,
+                              .gt = &*g.gt});
     if (!opened.ok()) return fail(opened.status());
     recorder = std::move(*opened);
     recorder->StopOnError(failure.stop());

@@ -17,6 +17,7 @@ Result<std::unique_ptr<ros::bag::McapRecorder>> OpenEpisodeRecording(
     const RecordingInfo& info) {
   ros::bag::RecorderOptions options;
   options.base_frame = info.base_frame;
+  options.compression = info.compression;
   AVP_ASSIGN_OR_RETURN(const robot::ArmModel arm, robot::LoadDefaultArm());
   options.joint_names = arm.joint_names();
   AVP_ASSIGN_OR_RETURN(const YAML::Node yaml, RunConfigToYaml(config, registries));

@@ -205,6 +205,7 @@ Result<RunSummary> WriteRunFolder(const CheckedRunConfig& checked, const RunFold
                                                         {.command = run.command,
                                                          .scene = run.scene_name,
                                                          .base_frame = options.record_base_frame,
+                                                         .compression = options.record_compression,
                                                          .gt = run.gt}));
     recorder->StopOnError(write_failed);
     all.push_back(recorder.get());

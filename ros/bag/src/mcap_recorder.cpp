@@ -33,7 +33,8 @@ McapRecorder::~McapRecorder() {
 Result<std::unique_ptr<McapRecorder>> McapRecorder::Open(const std::filesystem::path& path,
                                                          RecorderOptions options) {
   AVP_ASSIGN_OR_RETURN(std::unique_ptr<ros::mcap::Writer> writer,
-                       ros::mcap::Writer::Open(path, {.chunk_size = options.chunk_size}));
+                       ros::mcap::Writer::Open(path, {.chunk_size = options.chunk_size,
+                                                      .compression = options.compression}));
   std::unique_ptr<McapRecorder> r(new McapRecorder(std::move(writer), std::move(options)));
   AVP_RETURN_IF_ERROR(r->AddChannels());
   std::map<std::string, std::string> metadata = r->options_.metadata;

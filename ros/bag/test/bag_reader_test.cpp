@@ -95,7 +95,7 @@ class BagReaderTest : public test::TempDirTest {
 
   std::filesystem::path WriteBag(const BagSpec& spec, const std::string& name = "robot.mcap") {
     const std::filesystem::path path = dir_ / name;
-    auto w = ros::mcap::Writer::Open(path, {.chunk_size = 64 * 1024}).value();
+    auto w = ros::mcap::Writer::Open(path, {.chunk_size = 64 * 1024, .compression = ""}).value();
     const uint16_t color = Channel<ros::msg::Image>(*w, "/camera/camera/color/image_raw");
     const uint16_t depth =
         Channel<ros::msg::Image>(*w, "/camera/camera/aligned_depth_to_color/image_raw");

@@ -467,6 +467,12 @@ Writer::~Writer() {
 
 Result<std::unique_ptr<Writer>> Writer::Open(const std::filesystem::path& path,
                                              WriterOptions options) {
+  if (!options.compression.empty() && options.compression != "zstd" &&
+      options.compression != "lz4") {
+    return InvalidArgumentError(
+        fmt::format("MCAP chunk compression {} is not one avp writes (none, zstd or lz4)",
+                    QuoteText(options.compression)));
+  }
   std::FILE* f = std::fopen(path.c_str(), "wb");
   if (f == nullptr) {
     return IoError(fmt::format("{}: cannot create: {}", path.string(), std::strerror(errno)));
@@ -628,19 +634,48 @@ Status Writer::Write(uint16_t channel_id, uint32_t sequence, uint64_t log_time,
   return Status::Ok();
 }
 
+namespace {
+
+/// A chunk's records as stored with `compression` ("" leaves them as they are).
+Result<std::vector<uint8_t>> Compress(const std::string& compression,
+                                      const std::vector<uint8_t>& records) {
+  if (compression.empty()) return records;
+  std::vector<uint8_t> out;
+  if (compression == "zstd") {
+    out.resize(ZSTD_compressBound(records.size()));
+    const size_t n = ZSTD_compress(out.data(), out.size(), records.data(), records.size(), 3);
+    if (ZSTD_isError(n) != 0) {
+      return InternalError(fmt::format("zstd compression failed: {}", ZSTD_getErrorName(n)));
+    }
+    out.resize(n);
+    return out;
+  }
+  out.resize(LZ4F_compressFrameBound(records.size(), nullptr));
+  const size_t n =
+      LZ4F_compressFrame(out.data(), out.size(), records.data(), records.size(), nullptr);
+  if (LZ4F_isError(n) != 0) {
+    return InternalError(fmt::format("lz4 compression failed: {}", LZ4F_getErrorName(n)));
+  }
+  out.resize(n);
+  return out;
+}
+
+}  // namespace
+
 Status Writer::WriteChunk() {
   if (chunk_index_.empty()) return Status::Ok();
   const uint64_t chunk_offset = offset_;
   std::vector<uint8_t> out;
   PutU8(out, static_cast<uint8_t>(Opcode::kChunk));
-  PutU64(out, 8 + 8 + 8 + 4 + 4 + 8 + chunk_.size());
+  AVP_ASSIGN_OR_RETURN(const std::vector<uint8_t> stored, Compress(options_.compression, chunk_));
+  PutU64(out, 8 + 8 + 8 + 4 + 4 + options_.compression.size() + 8 + stored.size());
   PutU64(out, chunk_start_);
   PutU64(out, chunk_end_);
   PutU64(out, chunk_.size());
   PutU32(out, Crc32(chunk_));
-  PutString(out, "");
-  PutU64(out, chunk_.size());
-  PutBytes(out, chunk_);
+  PutString(out, options_.compression);
+  PutU64(out, stored.size());
+  PutBytes(out, stored);
   const uint64_t chunk_length = out.size();
   std::map<uint16_t, uint64_t> index_offsets;
   for (auto& [channel, entries] : chunk_index_) {
@@ -670,8 +705,8 @@ Status Writer::WriteChunk() {
     PutU64(ci, offset);
   }
   PutU64(ci, index_length);
-  PutString(ci, "");
-  PutU64(ci, chunk_.size());  // compressed_size: the records as stored
+  PutString(ci, options_.compression);
+  PutU64(ci, stored.size());  // compressed_size: the records as stored
   PutU64(ci, chunk_.size());
   PutRecord(chunk_indexes_, Opcode::kChunkIndex, ci);
   ++stats_.chunk_count;

@@ -28,9 +28,10 @@ void Spit(const std::filesystem::path& p, const std::vector<uint8_t>& bytes) {
 }
 
 /// 30 messages on two channels, payloads of 100 + i bytes, log times 1000 + 10 i (channel 0) and
-/// 1005 + 10 i (channel 1); chunks of ~1 KB so the file has several.
-std::vector<Message> WriteSample(const std::filesystem::path& path, uint64_t chunk_size = 1024) {
-  auto w = Writer::Open(path, {.chunk_size = chunk_size}).value();
+/// 1005 + 10 i (channel 1); chunks of ~1 KB so the file has several, stored with `compression`.
+std::vector<Message> WriteSample(const std::filesystem::path& path, uint64_t chunk_size = 1024,
+                                 const std::string& compression = "") {
+  auto w = Writer::Open(path, {.chunk_size = chunk_size, .compression = compression}).value();
   const uint16_t schema = w->AddSchema("std_msgs/msg/String", "ros2msg", "string data\n").value();
   EXPECT_EQ(schema, 1);
   EXPECT_EQ(
@@ -112,6 +113,42 @@ TEST_F(McapTest, RoundTripIndexedAndStreaming) {
   EXPECT_EQ(streamed.file.schemas, indexed.schemas);
   EXPECT_EQ(streamed.file.channels, indexed.channels);
   EXPECT_EQ(streamed.file.chunk_count, indexed.chunk_count);
+}
+
+TEST_F(McapTest, CompressedChunksRoundTripAndDamageIsNamedNeverACrash) {
+  WriteSample(dir_ / "plain.mcap", 1024);
+  for (const std::string compression : {"zstd", "lz4"}) {
+    const auto path = dir_ / (compression + ".mcap");
+    const std::vector<Message> written = WriteSample(path, 1024, compression);
+    const File indexed = ReadIndexed(path).value();
+    EXPECT_EQ(indexed.messages, written) << compression;
+    EXPECT_GT(indexed.chunk_count, 2u);
+    const StreamResult streamed = ReadStreaming(path);
+    ASSERT_TRUE(streamed.status.ok()) << streamed.status.ToString();
+    EXPECT_EQ(streamed.file.messages, written) << compression;
+    // The payloads repeat one byte: stored compressed, the file is far smaller than the records.
+    EXPECT_LT(Slurp(path).size(), Slurp(dir_ / "plain.mcap").size() / 2) << compression;
+    // Every flipped byte is found (a chunk that does not decompress, a CRC) or harmless.
+    const std::vector<uint8_t> good = Slurp(path);
+    const auto bad_path = dir_ / "bad.mcap";
+    for (size_t i = 0; i < good.size(); ++i) {
+      std::vector<uint8_t> bytes = good;
+      bytes[i] ^= 0x5A;
+      Spit(bad_path, bytes);
+      const StreamResult s = ReadStreaming(bad_path);
+      if (!s.status.ok()) {
+        EXPECT_THAT(s.status.message(), HasSubstr(bad_path.string())) << "byte " << i;
+      }
+      for (const Message& m : s.file.messages) {
+        ASSERT_LT(m.sequence, written.size()) << compression << " byte " << i;
+        ASSERT_EQ(m, written[m.sequence]) << compression << " byte " << i;
+      }
+    }
+  }
+  const Result<std::unique_ptr<Writer>> bz2 =
+      Writer::Open(dir_ / "x.mcap", {.chunk_size = 1024, .compression = "bz2"});
+  ASSERT_FALSE(bz2.ok());
+  EXPECT_THAT(bz2.status().message(), HasSubstr("'bz2' is not one avp writes (none, zstd or lz4)"));
 }
 
 TEST_F(McapTest, SummaryStatistics) {
@@ -279,7 +316,7 @@ TEST_F(McapTest, FlushWritesTheChunkSoAnUnclosedFileKeepsIt) {
 
 TEST_F(McapTest, AttachmentsAndMetadataRoundTrip) {
   const auto path = dir_ / "am.mcap";
-  auto w = Writer::Open(path, {.chunk_size = 256}).value();
+  auto w = Writer::Open(path, {.chunk_size = 256, .compression = ""}).value();
   const uint16_t sc = w->AddSchema("std_msgs/msg/String", "ros2msg", "string data\n").value();
   const uint16_t ch = w->AddChannel(sc, "/a", "cdr").value();
   const Metadata avp{"avp", {{"command", "avp run"}, {"seed", "7"}, {"empty", ""}}};

@@ -174,7 +174,7 @@ int main(int argc, char** argv) {
   const std::filesystem::path dir = argv[1];
   std::filesystem::create_directories(dir);
   const auto path = dir / "ros2.mcap";
-  auto writer = avp::ros::mcap::Writer::Open(path, {.chunk_size = 2048}).value();
+  auto writer = avp::ros::mcap::Writer::Open(path, {.chunk_size = 2048, .compression = ""}).value();
   json expected = {{"profile", "ros2"},
                    {"schemas", json::array()},
                    {"channels", json::array()},

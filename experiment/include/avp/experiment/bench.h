@@ -95,6 +95,8 @@ struct BenchConfig {
   /// `--record`: each episode also as MCAP, runs/<scenario>/<planner>/seed-<n>/episode.mcap
   /// (docs/recording.md).
   bool record = false;
+  /// The recordings' chunk compression: "" (none), "zstd" or "lz4" (`--record-compression`).
+  std::string record_compression;
   /// `--shard K/N`: run only the K-th (1-based) of N slices of the job list (scenario x seed x
   /// planner). The (scenario, seed)s are dealt, each with all its planners (its ground truth is
   /// computed once), round-robin in a fixed shuffled order (the same on every machine), so that

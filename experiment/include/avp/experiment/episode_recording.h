@@ -19,6 +19,8 @@ struct RecordingInfo {
   std::string command = "avp run";  ///< "avp run", "avp live", "avp bench"
   std::string scene;                ///< the scene's name
   std::string base_frame = "igus_rebel_base_link";
+  /// The chunks' compression: "" (none), "zstd" or "lz4" (`--record-compression`).
+  std::string compression = "";
   const eval::GroundTruth* gt = nullptr;  ///< attached as ground_truth.json when set
 };
 

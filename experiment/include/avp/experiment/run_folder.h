@@ -37,6 +37,8 @@ struct RunFolderOptions {
   /// is the run's error, naming the file.
   bool record = false;
   std::filesystem::path record_path;
+  /// The recording's chunk compression: "" (none), "zstd" or "lz4" (`--record-compression`).
+  std::string record_compression;
   /// The frame the recording's TF and markers are in (`avp live`: its base frame).
   std::string record_base_frame = "igus_rebel_base_link";
 };

@@ -30,6 +30,8 @@ struct RecorderOptions {
   std::vector<ros::mcap::Attachment> attachments;
   /// Chunks are written after every view anyway; a view larger than this is split.
   uint64_t chunk_size = 64u << 20;
+  /// The chunks' compression: "" (none), "zstd" or "lz4" (mcap::WriterOptions::compression).
+  std::string compression = "";
 };
 
 class McapRecorder final : public pipeline::EpisodeObserver {

@@ -126,6 +126,9 @@ struct WriterOptions {
   std::string library = "avp";
   /// A chunk is written once its records hold this many bytes (and on Close / Flush).
   uint64_t chunk_size = 4u << 20;
+  /// How chunks are stored: "" (uncompressed), "zstd" (level 3) or "lz4" (the LZ4 frame format),
+  /// the MCAP spec's names; Open refuses any other.
+  std::string compression = "";
 };
 
 class Writer {
