@@ -22,6 +22,7 @@
 #include <avp/experiment/run_folder.h>
 #include <avp/io/json.h>
 #include <avp/mapping/map_file.h>
+#include <avp/report/run_html.h>
 #include <avp/ros/bag/bag_reader.h>
 #include <avp/ros/bag/layout.h>
 #include <avp/ros/mcap/mcap.h>
@@ -450,6 +451,12 @@ TEST_F(ReplayTest, CommandEndToEnd) {
   // Progress off a terminal: one plain line per view.
   EXPECT_THAT(r.output, HasSubstr("views 3/3 (100 %)"));
   ExpectSameAsRun("cli");
+  // The page says it is a replay, which planned nothing (not "avp-nbv, 3 of 8").
+  const auto page = report::ReadRunReportData(out / "report.html");
+  ASSERT_TRUE(page.ok()) << page.status().ToString();
+  EXPECT_THAT(page->dump(), HasSubstr("replay of a recording"));
+  EXPECT_THAT(page->dump(), HasSubstr("none (a replay: the recording's camera poses)"));
+  EXPECT_THAT(page->dump(), HasSubstr("3 (the recording's)"));
 
   // A damaged recording: exit code 1, the offset named, the intact views written.
   const fs::path cut = *dir_ / "cli_cut.mcap";

@@ -78,18 +78,24 @@ Status WriteMapAndPlot(const RunConfig& config, const FolderRun& run, const RunR
 Status WriteRunReport(const RunConfig& config, const FolderRun& run, const RunResult& result,
                       const report::RunReportCollector& collector, const fs::path& path) {
   report::RunReportInfo info;
-  info.title = fmt::format("{} — {} / {} (seed {})", run.scene_name, config.planner.name,
-                           config.segmenter.name, config.seed);
   const pipeline::EpisodeResult& e = result.episode;
-  info.facts = {{"command", run.command},
-                {"scene", run.scene_name},
-                {"planner", config.planner.name},
-                {"segmenter", config.segmenter.name},
-                {"seed", std::to_string(config.seed)},
-                {"views", fmt::format("{} of {}", e.views_fused(), config.episode.views)},
-                {"end", e.end_reason.empty()
-                            ? std::string(pipeline::ToString(e.end))
-                            : fmt::format("{} ({})", pipeline::ToString(e.end), e.end_reason)}};
+  // A replay planned nothing: it fused the recording's views, where the recording's arm went.
+  const bool replay = run.command == "avp replay";
+  info.title =
+      replay ? fmt::format("{} — replay of a recording, {}", run.scene_name, config.segmenter.name)
+             : fmt::format("{} — {} / {} (seed {})", run.scene_name, config.planner.name,
+                           config.segmenter.name, config.seed);
+  info.facts = {
+      {"command", run.command},
+      {"scene", run.scene_name},
+      {"planner", replay ? "none (a replay: the recording's camera poses)" : config.planner.name},
+      {"segmenter", config.segmenter.name},
+      {"seed", std::to_string(config.seed)},
+      {"views", replay ? fmt::format("{} (the recording's)", e.views_fused())
+                       : fmt::format("{} of {}", e.views_fused(), config.episode.views)},
+      {"end", e.end_reason.empty()
+                  ? std::string(pipeline::ToString(e.end))
+                  : fmt::format("{} ({})", pipeline::ToString(e.end), e.end_reason)}};
   if (run.gt != nullptr) {
     info.facts.emplace_back("F1", fmt::format("{:.3f}", result.final_metrics.exact.f1));
     info.facts.emplace_back("fruits found",
