@@ -61,6 +61,21 @@ function(avp_add_test name)
                        PROPERTIES ENVIRONMENT "AVP_CONFIG_DIR=${AVP_CONFIG_DIR}")
 endfunction()
 
+# avp_add_node_test(<name> <script.mjs> [ARGS ...] TIMEOUT <s>)
+# A test run by Node.js (its npm packages from scripts/setup: tests/npm/npm_test.mjs); without
+# node, a test that fails saying so (never a silent skip).
+function(avp_add_node_test name script)
+  cmake_parse_arguments(ARG "" "TIMEOUT" "ARGS" ${ARGN})
+  find_program(AVP_NODE_EXECUTABLE NAMES node nodejs)
+  if(AVP_NODE_EXECUTABLE)
+    add_test(NAME ${name} COMMAND ${AVP_NODE_EXECUTABLE} ${script} ${ARG_ARGS})
+  else()
+    add_test(NAME ${name}
+             COMMAND sh -c "echo '${name}: node not found; run scripts/setup' >&2; exit 1")
+  endif()
+  set_tests_properties(${name} PROPERTIES TIMEOUT ${ARG_TIMEOUT})
+endfunction()
+
 # avp_add_benchmark(<name> SOURCES ... DEPS ...)
 function(avp_add_benchmark name)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})

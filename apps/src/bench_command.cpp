@@ -300,12 +300,16 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
   cmd->add_option("--scenarios,--scenario", cli->scenarios,
                   "Comma-separated scenarios and scene files (FILE.yaml, relative to the current "
                   "folder), each optionally @ARRANGEMENT (FILE.yaml@paper: the four paper "
-                  "arrangements); `help` lists them; overrides the config");
+                  "arrangements); `help` lists them; overrides the config")
+      ->type_name("NAME,...");
   cmd->add_option("--planners,--planner", cli->planners,
-                  "Comma-separated planners (overrides the config); `help` lists them");
+                  "Comma-separated planners (overrides the config); `help` lists them")
+      ->type_name("NAME,...");
   cmd->add_option("--seeds", cli->seeds,
-                  "N for seeds 0..N-1, or comma-separated seeds (overrides the config)");
-  cmd->add_option("--seed", cli->seed, "Comma-separated seeds, \"5\" being seed 5 (not a count)");
+                  "N for seeds 0..N-1, or comma-separated seeds (overrides the config)")
+      ->type_name("N|SEED,...");
+  cmd->add_option("--seed", cli->seed, "Comma-separated seeds, \"5\" being seed 5 (not a count)")
+      ->type_name("SEED,...");
   AddEpisodeFlags(*cmd, cli->episode);
   AddNumberOption(*cmd, "--jobs", cli->jobs, 0, experiment::kMaxThreads,
                   "Episodes at once (0 = hardware threads)");
@@ -327,7 +331,8 @@ void AddBenchCommand(CLI::App& app, CommandContext& context) {
                 "--out holds an interrupted run of this same bench: keep its complete episodes, "
                 "run the others");
   cmd->add_option("--conditions", cli->conditions,
-                  "Comma-separated conditions of the config to run (default: all of them)");
+                  "Comma-separated conditions of the config to run (default: all of them)")
+      ->type_name("NAME,...");
   auto compare = std::make_shared<CompareCli>();
   CLI::App* compare_cmd = cmd->add_subcommand(
       "compare",

@@ -141,27 +141,14 @@ int ReportParseError(CLI::App& app, const CLI::ParseError& e, int argc, char** a
   return app.exit(e);
 }
 
-/// The options that take a list, per command: "--joints 0 -70 60" (words after the option up to
-/// the next option; negative numbers are values) is read as "--joints 0,-70,60", as the commas are.
-struct ListOptions {
-  std::string_view command;
-  std::array<std::string_view, 7> options;
-};
-constexpr std::array<ListOptions, 3> kListOptions = {{
-    {"render", {"--joints", "--camera-pose"}},
-    {"bench",
-     {"--seeds", "--seed", "--scenarios", "--scenario", "--planners", "--planner", "--conditions"}},
-    {"serve", {"--backend"}},
-}};
-
-/// Whether `option` takes a list in the command `command`.
-bool IsListOption(std::string_view command, std::string_view option) {
-  for (const ListOptions& l : kListOptions) {
-    if (l.command == command) {
-      return std::find(l.options.begin(), l.options.end(), option) != l.options.end();
-    }
-  }
-  return false;
+/// Whether `option` takes a list in `command` (or an option group of it): a vector option split on
+/// commas (render --joints), or one whose type name says so ("NAME,...": bench --planners, serve
+/// segmentation --backend). Such an option's space-separated values ("--joints 0 -70 60": the
+/// words after it up to the next option; negative numbers are values) are read as the commas are.
+bool IsListOption(const CLI::App* command, const std::string& option) {
+  if (command == nullptr || !option.starts_with("--")) return false;
+  const CLI::Option* o = command->get_option_no_throw(option);
+  return o != nullptr && (o->get_delimiter() == ',' || o->get_type_name().ends_with(",..."));
 }
 
 /// A word that is a value after a list option: not an option (a negative number is a value), not
@@ -175,17 +162,20 @@ bool IsListValue(const std::string& word, const std::vector<std::string>& comman
   return std::find(commands.begin(), commands.end(), word) == commands.end();
 }
 
-/// The command line with each list option's space-separated values joined by commas.
-std::vector<std::string> JoinListArguments(int argc, char** argv,
+/// The command line with each list option's space-separated values joined by commas; `app`
+/// tells the commands (followed as they are named) and their list options.
+std::vector<std::string> JoinListArguments(int argc, char** argv, CLI::App& app,
                                            const std::vector<std::string>& commands) {
   std::vector<std::string> out;
-  std::string command;  // the first command word: render, bench, ...
+  CLI::App* command = &app;  // the deepest command named so far
   for (int i = 0; i < argc; ++i) {
     const std::string word = argv[i];
     out.push_back(word);
-    if (i > 0 && command.empty() &&
-        std::find(commands.begin(), commands.end(), word) != commands.end()) {
-      command = word;
+    if (i > 0 && !word.starts_with("-")) {
+      for (CLI::App* sub : command->get_subcommands([](CLI::App*) { return true; })) {
+        if (sub->get_name() == word) command = sub;
+      }
+      continue;
     }
     if (!IsListOption(command, word) || i + 1 >= argc) continue;
     std::string joined = argv[++i];
@@ -273,7 +263,7 @@ int main(int argc, char** argv) {
   avp::apps::AddSimCommand(app, context);
 #endif
   AddHelpCommand(app, context);
-  const std::vector<std::string> words = JoinListArguments(argc, argv, AllCommandNames(app));
+  const std::vector<std::string> words = JoinListArguments(argc, argv, app, AllCommandNames(app));
   std::vector<char*> args;
   for (const std::string& w : words) args.push_back(const_cast<char*>(w.c_str()));
   try {

@@ -248,7 +248,8 @@ void AddServeSegmentation(CLI::App& serve_cmd, CommandContext& context) {
                   "Backends to serve, comma separated, each SPEC (any registered segmenter: `avp "
                   "run --segmenter help`) served as a model of its name, a spec with a scheme by "
                   "its scheme (ywes://DIR as 'ywes'), or NAME=SPEC")
-      ->default_val(cli->backends);
+      ->default_val(cli->backends)
+      ->type_name("SPEC,...");
   cmd->add_option("--host", server.host, "Address to listen on")->default_val(server.host);
   cmd->add_option("--threads", server.threads, "Worker threads")->default_val(server.threads);
   cmd->add_option("--instances", server.instances_per_model,

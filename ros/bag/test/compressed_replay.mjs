@@ -9,35 +9,16 @@
 
 import { execFileSync } from "node:child_process";
 import { createHash } from "node:crypto";
-import { existsSync, readFileSync, rmSync, writeFileSync, mkdirSync } from "node:fs";
-import { createRequire } from "node:module";
-import { homedir } from "node:os";
+import { readFileSync, rmSync, writeFileSync, mkdirSync } from "node:fs";
 import { join } from "node:path";
 
-function arg(name) {
-  const i = process.argv.indexOf(name);
-  if (i < 0 || i + 1 >= process.argv.length) {
-    console.error(`compressed_replay.mjs: missing ${name} <value>`);
-    process.exit(2);
-  }
-  return process.argv[i + 1];
-}
+import { arg, npmTestRequire } from "../../../tests/npm/npm_test.mjs";
 
-const avp = arg("--avp");
-const lockfile = arg("--lockfile");
-const outDir = arg("--out");
-const lockHash = createHash("sha256").update(readFileSync(lockfile)).digest("hex");
-const cacheRoot = process.env.XDG_CACHE_HOME || join(homedir(), ".cache");
-const installDir = process.env.AVP_NPM_TEST_DIR || join(cacheRoot, "avp", "npm-test", lockHash);
-const modules = join(installDir, "node_modules");
-for (const pkg of ["@mcap/core", "@foxglove/wasm-zstd", "lz4js"]) {
-  if (!existsSync(join(modules, pkg, "package.json"))) {
-    console.error(`compressed_replay: ${pkg} is not installed in ${modules}; run scripts/setup ` +
-                  `(it installs tests/npm/package-lock.json there with npm ci)`);
-    process.exit(1);
-  }
-}
-const require = createRequire(join(modules, "avp-compressed-replay.js"));
+const avp = arg("compressed_replay.mjs", "--avp");
+const lockfile = arg("compressed_replay.mjs", "--lockfile");
+const outDir = arg("compressed_replay.mjs", "--out");
+const require = npmTestRequire("compressed_replay", lockfile,
+                                ["@mcap/core", "@foxglove/wasm-zstd", "lz4js"]);
 const { McapIndexedReader, McapWriter } = require("@mcap/core");
 const zstd = require("@foxglove/wasm-zstd");
 const lz4 = require("lz4js");

@@ -11,41 +11,18 @@
 // the lockfile>/node_modules (or AVP_NPM_TEST_DIR=<dir holding node_modules>).
 
 import { execFileSync } from "node:child_process";
-import { createHash } from "node:crypto";
-import { existsSync, readFileSync } from "node:fs";
-import { createRequire } from "node:module";
-import { homedir } from "node:os";
+import { readFileSync } from "node:fs";
 import { join } from "node:path";
 import zlib from "node:zlib";
 
-function arg(name) {
-  const i = process.argv.indexOf(name);
-  if (i < 0 || i + 1 >= process.argv.length) {
-    console.error(`readback.mjs: missing ${name} <value>`);
-    process.exit(2);
-  }
-  return process.argv[i + 1];
-}
+import { arg, npmTestRequire } from "../../../tests/npm/npm_test.mjs";
 
-const dumpExe = arg("--dump");
-const lockfile = arg("--lockfile");
-const outDir = arg("--out");
-const lockHash = createHash("sha256").update(readFileSync(lockfile)).digest("hex");
-const cacheRoot = process.env.XDG_CACHE_HOME || join(homedir(), ".cache");
-const installDir = process.env.AVP_NPM_TEST_DIR || join(cacheRoot, "avp", "npm-test", lockHash);
-const modules = join(installDir, "node_modules");
-for (const pkg of ["@mcap/core", "@foxglove/rosmsg2-serialization", "@foxglove/rosmsg"]) {
-  if (!existsSync(join(modules, pkg, "package.json"))) {
-    console.error(`mcap_npm_readback: ${pkg} is not installed in ${modules}; run scripts/setup ` +
-                  `(it installs tests/npm/package-lock.json there with npm ci)`);
-    process.exit(1);
-  }
-}
-if (typeof zlib.crc32 !== "function") {
-  console.error("mcap_npm_readback: node's zlib.crc32 is missing (Node.js >= 20.15 needed)");
-  process.exit(1);
-}
-const require = createRequire(join(modules, "avp-readback.js"));
+const dumpExe = arg("readback.mjs", "--dump");
+const lockfile = arg("readback.mjs", "--lockfile");
+const outDir = arg("readback.mjs", "--out");
+const require = npmTestRequire("mcap_npm_readback", lockfile,
+                                ["@mcap/core", "@foxglove/rosmsg2-serialization",
+                                 "@foxglove/rosmsg"]);
 const { McapIndexedReader, McapStreamReader } = require("@mcap/core");
 const { MessageReader } = require("@foxglove/rosmsg2-serialization");
 const { parse } = require("@foxglove/rosmsg");

@@ -9,35 +9,15 @@
 // the lockfile>/node_modules (or AVP_NPM_TEST_DIR=<dir holding node_modules>).
 
 import { execFileSync } from "node:child_process";
-import { createHash } from "node:crypto";
-import { existsSync, readFileSync } from "node:fs";
-import { createRequire } from "node:module";
-import { homedir } from "node:os";
 import { join } from "node:path";
 
-function arg(name) {
-  const i = process.argv.indexOf(name);
-  if (i < 0 || i + 1 >= process.argv.length) {
-    console.error(`golden.mjs: missing ${name} <value>`);
-    process.exit(2);
-  }
-  return process.argv[i + 1];
-}
+import { arg, npmTestRequire } from "../../../tests/npm/npm_test.mjs";
 
-const dumpExe = arg("--dump");
-const lockfile = arg("--lockfile");
-const lockHash = createHash("sha256").update(readFileSync(lockfile)).digest("hex");
-const cacheRoot = process.env.XDG_CACHE_HOME || join(homedir(), ".cache");
-const installDir = process.env.AVP_NPM_TEST_DIR || join(cacheRoot, "avp", "npm-test", lockHash);
-const modules = join(installDir, "node_modules");
-for (const pkg of ["@foxglove/rosmsg2-serialization", "@foxglove/rosmsg", "@foxglove/rosmsg-msgs-common", "@foxglove/cdr"]) {
-  if (!existsSync(join(modules, pkg, "package.json"))) {
-    console.error(`ros_msg_golden: ${pkg} is not installed in ${modules}; run scripts/setup ` +
-                  `(it installs tests/npm/package-lock.json there with npm ci)`);
-    process.exit(1);
-  }
-}
-const require = createRequire(join(modules, "avp-golden.js"));
+const dumpExe = arg("golden.mjs", "--dump");
+const lockfile = arg("golden.mjs", "--lockfile");
+const require = npmTestRequire("ros_msg_golden", lockfile,
+                                ["@foxglove/rosmsg2-serialization", "@foxglove/rosmsg",
+                                 "@foxglove/rosmsg-msgs-common", "@foxglove/cdr"]);
 const { MessageReader, MessageWriter } = require("@foxglove/rosmsg2-serialization");
 const { parse } = require("@foxglove/rosmsg");
 const common = require("@foxglove/rosmsg-msgs-common");
