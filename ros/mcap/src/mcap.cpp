@@ -4,7 +4,6 @@
 #include <array>
 #include <cerrno>
 #include <cstring>
-#include <fstream>
 #include <iterator>
 #include <memory>
 #include <optional>
@@ -16,6 +15,8 @@
 #include <avp/core/text.h>
 #include <avp/io/file.h>
 #include <avp/io/file_kind.h>
+
+#include "records.h"
 
 namespace avp::ros::mcap {
 namespace {
@@ -64,61 +65,12 @@ void PutRecord(std::vector<uint8_t>& out, Opcode op, const std::vector<uint8_t>&
   PutBytes(out, content);
 }
 
-// ---- Reading
+}  // namespace
+
+// ---- Reading records (records.h)
 // --------------------------------------------------------------------------------------
 
-/// Reads fields of one record's content; `base` is the content's offset in the file (for errors).
-class Cursor {
- public:
-  Cursor(std::span<const uint8_t> bytes, uint64_t base, std::string_view what)
-      : bytes_(bytes), base_(base), what_(what) {}
-  bool ok() const { return error_.empty(); }
-  const std::string& error() const { return error_; }
-  uint64_t offset() const { return base_ + pos_; }
-  size_t left() const { return bytes_.size() - pos_; }
-
-  template <typename T>
-  T Le(std::string_view field) {
-    if (!Need(sizeof(T), field)) return 0;
-    T v = 0;
-    for (size_t i = 0; i < sizeof(T); ++i)
-      v |= static_cast<T>(static_cast<T>(bytes_[pos_ + i]) << (8 * i));
-    pos_ += sizeof(T);
-    return v;
-  }
-  uint8_t U8(std::string_view f) { return Le<uint8_t>(f); }
-  uint16_t U16(std::string_view f) { return Le<uint16_t>(f); }
-  uint32_t U32(std::string_view f) { return Le<uint32_t>(f); }
-  uint64_t U64(std::string_view f) { return Le<uint64_t>(f); }
-  std::span<const uint8_t> Take(uint64_t n, std::string_view field) {
-    if (!Need(n, field)) return {};
-    auto s = bytes_.subspan(pos_, static_cast<size_t>(n));
-    pos_ += static_cast<size_t>(n);
-    return s;
-  }
-  std::string String(std::string_view field) {
-    const uint32_t n = U32(field);
-    auto s = Take(n, field);
-    return {s.begin(), s.end()};
-  }
-  std::span<const uint8_t> Rest() { return Take(left(), "data"); }
-
- private:
-  bool Need(uint64_t n, std::string_view field) {
-    if (!error_.empty()) return false;
-    if (n > left()) {
-      error_ = fmt::format("{} field '{}' at offset {} needs {} bytes, the record has {} left",
-                           what_, field, offset(), n, left());
-      return false;
-    }
-    return true;
-  }
-  std::span<const uint8_t> bytes_;
-  uint64_t base_;
-  size_t pos_ = 0;
-  std::string_view what_;
-  std::string error_;
-};
+namespace internal {
 
 std::string_view OpcodeName(uint8_t op) {
   switch (static_cast<Opcode>(op)) {
@@ -155,13 +107,6 @@ std::string_view OpcodeName(uint8_t op) {
   }
   return "unknown";
 }
-
-struct Record {
-  uint8_t op = 0;
-  uint64_t offset = 0;  // of the opcode
-  std::span<const uint8_t> content;
-  uint64_t end() const { return offset + 9 + content.size(); }
-};
 
 /// The record at `offset` of `bytes` (whose first byte is file offset `base`), or an error.
 Result<Record> RecordAt(std::span<const uint8_t> bytes, uint64_t offset, uint64_t base,
@@ -326,9 +271,8 @@ Status Decompress(std::string_view compression, std::span<const uint8_t> in, uin
 
 /// A chunk's messages (the chunk record `r`), decompressed and its CRC checked. `where` names the
 /// file.
-Status ReadChunk(const Record& r, const std::string& where, const File& file,
-                 std::vector<Message>& out, std::vector<Schema>* schemas,
-                 std::vector<Channel>* channels) {
+Status ReadChunk(const Record& r, const std::string& where, std::vector<Message>& out,
+                 std::vector<Schema>* schemas, std::vector<Channel>* channels) {
   Cursor c(r.content, r.offset + 9, "Chunk");
   c.U64("message_start_time");
   c.U64("message_end_time");
@@ -383,29 +327,9 @@ Status ReadChunk(const Record& r, const std::string& where, const File& file,
     }
     at = rec.end();
   }
-  (void)file;
   out.insert(out.end(), std::make_move_iterator(messages.begin()),
              std::make_move_iterator(messages.end()));
   return Status::Ok();
-}
-
-/// The whole file, its size checked against the process-wide max_file_bytes limit
-/// (io::CheckReadableFile) before anything is allocated.
-Result<std::string> ReadAll(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return IoError(fmt::format("{}: cannot open: {}", path.string(), std::strerror(errno)));
-  AVP_ASSIGN_OR_RETURN(const uint64_t size, io::CheckReadableFile(path, "MCAP file"));
-  std::string bytes(size, '\0');
-  in.read(bytes.data(), static_cast<std::streamsize>(size));
-  if (static_cast<uint64_t>(in.gcount()) != size) {
-    return IoError(
-        fmt::format("{}: read failed after {} of {} bytes", path.string(), in.gcount(), size));
-  }
-  return bytes;
-}
-
-std::span<const uint8_t> Bytes(const std::string& s) {
-  return {reinterpret_cast<const uint8_t*>(s.data()), s.size()};
 }
 
 Status ReadHeader(std::span<const uint8_t> bytes, const std::string& where, File& file) {
@@ -429,7 +353,9 @@ Status ReadHeader(std::span<const uint8_t> bytes, const std::string& where, File
   return Status::Ok();
 }
 
-}  // namespace
+}  // namespace internal
+
+using namespace internal;  // NOLINT: this file is the implementation
 
 uint32_t Crc32(std::span<const uint8_t> bytes, uint32_t crc) {
   crc = ~crc;
@@ -812,336 +738,6 @@ Status Writer::Close() {
     file_ = nullptr;
   }
   return status;
-}
-
-// ---- Readers
-// --------------------------------------------------------------------------------------
-
-namespace {
-
-/// Where an indexed file's summary section is: its start and the Footer's offset (the summary
-/// ends where the Footer does, before its CRC).
-struct SummaryLocation {
-  uint64_t footer_at = 0;
-  uint64_t summary_start = 0;
-};
-
-/// The Footer of a closed file and its summary section, CRC checked.
-Result<SummaryLocation> LocateSummary(std::span<const uint8_t> bytes, const std::string& where) {
-  const size_t n = bytes.size();
-  constexpr size_t kFooterSize = 1 + 8 + 8 + 8 + 4;
-  const bool closed = n >= 8 + kFooterSize + 8 &&
-                      std::equal(kMagic.begin(), kMagic.end(), bytes.end() - 8,
-                                 [](char a, uint8_t b) { return static_cast<uint8_t>(a) == b; });
-  if (!closed) {
-    return ParseError(fmt::format(
-        "{}: no closing magic at the end (offset {}): the file is truncated or was not closed; "
-        "read it streaming to recover the intact chunks",
-        where, n >= 8 ? n - 8 : 0));
-  }
-  SummaryLocation loc;
-  loc.footer_at = n - 8 - kFooterSize;
-  AVP_ASSIGN_OR_RETURN(Record footer, RecordAt(bytes, loc.footer_at, 0, where));
-  if (footer.op != static_cast<uint8_t>(Opcode::kFooter) || footer.content.size() != 20) {
-    return ParseError(fmt::format("{}: no Footer record at offset {}", where, loc.footer_at));
-  }
-  Cursor fc(footer.content, loc.footer_at + 9, "Footer");
-  loc.summary_start = fc.U64("summary_start");
-  fc.U64("summary_offset_start");
-  const uint32_t summary_crc = fc.U32("summary_crc");
-  if (loc.summary_start == 0) {
-    return ParseError(
-        fmt::format("{}: the Footer at offset {} names no summary section", where, loc.footer_at));
-  }
-  if (loc.summary_start < 8 || loc.summary_start > loc.footer_at) {
-    return ParseError(fmt::format("{}: Footer at offset {}: summary_start {} is outside the file",
-                                  where, loc.footer_at, loc.summary_start));
-  }
-  const auto summary_bytes =
-      bytes.subspan(loc.summary_start, loc.footer_at + 1 + 8 + 8 + 8 - loc.summary_start);
-  if (summary_crc != 0 && Crc32(summary_bytes) != summary_crc) {
-    return ParseError(
-        fmt::format("{}: summary CRC mismatch (summary at offset {}): stored {:08x}, "
-                    "computed {:08x}",
-                    where, loc.summary_start, summary_crc, Crc32(summary_bytes)));
-  }
-  return loc;
-}
-
-/// A Statistics record's fields into `s`.
-Status ParseStatistics(const Record& r, const std::string& where, Statistics& s) {
-  Cursor c(r.content, r.offset + 9, "Statistics");
-  s.message_count = c.U64("message_count");
-  s.schema_count = c.U16("schema_count");
-  s.channel_count = c.U32("channel_count");
-  s.attachment_count = c.U32("attachment_count");
-  s.metadata_count = c.U32("metadata_count");
-  s.chunk_count = c.U32("chunk_count");
-  s.message_start_time = c.U64("message_start_time");
-  s.message_end_time = c.U64("message_end_time");
-  const uint32_t len = c.U32("channel_message_counts");
-  Cursor m(c.Take(len, "channel_message_counts"), c.offset() - len, "Statistics counts");
-  while (c.ok() && m.ok() && m.left() > 0) {
-    const uint16_t channel = m.U16("channel_id");
-    s.channel_message_counts[channel] = m.U64("count");
-  }
-  if (!c.ok()) return Bad(where, c);
-  if (!m.ok()) return Bad(where, m);
-  return Status::Ok();
-}
-
-/// The summary section's records: schemas, channels and statistics into `file`; the chunk
-/// indexes and the attachment and metadata indexes kept for reading what they point at.
-struct SummaryIndexes {
-  std::vector<Record> chunks;
-  std::vector<Record> others;
-};
-
-Result<SummaryIndexes> ReadSummary(std::span<const uint8_t> bytes, const SummaryLocation& loc,
-                                   const std::string& where, File& file) {
-  SummaryIndexes indexes;
-  uint64_t at = loc.summary_start;
-  while (at < loc.footer_at) {
-    AVP_ASSIGN_OR_RETURN(Record r, RecordAt(bytes.first(loc.footer_at), at, 0, where));
-    switch (static_cast<Opcode>(r.op)) {
-      case Opcode::kSchema: {
-        AVP_ASSIGN_OR_RETURN(Schema s, ParseSchema(r, where));
-        file.schemas.push_back(std::move(s));
-        break;
-      }
-      case Opcode::kChannel: {
-        AVP_ASSIGN_OR_RETURN(Channel ch, ParseChannel(r, where));
-        file.channels.push_back(std::move(ch));
-        break;
-      }
-      case Opcode::kStatistics:
-        AVP_RETURN_IF_ERROR(ParseStatistics(r, where, file.statistics));
-        break;
-      case Opcode::kChunkIndex:
-        indexes.chunks.push_back(r);
-        break;
-      case Opcode::kAttachmentIndex:
-      case Opcode::kMetadataIndex:
-        indexes.others.push_back(r);
-        break;
-      default:
-        break;
-    }
-    at = r.end();
-  }
-  return indexes;
-}
-
-/// The chunks the Chunk Indexes point at, each checked to lie in the data section.
-Status ReadIndexedChunks(std::span<const uint8_t> bytes, uint64_t summary_start,
-                         const std::vector<Record>& chunk_indexes, const std::string& where,
-                         File& file) {
-  for (const Record& r : chunk_indexes) {
-    Cursor c(r.content, r.offset + 9, "Chunk Index");
-    c.U64("message_start_time");
-    c.U64("message_end_time");
-    const uint64_t chunk_start = c.U64("chunk_start_offset");
-    const uint64_t chunk_length = c.U64("chunk_length");
-    if (!c.ok()) return Bad(where, c);
-    if (chunk_start < 8 || chunk_start > summary_start ||
-        chunk_length > summary_start - chunk_start || chunk_length < 9) {
-      return ParseError(
-          fmt::format("{}: Chunk Index at offset {} points at bytes {}..{}, outside "
-                      "the data section",
-                      where, r.offset, chunk_start, chunk_start + chunk_length));
-    }
-    AVP_ASSIGN_OR_RETURN(Record chunk,
-                         RecordAt(bytes.first(chunk_start + chunk_length), chunk_start, 0, where));
-    if (chunk.op != static_cast<uint8_t>(Opcode::kChunk)) {
-      return ParseError(
-          fmt::format("{}: Chunk Index at offset {} points at offset {}, which holds "
-                      "a {} record, not a Chunk",
-                      where, r.offset, chunk_start, OpcodeName(chunk.op)));
-    }
-    AVP_RETURN_IF_ERROR(ReadChunk(chunk, where, file, file.messages, nullptr, nullptr));
-    ++file.chunk_count;
-  }
-  return Status::Ok();
-}
-
-/// Attachments and metadata through their indexes (offset and length of each record).
-Status ReadIndexedRecords(std::span<const uint8_t> bytes, uint64_t summary_start,
-                          const std::vector<Record>& indexes, const std::string& where,
-                          File& file) {
-  for (const Record& r : indexes) {
-    const bool attachment = r.op == static_cast<uint8_t>(Opcode::kAttachmentIndex);
-    Cursor c(r.content, r.offset + 9, attachment ? "Attachment Index" : "Metadata Index");
-    const uint64_t record_at = c.U64("offset");
-    const uint64_t length = c.U64("length");
-    if (!c.ok()) return Bad(where, c);
-    if (record_at < 8 || record_at > summary_start || length > summary_start - record_at ||
-        length < 9) {
-      return ParseError(
-          fmt::format("{}: {} at offset {} points at bytes {}..{}, outside the data section", where,
-                      OpcodeName(r.op), r.offset, record_at, record_at + length));
-    }
-    AVP_ASSIGN_OR_RETURN(Record rec,
-                         RecordAt(bytes.first(record_at + length), record_at, 0, where));
-    const Opcode want = attachment ? Opcode::kAttachment : Opcode::kMetadata;
-    if (rec.op != static_cast<uint8_t>(want) || rec.end() != record_at + length) {
-      return ParseError(
-          fmt::format("{}: {} at offset {} points at offset {}, which holds a {} "
-                      "record of {} bytes, not a {} of {}",
-                      where, OpcodeName(r.op), r.offset, record_at, OpcodeName(rec.op),
-                      rec.end() - record_at, OpcodeName(static_cast<uint8_t>(want)), length));
-    }
-    if (attachment) {
-      AVP_ASSIGN_OR_RETURN(Attachment a, ParseAttachment(rec, where));
-      file.attachments.push_back(std::move(a));
-    } else {
-      AVP_ASSIGN_OR_RETURN(Metadata md, ParseMetadata(rec, where));
-      file.metadata.push_back(std::move(md));
-    }
-  }
-  return Status::Ok();
-}
-
-/// A streaming reader's state: where it is and whether it has passed the Data End record.
-struct StreamPosition {
-  uint64_t at = 8;
-  bool data_end = false;
-};
-
-/// One record of the data section read in file order into `file`. Schemas and channels after
-/// the Data End record (the summary's copies) are not added twice.
-Status ReadStreamRecord(std::span<const uint8_t> bytes, const Record& r, const std::string& where,
-                        StreamPosition& pos, File& file) {
-  switch (static_cast<Opcode>(r.op)) {
-    case Opcode::kSchema: {
-      AVP_ASSIGN_OR_RETURN(Schema s, ParseSchema(r, where));
-      if (!pos.data_end) file.schemas.push_back(std::move(s));
-      return Status::Ok();
-    }
-    case Opcode::kChannel: {
-      AVP_ASSIGN_OR_RETURN(Channel ch, ParseChannel(r, where));
-      if (!pos.data_end) file.channels.push_back(std::move(ch));
-      return Status::Ok();
-    }
-    case Opcode::kMessage: {
-      AVP_ASSIGN_OR_RETURN(Message m, ParseMessage(r, where));
-      file.messages.push_back(std::move(m));
-      return Status::Ok();
-    }
-    case Opcode::kChunk:
-      AVP_RETURN_IF_ERROR(ReadChunk(r, where, file, file.messages, &file.schemas, &file.channels));
-      ++file.chunk_count;
-      return Status::Ok();
-    case Opcode::kAttachment: {
-      AVP_ASSIGN_OR_RETURN(Attachment a, ParseAttachment(r, where));
-      file.attachments.push_back(std::move(a));
-      return Status::Ok();
-    }
-    case Opcode::kMetadata: {
-      AVP_ASSIGN_OR_RETURN(Metadata md, ParseMetadata(r, where));
-      file.metadata.push_back(std::move(md));
-      return Status::Ok();
-    }
-    case Opcode::kDataEnd: {
-      Cursor c(r.content, r.offset + 9, "Data End");
-      const uint32_t crc = c.U32("data_section_crc");
-      if (!c.ok()) return Bad(where, c);
-      const uint32_t computed = Crc32(bytes.first(pos.at));
-      if (crc != 0 && crc != computed) {
-        return ParseError(
-            fmt::format("{}: data section CRC mismatch (Data End at offset "
-                        "{}): stored {:08x}, computed {:08x}",
-                        where, pos.at, crc, computed));
-      }
-      pos.data_end = true;
-      return Status::Ok();
-    }
-    case Opcode::kFooter: {
-      const uint64_t end = r.end();
-      if (end + 8 > bytes.size() ||
-          !std::equal(kMagic.begin(), kMagic.end(), bytes.begin() + static_cast<long>(end),
-                      [](char a, uint8_t b) { return static_cast<uint8_t>(a) == b; })) {
-        return ParseError(fmt::format(
-            "{}: no closing magic after the Footer at offset {} (the file ends at byte {})", where,
-            pos.at, bytes.size()));
-      }
-      return Status::Ok();
-    }
-    default:
-      return Status::Ok();
-  }
-}
-
-/// A streamed file's statistics, counted from what was read.
-void CountStatistics(File& file) {
-  Statistics& s = file.statistics;
-  s.message_count = file.messages.size();
-  s.schema_count = static_cast<uint16_t>(file.schemas.size());
-  s.channel_count = static_cast<uint32_t>(file.channels.size());
-  s.chunk_count = file.chunk_count;
-  s.attachment_count = static_cast<uint32_t>(file.attachments.size());
-  s.metadata_count = static_cast<uint32_t>(file.metadata.size());
-  for (size_t i = 0; i < file.messages.size(); ++i) {
-    const Message& m = file.messages[i];
-    s.message_start_time = i == 0 ? m.log_time : std::min(s.message_start_time, m.log_time);
-    s.message_end_time = i == 0 ? m.log_time : std::max(s.message_end_time, m.log_time);
-    ++s.channel_message_counts[m.channel_id];
-  }
-}
-
-}  // namespace
-
-Result<File> ReadIndexed(const std::filesystem::path& path) {
-  const std::string where = path.string();
-  AVP_ASSIGN_OR_RETURN(const std::string contents, ReadAll(path));
-  const std::span<const uint8_t> bytes = Bytes(contents);
-  File file;
-  AVP_RETURN_IF_ERROR(ReadHeader(bytes, where, file));
-  AVP_ASSIGN_OR_RETURN(const SummaryLocation loc, LocateSummary(bytes, where));
-  AVP_ASSIGN_OR_RETURN(const SummaryIndexes indexes, ReadSummary(bytes, loc, where, file));
-  AVP_RETURN_IF_ERROR(ReadIndexedChunks(bytes, loc.summary_start, indexes.chunks, where, file));
-  AVP_RETURN_IF_ERROR(ReadIndexedRecords(bytes, loc.summary_start, indexes.others, where, file));
-  std::stable_sort(file.messages.begin(), file.messages.end(),
-                   [](const Message& a, const Message& b) { return a.log_time < b.log_time; });
-  return file;
-}
-
-StreamResult ReadStreaming(const std::filesystem::path& path) {
-  const std::string where = path.string();
-  StreamResult result;
-  auto read = ReadAll(path);
-  if (!read.ok()) {
-    result.status = read.status();
-    return result;
-  }
-  const std::span<const uint8_t> bytes = Bytes(*read);
-  File& file = result.file;
-  result.status = ReadHeader(bytes, where, file);
-  if (!result.status.ok()) {
-    result.intact_bytes = bytes.size() >= kMagic.size() ? kMagic.size() : 0;
-    return result;
-  }
-  StreamPosition pos;
-  auto fail = [&](Status s) {
-    result.status = std::move(s);
-    result.intact_bytes = pos.at;
-    return result;
-  };
-  while (true) {
-    if (pos.at == bytes.size()) {
-      return fail(ParseError(
-          fmt::format("{}: the file ends at offset {} without {}: truncated "
-                      "(the messages before it are intact)",
-                      where, pos.at, pos.data_end ? "its Footer" : "a Data End record")));
-    }
-    auto rec = RecordAt(bytes, pos.at, 0, where);
-    if (!rec.ok()) return fail(rec.status());
-    if (Status s = ReadStreamRecord(bytes, *rec, where, pos, file); !s.ok()) return fail(s);
-    if (rec->op == static_cast<uint8_t>(Opcode::kFooter)) break;
-    pos.at = rec->end();
-  }
-  CountStatistics(file);
-  result.intact_bytes = bytes.size();
-  return result;
 }
 
 }  // namespace avp::ros::mcap

@@ -13,17 +13,20 @@
 // Metadata Index records, each group found through a Summary Offset record), the Footer (the
 // summary's CRC-32) and the closing magic.
 //
-// Reader: ReadIndexed goes Footer -> summary -> chunk / attachment / metadata indexes -> records;
-// ReadStreaming walks the
-// records from the start. Both check every CRC. A truncated or corrupt file is an error naming the
-// file and the byte offset; ReadStreaming also returns what came before the damage (the messages
-// of the intact chunks), so a replay can use it.
+// Reading (StreamReader) is from disk, one record and one chunk at a time, so a file of any size is
+// read in bounded memory: indexed (Footer -> summary -> Chunk Indexes: the chunks read in log-time
+// order, overlapping chunks merged) or, for a file without a usable summary (truncated, not
+// closed, written unindexed), in one streaming pass in file order. Both check every CRC they
+// pass. A truncated or corrupt file is an error naming the file and the byte offset, after the
+// messages of the intact chunks before it. ReadIndexed and ReadStreaming read a whole file into a
+// File (tests, small files).
 
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -199,6 +202,53 @@ struct File {
   std::vector<Metadata> metadata;       ///< file order (indexed: through the Metadata Indexes)
   Statistics statistics;                ///< from the summary (indexed); counted (streaming)
   uint32_t chunk_count = 0;             ///< chunks read
+};
+
+/// An MCAP file's messages one at a time, in bounded memory (at most one record, or the chunks
+/// whose log times overlap, decoded at once).
+class StreamReader {
+ public:
+  enum class Mode {
+    kAuto,       ///< indexed when the summary reads, else a streaming pass
+    kIndexed,    ///< indexed, else the summary's error
+    kStreaming,  ///< a streaming pass in file order, even when the file has a summary
+  };
+  /// Opens `path` and reads its Header; indexed: the summary, attachments and metadata;
+  /// streaming: the records outside chunks wherever they are (schemas, channels, metadata,
+  /// attachments: a scan of the record headers that seeks over the chunks) and the first chunk.
+  /// Errors: the file cannot be opened, is not MCAP (saying what it is), or (kIndexed) its
+  /// summary does not read.
+  static Result<std::unique_ptr<StreamReader>> Open(const std::filesystem::path& path,
+                                                    Mode mode = Mode::kAuto);
+  ~StreamReader();
+  StreamReader(const StreamReader&) = delete;
+  StreamReader& operator=(const StreamReader&) = delete;
+
+  /// The next message: indexed, in log-time order (ties: file order); streaming, in file order
+  /// (each chunk's messages by log time). nullopt at the end. An error names the file and the
+  /// byte offset of the damage; every message before it was returned; after it, Next returns it
+  /// again.
+  Result<std::optional<Message>> Next();
+
+  bool indexed() const;
+  /// Profile, library, schemas, channels, attachments, metadata, statistics (indexed: the
+  /// summary's; streaming: what has been read so far) and chunks read; `messages` is empty.
+  const File& info() const;
+  /// kAuto: why the file is read streaming ("" when indexed).
+  const std::string& fallback_reason() const;
+  /// The chunks' compressions seen: "uncompressed", "zstd", "lz4", comma-separated.
+  const std::string& chunk_compression() const;
+  uint64_t bytes_read() const;
+  uint64_t file_bytes() const;
+  /// The file's size, or where the damage begins.
+  uint64_t intact_bytes() const;
+  const std::filesystem::path& path() const;
+
+  struct Impl;
+
+ private:
+  explicit StreamReader(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
 };
 
 /// Reads through the Footer, the summary and its chunk, attachment and metadata indexes, checking
