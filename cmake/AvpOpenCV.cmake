@@ -1,9 +1,10 @@
-# OpenCV from Debian's per-module -dev packages (libopencv-{imgproc,imgcodecs,dnn}-dev): only the
-# umbrella libopencv-dev ships OpenCVConfig.cmake, and it pulls in every module (VTK included), so
-# the modules avp uses are found directly. Defines the imported target avp::opencv.
+# OpenCV from Debian's per-module -dev packages (libopencv-{imgproc,imgcodecs,dnn,calib3d}-dev):
+# only the umbrella libopencv-dev ships OpenCVConfig.cmake, and it pulls in every module (VTK
+# included), so the modules avp uses are found directly. calib3d: the lens models of
+# ros/msg/lens.h (undistortion maps). Defines the imported target avp::opencv.
 find_path(AVP_OPENCV_INCLUDE_DIR opencv2/core.hpp PATH_SUFFIXES opencv4 REQUIRED)
 set(_avp_opencv_libs)
-foreach(_m core imgproc imgcodecs dnn)
+foreach(_m core imgproc imgcodecs dnn calib3d)
   find_library(AVP_OPENCV_${_m}_LIBRARY NAMES opencv_${_m} REQUIRED)
   list(APPEND _avp_opencv_libs ${AVP_OPENCV_${_m}_LIBRARY})
 endforeach()

@@ -70,6 +70,8 @@ CameraInfo ToCameraInfo(const CameraIntrinsics& K, const Header& header);
 /// Intrinsics from a CameraInfo (its size, K's fx, fy, cx, cy) with the given depth range (a
 /// CameraInfo carries none). InvalidArgument naming the frame and the values: a size outside
 /// 1..kMaxImageSide, intrinsics that do not validate, binning or a region of interest.
+/// Reads K only: distortion_model, d, R and P are the lens model's (lens.h:
+/// LensModelFromCameraInfo, and Rectifier to remap raw images to the rectified camera).
 Result<CameraIntrinsics> FromCameraInfo(const CameraInfo& info, double min_depth_m,
                                         double max_depth_m);
 
