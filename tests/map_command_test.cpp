@@ -111,9 +111,35 @@ void ExpectExports(const MapBuildOptions& build, const MapBuildSummary& built, c
   exp.out = dir_ / "plant.ply";
   exported = mapping::ExportMapFile(exp);
   ASSERT_TRUE(exported.ok()) << exported.status().ToString();
-  EXPECT_EQ(exported->labelled_voxels, info.occupied_by_class[1] + info.occupied_by_class[2] +
-                                           info.occupied_by_class[3] + info.occupied_by_class[4] +
-                                           info.occupied_by_class[5] + info.occupied_by_class[6]);
+  const size_t occupied_labelled = info.occupied_by_class[1] + info.occupied_by_class[2] +
+                                   info.occupied_by_class[3] + info.occupied_by_class[4] +
+                                   info.occupied_by_class[5] + info.occupied_by_class[6];
+  EXPECT_EQ(exported->labelled_voxels, occupied_labelled);
+  EXPECT_EQ(exported->ply_voxels, mapping::PlyVoxels::kLabelled);
+  EXPECT_EQ(exported->unlabelled_voxels, 0u);
+  // --voxels all-labelled: every labelled voxel; --voxels occupied: the whole plant.
+  exp.ply_voxels = mapping::PlyVoxels::kAllLabelled;
+  exported = mapping::ExportMapFile(exp);
+  ASSERT_TRUE(exported.ok()) << exported.status().ToString();
+  EXPECT_EQ(exported->labelled_voxels, info.labelled_voxels);
+  EXPECT_EQ(exported->not_occupied_voxels, info.labelled_voxels - occupied_labelled);
+  exp.ply_voxels = mapping::PlyVoxels::kOccupied;
+  exported = mapping::ExportMapFile(exp);
+  ASSERT_TRUE(exported.ok()) << exported.status().ToString();
+  EXPECT_EQ(exported->ply_voxels, mapping::PlyVoxels::kOccupied);
+  EXPECT_EQ(exported->occupied_voxels, built.occupied_voxels);
+  EXPECT_EQ(exported->labelled_voxels, occupied_labelled);
+  EXPECT_EQ(exported->unlabelled_voxels, built.occupied_voxels - occupied_labelled);
+  EXPECT_GT(exported->unlabelled_voxels, 0u);  // leaves and stem the masks did not cover
+  EXPECT_EQ(exported->file_bytes, fs::file_size(exp.out));
+  // Other formats have no choice of voxels: refused, naming the format.
+  exp.format = "bt";
+  exp.out = dir_ / "plant2.bt";
+  const Status refused = mapping::ExportMapFile(exp).status();
+  EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(refused.message(), HasSubstr("--voxels occupied applies to PLY only"));
+  EXPECT_THAT(refused.message(), HasSubstr("'bt' (from --format)"));
+  EXPECT_FALSE(fs::exists(exp.out));
 }
 
 /// `map gt` + `map compare`: at 6 mm the GT is resampled onto the 8 mm map; at 8 mm it is not.

@@ -6,8 +6,10 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <sstream>
 #include <string>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -164,6 +166,68 @@ TEST_F(CliTest, MapExportRefusesToOverwriteItsInput) {
   // A folder as --out is named as one.
   r = Avp("map export " + map.string() + " --out " + dir_.string());
   EXPECT_THAT(r.output, HasSubstr("is a folder: give a file name"));
+}
+
+/// The whole number in `text` right after `key`: NumberAfter("x: 12 occupied", ": ") = 12.
+size_t NumberAfter(const std::string& text, const std::string& key) {
+  const size_t at = text.find(key);
+  EXPECT_NE(at, std::string::npos) << key << " not in " << text;
+  return at == std::string::npos ? 0 : std::stoul(text.substr(at + key.size()));
+}
+
+TEST_F(CliTest, MapExportPlyVoxelsChoosesWhatIsWritten) {
+  const fs::path map = dir_ / "plant.avpmap";
+  Ran r = Avp("map build --views 1 --voxel-size 0.01 --out " + map.string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const size_t occupied = NumberAfter(r.output, " known, ");
+  ASSERT_GT(occupied, 0u);
+  // The default: the occupied labelled voxels.
+  r = Avp("map export " + map.string() + " --out " + (dir_ / "labelled.ply").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const size_t labelled = NumberAfter(r.output, "labelled.ply: ");
+  ASSERT_GT(labelled, 0u);
+  EXPECT_THAT(r.output, HasSubstr(" labelled voxels ("));
+  // --voxels occupied: every occupied voxel, labelled ones in class colours, the others grey.
+  const fs::path ply = dir_ / "occupied.ply";
+  r = Avp("map export " + map.string() + " --voxels occupied --ascii --out " + ply.string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr(fmt::format(
+                            "occupied.ply: {} occupied voxels, {} labelled in class colours and {} "
+                            "unlabelled in grey (",
+                            occupied, labelled, occupied - labelled)));
+  const std::string text = test::ReadWholeFile(ply);
+  EXPECT_THAT(text, HasSubstr(fmt::format("element vertex {}\n", occupied)));
+  std::istringstream body(text.substr(text.find("end_header\n") + 11));
+  std::string line;
+  size_t vertices = 0, grey = 0;
+  while (std::getline(body, line)) {
+    ++vertices;
+    std::istringstream fields(line);
+    float x, y, z;
+    int red, green, blue, cls;
+    ASSERT_TRUE(fields >> x >> y >> z >> red >> green >> blue >> cls) << line;
+    const bool is_grey = red == 128 && green == 128 && blue == 128;
+    EXPECT_EQ(is_grey, cls == 0) << line;  // unlabelled: class 0 (background), grey
+    if (is_grey) ++grey;
+  }
+  EXPECT_EQ(vertices, occupied);
+  EXPECT_EQ(grey, occupied - labelled);
+  // --all-labelled still works, as --voxels all-labelled; the two together are refused.
+  r = Avp("map export " + map.string() + " --all-labelled --out " + (dir_ / "all.ply").string());
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("of them not occupied"));
+  r = Avp("map export " + map.string() + " --all-labelled --voxels occupied --out " +
+          (dir_ / "both.ply").string());
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("excludes"));
+  r = Avp("map export " + map.string() + " --voxels everything --out " +
+          (dir_ / "bad.ply").string());
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("everything not in {labelled,all-labelled,occupied}"));
+  r = Avp("map export " + map.string() + " --voxels occupied --out " + (dir_ / "x.bt").string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("--voxels occupied applies to PLY only, not to format 'bt'"));
+  EXPECT_FALSE(fs::exists(dir_ / "x.bt"));
 }
 
 TEST_F(CliTest, AFolderIsNotAMissingFile) {

@@ -158,8 +158,11 @@ std::optional<MapExportFormat> MapExportFormatFromString(std::string_view name) 
   return std::nullopt;
 }
 
-Result<MapExportSummary> ExportMapFile(const MapExportOptions& options) {
-  if (options.out.empty()) return InvalidArgumentError("give the output file with --out");
+namespace {
+
+/// The export format: --format, else the extension of --out. Errors: an unknown name, naming it
+/// and where it came from; --voxels other than labelled with a format other than PLY.
+Result<MapExportFormat> ResolveExportFormat(const MapExportOptions& options) {
   std::string format = options.format;
   if (format.empty()) {
     format = options.out.extension().string();
@@ -171,6 +174,59 @@ Result<MapExportSummary> ExportMapFile(const MapExportOptions& options) {
         "unknown export format {} (from {}): use avpmap, bt, ot or ply", QuoteText(format),
         options.format.empty() ? "the extension of --out" : "--format"));
   }
+  if (*f != MapExportFormat::kPly && options.ply_voxels != PlyVoxels::kLabelled) {
+    return InvalidArgumentError(fmt::format(
+        "--voxels {} applies to PLY only, not to format {} (from {}): write a .ply file or "
+        "leave --voxels out",
+        ToString(options.ply_voxels), QuoteText(format),
+        options.format.empty() ? "the extension of --out" : "--format"));
+  }
+  return *f;
+}
+
+/// The .avpmap branch of ExportMapFile: SaveMap with a note saying where the map came from.
+Status ExportAvpMap(const LoadedMap& loaded, const MapExportOptions& options,
+                    MapExportSummary& summary) {
+  const SemanticMap& map = loaded.map;
+  MapSaveOptions save;
+  save.note =
+      fmt::format("avp map export of {} ({}{})", options.map.filename().string(),
+                  ToString(loaded.source.format),
+                  loaded.source.tree_type.empty() ? std::string() : ", " + loaded.source.tree_type);
+  if (loaded.source.format == MapFileFormat::kAvpMap && !loaded.source.avpmap.note.empty()) {
+    save.note += "; made by: " + loaded.source.avpmap.note;
+  }
+  if (save.note.size() > kMaxMapNoteBytes) save.note.resize(kMaxMapNoteBytes);
+  AVP_RETURN_IF_ERROR(SaveMap(map, options.out, save));
+  summary.occupied_voxels = map.grid().CountOccupiedVoxels();
+  summary.free_voxels = map.grid().CountKnownVoxels() - summary.occupied_voxels;
+  summary.labelled_voxels = map.grid().CountSemanticVoxels();
+  std::error_code ec;
+  summary.file_bytes = fs::file_size(options.out, ec);
+  return Status::Ok();
+}
+
+/// The PLY branch of ExportMapFile: ExportSemanticPly with --ascii and --voxels.
+Status ExportPly(const SemanticMap& map, const MapExportOptions& options,
+                 MapExportSummary& summary) {
+  PlyExportOptions ply;
+  ply.binary = !options.ply_ascii;
+  ply.voxels = options.ply_voxels;
+  AVP_ASSIGN_OR_RETURN(const PlyExportStats stats, ExportSemanticPly(map.grid(), options.out, ply));
+  summary.ply_voxels = options.ply_voxels;
+  summary.labelled_voxels = stats.labelled;
+  summary.unlabelled_voxels = stats.unlabelled;
+  summary.not_occupied_voxels = stats.not_occupied;
+  summary.occupied_voxels = stats.vertices - stats.not_occupied;
+  summary.file_bytes = stats.file_bytes;
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<MapExportSummary> ExportMapFile(const MapExportOptions& options) {
+  if (options.out.empty()) return InvalidArgumentError("give the output file with --out");
+  AVP_ASSIGN_OR_RETURN(const MapExportFormat f, ResolveExportFormat(options));
   // Outputs never overwrite inputs: `map export X --out X` would replace the map it reads.
   AVP_RETURN_IF_ERROR(
       io::CheckOutputIsNotInput(options.out, "export file (--out)", options.map, "map file"));
@@ -178,40 +234,20 @@ Result<MapExportSummary> ExportMapFile(const MapExportOptions& options) {
   AVP_ASSIGN_OR_RETURN(const LoadedMap loaded, LoadAnyMap(options.map));
   const SemanticMap& map = loaded.map;
   MapExportSummary summary;
-  summary.format = *f;
+  summary.format = f;
   summary.out = options.out;
   summary.source = loaded.source;
-  if (*f == MapExportFormat::kAvpMap) {
-    MapSaveOptions save;
-    save.note = fmt::format(
-        "avp map export of {} ({}{})", options.map.filename().string(),
-        ToString(loaded.source.format),
-        loaded.source.tree_type.empty() ? std::string() : ", " + loaded.source.tree_type);
-    if (loaded.source.format == MapFileFormat::kAvpMap && !loaded.source.avpmap.note.empty()) {
-      save.note += "; made by: " + loaded.source.avpmap.note;
-    }
-    if (save.note.size() > kMaxMapNoteBytes) save.note.resize(kMaxMapNoteBytes);
-    AVP_RETURN_IF_ERROR(SaveMap(map, options.out, save));
-    summary.occupied_voxels = map.grid().CountOccupiedVoxels();
-    summary.free_voxels = map.grid().CountKnownVoxels() - summary.occupied_voxels;
-    summary.labelled_voxels = map.grid().CountSemanticVoxels();
-    std::error_code ec;
-    summary.file_bytes = fs::file_size(options.out, ec);
+  if (f == MapExportFormat::kAvpMap) {
+    AVP_RETURN_IF_ERROR(ExportAvpMap(loaded, options, summary));
     return summary;
   }
-  if (*f == MapExportFormat::kPly) {
-    PlyExportOptions ply;
-    ply.binary = !options.ply_ascii;
-    ply.occupied_only = !options.ply_all_labelled;
-    AVP_ASSIGN_OR_RETURN(const PlyExportStats stats,
-                         ExportSemanticPly(map.grid(), options.out, ply));
-    summary.labelled_voxels = stats.vertices;
-    summary.file_bytes = stats.file_bytes;
+  if (f == MapExportFormat::kPly) {
+    AVP_RETURN_IF_ERROR(ExportPly(map, options, summary));
     return summary;
   }
   AVP_ASSIGN_OR_RETURN(const OctomapExportStats stats,
-                       *f == MapExportFormat::kBt ? ExportOctomapBinary(map.grid(), options.out)
-                                                  : ExportOctomapColor(map, options.out));
+                       f == MapExportFormat::kBt ? ExportOctomapBinary(map.grid(), options.out)
+                                                 : ExportOctomapColor(map, options.out));
   summary.occupied_voxels = stats.occupied_voxels;
   summary.free_voxels = stats.free_voxels;
   summary.labelled_voxels = stats.labelled_voxels;

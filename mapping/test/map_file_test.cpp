@@ -1,5 +1,7 @@
 // The .avpmap file: exact round trips, deterministic bytes, and clear errors (never a crash) on
 // truncated, corrupted or foreign input. Also the semantic PLY export.
+#include <algorithm>
+#include <array>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -15,6 +17,7 @@
 #include <avp/core/rng.h>
 #include <avp/io/label_preview.h>
 #include <avp/mapping/map_file.h>
+#include <avp/mapping/octomap_io.h>
 #include <avp/mapping/ply_export.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/test/read_file.h>
@@ -506,9 +509,14 @@ TEST_F(PlyExportTest, AsciiWithFreeVoxels) {
   map.grid().MutableSemantic({-50, 0, 0})->semantic_class =
       static_cast<uint8_t>(SemanticClass::kStem);
   const auto path = dir_ / "map_ascii.ply";
-  const auto stats = ExportSemanticPly(map.grid(), path, {.binary = false, .occupied_only = false});
+  const auto stats =
+      ExportSemanticPly(map.grid(), path, {.binary = false, .voxels = PlyVoxels::kAllLabelled});
   ASSERT_TRUE(stats.ok()) << stats.status().ToString();
   EXPECT_EQ(stats->vertices, map.grid().CountSemanticVoxels());
+  EXPECT_EQ(stats->labelled, stats->vertices);
+  EXPECT_EQ(stats->not_occupied, 1u);
+  EXPECT_EQ(stats->unlabelled, 0u);
+  EXPECT_EQ(stats->skipped_not_occupied, 0u);
   const PlyFile ply = ReadPly(path);
   EXPECT_THAT(ply.header, HasSubstr("format ascii 1.0\n"));
   std::istringstream body(ply.body);
@@ -532,6 +540,196 @@ TEST_F(PlyExportTest, AsciiWithFreeVoxels) {
   }
   EXPECT_EQ(lines, stats->vertices);
   EXPECT_TRUE(found_stem);
+}
+
+/// One vertex of a PLY that ExportSemanticPly wrote.
+struct PlyVertex {
+  std::array<float, 3> xyz{};
+  std::array<int, 3> rgb{};
+  int cls = 0;
+  float confidence = 0.0f;
+  int instance = 0;
+  int observations = 0;
+};
+
+/// Reads back the vertices of an ExportSemanticPly file, binary or ASCII (from its header), and
+/// checks that the header's vertex count is the number of vertices the body holds.
+std::vector<PlyVertex> ReadPlyVertices(const std::filesystem::path& path) {
+  const PlyFile ply = ReadPly(path);
+  const size_t at = ply.header.find("element vertex ");
+  EXPECT_NE(at, std::string::npos);
+  const size_t count = std::stoul(ply.header.substr(at + 15));
+  std::vector<PlyVertex> out;
+  if (ply.header.find("format binary_little_endian 1.0\n") != std::string::npos) {
+    constexpr size_t kVertexBytes = 3 * 4 + 3 + 1 + 4 + 2 + 2;
+    EXPECT_EQ(ply.body.size(), count * kVertexBytes);
+    for (size_t off = 0; off + kVertexBytes <= ply.body.size(); off += kVertexBytes) {
+      const char* p = ply.body.data() + off;
+      PlyVertex v;
+      uint16_t instance, observations;
+      std::memcpy(v.xyz.data(), p, 12);  // the test machine is little-endian like the file
+      for (int i = 0; i < 3; ++i) v.rgb[i] = static_cast<uint8_t>(p[12 + i]);
+      v.cls = static_cast<uint8_t>(p[15]);
+      std::memcpy(&v.confidence, p + 16, 4);
+      std::memcpy(&instance, p + 20, 2);
+      std::memcpy(&observations, p + 22, 2);
+      v.instance = instance;
+      v.observations = observations;
+      out.push_back(v);
+    }
+  } else {
+    EXPECT_THAT(ply.header, HasSubstr("format ascii 1.0\n"));
+    std::istringstream body(ply.body);
+    std::string line;
+    while (std::getline(body, line)) {
+      std::istringstream fields(line);
+      PlyVertex v;
+      EXPECT_TRUE(fields >> v.xyz[0] >> v.xyz[1] >> v.xyz[2] >> v.rgb[0] >> v.rgb[1] >> v.rgb[2] >>
+                  v.cls >> v.confidence >> v.instance >> v.observations)
+          << line;
+      out.push_back(v);
+    }
+  }
+  EXPECT_EQ(out.size(), count);
+  return out;
+}
+
+/// A small map: 12 occupied fruit voxels, 2 occupied leaf voxels, 6 occupied unlabelled voxels
+/// (one with a semantic cell that has evidence but no label), a labelled free voxel, 5 free
+/// voxels and one just below the occupied threshold.
+SemanticMap MakePlantMap() {
+  SemanticMap map(TestOptions());
+  OccupancyGrid& grid = map.grid();
+  const float hi = grid.clamp_max_log_odds();
+  const float lo = grid.clamp_min_log_odds();
+  const auto label = [&](const VoxelKey& k, SemanticClass cls, uint16_t instance) {
+    SemanticCell* c = grid.MutableSemantic(k);
+    c->semantic_class = static_cast<uint8_t>(cls);
+    c->instance_id = instance;
+    c->confidence = 0.875f;
+    c->observations = 4;
+  };
+  for (int x = 0; x < 3; ++x) {
+    for (int y = 0; y < 4; ++y) {
+      EXPECT_TRUE(grid.SetLogOdds({x, y, 20}, hi));
+      label({x, y, 20}, SemanticClass::kFruit, 1);
+    }
+  }
+  for (int x = 0; x < 2; ++x) {
+    EXPECT_TRUE(grid.SetLogOdds({x, -5, 10}, hi));
+    label({x, -5, 10}, SemanticClass::kLeaf, 0);
+  }
+  for (int z = 0; z < 6; ++z) EXPECT_TRUE(grid.SetLogOdds({-3, 0, z}, hi));  // the stem, unseen
+  grid.MutableSemantic({-3, 0, 2})->observations = 2;                        // evidence, no label
+  EXPECT_TRUE(grid.SetLogOdds({5, 5, 5}, lo));
+  label({5, 5, 5}, SemanticClass::kStem, 0);  // labelled but free: never in "occupied"
+  for (int x = 20; x < 25; ++x) EXPECT_TRUE(grid.SetLogOdds({x, 0, 0}, lo));
+  EXPECT_TRUE(grid.SetLogOdds({30, 0, 0}, grid.occupied_log_odds() - 0.01f));
+  return map;
+}
+
+TEST_F(PlyExportTest, VoxelsNamesRoundTrip) {
+  for (PlyVoxels v : {PlyVoxels::kLabelled, PlyVoxels::kAllLabelled, PlyVoxels::kOccupied}) {
+    EXPECT_EQ(PlyVoxelsFromString(ToString(v)), v);
+  }
+  EXPECT_EQ(ToString(PlyVoxels::kAllLabelled), "all-labelled");
+  EXPECT_FALSE(PlyVoxelsFromString("all").has_value());
+  EXPECT_FALSE(PlyVoxelsFromString("Occupied").has_value());
+}
+
+TEST_F(PlyExportTest, OccupiedHoldsTheWholePlantInClassColoursAndGrey) {
+  const SemanticMap map = MakePlantMap();
+  const OccupancyGrid& grid = map.grid();
+  ASSERT_EQ(grid.CountOccupiedVoxels(), 20u);
+  const auto fruit_rgb = io::ClassColor(SemanticClass::kFruit);
+  const auto leaf_rgb = io::ClassColor(SemanticClass::kLeaf);
+  std::vector<std::vector<PlyVertex>> written;
+  for (const bool binary : {true, false}) {
+    SCOPED_TRACE(binary ? "binary" : "ascii");
+    const auto path = dir_ / (binary ? "plant.ply" : "plant_ascii.ply");
+    const auto stats =
+        ExportSemanticPly(grid, path, {.binary = binary, .voxels = PlyVoxels::kOccupied});
+    ASSERT_TRUE(stats.ok()) << stats.status().ToString();
+    EXPECT_EQ(stats->vertices, 20u);
+    EXPECT_EQ(stats->labelled, 14u);
+    EXPECT_EQ(stats->unlabelled, 6u);
+    EXPECT_EQ(stats->not_occupied, 0u);
+    EXPECT_EQ(stats->skipped_not_occupied, 1u);  // the free stem voxel
+    EXPECT_EQ(stats->file_bytes, std::filesystem::file_size(path));
+    const std::vector<PlyVertex> vertices = ReadPlyVertices(path);
+    ASSERT_EQ(vertices.size(), 20u);
+    size_t fruit = 0, leaf = 0, grey = 0;
+    std::set<VoxelKey> seen;
+    for (const PlyVertex& v : vertices) {
+      const VoxelKey k = grid.KeyOf(Eigen::Vector3d(v.xyz[0], v.xyz[1], v.xyz[2]));
+      EXPECT_TRUE(seen.insert(k).second) << "voxel written twice";
+      EXPECT_EQ(grid.State(k), VoxelState::kOccupied);
+      EXPECT_NEAR(v.xyz[2], grid.CenterOf(k).z(), 1e-6);
+      const SemanticCell* c = grid.Semantic(k);
+      if (c != nullptr && c->has_label()) {
+        EXPECT_EQ(v.cls, c->semantic_class);
+        EXPECT_EQ(v.confidence, c->confidence);
+        EXPECT_EQ(v.instance, c->instance_id);
+        EXPECT_EQ(v.observations, c->observations);
+      }
+      if (v.cls == static_cast<int>(SemanticClass::kFruit)) {
+        ++fruit;
+        EXPECT_EQ(v.rgb, (std::array<int, 3>{fruit_rgb[0], fruit_rgb[1], fruit_rgb[2]}));
+        EXPECT_EQ(v.instance, 1);
+      } else if (v.cls == static_cast<int>(SemanticClass::kLeaf)) {
+        ++leaf;
+        EXPECT_EQ(v.rgb, (std::array<int, 3>{leaf_rgb[0], leaf_rgb[1], leaf_rgb[2]}));
+      } else {
+        ++grey;
+        EXPECT_EQ(v.cls, static_cast<int>(SemanticClass::kBackground));
+        EXPECT_EQ(v.rgb,
+                  (std::array<int, 3>{kUnlabelledOccupiedColor[0], kUnlabelledOccupiedColor[1],
+                                      kUnlabelledOccupiedColor[2]}));
+        EXPECT_EQ(v.confidence, 0.0f);
+        EXPECT_EQ(v.instance, 0);
+        EXPECT_EQ(v.observations, 0);
+        EXPECT_EQ(k.x, -3);
+      }
+    }
+    EXPECT_EQ(fruit, 12u);
+    EXPECT_EQ(leaf, 2u);
+    EXPECT_EQ(grey, 6u);
+    written.push_back(vertices);
+  }
+  // Binary and ASCII hold the same vertices in the same order.
+  ASSERT_EQ(written.size(), 2u);
+  for (size_t i = 0; i < written[0].size(); ++i) {
+    EXPECT_EQ(written[0][i].xyz, written[1][i].xyz) << i;
+    EXPECT_EQ(written[0][i].rgb, written[1][i].rgb) << i;
+    EXPECT_EQ(written[0][i].cls, written[1][i].cls) << i;
+  }
+}
+
+TEST_F(PlyExportTest, EachVoxelsChoiceOnTheSameMap) {
+  const SemanticMap map = MakePlantMap();
+  const auto path = dir_ / "plant.ply";
+  // labelled: the 14 occupied labelled voxels; all-labelled: and the free stem voxel.
+  auto stats = ExportSemanticPly(map.grid(), path);
+  ASSERT_TRUE(stats.ok()) << stats.status().ToString();
+  EXPECT_EQ(stats->vertices, 14u);
+  EXPECT_EQ(stats->skipped_not_occupied, 1u);
+  EXPECT_EQ(ReadPlyVertices(path).size(), 14u);
+  stats = ExportSemanticPly(map.grid(), path, {.voxels = PlyVoxels::kAllLabelled});
+  ASSERT_TRUE(stats.ok()) << stats.status().ToString();
+  EXPECT_EQ(stats->vertices, 15u);
+  EXPECT_EQ(stats->not_occupied, 1u);
+  const std::vector<PlyVertex> all = ReadPlyVertices(path);
+  ASSERT_EQ(all.size(), 15u);
+  EXPECT_EQ(std::count_if(
+                all.begin(), all.end(),
+                [](const PlyVertex& v) { return v.cls == static_cast<int>(SemanticClass::kStem); }),
+            1);
+  // An empty map writes a valid PLY with no vertices.
+  stats =
+      ExportSemanticPly(SemanticMap(TestOptions()).grid(), path, {.voxels = PlyVoxels::kOccupied});
+  ASSERT_TRUE(stats.ok()) << stats.status().ToString();
+  EXPECT_EQ(stats->vertices, 0u);
+  EXPECT_TRUE(ReadPlyVertices(path).empty());
 }
 
 TEST_F(PlyExportTest, UnwritablePathIsAnError) {

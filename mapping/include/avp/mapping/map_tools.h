@@ -21,6 +21,7 @@
 #include <avp/mapping/map_file.h>
 #include <avp/mapping/map_reader.h>
 #include <avp/mapping/octomap_io.h>
+#include <avp/mapping/ply_export.h>
 #include <avp/mapping/semantics.h>
 
 namespace avp::mapping {
@@ -66,15 +67,22 @@ struct MapExportOptions {
   std::string format;
   std::filesystem::path out;
   bool ply_ascii = false;
-  /// PLY: every labelled voxel, not only the occupied ones.
-  bool ply_all_labelled = false;
+  /// PLY: which voxels (`--voxels`; `--all-labelled` is kAllLabelled). Any other format refuses
+  /// a value other than the default kLabelled.
+  PlyVoxels ply_voxels = PlyVoxels::kLabelled;
 };
 struct MapExportSummary {
   MapExportFormat format = MapExportFormat::kBt;
   std::filesystem::path out;
-  size_t occupied_voxels = 0;  ///< bt / ot
-  size_t free_voxels = 0;      ///< bt / ot
-  size_t labelled_voxels = 0;  ///< ot: coloured by class; ply: vertices; avpmap: labelled
+  size_t occupied_voxels = 0;  ///< bt / ot / avpmap; ply: occupied vertices
+  size_t free_voxels = 0;      ///< bt / ot / avpmap
+  /// ot: coloured by class; ply: labelled vertices (class colour); avpmap: labelled.
+  size_t labelled_voxels = 0;
+  /// ply, --voxels occupied: vertices of occupied voxels without a label (grey, class 0).
+  size_t unlabelled_voxels = 0;
+  /// ply, --voxels all-labelled: labelled vertices of voxels that are not occupied.
+  size_t not_occupied_voxels = 0;
+  PlyVoxels ply_voxels = PlyVoxels::kLabelled;  ///< ply: which voxels were written
   uint64_t file_bytes = 0;
   MapSource source;  ///< what was read
 };
