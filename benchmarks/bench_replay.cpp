@@ -9,25 +9,32 @@
 //   BM_Replay/recorded         read + the recorded masks + integrate + evaluate + write the folder
 //   BM_Replay/oracle           the same with the oracle segmenter rerun on the recorded labels
 //   BM_Replay/robot_bag        the file read as a robot's bag (images, CameraInfo, TF) + oracle
+//   BM_ReplayRobotBag/W/H      a 90-frame RealSense bag (W x H, 30 Hz) replayed frame by frame
+//                              with the colour segmenter; peak resident memory
 // Counters: fps (views per second of wall time, the whole replay), ms_per_view, and for the
 // replays the original episode's ms per view (episode_ms_per_view: capture, segment, integrate,
 // evaluate, plan, move), speedup = episode_ms_per_view / ms_per_view, and the replay's own
 // integrate_ms and segment_ms per view (the rest: reading, evaluating, writing the folder).
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <optional>
 #include <string>
 
 #include <benchmark/benchmark.h>
+#include <fmt/format.h>
 
 #include <avp/experiment/replay.h>
 #include <avp/experiment/run_folder.h>
 #include <avp/ros/bag/bag_reader.h>
 
 #include "bench_report.h"
+#include "robot_bag_writer.h"
 
 namespace avp {
 namespace {
@@ -103,24 +110,22 @@ BENCHMARK(BM_ReadBag)->Unit(benchmark::kMillisecond)->Iterations(3)->UseRealTime
 void BM_Replay(benchmark::State& state, int mode) {
   Fixture& f = TheFixture();
   ros::bag::BagReadOptions read;
-  if (mode == 2) {
-    read.as_robot_bag = true;
-    read.frame_rate_hz = 0.0;
-  }
+  if (mode == 2) read.as_robot_bag = true;
   double seconds = 0.0, integrate_ms = 0.0, segment_ms = 0.0;
   size_t views = 0;
   for (auto _ : state) {
     const auto t0 = Clock::now();
-    Result<ros::bag::Bag> bag = ros::bag::ReadBag(f.bag, read);
+    Result<std::unique_ptr<ros::bag::BagReader>> bag = ros::bag::BagReader::Open(f.bag, read);
     if (!bag.ok()) Die(bag.status());
-    Result<experiment::RunConfig> config = experiment::BagRunConfig(*bag);
+    Result<experiment::RunConfig> config = experiment::BagRunConfig(**bag);
     if (!config.ok()) Die(config.status());
+    if (mode == 2) config->replay.fps = 0.0;
     experiment::ReplayOptions o;
     o.segmenter = mode == 0 ? "recorded" : "oracle";
     o.folder.out_dir = f.dir / "replay";
     o.folder.force = true;
     Result<experiment::ReplaySummary> r =
-        experiment::ReplayToFolder(*bag, *config, f.registries, o);
+        experiment::ReplayToFolder(**bag, *config, f.registries, o);
     if (!r.ok()) Die(r.status());
     seconds += Seconds(t0);
     views += r->views;
@@ -153,6 +158,115 @@ BENCHMARK_CAPTURE(BM_Replay, oracle, 1)
 BENCHMARK_CAPTURE(BM_Replay, robot_bag, 2)
     ->Unit(benchmark::kMillisecond)
     ->Iterations(3)
+    ->UseRealTime();
+
+/// The process's peak resident memory (VmHWM), MB, or NaN when /proc does not say.
+double PeakRssMb() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+  }
+  return std::nan("");
+}
+
+/// Resets VmHWM to the current RSS (Linux >= 4.0: clear_refs 5), so that PeakRssMb measures what
+/// follows.
+void ResetPeakRss() { std::ofstream("/proc/self/clear_refs") << "5"; }
+
+/// A RealSense robot's bag (ros/bag/test/robot_bag_writer.h) of 3 s at 30 Hz, width x height:
+/// rgb8 colour, 16UC1 depth of a wall 0.6 m ahead with a red disc, CameraInfo, /tf at 100 Hz.
+fs::path RobotBag(int width, int height) {
+  const fs::path path = TheFixture().dir / fmt::format("robot_{}x{}.mcap", width, height);
+  if (fs::exists(path)) return path;
+  using Writer = ros::bag::testing::RobotBagWriter;
+  auto w = Writer::Open(path).value();
+  const int64_t t0 = 1'700'000'000'000'000'000;
+  const RigidTransform optical =
+      RigidTransform::LookAt({0, 0, 0}, {1, 0, 0}, Eigen::Vector3d::UnitZ());
+  if (!w->Tf({Writer::Edge("igus_rebel_base_link", "link",
+                           RigidTransform(Eigen::Vector3d(0, 0, 0.4)), t0),
+              Writer::Edge("link", "camera_color_optical_frame", optical, t0)},
+             t0, true)
+           .ok()) {
+    Die(InternalError("tf"));
+  }
+  CameraIntrinsics K;
+  K.width = width;
+  K.height = height;
+  K.fx = K.fy = 0.9 * width;
+  K.cx = (width - 1) / 2.0;
+  K.cy = (height - 1) / 2.0;
+  ImageRgb8 rgb(width, height);
+  DepthImage depth(width, height);
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u) {
+      const int du = u - width / 2, dv = v - height / 2;
+      const bool disc = du * du + dv * dv < (height / 5) * (height / 5);
+      rgb(u, v, 0) = disc ? 210 : 40;
+      rgb(u, v, 1) = disc ? 20 : 160;
+      rgb(u, v, 2) = disc ? 30 : 40;
+      depth(u, v) = disc ? 0.55f : 0.6f;
+    }
+  }
+  for (int i = 0; i < 90; ++i) {
+    const int64_t t = t0 + i * int64_t{33'333'333};
+    if (!w->Frame(t, rgb, depth, ros::msg::ToCameraInfo(K, {}), "camera_color_optical_frame")
+             .ok()) {
+      Die(InternalError("frame"));
+    }
+  }
+  if (Status st = w->Close(); !st.ok()) Die(st);
+  return path;
+}
+
+/// A robot's bag replayed frame by frame (replay.fps = 0: all 90 frames) with the colour
+/// segmenter into a run folder, at 640 x 480 and 1280 x 720: fps (views per second of wall
+/// time), MB_per_s of bag read, and peak_rss_MB (the process's resident memory at its highest
+/// during the replay) with rss_growth_MB over the memory before it.
+void BM_ReplayRobotBag(benchmark::State& state) {
+  Fixture& f = TheFixture();
+  const fs::path bag = RobotBag(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
+  double seconds = 0.0, peak = 0.0, growth = 0.0;
+  size_t views = 0;
+  for (auto _ : state) {
+    const double before = [] {
+      std::ifstream status("/proc/self/status");
+      std::string line;
+      while (std::getline(status, line)) {
+        if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+      }
+      return std::nan("");
+    }();
+    ResetPeakRss();
+    const auto t0 = Clock::now();
+    auto reader = ros::bag::BagReader::Open(bag).value();
+    experiment::RunConfig config = experiment::BagRunConfig(*reader).value();
+    config.replay.fps = 0.0;
+    experiment::ReplayOptions o;
+    o.segmenter = "color";
+    o.folder.out_dir = f.dir / "replay_robot";
+    o.folder.force = true;
+    Result<experiment::ReplaySummary> r =
+        experiment::ReplayToFolder(*reader, config, f.registries, o);
+    if (!r.ok()) Die(r.status());
+    seconds += Seconds(t0);
+    views += r->views;
+    peak = std::max(peak, PeakRssMb());
+    growth = std::max(growth, PeakRssMb() - before);
+  }
+  state.counters["fps"] = static_cast<double>(views) / seconds;
+  state.counters["ms_per_view"] = 1e3 * seconds / static_cast<double>(views);
+  state.counters["MB_per_s"] = static_cast<double>(fs::file_size(bag)) *
+                               static_cast<double>(state.iterations()) / seconds / 1e6;
+  state.counters["peak_rss_MB"] = peak;
+  state.counters["rss_growth_MB"] = growth;
+}
+BENCHMARK(BM_ReplayRobotBag)
+    ->Args({640, 480})
+    ->Args({1280, 720})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(2)
     ->UseRealTime();
 
 }  // namespace

@@ -59,7 +59,7 @@ SKIP = [
     (r"remote://|grpc://|\bavp serve\b", "a network service (tests/remote_segmenter_e2e_test)"),
     (r"^xdg-open\b", "opens a browser"),
     (r"^python\b.*export_", "exports models with the upstream repository"),
-    (r"\brobot\.mcap\b", "needs a robot's rosbag2 recording"),
+    (r"\brobot\.mcap\b|\breplay bag/", "needs a robot's rosbag2 recording"),
 ]
 
 # ---- What runs: an avp command, or these helpers. ----
@@ -118,7 +118,13 @@ OVERRIDES = [
 # ---- Files the docs only describe, made before the first matching command: (doc, regex,
 # shell commands, why). ----
 EXAMPLE = "cp configs/scenes/example_plant.yaml configs/scenes/example_plant.obj configs/scenes/example_plant.mtl"
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PREPARE = [
+    ("README.md", r"replay rosbag2_humble/",
+     [f"avp run --scenario tomato-single-cluster --seed 1 --record --out rec_plain {VIEWS2}",
+      f"python3 {REPO}/ros/bag/test/write_humble_db3.py --from-mcap rec_plain/episode.mcap "
+      "rosbag2_humble"],
+     "a Humble bag folder: a recording written in rosbag2's SQLite 3 storage"),
     ("README.md", r"scene check my_plant\.yaml", [f"{EXAMPLE} . && mv example_plant.yaml my_plant.yaml"],
      "my_plant.yaml: the shipped example plant"),
     ("README.md", r"their_fruit\.bt", ["avp map gt --scene my_plant.yaml --voxel-size 0.006 --out their_fruit.bt"],
@@ -165,8 +171,11 @@ FIGURES = [
     ("README.md", r"--seed 3 --planner avp-nbv --segmenter oracle --views 8 --out out/run",
      [f"out/run/{f}" for f in ("record.json", "metrics.csv", "map.avpmap", "map.ot", "fruit_voxels.ply",
                                "metrics.svg", "report.html")], True),
-    ("README.md", r"--record --out out/rec", ["out/rec/episode.mcap"], True),
-    ("README.md", r"replay out/rec/episode\.mcap", ["metrics identical to the recording's at all"], True),
+    ("README.md", r"--record --record-compression zstd --out out/rec", ["out/rec/episode.mcap"], True),
+    ("README.md", r"replay out/rec/episode\.mcap",
+     ["MCAP (indexed, zstd chunks)", "metrics identical to the recording's at all"], True),
+    ("README.md", r"replay rosbag2_humble/", ["rosbag2 folder: 1 SQLite 3 file", "replayed 2 view(s)"],
+     True),
     ("README.md", r"bench --scenarios tomato-full-occlusion,", ["out/b/summary.md"], True),
     ("experiments.md", r"--print-config$", ["scenario: tomato-full-occlusion", "seed: 3", "voxel_size_m: 0.005",
                                            "policy: bayesian", "views: 8", "carving: projective",

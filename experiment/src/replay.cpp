@@ -125,19 +125,13 @@ bool RecordedPlan(const json& step, int keep_top, pipeline::StepRecord& s,
   return true;
 }
 
-/// Whether every view has the recording's masks.
-bool AllRecorded(const ros::bag::Bag& bag) {
-  return std::all_of(bag.views.begin(), bag.views.end(),
-                     [](const ros::bag::BagView& v) { return v.segmentation.has_value(); });
-}
-
 }  // namespace
 
-Result<RunConfig> BagRunConfig(const ros::bag::Bag& bag) {
+Result<RunConfig> BagRunConfig(const ros::bag::BagReader& bag) {
   RunConfig config;
-  const auto it = bag.avp_metadata.find("run_config");
-  if (it == bag.avp_metadata.end()) return config;
-  const std::string context = fmt::format("{}: metadata run_config", bag.path.string());
+  const auto it = bag.avp_metadata().find("run_config");
+  if (it == bag.avp_metadata().end()) return config;
+  const std::string context = fmt::format("{}: metadata run_config", bag.path().string());
   AVP_ASSIGN_OR_RETURN(const YAML::Node node, io::ParseYaml(it->second, context));
   AVP_RETURN_IF_ERROR(ReadRunConfigYaml(node, context, config));
   return config;
@@ -145,20 +139,25 @@ Result<RunConfig> BagRunConfig(const ros::bag::Bag& bag) {
 
 namespace {
 
+/// The segmenters that read a bag's own masks or the simulator's labels, for the messages.
+constexpr std::string_view kRealSegmenters =
+    "color, ywes://MODEL_DIR, lsam://MODEL_DIR or remote://HOST:PORT (`avp run --segmenter help` "
+    "lists them)";
+
 /// Whether the replay uses the recording's masks (else config.segmenter, set from
-/// options.segmenter); summary.segmenter names the choice. Errors: "recorded" for a view
-/// without masks, an oracle segmenter for a view without simulator labels.
-Result<bool> ChooseSegmenter(const ros::bag::Bag& bag, const ReplayOptions& options,
+/// options.segmenter); summary.segmenter names the choice. Errors: "recorded" for a bag without
+/// masks, an oracle segmenter for a bag without simulator labels, no segmenter for a robot's bag.
+Result<bool> ChooseSegmenter(const ros::bag::BagReader& bag, const ReplayOptions& options,
                              RunConfig& config, ReplaySummary& summary) {
+  // A bag read as a robot's (as_robot_bag) keeps no masks.
+  const bool has_masks = bag.avp_recording() && bag.HasTopic(ros::bag::kInstancesTopic);
   const bool recorded = options.segmenter == kRecordedSegmenter ||
-                        (options.segmenter.empty() && bag.avp_recording && AllRecorded(bag));
+                        (options.segmenter.empty() && bag.avp_recording() && has_masks);
   if (recorded) {
-    for (const ros::bag::BagView& v : bag.views) {
-      if (!v.segmentation) {
-        return InvalidArgumentError(
-            fmt::format("{}: view {} has no recorded masks ({}): give --segmenter NAME",
-                        bag.path.string(), v.index, ros::bag::kInstancesTopic));
-      }
+    if (!has_masks) {
+      return InvalidArgumentError(
+          fmt::format("{}: the bag has no recorded masks ({}): give --segmenter NAME: {}",
+                      bag.path().string(), ros::bag::kInstancesTopic, kRealSegmenters));
     }
     summary.segmenter = std::string(kRecordedSegmenter);
     return true;
@@ -167,30 +166,33 @@ Result<bool> ChooseSegmenter(const ros::bag::Bag& bag, const ReplayOptions& opti
     config.segmenter = {options.segmenter, {}};
   }
   summary.segmenter = config.segmenter.name;
-  if (summary.segmenter.starts_with("oracle")) {
-    for (const ros::bag::BagView& v : bag.views) {
-      if (!v.observation.labels) {
-        return InvalidArgumentError(fmt::format(
-            "{}: the '{}' segmenter needs the simulator's label images ({}, {}), and view {} "
-            "has none (a real robot's bag never has them): use --segmenter recorded (an avp "
-            "recording's masks) or a real segmenter (color, ywes, lsam, remote://...)",
-            bag.path.string(), summary.segmenter, ros::bag::kSimInstanceTopic,
-            ros::bag::kSimClassTopic, v.index));
-      }
+  const bool has_labels = bag.HasSimulatorLabels();
+  if (summary.segmenter.starts_with("oracle") && !has_labels) {
+    if (options.segmenter.empty() && !bag.avp_recording()) {
+      return InvalidArgumentError(fmt::format(
+          "{}: a robot's bag has neither avp's masks nor the simulator's labels, so it needs a "
+          "segmenter: give --segmenter NAME: {}",
+          bag.path().string(), kRealSegmenters));
     }
+    return InvalidArgumentError(fmt::format(
+        "{}: the '{}' segmenter needs the simulator's label images ({}, {}), and the bag has "
+        "none (a real robot's bag never has them): use --segmenter recorded (an avp "
+        "recording's masks) or a real segmenter: {}",
+        bag.path().string(), summary.segmenter, ros::bag::kSimInstanceTopic,
+        ros::bag::kSimClassTopic, kRealSegmenters));
   }
   return false;
 }
 
 /// The bag's ground truth when it has one of the map's voxel size (else a note says why not).
-Result<std::optional<eval::GroundTruth>> BagGroundTruth(const ros::bag::Bag& bag,
+Result<std::optional<eval::GroundTruth>> BagGroundTruth(const ros::bag::BagReader& bag,
                                                         const RunConfig& config,
                                                         ReplaySummary& summary) {
-  if (!bag.ground_truth) return std::optional<eval::GroundTruth>();
-  Result<eval::GroundTruth> read = eval::GroundTruthFromJson(*bag.ground_truth);
+  if (!bag.ground_truth()) return std::optional<eval::GroundTruth>();
+  Result<eval::GroundTruth> read = eval::GroundTruthFromJson(*bag.ground_truth());
   if (!read.ok()) {
     return read.status().WithContext(
-        fmt::format("{}: attachment {}", bag.path.string(), ros::bag::kGroundTruthAttachment));
+        fmt::format("{}: attachment {}", bag.path().string(), ros::bag::kGroundTruthAttachment));
   }
   if (std::abs(read->voxel_size_m - config.map.grid.voxel_size_m) > 1e-12) {
     summary.notes.push_back(
@@ -209,11 +211,15 @@ struct ReplayScene {
   std::string description;
 };
 
-ReplayScene SceneOfBag(const ros::bag::Bag& bag, const RunConfig& config,
+ReplayScene SceneOfBag(const ros::bag::BagReader& bag, const RunConfig& config,
                        const Registries& registries, bool have_truth, ReplaySummary& summary) {
-  ReplayScene out{Box3(), bag.path.stem().string(), "replay of " + bag.path.string()};
-  if (auto s = bag.avp_metadata.find("scene"); s != bag.avp_metadata.end()) out.name = s->second;
-  if (bag.avp_recording && (!config.scenario.empty() || !config.scene_file.empty())) {
+  ReplayScene out{config.replay.Roi().value_or(Box3()), bag.path().stem().string(),
+                  "replay of " + bag.path().string()};
+  if (auto s = bag.avp_metadata().find("scene"); s != bag.avp_metadata().end()) {
+    out.name = s->second;
+  }
+  if (bag.avp_recording() && !config.replay.Roi() &&
+      (!config.scenario.empty() || !config.scene_file.empty())) {
     Result<sim::Scene> scene = LoadScene(config, registries);
     if (scene.ok()) {
       out.roi = scene->plant_bounds.Inflated(config.roi_margin_m);
@@ -228,37 +234,68 @@ ReplayScene SceneOfBag(const ros::bag::Bag& bag, const RunConfig& config,
   return out;
 }
 
-/// record.json's "replay" section.
-json ReplayRecord(const ros::bag::Bag& bag, const ReplaySummary& summary) {
+/// record.json's "replay" section: the bag, what became of each of its frames, the comparison
+/// with the recorded metrics.
+json ReplayRecord(const ros::bag::BagReader& bag, const ReplaySummary& summary) {
+  const ros::bag::FrameAccount& a = bag.account();
+  std::map<int, const ReplaySummary::ViewMasks*> masks;
+  for (const ReplaySummary::ViewMasks& m : summary.view_masks) masks[m.index] = &m;
+  json frames = json::array();
+  for (const ros::bag::FrameAccount::Frame& f : a.frames) {
+    json j{{"index", f.index}, {"stamp_ns", f.stamp_ns}, {"what", f.what}};
+    if (auto m = masks.find(f.index); m != masks.end() && f.what == "fused") {
+      j["masks"] = m->second->masks;
+      j["masks_without_depth"] = m->second->masks_without_depth;
+    }
+    frames.push_back(std::move(j));
+  }
+  std::vector<std::string> files;
+  for (const auto& f : bag.info().files) files.push_back(f.string());
   const json notes = summary.notes;
   return json{{"replay",
-               {{"bag", bag.path.string()},
-                {"avp_recording", bag.avp_recording},
-                {"recorded_with", bag.avp_metadata},
+               {{"bag", bag.path().string()},
+                {"format", bag.info().format},
+                {"files", files},
+                {"avp_recording", bag.avp_recording()},
+                {"recorded_with", bag.avp_metadata()},
                 {"segmenter", summary.segmenter},
-                {"views", bag.views.size()},
-                {"damage", bag.damage.ok() ? json(nullptr) : json(bag.damage.ToString())},
-                {"intact_bytes", bag.intact_bytes},
-                {"file_bytes", bag.file_bytes},
-                {"pairs", bag.pairs},
-                {"pairs_thinned", bag.pairs_thinned},
-                {"skipped", bag.skipped},
-                {"skipped_count", bag.skipped_count},
+                {"views", summary.views},
+                {"damage", bag.damage().ok() ? json(nullptr) : json(bag.damage().ToString())},
+                {"bytes_read", bag.bytes_read()},
+                {"file_bytes", bag.info().file_bytes},
+                {"pairs", a.pairs},
+                {"left_out", a.left_out},
+                {"skipped_by_reason", a.skipped_by_reason},
+                {"skipped", a.skipped},
+                {"skipped_count", a.skipped_count},
+                {"frames", frames},
+                {"masks_without_depth", summary.masks_without_depth},
+                {"masks", summary.masks},
+                {"topic_messages", bag.topic_messages()},
                 {"metrics_compared", summary.metrics_compared},
                 {"metrics_differ", summary.metrics_differ},
                 {"first_difference", summary.first_difference},
                 {"notes", notes}}}};
 }
 
-/// The episode of a replay: each view of the bag fused through the pipeline (pipeline::ViewFusion,
-/// as the episode fused it), evaluated against the ground truth when there is one, with the plan
-/// the recorded episode made after it.
+/// The episode of a replay: each view of the bag, as it is read, fused through the pipeline
+/// (pipeline::ViewFusion, as the episode fused it), evaluated against the ground truth when there
+/// is one, with the plan the recorded episode made after it.
 class ReplayEpisode {
  public:
-  ReplayEpisode(const ros::bag::Bag& bag, const RunConfig& config,
-                const pipeline::EpisodeOptions& eo, const eval::GroundTruth* gt, const Box3& roi,
-                segmentation::Segmenter* segmenter, ReplaySummary& summary)
-      : bag_(bag), config_(config), eo_(eo), gt_(gt), segmenter_(segmenter), summary_(summary) {
+  /// `first`: the bag's first view, read before the run folder was made (so that a bag with
+  /// nothing to fuse is refused before anything is written).
+  ReplayEpisode(ros::bag::BagReader& bag, std::optional<ros::bag::BagView> first,
+                const RunConfig& config, const pipeline::EpisodeOptions& eo,
+                const eval::GroundTruth* gt, const Box3& roi, segmentation::Segmenter* segmenter,
+                ReplaySummary& summary)
+      : bag_(bag),
+        first_(std::move(first)),
+        config_(config),
+        eo_(eo),
+        gt_(gt),
+        segmenter_(segmenter),
+        summary_(summary) {
     eval_options_.roi = roi;
   }
 
@@ -268,15 +305,20 @@ class ReplayEpisode {
     pipeline::ViewFusion fusion(*map, eo_);
     pipeline::EpisodeResult& episode = result_.episode;
     const auto t_episode = Clock::now();
-    const int total = static_cast<int>(bag_.views.size());
-    for (int i = 0; i < total; ++i) {
+    for (int i = 0;; ++i) {
       if (stop.stop_requested()) {
         episode.end = pipeline::EpisodeEnd::kInterrupted;
         episode.end_reason = fmt::format("stop requested before view {}", i);
         break;
       }
-      ReplayView(i, fusion, stop, observers);
+      Result<std::optional<ros::bag::BagView>> view =
+          first_ ? Result<std::optional<ros::bag::BagView>>(std::move(first_)) : bag_.Next();
+      first_.reset();
+      if (!view.ok()) return view.status();
+      if (!*view) break;
+      AVP_RETURN_IF_ERROR(ReplayView(i, **view, fusion, stop, observers));
     }
+    summary_.views = episode.steps.size();
     EndOfReplay(episode);
     episode.total_ms = MsSince(t_episode);
     pipeline::NotifyEnd(observers, episode, *map);
@@ -306,13 +348,32 @@ class ReplayEpisode {
     return obs;
   }
 
-  void ReplayView(int i, pipeline::ViewFusion& fusion, const std::stop_token& stop,
-                  const std::vector<pipeline::EpisodeObserver*>& observers) {
-    const ros::bag::BagView& view = bag_.views[static_cast<size_t>(i)];
+  /// Why the view cannot be segmented as chosen (no recorded masks, no labels for the oracle).
+  Status CheckView(const ros::bag::BagView& view) const {
+    if (segmenter_ == nullptr && !view.segmentation) {
+      return InvalidArgumentError(
+          fmt::format("{}: view {} has no recorded masks ({}): give --segmenter NAME",
+                      bag_.path().string(), view.index, ros::bag::kInstancesTopic));
+    }
+    if (segmenter_ != nullptr && summary_.segmenter.starts_with("oracle") &&
+        !view.observation.labels) {
+      return InvalidArgumentError(fmt::format(
+          "{}: the '{}' segmenter needs the simulator's label images ({}, {}), and view {} has "
+          "none",
+          bag_.path().string(), summary_.segmenter, ros::bag::kSimInstanceTopic,
+          ros::bag::kSimClassTopic, view.index));
+    }
+    return Status::Ok();
+  }
+
+  Status ReplayView(int i, const ros::bag::BagView& view, pipeline::ViewFusion& fusion,
+                    const std::stop_token& stop,
+                    const std::vector<pipeline::EpisodeObserver*>& observers) {
+    AVP_RETURN_IF_ERROR(CheckView(view));
     const auto t_step = Clock::now();
     pipeline::StepRecord step;
     step.view = i;
-    step.views_total = static_cast<int>(bag_.views.size());
+    step.views_total = static_cast<int>(bag_.account().fused);  // read so far
     step.X_WC = view.observation.frame.X_WC;
     step.q = view.q;
     pipeline::ViewSeen seen;
@@ -325,16 +386,20 @@ class ReplayEpisode {
       fusion.Segment(ObservationOf(view), *segmenter_, static_cast<uint64_t>(view.index), stop,
                      step, seen);
     }
+    summary_.view_masks.push_back({view.index, step.masks, step.masks_without_depth});
+    summary_.masks += step.masks;
+    summary_.masks_without_depth += step.masks_without_depth;
     if (gt_ != nullptr) Evaluate(i, view, *seen.observation, fusion.map(), step);
     // The plan the recorded episode made after this view (not rerun): record.json, the report
     // and metrics.csv show it as the episode had it.
     planning::PlanResult plan;
-    if (bag_.avp_recording && RecordedPlan(view.step, eo_.record_top_candidates, step, plan)) {
+    if (bag_.avp_recording() && RecordedPlan(view.step, eo_.record_top_candidates, step, plan)) {
       seen.plan = std::move(plan);
     }
     step.times.total_ms = MsSince(t_step);
     result_.episode.steps.push_back(step);
     pipeline::NotifyStep(observers, result_.episode.steps.back(), seen.Data(), fusion.map());
+    return Status::Ok();
   }
 
   /// The step's metrics against the ground truth (as `avp run` computes them), the fruits' state,
@@ -349,7 +414,7 @@ class ReplayEpisode {
     fruits_.AfterView(i, std::move(now), visible);
     step.metrics = report::MetricsRow(result_.final_metrics);
     step.times.metrics_ms = MsSince(t0);
-    if (!bag_.avp_recording || view.step.is_null()) return;
+    if (!bag_.avp_recording() || view.step.is_null()) return;
     ++summary_.metrics_compared;
     const std::string difference = CompareMetrics(view.step, step);
     if (!difference.empty() && summary_.metrics_differ++ == 0) {
@@ -360,18 +425,19 @@ class ReplayEpisode {
 
   /// How the replay ended: interrupted by a stop or the bag's damage, else all its views.
   void EndOfReplay(pipeline::EpisodeResult& episode) const {
-    if (episode.end != pipeline::EpisodeEnd::kInterrupted && !bag_.damage.ok()) {
+    if (episode.end != pipeline::EpisodeEnd::kInterrupted && !bag_.damage().ok()) {
       episode.end = pipeline::EpisodeEnd::kInterrupted;
       episode.end_reason =
           fmt::format("the recording is damaged ({}): replayed the {} intact views",
-                      bag_.damage.message(), bag_.views.size());
+                      bag_.damage().message(), episode.steps.size());
     } else if (episode.end == pipeline::EpisodeEnd::kBudgetReached) {
       episode.end_reason = fmt::format("replayed {} views of {}", episode.steps.size(),
-                                       bag_.path.filename().string());
+                                       bag_.path().filename().string());
     }
   }
 
-  const ros::bag::Bag& bag_;
+  ros::bag::BagReader& bag_;
+  std::optional<ros::bag::BagView> first_;
   const RunConfig& config_;
   const pipeline::EpisodeOptions& eo_;
   const eval::GroundTruth* gt_;
@@ -384,12 +450,18 @@ class ReplayEpisode {
 
 }  // namespace
 
-Result<ReplaySummary> ReplayToFolder(const ros::bag::Bag& bag, RunConfig config,
+Result<ReplaySummary> ReplayToFolder(ros::bag::BagReader& bag, RunConfig config,
                                      const Registries& registries, const ReplayOptions& options) {
   ReplaySummary summary;
-  summary.views = bag.views.size();
-  if (bag.views.empty()) return InvalidArgumentError(bag.path.string() + ": no view to replay");
+  // The first view is read before anything else: a bag with nothing to fuse is refused before
+  // anything is written, and a streamed bag has shown its topics (masks? labels?) by then.
+  AVP_RETURN_IF_ERROR(
+      ReplayConfigTable().Validate(config.replay).WithContext("invalid run configuration: replay"));
+  AVP_RETURN_IF_ERROR(bag.SetSelection(config.replay));
+  AVP_ASSIGN_OR_RETURN(std::optional<ros::bag::BagView> first, bag.Next());
   AVP_ASSIGN_OR_RETURN(const bool recorded, ChooseSegmenter(bag, options, config, summary));
+  // The region of interest: the map keeps what is inside it.
+  if (const std::optional<Box3> roi = config.replay.Roi()) config.map.grid.roi = *roi;
   // Checked once, here: the bag has chosen the segmenter.
   AVP_ASSIGN_OR_RETURN(const CheckedRunConfig checked,
                        CheckedRunConfig::Check(std::move(config), registries));
@@ -405,7 +477,8 @@ Result<ReplaySummary> ReplayToFolder(const ros::bag::Bag& bag, RunConfig config,
         segmenter, registries.segmenters.Make(c.segmenter.name, checked.segmenter_options(),
                                               {.seed = Rng(c.seed).Fork("segmenter").NextU64()}));
   }
-  ReplayEpisode episode(bag, c, eo, gt ? &*gt : nullptr, scene.roi, segmenter.get(), summary);
+  ReplayEpisode episode(bag, std::move(first), c, eo, gt ? &*gt : nullptr, scene.roi,
+                        segmenter.get(), summary);
 
   FolderRun run;
   run.command = "avp replay";
@@ -419,7 +492,7 @@ Result<ReplaySummary> ReplayToFolder(const ros::bag::Bag& bag, RunConfig config,
     return episode.Run(observers, map_out, std::move(stop));
   };
   RunFolderOptions folder = options.folder;
-  folder.inputs.emplace_back(bag.path, "bag");
+  for (const auto& f : bag.info().files) folder.inputs.emplace_back(f, "bag");
   AVP_ASSIGN_OR_RETURN(summary.run, RunEpisodeToFolder(checked, folder, run));
   return summary;
 }

@@ -56,6 +56,42 @@ YAML::Node ComponentToYaml(const std::string& name, const AnyOptions& options) {
 
 }  // namespace
 
+std::optional<Box3> ReplayConfig::Roi() const {
+  if (roi_min_m.size() != 3 || roi_max_m.size() != 3) return std::nullopt;
+  return Box3(Eigen::Vector3d(roi_min_m[0], roi_min_m[1], roi_min_m[2]),
+              Eigen::Vector3d(roi_max_m[0], roi_max_m[1], roi_max_m[2]));
+}
+
+const OptionTable<ReplayConfig>& ReplayConfigTable() {
+  static const auto* table = [] {
+    using R = ReplayConfig;
+    auto* t = new OptionTable<R>("replay key");
+    ros::bag::AddFrameSelectionOptions(*t);
+    t->RealList("roi_min_m", &R::roi_min_m, "m", ValueRange::Closed(-1000, 1000), 0, 3,
+                "the map keeps voxels inside [roi_min_m, roi_max_m] only (x,y,z in the base "
+                "frame; empty: no box)");
+    t->RealList("roi_max_m", &R::roi_max_m, "m", ValueRange::Closed(-1000, 1000), 0, 3,
+                "the box's other corner (x,y,z)");
+    t->AddRule([](const R& r, std::vector<std::string>& errors) {
+      const size_t a = r.roi_min_m.size(), b = r.roi_max_m.size();
+      if ((a != 0 && a != 3) || (b != 0 && b != 3) || a != b) {
+        errors.push_back(fmt::format(
+            "roi_min_m ({} values) and roi_max_m ({} values): give both as x,y,z or neither", a,
+            b));
+        return;
+      }
+      for (size_t i = 0; i < a; ++i) {
+        if (!(r.roi_max_m[i] > r.roi_min_m[i])) {
+          errors.push_back(fmt::format("roi_max_m[{}] = {} must be above roi_min_m[{}] = {}", i,
+                                       r.roi_max_m[i], i, r.roi_min_m[i]));
+        }
+      }
+    });
+    return t;
+  }();
+  return *table;
+}
+
 const OptionTable<RunConfig>& RunConfigTable() {
   static const auto* table = [] {
     using R = RunConfig;
@@ -80,6 +116,7 @@ const OptionTable<RunConfig>& RunConfigTable() {
     t->Nested("map", &R::map, mapping::MapOptionTable());
     t->Nested("episode", &R::episode, pipeline::EpisodeOptionTable());
     t->Nested("ground_truth", &R::ground_truth, eval::GroundTruthOptionTable());
+    t->Nested("replay", &R::replay, ReplayConfigTable());
     t->AddRule([](const R& c, std::vector<std::string>& errors) {
       if (!c.scenario.empty() && !c.scene_file.empty()) {
         errors.push_back(fmt::format("give a scenario ('{}') or a scene file ('{}'), not both",

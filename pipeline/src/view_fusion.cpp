@@ -1,4 +1,5 @@
 #include <chrono>
+#include <cmath>
 #include <exception>
 #include <utility>
 
@@ -63,11 +64,35 @@ void ViewFusion::Segment(robot::Observation obs, segmentation::Segmenter& segmen
   Fuse(std::move(obs), std::move(masks), step, seen);
 }
 
+size_t CountMasksWithoutDepth(const Segmentation& segmentation, const RgbdFrame& frame) {
+  const DepthImage& depth = frame.depth_m;
+  size_t n = 0;
+  for (const InstanceMask& m : segmentation.instances) {
+    if (!m.mask.SameSizeAs(depth)) continue;  // Integrate names the mismatch
+    bool any = false;
+    for (int v = 0; v < depth.height() && !any; ++v) {
+      for (int u = 0; u < depth.width(); ++u) {
+        const float d = depth(u, v);
+        if (m.mask(u, v) != 0 && std::isfinite(d) && d >= frame.K.min_depth_m &&
+            d <= frame.K.max_depth_m) {
+          any = true;
+          break;
+        }
+      }
+    }
+    if (!any) ++n;
+  }
+  return n;
+}
+
 void ViewFusion::Fuse(robot::Observation obs, std::optional<Segmentation> segmentation,
                       StepRecord& step, ViewSeen& seen) {
   seen.observation = std::move(obs);
   seen.segmentation = std::move(segmentation);
-  if (seen.segmentation) step.masks = seen.segmentation->instances.size();
+  if (seen.segmentation) {
+    step.masks = seen.segmentation->instances.size();
+    step.masks_without_depth = CountMasksWithoutDepth(*seen.segmentation, seen.observation->frame);
+  }
   Integrate(step, seen);
   RecordMap(step);
 }

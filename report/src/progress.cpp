@@ -73,6 +73,9 @@ std::string FormatProgressTimes(size_t done, size_t total, double elapsed_s, Rat
 }
 
 std::string FormatProgressCounts(size_t done, size_t total, double elapsed_s, RateUnit* unit) {
+  // An unknown total (a bag read as it streams): the count, the rate and the time so far.
+  if (total == 0)
+    return fmt::format("{} {}", done, FormatProgressTimes(done, done, elapsed_s, unit));
   const size_t percent = total == 0 ? 100 : std::min<size_t>(done, total) * 100 / total;
   return fmt::format("{}/{} ({} %) {}", done, total, percent,
                      FormatProgressTimes(done, total, elapsed_s, unit));

@@ -318,6 +318,7 @@ void RunReportCollector::OnView(const pipeline::StepRecord& step, const pipeline
             {"target_voxels", step.target_voxels},
             {"instances", step.instances},
             {"masks", step.masks},
+            {"masks_without_depth", step.masks_without_depth},
             {"camera", camera},
             {"image", masks},
             {"plan", data.plan != nullptr ? PlanJson(step, *data.plan, options_) : json(nullptr)},

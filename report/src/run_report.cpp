@@ -22,6 +22,7 @@ json StepJson(const pipeline::StepRecord& s) {
   json j{{"view", s.view + 1},
          {"X_WC", io::ToJson(s.X_WC)},
          {"masks", s.masks},
+         {"masks_without_depth", s.masks_without_depth},
          {"known_voxels", s.known_voxels},
          {"occupied_voxels", s.occupied_voxels},
          {"target_voxels", s.target_voxels},

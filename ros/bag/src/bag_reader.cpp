@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <limits>
 #include <utility>
 
@@ -7,12 +8,14 @@
 
 #include <avp/core/text.h>
 #include <avp/io/mask_codec.h>
+#include <avp/robot/arm_model.h>
 #include <avp/ros/bag/bag_reader.h>
 #include <avp/ros/bag/encode.h>
 #include <avp/ros/bag/layout.h>
 #include <avp/ros/mcap/mcap.h>
 #include <avp/ros/msg/convert.h>
 #include <avp/ros/msg/images.h>
+#include <avp/ros/msg/lens.h>
 #include <avp/ros/msg/tf_buffer.h>
 
 namespace avp::ros::bag {
@@ -28,15 +31,19 @@ const OptionTable<BagReadOptions>& BagReadOptionTable() {
             "simulator label images PREFIX/instance, PREFIX/class (empty: none)");
     t->Real("tf_tolerance_ms", &O::tf_tolerance_ms, "ms", ValueRange::Closed(0, 10000),
             "outside a TF edge's samples, its nearest one within this much is used");
-    t->Real("frame_rate_hz", &O::frame_rate_hz, "Hz", ValueRange::Closed(0, 1000),
-            "real bags: fuse at most this many frames per second of bag time (0: every pair)");
-    t->Integer("max_views", &O::max_views, "", ValueRange::Closed(0, 1000000),
-               "fuse at most this many views (0: all)");
-    t->Real("max_decoded_mb", &O::max_decoded_mb, "MB", ValueRange::Above(0),
-            "the views are decoded in memory: at most this much");
+    t->Text("joint_states_topic", &O::joint_states_topic,
+            "without a TF transform to the camera: the arm's joints (sensor_msgs/JointState)");
+    t->Text("arm", &O::arm,
+            "the arm's YAML for the joints' camera pose (empty: avp's default arm)");
+    t->Text("distortion", &O::distortion,
+            "lens distortion: rectify (colour bilinear, depth nearest) or ignore");
     t->Flag("as_robot_bag", &O::as_robot_bag,
             "read an avp recording like a robot's bag (images, CameraInfo, TF; no /avp/step)");
     t->AddRule([](const O& o, std::vector<std::string>& errors) {
+      if (o.distortion != "rectify" && o.distortion != "ignore") {
+        errors.push_back(
+            fmt::format("distortion = {}: rectify or ignore", QuoteText(o.distortion)));
+      }
       if (!(o.min_depth_m > 0.0) || !(o.max_depth_m > o.min_depth_m) ||
           !std::isfinite(o.max_depth_m)) {
         errors.push_back(fmt::format("depth range [{}, {}] m must satisfy 0 < min < max",
@@ -48,205 +55,390 @@ const OptionTable<BagReadOptions>& BagReadOptionTable() {
   return *table;
 }
 
+size_t FrameAccount::left_out_count() const {
+  size_t n = 0;
+  for (const auto& [reason, count] : left_out) n += count;
+  return n;
+}
+
 // ---- Reading ------------------------------------------------------------------------------------
 
 namespace {
 
 constexpr size_t kMaxSkippedKept = 10;
+/// Images kept waiting for their partner (colour or depth) at most; beyond, the oldest goes.
+constexpr size_t kMaxQueued = 64;
+/// CameraInfo messages kept (the nearest in time to an image is used).
+constexpr size_t kMaxInfos = 16;
+/// TF and joint-state history kept, seconds of bag time.
+constexpr double kHistoryS = 60.0;
+/// A pair waits for TF (and a CameraInfo) at most this long in bag time beyond tf_tolerance_ms.
+constexpr int64_t kPoseWaitNs = 250'000'000;
 
-/// The messages of one topic, by log time.
-struct TopicMessages {
-  std::string schema;
-  std::vector<const ros::mcap::Message*> messages;
-  /// The message logged at exactly `t`, or null.
-  const ros::mcap::Message* At(uint64_t t) const {
-    auto it =
-        std::lower_bound(messages.begin(), messages.end(), t,
-                         [](const ros::mcap::Message* m, uint64_t x) { return m->log_time < x; });
-    return it != messages.end() && (*it)->log_time == t ? *it : nullptr;
-  }
+/// The stamp and frame_id at the start of a CDR-encoded message with a std_msgs/Header (Image,
+/// CameraInfo, JointState), read without decoding the rest; nullopt when it is not one.
+struct PeekedHeader {
+  int64_t stamp_ns = 0;
+  std::string frame_id;
 };
 
-class Reader {
+std::optional<PeekedHeader> PeekHeader(std::span<const uint8_t> d) {
+  if (d.size() < 16 || d[0] != 0 || d[1] > 1) return std::nullopt;
+  const bool le = d[1] == 1;
+  auto u32 = [&](size_t at) {
+    uint32_t v = 0;
+    for (size_t i = 0; i < 4; ++i) {
+      const uint32_t b = d[at + (le ? i : 3 - i)];
+      v |= b << (8 * i);
+    }
+    return v;
+  };
+  const auto sec = static_cast<int32_t>(u32(4));
+  const uint32_t nsec = u32(8);
+  const uint32_t len = u32(12);
+  if (nsec >= 1'000'000'000u || len == 0 || len > d.size() - 16) return std::nullopt;
+  PeekedHeader h;
+  h.stamp_ns = int64_t{sec} * 1'000'000'000 + nsec;
+  h.frame_id.assign(reinterpret_cast<const char*>(d.data()) + 16, len - 1);
+  return h;
+}
+
+/// A colour or depth image as it came, waiting for its partner.
+struct RawImage {
+  int64_t stamp_ns = 0;
+  uint64_t log_time = 0;
+  std::string frame_id;
+  std::vector<uint8_t> data;
+};
+
+/// A colour/depth pair waiting for its pose (TF at its stamp may come later in the bag).
+struct PendingPair {
+  int index = 0;
+  RawImage color, depth;
+};
+
+/// The rectifier of the camera a bag's CameraInfo describes, rebuilt only when the camera
+/// changes (its size, model, coefficients, K, R or P; not its stamp).
+class LensCache {
  public:
-  Reader(const BagReadOptions& options, Bag& bag)
-      : o_(options),
-        bag_(bag),
-        // The whole bag is kept; its tolerance on both sides of an edge's samples.
-        tf_(ros::msg::TfBuffer::Options{.cache_s = 0.0,
-                                        .extrapolation_s = options.tf_tolerance_ms * 1e-3}) {}
-
-  /// Keeps `view`, unless the views would then hold more than max_decoded_mb.
-  Status Keep(BagView view) {
-    const RgbdFrame& f = view.observation.frame;
-    decoded_bytes_ += f.rgb.data().size() + f.depth_m.data().size() * sizeof(float) +
-                      (view.observation.labels ? f.rgb.data().size() : 0);
-    if (view.segmentation) {
-      for (const InstanceMask& m : view.segmentation->instances)
-        decoded_bytes_ += m.mask.data().size();
+  /// Rectifies `frame` (raw images, K, pose set) by `info`'s lens, unless options.distortion is
+  /// "ignore". Errors: the lens model's (an unknown model, wrong coefficients).
+  Status Apply(const ros::msg::CameraInfo& info, const BagReadOptions& o, RgbdFrame& frame) {
+    if (o.distortion == "ignore") return Status::Ok();
+    if (!camera_ || !SameCamera(info, *camera_)) {
+      AVP_ASSIGN_OR_RETURN(ros::msg::LensModel model,
+                           ros::msg::LensModelFromCameraInfo(info, o.min_depth_m, o.max_depth_m));
+      rectifier_ = ros::msg::Rectifier(std::move(model));
+      camera_ = info;
     }
-    if (static_cast<double>(decoded_bytes_) > o_.max_decoded_mb * 1e6) {
-      return ResourceExhaustedError(fmt::format(
-          "{}: the views to fuse need more than max_decoded_mb = {} MB decoded (at view {}, stamp "
-          "{}): fuse fewer frames (--fps, --max-views) or raise the limit",
-          bag_.path.string(), o_.max_decoded_mb, bag_.views.size() + 1,
-          ros::msg::FormatStamp(f.stamp_ns)));
-    }
-    bag_.views.push_back(std::move(view));
-    return Status::Ok();
+    if (rectifier_.identity()) return Status::Ok();
+    return rectifier_.Rectify(frame);
   }
 
-  void Skip(std::string why) {
-    if (bag_.skipped.size() < kMaxSkippedKept) bag_.skipped.push_back(std::move(why));
-    ++bag_.skipped_count;
+ private:
+  static bool SameCamera(const ros::msg::CameraInfo& a, const ros::msg::CameraInfo& b) {
+    return a.width == b.width && a.height == b.height && a.distortion_model == b.distortion_model &&
+           a.d == b.d && a.k == b.k && a.r == b.r && a.p == b.p && a.binning_x == b.binning_x &&
+           a.binning_y == b.binning_y && a.roi == b.roi;
+  }
+  std::optional<ros::msg::CameraInfo> camera_;
+  ros::msg::Rectifier rectifier_;
+};
+
+std::string StampText(int64_t stamp_ns) { return ros::msg::FormatStamp(stamp_ns); }
+
+}  // namespace
+
+struct BagReader::Impl {
+  explicit Impl(const BagReadOptions& options)
+      : o(options),
+        tf(ros::msg::TfBuffer::Options{.cache_s = kHistoryS,
+                                       .extrapolation_s = options.tf_tolerance_ms * 1e-3}) {}
+
+  BagReadOptions o;
+  FrameSelection selection;
+  std::filesystem::path path;
+  std::unique_ptr<MessageSource> source;
+  bool avp_recording = false;
+  std::map<std::string, std::string> avp_metadata;
+  std::optional<nlohmann::json> ground_truth;
+  Status damage;
+  FrameAccount account;
+  std::map<std::string, uint64_t> topic_messages;
+  std::map<std::string, std::string> topic_types;  ///< as met
+  bool started = false, ended = false, done = false;
+  uint64_t latest_log_time = 0;
+  std::deque<BagView> ready;
+  // Poses, intrinsics, labels.
+  ros::msg::TfBuffer tf;
+  std::deque<std::pair<int64_t, ros::msg::CameraInfo>> infos;
+  std::optional<robot::ArmModel> arm;
+  Status arm_status;
+  std::deque<std::pair<int64_t, Eigen::VectorXd>> joints;  ///< stamp, the arm's joints
+  std::map<std::string, std::deque<std::pair<uint64_t, std::vector<uint8_t>>>> labels;
+  // Robot bags: pairing and selection.
+  std::deque<RawImage> colors, depths;
+  std::deque<PendingPair> pending;
+  std::optional<int64_t> first_color_ns, latest_depth_ns;
+  int pair_index = 0;
+  size_t passed_rest = 0;
+  std::optional<int64_t> fps_first_ns;
+  int64_t fps_next_ns = 0;
+  // avp recordings: the messages of the current log time.
+  uint64_t moment_time = 0;
+  std::map<std::string, std::vector<uint8_t>> moment;
+
+  std::string Where() const { return path.string(); }
+
+  // ---- Accounting ----
+
+  void Skip(int index, int64_t stamp_ns, const std::string& reason, const std::string& why) {
+    ++account.skipped_by_reason[reason];
+    if (account.skipped.size() < kMaxSkippedKept) {
+      account.skipped.push_back(fmt::format("stamp {}: {}", StampText(stamp_ns), why));
+    }
+    ++account.skipped_count;
+    Record(index, stamp_ns, "skipped: " + why);
   }
 
-  Status Index(const ros::mcap::File& file) {
-    std::map<uint16_t, std::string> schema_names;
-    for (const ros::mcap::Schema& s : file.schemas) schema_names[s.id] = s.name;
-    std::map<uint16_t, const ros::mcap::Channel*> channels;
-    for (const ros::mcap::Channel& c : file.channels) channels[c.id] = &c;
-    for (const ros::mcap::Message& m : file.messages) {
-      auto c = channels.find(m.channel_id);
-      if (c == channels.end()) continue;  // the reader refuses these; defensive
-      TopicMessages& t = topics_[c->second->topic];
-      if (t.messages.empty()) {
-        auto s = schema_names.find(c->second->schema_id);
-        t.schema = s == schema_names.end() ? std::string() : s->second;
-        if (c->second->message_encoding != "cdr") {
-          return InvalidArgumentError(fmt::format(
-              "{}: topic {} has message encoding {}, not cdr (a ROS 2 bag)", bag_.path.string(),
-              QuoteText(c->second->topic), QuoteText(c->second->message_encoding)));
-        }
-      }
-      t.messages.push_back(&m);
+  void Record(int index, int64_t stamp_ns, std::string what) {
+    if (account.frames.size() < FrameAccount::kMaxFrames) {
+      account.frames.push_back({index, stamp_ns, std::move(what)});
     }
-    for (auto& [topic, t] : topics_) {
-      std::stable_sort(t.messages.begin(), t.messages.end(),
-                       [](const ros::mcap::Message* a, const ros::mcap::Message* b) {
-                         return a->log_time < b->log_time;
-                       });
-      bag_.topic_messages[topic] = t.messages.size();
-    }
-    return Status::Ok();
   }
+
+  void Keep(BagView view) {
+    ++account.fused;
+    Record(view.index, view.observation.frame.stamp_ns, "fused");
+    ready.push_back(std::move(view));
+    if (selection.max_views > 0 && static_cast<int>(account.fused) >= selection.max_views) {
+      done = true;  // nothing after it is read
+    }
+  }
+
+  // ---- Topics ----
 
   std::string TopicList() const {
     std::vector<std::string> names;
-    for (const auto& [topic, t] : topics_) {
-      names.push_back(
-          fmt::format("{} ({}, {})", topic, t.schema.empty() ? "?" : t.schema, t.messages.size()));
+    for (const auto& [topic, n] : topic_messages) {
+      auto t = topic_types.find(topic);
+      names.push_back(fmt::format(
+          "{} ({}, {})", topic, t == topic_types.end() || t->second.empty() ? "?" : t->second, n));
     }
     return EscapeText(fmt::format("{}", fmt::join(names, ", ")), 800);
   }
 
-  /// The topic's messages, checking its type; NotFound listing the bag's topics.
-  Result<const TopicMessages*> Topic(const std::string& topic, std::string_view type,
-                                     bool required) {
-    auto it = topics_.find(topic);
-    if (it == topics_.end() || it->second.messages.empty()) {
-      if (!required) return static_cast<const TopicMessages*>(nullptr);
-      return NotFoundError(fmt::format("{}: no messages on {} (the bag's topics: {}){}",
-                                       bag_.path.string(), QuoteText(topic), TopicList(),
-                                       bag_.damage.ok() ? "" : " in the intact part"));
+  /// The first message of a topic avp reads: its type and encoding checked.
+  Status CheckTopic(const BagMessage& m, std::string_view type) {
+    if (m.encoding != "cdr") {
+      return InvalidArgumentError(
+          fmt::format("{}: topic {} has message encoding {}, not cdr (a ROS 2 bag)", Where(),
+                      QuoteText(m.topic), QuoteText(m.encoding)));
     }
-    if (it->second.schema != type) {
-      return InvalidArgumentError(fmt::format("{}: topic {} carries {}, not {}", bag_.path.string(),
-                                              QuoteText(topic), QuoteText(it->second.schema),
-                                              type));
-    }
-    return &it->second;
-  }
-
-  /// Both TF topics into the tree; bad transforms are skipped and noted.
-  Status ReadTf() {
-    for (const auto& [topic, is_static] :
-         {std::pair{o_.tf_static_topic, true}, std::pair{o_.tf_topic, false}}) {
-      if (topic.empty()) continue;
-      AVP_ASSIGN_OR_RETURN(const TopicMessages* t,
-                           Topic(topic, "tf2_msgs/msg/TFMessage", /*required=*/false));
-      if (t == nullptr) continue;
-      for (const ros::mcap::Message* m : t->messages) {
-        Result<ros::msg::TFMessage> tf = ros::msg::Decode<ros::msg::TFMessage>(m->data);
-        if (!tf.ok()) {
-          Skip(fmt::format("{} message at {}: {}", topic,
-                           ros::msg::FormatStamp(static_cast<int64_t>(m->log_time)),
-                           tf.status().message()));
-          continue;
-        }
-        for (const ros::msg::TransformStamped& x : tf->transforms) {
-          if (Status s = tf_.Add(x, is_static); !s.ok())
-            Skip(fmt::format("{}: {}", topic, s.message()));
-        }
-      }
+    if (!m.type.empty() && m.type != type) {
+      return InvalidArgumentError(fmt::format("{}: topic {} carries {}, not {}", Where(),
+                                              QuoteText(m.topic), QuoteText(m.type), type));
     }
     return Status::Ok();
   }
 
-  Result<RigidTransform> CameraPose(const std::string& camera_frame, int64_t stamp_ns) const {
-    if (tf_.empty()) {
-      return NotFoundError(fmt::format("no transforms on {} or {}", QuoteText(o_.tf_topic),
-                                       QuoteText(o_.tf_static_topic)));
-    }
-    return tf_.Lookup(o_.base_frame, camera_frame, stamp_ns);
-  }
+  // ---- The loop ----
 
-  /// The CameraInfo nearest in time to `stamp_ns` (the latest at or before it, else the first
-  /// after it) as intrinsics.
-  Result<CameraIntrinsics> Intrinsics(const TopicMessages& infos, int64_t stamp_ns) {
-    // Decoded once; CameraInfo messages are small.
-    if (infos_.empty()) {
-      for (const ros::mcap::Message* m : infos.messages) {
-        Result<ros::msg::CameraInfo> info = ros::msg::Decode<ros::msg::CameraInfo>(m->data);
-        if (!info.ok()) {
-          Skip(fmt::format("{} at {}: {}", o_.camera_info_topic,
-                           ros::msg::FormatStamp(static_cast<int64_t>(m->log_time)),
-                           info.status().message()));
-          continue;
-        }
-        infos_.emplace_back(info->header.stamp.ToNanoseconds(), std::move(*info));
+  /// Reads messages until a view is ready or the bag ends.
+  Status Fill() {
+    while (ready.empty() && !ended) {
+      if (done) {
+        ended = true;
+        break;
       }
-      std::stable_sort(infos_.begin(), infos_.end(),
-                       [](const auto& a, const auto& b) { return a.first < b.first; });
+      Result<std::optional<BagMessage>> m = source->Next();
+      if (!m.ok() || !*m) {
+        if (!m.ok()) damage = m.status();
+        ended = true;
+        AVP_RETURN_IF_ERROR(Flush());
+        break;
+      }
+      AVP_RETURN_IF_ERROR(Dispatch(std::move(**m)));
     }
-    if (infos_.empty()) {
-      return InvalidArgumentError(fmt::format("{}: no CameraInfo on {} could be decoded",
-                                              bag_.path.string(), QuoteText(o_.camera_info_topic)));
+    return Status::Ok();
+  }
+
+  Status Dispatch(BagMessage m) {
+    if (++topic_messages[m.topic] == 1) topic_types.emplace(m.topic, m.type);
+    latest_log_time = std::max(latest_log_time, m.log_time);
+    if (m.topic == o.tf_topic || m.topic == o.tf_static_topic) {
+      if (topic_messages[m.topic] == 1)
+        AVP_RETURN_IF_ERROR(CheckTopic(m, "tf2_msgs/msg/TFMessage"));
+      AddTf(m, m.topic == o.tf_static_topic);
+    } else if (m.topic == o.camera_info_topic) {
+      if (topic_messages[m.topic] == 1)
+        AVP_RETURN_IF_ERROR(CheckTopic(m, "sensor_msgs/msg/CameraInfo"));
+      AddCameraInfo(m);
+    } else if (m.topic == o.joint_states_topic && !avp_recording) {
+      AddJoints(m);
     }
-    auto it = std::upper_bound(infos_.begin(), infos_.end(), stamp_ns,
+    return avp_recording ? DispatchAvp(std::move(m)) : DispatchRobot(std::move(m));
+  }
+
+  /// The end of the bag (or of its intact part): what waits is finished.
+  Status Flush() {
+    if (avp_recording) return EndMoment();
+    if (!done) Pair(/*at_end=*/true);
+    return Resolve(/*at_end=*/true);
+  }
+
+  // ---- TF, CameraInfo, joints, labels ----
+
+  void AddTf(const BagMessage& m, bool is_static) {
+    Result<ros::msg::TFMessage> tfm = ros::msg::Decode<ros::msg::TFMessage>(m.data);
+    if (!tfm.ok()) {
+      Skip(-1, static_cast<int64_t>(m.log_time), "bad TF message",
+           fmt::format("{}: {}", m.topic, tfm.status().message()));
+      return;
+    }
+    for (const ros::msg::TransformStamped& x : tfm->transforms) {
+      if (Status s = tf.Add(x, is_static); !s.ok()) {
+        Skip(-1, x.header.stamp.ToNanoseconds(), "bad transform",
+             fmt::format("{}: {}", m.topic, s.message()));
+      }
+    }
+  }
+
+  void AddCameraInfo(const BagMessage& m) {
+    Result<ros::msg::CameraInfo> info = ros::msg::Decode<ros::msg::CameraInfo>(m.data);
+    if (!info.ok()) {
+      Skip(-1, static_cast<int64_t>(m.log_time), "bad CameraInfo",
+           fmt::format("{}: {}", m.topic, info.status().message()));
+      return;
+    }
+    const int64_t stamp = info->header.stamp.ToNanoseconds();
+    auto at = std::upper_bound(infos.begin(), infos.end(), stamp,
                                [](int64_t t, const auto& x) { return t < x.first; });
-    const ros::msg::CameraInfo& info = it == infos_.begin() ? it->second : std::prev(it)->second;
-    return ros::msg::FromCameraInfo(info, o_.min_depth_m, o_.max_depth_m);
+    infos.emplace(at, stamp, std::move(*info));
+    if (infos.size() > kMaxInfos) infos.pop_front();
   }
 
-  /// Simulator labels at log time `t` (both images), when the bag has them.
-  Result<std::optional<SimulatorLabels>> Labels(uint64_t t, int width, int height) {
-    if (o_.labels_prefix.empty()) return std::optional<SimulatorLabels>();
-    const std::string inst_topic = o_.labels_prefix + "/instance";
-    const std::string class_topic = o_.labels_prefix + "/class";
-    AVP_ASSIGN_OR_RETURN(const TopicMessages* inst,
-                         Topic(inst_topic, "sensor_msgs/msg/Image", /*required=*/false));
-    AVP_ASSIGN_OR_RETURN(const TopicMessages* cls,
-                         Topic(class_topic, "sensor_msgs/msg/Image", /*required=*/false));
-    if (inst == nullptr || cls == nullptr) return std::optional<SimulatorLabels>();
-    const ros::mcap::Message* mi = inst->At(t);
-    const ros::mcap::Message* mc = cls->At(t);
+  /// The CameraInfo nearest in time: the latest at or before the stamp, else the first after.
+  const ros::msg::CameraInfo* InfoAt(int64_t stamp_ns) const {
+    if (infos.empty()) return nullptr;
+    auto it = std::upper_bound(infos.begin(), infos.end(), stamp_ns,
+                               [](int64_t t, const auto& x) { return t < x.first; });
+    return it == infos.begin() ? &it->second : &std::prev(it)->second;
+  }
+
+  void AddJoints(const BagMessage& m) {
+    if (!arm && arm_status.ok()) {
+      Result<robot::ArmModel> a = o.arm.empty() ? robot::LoadDefaultArm() : robot::LoadArm(o.arm);
+      if (!a.ok()) {
+        arm_status = a.status();
+        return;
+      }
+      arm = std::move(*a);
+    }
+    if (!arm) return;
+    Result<ros::msg::JointState> js = ros::msg::Decode<ros::msg::JointState>(m.data);
+    if (!js.ok() || js->name.size() != js->position.size()) return;
+    Eigen::VectorXd q(arm->num_joints());
+    for (int j = 0; j < arm->num_joints(); ++j) {
+      const auto& name = arm->joint_names()[static_cast<size_t>(j)];
+      const auto it = std::find(js->name.begin(), js->name.end(), name);
+      if (it == js->name.end()) {
+        if (arm_status.ok()) {
+          arm_status = NotFoundError(
+              fmt::format("{} has no joint {} of the arm's URDF (it has: {})", o.joint_states_topic,
+                          QuoteText(name), fmt::join(js->name, ", ")));
+        }
+        return;
+      }
+      q[j] = js->position[static_cast<size_t>(it - js->name.begin())];
+    }
+    const int64_t stamp = js->header.stamp.ToNanoseconds();
+    if (!joints.empty() && stamp < joints.back().first) return;  // out of order: dropped
+    joints.emplace_back(stamp, std::move(q));
+    const auto keep_ns = static_cast<int64_t>(kHistoryS * 1e9);
+    while (joints.size() > 2 && joints.front().first < stamp - keep_ns) joints.pop_front();
+  }
+
+  /// The camera pose from the arm's joints interpolated at `stamp_ns`.
+  Result<RigidTransform> PoseFromJoints(int64_t stamp_ns) const {
+    if (!arm_status.ok()) return arm_status;
+    if (joints.empty()) {
+      return NotFoundError(fmt::format("no joint states on {}", QuoteText(o.joint_states_topic)));
+    }
+    const auto tol = static_cast<int64_t>(o.tf_tolerance_ms * 1e6);
+    auto it = std::lower_bound(joints.begin(), joints.end(), stamp_ns,
+                               [](const auto& x, int64_t t) { return x.first < t; });
+    Eigen::VectorXd q;
+    if (it != joints.end() && it->first == stamp_ns) {
+      q = it->second;
+    } else if (it != joints.begin() && it != joints.end()) {
+      const auto& a = *std::prev(it);
+      const double f =
+          static_cast<double>(stamp_ns - a.first) / static_cast<double>(it->first - a.first);
+      q = a.second + f * (it->second - a.second);
+    } else {
+      const auto& near = it == joints.end() ? joints.back() : joints.front();
+      if (std::abs(near.first - stamp_ns) > tol) {
+        return OutOfRangeError(
+            fmt::format("no joint state within {} ms of the image (nearest at {})",
+                        o.tf_tolerance_ms, StampText(near.first)));
+      }
+      q = near.second;
+    }
+    return arm->CameraPose(q);
+  }
+
+  void AddLabel(const BagMessage& m) {
+    auto& q = labels[m.topic];
+    q.emplace_back(m.log_time, m.data);
+    while (q.size() > 8) q.pop_front();
+  }
+
+  /// Simulator labels logged at `log_time` (both images), when the bag has them.
+  Result<std::optional<SimulatorLabels>> LabelsAt(uint64_t log_time, int width, int height) {
+    if (o.labels_prefix.empty()) return std::optional<SimulatorLabels>();
+    auto find = [&](const std::string& topic) -> const std::vector<uint8_t>* {
+      auto q = labels.find(topic);
+      if (q == labels.end()) return nullptr;
+      for (const auto& [t, data] : q->second)
+        if (t == log_time) return &data;
+      return nullptr;
+    };
+    const std::vector<uint8_t>* mi = find(o.labels_prefix + "/instance");
+    const std::vector<uint8_t>* mc = find(o.labels_prefix + "/class");
     if (mi == nullptr || mc == nullptr) return std::optional<SimulatorLabels>();
-    AVP_ASSIGN_OR_RETURN(const ros::msg::Image i, ros::msg::Decode<ros::msg::Image>(mi->data));
-    AVP_ASSIGN_OR_RETURN(const ros::msg::Image c, ros::msg::Decode<ros::msg::Image>(mc->data));
-    AVP_ASSIGN_OR_RETURN(SimulatorLabels labels,
-                         ros::msg::LabelsFromImages(i, c, width, height, o_.labels_prefix));
-    return std::optional<SimulatorLabels>(std::move(labels));
+    AVP_ASSIGN_OR_RETURN(const ros::msg::Image i, ros::msg::Decode<ros::msg::Image>(*mi));
+    AVP_ASSIGN_OR_RETURN(const ros::msg::Image c, ros::msg::Decode<ros::msg::Image>(*mc));
+    AVP_ASSIGN_OR_RETURN(SimulatorLabels l,
+                         ros::msg::LabelsFromImages(i, c, width, height, o.labels_prefix));
+    return std::optional<SimulatorLabels>(std::move(l));
   }
 
-  /// Colour + depth + intrinsics of one frame, `color` and `depth` already decoded.
-  Result<RgbdFrame> Frame(const ros::msg::Image& color, const ros::msg::Image& depth,
-                          const TopicMessages& infos) {
+  bool IsLabelTopic(const std::string& topic) const {
+    return !o.labels_prefix.empty() &&
+           (topic == o.labels_prefix + "/instance" || topic == o.labels_prefix + "/class");
+  }
+
+  // ---- Frames ----
+
+  /// Colour + depth + intrinsics (the CameraInfo nearest in time, its lens rectified).
+  Result<RgbdFrame> Frame(std::span<const uint8_t> color_data,
+                          std::span<const uint8_t> depth_data) {
+    AVP_ASSIGN_OR_RETURN(const ros::msg::Image color,
+                         ros::msg::Decode<ros::msg::Image>(color_data));
+    AVP_ASSIGN_OR_RETURN(const ros::msg::Image depth,
+                         ros::msg::Decode<ros::msg::Image>(depth_data));
     RgbdFrame frame;
-    AVP_ASSIGN_OR_RETURN(frame.rgb, ros::msg::ColorFromImage(color, o_.color_topic));
-    AVP_ASSIGN_OR_RETURN(frame.depth_m, ros::msg::DepthFromImage(depth, o_.depth_topic));
+    AVP_ASSIGN_OR_RETURN(frame.rgb, ros::msg::ColorFromImage(color, o.color_topic));
+    AVP_ASSIGN_OR_RETURN(frame.depth_m, ros::msg::DepthFromImage(depth, o.depth_topic));
     frame.stamp_ns = color.header.stamp.ToNanoseconds();
-    AVP_ASSIGN_OR_RETURN(frame.K, Intrinsics(infos, frame.stamp_ns));
+    frame.frame_id = o.camera_frame.empty() ? color.header.frame_id : o.camera_frame;
+    const ros::msg::CameraInfo* info = InfoAt(frame.stamp_ns);
+    if (info == nullptr) {
+      return NotFoundError(
+          fmt::format("no CameraInfo on {} before or near it", QuoteText(o.camera_info_topic)));
+    }
+    AVP_ASSIGN_OR_RETURN(frame.K, ros::msg::FromCameraInfo(*info, o.min_depth_m, o.max_depth_m));
     if (!frame.depth_m.SameSizeAs(frame.rgb) || frame.K.width != frame.rgb.width() ||
         frame.K.height != frame.rgb.height()) {
       return InvalidArgumentError(fmt::format(
@@ -255,36 +447,254 @@ class Reader {
           frame.rgb.width(), frame.rgb.height(), frame.depth_m.width(), frame.depth_m.height(),
           frame.K.width, frame.K.height));
     }
-    frame.frame_id = o_.camera_frame.empty() ? color.header.frame_id : o_.camera_frame;
     return frame;
   }
 
-  Status ReadAvpSteps(const TopicMessages& steps) {
-    AVP_ASSIGN_OR_RETURN(const TopicMessages* color,
-                         Topic(o_.color_topic, "sensor_msgs/msg/Image", true));
-    AVP_ASSIGN_OR_RETURN(const TopicMessages* depth,
-                         Topic(o_.depth_topic, "sensor_msgs/msg/Image", true));
-    AVP_ASSIGN_OR_RETURN(const TopicMessages* infos,
-                         Topic(o_.camera_info_topic, "sensor_msgs/msg/CameraInfo", true));
-    AVP_ASSIGN_OR_RETURN(const TopicMessages* instances,
-                         Topic(std::string(kInstancesTopic), "std_msgs/msg/String", false));
-    for (const ros::mcap::Message* m : steps.messages) {
-      if (o_.max_views > 0 && static_cast<int>(bag_.views.size()) >= o_.max_views) break;
-      Result<BagView> view = AvpStep(*m, *color, *depth, *infos, instances);
-      if (!view.ok()) {
-        Skip(fmt::format("step at {}: {}", ros::msg::FormatStamp(static_cast<int64_t>(m->log_time)),
-                         view.status().message()));
-        continue;
+  /// The lens of the CameraInfo the frame was read with, rectified (after its pose is set).
+  Status Rectify(RgbdFrame& frame) {
+    const ros::msg::CameraInfo* info = InfoAt(frame.stamp_ns);
+    return info == nullptr ? Status::Ok() : lens.Apply(*info, o, frame);
+  }
+
+  /// The camera pose at `stamp_ns`: TF (interpolated), else the arm's joints through its URDF.
+  Result<RigidTransform> PoseAt(const std::string& camera_frame, int64_t stamp_ns) const {
+    if (tf.empty() && joints.empty()) {
+      if (!arm_status.ok()) {
+        return NotFoundError(
+            fmt::format("no transforms on {} or {}, and the joint states on {} give no pose: {}",
+                        QuoteText(o.tf_topic), QuoteText(o.tf_static_topic),
+                        QuoteText(o.joint_states_topic), arm_status.message()));
       }
-      AVP_RETURN_IF_ERROR(Keep(std::move(*view)));
+      return NotFoundError(fmt::format("no transforms on {} or {} and no joint states on {}",
+                                       QuoteText(o.tf_topic), QuoteText(o.tf_static_topic),
+                                       QuoteText(o.joint_states_topic)));
+    }
+    Result<RigidTransform> pose = tf.empty() ? Result<RigidTransform>(NotFoundError("no TF"))
+                                             : tf.Lookup(o.base_frame, camera_frame, stamp_ns);
+    if (pose.ok() || pose.status().code() != StatusCode::kNotFound || joints.empty()) return pose;
+    Result<RigidTransform> from_joints = PoseFromJoints(stamp_ns);
+    if (from_joints.ok()) return from_joints;
+    return NotFoundError(fmt::format("{}; and from {}: {}", pose.status().message(),
+                                     o.joint_states_topic, from_joints.status().message()));
+  }
+
+  LensCache lens;
+
+  // ---- Robot bags ----
+
+  Status DispatchRobot(BagMessage m) {
+    if (IsLabelTopic(m.topic)) {
+      AddLabel(m);
+      return Status::Ok();
+    }
+    const bool is_color = m.topic == o.color_topic;
+    if (!is_color && m.topic != o.depth_topic) return Resolve(/*at_end=*/false);
+    if (topic_messages[m.topic] == 1) AVP_RETURN_IF_ERROR(CheckTopic(m, "sensor_msgs/msg/Image"));
+    const std::optional<PeekedHeader> h = PeekHeader(m.data);
+    if (!h) {
+      Skip(-1, static_cast<int64_t>(m.log_time), "bad image",
+           fmt::format("{} at log time {}: not a CDR sensor_msgs/Image", m.topic,
+                       StampText(static_cast<int64_t>(m.log_time))));
+      return Status::Ok();
+    }
+    RawImage image{h->stamp_ns, m.log_time, h->frame_id, std::move(m.data)};
+    if (is_color) {
+      if (!first_color_ns) first_color_ns = image.stamp_ns;
+      colors.push_back(std::move(image));
+    } else {
+      latest_depth_ns = std::max(latest_depth_ns.value_or(image.stamp_ns), image.stamp_ns);
+      depths.push_back(std::move(image));
+      if (depths.size() > kMaxQueued) depths.pop_front();
+    }
+    Pair(/*at_end=*/false);
+    return Resolve(/*at_end=*/false);
+  }
+
+  /// Pairs each colour image with the depth image nearest in stamp (within max_pair_skew_ms)
+  /// once no later depth image can be nearer; the pairs go through the time window.
+  void Pair(bool at_end) {
+    const auto skew = static_cast<int64_t>(std::llround(o.max_pair_skew_ms * 1e6));
+    while (!colors.empty()) {
+      RawImage& c = colors.front();
+      const bool decided = at_end || colors.size() > kMaxQueued ||
+                           (latest_depth_ns && *latest_depth_ns > c.stamp_ns + skew);
+      if (!decided) break;
+      auto best = depths.end();
+      int64_t best_d = std::numeric_limits<int64_t>::max();
+      for (auto it = depths.begin(); it != depths.end(); ++it) {
+        const int64_t d = std::abs(it->stamp_ns - c.stamp_ns);
+        if (d < best_d) {
+          best_d = d;
+          best = it;
+        }
+      }
+      if (best == depths.end() || best_d > skew) {
+        Skip(-1, c.stamp_ns, "no depth within max_pair_skew_ms",
+             fmt::format("no depth image on {} within {} ms of the colour image",
+                         QuoteText(o.depth_topic), o.max_pair_skew_ms));
+      } else {
+        PendingPair p{pair_index++, std::move(c), std::move(*best)};
+        depths.erase(depths.begin(), std::next(best));
+        ++account.pairs;
+        Window(std::move(p));
+      }
+      colors.pop_front();
+    }
+  }
+
+  /// The time window; the pairs in it wait for their pose.
+  void Window(PendingPair p) {
+    // 1 us of slack: a 30 Hz camera's 30th frame is stamped 10 ns short of 1 s.
+    const double t = static_cast<double>(p.color.stamp_ns - first_color_ns.value_or(0)) * 1e-9;
+    if (t < selection.start_s - 1e-6) {
+      ++account.left_out["before start_s"];
+    } else if (selection.end_s > 0.0 && t > selection.end_s + 1e-6) {
+      ++account.left_out["after end_s"];
+      done = true;  // the bag's later pairs are later still
+    } else {
+      pending.push_back(std::move(p));
+    }
+  }
+
+  /// Pairs whose pose can be known now (or never will be) are selected and decoded.
+  Status Resolve(bool at_end) {
+    const auto wait = static_cast<int64_t>(o.tf_tolerance_ms * 1e6) + kPoseWaitNs;
+    while (!pending.empty() && !done) {
+      PendingPair& p = pending.front();
+      const std::string frame = o.camera_frame.empty() ? p.color.frame_id : o.camera_frame;
+      Result<RigidTransform> pose = PoseAt(frame, p.color.stamp_ns);
+      const bool may_come = !at_end && static_cast<int64_t>(latest_log_time) <
+                                           static_cast<int64_t>(p.color.log_time) + wait;
+      if (may_come && (!pose.ok() || infos.empty())) break;
+      PendingPair pair = std::move(p);
+      pending.pop_front();
+      Select(std::move(pair), std::move(pose), frame);
     }
     return Status::Ok();
   }
 
-  Result<BagView> AvpStep(const ros::mcap::Message& m, const TopicMessages& colors,
-                          const TopicMessages& depths, const TopicMessages& infos,
-                          const TopicMessages* instances) {
-    AVP_ASSIGN_OR_RETURN(const ros::msg::String text, ros::msg::Decode<ros::msg::String>(m.data));
+  /// At rest, every Nth, fps, max views; then the view.
+  void Select(PendingPair p, Result<RigidTransform> pose, const std::string& frame) {
+    const int64_t stamp = p.color.stamp_ns;
+    if (!pose.ok()) {
+      Skip(p.index, stamp, "no camera pose", pose.status().message());
+      return;
+    }
+    if (selection.at_rest_only) {
+      Result<bool> moving = Moving(frame, stamp, *pose);
+      if (!moving.ok()) {
+        Skip(p.index, stamp, "no camera pose", "at rest? " + moving.status().message());
+        return;
+      }
+      if (*moving) {
+        ++account.left_out["moving"];
+        return;
+      }
+    }
+    if (passed_rest++ % static_cast<size_t>(selection.every_nth) != 0) {
+      ++account.left_out["every_nth"];
+      return;
+    }
+    if (!PassesFps(stamp)) {
+      ++account.left_out["fps"];
+      return;
+    }
+    Result<BagView> view = RobotView(p, *pose);
+    if (!view.ok()) {
+      Skip(p.index, stamp, ReasonOf(view.status()), view.status().message());
+      return;
+    }
+    if (fps_period_ns() > 0) {
+      if (!fps_first_ns) fps_first_ns = stamp;
+      const int64_t period = fps_period_ns();
+      const int64_t early = period / 100;
+      fps_next_ns = *fps_first_ns + ((stamp - *fps_first_ns + early) / period + 1) * period;
+    }
+    Keep(std::move(*view));
+  }
+
+  int64_t fps_period_ns() const {
+    return selection.fps > 0.0 ? static_cast<int64_t>(std::llround(1e9 / selection.fps)) : 0;
+  }
+
+  /// The first pair at or after each instant first + k / fps, or up to 1 % of a period before it
+  /// (a 30 Hz camera's 30th frame is stamped 10 ns short of 1 s).
+  bool PassesFps(int64_t stamp) const {
+    return !fps_first_ns || stamp >= fps_next_ns - fps_period_ns() / 100;
+  }
+
+  /// Whether the camera moved faster than at rest over the window before `stamp`.
+  Result<bool> Moving(const std::string& frame, int64_t stamp, const RigidTransform& X) const {
+    const auto w = static_cast<int64_t>(selection.at_rest_window_s * 1e9);
+    AVP_ASSIGN_OR_RETURN(const RigidTransform before, PoseAt(frame, stamp - w));
+    const double dt = selection.at_rest_window_s;
+    const double speed = X.TranslationDistanceTo(before) / dt;
+    const double turn = X.AngleTo(before) * 180.0 / M_PI / dt;
+    return speed > selection.at_rest_m_s || turn > selection.at_rest_deg_s;
+  }
+
+  static std::string ReasonOf(const Status& s) {
+    const std::string& m = s.message();
+    if (m.find("CameraInfo") != std::string::npos) return "no CameraInfo";
+    if (m.find("distortion") != std::string::npos || m.find("coefficient") != std::string::npos)
+      return "lens model";
+    return "bad image";
+  }
+
+  Result<BagView> RobotView(const PendingPair& p, const RigidTransform& pose) {
+    BagView view;
+    view.index = p.index;
+    AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(p.color.data, p.depth.data));
+    RgbdFrame& frame = view.observation.frame;
+    if (frame.frame_id.empty()) {
+      return InvalidArgumentError(fmt::format(
+          "{}: the image has no frame_id; give the camera frame (camera_frame)", o.color_topic));
+    }
+    frame.X_WC = pose;
+    AVP_RETURN_IF_ERROR(Rectify(frame));
+    AVP_ASSIGN_OR_RETURN(view.observation.labels,
+                         LabelsAt(p.color.log_time, frame.rgb.width(), frame.rgb.height()));
+    return view;
+  }
+
+  // ---- avp recordings ----
+
+  /// The messages of one log time are gathered; a step's view is made when the time moves on.
+  Status DispatchAvp(BagMessage m) {
+    if (m.log_time != moment_time) {
+      AVP_RETURN_IF_ERROR(EndMoment());
+      moment_time = m.log_time;
+    }
+    if (m.topic == kStepTopic || m.topic == o.color_topic || m.topic == o.depth_topic ||
+        m.topic == kInstancesTopic || IsLabelTopic(m.topic)) {
+      if (topic_messages[m.topic] == 1) {
+        const bool text = m.topic == kStepTopic || m.topic == kInstancesTopic;
+        AVP_RETURN_IF_ERROR(CheckTopic(m, text ? "std_msgs/msg/String" : "sensor_msgs/msg/Image"));
+      }
+      if (IsLabelTopic(m.topic)) AddLabel(m);
+      moment[m.topic] = std::move(m.data);
+    }
+    return Status::Ok();
+  }
+
+  Status EndMoment() {
+    if (moment.contains(std::string(kStepTopic)) && !done) {
+      ++account.pairs;
+      Result<BagView> view = AvpStep();
+      if (view.ok()) {
+        Keep(std::move(*view));
+      } else {
+        Skip(static_cast<int>(account.pairs) - 1, static_cast<int64_t>(moment_time),
+             ReasonOf(view.status()), view.status().message());
+      }
+    }
+    moment.clear();
+    return Status::Ok();
+  }
+
+  Result<BagView> AvpStep() {
+    AVP_ASSIGN_OR_RETURN(const ros::msg::String text,
+                         ros::msg::Decode<ros::msg::String>(moment.at(std::string(kStepTopic))));
     BagView view;
     try {
       view.step = nlohmann::json::parse(text.data);
@@ -298,23 +708,32 @@ class Reader {
     if (auto v = view.step.find("view"); v != view.step.end() && v->is_number_integer()) {
       view.index = v->get<int>();
     } else {
-      view.index = static_cast<int>(bag_.views.size());
+      view.index = static_cast<int>(account.pairs) - 1;
     }
-    const uint64_t t = m.log_time;
-    const ros::mcap::Message* mc = colors.At(t);
-    const ros::mcap::Message* md = depths.At(t);
-    if (mc == nullptr || md == nullptr) {
+    const auto mc = moment.find(o.color_topic);
+    const auto md = moment.find(o.depth_topic);
+    if (mc == moment.end() || md == moment.end()) {
       return NotFoundError(fmt::format("no {} image logged at the step's time",
-                                       mc == nullptr ? o_.color_topic : o_.depth_topic));
+                                       mc == moment.end() ? o.color_topic : o.depth_topic));
     }
-    AVP_ASSIGN_OR_RETURN(const ros::msg::Image color, ros::msg::Decode<ros::msg::Image>(mc->data));
-    AVP_ASSIGN_OR_RETURN(const ros::msg::Image depth, ros::msg::Decode<ros::msg::Image>(md->data));
-    AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(color, depth, infos));
+    AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(mc->second, md->second));
+    AVP_RETURN_IF_ERROR(StepPoseAndJoints(view));
+    AVP_RETURN_IF_ERROR(Rectify(view.observation.frame));
+    const RgbdFrame& frame = view.observation.frame;
+    AVP_ASSIGN_OR_RETURN(view.observation.labels,
+                         LabelsAt(moment_time, frame.rgb.width(), frame.rgb.height()));
+    if (auto mi = moment.find(std::string(kInstancesTopic)); mi != moment.end()) {
+      AVP_ASSIGN_OR_RETURN(view.segmentation, RecordedMasks(mi->second, frame));
+    }
+    return view;
+  }
+
+  /// The exact pose from the step (TF's quaternion does not round-trip bit for bit). The step's
+  /// pose is the arm's; the frame's (TF) is what was fused: they agree in simulation, while a
+  /// live robot's camera pose comes from its TF, so a TF pose that differs is used instead.
+  Status StepPoseAndJoints(BagView& view) const {
     RgbdFrame& frame = view.observation.frame;
-    // The exact pose from the step (TF's quaternion does not round-trip bit for bit). The step's
-    // pose is the arm's; the frame's (TF) is what was fused: they agree in simulation, while a
-    // live robot's camera pose comes from its TF, so a TF pose that differs is used instead.
-    Result<RigidTransform> tf_pose = CameraPose(frame.frame_id, frame.stamp_ns);
+    Result<RigidTransform> tf_pose = PoseAt(frame.frame_id, frame.stamp_ns);
     if (auto x = view.step.find("X_WC"); x != view.step.end()) {
       Result<RigidTransform> step_pose = PoseFromJson(*x);
       if (!step_pose.ok())
@@ -336,175 +755,194 @@ class Reader {
         view.q[static_cast<Eigen::Index>(i)] = (*q)[i].get<double>();
       }
     }
-    AVP_ASSIGN_OR_RETURN(view.observation.labels, Labels(t, frame.rgb.width(), frame.rgb.height()));
-    if (instances != nullptr) {
-      if (const ros::mcap::Message* mi = instances->At(t); mi != nullptr) {
-        AVP_ASSIGN_OR_RETURN(const ros::msg::String s,
-                             ros::msg::Decode<ros::msg::String>(mi->data));
-        nlohmann::json j;
-        try {
-          j = nlohmann::json::parse(s.data);
-        } catch (const nlohmann::json::parse_error& e) {
-          return InvalidArgumentError(
-              fmt::format("{}: malformed JSON: {}", kInstancesTopic, EscapeText(e.what(), 200)));
-        }
-        Result<Segmentation> seg = InstancesFromJson(j);
-        if (!seg.ok()) return seg.status().WithContext(std::string(kInstancesTopic));
-        if (Status v = seg->ValidateFor(frame.rgb.width(), frame.rgb.height()); !v.ok()) {
-          return v.WithContext(std::string(kInstancesTopic));
-        }
-        view.segmentation = std::move(*seg);
-      }
-    }
-    return view;
-  }
-
-  Status ReadRobotBag() {
-    AVP_ASSIGN_OR_RETURN(const TopicMessages* colors,
-                         Topic(o_.color_topic, "sensor_msgs/msg/Image", true));
-    AVP_ASSIGN_OR_RETURN(const TopicMessages* depths,
-                         Topic(o_.depth_topic, "sensor_msgs/msg/Image", true));
-    AVP_ASSIGN_OR_RETURN(const TopicMessages* infos,
-                         Topic(o_.camera_info_topic, "sensor_msgs/msg/CameraInfo", true));
-    // Stamps first (each image decoded once here, and again only when it is used).
-    auto stamps = [&](const TopicMessages& t, const std::string& topic) {
-      std::vector<std::pair<int64_t, const ros::mcap::Message*>> out;
-      for (const ros::mcap::Message* m : t.messages) {
-        Result<ros::msg::Image> image = ros::msg::Decode<ros::msg::Image>(m->data);
-        if (!image.ok()) {
-          Skip(fmt::format("{} at {}: {}", topic,
-                           ros::msg::FormatStamp(static_cast<int64_t>(m->log_time)),
-                           image.status().message()));
-          continue;
-        }
-        out.emplace_back(image->header.stamp.ToNanoseconds(), m);
-      }
-      std::stable_sort(out.begin(), out.end(),
-                       [](const auto& a, const auto& b) { return a.first < b.first; });
-      return out;
-    };
-    const auto color_stamps = stamps(*colors, o_.color_topic);
-    const auto depth_stamps = stamps(*depths, o_.depth_topic);
-    const auto skew_ns = static_cast<int64_t>(std::llround(o_.max_pair_skew_ms * 1e6));
-    const int64_t period_ns =
-        o_.frame_rate_hz > 0.0 ? static_cast<int64_t>(std::llround(1e9 / o_.frame_rate_hz)) : 0;
-    // Thinning: the first pair at or after each instant first + k / rate, or up to 1 % of a
-    // period before it (a 30 Hz camera's 30th frame is stamped 10 ns short of 1 s).
-    std::optional<int64_t> first_stamp;
-    int64_t next_ns = 0;
-    const int64_t early_ns = period_ns / 100;
-    int pair_index = 0;
-    for (const auto& [stamp, mc] : color_stamps) {
-      auto it = std::lower_bound(depth_stamps.begin(), depth_stamps.end(), stamp,
-                                 [](const auto& x, int64_t t) { return x.first < t; });
-      const ros::mcap::Message* md = nullptr;
-      int64_t best = std::numeric_limits<int64_t>::max();
-      for (auto c : {it, it == depth_stamps.begin() ? it : std::prev(it)}) {
-        if (c == depth_stamps.end()) continue;
-        const int64_t d = std::abs(c->first - stamp);
-        if (d < best) {
-          best = d;
-          md = c->second;
-        }
-      }
-      if (md == nullptr || best > skew_ns) continue;
-      const int index = pair_index++;
-      ++bag_.pairs;
-      if ((first_stamp && stamp < next_ns - early_ns) ||
-          (o_.max_views > 0 && static_cast<int>(bag_.views.size()) >= o_.max_views)) {
-        ++bag_.pairs_thinned;
-        continue;
-      }
-      Result<BagView> view = RobotView(index, *mc, *md, *infos);
-      if (!view.ok()) {
-        Skip(fmt::format("frame at {}: {}", ros::msg::FormatStamp(stamp), view.status().message()));
-        continue;
-      }
-      if (period_ns > 0) {
-        if (!first_stamp) first_stamp = stamp;
-        next_ns = *first_stamp + ((stamp - *first_stamp + early_ns) / period_ns + 1) * period_ns;
-      }
-      AVP_RETURN_IF_ERROR(Keep(std::move(*view)));
-    }
-    if (bag_.pairs == 0) {
-      return NotFoundError(fmt::format(
-          "{}: no colour image on {} has a depth image on {} within {} ms ({} colour, {} depth "
-          "images)",
-          bag_.path.string(), QuoteText(o_.color_topic), QuoteText(o_.depth_topic),
-          o_.max_pair_skew_ms, color_stamps.size(), depth_stamps.size()));
-    }
     return Status::Ok();
   }
 
-  Result<BagView> RobotView(int index, const ros::mcap::Message& mc, const ros::mcap::Message& md,
-                            const TopicMessages& infos) {
-    BagView view;
-    view.index = index;
-    AVP_ASSIGN_OR_RETURN(const ros::msg::Image color, ros::msg::Decode<ros::msg::Image>(mc.data));
-    AVP_ASSIGN_OR_RETURN(const ros::msg::Image depth, ros::msg::Decode<ros::msg::Image>(md.data));
-    AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(color, depth, infos));
-    RgbdFrame& frame = view.observation.frame;
-    if (frame.frame_id.empty()) {
-      return InvalidArgumentError(fmt::format(
-          "{}: the image has no frame_id; give the camera frame (camera_frame)", o_.color_topic));
+  static Result<Segmentation> RecordedMasks(std::span<const uint8_t> data, const RgbdFrame& frame) {
+    AVP_ASSIGN_OR_RETURN(const ros::msg::String s, ros::msg::Decode<ros::msg::String>(data));
+    nlohmann::json j;
+    try {
+      j = nlohmann::json::parse(s.data);
+    } catch (const nlohmann::json::parse_error& e) {
+      return InvalidArgumentError(
+          fmt::format("{}: malformed JSON: {}", kInstancesTopic, EscapeText(e.what(), 200)));
     }
-    AVP_ASSIGN_OR_RETURN(frame.X_WC, CameraPose(frame.frame_id, frame.stamp_ns));
-    AVP_ASSIGN_OR_RETURN(view.observation.labels,
-                         Labels(mc.log_time, frame.rgb.width(), frame.rgb.height()));
-    return view;
+    Result<Segmentation> seg = InstancesFromJson(j);
+    if (!seg.ok()) return seg.status().WithContext(std::string(kInstancesTopic));
+    if (Status v = seg->ValidateFor(frame.rgb.width(), frame.rgb.height()); !v.ok()) {
+      return v.WithContext(std::string(kInstancesTopic));
+    }
+    return std::move(*seg);
   }
 
-  const BagReadOptions& o_;
-  Bag& bag_;
-  std::map<std::string, TopicMessages> topics_;
-  ros::msg::TfBuffer tf_;
-  std::vector<std::pair<int64_t, ros::msg::CameraInfo>> infos_;
-  uint64_t decoded_bytes_ = 0;
+  // ---- The end ----
+
+  /// Why a bag gave no view at all, and its damage when it has some.
+  Status NothingToFuse() const {
+    if (!damage.ok() && topic_messages.empty()) {
+      return Status(damage.code(), fmt::format("no view could be read: {}", damage.message()));
+    }
+    Status s = WhyNothing();
+    if (damage.ok()) return s;
+    return Status(s.code(),
+                  fmt::format("{} (the bag is damaged: {})", s.message(), damage.message()));
+  }
+
+  Status WhyNothing() const {
+    const bool avp = avp_recording;
+    for (const std::string& topic :
+         avp ? std::vector<std::string>{std::string(kStepTopic), o.color_topic, o.depth_topic,
+                                        o.camera_info_topic}
+             : std::vector<std::string>{o.color_topic, o.depth_topic, o.camera_info_topic}) {
+      if (!topic_messages.contains(topic)) {
+        return NotFoundError(fmt::format("{}: no messages on {} (the bag's topics: {}){}", Where(),
+                                         QuoteText(topic), TopicList(),
+                                         damage.ok() ? "" : " in the intact part"));
+      }
+    }
+    if (!avp && account.pairs == 0) {
+      return NotFoundError(fmt::format(
+          "{}: no colour image on {} has a depth image on {} within {} ms ({} colour, {} depth "
+          "images)",
+          Where(), QuoteText(o.color_topic), QuoteText(o.depth_topic), o.max_pair_skew_ms,
+          topic_messages.at(o.color_topic), topic_messages.at(o.depth_topic)));
+    }
+    std::string why =
+        account.skipped.empty()
+            ? fmt::format("every pair was left out by the frame selection ({})", LeftOutText())
+            : account.skipped.front();
+    return InvalidArgumentError(fmt::format("{}: no view could be read{}: {}", Where(),
+                                            damage.ok() ? "" : " (the file is damaged)", why));
+  }
+
+  std::string LeftOutText() const {
+    std::vector<std::string> parts;
+    for (const auto& [reason, n] : account.left_out)
+      parts.push_back(fmt::format("{} {}", n, reason));
+    return parts.empty() ? std::string("none") : fmt::format("{}", fmt::join(parts, ", "));
+  }
 };
 
-}  // namespace
+BagReader::BagReader(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+BagReader::~BagReader() = default;
 
-Result<Bag> ReadBag(const std::filesystem::path& path, const BagReadOptions& options) {
-  AVP_RETURN_IF_ERROR(BagReadOptionTable().Validate(options));
-  Bag bag;
-  bag.path = path;
-  ros::mcap::StreamResult stream = ros::mcap::ReadStreaming(path);
-  if (!stream.status.ok() && stream.file.messages.empty()) {
-    return stream.status;
+namespace {
+
+/// The bag's "avp" metadata and ground_truth.json attachment.
+Status ReadAvpRecords(const BagInfo& info, const std::filesystem::path& path,
+                      std::map<std::string, std::string>& metadata,
+                      std::optional<nlohmann::json>& ground_truth) {
+  if (auto m = info.metadata.find(std::string(kMetadataName)); m != info.metadata.end()) {
+    metadata = m->second;
   }
-  bag.damage = stream.status;
-  bag.intact_bytes = stream.intact_bytes;
-  std::error_code ec;
-  bag.file_bytes = std::filesystem::file_size(path, ec);
-  for (const ros::mcap::Metadata& m : stream.file.metadata) {
-    if (m.name == kMetadataName) bag.avp_metadata = m.metadata;
-  }
-  for (const ros::mcap::Attachment& a : stream.file.attachments) {
+  for (const BagAttachment& a : info.attachments) {
     if (a.name != kGroundTruthAttachment) continue;
     try {
-      bag.ground_truth = nlohmann::json::parse(a.data);
+      ground_truth = nlohmann::json::parse(a.data);
     } catch (const nlohmann::json::parse_error& e) {
       return InvalidArgumentError(fmt::format("{}: attachment {}: malformed JSON: {}",
                                               path.string(), kGroundTruthAttachment,
                                               EscapeText(e.what(), 200)));
     }
   }
-  Reader reader(options, bag);
-  AVP_RETURN_IF_ERROR(reader.Index(stream.file));
-  AVP_RETURN_IF_ERROR(reader.ReadTf());
-  AVP_ASSIGN_OR_RETURN(const TopicMessages* steps,
-                       reader.Topic(std::string(kStepTopic), "std_msgs/msg/String", false));
-  if (steps != nullptr && !options.as_robot_bag) {
-    bag.avp_recording = true;
-    AVP_RETURN_IF_ERROR(reader.ReadAvpSteps(*steps));
-  } else {
-    AVP_RETURN_IF_ERROR(reader.ReadRobotBag());
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<std::unique_ptr<BagReader>> BagReader::Open(const std::filesystem::path& path,
+                                                   const BagReadOptions& options) {
+  AVP_RETURN_IF_ERROR(BagReadOptionTable().Validate(options));
+  auto impl = std::make_unique<Impl>(options);
+  // "bag/" names the folder "bag" (its file name, in messages and the report).
+  impl->path = path.has_filename() ? path : path.parent_path();
+  AVP_ASSIGN_OR_RETURN(impl->source, OpenBag(path));
+  const BagInfo& info = impl->source->info();
+  AVP_RETURN_IF_ERROR(ReadAvpRecords(info, path, impl->avp_metadata, impl->ground_truth));
+  impl->avp_recording =
+      !options.as_robot_bag && (info.topic_types.contains(std::string(kStepTopic)) ||
+                                info.metadata.contains(std::string(kMetadataName)));
+  // A bag whose index lists every topic and not the colour one has nothing to fuse: say so now.
+  if (!info.topic_counts.empty() && !info.topic_counts.contains(options.color_topic)) {
+    std::vector<std::string> topics;
+    for (const auto& [topic, n] : info.topic_counts) {
+      auto t = info.topic_types.find(topic);
+      topics.push_back(
+          fmt::format("{} ({}, {})", topic, t == info.topic_types.end() ? "?" : t->second, n));
+    }
+    return NotFoundError(fmt::format("{}: no messages on {} (the bag's topics: {})", path.string(),
+                                     QuoteText(options.color_topic),
+                                     EscapeText(fmt::format("{}", fmt::join(topics, ", ")), 800)));
   }
-  if (bag.views.empty()) {
-    std::string why = bag.skipped.empty() ? std::string("nothing to fuse") : bag.skipped.front();
-    return InvalidArgumentError(fmt::format("{}: no view could be read{}: {}", path.string(),
-                                            bag.damage.ok() ? "" : " (the file is damaged)", why));
+  return std::unique_ptr<BagReader>(new BagReader(std::move(impl)));
+}
+
+Status BagReader::SetSelection(const FrameSelection& selection) {
+  if (impl_->started) {
+    return FailedPreconditionError("BagReader::SetSelection after the first view was read");
   }
+  if (selection.every_nth < 1 || selection.fps < 0.0 || selection.max_views < 0 ||
+      selection.start_s < 0.0 || (selection.end_s > 0.0 && selection.end_s <= selection.start_s)) {
+    return InvalidArgumentError(fmt::format(
+        "invalid frame selection: every_nth {}, fps {}, max_views {}, start_s {}, end_s {}",
+        selection.every_nth, selection.fps, selection.max_views, selection.start_s,
+        selection.end_s));
+  }
+  impl_->selection = selection;
+  return Status::Ok();
+}
+
+Result<std::optional<BagView>> BagReader::Next() {
+  impl_->started = true;
+  AVP_RETURN_IF_ERROR(impl_->Fill());
+  if (impl_->ready.empty()) {
+    if (impl_->account.fused == 0) return impl_->NothingToFuse();
+    return std::optional<BagView>();
+  }
+  BagView view = std::move(impl_->ready.front());
+  impl_->ready.pop_front();
+  return std::optional<BagView>(std::move(view));
+}
+
+const std::filesystem::path& BagReader::path() const { return impl_->path; }
+const BagInfo& BagReader::info() const { return impl_->source->info(); }
+bool BagReader::avp_recording() const { return impl_->avp_recording; }
+const std::map<std::string, std::string>& BagReader::avp_metadata() const {
+  return impl_->avp_metadata;
+}
+const std::optional<nlohmann::json>& BagReader::ground_truth() const { return impl_->ground_truth; }
+bool BagReader::HasTopic(std::string_view topic) const {
+  const std::string t(topic);
+  return impl_->source->info().topic_types.contains(t) || impl_->topic_messages.contains(t);
+}
+bool BagReader::HasSimulatorLabels() const {
+  return !impl_->o.labels_prefix.empty() && HasTopic(impl_->o.labels_prefix + "/instance");
+}
+const Status& BagReader::damage() const { return impl_->damage; }
+uint64_t BagReader::bytes_read() const { return impl_->source->bytes_read(); }
+const FrameAccount& BagReader::account() const { return impl_->account; }
+const std::map<std::string, uint64_t>& BagReader::topic_messages() const {
+  return impl_->topic_messages;
+}
+
+Result<Bag> ReadBag(const std::filesystem::path& path, const BagReadOptions& options,
+                    const FrameSelection& selection) {
+  AVP_ASSIGN_OR_RETURN(std::unique_ptr<BagReader> reader, BagReader::Open(path, options));
+  AVP_RETURN_IF_ERROR(reader->SetSelection(selection));
+  Bag bag;
+  while (true) {
+    AVP_ASSIGN_OR_RETURN(std::optional<BagView> view, reader->Next());
+    if (!view) break;
+    bag.views.push_back(std::move(*view));
+  }
+  bag.path = path;
+  bag.info = reader->info();
+  bag.avp_recording = reader->avp_recording();
+  bag.avp_metadata = reader->avp_metadata();
+  bag.ground_truth = reader->ground_truth();
+  bag.damage = reader->damage();
+  bag.account = reader->account();
+  bag.topic_messages = reader->topic_messages();
   return bag;
 }
 

@@ -1,9 +1,10 @@
-// Compressed MCAP as other recorders write it (issue 33): a real `avp run --record` is rewritten by
+// Every bag a ROS 2 robot writes (issue 33): a real `avp run --record` is rewritten by
 // npm's @mcap/core McapWriter with zstd chunks (@foxglove/wasm-zstd) and with lz4 frame chunks
 // (lz4js), as Foxglove and the rosbag2 MCAP plugin write them, indexed or not; `avp replay` of each must give the
 // same map and metrics as the replay of the uncompressed original (map.ot byte for byte,
-// metrics.csv without its timing columns). Another implementation's compressor checks avp's reader
-// against the MCAP spec, not against avp's own writer.
+// metrics.csv without its timing columns); so must the same messages as a rosbag2 folder of split
+// MCAP files and as Humble's SQLite 3 storage (.db3, written by Python's sqlite3). Another
+// implementation's writer checks avp's reader against the MCAP spec, not against avp's own writer.
 // Usage: node compressed_replay.mjs --avp <avp> --lockfile <tests/npm/package-lock.json> --out <dir>
 // The npm packages come from scripts/setup (tests/npm), as for readback.mjs.
 
@@ -136,6 +137,105 @@ for (const [name, compress] of variants) {
     }
   }
 }
+// ---- The same frames as a split bag and as ROS 2 Humble's SQLite 3 storage ------------------------
+// A rosbag2 folder of two MCAP files (split by message count; the metadata and attachments in the
+// first), and a Humble `.db3` folder (one file, and split in two) written by Python's sqlite3 in
+// rosbag2's own tables (write_humble_db3.py): the split MCAP replays to the same map and metrics;
+// a .db3 has no MCAP metadata or attachment (no run configuration, no ground truth), so its
+// replay is compared by its map, byte for byte.
+const all = [];
+for await (const m of reader.readMessages()) all.push(m);
+async function writeMcapPart(messages, withRecords) {
+  const parts = [];
+  let position = 0n;
+  const writer = new McapWriter({
+    writable: {
+      position: () => position,
+      write: async (buffer) => {
+        parts.push(Buffer.from(buffer));
+        position += BigInt(buffer.byteLength);
+      },
+    },
+  });
+  await writer.start({ profile: reader.header.profile, library: "@mcap/core (avp test)" });
+  const schemaIds = new Map();
+  for (const [id, s] of reader.schemasById) {
+    schemaIds.set(id, await writer.registerSchema({ name: s.name, encoding: s.encoding,
+                                                    data: s.data }));
+  }
+  const channelIds = new Map();
+  for (const [id, c] of reader.channelsById) {
+    channelIds.set(id, await writer.registerChannel({
+      topic: c.topic, schemaId: schemaIds.get(c.schemaId) ?? 0,
+      messageEncoding: c.messageEncoding, metadata: c.metadata }));
+  }
+  if (withRecords) {
+    for await (const a of reader.readAttachments()) await writer.addAttachment(a);
+    for await (const md of reader.readMetadata()) await writer.addMetadata(md);
+  }
+  for (const m of messages) await writer.addMessage({ ...m, channelId: channelIds.get(m.channelId) });
+  await writer.end();
+  return Buffer.concat(parts);
+}
+const splitDir = join(outDir, "split_mcap");
+mkdirSync(splitDir, { recursive: true });
+const half = Math.ceil(all.length / 2);
+writeFileSync(join(splitDir, "split_mcap_0.mcap"), await writeMcapPart(all.slice(0, half), true));
+writeFileSync(join(splitDir, "split_mcap_1.mcap"), await writeMcapPart(all.slice(half), false));
+writeFileSync(join(splitDir, "metadata.yaml"), [
+  "rosbag2_bagfile_information:", "  version: 5", "  storage_identifier: mcap",
+  "  relative_file_paths:", "    - split_mcap_0.mcap", "    - split_mcap_1.mcap", ""].join("\n"));
+{
+  const replayDir = join(outDir, "replay-split-mcap");
+  run(["replay", splitDir, "--out", replayDir]);
+  if (metricsWithoutTimes(replayDir) !== want.metrics) {
+    console.error("FAIL split MCAP folder: metrics.csv differs from the single file's replay");
+    failures++;
+  } else if (!readFileSync(join(replayDir, "map.ot")).equals(want.map)) {
+    console.error("FAIL split MCAP folder: map.ot differs from the single file's replay");
+    failures++;
+  } else {
+    console.log(`ok split MCAP folder (2 files, ${all.length} messages): the same map and metrics`);
+  }
+}
+const manifest = {
+  topics: [...reader.channelsById.values()].map((c) => ({
+    name: c.topic, type: reader.schemasById.get(c.schemaId)?.name ?? "" })),
+  messages: all.map((m) => ({ topic: reader.channelsById.get(m.channelId).topic,
+                              t: m.logTime.toString(), data: Buffer.from(m.data).toString("base64") })),
+};
+// JSON numbers lose nanoseconds past 2^53: the stamps go as text and Python reads them as ints.
+const manifestPath = join(outDir, "manifest.json");
+writeFileSync(manifestPath, JSON.stringify(manifest).replace(/"t":"(\d+)"/g, '"t":$1'));
+const python = process.env.PYTHON ?? "python3";
+const writer = new URL("./write_humble_db3.py", import.meta.url).pathname;
+const mapOnly = [];
+for (const split of [1, 2]) {
+  const bagDir = join(outDir, `humble_${split}`);
+  execFileSync(python, [writer, manifestPath, bagDir, "--split", String(split)],
+               { stdio: ["ignore", "inherit", "inherit"] });
+  const replayDir = join(outDir, `replay-humble-${split}`);
+  run(["replay", bagDir, "--out", replayDir]);
+  mapOnly.push(replayDir);
+  if (!readFileSync(join(replayDir, "map.ot")).equals(want.map)) {
+    console.error(`FAIL Humble .db3 folder (${split} file(s)): map.ot differs`);
+    failures++;
+  } else {
+    console.log(`ok Humble .db3 folder (${split} file(s)): the same map, byte for byte`);
+  }
+}
+// The .db3 file itself (not its folder) is a bag too.
+{
+  const replayDir = join(outDir, "replay-humble-file");
+  run(["replay", join(outDir, "humble_1", "humble_1_0.db3"), "--out", replayDir]);
+  if (!readFileSync(join(replayDir, "map.ot")).equals(want.map)) {
+    console.error("FAIL Humble .db3 file: map.ot differs");
+    failures++;
+  } else {
+    console.log("ok Humble .db3 file: the same map, byte for byte");
+  }
+}
+
 // avp's own writer with --record-compression: the same run recorded again, read by @mcap/core
 // (its decompressors: another implementation's) to the same payloads on every topic but /avp/step
 // (timings), and replayed

@@ -134,32 +134,45 @@ Status Ros2RgbdSource::Subscribe() {
   return Status::Ok();
 }
 
+namespace {
+
+bool SameLens(const ros::msg::LensModel& a, const ros::msg::LensModel& b) {
+  auto same_k = [](const CameraIntrinsics& x, const CameraIntrinsics& y) {
+    return x.width == y.width && x.height == y.height && x.fx == y.fx && x.fy == y.fy &&
+           x.cx == y.cx && x.cy == y.cy;
+  };
+  return a.kind == b.kind && a.d == b.d && same_k(a.K, b.K) && same_k(a.rectified, b.rectified) &&
+         a.R == b.R;
+}
+
+}  // namespace
+
 void Ros2RgbdSource::OnCameraInfo(ros::msg::CameraInfo&& msg) {
-  Result<CameraIntrinsics> K =
-      ros::msg::FromCameraInfo(msg, camera_.min_depth_m, camera_.max_depth_m);
+  // The lens (ros/msg/lens.h): K is the raw camera's; a distorted lens is rectified per frame.
+  Result<ros::msg::LensModel> lens =
+      ros::msg::LensModelFromCameraInfo(msg, camera_.min_depth_m, camera_.max_depth_m);
   std::lock_guard lock(mutex_);
   ++counters_.camera_info;
-  if (!K.ok()) {
+  if (!lens.ok()) {
     counters_.last_problem =
-        fmt::format("{}: {}", options_.camera_info_topic, K.status().message());
+        fmt::format("{}: {}", options_.camera_info_topic, lens.status().message());
     return;
   }
-  const bool distorted =
-      std::any_of(msg.d.begin(), msg.d.end(), [](double d) { return std::abs(d) > 1e-9; });
-  if (distorted && !warned_distortion_) {
-    warned_distortion_ = true;
-    spdlog::warn(
-        "{}: distortion model '{}' with non-zero coefficients: avp treats the images as "
-        "undistorted (RealSense colour and aligned depth are)",
-        options_.camera_info_topic, msg.distortion_model);
-  }
+  const CameraIntrinsics& K = lens->K;
   if (!K_) {
-    if (K->width != camera_.width || K->height != camera_.height) {
+    if (K.width != camera_.width || K.height != camera_.height) {
       spdlog::info("{}: the camera is {}x{} (the configured camera: {}x{})",
-                   options_.camera_info_topic, K->width, K->height, camera_.width, camera_.height);
+                   options_.camera_info_topic, K.width, K.height, camera_.width, camera_.height);
     }
   }
-  K_ = *K;
+  if (!lens->IsIdentity() && (!rectifier_ || !SameLens(rectifier_->model(), *lens))) {
+    spdlog::info("{}: distortion model '{}' ({} coefficients): the images are rectified",
+                 options_.camera_info_topic, msg.distortion_model, msg.d.size());
+  }
+  K_ = K;
+  if (!rectifier_ || !SameLens(rectifier_->model(), *lens)) {
+    rectifier_ = std::make_shared<const ros::msg::Rectifier>(std::move(*lens));
+  }
   cv_.notify_all();
 }
 
@@ -263,6 +276,7 @@ Result<robot::Observation> Ros2RgbdSource::Assemble(const ros::msg::Image& color
                                                     std::unique_lock<std::mutex>& lock) {
   const int64_t t = StampNs(color.header);
   const CameraIntrinsics K = *K_;
+  const std::shared_ptr<const ros::msg::Rectifier> rectifier = rectifier_;
   std::optional<ros::msg::Image> instance, cls;
   if (!options_.labels_prefix.empty()) {
     for (const auto& m : instance_) {
@@ -307,6 +321,7 @@ Result<robot::Observation> Ros2RgbdSource::Assemble(const ros::msg::Image& color
   obs.frame.X_WC = *X_WC;
   obs.frame.stamp_ns = t;
   obs.frame.frame_id = camera_frame;
+  if (rectifier && !rectifier->identity()) AVP_RETURN_IF_ERROR(rectifier->Rectify(obs.frame));
   if (instance && cls) {
     AVP_ASSIGN_OR_RETURN(
         SimulatorLabels labels,

@@ -24,7 +24,7 @@ inline constexpr std::string_view kRecordedSegmenter = "recorded";
 /// YAML `avp run --print-config` prints) over the defaults, or the defaults when the bag has
 /// none (a robot's bag). Not validated (the caller applies its own --config / --set first).
 /// InvalidArgument naming the bag and the key when run_config does not read back.
-Result<RunConfig> BagRunConfig(const ros::bag::Bag& bag);
+Result<RunConfig> BagRunConfig(const ros::bag::BagReader& bag);
 
 struct ReplayOptions {
   /// "recorded": the recording's masks (every view must have them); a registered segmenter name
@@ -41,6 +41,15 @@ struct ReplaySummary {
   /// The segmenter that made the masks: "recorded" or a registered name.
   std::string segmenter;
   size_t views = 0;
+  /// Per fused view: its index in the bag, its masks and those with no valid depth.
+  struct ViewMasks {
+    int index = 0;
+    size_t masks = 0;
+    size_t masks_without_depth = 0;
+  };
+  std::vector<ViewMasks> view_masks;
+  size_t masks = 0;
+  size_t masks_without_depth = 0;
   /// avp recordings: views whose recomputed metrics were compared with the recorded /avp/step
   /// metrics, and those that differ (the first difference described).
   size_t metrics_compared = 0;
@@ -50,17 +59,19 @@ struct ReplaySummary {
   std::vector<std::string> notes;
 };
 
-/// Replays `bag` with `config` into options.folder.out_dir: each view segmented (the recorded
-/// masks or the segmenter), integrated into a map of config.map with config.episode.integrator
-/// (exactly as the episode did), and, when the bag has a ground truth of the map's voxel size,
-/// evaluated after every view as `avp run` does (the ROI of the coverage metric is the
-/// configuration's scene's plant bounds inflated by roi_margin_m). Writes record.json (with a
-/// "replay" section: the bag, the segmenter, views, damage, the comparison with the recorded
-/// metrics), metrics.csv, map.avpmap, map.ot, fruit_voxels.ply, metrics.svg (RunEpisodeToFolder).
-/// A damaged bag replays its intact views and the episode ends "interrupted" naming the damage.
-/// Errors: invalid configuration, "recorded" without masks, an oracle segmenter without labels,
-/// a bad ground_truth.json, the folder's.
-Result<ReplaySummary> ReplayToFolder(const ros::bag::Bag& bag, RunConfig config,
+/// Replays `bag` with `config` into options.folder.out_dir, reading it view by view (bounded
+/// memory: ros::bag::BagReader): each view segmented (the recorded masks or the segmenter),
+/// integrated into a map of config.map with config.episode.integrator (exactly as the episode
+/// did; config.replay's region of interest, when set, bounds the map), and, when the bag has a
+/// ground truth of the map's voxel size, evaluated after every view as `avp run` does. The frames
+/// fused are config.replay's (ros::bag::FrameSelection). Writes record.json (with a "replay"
+/// section: the bag, its format and files, the segmenter, what became of each frame, damage, the
+/// comparison with the recorded metrics), metrics.csv, map.avpmap, map.ot, fruit_voxels.ply,
+/// metrics.svg (RunEpisodeToFolder). A damaged bag replays its intact views and the episode ends
+/// "interrupted" naming the damage. Errors (before anything is written): invalid configuration,
+/// "recorded" without masks, an oracle segmenter without labels, a robot's bag without a
+/// segmenter, a bag with nothing to fuse, a bad ground_truth.json; then the folder's.
+Result<ReplaySummary> ReplayToFolder(ros::bag::BagReader& bag, RunConfig config,
                                      const Registries& registries, const ReplayOptions& options);
 
 }  // namespace avp::experiment

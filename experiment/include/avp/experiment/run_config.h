@@ -14,6 +14,7 @@
 #include <avp/experiment/registries.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/pipeline/episode.h>
+#include <avp/ros/bag/frame_selection.h>
 #include <avp/sim/sensor_noise.h>
 
 namespace avp::experiment {
@@ -27,6 +28,21 @@ struct ComponentChoice {
   std::string name;
   OptionValues options;
 };
+
+/// What `avp replay` fuses of a robot's bag (docs/recording.md "Replaying a real robot's bag"):
+/// which of its colour/depth pairs (ros::bag::FrameSelection: start_s, end_s, at_rest_only,
+/// every_nth, fps, max_views, ...) and the region of interest the map keeps.
+struct ReplayConfig : ros::bag::FrameSelection {
+  /// The map keeps only voxels inside the box [roi_min_m, roi_max_m] (the base frame, metres;
+  /// both 3 values, or both empty: no box); the coverage metric and the report use it too.
+  std::vector<double> roi_min_m;
+  std::vector<double> roi_max_m;
+  /// The box, when set.
+  std::optional<Box3> Roi() const;
+};
+
+/// The fields of ReplayConfig (the run configuration's replay.* keys).
+const OptionTable<ReplayConfig>& ReplayConfigTable();
 
 /// One episode's whole configuration (docs/experiments.md, "Configuration"): it nests the
 /// modules' own option structs, each with its field table, and writes each default once, where
@@ -62,6 +78,8 @@ struct RunConfig {
   /// How the observable ground truth is computed (its voxel size and range are the map's and the
   /// integrator's).
   eval::GroundTruthOptions ground_truth;
+  /// `avp replay` of a robot's bag: the frames to fuse and the region of interest.
+  ReplayConfig replay;
   ComponentChoice planner{"avp-nbv", {}};
   ComponentChoice segmenter{"oracle", {}};
 

@@ -49,6 +49,9 @@ struct StepRecord {
   Status segment_status;  ///< a segmenter error: the frame is fused without semantics
   Status integrate_status;
   size_t masks = 0;  ///< instances the segmenter returned
+  /// Of those, masks with no pixel of valid depth (finite, within the camera's depth range):
+  /// they add no semantic evidence (a real camera's depth holes, a mask on a far background).
+  size_t masks_without_depth = 0;
   mapping::IntegrationStats integration;
 
   /// The map after this view, and its change from the previous view.

@@ -43,6 +43,10 @@ Result<Segmentation> SegmentObservation(segmentation::Segmenter& segmenter,
                                         const EpisodeOptions& options, uint64_t frame_index,
                                         const std::stop_token& stop = {});
 
+/// The instance masks of `segmentation` with no pixel of valid depth in `frame` (finite, within
+/// frame.K's depth range): StepRecord::masks_without_depth.
+size_t CountMasksWithoutDepth(const Segmentation& segmentation, const RgbdFrame& frame);
+
 /// Fuses views into one map, step after step, and records in each StepRecord what the fusion did
 /// (segment_status, masks, integration, integrate_status, segment_ms, integrate_ms) and the map
 /// after it (known, occupied and target voxels, target instances, and the change since the

@@ -54,7 +54,8 @@ std::string FormatProgressRate(size_t done, double elapsed_s, RateUnit* unit = n
 std::string FormatProgressTimes(size_t done, size_t total, double elapsed_s,
                                 RateUnit* unit = nullptr);
 
-/// "12/120 (10 %) 3.1/min, 52 s elapsed, ~8 min left".
+/// "12/120 (10 %) 3.1/min, 52 s elapsed, ~8 min left"; total 0 (not known): "12 3.1/min, 52 s
+/// elapsed".
 std::string FormatProgressCounts(size_t done, size_t total, double elapsed_s,
                                  RateUnit* unit = nullptr);
 

@@ -6,15 +6,18 @@
 // robot (sensor_msgs/Image colour + aligned depth, CameraInfo, /tf and /tf_static), its images
 // read as `avp live` reads them (ros/msg/images.h) and its transforms in ros::msg::TfBuffer.
 
+#include <concepts>
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include <avp/core/camera.h>
@@ -23,6 +26,8 @@
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/robot/rgbd_source.h>
+#include <avp/ros/bag/frame_selection.h>
+#include <avp/ros/bag/message_source.h>
 #include <avp/ros/msg/camera_topics.h>
 #include <avp/ros/msg/messages.h>
 
@@ -40,15 +45,16 @@ struct BagReadOptions : ros::msg::CameraTopics {
   /// /tf edge that bracket it; outside an edge's samples, the nearest one is used when it is at
   /// most this far from the stamp.
   double tf_tolerance_ms = 50.0;
-  /// Real bags: fuse at most this many frames per second of bag time (the first pair, then each
-  /// first pair at least 1 / rate later); 0 = every pair. avp's own recordings fuse every step.
-  double frame_rate_hz = 1.0;
-  /// At most this many views (0 = all).
-  int max_views = 0;
-  /// The views to fuse are decoded in memory (colour, depth, labels, masks: about 3.7 MB per
-  /// 640 x 480 view): at most this many megabytes, else ResourceExhausted (a long 30 Hz bag with
-  /// frame_rate_hz = 0 would fill the memory).
-  double max_decoded_mb = 4096.0;
+  /// When the bag's TF has no transform from the base to the camera frame: the arm's joints
+  /// (sensor_msgs/JointState, interpolated at the image's stamp) through the arm's URDF give the
+  /// camera pose (robot::ArmModel::CameraPose; the base frame is then the arm's base link).
+  std::string joint_states_topic = "/joint_states";
+  /// The arm (its YAML: URDF, base and tip links, camera mount); empty: avp's default arm.
+  std::string arm;
+  /// Lens distortion (CameraInfo's distortion_model and D): "rectify" the images (colour
+  /// bilinear, depth nearest: ros::msg::Rectifier) or "ignore" it (fuse raw images as if
+  /// rectified: for comparisons only).
+  std::string distortion = "rectify";
   /// Ignore the bag's /avp/step messages and read it like a real robot's bag (colour, depth,
   /// CameraInfo and TF only).
   bool as_robot_bag = false;
@@ -77,38 +83,104 @@ struct BagView {
   nlohmann::json step;
 };
 
-/// A bag read for replay.
-struct Bag {
-  std::filesystem::path path;
-  /// True for an avp recording (it has /avp/step messages and was not read as_robot_bag).
-  bool avp_recording = false;
-  /// The MCAP metadata record "avp" (command, scene, seed, planner, segmenter, run_config ...);
-  /// empty when absent.
-  std::map<std::string, std::string> avp_metadata;
-  /// The ground_truth.json attachment (eval::GroundTruthToJson's form, read with
-  /// eval::GroundTruthFromJson), when the bag has one.
-  std::optional<nlohmann::json> ground_truth;
-  std::vector<BagView> views;
-  /// OK, or the damage the streaming reader found (naming the byte offset): `views` then holds
-  /// what came before it.
-  Status damage;
-  uint64_t intact_bytes = 0;
-  uint64_t file_bytes = 0;
-  /// Real bags: colour/depth pairs found, and those left out by frame_rate_hz / max_views.
+/// What became of a bag's frames: each colour/depth pair (robot bags) or step (avp recordings)
+/// is fused, left out by the FrameSelection (counted by reason), or skipped because it could not
+/// be used (no transform, no CameraInfo, a bad image: counted by reason, and named).
+struct FrameAccount {
+  /// Colour/depth pairs found (robot bags), or steps (avp recordings).
   size_t pairs = 0;
-  size_t pairs_thinned = 0;
-  /// Pairs or steps that could not be used (no transform, no CameraInfo, a bad image), each
-  /// "stamp S: why"; the first few are kept, `skipped_count` counts them all.
+  size_t fused = 0;
+  /// Reason -> pairs: "before start_s", "after end_s", "moving", "every_nth", "fps",
+  /// "max_views".
+  std::map<std::string, size_t> left_out;
+  /// Reason -> frames: "no transform", "no CameraInfo", "bad image", "no depth within
+  /// max_pair_skew_ms", ...
+  std::map<std::string, size_t> skipped_by_reason;
+  /// The first skipped frames, each "stamp S: why"; skipped_count counts them all.
   std::vector<std::string> skipped;
   size_t skipped_count = 0;
-  /// Messages per topic in the intact part.
+  /// One entry per fused or skipped frame (the first kMaxFrames): index, stamp, what became of
+  /// it ("fused" or the reason it was skipped).
+  struct Frame {
+    int index = 0;
+    int64_t stamp_ns = 0;
+    std::string what;
+  };
+  std::vector<Frame> frames;
+  static constexpr size_t kMaxFrames = 10000;
+
+  size_t left_out_count() const;
+};
+
+/// A bag opened for replay, read view by view in bounded memory (its messages streamed in
+/// log-time order: ros::bag::OpenBag). Robot bags: colour and depth paired by stamp (within
+/// max_pair_skew_ms), the camera pose from TF interpolated at the colour image's stamp (or the
+/// arm's joints through its URDF), the intrinsics from the CameraInfo nearest in time, the lens
+/// distortion rectified; the pairs chosen by the FrameSelection. avp recordings: every /avp/step
+/// with its images, masks, labels and exact pose.
+class BagReader {
+ public:
+  /// Opens `path` (a file or a bag folder) and reads what is known before the first message.
+  /// Errors: invalid options, a path that is no bag (saying what it is), a bag whose index
+  /// lists no colour topic (listing its topics), a ground_truth.json that is not JSON.
+  static Result<std::unique_ptr<BagReader>> Open(const std::filesystem::path& path,
+                                                 const BagReadOptions& options = {});
+  ~BagReader();
+  BagReader(const BagReader&) = delete;
+  BagReader& operator=(const BagReader&) = delete;
+
+  /// Which frames to fuse; before the first Next. InvalidArgument naming a bad value.
+  Status SetSelection(const FrameSelection& selection);
+
+  /// The next view; nullopt at the end of the bag (or of its intact part: damage()). Errors: a
+  /// topic of the wrong type or encoding, and, at the end, a bag that gave no view at all (why:
+  /// a missing topic, listing the bag's topics; no transform, listing the TF frames; ...).
+  Result<std::optional<BagView>> Next();
+
+  const std::filesystem::path& path() const;
+  /// Format ("MCAP (indexed, zstd chunks)", "rosbag2 SQLite 3", ...), files, sizes.
+  const BagInfo& info() const;
+  /// True for an avp recording (its "avp" metadata or /avp/step topic; not read as_robot_bag).
+  bool avp_recording() const;
+  /// The MCAP metadata record "avp" (command, scene, seed, planner, segmenter, run_config ...);
+  /// empty when absent.
+  const std::map<std::string, std::string>& avp_metadata() const;
+  /// The ground_truth.json attachment (eval::GroundTruthToJson's form), when the bag has one.
+  const std::optional<nlohmann::json>& ground_truth() const;
+  /// Whether the bag's topics (as far as known) include `topic`.
+  bool HasTopic(std::string_view topic) const;
+  /// Whether the views carry the simulator's labels: labels_prefix is set and the bag has
+  /// PREFIX/instance (as far as known).
+  bool HasSimulatorLabels() const;
+  /// OK, or the damage met (naming the file and offset): the views before it were returned.
+  const Status& damage() const;
+  uint64_t bytes_read() const;
+  const FrameAccount& account() const;
+  /// Messages per topic read so far.
+  const std::map<std::string, uint64_t>& topic_messages() const;
+
+  struct Impl;
+
+ private:
+  explicit BagReader(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+/// A whole bag read at once (tests and small bags: every view is kept in memory).
+struct Bag {
+  std::filesystem::path path;
+  BagInfo info;
+  bool avp_recording = false;
+  std::map<std::string, std::string> avp_metadata;
+  std::optional<nlohmann::json> ground_truth;
+  std::vector<BagView> views;
+  Status damage;
+  FrameAccount account;
   std::map<std::string, uint64_t> topic_messages;
 };
 
-/// Reads `path` (ros::mcap::ReadStreaming: a damaged file gives the views before the damage, and
-/// `damage` says where). Errors: the file cannot be read at all or holds no usable view (the
-/// error names why: a missing topic, listing the bag's topics; no transform between the frames,
-/// listing the TF frames; ...), invalid options, a ground_truth.json that is not JSON.
-Result<Bag> ReadBag(const std::filesystem::path& path, const BagReadOptions& options = {});
+/// Every view of `path` (BagReader). Errors: those of Open and Next.
+Result<Bag> ReadBag(const std::filesystem::path& path, const BagReadOptions& options = {},
+                    const FrameSelection& selection = {});
 
 }  // namespace avp::ros::bag

@@ -19,6 +19,7 @@
 #include <avp/ros/live/tf_listener.h>
 #include <avp/ros/msg/camera_topics.h>
 #include <avp/ros/msg/images.h>
+#include <avp/ros/msg/lens.h>
 #include <avp/ros/msg/messages.h>
 
 namespace avp::ros::live {
@@ -106,7 +107,8 @@ class Ros2RgbdSource final : public robot::RgbdSource {
   std::vector<GroundTruthFruit> fruits_;
   bool have_fruits_ = false;
   SourceCounters counters_;
-  bool warned_distortion_ = false;
+  /// The lens of the latest CameraInfo (identity for a rectified camera).
+  std::shared_ptr<const ros::msg::Rectifier> rectifier_;
 
   std::unique_ptr<ros::dds::Subscription<ros::msg::Image>> color_sub_, depth_sub_, instance_sub_,
       class_sub_;
