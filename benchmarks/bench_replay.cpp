@@ -199,16 +199,7 @@ fs::path RobotBag(int width, int height) {
   K.cy = (height - 1) / 2.0;
   ImageRgb8 rgb(width, height);
   DepthImage depth(width, height);
-  for (int v = 0; v < height; ++v) {
-    for (int u = 0; u < width; ++u) {
-      const int du = u - width / 2, dv = v - height / 2;
-      const bool disc = du * du + dv * dv < (height / 5) * (height / 5);
-      rgb(u, v, 0) = disc ? 210 : 40;
-      rgb(u, v, 1) = disc ? 20 : 160;
-      rgb(u, v, 2) = disc ? 30 : 40;
-      depth(u, v) = disc ? 0.55f : 0.6f;
-    }
-  }
+  ros::bag::testing::DrawWallAndDisc(rgb, depth);
   for (int i = 0; i < 90; ++i) {
     const int64_t t = t0 + i * int64_t{33'333'333};
     if (!w->Frame(t, rgb, depth, ros::msg::ToCameraInfo(K, {}), "camera_color_optical_frame")

@@ -353,16 +353,7 @@ fs::path WriteRobotBag(const fs::path& path) {
     ASSERT_TRUE(
         w->Write(ch, seq++, static_cast<uint64_t>(t), static_cast<uint64_t>(t), bytes).ok());
   };
-  auto edge = [](const std::string& parent, const std::string& child, const RigidTransform& X,
-                 int64_t t) {
-    ros::msg::TransformStamped e;
-    e.header = {ros::msg::Time::FromNanoseconds(t), parent};
-    e.child_frame_id = child;
-    e.transform.translation = {X.translation().x(), X.translation().y(), X.translation().z()};
-    const Eigen::Quaterniond q = X.quaternion();
-    e.transform.rotation = {q.x(), q.y(), q.z(), q.w()};
-    return e;
-  };
+  const auto edge = &ros::bag::testing::RobotBagWriter::Edge;
   // The optical frame looks along +x of the link (z forward, x right, y down).
   const RigidTransform link_to_optical =
       RigidTransform::LookAt({0, 0, 0}, {1, 0, 0}, Eigen::Vector3d::UnitZ());

@@ -42,6 +42,23 @@ const readable = (buf) => ({
 });
 const reader = await McapIndexedReader.Initialize({ readable: readable(original) });
 
+/** Starts `writer` with the recording's header, schemas and channels; the channel ids' map. */
+async function startLike(writer) {
+  await writer.start({ profile: reader.header.profile, library: "@mcap/core (avp test)" });
+  const schemaIds = new Map();
+  for (const [id, s] of reader.schemasById) {
+    schemaIds.set(id, await writer.registerSchema({ name: s.name, encoding: s.encoding,
+                                                    data: s.data }));
+  }
+  const channelIds = new Map();
+  for (const [id, c] of reader.channelsById) {
+    channelIds.set(id, await writer.registerChannel({
+      topic: c.topic, schemaId: schemaIds.get(c.schemaId) ?? 0,
+      messageEncoding: c.messageEncoding, metadata: c.metadata }));
+  }
+  return channelIds;
+}
+
 /** The recording written again by @mcap/core with `compress` for every chunk; `indexed` false:
  * no summary, no index of any kind (a reader must stream through the file). */
 async function rewrite(compress, chunkSize, indexed = true) {
@@ -63,18 +80,7 @@ async function rewrite(compress, chunkSize, indexed = true) {
       repeatSchemas: false, repeatChannels: false,
     }),
   });
-  await writer.start({ profile: reader.header.profile, library: "@mcap/core (avp test)" });
-  const schemaIds = new Map();
-  for (const [id, s] of reader.schemasById) {
-    schemaIds.set(id, await writer.registerSchema({ name: s.name, encoding: s.encoding,
-                                                    data: s.data }));
-  }
-  const channelIds = new Map();
-  for (const [id, c] of reader.channelsById) {
-    channelIds.set(id, await writer.registerChannel({
-      topic: c.topic, schemaId: schemaIds.get(c.schemaId) ?? 0,
-      messageEncoding: c.messageEncoding, metadata: c.metadata }));
-  }
+  const channelIds = await startLike(writer);
   for await (const m of reader.readMessages()) {
     await writer.addMessage({ ...m, channelId: channelIds.get(m.channelId) });
   }
@@ -157,18 +163,7 @@ async function writeMcapPart(messages, withRecords) {
       },
     },
   });
-  await writer.start({ profile: reader.header.profile, library: "@mcap/core (avp test)" });
-  const schemaIds = new Map();
-  for (const [id, s] of reader.schemasById) {
-    schemaIds.set(id, await writer.registerSchema({ name: s.name, encoding: s.encoding,
-                                                    data: s.data }));
-  }
-  const channelIds = new Map();
-  for (const [id, c] of reader.channelsById) {
-    channelIds.set(id, await writer.registerChannel({
-      topic: c.topic, schemaId: schemaIds.get(c.schemaId) ?? 0,
-      messageEncoding: c.messageEncoding, metadata: c.metadata }));
-  }
+  const channelIds = await startLike(writer);
   if (withRecords) {
     for await (const a of reader.readAttachments()) await writer.addAttachment(a);
     for await (const md of reader.readMetadata()) await writer.addMetadata(md);

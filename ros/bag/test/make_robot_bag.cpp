@@ -71,17 +71,7 @@ int main(int argc, char** argv) {
                  next_tf, false);
       if (!st.ok()) return Fail(st);
     }
-    const int r2 = (height / 5) * (height / 5);
-    for (int v = 0; v < height; ++v) {
-      for (int u = 0; u < width; ++u) {
-        const int du = u - width / 2 + (i % 20), dv = v - height / 2;
-        const bool disc = du * du + dv * dv < r2;
-        rgb(u, v, 0) = disc ? 210 : 40;
-        rgb(u, v, 1) = disc ? 20 : 160;
-        rgb(u, v, 2) = disc ? 30 : 40;
-        depth(u, v) = disc ? 0.55f : 0.6f;
-      }
-    }
+    ros::bag::testing::DrawWallAndDisc(rgb, depth, -(i % 20));
     if (Status s = bag.Frame(t, rgb, depth, info, "camera_color_optical_frame"); !s.ok()) {
       return Fail(s);
     }

@@ -19,6 +19,22 @@
 
 namespace avp::ros::bag::testing {
 
+/// A synthetic RealSense view: a green wall 0.6 m ahead with a red disc 5 cm nearer, its centre
+/// `shift` pixels right of the image's (the images' sizes are kept).
+inline void DrawWallAndDisc(ImageRgb8& rgb, DepthImage& depth_m, int shift = 0) {
+  const int w = rgb.width(), h = rgb.height(), r2 = (h / 5) * (h / 5);
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const int du = u - w / 2 - shift, dv = v - h / 2;
+      const bool disc = du * du + dv * dv < r2;
+      rgb(u, v, 0) = disc ? 210 : 40;
+      rgb(u, v, 1) = disc ? 20 : 160;
+      rgb(u, v, 2) = disc ? 30 : 40;
+      depth_m(u, v) = disc ? 0.55f : 0.6f;
+    }
+  }
+}
+
 class RobotBagWriter {
  public:
   static Result<std::unique_ptr<RobotBagWriter>> Open(const std::filesystem::path& path,
