@@ -9,7 +9,7 @@
 #
 # BUILD_DIR: a build configured with cmake/AvpSanitizeBuild.cmake (its fuzz/avp_fuzz_<target>).
 # SECONDS: fuzzing time per target. TARGET: map_file octomap_import scene_file image_codec
-# tensor_codec infer_request (default: all). FUZZ_JOBS targets run at once (default 2);
+# tensor_codec infer_request bag (default: all). FUZZ_JOBS targets run at once (default 2);
 # FUZZ_TIMEOUT (s per input, default 10), FUZZ_RSS_MB (default 2048) and FUZZ_ARGS (more
 # libFuzzer flags) tune the run. Used by `make test` (briefly) and `make fuzz` (longer).
 set -euo pipefail
@@ -24,7 +24,7 @@ shift 2
 fuzz_dir="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-  targets=(map_file octomap_import scene_file image_codec tensor_codec infer_request)
+  targets=(map_file octomap_import scene_file image_codec tensor_codec infer_request bag)
 fi
 jobs="${FUZZ_JOBS:-2}"
 timeout_s="${FUZZ_TIMEOUT:-10}"
