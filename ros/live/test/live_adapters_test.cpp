@@ -109,10 +109,10 @@ class LiveSourceTest : public ::testing::Test {
   }
 
   /// CameraInfo at 20 Hz from a thread until the test ends (drivers publish it with every frame).
-  void StartInfo() {
-    info_thread_ = std::jthread([this](std::stop_token stop) {
+  void StartInfo(const ros::msg::CameraInfo& info = Info(8, 6)) {
+    info_thread_ = std::jthread([this, info](std::stop_token stop) {
       while (!stop.stop_requested()) {
-        (void)info_->Publish(Info(8, 6));
+        (void)info_->Publish(info);
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
       }
     });
@@ -197,6 +197,42 @@ TEST_F(LiveSourceTest, CapturesThePairStampedAfterTheCallWithItsTransform) {
   EXPECT_NEAR(obs->frame.X_WC.translation().x(), 2.0 + 2.0 * 6.0 / 20.0, 1e-6);
   EXPECT_FALSE(obs->labels.has_value());
   EXPECT_EQ((*source)->counters().pairs_used, 1u);
+}
+
+TEST_F(LiveSourceTest, ADistortedCameraIsRectifiedToItsProjectionMatrix) {
+  // A plumb_bob lens and a P whose focal length differs from K's: the frames avp fuses are the
+  // rectified camera's (ros/msg/lens.h, as avp replay's), depth taken from the nearest raw pixel.
+  ros::msg::CameraInfo info = Info(8, 6);
+  info.d = {-0.2, 0.05, 0.0, 0.0, 0.0};
+  info.p = {40.0, 0, 3.5, 0, 0, 40.0, 2.5, 0, 0, 0, 1, 0};
+  StartInfo(info);
+  auto source = MakeSource();
+  ASSERT_TRUE(source.ok()) << source.status().ToString();
+  WaitMatched();
+  std::jthread camera([&](std::stop_token) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    const int64_t t = NowNs();
+    SendCameraTf(t - 10'000'000, 1.0);
+    SendCameraTf(t + 10'000'000, 1.0);
+    (void)depth_->Publish(DepthMm(8, 6, 1500, t));
+    (void)color_->Publish(ColorImage(8, 6, "rgb8", t));
+  });
+  auto obs = (*source)->Capture(RigidTransform(), 0);
+  ASSERT_TRUE(obs.ok()) << obs.status().ToString();
+  EXPECT_DOUBLE_EQ(obs->frame.K.fx, 40.0);  // P's, not K's 50
+  EXPECT_DOUBLE_EQ(obs->frame.K.cx, 3.5);
+  // Every rectified depth is a raw pixel's (1500 mm as metres) or 0 where the raw image has none.
+  const float raw = obs->frame.depth_m.at(3, 3);
+  EXPECT_FLOAT_EQ(raw, 1.5f);
+  // The rectified camera (f 40) sees wider than the raw one (f 50): its border pixels look
+  // outside the raw image (column 0 at -0.87 px, row 0 at -0.63 px) and have no depth; the
+  // interior has the raw depth.
+  for (int v = 0; v < 6; ++v) {
+    for (int u = 0; u < 8; ++u) {
+      const bool border = u == 0 || u == 7 || v == 0 || v == 5;
+      EXPECT_EQ(obs->frame.depth_m.at(u, v), border ? 0.0f : raw) << u << ", " << v;
+    }
+  }
 }
 
 TEST_F(LiveSourceTest, FramesArrivingOutOfOrderArePairedByStamp) {
