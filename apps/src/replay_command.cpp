@@ -1,5 +1,6 @@
-// avp replay BAG: segmentation, mapping and evaluation over an MCAP recording (avp's own or a
-// robot's rosbag2) into a run folder (docs/recording.md "Replay").
+// avp replay BAG: segmentation, mapping and evaluation over a bag (avp's own recording or a
+// robot's rosbag2: MCAP or SQLite 3, a file or a bag folder) into a run folder (docs/recording.md
+// "Replay").
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -32,7 +33,7 @@ struct ReplayCli {
   ros::bag::BagReadOptions bag_options;
   std::vector<std::string> bag_option_items;
   // Shorthands for run configuration keys (given: they override --config and the recording's).
-  double fps = 0.0;
+  double fps = 1.0;  ///< shown as the default; applied only when given (shorthand_keys)
   int max_views = 0;
   std::string prompt;
   std::vector<std::string> shorthand_keys;  ///< "replay.fps=2", ... in the order of the line
@@ -191,8 +192,9 @@ void AddReplayCommand(CLI::App& app, CommandContext& context) {
   auto cli = std::make_shared<ReplayCli>();
   CLI::App* cmd = app.add_subcommand(
       "replay",
-      "Segmentation, mapping and evaluation over an MCAP recording: avp's own (avp run --record) "
-      "or a robot's rosbag2 (docs/recording.md)");
+      "Segmentation, mapping and evaluation over a bag: avp's own recording (avp run --record) or "
+      "a robot's rosbag2 (MCAP or Humble's SQLite 3 .db3, a file or a bag folder; "
+      "docs/recording.md)");
   cmd->add_option("bag", cli->bag,
                   "The bag: an MCAP file (uncompressed, zstd or lz4), a rosbag2 .db3, or a bag "
                   "folder (metadata.yaml and its .db3 / .mcap files)")
@@ -201,7 +203,7 @@ void AddReplayCommand(CLI::App& app, CommandContext& context) {
   cmd->add_flag("--force", cli->force,
                 "Replace the results an earlier run left in --out (only an avp run folder)");
   cmd->add_option("--segmenter", cli->segmenter,
-                  "'recorded' (the recording's masks: the default when every view has them) or a "
+                  "'recorded' (the recording's masks: the default when the bag has them) or a "
                   "segmenter (`avp run --segmenter help`); the oracle needs the simulator labels "
                   "an avp recording carries");
   cmd->add_option("--config", cli->config_file,

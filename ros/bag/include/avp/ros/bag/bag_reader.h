@@ -1,10 +1,12 @@
 #pragma once
 
-// Reading an MCAP recording back as a sequence of views to fuse (`avp replay`, docs/recording.md
-// "Replay"): avp's own recordings (`avp run --record`: one view per /avp/step with its exact pose,
-// masks, simulator labels, run configuration and ground truth) and rosbag2 MCAP files from a real
-// robot (sensor_msgs/Image colour + aligned depth, CameraInfo, /tf and /tf_static), its images
-// read as `avp live` reads them (ros/msg/images.h) and its transforms in ros::msg::TfBuffer.
+// Reading a bag back as a sequence of views to fuse (`avp replay`, docs/recording.md "Replay" and
+// "Replaying a real robot's bag"): avp's own recordings (`avp run --record`: one view per
+// /avp/step with its exact pose, masks, simulator labels, run configuration and ground truth) and
+// a robot's rosbag2 bags, MCAP or SQLite 3, a file or a (split) bag folder (message_source.h):
+// sensor_msgs/Image colour + aligned depth, CameraInfo (its lens rectified: ros/msg/lens.h), /tf
+// and /tf_static (or /joint_states through the arm's URDF), read as `avp live` reads them
+// (ros/msg/images.h), message by message in bounded memory.
 
 #include <concepts>
 #include <cstdint>
