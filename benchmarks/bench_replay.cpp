@@ -191,12 +191,7 @@ fs::path RobotBag(int width, int height) {
            .ok()) {
     Die(InternalError("tf"));
   }
-  CameraIntrinsics K;
-  K.width = width;
-  K.height = height;
-  K.fx = K.fy = 0.9 * width;
-  K.cx = (width - 1) / 2.0;
-  K.cy = (height - 1) / 2.0;
+  const CameraIntrinsics K = ros::bag::testing::SyntheticIntrinsics(width, height);
   ImageRgb8 rgb(width, height);
   DepthImage depth(width, height);
   ros::bag::testing::DrawWallAndDisc(rgb, depth);

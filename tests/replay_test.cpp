@@ -307,7 +307,7 @@ TEST_F(ReplayTest, BadStepOrMasksSkipTheViewNamingTheValue) {
     ASSERT_TRUE(bag.ok()) << bag.status().ToString();
     ASSERT_EQ(bag->views.size(), 2u) << c.text;
     EXPECT_EQ(bag->views[1].index, 2);
-    ASSERT_EQ(bag->account.skipped_count, 1u);
+    ASSERT_EQ(bag->account.skipped_count(), 1u);
     EXPECT_THAT(bag->account.skipped[0], HasSubstr("stamp 1.000000000: " + c.expected)) << c.text;
   }
 }

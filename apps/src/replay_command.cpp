@@ -81,13 +81,13 @@ void PrintAccount(const ros::bag::BagReader& bag, const experiment::ReplaySummar
       "valid depth\n",
       a.pairs, bag.avp_recording() ? "steps" : "colour/depth pairs", a.fused, a.left_out_count(),
       left_out.empty() ? "" : fmt::format(" ({})", fmt::join(left_out, ", ")).c_str(),
-      a.skipped_count,
-      skipped.empty() ? "" : fmt::format(" ({})", fmt::join(skipped, ", ")).c_str(), summary.masks,
-      summary.masks_without_depth);
+      a.skipped_count(),
+      skipped.empty() ? "" : fmt::format(" ({})", fmt::join(skipped, ", ")).c_str(),
+      summary.masks(), summary.masks_without_depth());
   for (const std::string& s : a.skipped) spdlog::warn("skipped: {}", s);
-  if (a.skipped_count > a.skipped.size()) {
+  if (a.skipped_count() > a.skipped.size()) {
     spdlog::warn("... {} more skipped (record.json lists each frame)",
-                 a.skipped_count - a.skipped.size());
+                 a.skipped_count() - a.skipped.size());
   }
 }
 

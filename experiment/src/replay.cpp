@@ -127,6 +127,18 @@ bool RecordedPlan(const json& step, int keep_top, pipeline::StepRecord& s,
 
 }  // namespace
 
+size_t ReplaySummary::masks() const {
+  size_t n = 0;
+  for (const ViewMasks& v : view_masks) n += v.masks;
+  return n;
+}
+
+size_t ReplaySummary::masks_without_depth() const {
+  size_t n = 0;
+  for (const ViewMasks& v : view_masks) n += v.masks_without_depth;
+  return n;
+}
+
 Result<RunConfig> BagRunConfig(const ros::bag::BagReader& bag) {
   RunConfig config;
   const auto it = bag.avp_metadata().find("run_config");
@@ -143,6 +155,17 @@ namespace {
 constexpr std::string_view kRealSegmenters =
     "color, ywes://MODEL_DIR, lsam://MODEL_DIR or remote://HOST:PORT (`avp run --segmenter help` "
     "lists them)";
+
+/// The oracle segmenters need the simulator's label images: `which` has none ("the bag", "view 3").
+Status OracleNeedsLabels(const ros::bag::BagReader& bag, const std::string& segmenter,
+                         const std::string& which) {
+  return InvalidArgumentError(fmt::format(
+      "{}: the '{}' segmenter needs the simulator's label images ({}, {}), and {} has none (a real "
+      "robot's bag never has them): use --segmenter recorded (an avp recording's masks) or a real "
+      "segmenter: {}",
+      bag.path().string(), segmenter, ros::bag::kSimInstanceTopic, ros::bag::kSimClassTopic, which,
+      kRealSegmenters));
+}
 
 /// Whether the replay uses the recording's masks (else config.segmenter, set from
 /// options.segmenter); summary.segmenter names the choice. Errors: "recorded" for a bag without
@@ -174,12 +197,7 @@ Result<bool> ChooseSegmenter(const ros::bag::BagReader& bag, const ReplayOptions
           "segmenter: give --segmenter NAME: {}",
           bag.path().string(), kRealSegmenters));
     }
-    return InvalidArgumentError(fmt::format(
-        "{}: the '{}' segmenter needs the simulator's label images ({}, {}), and the bag has "
-        "none (a real robot's bag never has them): use --segmenter recorded (an avp "
-        "recording's masks) or a real segmenter: {}",
-        bag.path().string(), summary.segmenter, ros::bag::kSimInstanceTopic,
-        ros::bag::kSimClassTopic, kRealSegmenters));
+    return OracleNeedsLabels(bag, summary.segmenter, "the bag");
   }
   return false;
 }
@@ -267,10 +285,10 @@ json ReplayRecord(const ros::bag::BagReader& bag, const ReplaySummary& summary) 
                 {"left_out", a.left_out},
                 {"skipped_by_reason", a.skipped_by_reason},
                 {"skipped", a.skipped},
-                {"skipped_count", a.skipped_count},
+                {"skipped_count", a.skipped_count()},
                 {"frames", frames},
-                {"masks_without_depth", summary.masks_without_depth},
-                {"masks", summary.masks},
+                {"masks_without_depth", summary.masks_without_depth()},
+                {"masks", summary.masks()},
                 {"topic_messages", bag.topic_messages()},
                 {"metrics_compared", summary.metrics_compared},
                 {"metrics_differ", summary.metrics_differ},
@@ -357,11 +375,7 @@ class ReplayEpisode {
     }
     if (segmenter_ != nullptr && summary_.segmenter.starts_with("oracle") &&
         !view.observation.labels) {
-      return InvalidArgumentError(fmt::format(
-          "{}: the '{}' segmenter needs the simulator's label images ({}, {}), and view {} has "
-          "none",
-          bag_.path().string(), summary_.segmenter, ros::bag::kSimInstanceTopic,
-          ros::bag::kSimClassTopic, view.index));
+      return OracleNeedsLabels(bag_, summary_.segmenter, fmt::format("view {}", view.index));
     }
     return Status::Ok();
   }
@@ -387,8 +401,6 @@ class ReplayEpisode {
                      step, seen);
     }
     summary_.view_masks.push_back({view.index, step.masks, step.masks_without_depth});
-    summary_.masks += step.masks;
-    summary_.masks_without_depth += step.masks_without_depth;
     if (gt_ != nullptr) Evaluate(i, view, *seen.observation, fusion.map(), step);
     // The plan the recorded episode made after this view (not rerun): record.json, the report
     // and metrics.csv show it as the episode had it.

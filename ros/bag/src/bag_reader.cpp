@@ -55,6 +55,21 @@ const OptionTable<BagReadOptions>& BagReadOptionTable() {
   return *table;
 }
 
+const OptionTable<FrameSelection>& FrameSelectionTable() {
+  static const auto* table = [] {
+    auto* t = new OptionTable<FrameSelection>("replay key");
+    AddFrameSelectionOptions(*t);
+    return t;
+  }();
+  return *table;
+}
+
+size_t FrameAccount::skipped_count() const {
+  size_t n = 0;
+  for (const auto& [reason, count] : skipped_by_reason) n += count;
+  return n;
+}
+
 size_t FrameAccount::left_out_count() const {
   size_t n = 0;
   for (const auto& [reason, count] : left_out) n += count;
@@ -68,6 +83,8 @@ namespace {
 constexpr size_t kMaxSkippedKept = 10;
 /// Images kept waiting for their partner (colour or depth) at most; beyond, the oldest goes.
 constexpr size_t kMaxQueued = 64;
+/// Joint states kept at most (60 s at 1 kHz).
+constexpr size_t kMaxJointStates = 60'000;
 /// CameraInfo messages kept (the nearest in time to an image is used).
 constexpr size_t kMaxInfos = 16;
 /// TF and joint-state history kept, seconds of bag time.
@@ -117,35 +134,38 @@ struct PendingPair {
   RawImage color, depth;
 };
 
-/// The rectifier of the camera a bag's CameraInfo describes, rebuilt only when the camera
-/// changes (its size, model, coefficients, K, R or P; not its stamp).
+/// The rectifier of the camera a bag's CameraInfo describes, rebuilt only when the lens changes
+/// (LensModel::SameLensAs: not for a new stamp).
 class LensCache {
  public:
   /// Rectifies `frame` (raw images, K, pose set) by `info`'s lens, unless options.distortion is
   /// "ignore". Errors: the lens model's (an unknown model, wrong coefficients).
   Status Apply(const ros::msg::CameraInfo& info, const BagReadOptions& o, RgbdFrame& frame) {
     if (o.distortion == "ignore") return Status::Ok();
-    if (!camera_ || !SameCamera(info, *camera_)) {
-      AVP_ASSIGN_OR_RETURN(ros::msg::LensModel model,
-                           ros::msg::LensModelFromCameraInfo(info, o.min_depth_m, o.max_depth_m));
-      rectifier_ = ros::msg::Rectifier(std::move(model));
-      camera_ = info;
-    }
+    AVP_ASSIGN_OR_RETURN(ros::msg::LensModel model,
+                         ros::msg::LensModelFromCameraInfo(info, o.min_depth_m, o.max_depth_m));
+    if (!rectifier_.model().SameLensAs(model)) rectifier_ = ros::msg::Rectifier(std::move(model));
     if (rectifier_.identity()) return Status::Ok();
     return rectifier_.Rectify(frame);
   }
 
  private:
-  static bool SameCamera(const ros::msg::CameraInfo& a, const ros::msg::CameraInfo& b) {
-    return a.width == b.width && a.height == b.height && a.distortion_model == b.distortion_model &&
-           a.d == b.d && a.k == b.k && a.r == b.r && a.p == b.p && a.binning_x == b.binning_x &&
-           a.binning_y == b.binning_y && a.roi == b.roi;
-  }
-  std::optional<ros::msg::CameraInfo> camera_;
   ros::msg::Rectifier rectifier_;
 };
 
 std::string StampText(int64_t stamp_ns) { return ros::msg::FormatStamp(stamp_ns); }
+
+/// "/tf (tf2_msgs/msg/TFMessage, 300), ..." for messages that list a bag's topics.
+std::string FormatTopics(const std::map<std::string, uint64_t>& counts,
+                         const std::map<std::string, std::string>& types) {
+  std::vector<std::string> names;
+  for (const auto& [topic, n] : counts) {
+    auto t = types.find(topic);
+    names.push_back(fmt::format("{} ({}, {})", topic,
+                                t == types.end() || t->second.empty() ? "?" : t->second, n));
+  }
+  return EscapeText(fmt::format("{}", fmt::join(names, ", ")), 800);
+}
 
 }  // namespace
 
@@ -197,7 +217,6 @@ struct BagReader::Impl {
     if (account.skipped.size() < kMaxSkippedKept) {
       account.skipped.push_back(fmt::format("stamp {}: {}", StampText(stamp_ns), why));
     }
-    ++account.skipped_count;
     Record(index, stamp_ns, "skipped: " + why);
   }
 
@@ -218,15 +237,7 @@ struct BagReader::Impl {
 
   // ---- Topics ----
 
-  std::string TopicList() const {
-    std::vector<std::string> names;
-    for (const auto& [topic, n] : topic_messages) {
-      auto t = topic_types.find(topic);
-      names.push_back(fmt::format(
-          "{} ({}, {})", topic, t == topic_types.end() || t->second.empty() ? "?" : t->second, n));
-    }
-    return EscapeText(fmt::format("{}", fmt::join(names, ", ")), 800);
-  }
+  std::string TopicList() const { return FormatTopics(topic_messages, topic_types); }
 
   /// The first message of a topic avp reads: its type and encoding checked.
   Status CheckTopic(const BagMessage& m, std::string_view type) {
@@ -355,8 +366,12 @@ struct BagReader::Impl {
     const int64_t stamp = js->header.stamp.ToNanoseconds();
     if (!joints.empty() && stamp < joints.back().first) return;  // out of order: dropped
     joints.emplace_back(stamp, std::move(q));
+    // kHistoryS of them, and at most kMaxJointStates however fast (or stuck) their stamps run.
     const auto keep_ns = static_cast<int64_t>(kHistoryS * 1e9);
-    while (joints.size() > 2 && joints.front().first < stamp - keep_ns) joints.pop_front();
+    while (joints.size() > 2 &&
+           (joints.front().first < stamp - keep_ns || joints.size() > kMaxJointStates)) {
+      joints.pop_front();
+    }
   }
 
   /// The camera pose from the arm's joints interpolated at `stamp_ns`.
@@ -563,8 +578,11 @@ struct BagReader::Impl {
       PendingPair& p = pending.front();
       const std::string frame = o.camera_frame.empty() ? p.color.frame_id : o.camera_frame;
       Result<RigidTransform> pose = PoseAt(frame, p.color.stamp_ns);
-      const bool may_come = !at_end && static_cast<int64_t>(latest_log_time) <
-                                           static_cast<int64_t>(p.color.log_time) + wait;
+      // Bounded however the bag's log times run (a bag whose log times never advance must not
+      // hold every pair): beyond kMaxQueued waiting pairs, the oldest is decided now.
+      const bool may_come =
+          !at_end && pending.size() <= kMaxQueued &&
+          static_cast<int64_t>(latest_log_time) < static_cast<int64_t>(p.color.log_time) + wait;
       if (may_come && (!pose.ok() || infos.empty())) break;
       PendingPair pair = std::move(p);
       pending.pop_front();
@@ -864,15 +882,9 @@ Result<std::unique_ptr<BagReader>> BagReader::Open(const std::filesystem::path& 
                                 info.metadata.contains(std::string(kMetadataName)));
   // A bag whose index lists every topic and not the colour one has nothing to fuse: say so now.
   if (!info.topic_counts.empty() && !info.topic_counts.contains(options.color_topic)) {
-    std::vector<std::string> topics;
-    for (const auto& [topic, n] : info.topic_counts) {
-      auto t = info.topic_types.find(topic);
-      topics.push_back(
-          fmt::format("{} ({}, {})", topic, t == info.topic_types.end() ? "?" : t->second, n));
-    }
     return NotFoundError(fmt::format("{}: no messages on {} (the bag's topics: {})", path.string(),
                                      QuoteText(options.color_topic),
-                                     EscapeText(fmt::format("{}", fmt::join(topics, ", ")), 800)));
+                                     FormatTopics(info.topic_counts, info.topic_types)));
   }
   return std::unique_ptr<BagReader>(new BagReader(std::move(impl)));
 }
@@ -881,13 +893,7 @@ Status BagReader::SetSelection(const FrameSelection& selection) {
   if (impl_->started) {
     return FailedPreconditionError("BagReader::SetSelection after the first view was read");
   }
-  if (selection.every_nth < 1 || selection.fps < 0.0 || selection.max_views < 0 ||
-      selection.start_s < 0.0 || (selection.end_s > 0.0 && selection.end_s <= selection.start_s)) {
-    return InvalidArgumentError(fmt::format(
-        "invalid frame selection: every_nth {}, fps {}, max_views {}, start_s {}, end_s {}",
-        selection.every_nth, selection.fps, selection.max_views, selection.start_s,
-        selection.end_s));
-  }
+  AVP_RETURN_IF_ERROR(FrameSelectionTable().Validate(selection));
   impl_->selection = selection;
   return Status::Ok();
 }

@@ -53,8 +53,6 @@ using Statement = std::unique_ptr<sqlite3_stmt, StatementFinalizer>;
 constexpr std::string_view kSqliteMagic("SQLite format 3\0", 16);
 /// At most this many names (tables, topic ids) in a message.
 constexpr size_t kMaxListed = 20;
-/// A message decompressed from zstd may hold at most this much.
-constexpr uint64_t kMaxMessageBytes = uint64_t{1} << 30;
 /// What rosbag2 writes, for messages about a database that lacks it.
 constexpr std::string_view kRosbag2Tables =
     "rosbag2 writes topics(id, name, type, serialization_format, ...) and messages(id, topic_id, "
@@ -252,12 +250,9 @@ Result<std::vector<uint8_t>> DecompressZstd(std::span<const uint8_t> in, std::st
         "it), so avp cannot bound the memory it needs",
         where));
   }
-  if (size > kMaxMessageBytes) {
-    return ResourceExhaustedError(
-        fmt::format("{}: its zstd frame decompresses to {} bytes, more than the {} bytes (1 GiB) "
-                    "one message may hold",
-                    where, size, kMaxMessageBytes));
-  }
+  // The limit of MCAP's compressed chunks too: a message cannot claim more than a file may hold.
+  AVP_RETURN_IF_ERROR(
+      io::MaxFileBytes().Check(fmt::format("{}: its zstd frame's decompressed size", where), size));
   std::vector<uint8_t> out(static_cast<size_t>(size));
   const size_t got = ZSTD_decompress(out.data(), out.size(), in.data(), in.size());
   if (ZSTD_isError(got) != 0) {

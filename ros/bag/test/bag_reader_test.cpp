@@ -203,7 +203,7 @@ TEST_F(BagReaderTest, RealSenseBagAtOneFramePerSecondWithPoseFromTf) {
   EXPECT_TRUE(bag->damage.ok());
   EXPECT_EQ(bag->account.pairs, 90u);
   EXPECT_EQ(bag->account.left_out_count(), 87u);
-  EXPECT_EQ(bag->account.skipped_count, 0u)
+  EXPECT_EQ(bag->account.skipped_count(), 0u)
       << (bag->account.skipped.empty() ? "" : bag->account.skipped[0]);
   ASSERT_EQ(bag->views.size(), 3u);  // t = 0, 1, 2 s: frames 0, 30, 60
   ExpectView(bag->views[0], 0);
@@ -301,7 +301,7 @@ TEST_F(BagReaderTest, TransformOutsideItsSamplesBeyondTheToleranceIsAnError) {
   bag = ReadBag(WriteBag({.seconds = 1.0, .tf_tail_ns = -75'000'000}, "short_tf.mcap"), o, every);
   ASSERT_TRUE(bag.ok()) << bag.status().ToString();
   EXPECT_EQ(bag->views.size(), 29u);
-  ASSERT_EQ(bag->account.skipped_count, 1u) << ::testing::PrintToString(bag->account.skipped);
+  ASSERT_EQ(bag->account.skipped_count(), 1u) << ::testing::PrintToString(bag->account.skipped);
   EXPECT_THAT(bag->account.skipped[0],
               HasSubstr("transform 'arm_mount' -> 'link1' at 1700000000.966666657 is not "
                         "available yet: the newest is 1700000000.920000000 (46.7 ms earlier, "
@@ -314,7 +314,7 @@ TEST_F(BagReaderTest, BadImagesAreSkippedNamingTheValue) {
   // Frame 0 is broken: the first usable pair is frame 1, then frames >= 1 s later (none in 1 s).
   ASSERT_EQ(bag->views.size(), 1u);
   EXPECT_EQ(bag->views[0].index, 1);
-  ASSERT_EQ(bag->account.skipped_count, 1u) << ::testing::PrintToString(bag->account.skipped);
+  ASSERT_EQ(bag->account.skipped_count(), 1u) << ::testing::PrintToString(bag->account.skipped);
   EXPECT_THAT(bag->account.skipped[0],
               HasSubstr("/camera/camera/color/image_raw: data holds 143 bytes, "
                         "but step 24 x height 6 = 144"));
@@ -372,7 +372,7 @@ TEST_F(BagReaderTest, EveryCameraFixtureReadsAsLiveCapturesIt) {
     const ros::msg::testing::CameraFixture& f = fixtures[i];
     SCOPED_TRACE(f.name);
     if (!f.depth_error.empty()) {
-      ASSERT_EQ(bag->account.skipped_count, 1u);
+      ASSERT_EQ(bag->account.skipped_count(), 1u);
       EXPECT_THAT(bag->account.skipped[0],
                   HasSubstr("/camera/camera/aligned_depth_to_color/image_raw: " + f.depth_error));
       continue;
@@ -427,7 +427,7 @@ TEST_F(BagReaderTest, GarbledPayloadsAreErrorsOrSkipsNeverCrashes) {
       if (bag.ok()) {
         ++ok;
         EXPECT_LE(bag->views.size(), 6u);
-        EXPECT_EQ(bag->views.size() + bag->account.skipped_count >= 5, true);
+        EXPECT_EQ(bag->views.size() + bag->account.skipped_count() >= 5, true);
       } else {
         ++failed;
         EXPECT_FALSE(bag.status().message().empty());

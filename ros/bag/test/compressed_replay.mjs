@@ -42,6 +42,22 @@ const readable = (buf) => ({
 });
 const reader = await McapIndexedReader.Initialize({ readable: readable(original) });
 
+/** An in-memory writable for McapWriter: the buffers written, in order. */
+function memoryWritable() {
+  const parts = [];
+  let position = 0n;
+  return {
+    parts,
+    writable: {
+      position: () => position,
+      write: async (buffer) => {
+        parts.push(Buffer.from(buffer));
+        position += BigInt(buffer.byteLength);
+      },
+    },
+  };
+}
+
 /** Starts `writer` with the recording's header, schemas and channels; the channel ids' map. */
 async function startLike(writer) {
   await writer.start({ profile: reader.header.profile, library: "@mcap/core (avp test)" });
@@ -62,16 +78,9 @@ async function startLike(writer) {
 /** The recording written again by @mcap/core with `compress` for every chunk; `indexed` false:
  * no summary, no index of any kind (a reader must stream through the file). */
 async function rewrite(compress, chunkSize, indexed = true) {
-  const parts = [];
-  let position = 0n;
+  const { parts, writable } = memoryWritable();
   const writer = new McapWriter({
-    writable: {
-      position: () => position,
-      write: async (buffer) => {
-        parts.push(Buffer.from(buffer));
-        position += BigInt(buffer.byteLength);
-      },
-    },
+    writable,
     chunkSize,
     compressChunk: compress,
     ...(indexed ? {} : {
@@ -152,16 +161,9 @@ for (const [name, compress] of variants) {
 const all = [];
 for await (const m of reader.readMessages()) all.push(m);
 async function writeMcapPart(messages, withRecords) {
-  const parts = [];
-  let position = 0n;
+  const { parts, writable } = memoryWritable();
   const writer = new McapWriter({
-    writable: {
-      position: () => position,
-      write: async (buffer) => {
-        parts.push(Buffer.from(buffer));
-        position += BigInt(buffer.byteLength);
-      },
-    },
+    writable,
   });
   const channelIds = await startLike(writer);
   if (withRecords) {

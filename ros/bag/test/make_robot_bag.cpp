@@ -50,12 +50,7 @@ int main(int argc, char** argv) {
       !s.ok()) {
     return Fail(s);
   }
-  CameraIntrinsics K;
-  K.width = width;
-  K.height = height;
-  K.fx = K.fy = 0.9 * width;
-  K.cx = (width - 1) / 2.0;
-  K.cy = (height - 1) / 2.0;
+  const CameraIntrinsics K = ros::bag::testing::SyntheticIntrinsics(width, height);
   const ros::msg::CameraInfo info = ros::msg::ToCameraInfo(K, {});
   ImageRgb8 rgb(width, height);
   DepthImage depth(width, height);

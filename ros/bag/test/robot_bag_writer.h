@@ -35,6 +35,17 @@ inline void DrawWallAndDisc(ImageRgb8& rgb, DepthImage& depth_m, int shift = 0) 
   }
 }
 
+/// A camera of `width` x `height` pixels with a RealSense-like field of view (f = 0.9 width).
+inline CameraIntrinsics SyntheticIntrinsics(int width, int height) {
+  CameraIntrinsics K;
+  K.width = width;
+  K.height = height;
+  K.fx = K.fy = 0.9 * width;
+  K.cx = (width - 1) / 2.0;
+  K.cy = (height - 1) / 2.0;
+  return K;
+}
+
 class RobotBagWriter {
  public:
   static Result<std::unique_ptr<RobotBagWriter>> Open(const std::filesystem::path& path,

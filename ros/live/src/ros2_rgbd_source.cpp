@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <avp/io/image_limits.h>
 #include <avp/ros/live/ros2_rgbd_source.h>
 #include <avp/ros/msg/convert.h>
 #include <avp/ros/msg/markers.h>
@@ -134,23 +135,32 @@ Status Ros2RgbdSource::Subscribe() {
   return Status::Ok();
 }
 
-namespace {
-
-bool SameLens(const ros::msg::LensModel& a, const ros::msg::LensModel& b) {
-  auto same_k = [](const CameraIntrinsics& x, const CameraIntrinsics& y) {
-    return x.width == y.width && x.height == y.height && x.fx == y.fx && x.fy == y.fy &&
-           x.cx == y.cx && x.cy == y.cy;
-  };
-  return a.kind == b.kind && a.d == b.d && same_k(a.K, b.K) && same_k(a.rectified, b.rectified) &&
-         a.R == b.R;
-}
-
-}  // namespace
-
 void Ros2RgbdSource::OnCameraInfo(ros::msg::CameraInfo&& msg) {
   // The lens (ros/msg/lens.h): K is the raw camera's; a distorted lens is rectified per frame.
   Result<ros::msg::LensModel> lens =
       ros::msg::LensModelFromCameraInfo(msg, camera_.min_depth_m, camera_.max_depth_m);
+  // A new lens's maps are built outside the lock (tens of ms), and only for a camera whose
+  // images max_image_pixels admits (a CameraInfo alone must not make avp allocate gigabytes).
+  std::shared_ptr<const ros::msg::Rectifier> current;
+  {
+    std::lock_guard lock(mutex_);
+    current = rectifier_;
+  }
+  std::shared_ptr<const ros::msg::Rectifier> built;
+  if (lens.ok() && (!current || !current->model().SameLensAs(*lens))) {
+    if (const Status size = io::CheckImageSize(static_cast<uint64_t>(lens->K.width),
+                                               static_cast<uint64_t>(lens->K.height),
+                                               options_.camera_info_topic + " (CameraInfo)");
+        !size.ok()) {
+      lens = size;
+    } else {
+      if (!lens->IsIdentity()) {
+        spdlog::info("{}: distortion model '{}' ({} coefficients): the images are rectified",
+                     options_.camera_info_topic, msg.distortion_model, msg.d.size());
+      }
+      built = std::make_shared<const ros::msg::Rectifier>(*lens);
+    }
+  }
   std::lock_guard lock(mutex_);
   ++counters_.camera_info;
   if (!lens.ok()) {
@@ -159,20 +169,12 @@ void Ros2RgbdSource::OnCameraInfo(ros::msg::CameraInfo&& msg) {
     return;
   }
   const CameraIntrinsics& K = lens->K;
-  if (!K_) {
-    if (K.width != camera_.width || K.height != camera_.height) {
-      spdlog::info("{}: the camera is {}x{} (the configured camera: {}x{})",
-                   options_.camera_info_topic, K.width, K.height, camera_.width, camera_.height);
-    }
-  }
-  if (!lens->IsIdentity() && (!rectifier_ || !SameLens(rectifier_->model(), *lens))) {
-    spdlog::info("{}: distortion model '{}' ({} coefficients): the images are rectified",
-                 options_.camera_info_topic, msg.distortion_model, msg.d.size());
+  if (!K_ && (K.width != camera_.width || K.height != camera_.height)) {
+    spdlog::info("{}: the camera is {}x{} (the configured camera: {}x{})",
+                 options_.camera_info_topic, K.width, K.height, camera_.width, camera_.height);
   }
   K_ = K;
-  if (!rectifier_ || !SameLens(rectifier_->model(), *lens)) {
-    rectifier_ = std::make_shared<const ros::msg::Rectifier>(std::move(*lens));
-  }
+  if (built) rectifier_ = std::move(built);
   cv_.notify_all();
 }
 

@@ -257,6 +257,11 @@ bool LensModel::IsIdentity() const {
   return kind == Kind::kNone && R == Eigen::Matrix3d::Identity() && SameGeometry(rectified, K);
 }
 
+bool LensModel::SameLensAs(const LensModel& other) const {
+  return kind == other.kind && d == other.d && R == other.R && SameGeometry(K, other.K) &&
+         SameGeometry(rectified, other.rectified);
+}
+
 std::string_view ToString(LensModel::Kind kind) {
   for (const ModelSpec& s : kSpecs) {
     if (s.kind == kind && !s.name.empty()) return s.name;

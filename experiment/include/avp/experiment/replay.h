@@ -48,8 +48,9 @@ struct ReplaySummary {
     size_t masks_without_depth = 0;
   };
   std::vector<ViewMasks> view_masks;
-  size_t masks = 0;
-  size_t masks_without_depth = 0;
+  /// Over every view.
+  size_t masks() const;
+  size_t masks_without_depth() const;
   /// avp recordings: views whose recomputed metrics were compared with the recorded /avp/step
   /// metrics, and those that differ (the first difference described).
   size_t metrics_compared = 0;

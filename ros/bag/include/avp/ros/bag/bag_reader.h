@@ -98,9 +98,8 @@ struct FrameAccount {
   /// Reason -> frames: "no transform", "no CameraInfo", "bad image", "no depth within
   /// max_pair_skew_ms", ...
   std::map<std::string, size_t> skipped_by_reason;
-  /// The first skipped frames, each "stamp S: why"; skipped_count counts them all.
+  /// The first skipped frames, each "stamp S: why"; skipped_count() counts them all.
   std::vector<std::string> skipped;
-  size_t skipped_count = 0;
   /// One entry per fused or skipped frame (the first kMaxFrames): index, stamp, what became of
   /// it ("fused" or the reason it was skipped).
   struct Frame {
@@ -112,6 +111,7 @@ struct FrameAccount {
   static constexpr size_t kMaxFrames = 10000;
 
   size_t left_out_count() const;
+  size_t skipped_count() const;
 };
 
 /// A bag opened for replay, read view by view in bounded memory (its messages streamed in

@@ -67,4 +67,7 @@ void AddFrameSelectionOptions(OptionTable<O>& t) {
   });
 }
 
+/// FrameSelection's own table (its keys and rules, as AddFrameSelectionOptions gives them).
+const OptionTable<FrameSelection>& FrameSelectionTable();
+
 }  // namespace avp::ros::bag

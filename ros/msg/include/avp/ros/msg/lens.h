@@ -58,6 +58,9 @@ struct LensModel {
 
   /// True when the rectified image is the raw one: no distortion, R = I, rectified == K.
   bool IsIdentity() const;
+  /// The same lens: kind, coefficients, R, and K's and the rectified camera's size and
+  /// intrinsics (not their depth ranges). A Rectifier built for one serves the other.
+  bool SameLensAs(const LensModel& other) const;
 };
 
 /// The name of a kind as CameraInfo writes it ("plumb_bob", ...; "none" for kNone).
