@@ -135,11 +135,16 @@ struct ArmModel::Impl {
   Eigen::Vector3d p_fixed = Eigen::Vector3d::Zero();
   Eigen::Vector3d p_wrist_in_tip = Eigen::Vector3d::Zero();
   double wrist_reach_m = 0.0;
+  // The chain's links (LinkInfo) and the tip link's index among them.
+  std::vector<LinkInfo> links;
+  int tip_link = 0;
   // The same chain for KDL's solvers. KDL::Joint caches its last pose in mutable members, so every
   // solve works on its own copy of this chain.
   KDL::Chain chain;
 
-  Eigen::Isometry3d Fk(const Eigen::VectorXd& q) const {
+  /// The last joint's frame after its motion; with `frames`, every joint's.
+  Eigen::Isometry3d JointFrames(const Eigen::VectorXd& q,
+                                std::vector<Eigen::Isometry3d>* frames) const {
     Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
     for (size_t i = 0; i < X_origin.size(); ++i) {
       X = X * X_origin[i];
@@ -149,8 +154,13 @@ struct ArmModel::Impl {
         X.linear() = X.linear() *
                      Eigen::AngleAxisd(q[static_cast<Eigen::Index>(i)], axis[i]).toRotationMatrix();
       }
+      if (frames != nullptr) frames->push_back(X);
     }
-    return X * X_last_tip;
+    return X;
+  }
+
+  Eigen::Isometry3d Fk(const Eigen::VectorXd& q) const {
+    return JointFrames(q, nullptr) * X_last_tip;
   }
 
   bool IsRotational(int i) const {
@@ -329,6 +339,113 @@ Status AppendMovableJoints(const std::vector<urdf::JointConstSharedPtr>& path,
   return Status::Ok();
 }
 
+/// A URDF <collision> or <visual> geometry as a CollisionShape (mesh files resolved against
+/// `folder`; "package://" names kept as written).
+CollisionShape ShapeOf(const urdf::Geometry& geometry, const urdf::Pose& origin,
+                       const std::string& name, const std::filesystem::path& folder) {
+  CollisionShape shape;
+  shape.name = name;
+  shape.X_PS = FromIsometry(ToIsometry(origin));
+  switch (geometry.type) {
+    case urdf::Geometry::BOX: {
+      const auto& box = static_cast<const urdf::Box&>(geometry);
+      shape.kind = ShapeKind::kBox;
+      shape.size = Eigen::Vector3d(box.dim.x, box.dim.y, box.dim.z);
+      break;
+    }
+    case urdf::Geometry::CYLINDER: {
+      const auto& c = static_cast<const urdf::Cylinder&>(geometry);
+      shape.kind = ShapeKind::kCylinder;
+      shape.size = Eigen::Vector3d(c.radius, c.radius, c.length);
+      break;
+    }
+    case urdf::Geometry::SPHERE: {
+      const auto& sp = static_cast<const urdf::Sphere&>(geometry);
+      shape.kind = ShapeKind::kSphere;
+      shape.size = Eigen::Vector3d::Constant(sp.radius);
+      break;
+    }
+    case urdf::Geometry::MESH: {
+      const auto& m = static_cast<const urdf::Mesh&>(geometry);
+      shape.kind = ShapeKind::kMesh;
+      shape.size = Eigen::Vector3d(m.scale.x, m.scale.y, m.scale.z);
+      std::string file = m.filename;
+      if (file.rfind("file://", 0) == 0) file = file.substr(7);
+      shape.mesh = std::filesystem::path(file);
+      if (file.find("://") == std::string::npos && shape.mesh.is_relative()) {
+        shape.mesh = (folder / shape.mesh).lexically_normal();
+      }
+      break;
+    }
+  }
+  return shape;
+}
+
+/// `link` as a LinkInfo fixed to joint `joint` at X_JL, with its URDF geometry.
+LinkInfo MakeLinkInfo(const urdf::Link& link, int joint, const Eigen::Isometry3d& X_JL,
+                      const std::filesystem::path& folder) {
+  LinkInfo info{link.name, joint, X_JL, {}, {}};
+  for (size_t i = 0; i < link.collision_array.size(); ++i) {
+    const urdf::Collision& c = *link.collision_array[i];
+    if (!c.geometry) continue;
+    info.collision.push_back(ShapeOf(*c.geometry, c.origin,
+                                     c.name.empty() ? fmt::format("{}#{}", link.name, i) : c.name,
+                                     folder));
+  }
+  for (size_t i = 0; i < link.visual_array.size(); ++i) {
+    const urdf::Visual& v = *link.visual_array[i];
+    if (!v.geometry) continue;
+    info.visual.push_back(ShapeOf(*v.geometry, v.origin,
+                                  v.name.empty() ? fmt::format("{}#{}", link.name, i) : v.name,
+                                  folder));
+  }
+  return info;
+}
+
+/// Appends `link` and, depth first, every link fixed to it by fixed joints that are not on the
+/// chain's path (a camera's links, a gripper's body).
+void AppendFixedSubtree(const urdf::ModelInterface& model, const urdf::Link& link, int joint,
+                        const Eigen::Isometry3d& X_JL, const std::vector<std::string>& on_path,
+                        const std::filesystem::path& folder, std::vector<LinkInfo>& out) {
+  out.push_back(MakeLinkInfo(link, joint, X_JL, folder));
+  for (const urdf::JointSharedPtr& child : link.child_joints) {
+    if (child->type != urdf::Joint::FIXED) continue;
+    if (std::find(on_path.begin(), on_path.end(), child->child_link_name) != on_path.end())
+      continue;
+    const urdf::LinkConstSharedPtr child_link = model.getLink(child->child_link_name);
+    if (!child_link) continue;
+    AppendFixedSubtree(model, *child_link, joint,
+                       X_JL * ToIsometry(child->parent_to_joint_origin_transform), on_path, folder,
+                       out);
+  }
+}
+
+/// impl.links and impl.tip_link: base_link, then the child of every joint on the path, each with
+/// the links fixed to it off the path.
+void CollectLinks(const urdf::ModelInterface& model,
+                  const std::vector<urdf::JointConstSharedPtr>& path, ArmModel::Impl& impl) {
+  const std::filesystem::path folder = impl.config.urdf_path.parent_path();
+  std::vector<std::string> on_path{impl.config.base_link};
+  for (const urdf::JointConstSharedPtr& joint : path) on_path.push_back(joint->child_link_name);
+  int joint_index = -1;
+  Eigen::Isometry3d X_JL = Eigen::Isometry3d::Identity();
+  AppendFixedSubtree(model, *model.getLink(impl.config.base_link), joint_index, X_JL, on_path,
+                     folder, impl.links);
+  for (const urdf::JointConstSharedPtr& joint : path) {
+    if (joint->type == urdf::Joint::FIXED) {
+      X_JL = X_JL * ToIsometry(joint->parent_to_joint_origin_transform);
+    } else {
+      ++joint_index;
+      X_JL = Eigen::Isometry3d::Identity();
+    }
+    if (joint->child_link_name == impl.config.tip_link) {
+      impl.tip_link = static_cast<int>(impl.links.size());
+    }
+    AppendFixedSubtree(model, *model.getLink(joint->child_link_name), joint_index, X_JL, on_path,
+                       folder, impl.links);
+  }
+}
+
 /// Applies config.joint_limit_overrides to `joints` (an overridden continuous joint becomes
 /// revolute); NotFound naming the movable joints for an unknown one.
 Status ApplyJointLimitOverrides(const ArmConfig& config, std::vector<JointInfo>& joints) {
@@ -441,6 +558,7 @@ Result<ArmModel> ArmModel::FromUrdfString(std::string_view urdf_xml, const ArmCo
   auto impl = std::make_shared<Impl>();
   impl->config = config;
   AVP_RETURN_IF_ERROR(AppendMovableJoints(path, where, *impl));
+  CollectLinks(*urdf_model, path, *impl);
   AVP_RETURN_IF_ERROR(ApplyJointLimitOverrides(config, impl->joints));
   AVP_RETURN_IF_ERROR(FillJointLimits(where, *impl));
   AVP_ASSIGN_OR_RETURN(impl->home, HomeJoints(config, *impl));
@@ -559,6 +677,37 @@ RigidTransform ArmModel::ForwardKinematics(const Eigen::VectorXd& q) const {
   AVP_THROW_UNLESS(q.size() == num_joints() && q.allFinite(), q.size(), num_joints(),
                    q.transpose());
   return FromIsometry(impl_->Fk(q));
+}
+
+const std::vector<LinkInfo>& ArmModel::links() const { return impl_->links; }
+
+int ArmModel::tip_link_index() const { return impl_->tip_link; }
+
+int ArmModel::LinkIndex(std::string_view name) const {
+  for (size_t i = 0; i < impl_->links.size(); ++i) {
+    if (impl_->links[i].name == name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+std::vector<Eigen::Isometry3d> ArmModel::JointFrames(const Eigen::VectorXd& q) const {
+  AVP_THROW_UNLESS(q.size() == num_joints() && q.allFinite(), q.size(), num_joints(),
+                   q.transpose());
+  std::vector<Eigen::Isometry3d> frames;
+  frames.reserve(static_cast<size_t>(num_joints()));
+  impl_->JointFrames(q, &frames);
+  return frames;
+}
+
+std::vector<Eigen::Isometry3d> ArmModel::LinkPoses(const Eigen::VectorXd& q) const {
+  const std::vector<Eigen::Isometry3d> frames = JointFrames(q);
+  std::vector<Eigen::Isometry3d> poses;
+  poses.reserve(impl_->links.size());
+  for (const LinkInfo& link : impl_->links) {
+    poses.push_back(link.joint < 0 ? link.X_JL
+                                   : frames[static_cast<size_t>(link.joint)] * link.X_JL);
+  }
+  return poses;
 }
 
 RigidTransform ArmModel::CameraPose(const Eigen::VectorXd& q) const {

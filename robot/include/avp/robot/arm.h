@@ -1,5 +1,7 @@
 #pragma once
 
+#include <optional>
+#include <string>
 #include <utility>
 
 #include <Eigen/Core>
@@ -8,8 +10,25 @@
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/robot/arm_model.h>
+#include <avp/robot/trajectory.h>
 
 namespace avp::robot {
+
+/// Contacts between the arm (camera included) and the true world along one motion, as only a
+/// simulator can count them. A contact is one interval of consecutive sampled states in which
+/// one body of the arm touches one object; counts are by what was touched.
+struct MotionContacts {
+  int plant = 0;  ///< leaves and stems
+  int fruit = 0;
+  int support = 0;  ///< stakes, posts, wires, walls
+  int ground = 0;
+  int self = 0;  ///< two of the arm's own bodies (not in the allowed list)
+  /// The first contact, for a person: "link_7 – leaf 'plant/leaf_3' at 42 % of the move".
+  std::string first;
+
+  int total() const { return plant + fruit + support + ground + self; }
+  MotionContacts& operator+=(const MotionContacts& other);
+};
 
 /// Outcome of one motion request.
 struct MoveResult {
@@ -22,6 +41,13 @@ struct MoveResult {
   double joint_path_length = 0.0;
   /// The joints after the request (unchanged ones when refused).
   Eigen::VectorXd q;
+  /// How long the motion took (seconds; a trajectory's duration); 0 when refused or unknown.
+  double execution_s = 0.0;
+  /// Contacts along the executed motion, where the arm can see the true world (a simulator).
+  std::optional<MotionContacts> contacts;
+  /// Contacts the straight joint-space line from the start to the end would have made (what a
+  /// blind straight move hits), where the arm can see the true world.
+  std::optional<MotionContacts> straight_line_contacts;
 
   bool ok() const { return status.ok(); }
 };
@@ -52,6 +78,10 @@ class Arm {
   /// Moves the camera to X_WC: IK seeded with the current joints (restarts drawn from `rng`), then
   /// MoveToJoints. Unreachable poses are refused with the IK status.
   MoveResult MoveToCameraPose(const RigidTransform& X_WC, Rng& rng);
+  /// Executes a timed joint path (from motion planning). Refuses (status, state unchanged) a
+  /// trajectory that fails JointTrajectory::Validate or does not start within 1e-3 rad (or m) of
+  /// the current joints, naming the value.
+  MoveResult FollowTrajectory(const JointTrajectory& trajectory);
 
   /// Statistics over this arm's lifetime: successful moves, their summed joint-space path length
   /// (radians; metres for prismatic joints), and refused requests.
@@ -65,6 +95,10 @@ class Arm {
   virtual Eigen::VectorXd DoCurrentJoints() const = 0;
   /// @pre `q` is within the limits. Returns the result of the motion (path length, final joints).
   virtual MoveResult DoMoveToJoints(const Eigen::VectorXd& q) = 0;
+  /// @pre `trajectory` is valid and starts at the current joints. The default moves to its last
+  /// point (DoMoveToJoints), for arms that cannot follow a trajectory; the path length is then
+  /// the trajectory's and the execution time its duration.
+  virtual MoveResult DoFollowTrajectory(const JointTrajectory& trajectory);
 
  private:
   MoveResult Record(MoveResult result);

@@ -3,12 +3,54 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 
 namespace avp::robot {
+
+/// The kind of a collision shape. Boxes, cylinders and spheres are centred on their frame;
+/// a cylinder's axis is its frame's z; a plane is the solid half-space z <= 0 of its frame.
+enum class ShapeKind : uint8_t { kBox, kCylinder, kSphere, kMesh, kPlane };
+std::string_view ToString(ShapeKind kind);
+
+/// One collision (or visual) shape: of a link (URDF), fixed to the tip link (the camera's body in
+/// the arm config), or fixed in the world (a table, a wall, the ground: the arm config's
+/// collision.world).
+struct CollisionShape {
+  std::string name;
+  ShapeKind kind = ShapeKind::kBox;
+  /// kBox: edge lengths (x, y, z); kCylinder: (radius, radius, length); kSphere: (radius, radius,
+  /// radius); kMesh: the scale per axis; kPlane: unused. Metres.
+  Eigen::Vector3d size = Eigen::Vector3d::Zero();
+  /// kMesh: the mesh file (any format assimp reads), resolved against the URDF's folder.
+  std::filesystem::path mesh;
+  /// Pose of the shape in its parent frame (link, tip link or world).
+  RigidTransform X_PS;
+
+  static CollisionShape Box(std::string name, const Eigen::Vector3d& size, const RigidTransform& X);
+  static CollisionShape Cylinder(std::string name, double radius, double length,
+                                 const RigidTransform& X);
+  static CollisionShape Sphere(std::string name, double radius, const RigidTransform& X);
+  /// The half-space below the x-y plane of X (its z <= 0) is solid.
+  static CollisionShape Plane(std::string name, const RigidTransform& X);
+
+  /// OK, or InvalidArgument naming `what`, the shape and the bad size (every size finite and
+  /// > 0; a mesh with a file and a finite, non-zero scale).
+  Status Validate(std::string_view what) const;
+};
+
+/// Collision geometry the URDF does not carry, from the arm config's `collision:` section.
+struct CollisionConfig {
+  /// Shapes fixed to the tip link (the camera's body, its bracket), poses in the tip frame F.
+  std::vector<CollisionShape> attached;
+  /// Fixed obstacles in the world frame W: the ground or table the arm stands on, a wall, posts.
+  std::vector<CollisionShape> world;
+};
 
 /// Settings of the inverse-kinematics solver (KDL ChainIkSolverPos_LMA with random restarts).
 struct IkOptions {
@@ -73,6 +115,11 @@ struct ArmConfig {
   IkOptions ik;
   /// The reference system's joint convention relative to this URDF (see JointConvention).
   JointConvention reference_convention;
+  /// Collision geometry beyond the URDF's (key `collision`; see docs/motion.md).
+  CollisionConfig collision;
+  /// Acceleration limit of every joint (rad/s², m/s² for prismatic joints); the URDF has none.
+  /// The ReBeL's: 5.24 rad/s² (300 °/s², igus). Key `joint_acceleration_limit`.
+  double joint_acceleration_limit = 5.24;
 
   /// Checks the fields that need no URDF (names non-empty, finite numbers, lower < upper, signs
   /// ±1, equal vector lengths, IK options). Names, joint counts and limits against the URDF are

@@ -33,6 +33,21 @@ struct JointInfo {
   double velocity_limit = 0.0;  ///< rad/s or m/s, from the URDF (0 when not given)
 };
 
+/// One link of the chain (base_link, the child of every joint from there to the tip, and links
+/// fixed to those by fixed joints elsewhere in the tree), with its URDF geometry.
+struct LinkInfo {
+  std::string name;
+  /// The movable joint whose moving frame this link is fixed to (an index into joints()); −1 for
+  /// links fixed to the base.
+  int joint = -1;
+  /// The link's frame in that joint's frame (after the joint's motion; in the base for −1).
+  Eigen::Isometry3d X_JL = Eigen::Isometry3d::Identity();
+  /// The URDF's <collision> and <visual> shapes, poses in the link frame; mesh files resolved
+  /// against the URDF's folder ("package://" names are kept as written).
+  std::vector<CollisionShape> collision;
+  std::vector<CollisionShape> visual;
+};
+
 /// Outcome of one inverse-kinematics query.
 struct IkResult {
   /// OK, or Unreachable with a message naming the target and the best residual reached.
@@ -94,6 +109,19 @@ class ArmModel {
   Eigen::VectorXd ClampToLimits(const Eigen::VectorXd& q) const;
   /// Joints drawn uniformly within the limits (continuous joints within [−π, π]).
   Eigen::VectorXd RandomJoints(Rng& rng) const;
+
+  /// The chain's links, base first, in tree order (see LinkInfo).
+  const std::vector<LinkInfo>& links() const;
+  /// The index of the link named `name` in links(), or −1.
+  int LinkIndex(std::string_view name) const;
+  /// X_WJ of every movable joint's frame after its motion (joint i's pose is X_WJ[i]); a link's
+  /// pose is X_WJ[link.joint] · link.X_JL (the base frame for joint −1).
+  /// @throws avp::Error if q has the wrong size or a non-finite entry.
+  std::vector<Eigen::Isometry3d> JointFrames(const Eigen::VectorXd& q) const;
+  /// X_WL of every link in links() order, from JointFrames.
+  std::vector<Eigen::Isometry3d> LinkPoses(const Eigen::VectorXd& q) const;
+  /// Index of the tip link in links().
+  int tip_link_index() const;
 
   /// X_WF, the tip (flange) pose in the base frame.
   /// @throws avp::Error if q has the wrong size or a non-finite entry (limits are not checked).
