@@ -103,8 +103,8 @@ const Fixture& GetFixture() {
     eo.integrator.carving = mapping::FreeSpaceCarving::kProjective;
     eo.integrator.max_range_m = 1.5;
     eo.seed = kSeed;
-    pipeline::EpisodeComponents components{&source,  segmenter->get(), &sim_arm,
-                                           &planner, f->map.get(),     {}};
+    pipeline::EpisodeComponents components{
+        &source, segmenter->get(), &sim_arm, &planner, f->map.get(), {}, nullptr};
     Result<pipeline::EpisodeResult> episode = pipeline::RunEpisode(components, eo);
     if (!episode.ok()) Die(episode.status());
     if (episode->views_fused() != kViews) {

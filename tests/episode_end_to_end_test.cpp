@@ -64,8 +64,59 @@ TEST(EpisodeEndToEndTest, AvpNbvRaisesF1AboveTheFloor) {
   ExpectSameEpisode(*again, *r);
 }
 
+/// Every move is planned collision-free, executed as a timed trajectory, and checked by the
+/// simulator against the true scene (docs/motion.md); the arm returns home at the end. With
+/// motion planning off the same counts are kept (today's straight moves), for comparison.
+TEST(EpisodeEndToEndTest, EveryMoveIsPlannedAndTheSimulatorCountsItsContacts) {
+  RunConfig c = Config("avp-nbv");
+  c.motion.enabled = true;
+  auto scene = sim::MakeScenario(c.scenario, c.seed);
+  ASSERT_TRUE(scene.ok());
+  auto gt = experiment::GroundTruthFor(c, *scene);
+  ASSERT_TRUE(gt.ok());
+  auto r = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_GE(r->episode.views_fused(), 2) << r->episode.end_reason;
+  int moves = 0;
+  for (const pipeline::StepRecord& s : r->episode.steps) {
+    if (s.chosen_rank < 0) continue;
+    ++moves;
+    EXPECT_TRUE(s.motion.planned);
+    EXPECT_GE(s.motion.attempts, 1);
+    EXPECT_GT(s.motion.execution_s, 0.0);
+    EXPECT_GT(s.motion.path_length_rad, 0.0);
+    EXPECT_GE(s.motion.camera_path_W.size(), 2u);
+    ASSERT_TRUE(s.motion.contacts.has_value());
+    ASSERT_TRUE(s.motion.straight_line_contacts.has_value());
+    EXPECT_EQ(s.motion.contacts->total(), 0) << s.motion.contacts->first;
+    EXPECT_GE(s.candidates_in_collision, 0u);
+  }
+  EXPECT_GE(moves, 1);
+  ASSERT_TRUE(r->episode.return_home.has_value());
+  EXPECT_TRUE(r->episode.return_home_status.ok()) << r->episode.return_home_status.ToString();
+  const pipeline::MotionTotals t = pipeline::SumMotion(r->episode);
+  EXPECT_EQ(t.moves, moves + 1);  // and the return home
+  ASSERT_TRUE(t.contacts.has_value());
+  EXPECT_EQ(t.contacts->total(), 0);
+
+  c.motion.enabled = false;
+  auto straight = experiment::RunEpisodeOnScene(
+      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
+  ASSERT_TRUE(straight.ok()) << straight.status().ToString();
+  const pipeline::MotionTotals u = pipeline::SumMotion(straight->episode);
+  EXPECT_FALSE(straight->episode.return_home.has_value());
+  ASSERT_TRUE(u.contacts.has_value());
+  // Unplanned moves are the straight line: both counts are the same.
+  EXPECT_EQ(u.contacts->total(), u.straight_line_contacts->total());
+  for (const pipeline::StepRecord& s : straight->episode.steps) EXPECT_FALSE(s.motion.planned);
+}
+
 TEST(EpisodeEndToEndTest, PredefinedRunsTheSameLoop) {
-  const RunConfig c = Config("predefined");
+  RunConfig c = Config("predefined");
+  // Straight moves: this tomato's leaves reach the start camera, and with planned motion every
+  // zig-zag waypoint after it is in unseen space (docs/motion.md, "What it costs").
+  c.motion.enabled = false;
   auto scene = sim::MakeScenario(c.scenario, c.seed);
   ASSERT_TRUE(scene.ok());
   auto gt = experiment::GroundTruthFor(c, *scene);
@@ -84,6 +135,7 @@ TEST(EpisodeEndToEndTest, OracleDetectKnowsTheTruthAndIsDeterministic) {
   EXPECT_TRUE(entry->needs_ground_truth);
   RunConfig c = Config("oracle-detect");
   c.episode.views = 3;
+  c.motion.enabled = false;  // the diagnostic's views, as in PredefinedRunsTheSameLoop
   const auto made = Registries().planners.Make("oracle-detect", entry->options, {});
   ASSERT_FALSE(made.ok());
   EXPECT_NE(made.status().message().find("planner 'oracle-detect' needs the true scene"),

@@ -188,6 +188,25 @@ void PrintStepWithProgress(const pipeline::StepRecord& s, std::string_view progr
 
 namespace {
 
+/// The episode's moves: contacts with the true world (simulation), against what straight moves
+/// would have hit, motion time and planning time per move (docs/motion.md).
+void PrintMotionSummary(const pipeline::EpisodeResult& episode) {
+  const pipeline::MotionTotals m = pipeline::SumMotion(episode);
+  if (m.moves == 0) return;
+  std::vector<double> ms = m.planning_ms;
+  std::sort(ms.begin(), ms.end());
+  const std::string contacts =
+      m.contacts ? fmt::format("contacts {} (straight joint-space moves would have made {})",
+                               m.contacts->total(),
+                               m.straight_line_contacts ? m.straight_line_contacts->total() : 0)
+                 : std::string("contacts unknown (no ground truth)");
+  std::printf("motion: %d moves, %.1f s, %.2f rad; %s; planning %.0f ms median, %.0f ms max\n",
+              m.moves, m.execution_s, m.path_length_rad, contacts.c_str(), ms[ms.size() / 2],
+              ms.back());
+  if (m.contacts && m.contacts->total() > 0)
+    std::printf("  first contact: %s\n", m.contacts->first.c_str());
+}
+
 void PrintSummary(const experiment::RunConfig& config, const experiment::RunSummary& summary,
                   const std::filesystem::path& out_dir) {
   const experiment::RunResult& r = summary.result;
@@ -202,6 +221,7 @@ void PrintSummary(const experiment::RunConfig& config, const experiment::RunSumm
   for (const std::string& why : experiment::WhyNothingFound(config, r)) {
     std::printf("no fruit found: %s\n", why.c_str());
   }
+  PrintMotionSummary(r.episode);
   if (!r.regret.empty()) {
     std::printf(
         "oracle regret per plan step (1 - true gain of the choice / best true gain; true "

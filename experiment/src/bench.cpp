@@ -230,6 +230,12 @@ void TakeResults(const RunResult& r, report::BenchEpisode& j) {
     j.metrics.push_back(s.metrics);
     if (s.planned) j.plan_ms.push_back(s.times.plan_ms);
   }
+  const pipeline::MotionTotals motion = pipeline::SumMotion(r.episode);
+  if (motion.contacts) j.contacts = motion.contacts->total();
+  if (motion.straight_line_contacts)
+    j.straight_line_contacts = motion.straight_line_contacts->total();
+  j.motion_s = motion.execution_s;
+  j.move_planning_ms = motion.planning_ms;
   for (const eval::FruitResult& f : r.fruits) {
     j.fruits.push_back({.best_visible_fraction = f.best_visible_fraction,
                         .episode_visible_fraction = f.episode_visible_fraction,
@@ -326,6 +332,7 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
                      {"end_reason", r->episode.end_reason},
                      {"episode_seconds", j.episode_s},
                      {"plan_ms", j.plan_ms},
+                     {"motion", report::MotionTotalsJson(r->episode)},
                      {"git_revision", revision},
                      {"fruits", report::FruitsJson(r->fruits)}};
   // A scene file's entry: the file and the arrangement its scene was made with.

@@ -13,6 +13,7 @@
 #include <avp/report/metrics_csv.h>
 #include <avp/robot/arm_model.h>
 #include <avp/segmentation/oracle_segmenter.h>
+#include <avp/sim/contact_counter.h>
 #include <avp/sim/sim_arm.h>
 #include <avp/sim/sim_rgbd_source.h>
 
@@ -290,8 +291,27 @@ Result<RunResult> RunEpisodeWithRobot(const CheckedRunConfig& checked, const Rob
   }
   planning::ViewPlanner* planner = e.probe ? e.probe.get() : e.planner.get();
   robot::RgbdSource* source = visibility ? &*visibility : robot.source;
-  const pipeline::EpisodeComponents components{source,  e.segmenter.get(), robot.arm,
-                                               planner, e.map.get(),       robot.stop};
+  // Collision-free motion (docs/motion.md): the arm's collision model, the declared world, the
+  // map as obstacles (updated by the loop after every view).
+  std::optional<motion::CollisionChecker> checker;
+  std::optional<motion::MotionPlanner> motion_planner;
+  if (config.motion.enabled) {
+    AVP_ASSIGN_OR_RETURN(motion::RobotGeometry geometry,
+                         motion::RobotGeometry::Create(robot.arm->model()));
+    for (const std::string& w : geometry.warnings()) fmt::print(stderr, "warning: {}\n", w);
+    AVP_ASSIGN_OR_RETURN(
+        checker, motion::CollisionChecker::Create(std::move(geometry),
+                                                  robot.arm->model().config().collision.world,
+                                                  config.motion.collision));
+    motion_planner.emplace(*checker, config.motion);
+  }
+  const pipeline::EpisodeComponents components{source,
+                                               e.segmenter.get(),
+                                               robot.arm,
+                                               planner,
+                                               e.map.get(),
+                                               robot.stop,
+                                               motion_planner ? &*motion_planner : nullptr};
   AVP_ASSIGN_OR_RETURN(pipeline::EpisodeResult episode,
                        pipeline::RunEpisode(components, eo, hook, observers));
   RunResult result;
@@ -318,6 +338,12 @@ Result<RunResult> RunEpisodeOnScene(const CheckedRunConfig& checked, const sim::
   const Eigen::VectorXd q0 = StartJoints(scene, arm_model);
   AVP_RETURN_IF_ERROR(arm_model.CheckJoints(q0));
   sim::SimArm arm(arm_model, q0);
+  // The simulator checks every move against the true scene (docs/motion.md): contacts along the
+  // executed path and along the straight line.
+  AVP_ASSIGN_OR_RETURN(motion::RobotGeometry geometry, motion::RobotGeometry::Create(arm_model));
+  AVP_ASSIGN_OR_RETURN(sim::ContactCounter counter,
+                       sim::ContactCounter::Create(scene, std::move(geometry)));
+  arm.SetContactCounter(std::make_shared<const sim::ContactCounter>(std::move(counter)));
   sim::SimRgbdSource source(scene, config.camera, config.depth_noise, config.seed);
   return RunEpisodeWithRobot(checked, {&source, &arm, stop},
                              scene.plant_bounds.Inflated(config.roi_margin_m), {&scene, &gt},

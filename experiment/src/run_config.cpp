@@ -117,6 +117,7 @@ const OptionTable<RunConfig>& RunConfigTable() {
     t->Nested("episode", &R::episode, pipeline::EpisodeOptionTable());
     t->Nested("ground_truth", &R::ground_truth, eval::GroundTruthOptionTable());
     t->Nested("replay", &R::replay, ReplayConfigTable());
+    t->Nested("motion", &R::motion, motion::MotionOptionTable());
     t->AddRule([](const R& c, std::vector<std::string>& errors) {
       if (!c.scenario.empty() && !c.scene_file.empty()) {
         errors.push_back(fmt::format("give a scenario ('{}') or a scene file ('{}'), not both",

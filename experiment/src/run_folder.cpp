@@ -137,6 +137,8 @@ json RecordJson(const CheckedRunConfig& config, const FolderRun& run, const RunR
       // Why no fruit was found ([] when one was; null without a ground truth).
       {"nothing_found", run.gt != nullptr ? json(WhyNothingFound(*config, result)) : json(nullptr)},
       {"oracle_regret", report::RegretJson(result.regret)},
+      // The episode's moves: contacts with the true world (simulation), motion time, planning.
+      {"motion", report::MotionTotalsJson(result.episode)},
       {"steps", steps}};
   if (run.extra) {
     const json extra = run.extra();

@@ -110,7 +110,8 @@ TEST(RunConfigTest, UnknownKeysAndBadValuesAreNamed) {
   Status s = SetRunConfigKey(c, "map.grid.voxel_sise_m", "0.01");
   EXPECT_THAT(s.message(), HasSubstr("unknown run configuration key 'map.grid.voxel_sise_m' "
                                      "(known: scenario, scene_file, arrangement, seed,"));
-  EXPECT_THAT(s.message(), HasSubstr("map, episode, ground_truth, replay, planner, segmenter"));
+  EXPECT_THAT(s.message(),
+              HasSubstr("map, episode, ground_truth, replay, motion, planner, segmenter"));
   s = SetRunConfigKey(c, "planner.option.p_unknown", "0.1");
   EXPECT_THAT(s.message(), HasSubstr("planner.name and planner.options.KEY are known"));
   EXPECT_THAT(SetRunConfigKey(c, "seed", "-1").message(), HasSubstr("is not a whole number >= 0"));

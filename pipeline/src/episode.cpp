@@ -118,6 +118,7 @@ planning::PlanningRequest PlanningRequestAfter(const NextViewContext& next, int 
   req.views_total = next.options.views;
   req.fused_views = fused;
   req.target_class = next.options.target_class;
+  req.collision = next.c.motion != nullptr ? &next.c.motion->checker() : nullptr;
   return req;
 }
 
@@ -133,17 +134,69 @@ planning::PlanResult PlanOrError(planning::ViewPlanner& planner,
   return plan;
 }
 
-/// Moves the arm to the best ranked candidate it accepts (joints when the candidate has them,
-/// else its camera pose), recording the choice and the refusals in `step`. Returns the refusals'
-/// messages (the first ~400 characters) for the episode's end reason.
-std::string MoveToBestCandidate(robot::Arm& arm, const std::vector<planning::ViewCandidate>& ranked,
-                                Rng& arm_rng, StepRecord& step) {
+/// A refusal as a MoveResult.
+robot::MoveResult NotMoved(Status status) {
+  robot::MoveResult move;
+  move.status = std::move(status);
+  return move;
+}
+
+/// Moves the arm to `q_goal` (or, when empty, to joints IK finds for `X_WC`): along a planned
+/// collision-free trajectory with a motion planner, else straight (unchecked). A plan that fails
+/// comes back as the move's status (not a robot fault: the next candidate is tried); `rec` gets
+/// the plan's figures, and the executed trajectory is marked as swept (free) space.
+robot::MoveResult MoveTo(const EpisodeComponents& c, const Eigen::VectorXd& q_goal,
+                         const RigidTransform& X_WC, Rng& rng, MotionRecord& rec) {
+  robot::Arm& arm = *c.arm;
+  const int n = arm.model().num_joints();
+  robot::MoveResult move;
+  if (c.motion == nullptr) {
+    move = q_goal.size() == n ? arm.MoveToJoints(q_goal) : arm.MoveToCameraPose(X_WC, rng);
+    rec.path_length_rad = move.joint_path_length;
+  } else {
+    rec.planned = true;
+    Eigen::VectorXd goal = q_goal;
+    if (goal.size() != n) {
+      const robot::IkResult ik = arm.model().SolveCameraIk(X_WC, arm.CurrentJoints(), rng);
+      if (!ik.ok()) return NotMoved(ik.status);
+      goal = ik.q;
+    }
+    ++rec.attempts;
+    const motion::MotionPlan plan = c.motion->Plan(arm.CurrentJoints(), goal, rng);
+    rec.planning_ms += plan.planning_ms;
+    if (!plan.ok()) return NotMoved(plan.status);
+    move = arm.FollowTrajectory(plan.trajectory);
+    if (!move.ok()) return move;
+    rec.straight = plan.straight;
+    rec.samples = plan.samples;
+    rec.path_length_rad = plan.path_length;
+    for (const robot::TrajectoryPoint& p : plan.trajectory.points) {
+      rec.camera_path_W.push_back(arm.model().CameraPose(p.q).translation());
+      c.motion->checker().MarkSwept(p.q);
+    }
+  }
+  if (move.ok()) {
+    rec.execution_s = move.execution_s;
+    rec.contacts = move.contacts;
+    rec.straight_line_contacts = move.straight_line_contacts;
+  }
+  return move;
+}
+
+/// Moves the arm to the best ranked candidate it can reach (planned, with a motion planner;
+/// at most MotionOptions::max_attempts plans), recording the choice and the refusals in `step`.
+/// Returns the refusals' messages (the first ~400 characters) for the episode's end reason.
+std::string MoveToBestCandidate(const EpisodeComponents& c,
+                                const std::vector<planning::ViewCandidate>& ranked, Rng& arm_rng,
+                                StepRecord& step) {
   std::string refusals;
   for (size_t i = 0; i < ranked.size(); ++i) {
+    if (c.motion != nullptr && step.motion.attempts >= c.motion->options().max_attempts) {
+      refusals += fmt::format("; {} motion plans failed (max_attempts)", step.motion.attempts);
+      break;
+    }
     const planning::ViewCandidate& cand = ranked[i];
-    robot::MoveResult move = cand.q.size() == arm.model().num_joints()
-                                 ? arm.MoveToJoints(cand.q)
-                                 : arm.MoveToCameraPose(cand.X_WC, arm_rng);
+    const robot::MoveResult move = MoveTo(c, cand.q, cand.X_WC, arm_rng, step.motion);
     if (move.ok()) {
       step.chosen_rank = static_cast<int>(i);
       step.chosen = cand;
@@ -152,11 +205,42 @@ std::string MoveToBestCandidate(robot::Arm& arm, const std::vector<planning::Vie
       break;
     }
     ++step.refused_moves;
+    step.motion.rejected.push_back(
+        fmt::format("rank {} ({}): {}", i, cand.source, move.status.ToString()));
     if (refusals.size() < 400) refusals += (refusals.empty() ? "" : "; ") + move.status.ToString();
     step.move_status = move.status;
     if (IsRobotFault(move.status)) break;  // where the arm is, is unknown: try nothing else
   }
   return refusals;
+}
+
+/// Takes the map into the motion planner's obstacle field (before planning).
+Status UpdateMotionMap(const EpisodeComponents& c, const EpisodeOptions& options,
+                       MotionRecord& rec) {
+  if (c.motion == nullptr) return Status::Ok();
+  const auto t0 = Clock::now();
+  const Status s = c.motion->checker().SetMap(c.map->grid(), options.roi);
+  rec.map_update_ms = MsSince(t0);
+  return s;
+}
+
+/// With a motion planner and EpisodeOptions::return_home: the planned move back to the first
+/// pose, unless the episode was interrupted or the robot failed.
+void ReturnHome(const NextViewContext& next, EpisodeResult& result) {
+  const EpisodeComponents& c = next.c;
+  if (c.motion == nullptr || !next.options.return_home || result.end == EpisodeEnd::kInterrupted ||
+      result.end == EpisodeEnd::kRobotFault) {
+    return;
+  }
+  MotionRecord& rec = result.return_home.emplace();
+  if (Status s = UpdateMotionMap(c, next.options, rec); !s.ok()) {
+    result.return_home_status = std::move(s);
+    return;
+  }
+  Rng rng = next.arm_root.Fork("return-home");
+  const robot::MoveResult move = MoveTo(c, next.q_start, next.X_WC_start, rng, rec);
+  result.return_home_status = move.status;
+  if (!move.ok()) rec.rejected.push_back("home: " + move.status.ToString());
 }
 
 /// Plans the view after `view` and moves there, recording both in `step`. Returns true, with the
@@ -165,8 +249,14 @@ std::string MoveToBestCandidate(robot::Arm& arm, const std::vector<planning::Vie
 bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidTransform>& fused,
                  StepRecord& step, EpisodeResult& result, ViewSeen& seen) {
   if (next.c.stop.stop_requested()) return Interrupted(result, "stop requested before planning");
-  const planning::PlanningRequest req = PlanningRequestAfter(next, view, step, fused);
   auto t0 = Clock::now();
+  if (const Status s = UpdateMotionMap(next.c, next.options, step.motion); !s.ok()) {
+    result.end = EpisodeEnd::kNoValidCandidate;
+    result.end_reason =
+        s.WithContext("the map could not be taken into the motion planner").ToString();
+    return true;
+  }
+  const planning::PlanningRequest req = PlanningRequestAfter(next, view, step, fused);
   Rng planner_rng = next.planner_root.Fork(static_cast<uint64_t>(view + 1));
   const planning::PlanResult& plan =
       seen.plan.emplace(PlanOrError(*next.c.planner, req, planner_rng));
@@ -175,6 +265,7 @@ bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidT
   step.plan_status = plan.status;
   step.candidates_generated = plan.generated;
   step.candidates_reachable = plan.reachable;
+  step.candidates_in_collision = plan.in_collision;
   for (size_t i = 0;
        i < plan.ranked.size() && static_cast<int>(i) < next.options.record_top_candidates; ++i) {
     step.top_candidates.push_back(plan.ranked[i]);
@@ -194,7 +285,7 @@ bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidT
   // Move: the best candidate the arm accepts.
   t0 = Clock::now();
   Rng arm_rng = next.arm_root.Fork(static_cast<uint64_t>(view + 1));
-  const std::string refusals = MoveToBestCandidate(*next.c.arm, plan.ranked, arm_rng, step);
+  const std::string refusals = MoveToBestCandidate(next.c, plan.ranked, arm_rng, step);
   step.times.move_ms = MsSince(t0);
   if (step.chosen_rank >= 0) return false;
   if (step.move_status.code() == StatusCode::kCancelled) {
@@ -212,6 +303,32 @@ bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidT
 }
 
 }  // namespace
+
+MotionTotals SumMotion(const EpisodeResult& result) {
+  MotionTotals t;
+  bool all_contacts = true;
+  bool all_straight = true;
+  robot::MotionContacts contacts;
+  robot::MotionContacts straight;
+  const auto add = [&](const MotionRecord& m, bool moved) {
+    t.attempts += m.attempts;
+    t.rejected += static_cast<int>(m.rejected.size());
+    if (!moved) return;
+    ++t.moves;
+    t.execution_s += m.execution_s;
+    t.path_length_rad += m.path_length_rad;
+    t.planning_ms.push_back(m.planning_ms);
+    if (m.contacts) contacts += *m.contacts;
+    all_contacts = all_contacts && m.contacts.has_value();
+    if (m.straight_line_contacts) straight += *m.straight_line_contacts;
+    all_straight = all_straight && m.straight_line_contacts.has_value();
+  };
+  for (const StepRecord& s : result.steps) add(s.motion, s.chosen_rank >= 0);
+  if (result.return_home) add(*result.return_home, result.return_home_status.ok());
+  if (all_contacts && t.moves > 0) t.contacts = contacts;
+  if (all_straight && t.moves > 0) t.straight_line_contacts = straight;
+  return t;
+}
 
 double StepRecord::Metric(std::string_view name) const {
   for (const auto& [key, value] : metrics) {
@@ -234,6 +351,8 @@ const OptionTable<EpisodeOptions>& EpisodeOptionTable() {
     t->Integer(
         "max_segment_failures", &E::max_segment_failures, "", ValueRange::Closed(1, 1000),
         "views in a row whose segmentation failed before the episode ends (segmenter-fault)");
+    t->Flag("return_home", &E::return_home,
+            "with motion planning, the arm returns to its first pose at the end of the episode");
     t->Nested("integrator", &E::integrator, mapping::IntegratorOptionTable());
     t->AddRule([](const E& o, std::vector<std::string>& errors) {
       if (o.prompt.find_first_not_of(" ,\t") == std::string::npos) {
@@ -305,6 +424,12 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
                              arm.CurrentJoints(),
                              arm.CurrentCameraPose()};
   std::vector<RigidTransform> fused;
+  if (c.motion != nullptr) {
+    // A new episode: no map yet; where the arm stands is free.
+    c.motion->checker().ClearMap();
+    c.motion->checker().MarkSwept(next.q_start);
+    c.motion->checker().SetStartView(next.X_WC_start, options.roi);
+  }
 
   int segment_failures_in_a_row = 0;
   for (int view = 0; view < options.views; ++view) {
@@ -344,6 +469,7 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
     NotifyStep(observers, result.steps.back(), seen.Data(), map);
     if (stop) break;
   }
+  ReturnHome(next, result);
   result.total_ms = MsSince(t_episode);
   NotifyEnd(observers, result, map);
   return result;

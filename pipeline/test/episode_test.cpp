@@ -180,7 +180,8 @@ class EpisodeTest : public ::testing::Test {
   Result<EpisodeResult> Run(const std::vector<EpisodeObserver*>& observers = {},
                             robot::Arm* arm = nullptr) {
     EpisodeComponents c{&source_,  &segmenter_, arm != nullptr ? arm : arm_.get(),
-                        &planner_, &map_,       stop_.get_token()};
+                        &planner_, &map_,       stop_.get_token(),
+                        nullptr};
     return RunEpisode(
         c, options_,
         [](const mapping::SemanticMap& m) {
@@ -449,7 +450,7 @@ TEST_F(EpisodeTest, CaptureErrorIsRecordedAndFusesNothing) {
 }
 
 TEST_F(EpisodeTest, MissingComponentsAndBadOptionsAreErrors) {
-  EpisodeComponents c{&source_, nullptr, arm_.get(), &planner_, &map_, {}};
+  EpisodeComponents c{&source_, nullptr, arm_.get(), &planner_, &map_, {}, nullptr};
   auto r = RunEpisode(c, options_);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.status().message().find("segmenter"), std::string::npos);

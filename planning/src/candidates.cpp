@@ -371,6 +371,7 @@ std::vector<ViewCandidate> GenerateShellCandidates(const PlanningRequest& reques
       out[i].cost = (res.q - request.q_current).norm();
     }
   });
+  DropCollidingCandidates(request, out);
   return out;
 }
 

@@ -209,6 +209,46 @@ const PredefinedPlanner::Waypoints& PredefinedPlanner::WaypointsFor(const Planni
   return waypoints_;
 }
 
+namespace {
+
+/// With a collision checker: waypoint p_k and every later one, in order, without those already
+/// visited (near a fused view: an earlier view moved past a skipped waypoint) and those whose
+/// joints are in collision (counted), so that the loop skips a waypoint it cannot reach without
+/// collision for the next.
+PlanResult RankRemainingWaypoints(const PlanningRequest& request,
+                                  const PredefinedPlanner::Waypoints& w,
+                                  const std::string& set_name) {
+  const robot::ArmModel& arm = *request.arm;
+  PlanResult result;
+  std::vector<ViewCandidate> candidates;
+  for (size_t i = static_cast<size_t>(request.view_index - 1); i < w.q.size(); ++i) {
+    ViewCandidate c;
+    c.q = w.q[i];
+    c.X_WC = arm.CameraPose(c.q);
+    if (IsNearAny(c.X_WC, request.fused_views)) continue;
+    c.reachable = arm.WithinLimits(c.q);
+    c.cost = (c.q - request.q_current).norm();
+    c.source = fmt::format("waypoint p{}", i + 1);
+    candidates.push_back(std::move(c));
+  }
+  result.generated = candidates.size();
+  result.in_collision = DropCollidingCandidates(request, candidates);
+  for (ViewCandidate& c : candidates) {
+    if (c.reachable) result.ranked.push_back(std::move(c));
+  }
+  result.reachable = result.ranked.size();
+  if (result.ranked.empty()) {
+    result.status = NotFoundError(fmt::format(
+        "predefined ({}): no waypoint from p{} on is free: {} not yet visited, {} of them in "
+        "collision, {} outside the joint limits",
+        set_name, request.view_index, result.generated, result.in_collision,
+        result.generated - result.in_collision));
+  }
+  return result;
+}
+
+}  // namespace
+
 PlanResult PredefinedPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   PlanResult result;
   if (const Status s = ValidateRequest(request); !s.ok()) {
@@ -234,6 +274,7 @@ PlanResult PredefinedPlanner::Plan(const PlanningRequest& request, Rng& rng) {
         set_name, k, k, w.q.size(), dropped));
     return result;
   }
+  if (request.collision != nullptr) return RankRemainingWaypoints(request, w, set_name);
   const Eigen::VectorXd& q = w.q[static_cast<size_t>(k - 1)];
   result.generated = 1;
   if (!arm.WithinLimits(q)) {

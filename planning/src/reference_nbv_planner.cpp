@@ -233,11 +233,11 @@ PlanResult ReferenceNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
     const robot::IkResult ik = arm.SolveCameraIk(c.X_WC, request.q_current, rng);
     c.q = ik.q;
     c.reachable = ik.ok() && arm.WithinLimits(ik.q);
-    if (c.reachable) {
-      c.cost = (ik.q - request.q_current).norm();
-      ++reachable;
-    }
+    if (c.reachable) c.cost = (ik.q - request.q_current).norm();
   }
+  // Extension: with a collision checker, joints in collision are dropped too.
+  const size_t in_collision = DropCollidingCandidates(request, kept);
+  for (const ViewCandidate& c : kept) reachable += c.reachable ? 1 : 0;
 
   GainGridOptions grid_options = options_.grid;
   auto grid = GainGrid::Build(map, request.target_class, request.roi, grid_options);
@@ -267,8 +267,9 @@ PlanResult ReferenceNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
     if (!result.status.ok()) {
       result.status = NotFoundError(fmt::format(
           "reference-nbv: no valid candidate: {} generated around the start pose, {} dropped "
-          "near a fused view or the current pose, 0 of {} reachable",
-          generated.size(), near_fused, kept_count));
+          "near a fused view or the current pose, 0 of {} reachable ({} in collision)",
+          generated.size(), near_fused, kept_count, in_collision));
+      result.in_collision = in_collision;
     }
     return result;
   }
@@ -286,6 +287,7 @@ PlanResult ReferenceNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   for (ViewCandidate& c : order) c.source = "grid-random";
   result.generated = generated.size();
   result.reachable = order.size();
+  result.in_collision = in_collision;
   result.ranked = std::move(order);
   return result;
 }

@@ -8,6 +8,7 @@
 
 #include <fmt/format.h>
 
+#include <avp/core/parallel.h>
 #include <avp/planning/view_planner.h>
 
 namespace avp::planning {
@@ -74,6 +75,24 @@ Status ValidateRequest(const PlanningRequest& request) {
       fmt::format("invalid planning request: {}", fmt::join(problems, "; ")));
 }
 
+size_t DropCollidingCandidates(const PlanningRequest& request,
+                               std::vector<ViewCandidate>& candidates) {
+  if (request.collision == nullptr) return 0;
+  std::vector<char> collides(candidates.size(), 0);
+  ParallelFor(candidates.size(), [&](size_t i) {
+    const ViewCandidate& c = candidates[i];
+    collides[i] = c.reachable && !request.collision->IsFree(c.q);
+  });
+  size_t dropped = 0;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (!collides[i]) continue;
+    candidates[i].reachable = false;
+    candidates[i].in_collision = true;
+    ++dropped;
+  }
+  return dropped;
+}
+
 PlanResult RankCandidates(std::vector<ViewCandidate> candidates, size_t generated,
                           std::string_view planner_name) {
   PlanResult result;
@@ -81,6 +100,7 @@ PlanResult RankCandidates(std::vector<ViewCandidate> candidates, size_t generate
   std::vector<size_t> order;
   for (size_t i = 0; i < candidates.size(); ++i) {
     if (candidates[i].reachable) order.push_back(i);
+    if (candidates[i].in_collision) ++result.in_collision;
   }
   result.reachable = order.size();
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
@@ -92,8 +112,9 @@ PlanResult RankCandidates(std::vector<ViewCandidate> candidates, size_t generate
   for (size_t i : order) result.ranked.push_back(std::move(candidates[i]));
   if (result.ranked.empty()) {
     result.status = NotFoundError(
-        fmt::format("{}: no valid candidate: {} generated, {} kept after filtering, 0 reachable",
-                    planner_name, generated, candidates.size()));
+        fmt::format("{}: no valid candidate: {} generated, {} kept after filtering, 0 reachable "
+                    "({} in collision)",
+                    planner_name, generated, candidates.size(), result.in_collision));
   }
   return result;
 }

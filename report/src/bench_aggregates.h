@@ -27,6 +27,10 @@ struct BenchAggregates {
   /// values[key][metric][view] -> samples over seeds
   std::map<BenchKey, std::map<std::string, std::vector<std::vector<double>>>> values;
   std::map<BenchKey, std::vector<double>> plan_ms, episode_s;
+  /// Per episode: contacts (where known), straight-line contacts, motion time; per move: its
+  /// planning time.
+  std::map<BenchKey, std::vector<double>> contacts, straight_line_contacts, motion_s,
+      move_planning_ms;
   std::map<BenchKey, size_t> failed;
   size_t failed_total = 0;
   std::vector<std::string> metric_order;
@@ -70,6 +74,13 @@ inline BenchAggregates Aggregate(const std::vector<BenchEpisode>& episodes, int 
     }
     a.plan_ms[key].insert(a.plan_ms[key].end(), j.plan_ms.begin(), j.plan_ms.end());
     a.episode_s[key].push_back(j.episode_s);
+    if (std::isfinite(j.contacts)) a.contacts[key].push_back(j.contacts);
+    if (std::isfinite(j.straight_line_contacts)) {
+      a.straight_line_contacts[key].push_back(j.straight_line_contacts);
+    }
+    if (std::isfinite(j.motion_s)) a.motion_s[key].push_back(j.motion_s);
+    a.move_planning_ms[key].insert(a.move_planning_ms[key].end(), j.move_planning_ms.begin(),
+                                   j.move_planning_ms.end());
   }
   return a;
 }

@@ -86,6 +86,17 @@ std::string SummaryCsv(const Aggregates& a, const BenchDescription& bench) {
                            name, CsvStat(s));
       }
     }
+    // The episode's motion (docs/motion.md), on the last view's line: contacts and motion time
+    // per episode (wall times stay out: summary.csv is the same for the same seeds).
+    for (const auto& [name, values] :
+         {std::pair{"contacts", &a.contacts},
+          std::pair{"straight_line_contacts", &a.straight_line_contacts},
+          std::pair{"motion_s", &a.motion_s}}) {
+      const auto it = values->find(key);
+      if (it == values->end() || it->second.empty()) continue;
+      csv += fmt::format("{},{},{},{},{},{}\n", key.scenario, key.planner, bench.segmenter,
+                         bench.views, name, CsvStat(eval::Summarize(it->second)));
+    }
   }
   return csv;
 }
@@ -198,13 +209,31 @@ std::string MarkdownHeader(const BenchDescription& bench, double seconds) {
   return md;
 }
 
+/// "mean" of one per-episode series of `key` with `digits` decimals, "–" when there is none.
+std::string MeanCell(const std::map<Key, std::vector<double>>& series, const Key& key, int digits) {
+  const auto it = series.find(key);
+  if (it == series.end() || it->second.empty()) return "–";
+  return fmt::format("{:.{}f}", MeanOf(it->second), digits);
+}
+
+/// Contacts per episode: "mean (straight line: mean)", with the most in one episode when any.
+std::string ContactsCell(const Aggregates& a, const Key& key) {
+  const auto it = a.contacts.find(key);
+  if (it == a.contacts.end() || it->second.empty()) return "–";
+  const double most = *std::max_element(it->second.begin(), it->second.end());
+  return fmt::format("{}{} ({})", MeanCell(a.contacts, key, 2),
+                     most > 0 ? fmt::format(", at most {:.0f}", most) : std::string(),
+                     MeanCell(a.straight_line_contacts, key, 2));
+}
+
 /// The final view's table of one scenario; appends its cells.
 std::string FinalViewTable(const Aggregates& a, const BenchDescription& bench,
                            const std::string& scenario, std::vector<BenchCell>& cells) {
   const int last = bench.views - 1;
   std::string md = fmt::format(
       "\n## {}\n\n| planner | n | F1 (exact) view {} | F1 (±1 voxel) | fruits found | found "
-      "fraction | plan ms/step | episode s | failed |\n|---|---|---|---|---|---|---|---|---|\n",
+      "fraction | plan ms/step | episode s | contacts/episode (straight line) | motion s | "
+      "failed |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
       scenario, bench.views);
   for (const std::string& p : bench.planners) {
     const Key key{scenario, p};
@@ -230,10 +259,11 @@ std::string FinalViewTable(const Aggregates& a, const BenchDescription& bench,
     cell.plan_ms_mean = plan == a.plan_ms.end() ? 0.0 : MeanOf(plan->second);
     cell.episode_s_mean = episode == a.episode_s.end() ? 0.0 : MeanOf(episode->second);
     cell.failed = failed == a.failed.end() ? 0 : failed->second;
-    md += fmt::format("| {} | {} | {} | {} | {:.1f} / {:.1f} | {} | {:.0f} | {:.2f} | {} |\n", p,
-                      SampleSize(f1.n), eval::FormatMeanInterval(f1), eval::FormatMeanInterval(f1t),
-                      found.mean, total.mean, eval::FormatMeanInterval(frac), cell.plan_ms_mean,
-                      cell.episode_s_mean, cell.failed);
+    md += fmt::format(
+        "| {} | {} | {} | {} | {:.1f} / {:.1f} | {} | {:.0f} | {:.2f} | {} | {} | {} |\n", p,
+        SampleSize(f1.n), eval::FormatMeanInterval(f1), eval::FormatMeanInterval(f1t), found.mean,
+        total.mean, eval::FormatMeanInterval(frac), cell.plan_ms_mean, cell.episode_s_mean,
+        ContactsCell(a, key), MeanCell(a.motion_s, key, 1), cell.failed);
     cells.push_back(cell);
   }
   return md;

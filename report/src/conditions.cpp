@@ -247,6 +247,20 @@ Result<BenchEpisode> ReadBenchEpisode(const fs::path& dir, const std::string& sc
     for (const nlohmann::json& t : rec.value("plan_ms", nlohmann::json::array())) {
       e.plan_ms.push_back(JsonNumber(t));
     }
+    // The episode's moves (docs/motion.md); absent in records older than motion planning.
+    if (const auto m = rec.find("motion"); m != rec.end() && m->is_object()) {
+      const auto total = [&](const char* key) {
+        const auto c = m->find(key);
+        return c != m->end() && c->is_object() ? JsonNumber(c->at("total"))
+                                               : std::numeric_limits<double>::quiet_NaN();
+      };
+      e.contacts = total("contacts");
+      e.straight_line_contacts = total("straight_line_contacts");
+      e.motion_s = JsonNumber(m->value("execution_s", nlohmann::json(0.0)));
+      for (const nlohmann::json& t : m->value("planning_ms", nlohmann::json::array())) {
+        e.move_planning_ms.push_back(JsonNumber(t));
+      }
+    }
     for (const nlohmann::json& f : rec.at("fruits")) {
       e.fruits.push_back({.best_visible_fraction = JsonNumber(f.at("best_visible_fraction")),
                           .episode_visible_fraction = JsonNumber(f.at("episode_visible_fraction")),

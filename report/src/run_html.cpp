@@ -182,6 +182,27 @@ json PlanJson(const pipeline::StepRecord& step, const planning::PlanResult& plan
             {"source", source}}}};
 }
 
+/// The move after a view (docs/motion.md): the camera's path (x, y, z per trajectory point, mm
+/// precision), and its contacts with the true world and the straight line's (null: unknown).
+json MoveJson(const pipeline::MotionRecord& m) {
+  json path = json::array();
+  for (const Eigen::Vector3d& p : m.camera_path_W) {
+    for (int k = 0; k < 3; ++k) path.push_back(Fixed(p(k)));
+  }
+  const auto total = [](const std::optional<robot::MotionContacts>& c) {
+    return c ? json(c->total()) : json(nullptr);
+  };
+  return {{"planned", m.planned},
+          {"straight", m.straight},
+          {"execution_s", Short(m.execution_s)},
+          {"planning_ms", Short(m.planning_ms)},
+          {"rejected", m.rejected.size()},
+          {"path", std::move(path)},
+          {"contacts", total(m.contacts)},
+          {"first_contact", m.contacts ? json(m.contacts->first) : json(nullptr)},
+          {"straight_line_contacts", total(m.straight_line_contacts)}};
+}
+
 void PutU16(std::string& out, uint32_t v) {
   out.push_back(static_cast<char>(v & 0xff));
   out.push_back(static_cast<char>((v >> 8) & 0xff));
@@ -322,6 +343,7 @@ void RunReportCollector::OnView(const pipeline::StepRecord& step, const pipeline
             {"camera", camera},
             {"image", masks},
             {"plan", data.plan != nullptr ? PlanJson(step, *data.plan, options_) : json(nullptr)},
+            {"motion", MoveJson(step.motion)},
             {"metrics", metrics},
             {"errors", errors},
             {"step_ms", Short(step.times.total_ms, 4)}};

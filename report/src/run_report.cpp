@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -15,6 +16,55 @@ namespace {
 json Finite(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 }  // namespace
+
+json ContactsJson(const std::optional<robot::MotionContacts>& c) {
+  if (!c) return nullptr;
+  return {{"total", c->total()}, {"plant", c->plant}, {"fruit", c->fruit}, {"support", c->support},
+          {"ground", c->ground}, {"self", c->self},   {"first", c->first}};
+}
+
+json MotionJson(const pipeline::MotionRecord& m) {
+  json path = json::array();
+  for (const Eigen::Vector3d& p : m.camera_path_W) path.push_back({p.x(), p.y(), p.z()});
+  return {{"planned", m.planned},
+          {"attempts", m.attempts},
+          {"rejected", m.rejected},
+          {"map_update_ms", m.map_update_ms},
+          {"planning_ms", m.planning_ms},
+          {"straight", m.straight},
+          {"samples", m.samples},
+          {"path_length_rad", m.path_length_rad},
+          {"execution_s", m.execution_s},
+          {"contacts", ContactsJson(m.contacts)},
+          {"straight_line_contacts", ContactsJson(m.straight_line_contacts)},
+          {"camera_path", std::move(path)}};
+}
+
+json MotionTotalsJson(const pipeline::EpisodeResult& e) {
+  const pipeline::MotionTotals t = pipeline::SumMotion(e);
+  std::vector<double> sorted = t.planning_ms;
+  std::sort(sorted.begin(), sorted.end());
+  const auto quantile = [&](double q) {
+    if (sorted.empty()) return json(nullptr);
+    return json(sorted[static_cast<size_t>(q * static_cast<double>(sorted.size() - 1) + 0.5)]);
+  };
+  json home = nullptr;
+  if (e.return_home) {
+    home = MotionJson(*e.return_home);
+    home["status"] = e.return_home_status.ToString();
+  }
+  return {{"moves", t.moves},
+          {"attempts", t.attempts},
+          {"rejected", t.rejected},
+          {"execution_s", t.execution_s},
+          {"path_length_rad", t.path_length_rad},
+          {"planning_ms", t.planning_ms},
+          {"planning_ms_median", quantile(0.5)},
+          {"planning_ms_max", sorted.empty() ? json(nullptr) : json(sorted.back())},
+          {"contacts", ContactsJson(t.contacts)},
+          {"straight_line_contacts", ContactsJson(t.straight_line_contacts)},
+          {"return_home", std::move(home)}};
+}
 
 json StepJson(const pipeline::StepRecord& s) {
   json metrics = json::object();
@@ -56,7 +106,9 @@ json StepJson(const pipeline::StepRecord& s) {
                  {"chosen_rank", s.chosen_rank},
                  {"refused_moves", s.refused_moves},
                  {"joint_path_length_rad", s.joint_path_length},
-                 {"top_candidates", cands}};
+                 {"in_collision", s.candidates_in_collision},
+                 {"top_candidates", cands},
+                 {"motion", MotionJson(s.motion)}};
   }
   return j;
 }

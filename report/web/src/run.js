@@ -264,6 +264,28 @@ function build(data) {
     color: 0x3060c0, dashSize: labelSize * 0.5, gapSize: labelSize * 0.4 }));
   path.computeLineDistances();
   scene.add(path);
+  // The camera's planned paths between the views (docs/motion.md), in place of the dashed
+  // straight one where the run has them: teal, red with a count where a move touched something.
+  let planned = 0;
+  steps.forEach((s) => {
+    const m = s.motion;
+    if (!m || !m.path || m.path.length < 6) return;
+    const pts = [];
+    for (let i = 0; i + 2 < m.path.length; i += 3) {
+      pts.push(new THREE.Vector3(m.path[i], m.path[i + 1], m.path[i + 2]));
+    }
+    const touched = m.contacts > 0;
+    scene.add(new THREE.Line(new THREE.BufferGeometry().setFromPoints(pts),
+      new THREE.LineBasicMaterial({ color: touched ? 0xe02020 : 0x1090a0 })));
+    if (touched) {
+      const mark = textSprite(`${m.contacts} contact${m.contacts > 1 ? "s" : ""}`, "#c01010",
+        labelSize * 0.8);
+      mark.position.copy(pts[Math.floor(pts.length / 2)]);
+      scene.add(mark);
+    }
+    ++planned;
+  });
+  path.visible = planned === 0;
 
   // Candidates of the current step: small spheres coloured by utility; the chosen one larger,
   // magenta, with its viewing direction.
@@ -465,6 +487,15 @@ function build(data) {
         ` after ${plan.refused_moves} refused` : ""}; utility ${fmt(lo)} – ${fmt(hi)}` +
       (plan.status !== "OK" ? `; ${plan.status}` : "") +
       (plan.stop ? `; planner stopped: ${plan.stop_reason}` : ""));
+    const m = s.motion;
+    if (m && (m.planned || m.contacts !== null)) {
+      const contacts = m.contacts === null ? "" : `; ${m.contacts} contact${m.contacts === 1 ? "" :
+        "s"}${m.first_contact ? ` (${m.first_contact})` : ""}, the straight line ` +
+        `${m.straight_line_contacts}`;
+      h("div", {}, candInfo, `move: ${m.planned ? (m.straight ? "straight (free)" :
+        "planned around obstacles") : "straight, unchecked"}, ${fmt(m.execution_s)} s` +
+        `${m.rejected ? `, ${m.rejected} candidates rejected` : ""}${contacts}`);
+    }
     const table = h("table", { class: "avp" }, candInfo);
     const hr = h("tr", {}, table);
     for (const t of ["rank", "utility", "gain", "cost", "source"]) h("th", {}, hr, t);

@@ -13,6 +13,7 @@
 #include <avp/eval/ground_truth.h>
 #include <avp/experiment/registries.h>
 #include <avp/mapping/semantic_map.h>
+#include <avp/motion/motion_planner.h>
 #include <avp/pipeline/episode.h>
 #include <avp/ros/bag/frame_selection.h>
 #include <avp/sim/sensor_noise.h>
@@ -80,6 +81,9 @@ struct RunConfig {
   eval::GroundTruthOptions ground_truth;
   /// `avp replay` of a robot's bag: the frames to fuse and the region of interest.
   ReplayConfig replay;
+  /// Collision-free motion (docs/motion.md): margins, what counts as an obstacle, the planner's
+  /// budget, the trajectory's speed.
+  motion::MotionOptions motion;
   ComponentChoice planner{"avp-nbv", {}};
   ComponentChoice segmenter{"oracle", {}};
 

@@ -2,6 +2,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <stop_token>
 #include <string>
 #include <utility>
@@ -16,6 +17,7 @@
 #include <avp/core/transform.h>
 #include <avp/mapping/integrator.h>
 #include <avp/mapping/semantic_map.h>
+#include <avp/motion/motion_planner.h>
 #include <avp/planning/view_planner.h>
 #include <avp/robot/arm.h>
 #include <avp/robot/rgbd_source.h>
@@ -32,6 +34,34 @@ struct StageTimes {
   double plan_ms = 0.0;
   double move_ms = 0.0;
   double total_ms = 0.0;
+};
+
+/// How one move was planned and executed (StepRecord::motion, EpisodeResult::return_home).
+struct MotionRecord {
+  /// A motion planner chose the path (EpisodeComponents::motion); false: the arm was sent
+  /// straight to the candidate's joints, unchecked.
+  bool planned = false;
+  /// Candidates given up before the executed one, each "rank R (source): why" (IK failed, the
+  /// goal or the start in collision, no collision-free path, the arm refused).
+  std::vector<std::string> rejected;
+  /// Motion plans attempted (the rejected ones and the executed one).
+  int attempts = 0;
+  /// Building the obstacle field from the map, and planning summed over the attempts, ms.
+  double map_update_ms = 0.0;
+  double planning_ms = 0.0;
+  /// The executed path is the straight joint-space line (no search was needed).
+  bool straight = false;
+  /// States the search drew (0 for a straight path).
+  int samples = 0;
+  /// The executed path's joint-space length (radians) and duration (seconds).
+  double path_length_rad = 0.0;
+  double execution_s = 0.0;
+  /// The camera's positions along the executed trajectory (its points), for the report.
+  std::vector<Eigen::Vector3d> camera_path_W;
+  /// Contacts with the true world along the executed motion, and along the straight joint line
+  /// (what a blind move would have hit): only where the arm sees the truth (a simulator).
+  std::optional<robot::MotionContacts> contacts;
+  std::optional<robot::MotionContacts> straight_line_contacts;
 };
 
 /// Everything that happened in one step of the loop: one fused view (sense, segment, integrate),
@@ -70,6 +100,8 @@ struct StepRecord {
   Status plan_status;
   size_t candidates_generated = 0;
   size_t candidates_reachable = 0;
+  /// Candidates IK reached but the collision check dropped.
+  size_t candidates_in_collision = 0;
   /// The best candidates as ranked (up to EpisodeOptions::record_top_candidates).
   std::vector<planning::ViewCandidate> top_candidates;
   /// Rank (0 = best) of the candidate the arm moved to; -1 when none.
@@ -79,6 +111,8 @@ struct StepRecord {
   int refused_moves = 0;
   Status move_status;
   double joint_path_length = 0.0;
+  /// How the move was planned and what it touched.
+  MotionRecord motion;
 
   StageTimes times;
 
@@ -102,6 +136,9 @@ struct EpisodeOptions {
   /// Views in a row whose segmentation failed before the episode ends as a segmenter fault, in
   /// [1, 1000] (a segmenter that reports Unavailable, a service that is down, ends it at once).
   int max_segment_failures = 3;
+  /// With a motion planner: the arm returns to the episode's first pose at the end (not after an
+  /// interruption or a robot fault), along a planned path.
+  bool return_home = true;
   /// The table's ranges, a prompt that names something (within the prompt limits of
   /// segmentation::SplitPrompt), a target class other than background and a finite, non-empty
   /// ROI.
@@ -133,9 +170,29 @@ struct EpisodeResult {
   /// Why it ended (the planner's or the arm's message when it ended early).
   std::string end_reason;
   std::vector<StepRecord> steps;
+  /// The move back to the first pose (EpisodeOptions::return_home), when one was made or tried.
+  std::optional<MotionRecord> return_home;
+  Status return_home_status;
   double total_ms = 0.0;
   int views_fused() const { return static_cast<int>(steps.size()); }
 };
+
+/// An episode's moves summed (the steps' and the return home's).
+struct MotionTotals {
+  /// Moves executed, and motion plans attempted.
+  int moves = 0;
+  int attempts = 0;
+  /// Candidates given up on the way (MotionRecord::rejected).
+  int rejected = 0;
+  double execution_s = 0.0;
+  double path_length_rad = 0.0;
+  /// Planning time of every executed move (ms, attempts summed), in order.
+  std::vector<double> planning_ms;
+  /// Summed contacts where every move reported them (a simulator), else nullopt.
+  std::optional<robot::MotionContacts> contacts;
+  std::optional<robot::MotionContacts> straight_line_contacts;
+};
+MotionTotals SumMotion(const EpisodeResult& result);
 
 /// What one view saw and what the planner weighed after it, for observers that keep more than
 /// the StepRecord (recordings, reports). Non-owning; valid only during the OnView call.
@@ -177,6 +234,10 @@ struct EpisodeComponents {
   /// Asked before every view, plan and move: a requested stop ends the episode (kInterrupted)
   /// with the steps so far. Live sources and arms take the same token so that their waits end.
   std::stop_token stop;
+  /// Plans every move collision-free against the map (updated after each view), the declared
+  /// world objects and the arm itself; planners drop candidates in collision. Null: the arm is
+  /// sent straight to each view's joints, unchecked (the paper's IK-only filter).
+  motion::MotionPlanner* motion = nullptr;
 };
 
 /// Occupied voxels of the target class in the grid (StepRecord::target_voxels).

@@ -15,6 +15,7 @@
 #include <avp/core/status.h>
 #include <avp/core/transform.h>
 #include <avp/mapping/semantic_map.h>
+#include <avp/motion/collision_checker.h>
 #include <avp/robot/arm_model.h>
 
 namespace avp::planning {
@@ -25,8 +26,10 @@ struct ViewCandidate {
   RigidTransform X_WC;
   /// Joints that reach X_WC (URDF convention); empty when the candidate was not IK-checked.
   Eigen::VectorXd q;
-  /// IK found joints within the limits.
+  /// IK found joints within the limits (and, with a collision checker, joints free of collision).
   bool reachable = false;
+  /// IK found joints, but the arm there is in collision (PlanningRequest::collision): dropped.
+  bool in_collision = false;
   /// Expected information gain (the planner's own units; bits for the entropy-based planners).
   double gain = 0.0;
   /// Motion cost: Euclidean joint-space distance |q - q_current| (radians).
@@ -63,6 +66,9 @@ struct PlanningRequest {
   std::vector<RigidTransform> fused_views;
   /// The class the prompt names.
   SemanticClass target_class = SemanticClass::kFruit;
+  /// The world the arm may not touch (the map's obstacles, declared objects, itself), or null:
+  /// then IK is the only filter. Candidates whose IK joints collide are dropped before scoring.
+  const motion::CollisionChecker* collision = nullptr;
 };
 
 /// A planner's answer.
@@ -72,9 +78,11 @@ struct PlanResult {
   Status status;
   /// Reachable candidates, best first (the loop tries them in order until one move succeeds).
   std::vector<ViewCandidate> ranked;
-  /// Candidates generated, and how many of them passed the reachability check.
+  /// Candidates generated, how many of them passed the reachability check, and how many IK
+  /// reached but the collision check dropped.
   size_t generated = 0;
   size_t reachable = 0;
+  size_t in_collision = 0;
   /// The planner's stopping rule fired (e.g. best gain below a threshold): the loop ends early.
   bool stop = false;
   std::string stop_reason;
@@ -100,6 +108,11 @@ Status ValidateRequest(const PlanningRequest& request);
 /// as that side minus the shorter one. For a square ROI (a tomato plant) it is the vertical axis
 /// through the centre (the stem); for a long, thin one (an espalier) the wall's mid-plane.
 double PlantCoreDistance(const Eigen::Vector3d& p, const Box3& roi);
+
+/// With request.collision, marks every reachable candidate whose joints are in collision
+/// unreachable and in_collision (in parallel); returns how many. Without it, 0.
+size_t DropCollidingCandidates(const PlanningRequest& request,
+                               std::vector<ViewCandidate>& candidates);
 
 /// Sorts by utility (descending; ties by lower cost, then generation order), drops unreachable
 /// candidates and fills the status ("no valid candidate: N generated, M reachable, ...").

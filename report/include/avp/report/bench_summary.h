@@ -46,6 +46,14 @@ struct BenchEpisode {
   std::vector<std::vector<std::pair<std::string, double>>> metrics;
   std::vector<double> plan_ms;
   double episode_s = 0.0;
+  /// The episode's contacts with the true world (pipeline::SumMotion: every move, the return
+  /// home included) and what the straight joint lines would have hit; NaN when unknown.
+  double contacts = std::numeric_limits<double>::quiet_NaN();
+  double straight_line_contacts = std::numeric_limits<double>::quiet_NaN();
+  /// The episode's motion time (the trajectories' durations, s; NaN when unknown) and each
+  /// move's planning time.
+  double motion_s = std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> move_planning_ms;
   /// Every ground-truth fruit of the episode (empty for a ground truth without fruits).
   std::vector<BenchFruit> fruits;
   /// Per plan step with the run configuration's oracle_regret (empty otherwise).

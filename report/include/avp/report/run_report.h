@@ -1,5 +1,6 @@
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,6 +17,14 @@ namespace avp::report {
 /// One step of record.json: the view, its pose, masks, map counts, metrics, stage times, and the
 /// plan (status, candidates, the best ones) when the step planned.
 nlohmann::json StepJson(const pipeline::StepRecord& step);
+/// Contacts by what was touched ({"total", "plant", "fruit", "support", "ground", "self",
+/// "first"}), null when unknown (a real robot).
+nlohmann::json ContactsJson(const std::optional<robot::MotionContacts>& contacts);
+/// One move: planned or not, attempts, rejected candidates and why, times, path length,
+/// contacts, the camera's path.
+nlohmann::json MotionJson(const pipeline::MotionRecord& motion);
+/// The episode's moves summed (pipeline::SumMotion), with the return home.
+nlohmann::json MotionTotalsJson(const pipeline::EpisodeResult& episode);
 
 /// The metrics of MetricsRow as a JSON object (non-finite values as null).
 nlohmann::json MetricsJson(const eval::MapMetrics& metrics);
