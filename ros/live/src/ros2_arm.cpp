@@ -168,13 +168,59 @@ std::string Ros2Arm::Distance(const Eigen::VectorXd& goal, const RigidTransform&
 }
 
 robot::MoveResult Ros2Arm::DoMoveToJoints(const Eigen::VectorXd& q) {
-  robot::MoveResult result;
   const Eigen::VectorXd q_before = DoCurrentJoints();
-  result.q = q_before;
-  const RigidTransform X_WC_goal = model().CameraPose(q);
   const double largest = (q - q_before).cwiseAbs().maxCoeff();
   const double duration_s =
       std::max(options_.min_duration_s, largest / options_.max_joint_speed_rad_s);
+  robot::JointTrajectory one;
+  one.joint_names = model().joint_names();
+  one.points.push_back({q, Eigen::VectorXd(), duration_s});
+  robot::MoveResult result = SendAndWait(one, q_before);
+  if (result.ok()) result.joint_path_length = (result.q - q_before).norm();
+  return result;
+}
+
+robot::MoveResult Ros2Arm::DoFollowTrajectory(const robot::JointTrajectory& trajectory) {
+  const Eigen::VectorXd q_before = DoCurrentJoints();
+  robot::MoveResult result = SendAndWait(trajectory, q_before);
+  if (!result.ok()) return result;
+  for (size_t i = 1; i < trajectory.points.size(); ++i) {
+    result.joint_path_length += (trajectory.points[i].q - trajectory.points[i - 1].q).norm();
+  }
+  result.execution_s = trajectory.duration_s();
+  return result;
+}
+
+ros::msg::JointTrajectory Ros2Arm::ToMessage(const robot::JointTrajectory& trajectory) const {
+  ros::msg::JointTrajectory traj;
+  traj.header.frame_id = options_.base_frame;  // stamp 0: start now (JointTrajectoryController)
+  traj.joint_names = model().joint_names();
+  for (const robot::TrajectoryPoint& p : trajectory.points) {
+    ros::msg::JointTrajectoryPoint point;
+    const Eigen::VectorXd q_out = options_.reference_joints ? model().ToReferenceJoints(p.q) : p.q;
+    point.positions.assign(q_out.data(), q_out.data() + q_out.size());
+    if (p.qd.size() == q_out.size()) {
+      // The reference convention flips signs only: velocities follow the positions' signs.
+      const Eigen::VectorXd qd_out =
+          options_.reference_joints
+              ? Eigen::VectorXd(model().ToReferenceJoints(p.qd) -
+                                model().ToReferenceJoints(Eigen::VectorXd::Zero(p.qd.size())))
+              : p.qd;
+      point.velocities.assign(qd_out.data(), qd_out.data() + qd_out.size());
+    }
+    point.time_from_start = ros::msg::Duration::FromNanoseconds(static_cast<int64_t>(p.t_s * 1e9));
+    traj.points.push_back(std::move(point));
+  }
+  return traj;
+}
+
+robot::MoveResult Ros2Arm::SendAndWait(const robot::JointTrajectory& trajectory,
+                                       const Eigen::VectorXd& q_before) {
+  robot::MoveResult result;
+  result.q = q_before;
+  const Eigen::VectorXd& q = trajectory.points.back().q;
+  const double duration_s = trajectory.duration_s();
+  const RigidTransform X_WC_goal = model().CameraPose(q);
   const ros::msg::Time now = ros::msg::Time::FromNanoseconds(NowNs());
 
   ros::msg::PoseStamped view;
@@ -187,16 +233,7 @@ robot::MoveResult Ros2Arm::DoMoveToJoints(const Eigen::VectorXd& q) {
     return result;
   }
   if (trajectory_pub_ != nullptr) {
-    ros::msg::JointTrajectory traj;
-    traj.header.frame_id = options_.base_frame;  // stamp 0: start now (JointTrajectoryController)
-    traj.joint_names = model().joint_names();
-    ros::msg::JointTrajectoryPoint point;
-    const Eigen::VectorXd q_out = options_.reference_joints ? model().ToReferenceJoints(q) : q;
-    point.positions.assign(q_out.data(), q_out.data() + q_out.size());
-    point.time_from_start =
-        ros::msg::Duration::FromNanoseconds(static_cast<int64_t>(duration_s * 1e9));
-    traj.points.push_back(point);
-    if (Status s = trajectory_pub_->Publish(traj); !s.ok()) {
+    if (Status s = trajectory_pub_->Publish(ToMessage(trajectory)); !s.ok()) {
       result.status = UnavailableError(fmt::format("publishing the joint goal on {} failed: {}",
                                                    options_.trajectory_topic, s.message()));
       return result;
@@ -234,7 +271,6 @@ robot::MoveResult Ros2Arm::DoMoveToJoints(const Eigen::VectorXd& q) {
     }
   }
   result.q = *q_;
-  result.joint_path_length = (result.q - q_before).norm();
   result.status = Status::Ok();
   return result;
 }

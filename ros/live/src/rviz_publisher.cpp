@@ -19,6 +19,7 @@ namespace {
 using ros::msg::ArrowMarker;
 using ros::msg::CubeListMarker;
 using ros::msg::DeleteAllMarker;
+using ros::msg::LineStripMarker;
 using ros::msg::Rgba;
 using ros::msg::SphereMarker;
 using ros::msg::TextMarker;
@@ -134,6 +135,12 @@ ros::msg::MarkerArray ChosenMarkers(const pipeline::StepRecord& step,
                              step.view + 1, step.chosen_rank, step.chosen.utility, step.chosen.gain,
                              step.chosen.cost, step.chosen.source),
                  0.03, Rgba(1, 1, 1, 1)));
+  // The camera's planned path to it (docs/motion.md): red when the simulator saw a contact.
+  if (step.motion.camera_path_W.size() >= 2) {
+    const bool touched = step.motion.contacts && step.motion.contacts->total() > 0;
+    out.markers.push_back(LineStripMarker(header, "path", 2, step.motion.camera_path_W, 0.005,
+                                          touched ? Rgba(1, 0.1, 0.1) : Rgba(0.2, 0.9, 1.0)));
+  }
   return out;
 }
 

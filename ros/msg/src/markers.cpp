@@ -55,6 +55,16 @@ Marker SphereMarker(const Header& header, std::string_view ns, int id,
   return m;
 }
 
+Marker LineStripMarker(const Header& header, std::string_view ns, int id,
+                       const std::vector<Eigen::Vector3d>& points, double width_m,
+                       const ColorRGBA& color) {
+  Marker m = Base(header, ns, id, Marker::kLineStrip);
+  m.scale = {width_m, 0.0, 0.0};
+  m.color = color;
+  for (const Eigen::Vector3d& p : points) m.points.push_back(ToPointMsg(p));
+  return m;
+}
+
 Marker TextMarker(const Header& header, std::string_view ns, int id,
                   const Eigen::Vector3d& position, std::string text, double height_m,
                   const ColorRGBA& color) {

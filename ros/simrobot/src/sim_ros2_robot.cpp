@@ -133,38 +133,60 @@ Result<std::unique_ptr<SimRos2Robot>> SimRos2Robot::Create(
   return r;
 }
 
+Eigen::VectorXd SimRos2Robot::Motion::At(int64_t elapsed_ns) const {
+  if (elapsed_ns <= 0) return q.front();
+  for (size_t i = 1; i < q.size(); ++i) {
+    if (elapsed_ns > t_ns[i]) continue;
+    const int64_t span = t_ns[i] - t_ns[i - 1];
+    if (span <= 0) return q[i];
+    const double a = static_cast<double>(elapsed_ns - t_ns[i - 1]) / static_cast<double>(span);
+    return q[i - 1] + a * (q[i] - q[i - 1]);
+  }
+  return q.back();
+}
+
 void SimRos2Robot::OnTrajectory(const ros::msg::JointTrajectory& msg) {
   std::string problem;
   Goal goal;
   const std::vector<std::string>& names = model_.joint_names();
-  goal.q.resize(static_cast<Eigen::Index>(names.size()));
-  if (msg.points.empty()) {
-    problem = "the trajectory has no point";
-  } else {
-    const ros::msg::JointTrajectoryPoint& last = msg.points.back();
-    if (last.positions.size() != msg.joint_names.size()) {
-      problem = fmt::format("{} joint names but {} positions", msg.joint_names.size(),
-                            last.positions.size());
+  if (msg.points.empty()) problem = "the trajectory has no point";
+  // Every point, in order (a planned trajectory is followed point by point).
+  std::vector<size_t> column(names.size(), 0);
+  for (size_t j = 0; j < names.size() && problem.empty(); ++j) {
+    size_t k = 0;
+    while (k < msg.joint_names.size() && msg.joint_names[k] != names[j]) ++k;
+    if (k == msg.joint_names.size()) {
+      problem = fmt::format("joint '{}' is missing (given: {})", names[j],
+                            fmt::join(msg.joint_names, ", "));
     }
-    for (size_t j = 0; j < names.size() && problem.empty(); ++j) {
-      size_t k = 0;
-      while (k < msg.joint_names.size() && msg.joint_names[k] != names[j]) ++k;
-      if (k == msg.joint_names.size()) {
-        problem = fmt::format("joint '{}' is missing (given: {})", names[j],
-                              fmt::join(msg.joint_names, ", "));
-      } else {
-        goal.q[static_cast<Eigen::Index>(j)] = last.positions[k];
-      }
+    column[j] = k;
+  }
+  double previous_t = 0.0;
+  for (size_t p = 0; p < msg.points.size() && problem.empty(); ++p) {
+    const ros::msg::JointTrajectoryPoint& point = msg.points[p];
+    if (point.positions.size() != msg.joint_names.size()) {
+      problem = fmt::format("point {}: {} joint names but {} positions", p, msg.joint_names.size(),
+                            point.positions.size());
+      break;
     }
-    if (problem.empty() && options_.reference_joints) goal.q = model_.FromReferenceJoints(goal.q);
-    const double t = static_cast<double>(last.time_from_start.ToNanoseconds()) * 1e-9;
-    if (problem.empty() && !(t >= 0.0 && t <= kMaxTrajectorySeconds)) {
-      problem = fmt::format("time_from_start {} s is outside [0, {}] s", t, kMaxTrajectorySeconds);
+    Eigen::VectorXd q(static_cast<Eigen::Index>(names.size()));
+    for (size_t j = 0; j < names.size(); ++j) {
+      q[static_cast<Eigen::Index>(j)] = point.positions[column[j]];
     }
-    goal.duration_s = std::max(0.0, t) * options_.time_scale;
-    if (problem.empty()) {
-      if (Status s = model_.CheckJoints(goal.q); !s.ok()) problem = s.message();
+    if (options_.reference_joints) q = model_.FromReferenceJoints(q);
+    const double t = static_cast<double>(point.time_from_start.ToNanoseconds()) * 1e-9;
+    if (!(t >= previous_t && t <= kMaxTrajectorySeconds)) {
+      problem = fmt::format("point {}: time_from_start {} s is outside [{}, {}] s", p, t,
+                            previous_t, kMaxTrajectorySeconds);
+      break;
     }
+    if (Status s = model_.CheckJoints(q); !s.ok()) {
+      problem = fmt::format("point {}: {}", p, s.message());
+      break;
+    }
+    previous_t = t;
+    goal.q.push_back(std::move(q));
+    goal.t_s.push_back(t * options_.time_scale);
   }
   std::lock_guard lock(mutex_);
   ++counters_.goals_received;
@@ -252,22 +274,28 @@ Status SimRos2Robot::Run(std::stop_token stop, double max_seconds) {
     {
       std::lock_guard lock(mutex_);
       if (pending_) {
-        motion_ = Motion{q_, pending_->q, ros::live::NowNs(),
-                         static_cast<int64_t>(pending_->duration_s * 1e9)};
+        Motion m;
+        m.q.push_back(q_);
+        m.t_ns.push_back(0);
+        for (size_t i = 0; i < pending_->q.size(); ++i) {
+          m.q.push_back(pending_->q[i]);
+          m.t_ns.push_back(std::max<int64_t>(0, static_cast<int64_t>(pending_->t_s[i] * 1e9)));
+        }
+        m.start_ns = ros::live::NowNs();
+        motion_ = std::move(m);
         pending_.reset();
       }
     }
     if (motion_) {
       const int64_t elapsed = ros::live::NowNs() - motion_->start_ns;
-      if (elapsed >= motion_->duration_ns) {
-        q_ = motion_->to;  // exactly the goal
+      if (elapsed >= motion_->duration_ns()) {
+        q_ = motion_->q.back();  // exactly the goal
         motion_.reset();
         rendered_ = false;
         std::lock_guard lock(mutex_);
         ++counters_.arrivals;
       } else {
-        const double a = static_cast<double>(elapsed) / static_cast<double>(motion_->duration_ns);
-        q_ = motion_->from + a * (motion_->to - motion_->from);
+        q_ = motion_->At(elapsed);
       }
     }
     if (tick >= next_state || (!motion_ && !rendered_)) {

@@ -21,8 +21,9 @@ namespace avp::ros::live {
 /// How avp moves a live arm and knows it arrived (docs/ros2.md).
 struct ArmTopicsOptions {
   std::string joint_states_topic = "/joint_states";
-  /// The IK joint goal as trajectory_msgs/JointTrajectory (one point), as a ros2_control
-  /// JointTrajectoryController takes it; empty: publish only the view (e.g. for MoveIt through
+  /// The move as trajectory_msgs/JointTrajectory, as a ros2_control JointTrajectoryController
+  /// takes it: the planned collision-free trajectory (docs/motion.md), or with motion planning
+  /// off the IK joint goal as one point; empty: publish only the view (e.g. for MoveIt through
   /// examples/ros2/next_view_to_moveit.py) and wait for the arm to arrive.
   std::string trajectory_topic = "/joint_trajectory_controller/joint_trajectory";
   /// The chosen camera pose (PoseStamped of the optical frame in the base frame).
@@ -70,8 +71,17 @@ class Ros2Arm final : public robot::Arm {
  protected:
   Eigen::VectorXd DoCurrentJoints() const override;
   robot::MoveResult DoMoveToJoints(const Eigen::VectorXd& q) override;
+  /// Publishes the whole trajectory (every point's positions, velocities and time_from_start)
+  /// and waits for the arm to arrive at its last point, as DoMoveToJoints does.
+  robot::MoveResult DoFollowTrajectory(const robot::JointTrajectory& trajectory) override;
 
  private:
+  /// trajectory_msgs/JointTrajectory of `trajectory` (in the reference convention when
+  /// reference_joints), stamp 0: start now.
+  ros::msg::JointTrajectory ToMessage(const robot::JointTrajectory& trajectory) const;
+  /// Publishes the view and the trajectory, then waits for the arm to reach its last point.
+  robot::MoveResult SendAndWait(const robot::JointTrajectory& trajectory,
+                                const Eigen::VectorXd& q_before);
   Ros2Arm(ros::msg::TfBuffer& tf, robot::ArmModel model, const ArmTopicsOptions& options,
           std::stop_token stop);
   void OnJointState(const ros::msg::JointState& msg);

@@ -36,6 +36,11 @@ Marker ViewArrowMarker(const Header& header, std::string_view ns, int id,
 Marker SphereMarker(const Header& header, std::string_view ns, int id,
                     const Eigen::Vector3d& center, double diameter_m, const ColorRGBA& color);
 
+/// A LINE_STRIP through `points` (a path), `width_m` wide.
+Marker LineStripMarker(const Header& header, std::string_view ns, int id,
+                       const std::vector<Eigen::Vector3d>& points, double width_m,
+                       const ColorRGBA& color);
+
 /// View-facing text of `height_m` at `position`.
 Marker TextMarker(const Header& header, std::string_view ns, int id,
                   const Eigen::Vector3d& position, std::string text, double height_m,

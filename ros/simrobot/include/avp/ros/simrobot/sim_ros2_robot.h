@@ -91,14 +91,20 @@ class SimRos2Robot {
   Status PublishImages(int64_t stamp_ns);
   Status PublishState(int64_t stamp_ns);
 
+  /// A trajectory's points (URDF joints) and their times (time_from_start × time_scale).
   struct Goal {
-    Eigen::VectorXd q;
-    double duration_s = 0.0;
+    std::vector<Eigen::VectorXd> q;
+    std::vector<double> t_s;
   };
+  /// The motion under way: from the joints at its start through the goal's points, linearly
+  /// between consecutive points in time.
   struct Motion {
-    Eigen::VectorXd from, to;
+    std::vector<Eigen::VectorXd> q;  ///< q[0]: where the arm was when the goal came
+    std::vector<int64_t> t_ns;       ///< t_ns[0] = 0
     int64_t start_ns = 0;
-    int64_t duration_ns = 0;
+    int64_t duration_ns() const { return t_ns.back(); }
+    /// The joints `elapsed_ns` after the start.
+    Eigen::VectorXd At(int64_t elapsed_ns) const;
   };
 
   const sim::Scene& scene_;
