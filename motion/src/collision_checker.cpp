@@ -150,6 +150,10 @@ Status CollisionChecker::SetMap(const mapping::OccupancyGrid& grid, const Box3& 
 }
 
 void CollisionChecker::MarkSwept(const Eigen::VectorXd& q) {
+  // A state within a centimetre of travel of the last one marked adds nothing the pad does not
+  // already cover: the swept list grows with the distance travelled, not with the states.
+  if (last_swept_.size() == q.size() && robot_.MaxDisplacement(q - last_swept_) < 0.01) return;
+  last_swept_ = q;
   const std::vector<Eigen::Isometry3d> links = robot_.LinkPoses(q);
   for (const RobotBody& body : robot_.bodies()) {
     if (!body.moves) continue;
@@ -166,6 +170,7 @@ void CollisionChecker::MarkSwept(const Eigen::VectorXd& q) {
 void CollisionChecker::ClearMap() {
   field_ = std::make_shared<const ObstacleField>();
   swept_.clear();
+  last_swept_.resize(0);
   clear_halfspace_.reset();
 }
 

@@ -123,6 +123,7 @@ class CollisionChecker {
   std::vector<std::shared_ptr<const WorldObject>> world_;
   std::shared_ptr<const ObstacleField> field_;
   std::vector<Sphere> swept_;
+  Eigen::VectorXd last_swept_;  ///< the last state MarkSwept took
   std::optional<Eigen::Vector4d> clear_halfspace_;
   std::shared_ptr<std::atomic<int64_t>> states_checked_;
 };
