@@ -144,7 +144,10 @@ std::vector<Sphere> CoverBox(const Eigen::Vector3d& lo, const Eigen::Vector3d& h
   const Eigen::Vector3d extent = (hi - lo).cwiseMax(1e-9);
   const double edge = std::max(extent.minCoeff(), spacing);
   Eigen::Vector3i n;
-  for (int i = 0; i < 3; ++i) n[i] = std::max(1, static_cast<int>(std::ceil(extent[i] / edge)));
+  // At most 64 spheres along a side (a huge box gets larger spheres, still covering it).
+  for (int i = 0; i < 3; ++i) {
+    n[i] = std::clamp(static_cast<int>(std::ceil(extent[i] / edge)), 1, 64);
+  }
   const Eigen::Vector3d cell = extent.cwiseQuotient(n.cast<double>());
   const double radius = 0.5 * cell.norm();
   std::vector<Sphere> spheres;
@@ -168,7 +171,7 @@ std::vector<Sphere> CoverShape(const robot::CollisionShape& shape, const Geometr
     // Spheres on the axis, one per `step` of length: each holds its slab of the cylinder.
     const double r = shape.size.x();
     const double length = shape.size.z();
-    const int k = std::max(1, static_cast<int>(std::ceil(length / std::min(r, spacing))));
+    const int k = std::clamp(static_cast<int>(std::ceil(length / std::min(r, spacing))), 1, 256);
     const double half_step = 0.5 * length / k;
     std::vector<Sphere> spheres;
     for (int j = 0; j < k; ++j) {
@@ -457,18 +460,14 @@ double RobotGeometry::MaxDisplacement(const Eigen::VectorXd& dq) const {
 }
 
 std::pair<int, int> RobotGeometry::SelfCollision(const Eigen::VectorXd& q, double margin_m) const {
-  const std::vector<Eigen::Isometry3d> links = LinkPoses(q);
-  const std::vector<Eigen::Isometry3d> poses = BodyPoses(q);
+  const std::vector<Eigen::Isometry3d> links = LinkPoses(q);  // once: bodies' poses follow
   for (const auto& [a, b] : impl_->self_pairs) {
-    const auto sa = static_cast<size_t>(a);
-    const auto sb = static_cast<size_t>(b);
-    if (!BoundsWithin(impl_->bodies[sa], links[static_cast<size_t>(impl_->bodies[sa].link)],
-                      impl_->bodies[sb], links[static_cast<size_t>(impl_->bodies[sb].link)],
-                      margin_m)) {
-      continue;
-    }
-    if (WithinDistance(*impl_->bodies[sa].geometry, poses[sa], *impl_->bodies[sb].geometry,
-                       poses[sb], margin_m)) {
+    const RobotBody& ba = impl_->bodies[static_cast<size_t>(a)];
+    const RobotBody& bb = impl_->bodies[static_cast<size_t>(b)];
+    const Eigen::Isometry3d& X_WLa = links[static_cast<size_t>(ba.link)];
+    const Eigen::Isometry3d& X_WLb = links[static_cast<size_t>(bb.link)];
+    if (!BoundsWithin(ba, X_WLa, bb, X_WLb, margin_m)) continue;
+    if (WithinDistance(*ba.geometry, X_WLa * ba.X_LG, *bb.geometry, X_WLb * bb.X_LG, margin_m)) {
       return {a, b};
     }
   }

@@ -139,6 +139,15 @@ Result<JointTrajectory> TimeParameterize(const ArmModel& arm,
     }
     if (!std::isfinite(v_s)) continue;  // a repeated vertex
     const Profile profile = Profile::Of(v_s, a_s);
+    // Bounded before sampling: a tiny limit cannot make millions of points.
+    constexpr double kMaxPoints = 100000;
+    if (!(profile.duration / sample_period_s + static_cast<double>(traj.points.size()) <=
+          kMaxPoints)) {
+      return InvalidArgumentError(fmt::format(
+          "time parameterization: segment {} takes {:.4g} s, more than {} points of {} s "
+          "(velocity or acceleration limits near 0?)",
+          k, profile.duration, kMaxPoints, sample_period_s));
+    }
     for (double t = sample_period_s; t < profile.duration - 1e-9; t += sample_period_s) {
       const auto [s, ds] = profile.At(t);
       traj.points.push_back({path[k - 1] + s * dq, ds * dq, t0 + t});
