@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <fmt/format.h>
@@ -371,6 +372,16 @@ void KeepUnknownNearOccupied(double band_m, double res, const Eigen::Vector3i& d
   }
 }
 
+/// Obstacle cells, and of those the unknown ones.
+std::pair<int64_t, int64_t> CountObstacles(const std::vector<uint8_t>& flags) {
+  int64_t obstacles = 0, unknown = 0;
+  for (const uint8_t f : flags) {
+    obstacles += f != kFreeCell ? 1 : 0;
+    unknown += f == kUnknownCell ? 1 : 0;
+  }
+  return {obstacles, unknown};
+}
+
 float FloatBelow(double v) {
   float f = static_cast<float>(v);
   if (static_cast<double>(f) > v) f = std::nextafter(f, 0.0f);
@@ -463,10 +474,7 @@ Result<ObstacleField> ObstacleField::Build(const mapping::OccupancyGrid& grid, c
     if (options.unknown_band_m > 0.0)
       KeepUnknownNearOccupied(options.unknown_band_m, res, field.dims_, flags);
   }
-  for (const uint8_t f : flags) {
-    field.obstacle_cells_ += f != kFreeCell ? 1 : 0;
-    field.unknown_cells_ += f == kUnknownCell ? 1 : 0;
-  }
+  std::tie(field.obstacle_cells_, field.unknown_cells_) = CountObstacles(flags);
 
   // Distances: the squared EDT in cells², capped, then metres.
   if (field.obstacle_cells_ == 0) {
