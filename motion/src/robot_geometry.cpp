@@ -1,5 +1,7 @@
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <filesystem>
 #include <string>
 #include <utility>
 #include <vector>
@@ -17,6 +19,7 @@
 #include <fcl/narrowphase/distance.h>
 #include <fmt/format.h>
 
+#include <avp/core/limits.h>
 #include <avp/core/rng.h>
 #include <avp/motion/robot_geometry.h>
 
@@ -65,7 +68,24 @@ std::string_view ToString(GeometrySource source) {
 
 namespace {
 
+/// The default of max_collision_mesh_file_bytes: 256 MiB. A robot's collision meshes (URDF links,
+/// the arm config's `collision.attached` and `collision.world`) are a few MB at most; a larger file
+/// is a mistake (a scanned scene, the wrong file) that assimp would read whole into memory.
+constexpr uint64_t kMaxCollisionMeshFileBytes = uint64_t{256} << 20;
+
+/// The process-wide limit (core/limits.h) on one collision mesh file, checked before assimp opens
+/// it: ResourceExhausted naming the shape, the file, its size and the limit. Raise it with
+/// `avp --limit max_collision_mesh_file_bytes=N` (docs/limits.md).
+const Limit& MaxCollisionMeshFileBytes() {
+  static const Limit limit("max_collision_mesh_file_bytes", kMaxCollisionMeshFileBytes, "bytes",
+                           "size of one collision mesh file (URDF, collision.attached / world)");
+  return limit;
+}
+// Registered when the program starts, so `avp --limit` and `avp limits` know it.
+[[maybe_unused]] const Limit& kRegisterMaxCollisionMeshFileBytes = MaxCollisionMeshFileBytes();
+
 /// The triangles of a mesh file, scaled, in the file's root frame (node transforms applied).
+/// The file's size is checked against MaxCollisionMeshFileBytes() before assimp reads it.
 Result<std::shared_ptr<const Geometry>> LoadMesh(const robot::CollisionShape& shape,
                                                  std::string_view what) {
   const std::string file = shape.mesh.string();
@@ -79,6 +99,14 @@ Result<std::shared_ptr<const Geometry>> LoadMesh(const robot::CollisionShape& sh
   if (!std::filesystem::is_regular_file(shape.mesh, ec)) {
     return NotFoundError(fmt::format("{} '{}': mesh file '{}' not found", what, shape.name, file));
   }
+  const uint64_t file_bytes = std::filesystem::file_size(shape.mesh, ec);
+  if (ec) {
+    return IoError(fmt::format("{} '{}': cannot read mesh file '{}': {}", what, shape.name, file,
+                               ec.message()));
+  }
+  AVP_RETURN_IF_ERROR(MaxCollisionMeshFileBytes().Check(
+      fmt::format("{} '{}': mesh file '{}' of {} bytes", what, shape.name, file, file_bytes),
+      file_bytes));
   Assimp::Importer importer;
   const aiScene* scene =
       importer.ReadFile(file, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices);

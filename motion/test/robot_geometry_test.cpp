@@ -1,10 +1,13 @@
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <string_view>
 
 #include <fcl/narrowphase/distance.h>
 #include <gtest/gtest.h>
 
+#include <avp/core/limits.h>
 #include <avp/core/rng.h>
 #include <avp/motion/robot_geometry.h>
 #include <avp/test/temp_dir_test.h>
@@ -244,6 +247,72 @@ TEST_F(RobotGeometryUrdfTest, MeshesAreReadAndMissingOnesNamed) {
       dir_);
   ASSERT_FALSE(package.ok());
   EXPECT_NE(package.status().message().find("package://rebel/l1.stl"), std::string::npos);
+}
+
+/// Sets a process-wide limit by name for a scope, restoring its value after (the limit's accessor
+/// is internal to robot_geometry.cpp, so core's ScopedLimit, which takes it, cannot be used).
+class ScopedLimitByName {
+ public:
+  ScopedLimitByName(std::string_view name, uint64_t value) : name_(name) {
+    for (const LimitInfo& info : RegisteredLimits()) {
+      if (info.name == name_) previous_ = info.value;
+    }
+    ok_ = previous_ != 0 && SetLimit(name_, value).ok();
+  }
+  ~ScopedLimitByName() {
+    if (previous_ != 0) (void)SetLimit(name_, previous_);
+  }
+  bool ok() const { return ok_; }
+
+ private:
+  std::string name_;
+  uint64_t previous_ = 0;
+  bool ok_ = false;
+};
+
+TEST_F(RobotGeometryUrdfTest, AMeshFileLargerThanTheLimitIsRefusedBeforeAssimpReadsIt) {
+  // Registered when the program starts, 256 MiB by default.
+  bool listed = false;
+  for (const LimitInfo& info : RegisteredLimits()) {
+    if (info.name != "max_collision_mesh_file_bytes") continue;
+    listed = true;
+    EXPECT_EQ(info.default_value, uint64_t{256} << 20);
+    EXPECT_EQ(info.unit, "bytes");
+  }
+  ASSERT_TRUE(listed);
+
+  // Not a mesh at all: past the limit it is refused by its size, before assimp could fail on it.
+  const std::string junk(300, 'x');
+  std::ofstream(dir_ / "huge.stl") << junk;
+  const std::string urdf =
+      TwoLinkUrdf(R"(<collision><geometry><mesh filename="huge.stl"/></geometry></collision>)");
+  {
+    const ScopedLimitByName tiny("max_collision_mesh_file_bytes", 100);
+    ASSERT_TRUE(tiny.ok());
+    const Result<RobotGeometry> g = GeometryOf(urdf, dir_);
+    ASSERT_FALSE(g.ok());
+    EXPECT_EQ(g.status().code(), StatusCode::kResourceExhausted) << g.status().ToString();
+    const std::string m = g.status().message();
+    EXPECT_NE(m.find("link 'l1'"), std::string::npos) << m;
+    EXPECT_NE(m.find((dir_ / "huge.stl").string()), std::string::npos) << m;           // the file
+    EXPECT_NE(m.find("of 300 bytes"), std::string::npos) << m;                         // its size
+    EXPECT_NE(m.find("max_collision_mesh_file_bytes = 100"), std::string::npos) << m;  // limit
+    EXPECT_NE(m.find("--limit max_collision_mesh_file_bytes=N"), std::string::npos) << m;
+  }
+  {
+    // A file exactly at the limit is not refused by its size.
+    const ScopedLimitByName exact("max_collision_mesh_file_bytes", 300);
+    ASSERT_TRUE(exact.ok());
+    const Result<RobotGeometry> g = GeometryOf(urdf, dir_);
+    ASSERT_FALSE(g.ok());
+    EXPECT_NE(g.status().code(), StatusCode::kResourceExhausted) << g.status().ToString();
+  }
+  // Within the default limit the same file reaches assimp, which cannot read it.
+  const Result<RobotGeometry> g = GeometryOf(urdf, dir_);
+  ASSERT_FALSE(g.ok());
+  EXPECT_NE(g.status().code(), StatusCode::kResourceExhausted) << g.status().ToString();
+  EXPECT_NE(g.status().message().find("cannot read mesh"), std::string::npos)
+      << g.status().ToString();
 }
 
 }  // namespace
