@@ -2,7 +2,8 @@
 // process (the image conversions are ros/msg's: ros/msg/test/images_test.cpp, and
 // same_frames_test.cpp for every encoding through this source): refusals, pairing by stamp, frames
 // stamped before the capture, a camera that stops, missing TF, a malformed sample, an arm that
-// arrives, one that never does, and a stop request.
+// arrives, one that never does, a stop request, a planned trajectory sent whole (both joint
+// conventions) and an invalid one refused before anything is published.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -15,6 +16,7 @@
 
 #include <avp/core/error.h>
 #include <avp/robot/arm_model.h>
+#include <avp/robot/trajectory.h>
 #include <avp/ros/live/ros2_arm.h>
 #include <avp/ros/live/ros2_rgbd_source.h>
 #include <avp/ros/live/rviz_publisher.h>
@@ -404,6 +406,91 @@ class LiveArmTest : public ::testing::Test {
   }
   void TearDown() override { publisher_ = {}; }
 
+  /// Sends a planned trajectory (3 vertices, TimeParameterize at half the limits, 0.1 s samples)
+  /// through Ros2Arm and checks the message the fake arm received against it: the joint names,
+  /// every point in the robot's convention (the reference one with options_.reference_joints),
+  /// times strictly increasing and equal to the trajectory's, speeds and finite-difference
+  /// accelerations within the scaled limits; then that the arm arrived at the last point.
+  void SendAPlannedTrajectoryAndCheckTheMessage() {
+    const robot::ArmModel& model = *model_;
+    if (options_.reference_joints) {
+      std::lock_guard lock(mutex_);
+      q_ = model.ToReferenceJoints(model.home_joints());  // the robot speaks the reference's
+    }
+    auto arm = Ros2Arm::Create(*avp_, tf_, model, options_);
+    ASSERT_TRUE(arm.ok()) << arm.status().ToString();
+    ASSERT_TRUE(WaitFor([&] { return goals_->matched_publishers() > 0; }));
+    ASSERT_NEAR(((*arm)->CurrentJoints() - model.home_joints()).norm(), 0.0, 1e-9);
+
+    const Eigen::VectorXd a = model.home_joints();
+    Eigen::VectorXd b = a;
+    b[0] += 0.3;
+    b[2] -= 0.2;
+    Eigen::VectorXd c = b;
+    c[1] += 0.25;
+    c[4] -= 0.15;
+    constexpr double kScaling = 0.5;
+    const robot::JointTrajectory t =
+        Take(robot::TimeParameterize(model, {a, b, c}, kScaling, kScaling, 0.1));
+    ASSERT_TRUE(t.Validate(model).ok()) << t.Validate(model).ToString();
+    ASSERT_GT(t.points.size(), 3u);  // samples between the vertices, not only the vertices
+
+    const robot::MoveResult r = (*arm)->FollowTrajectory(t);
+    ASSERT_TRUE(r.ok()) << r.status.ToString();
+    EXPECT_NEAR((r.q - c).norm(), 0.0, 1e-9);
+    EXPECT_NEAR((r.q - t.points.back().q).norm(), 0.0, 1e-9);
+    EXPECT_NEAR(r.execution_s, t.duration_s(), 1e-12);
+
+    std::lock_guard lock(mutex_);
+    ASSERT_EQ(goals_received_, 1);
+    const ros::msg::JointTrajectory& m = last_goal_;
+    EXPECT_EQ(m.joint_names, model.joint_names());
+    ASSERT_EQ(m.points.size(), t.points.size());
+    const auto n = static_cast<size_t>(model.num_joints());
+    // The reference convention flips signs and shifts: velocities take the signs only.
+    const std::vector<double>& sign = model.config().reference_convention.sign;
+    const double a_max = kScaling * model.config().joint_acceleration_limit;
+    for (size_t k = 0; k < m.points.size(); ++k) {
+      const ros::msg::JointTrajectoryPoint& p = m.points[k];
+      const robot::TrajectoryPoint& tp = t.points[k];
+      const Eigen::VectorXd q = options_.reference_joints ? model.ToReferenceJoints(tp.q) : tp.q;
+      ASSERT_EQ(p.positions.size(), n) << k;
+      ASSERT_EQ(p.velocities.size(), n) << k;
+      for (size_t j = 0; j < n; ++j) {
+        const auto jj = static_cast<Eigen::Index>(j);
+        const double s = options_.reference_joints && !sign.empty() ? sign[j] : 1.0;
+        EXPECT_NEAR(p.positions[j], q[jj], 1e-9) << "point " << k << " joint " << j;
+        EXPECT_NEAR(p.velocities[j], s * tp.qd[jj], 1e-9) << "point " << k << " joint " << j;
+        EXPECT_LE(std::abs(p.velocities[j]),
+                  kScaling * model.joints()[j].velocity_limit * (1 + 1e-9))
+            << "point " << k << " joint " << j;
+      }
+      // Nanoseconds: the trajectory's time, to the nanosecond.
+      const int64_t ns = p.time_from_start.ToNanoseconds();
+      EXPECT_LE(std::abs(static_cast<double>(ns) - tp.t_s * 1e9), 1.0) << k;
+      if (k == 0) {
+        EXPECT_EQ(ns, 0);
+        continue;
+      }
+      const int64_t ns_before = m.points[k - 1].time_from_start.ToNanoseconds();
+      ASSERT_GT(ns, ns_before) << k;
+      const double dt = static_cast<double>(ns - ns_before) * 1e-9;
+      for (size_t j = 0; j < n; ++j) {
+        const double acc = (p.velocities[j] - m.points[k - 1].velocities[j]) / dt;
+        EXPECT_LE(std::abs(acc), a_max * (1 + 1e-6)) << "point " << k << " joint " << j;
+      }
+    }
+    // At rest at both ends; the last point is the last vertex.
+    for (size_t j = 0; j < n; ++j) {
+      EXPECT_EQ(m.points.front().velocities[j], 0.0) << j;
+      EXPECT_EQ(m.points.back().velocities[j], 0.0) << j;
+    }
+    const Eigen::VectorXd last = options_.reference_joints ? model.ToReferenceJoints(c) : c;
+    for (size_t j = 0; j < n; ++j) {
+      EXPECT_NEAR(m.points.back().positions[j], last[static_cast<Eigen::Index>(j)], 1e-9) << j;
+    }
+  }
+
   std::unique_ptr<robot::ArmModel> model_;
   ArmTopicsOptions options_;
   std::unique_ptr<ros::dds::Node> robot_, avp_;
@@ -480,6 +567,39 @@ TEST_F(LiveArmTest, AStopRequestWhileMovingIsCancelled) {
   goal[0] += 0.3;
   const robot::MoveResult r = (*arm)->MoveToJoints(goal);
   EXPECT_EQ(r.status.code(), StatusCode::kCancelled);
+}
+
+TEST_F(LiveArmTest, APlannedTrajectoryIsSentWholeWithMonotonicTimesWithinTheLimits) {
+  SendAPlannedTrajectoryAndCheckTheMessage();
+}
+
+TEST_F(LiveArmTest, APlannedTrajectoryIsSentInTheReferenceConventionWhenAsked) {
+  options_.reference_joints = true;
+  SendAPlannedTrajectoryAndCheckTheMessage();
+}
+
+TEST_F(LiveArmTest, AnInvalidTrajectoryIsRefusedByPointAndNothingIsPublished) {
+  auto arm = Ros2Arm::Create(*avp_, tf_, *model_, options_);
+  ASSERT_TRUE(arm.ok()) << arm.status().ToString();
+  ASSERT_TRUE(WaitFor([&] { return goals_->matched_publishers() > 0; }));
+  Eigen::VectorXd b = model_->home_joints();
+  b[0] += 0.3;
+  robot::JointTrajectory t =
+      Take(robot::TimeParameterize(*model_, {model_->home_joints(), b}, 0.5, 0.5, 0.1));
+  ASSERT_GE(t.points.size(), 3u);
+  t.points[2].t_s = t.points[1].t_s;  // not strictly increasing
+  const robot::MoveResult r = (*arm)->FollowTrajectory(t);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(r.status.message(), HasSubstr("FollowTrajectory refused"));
+  EXPECT_THAT(r.status.message(), HasSubstr("trajectory point 2: time_from_start"));
+  EXPECT_NEAR((r.q - model_->home_joints()).norm(), 0.0, 1e-12);
+  EXPECT_EQ((*arm)->goals_sent(), 0u);
+  EXPECT_EQ((*arm)->num_refused_moves(), 1);
+  // Give a wrongly published goal time to arrive before checking that none did.
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  std::lock_guard lock(mutex_);
+  EXPECT_EQ(goals_received_, 0);
 }
 
 TEST(RvizMarkersTest, CandidatesAreColouredByUtilityAndTheChosenViewIsLabelled) {
