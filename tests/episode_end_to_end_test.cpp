@@ -112,6 +112,48 @@ TEST(EpisodeEndToEndTest, EveryMoveIsPlannedAndTheSimulatorCountsItsContacts) {
   for (const pipeline::StepRecord& s : straight->episode.steps) EXPECT_FALSE(s.motion.planned);
 }
 
+/// oracle_motion: the motion planner knows the true scene. Behind this tomato's leaf layer the
+/// map's unknown space holds back almost every candidate; the truth frees those the arm can
+/// really reach, and every move stays clear of the plant (docs/motion.md, "What it costs").
+TEST(EpisodeEndToEndTest, OracleMotionPlansAgainstTheTrueSceneAndTouchesNothing) {
+  RunConfig c = Config("avp-nbv");
+  c.scenario = "tomato-full-occlusion";
+  c.seed = 0;
+  c.episode.views = 3;
+  c.motion.enabled = true;
+  auto scene = sim::MakeScenario(c.scenario, c.seed);
+  ASSERT_TRUE(scene.ok());
+  auto gt = experiment::GroundTruthFor(c, *scene);
+  ASSERT_TRUE(gt.ok());
+  const auto run = [&](const RunConfig& config) {
+    return experiment::RunEpisodeOnScene(
+        experiment::CheckedRunConfig::Check(config, Registries()).value(), *scene, *gt);
+  };
+  auto map = run(c);
+  ASSERT_TRUE(map.ok()) << map.status().ToString();
+  c.oracle_motion = true;
+  auto truth = run(c);
+  ASSERT_TRUE(truth.ok()) << truth.status().ToString();
+  ASSERT_EQ(truth->episode.views_fused(), 3) << truth->episode.end_reason;
+  const pipeline::StepRecord& first_map = map->episode.steps.front();
+  const pipeline::StepRecord& first_truth = truth->episode.steps.front();
+  // The same first plan (same view, same candidates), judged against other obstacles.
+  EXPECT_EQ(first_truth.candidates_generated, first_map.candidates_generated);
+  EXPECT_GT(first_truth.candidates_reachable, 10 * first_map.candidates_reachable);
+  const pipeline::MotionTotals t = pipeline::SumMotion(truth->episode);
+  EXPECT_EQ(t.moves, 3);  // two views and the return home
+  ASSERT_TRUE(t.contacts.has_value());
+  EXPECT_EQ(t.contacts->total(), 0) << t.contacts->first;
+  ASSERT_TRUE(t.straight_line_contacts.has_value());
+  EXPECT_GT(t.straight_line_contacts->total(), 0);  // the straight line would go through it
+
+  c.motion.enabled = false;
+  auto refused = run(c);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("oracle_motion"), std::string::npos);
+  EXPECT_NE(refused.status().message().find("motion.enabled"), std::string::npos);
+}
+
 TEST(EpisodeEndToEndTest, PredefinedRunsTheSameLoop) {
   RunConfig c = Config("predefined");
   // Straight moves: this tomato's leaves reach the start camera, and with planned motion every

@@ -14,6 +14,7 @@
 #include <avp/robot/arm_model.h>
 #include <avp/segmentation/oracle_segmenter.h>
 #include <avp/sim/contact_counter.h>
+#include <avp/sim/ground_truth.h>
 #include <avp/sim/sim_arm.h>
 #include <avp/sim/sim_rgbd_source.h>
 
@@ -174,6 +175,37 @@ Result<EpisodeParts> BuildParts(const CheckedRunConfig& checked, const EpisodeTr
   return e;
 }
 
+/// With RunConfig::oracle_motion: the true scene's surfaces as occupied voxels of a grid of the
+/// map's voxel size, for the motion planner (nullopt otherwise). Refused without motion planning
+/// or without the scene.
+Result<std::optional<mapping::OccupancyGrid>> TrueObstacles(const RunConfig& config,
+                                                            const EpisodeTruth& truth) {
+  if (!config.oracle_motion) return std::optional<mapping::OccupancyGrid>();
+  if (!config.motion.enabled) {
+    return InvalidArgumentError(
+        "oracle_motion plans motion against the true scene: it needs "
+        "motion.enabled: true");
+  }
+  if (truth.scene == nullptr) {
+    return InvalidArgumentError(
+        "oracle_motion needs the true scene, and this episode has none (simulation only)");
+  }
+  std::optional<mapping::OccupancyGrid> grid(std::in_place, config.map.grid);
+  for (const VoxelKey& key :
+       sim::VoxelizeObstacleSurfaces(*truth.scene, config.map.grid.voxel_size_m)) {
+    grid->SetLogOdds(key, grid->clamp_max_log_odds());
+  }
+  return grid;
+}
+
+/// The run's collision options; with oracle_motion unknown space is free (the planner knows
+/// where everything is).
+motion::CollisionOptions MotionCollisionOptions(const RunConfig& config) {
+  motion::CollisionOptions options = config.motion.collision;
+  if (config.oracle_motion) options.field.unknown_is_obstacle = false;
+  return options;
+}
+
 }  // namespace
 
 Status SegmenterFailedEveryView(const RunResult& result) {
@@ -302,16 +334,19 @@ Result<RunResult> RunEpisodeWithRobot(const CheckedRunConfig& checked, const Rob
     AVP_ASSIGN_OR_RETURN(
         checker, motion::CollisionChecker::Create(std::move(geometry),
                                                   robot.arm->model().config().collision.world,
-                                                  config.motion.collision));
+                                                  MotionCollisionOptions(config)));
     motion_planner.emplace(*checker, config.motion);
   }
+  AVP_ASSIGN_OR_RETURN(const std::optional<mapping::OccupancyGrid> true_obstacles,
+                       TrueObstacles(config, truth));
   const pipeline::EpisodeComponents components{source,
                                                e.segmenter.get(),
                                                robot.arm,
                                                planner,
                                                e.map.get(),
                                                robot.stop,
-                                               motion_planner ? &*motion_planner : nullptr};
+                                               motion_planner ? &*motion_planner : nullptr,
+                                               true_obstacles ? &*true_obstacles : nullptr};
   AVP_ASSIGN_OR_RETURN(pipeline::EpisodeResult episode,
                        pipeline::RunEpisode(components, eo, hook, observers));
   RunResult result;

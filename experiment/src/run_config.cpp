@@ -111,6 +111,9 @@ const OptionTable<RunConfig>& RunConfigTable() {
             "ground truth from an OctoMap .bt instead of the observable fruit surface");
     t->Flag("oracle_regret", &R::oracle_regret,
             "measure each plan step's regret with the truth (record.json oracle_regret)");
+    t->Flag("oracle_motion", &R::oracle_motion,
+            "simulation, with motion.enabled: plan motion against the true scene instead of the "
+            "map (collision-free motion's ceiling)");
     t->Nested("camera", &R::camera, CameraIntrinsicsTable());
     t->Nested("depth_noise", &R::depth_noise, sim::DepthNoiseTable());
     t->Nested("map", &R::map, mapping::MapOptionTable());

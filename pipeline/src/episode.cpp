@@ -219,7 +219,8 @@ Status UpdateMotionMap(const EpisodeComponents& c, const EpisodeOptions& options
                        MotionRecord& rec) {
   if (c.motion == nullptr) return Status::Ok();
   const auto t0 = Clock::now();
-  const Status s = c.motion->checker().SetMap(c.map->grid(), options.roi);
+  const Status s = c.motion->checker().SetMap(
+      c.motion_obstacles != nullptr ? *c.motion_obstacles : c.map->grid(), options.roi);
   rec.map_update_ms = MsSince(t0);
   return s;
 }

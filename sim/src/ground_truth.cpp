@@ -219,29 +219,56 @@ std::vector<VoxelKey> FruitVoxels::SortedKeys() const {
   return keys;
 }
 
-FruitVoxels VoxelizeFruitSurfaces(const Scene& scene, double voxel_size_m) {
+namespace {
+
+/// emit(object, key) for every voxel the surface of every object `keep(object)` accepts passes
+/// through. `caller` names the function in errors.
+template <typename Keep, typename Emit>
+void VoxelizeObjects(const Scene& scene, double voxel_size_m, const char* caller, Keep&& keep,
+                     Emit&& emit) {
   AVP_THROW_UNLESS(std::isfinite(voxel_size_m) && voxel_size_m > 0.0, voxel_size_m);
   const Status valid = scene.Validate();
-  if (!valid.ok()) throw Error("VoxelizeFruitSurfaces: invalid scene: " + valid.ToString());
-
-  FruitVoxels out;
-  out.voxel_size_m = voxel_size_m;
+  if (!valid.ok()) throw Error(fmt::format("{}: invalid scene: {}", caller, valid.ToString()));
   for (const SceneObject& object : scene.objects) {
-    if (object.semantic_class != SemanticClass::kFruit) continue;
-    const uint16_t id = object.instance_id;
-    auto emit = [&](const VoxelKey& key) {
-      auto [it, inserted] = out.voxels.emplace(key, id);
-      if (!inserted) it->second = std::min(it->second, id);
-    };
+    if (!keep(object)) continue;
+    auto emit_key = [&](const VoxelKey& key) { emit(object, key); };
     if (const auto* e = std::get_if<Ellipsoid>(&object.shape)) {
       AVP_THROW_UNLESS(IsRotationMatrix(e->R_WE, 1e-6), object.name, e->R_WE);
-      VoxelizeEllipsoid(*e, voxel_size_m, object.name, emit);
+      VoxelizeEllipsoid(*e, voxel_size_m, object.name, emit_key);
     } else {
       const TriangleMesh& mesh = std::get<TriangleMesh>(object.shape);
-      if (!mesh.empty()) VoxelizeMesh(mesh, voxel_size_m, object.name, emit);
+      if (!mesh.empty()) VoxelizeMesh(mesh, voxel_size_m, object.name, emit_key);
     }
   }
+}
+
+}  // namespace
+
+FruitVoxels VoxelizeFruitSurfaces(const Scene& scene, double voxel_size_m) {
+  FruitVoxels out;
+  out.voxel_size_m = voxel_size_m;
+  VoxelizeObjects(
+      scene, voxel_size_m, "VoxelizeFruitSurfaces",
+      [](const SceneObject& o) { return o.semantic_class == SemanticClass::kFruit; },
+      [&](const SceneObject& o, const VoxelKey& key) {
+        auto [it, inserted] = out.voxels.emplace(key, o.instance_id);
+        if (!inserted) it->second = std::min(it->second, o.instance_id);
+      });
   return out;
+}
+
+std::vector<VoxelKey> VoxelizeObstacleSurfaces(const Scene& scene, double voxel_size_m) {
+  std::vector<VoxelKey> keys;
+  VoxelizeObjects(
+      scene, voxel_size_m, "VoxelizeObstacleSurfaces",
+      [](const SceneObject& o) {
+        return o.semantic_class != SemanticClass::kBackground &&
+               o.semantic_class != SemanticClass::kGround;
+      },
+      [&](const SceneObject&, const VoxelKey& key) { keys.push_back(key); });
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  return keys;
 }
 
 }  // namespace avp::sim

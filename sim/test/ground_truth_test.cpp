@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 #include <unordered_set>
 
@@ -275,6 +276,46 @@ TEST(GroundTruthTest, InstanceIdsOfTwoFruits) {
   Scene no_fruit;
   no_fruit.Add(leaf);
   EXPECT_TRUE(VoxelizeFruitSurfaces(no_fruit, s).voxels.empty());
+}
+
+TEST(GroundTruthTest, ObstacleSurfacesAreEverySolidObjectButTheGround) {
+  const double s = 0.005;
+  Scene scene;
+  SceneObject leaf;
+  leaf.name = "leaf";
+  leaf.semantic_class = SemanticClass::kLeaf;
+  leaf.shape = Icosphere(Eigen::Vector3d(0.5, 0.5, 0.5), 0.05, 1);
+  scene.Add(leaf);
+  scene.Add(SphereFruit(Eigen::Vector3d(0.0, 0.0, 0.3), 0.03));
+  SceneObject ground = leaf;
+  ground.name = "ground";
+  ground.semantic_class = SemanticClass::kGround;
+  ground.shape = Icosphere(Eigen::Vector3d(-0.5, 0.0, 0.0), 0.05, 1);
+  scene.Add(ground);
+  SceneObject sky = ground;
+  sky.name = "sky";
+  sky.semantic_class = SemanticClass::kBackground;
+  scene.Add(sky);
+
+  const std::vector<VoxelKey> keys = VoxelizeObstacleSurfaces(scene, s);
+  EXPECT_TRUE(std::is_sorted(keys.begin(), keys.end()));
+  EXPECT_EQ(std::adjacent_find(keys.begin(), keys.end()), keys.end());
+  // Exactly the leaf's and the fruit's surface voxels, neither the ground nor the background.
+  Scene only_leaf;
+  only_leaf.Add(leaf);
+  Scene leaf_as_fruit;
+  leaf.semantic_class = SemanticClass::kFruit;
+  leaf_as_fruit.Add(leaf);
+  const FruitVoxels fruit = VoxelizeFruitSurfaces(scene, s);
+  const FruitVoxels leaf_voxels = VoxelizeFruitSurfaces(leaf_as_fruit, s);
+  std::unordered_set<VoxelKey, VoxelKeyHash> expected;
+  for (const auto& [key, id] : fruit.voxels) expected.insert(key);
+  for (const auto& [key, id] : leaf_voxels.voxels) expected.insert(key);
+  using KeySet = std::unordered_set<VoxelKey, VoxelKeyHash>;
+  EXPECT_EQ(KeySet(keys.begin(), keys.end()), expected);
+  EXPECT_EQ(VoxelizeObstacleSurfaces(only_leaf, s).size(), leaf_voxels.voxels.size());
+  EXPECT_THAT([&] { (void)VoxelizeObstacleSurfaces(scene, 0.0); },
+              ::testing::ThrowsMessage<Error>(HasSubstr("voxel_size_m = 0")));
 }
 
 TEST(GroundTruthTest, BadInputThrowsNamingTheValue) {

@@ -68,6 +68,11 @@ struct RunConfig {
   /// Measure each plan step's regret with the truth (eval::RegretProbe): the episode does not
   /// change, its plan times include the probe's rendering.
   bool oracle_regret = false;
+  /// Simulation only, with motion.enabled: the motion planner avoids the true scene (every
+  /// object's surface voxelised at the map's voxel size; unknown space is free) instead of the
+  /// map. Collision-free motion's ceiling: what the arm could reach if it knew the plant
+  /// (docs/motion.md).
+  bool oracle_motion = false;
   /// The camera (its intrinsics and depth range).
   CameraIntrinsics camera = CameraIntrinsics::RealSenseD435();
   /// The simulated camera's depth noise (on by default in episodes).

@@ -238,6 +238,9 @@ struct EpisodeComponents {
   /// world objects and the arm itself; planners drop candidates in collision. Null: the arm is
   /// sent straight to each view's joints, unchecked (the paper's IK-only filter).
   motion::MotionPlanner* motion = nullptr;
+  /// With `motion`: the grid it avoids instead of the map (a simulator's true obstacles,
+  /// RunConfig::oracle_motion), taken in before every plan like the map. Null: the map.
+  const mapping::OccupancyGrid* motion_obstacles = nullptr;
 };
 
 /// Occupied voxels of the target class in the grid (StepRecord::target_voxels).

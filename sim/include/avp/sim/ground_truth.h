@@ -22,4 +22,10 @@ struct FruitVoxels {
 /// @throws avp::Error if voxel_size_m is not finite and > 0.
 FruitVoxels VoxelizeFruitSurfaces(const Scene& scene, double voxel_size_m);
 
+/// Every voxel (on the VoxelKey lattice) that the surface of a solid object passes through: every
+/// object but the background and the ground (the motion planner's ground is a declared plane),
+/// ascending, each once. What the arm must not touch, as only a simulator knows it
+/// (RunConfig::oracle_motion). @throws avp::Error as VoxelizeFruitSurfaces.
+std::vector<VoxelKey> VoxelizeObstacleSurfaces(const Scene& scene, double voxel_size_m);
+
 }  // namespace avp::sim
