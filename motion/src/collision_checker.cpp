@@ -97,10 +97,30 @@ CollisionChecker::CollisionChecker(RobotGeometry robot, CollisionOptions options
       field_(std::make_shared<const ObstacleField>()),
       states_checked_(std::make_shared<std::atomic<int64_t>>(0)) {}
 
+namespace {
+
+/// InvalidArgument naming the first joint whose limits have zero width: the planner searches
+/// between the limits (OMPL needs lower < upper), and such a joint cannot move.
+Status CheckJointRanges(const robot::ArmModel& arm) {
+  for (int i = 0; i < arm.num_joints(); ++i) {
+    const double lo = arm.lower_limits()[i], hi = arm.upper_limits()[i];
+    if (std::isfinite(lo) && std::isfinite(hi) && !(lo < hi)) {
+      return InvalidArgumentError(fmt::format(
+          "joint '{}' has limits of zero width ([{}, {}]): it cannot move, and collision-free "
+          "motion plans between the limits; make it a fixed joint in the URDF, or widen it",
+          arm.joint_names()[static_cast<size_t>(i)], lo, hi));
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
 Result<CollisionChecker> CollisionChecker::Create(RobotGeometry robot,
                                                   const std::vector<robot::CollisionShape>& world,
                                                   const CollisionOptions& options) {
   AVP_RETURN_IF_ERROR(options.Validate());
+  AVP_RETURN_IF_ERROR(CheckJointRanges(robot.arm()));
   CollisionChecker checker(std::move(robot), options);
   for (const robot::CollisionShape& shape : world) {
     auto object = std::make_shared<WorldObject>();

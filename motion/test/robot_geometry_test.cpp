@@ -9,6 +9,7 @@
 
 #include <avp/core/limits.h>
 #include <avp/core/rng.h>
+#include <avp/motion/collision_checker.h>
 #include <avp/motion/robot_geometry.h>
 #include <avp/test/temp_dir_test.h>
 
@@ -202,6 +203,23 @@ TEST_F(RobotGeometryUrdfTest, ANakedUrdfIsModelledAsCylindersBetweenJointsWithAW
   const Eigen::Vector3d mid =
       g->LinkPoses(Eigen::VectorXd::Zero(2))[static_cast<size_t>(b.link)] * b.X_LG.translation();
   EXPECT_NEAR((mid - Eigen::Vector3d(0, 0, 0.25)).norm(), 0.0, 1e-9);
+}
+
+TEST_F(RobotGeometryUrdfTest, AJointWithLimitsOfZeroWidthIsRefusedByTheChecker) {
+  std::string urdf =
+      TwoLinkUrdf(R"(<collision><geometry><box size="0.1 0.1 0.3"/></geometry></collision>)");
+  const std::string limits = R"(<axis xyz="0 1 0"/><limit lower="-1" upper="1")";
+  ASSERT_NE(urdf.find(limits), std::string::npos);
+  urdf.replace(urdf.find(limits), limits.size(),
+               R"(<axis xyz="0 1 0"/><limit lower="0.3" upper="0.3")");
+  Result<RobotGeometry> g = GeometryOf(urdf, dir_);
+  ASSERT_TRUE(g.ok()) << g.status().ToString();  // the model itself may hold such a joint
+  const Result<CollisionChecker> c = CollisionChecker::Create(*std::move(g), {}, {});
+  ASSERT_FALSE(c.ok());
+  EXPECT_EQ(c.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(c.status().message().find("joint 'j2' has limits of zero width ([0.3, 0.3])"),
+            std::string::npos)
+      << c.status().ToString();
 }
 
 TEST_F(RobotGeometryUrdfTest, DegenerateGeometryIsNamed) {
