@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Closed loop over DDS: `avp sim ros2` and `avp live` in two processes choose the same views and
 # score the same per-step metrics as `avp run` in one process, for the same scenario, seed,
-# planner and segmenter (the oracle, through the simulator's label topics). Loopback only, on a
-# domain of its own. Usage: live_closed_loop_test.sh AVP WORKDIR
+# planner and segmenter (the oracle, through the simulator's label topics), with straight moves
+# and with collision-free motion (the same planned paths). Loopback only, on a domain of its own. Usage: live_closed_loop_test.sh AVP WORKDIR
 set -euo pipefail
 AVP=$1
 WORK=$2
@@ -13,30 +13,42 @@ SCENARIO=tomato-single-cluster
 BASE=(--scenario "$SCENARIO" --seed 3 --planner avp-nbv --segmenter oracle --threads 2)
 COMMON=("${BASE[@]}" --views 4)
 
-"$AVP" run "${COMMON[@]}" --out "$WORK/run" > "$WORK/run.log"
-
-"$AVP" sim ros2 "${COMMON[@]}" --sim-option time_scale=0 --sim-option camera_rate_hz=10 \
-  --duration 240 > "$WORK/sim.log" 2>&1 &
-SIM=$!
+SIM=
 cleanup() { kill "$SIM" 2>/dev/null || true; wait "$SIM" 2>/dev/null || true; }
-trap cleanup EXIT
 
-status=0
-timeout 200 "$AVP" live "${COMMON[@]}" --out "$WORK/live" \
-  --live-option camera.labels_prefix=/avp/sim --live-option rviz.enabled=true \
-  --live-option arm.min_duration_s=0 --live-option arm.max_joint_speed_rad_s=100 \
-  --live-option camera.frame_timeout_s=20 --live-option arm.state_timeout_s=20 \
-  > "$WORK/live.log" 2>&1 || status=$?
-cleanup
-trap - EXIT
-if [ "$status" -ne 0 ]; then
-  echo "avp live failed ($status):"; cat "$WORK/live.log"; echo "--- sim:"; cat "$WORK/sim.log"
-  exit 1
-fi
+# One closed loop: MODE (straight: the arm goes straight to each view's joints; planned:
+# collision-free motion, each move one JointTrajectory that avp sim ros2 follows point by point),
+# then EXTRA run flags.
+closed_loop() {
+  local mode=$1
+  shift
+  local dir="$WORK/$mode"
+  mkdir -p "$dir"
+  "$AVP" run "${COMMON[@]}" "$@" --out "$dir/run" > "$dir/run.log"
 
-python3 - "$WORK/run/record.json" "$WORK/live/record.json" <<'PY'
+  "$AVP" sim ros2 "${COMMON[@]}" "$@" --sim-option time_scale=0 --sim-option camera_rate_hz=10 \
+    --duration 240 > "$dir/sim.log" 2>&1 &
+  SIM=$!
+  trap cleanup EXIT
+
+  local status=0
+  timeout 200 "$AVP" live "${COMMON[@]}" "$@" --out "$dir/live" \
+    --live-option camera.labels_prefix=/avp/sim --live-option rviz.enabled=true \
+    --live-option arm.min_duration_s=0 --live-option arm.max_joint_speed_rad_s=100 \
+    --live-option camera.frame_timeout_s=20 --live-option arm.state_timeout_s=20 \
+    > "$dir/live.log" 2>&1 || status=$?
+  cleanup
+  trap - EXIT
+  if [ "$status" -ne 0 ]; then
+    echo "avp live ($mode) failed ($status):"; cat "$dir/live.log"; echo "--- sim:"
+    cat "$dir/sim.log"
+    exit 1
+  fi
+
+  python3 - "$mode" "$dir/run/record.json" "$dir/live/record.json" <<'PY'
 import json, math, sys
-run, live = (json.load(open(p)) for p in sys.argv[1:3])
+mode = sys.argv[1]
+run, live = (json.load(open(p)) for p in sys.argv[2:4])
 assert live["avp"] == "avp live", live["avp"]
 assert live["end"] == run["end"] == "budget-reached", (run["end"], live["end"], live["end_reason"])
 assert len(run["steps"]) == len(live["steps"]) == 4, (len(run["steps"]), len(live["steps"]))
@@ -54,18 +66,26 @@ for r, l in zip(run["steps"], live["steps"]):
     if "plan" in r:
         assert r["plan"]["chosen_rank"] == l["plan"]["chosen_rank"], v
         assert r["plan"]["generated"] == l["plan"]["generated"], v
-print("closed loop: 4 views, identical poses and metrics; final F1 %.4f, fruits %s/%s" %
-      (live["final_metrics"]["f1"], live["final_metrics"]["fruits_found"],
+        rm, lm = r["plan"]["motion"], l["plan"]["motion"]
+        assert rm["planned"] == lm["planned"] == (mode == "planned"), (v, rm, lm)
+        if mode == "planned":
+            # The same path, executed over DDS; only the simulator knows the contacts.
+            assert rm["camera_path"] == lm["camera_path"], v
+            assert rm["contacts"]["total"] == 0, (v, rm["contacts"])
+            assert lm["contacts"] is None, (v, lm["contacts"])
+print("closed loop (%s): 4 views, identical poses and metrics; final F1 %.4f, fruits %s/%s" %
+      (mode, live["final_metrics"]["f1"], live["final_metrics"]["fruits_found"],
        live["final_metrics"]["fruits_total"]))
+# The live record counts what came over the wire: 3 moves (and the planned return home).
+w = live["live"]
+assert w["camera"]["pairs_used"] == 4, w["camera"]
+assert w["arm"]["goals_sent"] == (4 if mode == "planned" else 3), w["arm"]
+assert w["rviz_messages"] > 0, w
 PY
-# The live record counts what came over the wire.
-python3 - "$WORK/live/record.json" <<'PY'
-import json, sys
-live = json.load(open(sys.argv[1]))["live"]
-assert live["camera"]["pairs_used"] == 4, live["camera"]
-assert live["arm"]["goals_sent"] == 3, live["arm"]
-assert live["rviz_messages"] > 0, live
-PY
+}
+
+closed_loop straight
+closed_loop planned --set motion.enabled=true
 
 # Ctrl-C after the first view: the episode ends as interrupted, with its folder written.
 "$AVP" sim ros2 "${BASE[@]}" --sim-option time_scale=0 --sim-option camera_rate_hz=10 \
