@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <string>
 #include <unordered_set>
 
 #include <gmock/gmock.h>
@@ -37,6 +38,16 @@ TriangleMesh Icosphere(const Eigen::Vector3d& centre, double r, int levels) {
   TriangleMesh mesh = MakeIcosphere(r, levels);
   mesh.Transform(RigidTransform(centre));
   return mesh;
+}
+
+/// An icosphere of radius 0.05 m about `centre`, of the given class.
+SceneObject Ball(const std::string& name, SemanticClass semantic_class,
+                 const Eigen::Vector3d& centre) {
+  SceneObject o;
+  o.name = name;
+  o.semantic_class = semantic_class;
+  o.shape = Icosphere(centre, 0.05, 1);
+  return o;
 }
 
 Eigen::Vector3d RandomUnitVector(Rng& rng) {
@@ -237,10 +248,7 @@ TEST(GroundTruthTest, InstanceIdsOfTwoFruits) {
   const double s = 0.005;
   Scene scene;
   // A leaf (not a fruit) must be ignored.
-  SceneObject leaf;
-  leaf.name = "leaf";
-  leaf.semantic_class = SemanticClass::kLeaf;
-  leaf.shape = Icosphere(Eigen::Vector3d(0.5, 0.5, 0.5), 0.05, 1);
+  const SceneObject leaf = Ball("leaf", SemanticClass::kLeaf, Eigen::Vector3d(0.5, 0.5, 0.5));
   scene.Add(leaf);
   const Eigen::Vector3d ca(0.0, 0.0, 0.3);
   const Eigen::Vector3d cb(0.0595, 0.0, 0.3);  // touching within a voxel: they share voxels
@@ -281,21 +289,11 @@ TEST(GroundTruthTest, InstanceIdsOfTwoFruits) {
 TEST(GroundTruthTest, ObstacleSurfacesAreEverySolidObjectButTheGround) {
   const double s = 0.005;
   Scene scene;
-  SceneObject leaf;
-  leaf.name = "leaf";
-  leaf.semantic_class = SemanticClass::kLeaf;
-  leaf.shape = Icosphere(Eigen::Vector3d(0.5, 0.5, 0.5), 0.05, 1);
+  SceneObject leaf = Ball("leaf", SemanticClass::kLeaf, Eigen::Vector3d(0.5, 0.5, 0.5));
   scene.Add(leaf);
   scene.Add(SphereFruit(Eigen::Vector3d(0.0, 0.0, 0.3), 0.03));
-  SceneObject ground = leaf;
-  ground.name = "ground";
-  ground.semantic_class = SemanticClass::kGround;
-  ground.shape = Icosphere(Eigen::Vector3d(-0.5, 0.0, 0.0), 0.05, 1);
-  scene.Add(ground);
-  SceneObject sky = ground;
-  sky.name = "sky";
-  sky.semantic_class = SemanticClass::kBackground;
-  scene.Add(sky);
+  scene.Add(Ball("ground", SemanticClass::kGround, Eigen::Vector3d(-0.5, 0.0, 0.0)));
+  scene.Add(Ball("sky", SemanticClass::kBackground, Eigen::Vector3d(-0.5, 0.0, 0.0)));
 
   const std::vector<VoxelKey> keys = VoxelizeObstacleSurfaces(scene, s);
   EXPECT_TRUE(std::is_sorted(keys.begin(), keys.end()));
