@@ -112,23 +112,37 @@ TEST(EpisodeEndToEndTest, EveryMoveIsPlannedAndTheSimulatorCountsItsContacts) {
   for (const pipeline::StepRecord& s : straight->episode.steps) EXPECT_FALSE(s.motion.planned);
 }
 
+/// A scenario's scene and ground truth (seed 0), and episodes run on them.
+struct SceneEpisodes {
+  explicit SceneEpisodes(const RunConfig& c)
+      : scene(sim::MakeScenario(c.scenario, c.seed).value()),
+        gt(experiment::GroundTruthFor(c, scene).value()) {}
+  Result<experiment::RunResult> Run(const RunConfig& config) const {
+    return experiment::RunEpisodeOnScene(
+        experiment::CheckedRunConfig::Check(config, Registries()).value(), scene, gt);
+  }
+  sim::Scene scene;
+  eval::GroundTruth gt;
+};
+
+/// Three views of avp-nbv with planned motion on `scenario`, seed 0.
+RunConfig PlannedMotionConfig(const std::string& scenario) {
+  RunConfig c = Config("avp-nbv");
+  c.scenario = scenario;
+  c.seed = 0;
+  c.episode.views = 3;
+  c.motion.enabled = true;
+  return c;
+}
+
 /// oracle_motion: the motion planner knows the true scene. Behind this tomato's leaf layer the
 /// map's unknown space holds back almost every candidate; the truth frees those the arm can
 /// really reach, and every move stays clear of the plant (docs/motion.md, "What it costs").
 TEST(EpisodeEndToEndTest, OracleMotionPlansAgainstTheTrueSceneAndTouchesNothing) {
-  RunConfig c = Config("avp-nbv");
-  c.scenario = "tomato-full-occlusion";
-  c.seed = 0;
-  c.episode.views = 3;
-  c.motion.enabled = true;
-  auto scene = sim::MakeScenario(c.scenario, c.seed);
-  ASSERT_TRUE(scene.ok());
-  auto gt = experiment::GroundTruthFor(c, *scene);
-  ASSERT_TRUE(gt.ok());
-  const auto run = [&](const RunConfig& config) {
-    return experiment::RunEpisodeOnScene(
-        experiment::CheckedRunConfig::Check(config, Registries()).value(), *scene, *gt);
-  };
+  RunConfig c = PlannedMotionConfig("tomato-full-occlusion");
+  c.motion.step_back_m = 0.0;  // every candidate judged where it is
+  const SceneEpisodes episodes(c);
+  const auto run = [&](const RunConfig& config) { return episodes.Run(config); };
   auto map = run(c);
   ASSERT_TRUE(map.ok()) << map.status().ToString();
   c.oracle_motion = true;
@@ -152,6 +166,30 @@ TEST(EpisodeEndToEndTest, OracleMotionPlansAgainstTheTrueSceneAndTouchesNothing)
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.status().message().find("oracle_motion"), std::string::npos);
   EXPECT_NE(refused.status().message().find("motion.enabled"), std::string::npos);
+}
+
+/// motion.step_back_m: a view whose arm would stand in unseen space is taken from further back
+/// along the same optical axis, where the camera stands in space the map has seen free: more
+/// candidates survive the collision check, and nothing is touched.
+TEST(EpisodeEndToEndTest, CollidingViewsAreSteppedBackIntoSeenSpace) {
+  RunConfig c = PlannedMotionConfig("tomato-unoriented-start");
+  const SceneEpisodes episodes(c);
+  const auto run = [&](const RunConfig& config) { return episodes.Run(config); };
+  auto stepped = run(c);
+  ASSERT_TRUE(stepped.ok()) << stepped.status().ToString();
+  c.motion.step_back_m = 0.0;
+  auto dropped = run(c);
+  ASSERT_TRUE(dropped.ok()) << dropped.status().ToString();
+  const pipeline::StepRecord& a = stepped->episode.steps.front();
+  const pipeline::StepRecord& b = dropped->episode.steps.front();
+  EXPECT_EQ(a.candidates_generated, b.candidates_generated);
+  EXPECT_GT(a.candidates_reachable, b.candidates_reachable);
+  EXPECT_LT(a.candidates_in_collision, b.candidates_in_collision);
+  for (const auto* r : {&*stepped, &*dropped}) {
+    const pipeline::MotionTotals t = pipeline::SumMotion(r->episode);
+    ASSERT_TRUE(t.contacts.has_value());
+    EXPECT_EQ(t.contacts->total(), 0) << t.contacts->first;
+  }
 }
 
 TEST(EpisodeEndToEndTest, PredefinedRunsTheSameLoop) {

@@ -205,6 +205,9 @@ const OptionTable<MotionOptions>& MotionOptionTable() {
             "spacing of the trajectory's points in time");
     t->Integer("max_attempts", &M::max_attempts, "", ValueRange::Closed(1, 1000),
                "moves planned to ranked candidates after a view before the episode gives up");
+    t->Real("step_back_m", &M::step_back_m, "m", ValueRange::Closed(0, 1),
+            "a candidate view in collision is moved back along its optical axis up to this far "
+            "(0: dropped)");
     return t;
   }();
   return *table;

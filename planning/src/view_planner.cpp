@@ -75,13 +75,61 @@ Status ValidateRequest(const PlanningRequest& request) {
       fmt::format("invalid planning request: {}", fmt::join(problems, "; ")));
 }
 
+bool InSeenFreeSpace(const mapping::OccupancyGrid& grid, const Box3& roi, const Eigen::Vector3d& p,
+                     double radius) {
+  constexpr double kStep = 0.01;
+  const int n = static_cast<int>(std::ceil(radius / kStep));
+  for (int i = -n; i <= n; ++i) {
+    for (int j = -n; j <= n; ++j) {
+      for (int k = -n; k <= n; ++k) {
+        const Eigen::Vector3d d(i * kStep, j * kStep, k * kStep);
+        if (d.norm() > radius || !roi.Contains(p + d)) continue;
+        if (grid.State(grid.KeyOf(p + d)) != mapping::VoxelState::kFree) return false;
+      }
+    }
+  }
+  return true;
+}
+
+namespace {
+
+/// Moves `c` (its joints in collision) back along its optical axis until its arm is free and its
+/// camera stands in seen free space (PlanningRequest::collision_step_back_m). IK starts from the
+/// previous step's joints. True when it found such a pose.
+bool StepBack(const PlanningRequest& request, ViewCandidate& c) {
+  constexpr double kStep = 0.05;
+  const robot::ArmModel& arm = *request.arm;
+  robot::IkOptions ik = arm.config().ik;
+  ik.max_restarts = 0;  // from the previous step's joints only: no generator needed
+  Rng unused(0);
+  Eigen::VectorXd seed = c.q;
+  const int steps = static_cast<int>(std::floor(request.collision_step_back_m / kStep + 1e-9));
+  for (int s = 1; s <= steps; ++s) {
+    const RigidTransform X(c.X_WC.rotation(),
+                           c.X_WC.translation() - s * kStep * c.X_WC.rotation().col(2));
+    const robot::IkResult res = arm.SolveCameraIk(X, seed, unused, ik);
+    if (!res.ok()) return false;  // out of reach: farther back is farther still
+    seed = res.q;
+    if (request.collision->IsFree(res.q) &&
+        InSeenFreeSpace(request.map->grid(), request.roi, X.translation(), kSeenClearance_m)) {
+      c.X_WC = X;
+      c.q = res.q;
+      c.cost = (res.q - request.q_current).norm();
+      return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
 size_t DropCollidingCandidates(const PlanningRequest& request,
                                std::vector<ViewCandidate>& candidates) {
   if (request.collision == nullptr) return 0;
   std::vector<char> collides(candidates.size(), 0);
   ParallelFor(candidates.size(), [&](size_t i) {
-    const ViewCandidate& c = candidates[i];
-    collides[i] = c.reachable && !request.collision->IsFree(c.q);
+    ViewCandidate& c = candidates[i];
+    collides[i] = c.reachable && !request.collision->IsFree(c.q) && !StepBack(request, c);
   });
   size_t dropped = 0;
   for (size_t i = 0; i < candidates.size(); ++i) {

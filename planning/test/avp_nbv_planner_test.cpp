@@ -196,6 +196,27 @@ TEST(PlantCoreDistanceTest, AxisForSquareRoisMidPlaneForLongOnes) {
   EXPECT_NEAR(PlantCoreDistance({1.0, 1.2, 0.5}, wall), 0.5, 1e-12);
 }
 
+TEST(InSeenFreeSpaceTest, EveryPointOfTheBallInsideTheRoiMustBeSeenFree) {
+  mapping::OccupancyGrid grid;  // 5 mm voxels
+  // Seen free: the cube [0, 0.3]^3; one occupied voxel at (0.25, 0.15, 0.15).
+  for (double x = 0.0025; x < 0.3; x += 0.005) {
+    for (double y = 0.0025; y < 0.3; y += 0.005) {
+      for (double z = 0.0025; z < 0.3; z += 0.005) {
+        grid.SetLogOdds(grid.KeyOf({x, y, z}), grid.clamp_min_log_odds());
+      }
+    }
+  }
+  grid.SetLogOdds(grid.KeyOf({0.2525, 0.1525, 0.1525}), grid.clamp_max_log_odds());
+  const Box3 roi(Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1, 1, 1));
+  EXPECT_TRUE(InSeenFreeSpace(grid, roi, {0.1, 0.15, 0.15}, 0.08));
+  EXPECT_FALSE(InSeenFreeSpace(grid, roi, {0.2, 0.15, 0.15}, 0.08));   // reaches the occupied one
+  EXPECT_FALSE(InSeenFreeSpace(grid, roi, {0.15, 0.25, 0.15}, 0.08));  // reaches unseen y > 0.3
+  // Outside the ROI nothing needs to have been seen.
+  const Box3 small(Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.29, 0.29, 0.29));
+  EXPECT_TRUE(InSeenFreeSpace(grid, small, {0.15, 0.25, 0.15}, 0.08));
+  EXPECT_TRUE(InSeenFreeSpace(grid, small, {0.5, 0.5, 0.5}, 0.08));
+}
+
 TEST(CoreTargetsTest, PointsAlongTheCoreOfALongRoiTheCentreOfASquareOne) {
   const Box3 square(Eigen::Vector3d(0, -0.5, 0), Eigen::Vector3d(1, 0.5, 1));
   for (double spacing : {0.0, 0.3}) {

@@ -38,6 +38,10 @@ struct MotionOptions {
   /// An episode plans at most this many moves to ranked candidates after a view before it gives
   /// up (MoveIt's planning attempts): each failed plan costs up to timeout_s.
   int max_attempts = 5;
+  /// A candidate view whose joints collide is moved back along its optical axis up to this far,
+  /// to where its arm is free and its camera stands in seen free space
+  /// (planning::PlanningRequest::collision_step_back_m); 0: dropped at once.
+  double step_back_m = 0.3;
 
   Status Validate() const;
 };

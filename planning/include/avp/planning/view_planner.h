@@ -69,7 +69,17 @@ struct PlanningRequest {
   /// The world the arm may not touch (the map's obstacles, declared objects, itself), or null:
   /// then IK is the only filter. Candidates whose IK joints collide are dropped before scoring.
   const motion::CollisionChecker* collision = nullptr;
+  /// With `collision`: a candidate whose joints collide is moved back along its optical axis, in
+  /// steps of 5 cm up to this far (metres), keeping its viewing direction, to the first pose
+  /// where IK finds free joints and the camera stands in space the map has seen free (no point
+  /// within kSeenClearance_m of the eye inside the ROI unseen or occupied): the view from a step
+  /// further away. 0: a colliding candidate is dropped at once.
+  double collision_step_back_m = 0.0;
 };
+
+/// The ball about a stepped-back camera's eye that must lie in seen free space (inside the ROI):
+/// the camera's body (the D435 reaches 6 cm from its optical frame) and the 2 cm margin.
+inline constexpr double kSeenClearance_m = 0.08;
 
 /// A planner's answer.
 struct PlanResult {
@@ -109,10 +119,17 @@ Status ValidateRequest(const PlanningRequest& request);
 /// through the centre (the stem); for a long, thin one (an espalier) the wall's mid-plane.
 double PlantCoreDistance(const Eigen::Vector3d& p, const Box3& roi);
 
-/// With request.collision, marks every reachable candidate whose joints are in collision
-/// unreachable and in_collision (in parallel); returns how many. Without it, 0.
+/// With request.collision, moves every reachable candidate whose joints are in collision back
+/// along its optical axis (PlanningRequest::collision_step_back_m; its pose, joints and cost
+/// change), and marks those that stay in collision unreachable and in_collision (in parallel,
+/// deterministic); returns how many. Without a collision checker, 0.
 size_t DropCollidingCandidates(const PlanningRequest& request,
                                std::vector<ViewCandidate>& candidates);
+
+/// True when every point within `radius` of `p` (sampled every centimetre) that lies inside
+/// `roi` is in a voxel the map has seen free.
+bool InSeenFreeSpace(const mapping::OccupancyGrid& grid, const Box3& roi, const Eigen::Vector3d& p,
+                     double radius);
 
 /// Sorts by utility (descending; ties by lower cost, then generation order), drops unreachable
 /// candidates and fills the status ("no valid candidate: N generated, M reachable, ...").
