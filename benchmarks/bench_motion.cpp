@@ -278,29 +278,35 @@ void BM_FieldBuild(benchmark::State& state) {
 }
 BENCHMARK(BM_FieldBuild)->Args({1, 10})->Args({0, 10})->Args({1, 5})->Unit(benchmark::kMillisecond);
 
+/// Times `collides(i)` over the world's states in turn, one per iteration: the mean time per
+/// state (µs); sets the collision_rate counter.
+template <typename Collides>
+double TimeStates(benchmark::State& state, size_t num_states, Collides&& collides) {
+  size_t next = 0;
+  int64_t states = 0, collisions = 0;
+  const auto t0 = avp::SteadyClock::now();
+  for (auto _ : state) {
+    const bool c = collides(next);
+    benchmark::DoNotOptimize(c);
+    collisions += c ? 1 : 0;
+    ++states;
+    next = (next + 1) % num_states;
+  }
+  state.counters["collision_rate"] = static_cast<double>(collisions) / static_cast<double>(states);
+  return 1e3 * avp::MsSince(t0) / static_cast<double>(states);
+}
+
 void BM_FieldQuery(benchmark::State& state) {
   const bool unknown = state.range(0) != 0;
   const bool stop_at_first = state.range(1) != 0;
   const World& w = GetWorld();
   const ObstacleField field = BuildField(unknown, 0.01);
-  size_t next = 0;
-  int64_t states = 0, collisions = 0;
-  const auto t0 = avp::SteadyClock::now();
-  for (auto _ : state) {
+  const double us = TimeStates(state, w.spheres.size(), [&](size_t i) {
+    if (stop_at_first) return FieldCollides(field, w.spheres[i], w.sphere_radius);
     bool collides = false;
-    if (stop_at_first) {
-      collides = FieldCollides(field, w.spheres[next], w.sphere_radius);
-    } else {
-      for (const Eigen::Vector3d& c : w.spheres[next])
-        collides |= field.Distance(c) <= w.sphere_radius;
-    }
-    benchmark::DoNotOptimize(collides);
-    collisions += collides ? 1 : 0;
-    ++states;
-    next = (next + 1) % w.spheres.size();
-  }
-  const double us = 1e3 * avp::MsSince(t0) / static_cast<double>(states);
-  state.counters["collision_rate"] = static_cast<double>(collisions) / static_cast<double>(states);
+    for (const Eigen::Vector3d& c : w.spheres[i]) collides |= field.Distance(c) <= w.sphere_radius;
+    return collides;
+  });
   Results()["field_query_us/" + std::to_string(state.range(0)) + "/" +
             std::to_string(state.range(1))] = us;
 }
@@ -383,18 +389,9 @@ void BM_OcTreeQuery(benchmark::State& state) {
       }
     }
   }
-  size_t next = 0;
-  int64_t states = 0, collisions = 0;
-  const auto t0 = avp::SteadyClock::now();
-  for (auto _ : state) {
-    const bool collides = OcTreeCollides(tree, capsules, w.states[next], throws);
-    benchmark::DoNotOptimize(collides);
-    collisions += collides ? 1 : 0;
-    ++states;
-    next = (next + 1) % w.states.size();
-  }
-  const double us = 1e3 * avp::MsSince(t0) / static_cast<double>(states);
-  state.counters["collision_rate"] = static_cast<double>(collisions) / static_cast<double>(states);
+  const double us = TimeStates(state, w.states.size(), [&](size_t i) {
+    return OcTreeCollides(tree, capsules, w.states[i], throws);
+  });
   state.counters["throws"] = static_cast<double>(throws);
   state.counters["field_missed"] = static_cast<double>(missed);
   SetRatioToField(state, us);
@@ -438,14 +435,12 @@ void BM_BoxesQuery(benchmark::State& state) {
   const World& w = GetWorld();
   BoxWorld boxes(w);
   auto capsules = MakeCapsules();
-  size_t next = 0;
-  int64_t states = 0, collisions = 0, throws = 0;
-  const auto t0 = avp::SteadyClock::now();
-  for (auto _ : state) {
+  int64_t throws = 0;
+  const double us = TimeStates(state, w.states.size(), [&](size_t i) {
     bool collides = false;
     for (int c = 0; c < kCapsules && !collides; ++c) {
       fcl::CollisionObjectd& capsule = *capsules[static_cast<size_t>(c)];
-      capsule.setTransform(w.states[next][static_cast<size_t>(c)]);
+      capsule.setTransform(w.states[i][static_cast<size_t>(c)]);
       capsule.computeAABB();
       fcl::DefaultCollisionData<double> data;
       try {
@@ -456,13 +451,8 @@ void BM_BoxesQuery(benchmark::State& state) {
         ++throws;
       }
     }
-    benchmark::DoNotOptimize(collides);
-    collisions += collides ? 1 : 0;
-    ++states;
-    next = (next + 1) % w.states.size();
-  }
-  const double us = 1e3 * avp::MsSince(t0) / static_cast<double>(states);
-  state.counters["collision_rate"] = static_cast<double>(collisions) / static_cast<double>(states);
+    return collides;
+  });
   state.counters["throws"] = static_cast<double>(throws);
   SetRatioToField(state, us);
   Results()["boxes_query_us"] = us;

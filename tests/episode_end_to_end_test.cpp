@@ -29,6 +29,29 @@ RunConfig Config(const std::string& planner) {
   return c;
 }
 
+/// The scene and ground truth of a config's scenario and seed, and episodes run on them.
+struct SceneEpisodes {
+  explicit SceneEpisodes(const RunConfig& c)
+      : scene(sim::MakeScenario(c.scenario, c.seed).value()),
+        gt(experiment::GroundTruthFor(c, scene).value()) {}
+  Result<experiment::RunResult> Run(const RunConfig& config) const {
+    return experiment::RunEpisodeOnScene(
+        experiment::CheckedRunConfig::Check(config, Registries()).value(), scene, gt);
+  }
+  sim::Scene scene;
+  eval::GroundTruth gt;
+};
+
+/// Three views of avp-nbv with planned motion on `scenario`, seed 0.
+RunConfig PlannedMotionConfig(const std::string& scenario) {
+  RunConfig c = Config("avp-nbv");
+  c.scenario = scenario;
+  c.seed = 0;
+  c.episode.views = 3;
+  c.motion.enabled = true;
+  return c;
+}
+
 /// The same episode: the same metrics and the same eye at every step.
 void ExpectSameEpisode(const experiment::RunResult& a, const experiment::RunResult& b) {
   ASSERT_EQ(a.episode.steps.size(), b.episode.steps.size());
@@ -70,12 +93,8 @@ TEST(EpisodeEndToEndTest, AvpNbvRaisesF1AboveTheFloor) {
 TEST(EpisodeEndToEndTest, EveryMoveIsPlannedAndTheSimulatorCountsItsContacts) {
   RunConfig c = Config("avp-nbv");
   c.motion.enabled = true;
-  auto scene = sim::MakeScenario(c.scenario, c.seed);
-  ASSERT_TRUE(scene.ok());
-  auto gt = experiment::GroundTruthFor(c, *scene);
-  ASSERT_TRUE(gt.ok());
-  auto r = experiment::RunEpisodeOnScene(
-      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
+  const SceneEpisodes episodes(c);
+  auto r = episodes.Run(c);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   ASSERT_GE(r->episode.views_fused(), 2) << r->episode.end_reason;
   int moves = 0;
@@ -101,8 +120,7 @@ TEST(EpisodeEndToEndTest, EveryMoveIsPlannedAndTheSimulatorCountsItsContacts) {
   EXPECT_EQ(t.contacts->total(), 0);
 
   c.motion.enabled = false;
-  auto straight = experiment::RunEpisodeOnScene(
-      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
+  auto straight = episodes.Run(c);
   ASSERT_TRUE(straight.ok()) << straight.status().ToString();
   const pipeline::MotionTotals u = pipeline::SumMotion(straight->episode);
   EXPECT_FALSE(straight->episode.return_home.has_value());
@@ -110,29 +128,6 @@ TEST(EpisodeEndToEndTest, EveryMoveIsPlannedAndTheSimulatorCountsItsContacts) {
   // Unplanned moves are the straight line: both counts are the same.
   EXPECT_EQ(u.contacts->total(), u.straight_line_contacts->total());
   for (const pipeline::StepRecord& s : straight->episode.steps) EXPECT_FALSE(s.motion.planned);
-}
-
-/// A scenario's scene and ground truth (seed 0), and episodes run on them.
-struct SceneEpisodes {
-  explicit SceneEpisodes(const RunConfig& c)
-      : scene(sim::MakeScenario(c.scenario, c.seed).value()),
-        gt(experiment::GroundTruthFor(c, scene).value()) {}
-  Result<experiment::RunResult> Run(const RunConfig& config) const {
-    return experiment::RunEpisodeOnScene(
-        experiment::CheckedRunConfig::Check(config, Registries()).value(), scene, gt);
-  }
-  sim::Scene scene;
-  eval::GroundTruth gt;
-};
-
-/// Three views of avp-nbv with planned motion on `scenario`, seed 0.
-RunConfig PlannedMotionConfig(const std::string& scenario) {
-  RunConfig c = Config("avp-nbv");
-  c.scenario = scenario;
-  c.seed = 0;
-  c.episode.views = 3;
-  c.motion.enabled = true;
-  return c;
 }
 
 /// oracle_motion: the motion planner knows the true scene. Behind this tomato's leaf layer the
@@ -197,12 +192,7 @@ TEST(EpisodeEndToEndTest, PredefinedRunsTheSameLoop) {
   // Straight moves: this tomato's leaves reach the start camera, and with planned motion every
   // zig-zag waypoint after it is in unseen space (docs/motion.md, "What it costs").
   c.motion.enabled = false;
-  auto scene = sim::MakeScenario(c.scenario, c.seed);
-  ASSERT_TRUE(scene.ok());
-  auto gt = experiment::GroundTruthFor(c, *scene);
-  ASSERT_TRUE(gt.ok());
-  auto r = experiment::RunEpisodeOnScene(
-      experiment::CheckedRunConfig::Check(c, Registries()).value(), *scene, *gt);
+  auto r = SceneEpisodes(c).Run(c);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(r->episode.views_fused(), 4) << r->episode.end_reason;
   EXPECT_GE(r->episode.steps.back().Metric("f1"), r->episode.steps.front().Metric("f1"));

@@ -91,16 +91,22 @@ TEST(BenchSummaryTest, FruitsAreBinnedByBestVisibleFractionOverSeeds) {
   EXPECT_TRUE(std::isnan(b[0].fraction));
 }
 
-class BenchSummaryFilesTest : public test::TempDirTest {};
-
-TEST_F(BenchSummaryFilesTest, WritesTheVisibilityCsvAndTable) {
+/// Scenario "s", planners "a" and "b", two seeds, the oracle, 5 mm voxels, `views` views.
+BenchDescription TwoPlannerBench(int views) {
   BenchDescription d;
   d.scenarios = {"s"};
   d.planners = {"a", "b"};
   d.seeds = 2;
-  d.views = 1;
+  d.views = views;
   d.segmenter = "oracle";
   d.voxel_size_m = 0.005;
+  return d;
+}
+
+class BenchSummaryFilesTest : public test::TempDirTest {};
+
+TEST_F(BenchSummaryFilesTest, WritesTheVisibilityCsvAndTable) {
+  const BenchDescription d = TwoPlannerBench(1);
   const std::vector<BenchEpisode> episodes = {
       Episode("a", 0, {{0.01, false}, {0.3, true}, {0.7, true}}),
       Episode("a", 1, {{0.02, false}, {0.6, false}}),
@@ -134,13 +140,7 @@ TEST_F(BenchSummaryFilesTest, WritesTheVisibilityCsvAndTable) {
 /// move's planning time, in summary.md's table and summary.csv on the last view's line; an
 /// episode whose record has no motion (an older one) adds nothing.
 TEST_F(BenchSummaryFilesTest, WritesContactsAndMotionTimePerEpisode) {
-  BenchDescription d;
-  d.scenarios = {"s"};
-  d.planners = {"a", "b"};
-  d.seeds = 2;
-  d.views = 1;
-  d.segmenter = "oracle";
-  d.voxel_size_m = 0.005;
+  const BenchDescription d = TwoPlannerBench(1);
   BenchEpisode a0 = Episode("a", 0, {{0.5, true}});
   a0.contacts = 0;
   a0.straight_line_contacts = 5;
@@ -168,13 +168,7 @@ TEST_F(BenchSummaryFilesTest, WritesContactsAndMotionTimePerEpisode) {
 /// Regret per plan step: pooled per (scenario, planner), per view in summary.csv, a table in
 /// summary.md; planners without measurements have no rows.
 TEST_F(BenchSummaryFilesTest, WritesTheRegretOfEachPlanStep) {
-  BenchDescription d;
-  d.scenarios = {"s"};
-  d.planners = {"a", "b"};
-  d.seeds = 2;
-  d.views = 3;
-  d.segmenter = "oracle";
-  d.voxel_size_m = 0.005;
+  const BenchDescription d = TwoPlannerBench(3);
   const auto nan = std::nan("");
   auto episode = [&](const std::string& planner, uint64_t seed, std::vector<BenchRegret> regret) {
     BenchEpisode e = Episode(planner, seed, {});
