@@ -117,13 +117,7 @@ Result<experiment::BenchConfig> ResolveBench(const CLI::App& cmd, const BenchCli
   if (cmd.get_option("--seed")->count() > 0) {
     AVP_ASSIGN_OR_RETURN(b.seeds, ParseSeeds(cli.seed, false));
   }
-  if (cli.config.empty()) {
-    if (b.scenarios.empty()) b.scenarios = registries.scenarios.Names();
-    if (b.planners.empty()) b.planners = {"avp-nbv", "predefined", "reference-nbv"};
-    if (b.seeds.empty()) {
-      for (uint64_t i = 0; i < 10; ++i) b.seeds.push_back(i);
-    }
-  }
+  if (cli.config.empty()) experiment::FillBenchDefaults(b, registries);
   AVP_RETURN_IF_ERROR(ApplyPlannerOptions(cli.planner_options, b));
   AVP_RETURN_IF_ERROR(ApplyEpisodeFlags(cmd, cli.episode, b.base));
   b.jobs = cli.jobs;

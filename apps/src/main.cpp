@@ -16,7 +16,6 @@
 
 #include <avp/core/text.h>
 #include <avp/experiment/registries.h>
-#include <avp/segmentation_service/remote_segmenter.h>
 #include <avp/zsl/register.h>
 
 #include "commands.h"
@@ -233,8 +232,7 @@ int main(int argc, char** argv) {
   avp::experiment::Registries registries = avp::experiment::BuiltinRegistries();
   // Every command and config also accepts remote://host:port[/model] as a segmenter, and ywes /
   // lsam (models from AVP_ZSL_MODEL_DIR), ywes://DIR, lsam://DIR.
-  avp::segmentation_service::RegisterRemoteSegmenter(registries.segmenters);
-  avp::zsl::RegisterZslSegmenters(registries.segmenters);
+  avp::zsl::RegisterProgramSegmenters(registries.segmenters);
 
   CLI::App app{
       "avp: active vision for agricultural robots (simulated RGB-D arm, semantic mapping, "

@@ -15,6 +15,7 @@
 #include <avp/io/options_yaml.h>
 #include <avp/io/yaml.h>
 #include <avp/report/progress.h>
+#include <avp/report/run_report.h>
 #include <avp/sim/scenario.h>
 #include <avp/sim/scene_file.h>
 
@@ -163,26 +164,7 @@ Result<experiment::CheckedRunConfig> ResolveConfig(const CLI::App& cmd, const Ru
 void PrintStep(const pipeline::StepRecord& s) { PrintStepWithProgress(s, {}); }
 
 void PrintStepWithProgress(const pipeline::StepRecord& s, std::string_view progress) {
-  const Eigen::Vector3d eye = s.X_WC.translation();
-  const std::string metrics =
-      std::isnan(s.Metric("f1"))
-          ? std::string()
-          : fmt::format("  F1 {:.3f} (tol {:.3f})  fruits {:.0f}/{:.0f}", s.Metric("f1"),
-                        s.Metric("f1_tol"), s.Metric("fruits_found"), s.Metric("fruits_total"));
-  const std::string problems = !s.capture_status.ok() ? "  capture: " + s.capture_status.ToString()
-                               : !s.segment_status.ok()
-                                   ? "  segment: " + s.segment_status.ToString()
-                                   : std::string();
-  std::printf(
-      "view %d/%d  eye (%.3f, %.3f, %.3f)  %zu masks%s  [segment %.0f ms, integrate %.0f "
-      "ms, plan %.0f ms%s]%s%s\n",
-      s.view + 1, s.views_total, eye.x(), eye.y(), eye.z(), s.masks, metrics.c_str(),
-      s.times.segment_ms, s.times.integrate_ms, s.times.plan_ms,
-      s.planned ? fmt::format(", {} of {} candidates reachable", s.candidates_reachable,
-                              s.candidates_generated)
-                      .c_str()
-                : "",
-      progress.empty() ? "" : fmt::format("  {}", progress).c_str(), problems.c_str());
+  std::printf("%s\n", report::FormatStepLine(s, progress).c_str());
   std::fflush(stdout);
 }
 
@@ -276,14 +258,9 @@ int Run(const CLI::App& cmd, const RunCli& cli, const experiment::Registries& re
   const Result<experiment::RunSummary> summary = experiment::RunToFolder(*config, options);
   if (!summary.ok()) return Failed("run", summary.status());
   PrintSummary(**config, *summary, options.out_dir);
-  // An episode cut short by its segmenter (a service that is down) is a failure of the command,
-  // its results saved.
-  if (summary->result.episode.end == pipeline::EpisodeEnd::kSegmenterFault) {
-    return Failed("run", UnavailableError(fmt::format("segmenter fault: {}",
-                                                      summary->result.episode.end_reason)));
-  }
-  // So is one whose segmenter failed at every view: nothing it mapped was segmented.
-  if (const Status failed = experiment::SegmenterFailedEveryView(summary->result); !failed.ok()) {
+  // An episode cut short by its segmenter (a service that is down), or whose segmenter failed at
+  // every view, is a failure of the command, its results saved.
+  if (const Status failed = experiment::SegmenterFailure(summary->result); !failed.ok()) {
     return Failed("run", failed);
   }
   return 0;

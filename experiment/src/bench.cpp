@@ -200,8 +200,8 @@ Status ComputeGroundTruth(const BenchConfig& config, const Registries& registrie
   return Status::Ok();
 }
 
-/// The first result of the bench that could not be written: it asks every running episode to
-/// stop and keeps new ones from starting.
+/// The first result of the bench that could not be written, or the user's stop: it asks every
+/// running episode to stop and keeps new ones from starting.
 class WriteFailure {
  public:
   void Set(const Status& s) {
@@ -250,6 +250,32 @@ void TakeResults(const RunResult& r, report::BenchEpisode& j) {
   }
 }
 
+/// A bench episode's record.json: what ran, how it ended, its plan times, motion and fruits.
+nlohmann::json BenchRecord(const RunConfig& c, const Registries& registries, const RunResult& r,
+                           const report::BenchEpisode& j, const std::string& revision) {
+  const planning::PlannerEntry* entry = registries.planners.Find(j.planner);
+  const nlohmann::json options = io::OptionsToJson(
+      c.planner.options, entry != nullptr ? entry->options.Info() : std::vector<OptionInfo>{});
+  nlohmann::json rec{{"scenario", j.scenario},
+                     {"planner", j.planner},
+                     {"seed", j.seed},
+                     {"segmenter", c.segmenter.name},
+                     {"views", c.episode.views},
+                     {"planner_options", options},
+                     {"end", std::string(pipeline::ToString(r.episode.end))},
+                     {"end_reason", r.episode.end_reason},
+                     {"episode_seconds", j.episode_s},
+                     {"plan_ms", j.plan_ms},
+                     {"motion", report::MotionTotalsJson(r.episode)},
+                     {"git_revision", revision},
+                     {"fruits", report::FruitsJson(r.fruits)}};
+  if (c.oracle_regret) rec["oracle_regret"] = report::RegretJson(r.regret);
+  // A scene file's entry: the file and the arrangement its scene was made with.
+  if (!c.scene_file.empty()) rec["scene_file"] = c.scene_file.string();
+  if (!c.arrangement.empty()) rec["arrangement"] = c.arrangement;
+  return rec;
+}
+
 /// One episode into runs/<scenario>/<planner>/seed-<n>/: metrics.csv as it goes, record.json,
 /// avp-state.json around them. A file that cannot be written fails the bench (WriteFailure).
 report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registries, const Group& g,
@@ -260,7 +286,8 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
   j.planner = planner;
   j.seed = g.seed;
   if (failure.failed()) {
-    j.status = CancelledError("not run: the bench stopped (a result could not be written)");
+    j.status =
+        CancelledError(fmt::format("not run: the bench stopped: {}", failure.first().message()));
     return j;
   }
   // The job's configuration (the bench's, this scenario, seed and planner), checked once here.
@@ -318,28 +345,25 @@ report::BenchEpisode RunJob(const BenchConfig& config, const Registries& registr
     j.status = r.status();
     return j;
   }
+  // Stopped from outside (BenchConfig::stop): an episode cut short is no result, and a resumed
+  // bench runs it again.
+  if (r->episode.end == pipeline::EpisodeEnd::kInterrupted) {
+    j.status = CancelledError(fmt::format("interrupted: {}", r->episode.end_reason));
+    MarkFailed(dir, RunFolderKind(), "avp bench", j.status);
+    return j;
+  }
   TakeResults(*r, j);
-  const planning::PlannerEntry* entry = registries.planners.Find(planner);
-  const nlohmann::json options = io::OptionsToJson(
-      c.planner.options, entry != nullptr ? entry->options.Info() : std::vector<OptionInfo>{});
-  nlohmann::json rec{{"scenario", j.scenario},
-                     {"planner", j.planner},
-                     {"seed", j.seed},
-                     {"segmenter", c.segmenter.name},
-                     {"views", c.episode.views},
-                     {"planner_options", options},
-                     {"end", std::string(pipeline::ToString(r->episode.end))},
-                     {"end_reason", r->episode.end_reason},
-                     {"episode_seconds", j.episode_s},
-                     {"plan_ms", j.plan_ms},
-                     {"motion", report::MotionTotalsJson(r->episode)},
-                     {"git_revision", revision},
-                     {"fruits", report::FruitsJson(r->fruits)}};
-  // A scene file's entry: the file and the arrangement its scene was made with.
-  if (c.oracle_regret) rec["oracle_regret"] = report::RegretJson(r->regret);
-  if (!c.scene_file.empty()) rec["scene_file"] = c.scene_file.string();
-  if (!c.arrangement.empty()) rec["arrangement"] = c.arrangement;
-  if (Status s = io::WriteJsonFile(dir / "record.json", rec); !s.ok()) return fail(s);
+  if (Status s =
+          io::WriteJsonFile(dir / "record.json", BenchRecord(c, registries, *r, j, revision));
+      !s.ok()) {
+    return fail(s);
+  }
+  // A planner that threw: the episode is kept on disk, its folder failed, out of the statistics.
+  if (r->episode.end == pipeline::EpisodeEnd::kPlannerFault) {
+    j.status = InternalError(fmt::format("planner fault: {}", r->episode.end_reason));
+    MarkFailed(dir, RunFolderKind(), "avp bench", j.status);
+    return j;
+  }
   if (Status s = MarkComplete(dir, RunFolderKind(), "avp bench"); !s.ok()) return fail(s);
   // A segmenter that failed (a service that is down) leaves views without segmentation: the
   // episode is kept on disk but counted as failed, out of the statistics.
@@ -462,6 +486,11 @@ Status RunPendingJobs(const BenchConfig& config, const Registries& registries,
                       const std::vector<Group>& groups, const std::vector<JobRef>& refs,
                       const std::vector<size_t>& pending, const std::string& revision) {
   WriteFailure failure;
+  // The user's stop ends the bench as a write failure does: running episodes stop, no new one
+  // starts.
+  const std::stop_callback user_stop(config.stop, [&failure] {
+    failure.Set(CancelledError("the bench was interrupted; resume it to run the rest"));
+  });
   {
     report::Progress bar(report::ProgressOn(stderr, "episodes", pending.size(), config.progress));
     InJobs(config, pending.size(), [&](size_t t) {

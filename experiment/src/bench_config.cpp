@@ -439,7 +439,15 @@ Status BenchConfig::Validate(const Registries& registries) const {
 
 Result<BenchConfig> LoadBenchConfig(const fs::path& yaml) {
   AVP_ASSIGN_OR_RETURN(const YAML::Node root, io::LoadYamlFile(yaml));
-  const std::string ctx = yaml.string();
+  return ReadBenchConfigYaml(root, yaml.string(), yaml.parent_path());
+}
+
+Result<BenchConfig> ReadBenchConfigYaml(const YAML::Node& root, std::string_view context,
+                                        const fs::path& base_dir) {
+  const std::string ctx(context);
+  if (!root.IsMap()) {
+    return InvalidArgumentError(fmt::format("{}: a bench configuration is a mapping", ctx));
+  }
   AVP_RETURN_IF_ERROR(io::RejectUnknownKeys(
       root,
       {"description", "scenarios", "planners", "seeds", "planner_options", "run", "conditions"},
@@ -454,7 +462,7 @@ Result<BenchConfig> LoadBenchConfig(const fs::path& yaml) {
       const size_t at = entry.rfind('@');
       const fs::path file = entry.substr(0, at);
       if (file.is_relative()) {
-        entry = (yaml.parent_path() / file).lexically_normal().string() +
+        entry = (base_dir / file).lexically_normal().string() +
                 (at == std::string::npos ? std::string() : entry.substr(at));
       }
     }
@@ -468,6 +476,14 @@ Result<BenchConfig> LoadBenchConfig(const fs::path& yaml) {
     return InvalidArgumentError(fmt::format("{}: {}", ctx, e.what()));
   }
   return o;
+}
+
+void FillBenchDefaults(BenchConfig& config, const Registries& registries) {
+  if (config.scenarios.empty()) config.scenarios = registries.scenarios.Names();
+  if (config.planners.empty()) config.planners = {"avp-nbv", "predefined", "reference-nbv"};
+  if (config.seeds.empty()) {
+    for (uint64_t i = 0; i < 10; ++i) config.seeds.push_back(i);
+  }
 }
 
 Result<BenchConfig> ConditionBenchConfig(const BenchConfig& config, const BenchCondition& c) {

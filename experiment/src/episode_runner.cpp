@@ -220,6 +220,13 @@ Status SegmenterFailedEveryView(const RunResult& result) {
       steps.size(), steps.front().segment_status.ToString()));
 }
 
+Status SegmenterFailure(const RunResult& result) {
+  if (result.episode.end == pipeline::EpisodeEnd::kSegmenterFault) {
+    return UnavailableError(fmt::format("segmenter fault: {}", result.episode.end_reason));
+  }
+  return SegmenterFailedEveryView(result);
+}
+
 std::vector<std::string> WhyNothingFound(const RunConfig& config, const RunResult& result) {
   const std::vector<pipeline::StepRecord>& steps = result.episode.steps;
   const eval::FruitScores& fruits = result.final_metrics.fruits;

@@ -200,6 +200,9 @@ Result<RunSummary> WriteRunFolder(const CheckedRunConfig& checked, const RunFold
   // rather than going on without its results.
   std::stop_source write_failed;
   csv->StopOnError(write_failed);
+  // The user's stop reaches the episode through the same token.
+  const std::stop_callback user_stop(options.stop,
+                                     [&write_failed] { write_failed.request_stop(); });
   ProgressObserver progress(options);
   report::RunReportCollector report_data;
   std::vector<pipeline::EpisodeObserver*> all = {csv.get(), &progress, &report_data};
@@ -255,6 +258,13 @@ Result<RunSummary> RunEpisodeToFolder(const CheckedRunConfig& checked,
   if (!summary.ok()) {
     MarkFailed(options.out_dir, RunFolderKind(), run.command, summary.status());
     return summary.status();
+  }
+  // A planner that threw: its results are written, and the run is a failure.
+  if (summary->result.episode.end == pipeline::EpisodeEnd::kPlannerFault) {
+    const Status fault =
+        InternalError(fmt::format("planner fault: {}", summary->result.episode.end_reason));
+    MarkFailed(options.out_dir, RunFolderKind(), run.command, fault);
+    return fault;
   }
   AVP_RETURN_IF_ERROR(MarkComplete(options.out_dir, RunFolderKind(), run.command));
   summary->seconds = SecondsSince(t0);

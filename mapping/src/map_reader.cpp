@@ -142,10 +142,15 @@ Result<LoadedMap> LoadAnyMapBytes(const std::string& bytes, const fs::path& path
 }
 
 VoxelSet GroundTruthVoxels(const LoadedMap& loaded, SemanticClass cls, bool* used_labels) {
-  const OccupancyGrid& grid = loaded.map.grid();
+  return GroundTruthVoxels(loaded.map, loaded.source, cls, used_labels);
+}
+
+VoxelSet GroundTruthVoxels(const SemanticMap& map, const MapSource& source, SemanticClass cls,
+                           bool* used_labels) {
+  const OccupancyGrid& grid = map.grid();
   VoxelSet set;
   set.resolution_m = grid.voxel_size_m();
-  if (loaded.source.has_labels) {
+  if (source.has_labels) {
     set.keys = OccupiedVoxelsOfClass(grid, cls);
   } else {
     grid.ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
@@ -153,11 +158,10 @@ VoxelSet GroundTruthVoxels(const LoadedMap& loaded, SemanticClass cls, bool* use
     });
     std::sort(set.keys.begin(), set.keys.end());
   }
-  set.occupied_leaves = loaded.source.format == MapFileFormat::kAvpMap
-                            ? set.keys.size()
-                            : loaded.source.occupied_leaves;
-  set.coarse_leaves = loaded.source.coarse_leaves;
-  if (used_labels != nullptr) *used_labels = loaded.source.has_labels;
+  set.occupied_leaves =
+      source.format == MapFileFormat::kAvpMap ? set.keys.size() : source.occupied_leaves;
+  set.coarse_leaves = source.coarse_leaves;
+  if (used_labels != nullptr) *used_labels = source.has_labels;
   return set;
 }
 

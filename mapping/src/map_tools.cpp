@@ -185,16 +185,14 @@ Result<MapExportFormat> ResolveExportFormat(const MapExportOptions& options) {
 }
 
 /// The .avpmap branch of ExportMapFile: SaveMap with a note saying where the map came from.
-Status ExportAvpMap(const LoadedMap& loaded, const MapExportOptions& options,
-                    MapExportSummary& summary) {
-  const SemanticMap& map = loaded.map;
+Status ExportAvpMap(const SemanticMap& map, const MapSource& source,
+                    const MapExportOptions& options, MapExportSummary& summary) {
   MapSaveOptions save;
-  save.note =
-      fmt::format("avp map export of {} ({}{})", options.map.filename().string(),
-                  ToString(loaded.source.format),
-                  loaded.source.tree_type.empty() ? std::string() : ", " + loaded.source.tree_type);
-  if (loaded.source.format == MapFileFormat::kAvpMap && !loaded.source.avpmap.note.empty()) {
-    save.note += "; made by: " + loaded.source.avpmap.note;
+  save.note = fmt::format("avp map export of {} ({}{})", source.path.filename().string(),
+                          ToString(source.format),
+                          source.tree_type.empty() ? std::string() : ", " + source.tree_type);
+  if (source.format == MapFileFormat::kAvpMap && !source.avpmap.note.empty()) {
+    save.note += "; made by: " + source.avpmap.note;
   }
   if (save.note.size() > kMaxMapNoteBytes) save.note.resize(kMaxMapNoteBytes);
   AVP_RETURN_IF_ERROR(SaveMap(map, options.out, save));
@@ -226,19 +224,30 @@ Status ExportPly(const SemanticMap& map, const MapExportOptions& options,
 
 Result<MapExportSummary> ExportMapFile(const MapExportOptions& options) {
   if (options.out.empty()) return InvalidArgumentError("give the output file with --out");
-  AVP_ASSIGN_OR_RETURN(const MapExportFormat f, ResolveExportFormat(options));
+  // A bad format is refused before the map is read.
+  AVP_RETURN_IF_ERROR(ResolveExportFormat(options).status());
   // Outputs never overwrite inputs: `map export X --out X` would replace the map it reads.
   AVP_RETURN_IF_ERROR(
       io::CheckOutputIsNotInput(options.out, "export file (--out)", options.map, "map file"));
   AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.map, "map file").status());
   AVP_ASSIGN_OR_RETURN(const LoadedMap loaded, LoadAnyMap(options.map));
-  const SemanticMap& map = loaded.map;
+  return ExportMap(loaded.map, loaded.source, options);
+}
+
+Result<MapExportSummary> ExportMap(const SemanticMap& map, const MapSource& source,
+                                   const MapExportOptions& options) {
+  if (options.out.empty()) return InvalidArgumentError("give the output file with --out");
+  AVP_ASSIGN_OR_RETURN(const MapExportFormat f, ResolveExportFormat(options));
+  if (!source.path.empty()) {
+    AVP_RETURN_IF_ERROR(
+        io::CheckOutputIsNotInput(options.out, "export file (--out)", source.path, "map file"));
+  }
   MapExportSummary summary;
   summary.format = f;
   summary.out = options.out;
-  summary.source = loaded.source;
+  summary.source = source;
   if (f == MapExportFormat::kAvpMap) {
-    AVP_RETURN_IF_ERROR(ExportAvpMap(loaded, options, summary));
+    AVP_RETURN_IF_ERROR(ExportAvpMap(map, source, options, summary));
     return summary;
   }
   if (f == MapExportFormat::kPly) {
@@ -272,15 +281,27 @@ Result<MapCompareSummary> CompareMapFiles(const MapCompareOptions& options) {
   AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.map, "map file").status());
   AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.gt, "ground truth file").status());
   AVP_ASSIGN_OR_RETURN(const LoadedMap loaded, LoadAnyMap(options.map));
-  const SemanticMap& map = loaded.map;
-  MapCompareSummary summary;
-  summary.map_source = loaded.source;
-  VoxelSet gt;
-  {
-    AVP_ASSIGN_OR_RETURN(const LoadedMap gt_map, LoadAnyMap(options.gt));
-    gt = GroundTruthVoxels(gt_map, options.semantic_class, &summary.gt_used_labels);
-    summary.gt_source = gt_map.source;
+  AVP_ASSIGN_OR_RETURN(const LoadedMap gt_map, LoadAnyMap(options.gt));
+  AVP_ASSIGN_OR_RETURN(MapCompareSummary summary,
+                       CompareMaps(loaded.map, loaded.source, gt_map.map, gt_map.source, options));
+  if (!options.json_out.empty()) {
+    AVP_RETURN_IF_ERROR(io::WriteJsonFile(options.json_out, ToJson(summary)));
   }
+  return summary;
+}
+
+Result<MapCompareSummary> CompareMaps(const SemanticMap& map, const MapSource& source,
+                                      const SemanticMap& gt_map, const MapSource& gt_source,
+                                      const MapCompareOptions& options) {
+  GroundTruthCompareOptions compare;
+  compare.tolerance_voxels = options.tolerance_voxels;
+  compare.semantic_class = options.semantic_class;
+  AVP_RETURN_IF_ERROR(compare.Validate());
+  MapCompareSummary summary;
+  summary.map_source = source;
+  const VoxelSet gt =
+      GroundTruthVoxels(gt_map, gt_source, options.semantic_class, &summary.gt_used_labels);
+  summary.gt_source = gt_source;
   summary.map = options.map;
   summary.gt = options.gt;
   summary.semantic_class = options.semantic_class;
@@ -319,9 +340,6 @@ Result<MapCompareSummary> CompareMapFiles(const MapCompareOptions& options) {
         }
       }
     }
-  }
-  if (!options.json_out.empty()) {
-    AVP_RETURN_IF_ERROR(io::WriteJsonFile(options.json_out, ToJson(summary)));
   }
   return summary;
 }

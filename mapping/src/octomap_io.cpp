@@ -386,10 +386,11 @@ Result<OctomapHeader> ParseOctomapHeader(std::string_view bytes, const fs::path&
 /// .ot: the node's data (`value_bytes`: a float log-odds, + 3 colour bytes for a ColorOcTree)
 /// and one byte whose bits say which children follow. OK or what is wrong.
 Status CheckOctomapTree(std::string_view data, const OctomapHeader& h, size_t value_bytes,
-                        const fs::path& path) {
+                        const fs::path& path, uint64_t* counted = nullptr) {
   const auto bad = [&](const std::string& what) {
-    return ParseError(fmt::format("'{}' holds a broken OctoMap tree (id {}, {} nodes declared): {}",
-                                  path.string(), QuoteText(h.id), h.size, what));
+    return ParseError(fmt::format(
+        "'{}' holds a broken OctoMap tree (id {}{}): {}", path.string(), QuoteText(h.id),
+        counted != nullptr ? std::string() : fmt::format(", {} nodes declared", h.size), what));
   };
   if (h.size == 0) {
     if (!data.empty()) {
@@ -408,8 +409,10 @@ Status CheckOctomapTree(std::string_view data, const OctomapHeader& h, size_t va
     pending.pop_back();
     ++nodes;
     if (nodes > h.size) {
-      return bad(fmt::format("the tree has more nodes than its header declares (at byte {})",
-                             h.data_offset + at));
+      return bad(
+          fmt::format("the tree has more nodes than {} (at byte {})",
+                      counted != nullptr ? "max_octomap_nodes allows" : "its header declares",
+                      h.data_offset + at));
     }
     if (data.size() - at < node_bytes) {
       return bad(
@@ -461,6 +464,14 @@ Status CheckOctomapTree(std::string_view data, const OctomapHeader& h, size_t va
         if ((children >> child) & 1) pending.push_back(depth + 1);
       }
     }
+  }
+  if (counted != nullptr) {
+    // Counting (a message's tree, no header): the whole data must be the tree.
+    *counted = nodes;
+    if (at != data.size()) {
+      return bad(fmt::format("{} bytes follow the tree's {} nodes", data.size() - at, nodes));
+    }
+    return Status::Ok();
   }
   if (nodes != h.size) {
     return bad(
@@ -783,6 +794,38 @@ Result<GroundTruthComparison> CompareToGroundTruth(const OccupancyGrid& grid, co
   r.resampled = resampled;
   r.gt_voxels_original = gt.keys.size();
   return r;
+}
+
+Result<std::string> OctomapMessageFileBytes(std::string_view id, bool binary, double resolution_m,
+                                            std::string_view data, std::string_view what) {
+  if (id != "OcTree" && id != "ColorOcTree") {
+    return ParseError(
+        fmt::format("{}: an OctoMap tree of type {}; only OcTree and ColorOcTree "
+                    "can be read",
+                    what, QuoteText(id)));
+  }
+  if (binary && id != "OcTree") {
+    return ParseError(
+        fmt::format("{}: a binary tree must be an OcTree, not {}", what, QuoteText(id)));
+  }
+  if (!std::isfinite(resolution_m) || resolution_m < kMinOctomapResolution ||
+      resolution_m > kMaxOctomapResolution) {
+    return ParseError(fmt::format("{}: resolution {} m outside [{}, {}]", what, resolution_m,
+                                  kMinOctomapResolution, kMaxOctomapResolution));
+  }
+  OctomapHeader h;
+  h.binary = binary;
+  h.id = std::string(id);
+  h.size = MaxOctomapNodes().value();
+  h.resolution_m = resolution_m;
+  uint64_t nodes = 0;
+  if (!data.empty()) {
+    const size_t value_bytes = id == "ColorOcTree" ? sizeof(float) + 3 : sizeof(float);
+    AVP_RETURN_IF_ERROR(CheckOctomapTree(data, h, value_bytes, fs::path(what), &nodes));
+  }
+  return fmt::format("{}\nid {}\nsize {}\nres {}\ndata\n", binary ? kBinaryHeader : kGeneralHeader,
+                     id, nodes, resolution_m) +
+         std::string(data);
 }
 
 }  // namespace avp::mapping

@@ -48,40 +48,6 @@ std::array<uint8_t, 3> ClassRgb(const SemanticCell& c) {
   return {rgb[0], rgb[1], rgb[2]};
 }
 
-/// PlyVoxels::kLabelled and kAllLabelled: the labelled voxels, semantic blocks in allocation order.
-void AppendLabelledVoxels(const OccupancyGrid& grid, const PlyExportOptions& options,
-                          std::string& body, PlyExportStats& stats) {
-  grid.ForEachSemanticVoxel([&](const VoxelKey& k, const SemanticCell& c) {
-    const bool occupied = grid.State(k) == VoxelState::kOccupied;
-    if (!occupied && options.voxels == PlyVoxels::kLabelled) {
-      ++stats.skipped_not_occupied;
-      return;
-    }
-    if (!occupied) ++stats.not_occupied;
-    ++stats.labelled;
-    AppendVertex(body, grid, k, ClassRgb(c), c, options.binary);
-  });
-}
-
-/// PlyVoxels::kOccupied: every occupied voxel, all blocks in allocation order; labelled ones with
-/// their cell, the others grey with class 0.
-void AppendOccupiedVoxels(const OccupancyGrid& grid, const PlyExportOptions& options,
-                          std::string& body, PlyExportStats& stats) {
-  const float occupied = grid.occupied_log_odds();
-  grid.ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
-    const SemanticCell* cell = grid.Semantic(k);
-    const bool labelled = cell != nullptr && cell->has_label();
-    if (log_odds < occupied) {
-      if (labelled) ++stats.skipped_not_occupied;
-      return;
-    }
-    ++(labelled ? stats.labelled : stats.unlabelled);
-    // OctomapVoxelColor: the class colour when labelled, kUnlabelledOccupiedColor otherwise.
-    AppendVertex(body, grid, k, OctomapVoxelColor(cell), labelled ? *cell : SemanticCell{},
-                 options.binary);
-  });
-}
-
 }  // namespace
 
 std::string_view ToString(PlyVoxels voxels) {
@@ -103,16 +69,56 @@ std::optional<PlyVoxels> PlyVoxelsFromString(std::string_view name) {
   return std::nullopt;
 }
 
+size_t ForEachExportedVoxel(
+    const OccupancyGrid& grid, PlyVoxels voxels,
+    const std::function<void(const VoxelKey&, const SemanticCell*, bool occupied)>& fn) {
+  size_t skipped_not_occupied = 0;
+  if (voxels == PlyVoxels::kOccupied) {
+    // Every occupied voxel, all blocks in allocation order, each block's semantic cells beside
+    // its log-odds (no lookup per voxel: most known voxels are free).
+    const float occupied = grid.occupied_log_odds();
+    grid.ForEachBlock([&](const OccupancyBlock& b) {
+      b.known.ForEachSet([&](int i) {
+        const SemanticCell* cell = b.semantics != nullptr ? &(*b.semantics)[i] : nullptr;
+        const bool labelled = cell != nullptr && cell->has_label();
+        if (b.log_odds[i] < occupied) {
+          if (labelled) ++skipped_not_occupied;
+          return;
+        }
+        fn(KeyOf(b.key, i), labelled ? cell : nullptr, true);
+      });
+    });
+    return skipped_not_occupied;
+  }
+  // The labelled voxels, semantic blocks in allocation order.
+  grid.ForEachSemanticVoxel([&](const VoxelKey& k, const SemanticCell& c) {
+    const bool occupied = grid.State(k) == VoxelState::kOccupied;
+    if (!occupied && voxels == PlyVoxels::kLabelled) {
+      ++skipped_not_occupied;
+      return;
+    }
+    fn(k, &c, occupied);
+  });
+  return skipped_not_occupied;
+}
+
 Result<PlyExportStats> ExportSemanticPly(const OccupancyGrid& grid,
                                          const std::filesystem::path& path,
                                          const PlyExportOptions& options) {
   PlyExportStats stats;
   std::string body;
-  if (options.voxels == PlyVoxels::kOccupied) {
-    AppendOccupiedVoxels(grid, options, body, stats);
-  } else {
-    AppendLabelledVoxels(grid, options, body, stats);
-  }
+  stats.skipped_not_occupied = ForEachExportedVoxel(
+      grid, options.voxels, [&](const VoxelKey& k, const SemanticCell* cell, bool occupied) {
+        if (cell == nullptr) {
+          ++stats.unlabelled;
+          // OctomapVoxelColor: kUnlabelledOccupiedColor for an unlabelled voxel.
+          AppendVertex(body, grid, k, OctomapVoxelColor(nullptr), SemanticCell{}, options.binary);
+          return;
+        }
+        ++stats.labelled;
+        if (!occupied) ++stats.not_occupied;
+        AppendVertex(body, grid, k, ClassRgb(*cell), *cell, options.binary);
+      });
   stats.vertices = stats.labelled + stats.unlabelled;
 
   std::string header = "ply\n";

@@ -125,14 +125,17 @@ planning::PlanningRequest PlanningRequestAfter(const NextViewContext& next, int 
   return req;
 }
 
-/// The planner's answer; a throw becomes an Internal error naming the planner.
+/// The planner's answer; a throw becomes an Internal error naming the planner, and `*threw`.
 planning::PlanResult PlanOrError(planning::ViewPlanner& planner,
-                                 const planning::PlanningRequest& req, Rng& rng) {
+                                 const planning::PlanningRequest& req, Rng& rng, bool* threw) {
   planning::PlanResult plan;
+  *threw = false;
   try {
     plan = planner.Plan(req, rng);
   } catch (const std::exception& e) {
+    plan = {};
     plan.status = InternalError(fmt::format("planner '{}' threw: {}", planner.name(), e.what()));
+    *threw = true;
   }
   return plan;
 }
@@ -262,8 +265,9 @@ bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidT
   }
   const planning::PlanningRequest req = PlanningRequestAfter(next, view, step, fused);
   Rng planner_rng = next.planner_root.Fork(static_cast<uint64_t>(view + 1));
+  bool threw = false;
   const planning::PlanResult& plan =
-      seen.plan.emplace(PlanOrError(*next.c.planner, req, planner_rng));
+      seen.plan.emplace(PlanOrError(*next.c.planner, req, planner_rng, &threw));
   step.times.plan_ms = MsSince(t0);
   step.planned = true;
   step.plan_status = plan.status;
@@ -273,6 +277,11 @@ bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidT
   for (size_t i = 0;
        i < plan.ranked.size() && static_cast<int>(i) < next.options.record_top_candidates; ++i) {
     step.top_candidates.push_back(plan.ranked[i]);
+  }
+  if (threw) {
+    result.end = EpisodeEnd::kPlannerFault;
+    result.end_reason = plan.status.ToString();
+    return true;
   }
   if (plan.stop) {
     result.end = EpisodeEnd::kPlannerStopped;
@@ -399,6 +408,8 @@ std::string_view ToString(EpisodeEnd end) {
       return "robot-fault";
     case EpisodeEnd::kSegmenterFault:
       return "segmenter-fault";
+    case EpisodeEnd::kPlannerFault:
+      return "planner-fault";
   }
   return "unknown";
 }

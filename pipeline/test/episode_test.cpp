@@ -85,6 +85,7 @@ class ScriptedPlanner final : public planning::ViewPlanner {
  public:
   std::vector<std::vector<Eigen::VectorXd>> script;
   int stop_at_view = -1;
+  int throw_at_view = -1;
   std::vector<int> asked;
   std::vector<size_t> fused_seen;
   std::string_view name() const override { return "scripted"; }
@@ -92,6 +93,7 @@ class ScriptedPlanner final : public planning::ViewPlanner {
     asked.push_back(r.view_index);
     fused_seen.push_back(r.fused_views.size());
     planning::PlanResult out;
+    if (r.view_index == throw_at_view) throw std::runtime_error("planner bug");
     if (r.view_index == stop_at_view) {
       out.stop = true;
       out.stop_reason = "gain below threshold";
@@ -436,6 +438,19 @@ TEST_F(EpisodeTest, ThrowingSegmenterBecomesAStatus) {
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(r->views_fused(), 4);
   EXPECT_NE(r->steps[0].segment_status.message().find("model crashed"), std::string::npos);
+}
+
+TEST_F(EpisodeTest, AThrowingPlannerEndsTheEpisodeAsAPlannerFault) {
+  planner_.script = {{Home(0.1)}, {Home(0.2)}, {Home(0.3)}};
+  planner_.throw_at_view = 2;
+  auto r = Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->end, EpisodeEnd::kPlannerFault);
+  EXPECT_EQ(ToString(r->end), "planner-fault");
+  EXPECT_EQ(r->views_fused(), 2);  // the views before the fault are kept
+  EXPECT_NE(r->end_reason.find("planner 'scripted' threw: planner bug"), std::string::npos)
+      << r->end_reason;
+  EXPECT_EQ(r->steps[1].plan_status.code(), StatusCode::kInternal);
 }
 
 TEST_F(EpisodeTest, CaptureErrorIsRecordedAndFusesNothing) {

@@ -9,6 +9,29 @@
 
 namespace avp::report {
 
+std::string FormatStepLine(const pipeline::StepRecord& s, std::string_view progress) {
+  const Eigen::Vector3d eye = s.X_WC.translation();
+  const std::string metrics =
+      std::isnan(s.Metric("f1"))
+          ? std::string()
+          : fmt::format("  F1 {:.3f} (tol {:.3f})  fruits {:.0f}/{:.0f}", s.Metric("f1"),
+                        s.Metric("f1_tol"), s.Metric("fruits_found"), s.Metric("fruits_total"));
+  const std::string problems = !s.capture_status.ok() ? "  capture: " + s.capture_status.ToString()
+                               : !s.segment_status.ok()
+                                   ? "  segment: " + s.segment_status.ToString()
+                                   : std::string();
+  const std::string candidates = s.planned
+                                     ? fmt::format(", {} of {} candidates reachable",
+                                                   s.candidates_reachable, s.candidates_generated)
+                                     : std::string();
+  return fmt::format(
+      "view {}/{}  eye ({:.3f}, {:.3f}, {:.3f})  {} masks{}  [segment {:.0f} ms, integrate {:.0f} "
+      "ms, plan {:.0f} ms{}]{}{}",
+      s.view + 1, s.views_total, eye.x(), eye.y(), eye.z(), s.masks, metrics, s.times.segment_ms,
+      s.times.integrate_ms, s.times.plan_ms, candidates,
+      progress.empty() ? std::string() : fmt::format("  {}", progress), problems);
+}
+
 using nlohmann::json;
 
 namespace {

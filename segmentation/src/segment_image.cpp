@@ -57,6 +57,29 @@ Result<std::string> SegmenterSpecFor(const SegmentOptions& options) {
   return options.backend + "://" + options.models.string();
 }
 
+Result<SegmentResult> SegmentWith(const SegmenterRegistry& segmenters, const std::string& spec,
+                                  const OptionValues& segmenter_options, uint64_t seed,
+                                  const SegmentationRequest& request) {
+  if (request.frame == nullptr) return InvalidArgumentError("SegmentWith: no frame");
+  AVP_ASSIGN_OR_RETURN(const AnyOptions values, segmenters.Options(spec, segmenter_options));
+  AVP_ASSIGN_OR_RETURN(std::unique_ptr<Segmenter> segmenter,
+                       segmenters.Make(spec, values, {.seed = seed}));
+  SegmentResult result;
+  result.spec = spec;
+  result.backend = std::string(segmenter->name());
+  result.width = request.frame->rgb.width();
+  result.height = request.frame->rgb.height();
+  const auto start = std::chrono::steady_clock::now();
+  Result<Segmentation> seg = segmenter->Segment(request);
+  result.total_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  if (!seg.ok()) return seg.status().WithContext(fmt::format("segmenter '{}'", spec));
+  AVP_RETURN_IF_ERROR(seg->ValidateFor(result.width, result.height)
+                          .WithContext(fmt::format("segmenter '{}' returned", spec)));
+  result.segmentation = std::move(seg).value();
+  return result;
+}
+
 Result<SegmentResult> SegmentImageToFolder(const SegmentOptions& options,
                                            const SegmenterRegistry& segmenters) {
   AVP_RETURN_IF_ERROR(options.Validate());
@@ -68,11 +91,6 @@ Result<SegmentResult> SegmentImageToFolder(const SegmentOptions& options,
   }
   AVP_RETURN_IF_ERROR(io::CheckReadableFile(options.image, "image").status());
   AVP_ASSIGN_OR_RETURN(ImageRgb8 image, io::ReadImageFile(options.image));
-  AVP_ASSIGN_OR_RETURN(const AnyOptions segmenter_options,
-                       segmenters.Options(spec, options.segmenter_options));
-  AVP_ASSIGN_OR_RETURN(std::unique_ptr<Segmenter> segmenter,
-                       segmenters.Make(spec, segmenter_options, {.seed = options.seed}));
-
   RgbdFrame frame;
   frame.K = CameraIntrinsics::FromHorizontalFov(image.width(), image.height(), 60.0);
   frame.depth_m = DepthImage(image.width(), image.height(), 0.0f);
@@ -82,20 +100,10 @@ Result<SegmentResult> SegmentImageToFolder(const SegmentOptions& options,
   request.prompt = options.prompt;
   request.score_threshold = options.threshold;
 
-  SegmentResult result;
-  result.spec = spec;
-  result.backend = std::string(segmenter->name());
+  AVP_ASSIGN_OR_RETURN(
+      SegmentResult result,
+      SegmentWith(segmenters, spec, options.segmenter_options, options.seed, request));
   result.image = options.image;
-  result.width = frame.rgb.width();
-  result.height = frame.rgb.height();
-  const auto start = std::chrono::steady_clock::now();
-  Result<Segmentation> seg = segmenter->Segment(request);
-  result.total_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-  if (!seg.ok()) return seg.status().WithContext(fmt::format("segmenter '{}'", spec));
-  AVP_RETURN_IF_ERROR(seg->ValidateFor(result.width, result.height)
-                          .WithContext(fmt::format("segmenter '{}' returned", spec)));
-  result.segmentation = std::move(seg).value();
 
   const std::filesystem::path overlay = options.out_dir / "overlay.png";
   const std::filesystem::path json = options.out_dir / "instances.json";

@@ -9,6 +9,7 @@
 #include <avp/core/error.h>
 #include <avp/core/options.h>
 #include <avp/segmentation/segmenter_registry.h>
+#include <avp/segmentation_service/remote_segmenter.h>
 #include <avp/zsl/register.h>
 #include <avp/zsl/zsl.h>
 #ifdef AVP_WITH_ONNX
@@ -166,6 +167,11 @@ void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry,
 void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry) {
   const Result<BackendSettings> environment = BackendSettingsFromEnvironment();
   Register(registry, environment.ok() ? *environment : BackendSettings{}, environment.status());
+}
+
+void RegisterProgramSegmenters(segmentation::SegmenterRegistry& registry) {
+  segmentation_service::RegisterRemoteSegmenter(registry);
+  RegisterZslSegmenters(registry);
 }
 
 Result<segmentation::SegmenterRegistry> WithZslDefaults(

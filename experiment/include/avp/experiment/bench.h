@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -110,6 +111,10 @@ struct BenchConfig {
   /// When not empty, the bench runs once per condition, each into out_dir/<name>/, and compares
   /// them (RunBenchConditions); the first planner is the one compared with the others.
   std::vector<BenchCondition> conditions;
+  /// Asks the bench to stop (the user's interrupt: Ctrl-C in Python): running episodes end after
+  /// the step under way and are marked failed ("interrupted"), no new one starts, and RunBench
+  /// returns Cancelled. The folder can be resumed (`resume`).
+  std::stop_token stop;
 
   /// Every problem at once: empty or unknown scenarios and planners, empty names, bad
   /// arrangements, missing scene files (naming the entry and the file), repeated seeds, too many
@@ -126,6 +131,14 @@ struct BenchConfig {
 /// it), conditions (a list of {name, description, run, planner_options}, each over the bench's).
 /// Unknown keys are errors naming them and the known ones.
 Result<BenchConfig> LoadBenchConfig(const std::filesystem::path& yaml);
+/// The same from a YAML tree already parsed (`context` names it in errors; scene files of the
+/// list are relative to `base_dir`).
+Result<BenchConfig> ReadBenchConfigYaml(const YAML::Node& root, std::string_view context,
+                                        const std::filesystem::path& base_dir);
+
+/// What a bench without a configuration file runs, for each list it does not give: every
+/// registered scenario, the planners avp-nbv, predefined and reference-nbv, seeds 0..9.
+void FillBenchDefaults(BenchConfig& config, const Registries& registries);
 
 struct BenchSummary {
   std::vector<report::BenchCell> cells;

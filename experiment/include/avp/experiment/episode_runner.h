@@ -95,6 +95,11 @@ std::vector<std::string> WhyNothingFound(const RunConfig& config, const RunResul
 /// and `avp run` ends non-zero, its results saved. OK otherwise (no views: OK).
 Status SegmenterFailedEveryView(const RunResult& result);
 
+/// Unavailable when the episode's segmenter failed it: it ended as segmenter-fault (naming the
+/// reason), or failed at every view (SegmenterFailedEveryView). The run's results are saved, and
+/// `avp run` (and the Python module's avp.run) then fails. OK otherwise.
+Status SegmenterFailure(const RunResult& result);
+
 /// The scene's start joints, or the arm's home when the scene names none.
 Eigen::VectorXd StartJoints(const sim::Scene& scene, const robot::ArmModel& arm);
 

@@ -41,6 +41,9 @@ struct RunFolderOptions {
   std::string record_compression;
   /// The frame the recording's TF and markers are in (`avp live`: its base frame).
   std::string record_base_frame = "igus_rebel_base_link";
+  /// Asks the episode to stop (the user's interrupt: Ctrl-C in Python): it ends as interrupted
+  /// after the step under way, and its results are written as for any early end.
+  std::stop_token stop;
 };
 
 struct RunSummary {

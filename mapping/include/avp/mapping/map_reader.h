@@ -89,5 +89,8 @@ Result<LoadedMap> LoadAnyMapBytes(const std::string& bytes, const std::filesyste
 /// file carries labels (MapSource::has_labels), otherwise all its occupied voxels (a .bt or an
 /// unlabelled tree is a set of ground-truth voxels). `used_labels` (optional) says which.
 VoxelSet GroundTruthVoxels(const LoadedMap& loaded, SemanticClass cls, bool* used_labels = nullptr);
+/// The same for a map in memory and where it came from.
+VoxelSet GroundTruthVoxels(const SemanticMap& map, const MapSource& source, SemanticClass cls,
+                           bool* used_labels = nullptr);
 
 }  // namespace avp::mapping

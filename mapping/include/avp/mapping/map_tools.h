@@ -88,6 +88,10 @@ struct MapExportSummary {
 };
 /// Errors: an unknown format, an output that is the input, the reader's and the writer's.
 Result<MapExportSummary> ExportMapFile(const MapExportOptions& options);
+/// The same for a map in memory (`options.map` is not read; the output may not be
+/// `source.path`, the file the map came from, when it has one).
+Result<MapExportSummary> ExportMap(const SemanticMap& map, const MapSource& source,
+                                   const MapExportOptions& options);
 
 // ---- Compare ------------------------------------------------------------------------------------
 
@@ -124,6 +128,11 @@ struct MapCompareSummary {
 };
 /// Errors: a tolerance out of range, unreadable or corrupt files, a JSON output that is an input.
 Result<MapCompareSummary> CompareMapFiles(const MapCompareOptions& options);
+/// The same for maps in memory (`map`, where it came from, and a ground truth read: options.map,
+/// gt and json_out are not read; the summary's map and gt name options.map and options.gt).
+Result<MapCompareSummary> CompareMaps(const SemanticMap& map, const MapSource& source,
+                                      const SemanticMap& gt, const MapSource& gt_source,
+                                      const MapCompareOptions& options);
 std::string FormatMapCompare(const MapCompareSummary& summary);
 nlohmann::json ToJson(const MapCompareSummary& summary);
 

@@ -82,6 +82,14 @@ struct OctomapBinaryData {
 };
 Result<OctomapBinaryData> OctomapBinaryMessageData(const OccupancyGrid& grid);
 
+/// The file an octomap_msgs/Octomap message's tree stands for: the .bt (binary) or .ot text
+/// header with the node count the tree holds (walked and checked as a file's tree is, bounded by
+/// max_octomap_nodes), then the data: what LoadAnyMapBytes reads (a recording's /avp/map
+/// messages as maps). ParseError naming `what`: an id other than OcTree / ColorOcTree, a
+/// resolution out of range, a broken tree, bytes after it.
+Result<std::string> OctomapMessageFileBytes(std::string_view id, bool binary, double resolution_m,
+                                            std::string_view data, std::string_view what);
+
 /// Writes an OctoMap ColorOcTree (.ot, AbstractOcTree::write): every known voxel with its full
 /// log-odds (a float, as ours), occupied voxels coloured by OctomapVoxelColor, free voxels white
 /// (OctoMap's "no colour"); the tree's sensor parameters are set from the map's sensor model and

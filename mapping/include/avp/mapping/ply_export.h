@@ -3,6 +3,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string_view>
 
@@ -44,6 +45,15 @@ struct PlyExportStats {
   size_t skipped_not_occupied = 0;
   size_t file_bytes = 0;
 };
+
+/// Visits the voxels `voxels` selects, in ExportSemanticPly's order (below), each with its
+/// semantic cell (null for an unlabelled voxel, kOccupied only) and whether it is occupied (always
+/// for kLabelled and kOccupied). Returns how many labelled voxels were left out because they are
+/// not occupied (kLabelled, kOccupied). What the PLY file and avp's Python module
+/// (`avp.Map.voxels`) hold, from this one place.
+size_t ForEachExportedVoxel(
+    const OccupancyGrid& grid, PlyVoxels voxels,
+    const std::function<void(const VoxelKey&, const SemanticCell*, bool occupied)>& fn);
 
 /// Writes the map's voxels chosen by `options.voxels` as a PLY point cloud, one vertex per voxel,
 /// in the grid's deterministic order (labelled voxels: semantic blocks in allocation order;

@@ -162,6 +162,9 @@ enum class EpisodeEnd : uint8_t {
   /// unreachable) or failed EpisodeOptions::max_segment_failures views in a row. The steps so
   /// far are kept; end_reason is the segmenter's last error (naming the service's address).
   kSegmenterFault,
+  /// The planner threw (a bug in it, or a Python planner's exception: docs/python.md): nothing it
+  /// would answer can be trusted. end_reason is the exception's message (a Python traceback).
+  kPlannerFault,
 };
 std::string_view ToString(EpisodeEnd end);
 

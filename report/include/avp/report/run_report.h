@@ -2,6 +2,7 @@
 
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -13,6 +14,12 @@
 #include <avp/report/svg_plot.h>
 
 namespace avp::report {
+
+/// The line `avp run` prints for a step (and the Python module's run): the view, the eye, the
+/// masks, F1 and fruits found (with a ground truth), the stage times, the candidates,
+/// `progress` (e.g. report::FormatProgressTimes) and the capture's or segmenter's problem. No
+/// newline.
+std::string FormatStepLine(const pipeline::StepRecord& step, std::string_view progress = {});
 
 /// One step of record.json: the view, its pose, masks, map counts, metrics, stage times, and the
 /// plan (status, candidates, the best ones) when the step planned.

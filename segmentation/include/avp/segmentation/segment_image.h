@@ -56,6 +56,15 @@ struct SegmentResult {
 /// with a spec that already names a directory.
 Result<std::string> SegmenterSpecFor(const SegmentOptions& options);
 
+/// One frame through the segmenter `spec` of `segmenters` (its registered defaults with
+/// `segmenter_options` over them, seeded with `seed`): the segmentation, checked against the
+/// frame's size, and how long it took (SegmentResult without `image`). What `avp segment` and the
+/// Python module's avp.segment share. Errors name the spec: an unknown one, bad options, the
+/// segmenter's own error, a result of the wrong size.
+Result<SegmentResult> SegmentWith(const SegmenterRegistry& segmenters, const std::string& spec,
+                                  const OptionValues& segmenter_options, uint64_t seed,
+                                  const SegmentationRequest& request);
+
 /// Reads the image, builds an RgbdFrame around it (a nominal 60-degree pinhole camera and zero
 /// depth: the segmenters in scope use only the colour image), runs the segmenter on the prompt,
 /// and writes out_dir/overlay.png (zsl::DrawSegmentationOverlay) and out_dir/instances.json

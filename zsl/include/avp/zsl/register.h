@@ -71,6 +71,12 @@ void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry,
 /// these backends fail.
 void RegisterZslSegmenters(segmentation::SegmenterRegistry& registry);
 
+/// What every avp program (the `avp` command line, the Python module) adds to the built-in
+/// segmenters (experiment::BuiltinRegistries): remote://host:port[/model], the segmentation
+/// service's client (segmentation_service::RegisterRemoteSegmenter), then ywes and lsam with the
+/// environment's defaults (RegisterZslSegmenters above). @throws avp::Error if a name is taken.
+void RegisterProgramSegmenters(segmentation::SegmenterRegistry& registry);
+
 /// A copy of `registry` in which the default options of the ywes and lsam entries have
 /// `overrides` (KEY=VALUE of their tables) applied, validated: how a command's flags set the
 /// defaults of the backends it builds by spec alone (`avp serve segmentation --model-server
