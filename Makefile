@@ -2,7 +2,8 @@
 #   make demo   set up, build the avp program, run the main job (a simulated episode of the
 #               default scenario)
 #   make test   set up, build, run every test
-# Also: make build (everything, tests included), make build-avp (the program only),
+# Also: make python (the Python package: `.venv/bin/python -c "import avp"`, docs/python.md),
+# make build (everything, tests included), make build-avp (the program only),
 # make bench (benchmark programs, one JSON file each under bench-results/),
 # make format, make fuzz, make sanitize (docs/limits.md, "Fuzzing and sanitizers").
 
@@ -31,7 +32,7 @@ SAN_ALL_TESTS ?= avp_core_test avp_io_test avp_ros_msg_test avp_robot_test avp_s
   avp_episode_end_to_end_test avp_remote_segmenter_e2e_test avp_extending_examples_test \
   avp_scenario_start_pose_test
 
-.PHONY: all setup configure build build-avp test demo bench format check-format clean \
+.PHONY: all setup configure build build-avp python test demo bench format check-format clean \
         sanitize-configure fuzz-build fuzz-test sanitize-test fuzz sanitize
 
 all: build
@@ -86,6 +87,14 @@ sanitize: sanitize-configure
 	@cmake --build $(SAN_DIR) -j $(JOBS) --target avp_fuzzers $(SAN_ALL_TESTS)
 	@FUZZ_JOBS=$(JOBS) ./fuzz/run_sanitized_tests.sh $(SAN_DIR) $(SAN_ALL_TESTS)
 	@FUZZ_JOBS=$(JOBS) ./fuzz/run_fuzzers.sh $(SAN_DIR) $(FUZZ_TEST_SECONDS)
+
+# The Python package (python/, docs/python.md): built into $(BUILD_DIR)/python and put on the path
+# of the virtual environment $(PYTHON_VENV) (Debian's python3, its numpy and matplotlib visible:
+# --system-site-packages), so that `$(PYTHON_VENV)/bin/python -c "import avp"` works, offline.
+PYTHON_VENV ?= .venv
+python: configure
+	@cmake --build $(BUILD_DIR) -j $(JOBS) --target avp_python
+	@./scripts/python-venv $(PYTHON_VENV) $(BUILD_DIR)/python
 
 demo: build-avp
 	@./scripts/demo $(BUILD_DIR) $(DEMO_OUT)

@@ -58,6 +58,8 @@ SKIP = [
     (r"\b(ywes|lsam)\b|AVP_ZSL_MODEL", "needs exported model weights"),
     (r"remote://|grpc://|\bavp serve\b", "a network service (tests/remote_segmenter_e2e_test)"),
     (r"^xdg-open\b", "opens a browser"),
+    (r"^(\.venv/bin/python|python3?|source \.venv|export PYTHONPATH)\b",
+     "Python: the package's own tests run it (python/tests, ctest avp_python_test)"),
     (r"^python\b.*export_", "exports models with the upstream repository"),
     (r"\brobot\.mcap\b|\breplay bag/", "needs a robot's rosbag2 recording"),
 ]
