@@ -44,6 +44,7 @@ planning::PlanningRequest ContractRequest(const ContractWorld& w) {
   r.view_index = 1;
   r.views_total = 8;
   r.fused_views = {w.X0};
+  r.prompt = "tomato";
   return r;
 }
 

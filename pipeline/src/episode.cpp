@@ -118,6 +118,7 @@ planning::PlanningRequest PlanningRequestAfter(const NextViewContext& next, int 
   req.views_total = next.options.views;
   req.fused_views = fused;
   req.target_class = next.options.target_class;
+  req.prompt = next.options.prompt;
   if (next.c.motion != nullptr) {
     req.collision = &next.c.motion->checker();
     req.collision_step_back_m = next.c.motion->options().step_back_m;

@@ -283,8 +283,7 @@ def bench(out: PathLike = "out/bench", config: Config = None, *,
     once (0: one per core). Progress goes to stderr as the CLI's. Ctrl-C stops the bench (the
     episodes under way are marked failed) and raises KeyboardInterrupt; resume=True runs the
     rest."""
-    file, text = _config_args(config, {}) if not isinstance(config, Mapping) else (
-        None, json.dumps(config))
+    file, text = _config_args(config, {})
     if isinstance(seeds, int) and not isinstance(seeds, bool):
         if seeds < 1:
             raise ValueError(f"seeds ({seeds}): a count must be at least 1")

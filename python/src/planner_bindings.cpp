@@ -432,6 +432,9 @@ void BindRequest(py::module_& m) {
       .def_property_readonly(
           "target_class",
           [](const RequestView& v) { return std::string(ToString(v.request().target_class)); })
+      .def_property_readonly(
+          "prompt", [](const RequestView& v) { return v.request().prompt; },
+          "The episode's text prompt ('tomato').")
       .def("plan_with", &PlanWith, py::arg("planner"), py::arg("options") = py::dict(),
            "A built-in planner (its registered defaults, `options` over them) run on this very "
            "request and random stream: its avp.Plan. Returned as it is, it makes the episode the "

@@ -30,6 +30,8 @@ class NearestOfAvpNbv(avp.ViewPlanner):
         m = request.map
         assert m.voxels("occupied")["x"].size == m.occupied_voxels
         assert request.fused_views.shape == (request.view_index, 4, 4)
+        assert request.prompt == "tomato" and request.target_class == "fruit"
+        assert request.roi.shape == (2, 3) and request.joints.shape == (6,)
         ranked = sorted(request.plan_with("avp-nbv").ranked, key=lambda c: c.cost)
         return [c.pose for c in ranked[:5]]
 

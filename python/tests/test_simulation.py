@@ -2,6 +2,10 @@
 arm's kinematics, and bad arrays refused by name."""
 
 import json
+import os
+import signal
+import subprocess
+import time
 
 import numpy as np
 import pytest
@@ -170,3 +174,53 @@ def test_segmentation_errors_name_the_value():
         avp.segment(np.zeros((4, 4, 3), dtype=np.uint8), "tomato", backend="nope")
     with pytest.raises(ValueError, match="prompt"):
         avp.segment(np.zeros((4, 4, 3), dtype=np.uint8), "", backend="color")
+
+
+def test_a_zero_shot_backend_equals_avp_segment(avp_binary, tmp_root):
+    """ywes on the stub models (zsl/test/stubs): the same instances as `avp segment`."""
+    stubs = os.environ.get("AVP_ZSL_STUBS")
+    if not stubs:
+        pytest.skip("no ONNX Runtime in this build: AVP_ZSL_STUBS is not set (ctest sets it)")
+    image = np.empty((768, 1024, 3), dtype=np.uint8)
+    image[:] = (200, 50, 10)
+    ppm = tmp_root / "stub-image.ppm"
+    ppm.write_bytes(b"P6\n1024 768\n255\n" + image.tobytes())
+    out = tmp_root / "cli-ywes"
+    run_cli(avp_binary, "segment", "--image", ppm, "--prompt", "a, b", "--backend",
+            f"ywes://{stubs}/ywes", "--out", out)
+    with open(out / "instances.json") as f:
+        cli = json.load(f)["instances"]
+    py = avp.segment(image, "a, b", backend=f"ywes://{stubs}/ywes")
+    assert len(cli) == 2 and py["labels"] == [i["label"] for i in cli]
+    assert [int(m.sum()) for m in py["masks"]] == [i["area"] for i in cli]
+    np.testing.assert_allclose(py["boxes"], [i["box"] for i in cli], atol=1e-3)
+    np.testing.assert_allclose(py["scores"], [i["score"] for i in cli], rtol=1e-6)
+
+
+def test_a_remote_segmenter_equals_the_same_segmenter_here(avp_binary, tmp_root):
+    """`avp serve segmentation` on loopback: remote://.../color gives the local color masks."""
+    port_file = tmp_root / "serve.port"
+    port_file.unlink(missing_ok=True)
+    server = subprocess.Popen([avp_binary, "serve", "segmentation", "--port", "0", "--backend",
+                               "color", "--port-file", str(port_file)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while not port_file.exists() and time.monotonic() < deadline and server.poll() is None:
+            time.sleep(0.05)
+        assert port_file.exists(), server.stderr.read() if server.poll() is not None else "no port"
+        port = int(port_file.read_text())
+        # Two red disks on green leaves: what the colour segmenter finds.
+        yy, xx = np.mgrid[0:240, 0:320]
+        image = np.empty((240, 320, 3), dtype=np.uint8)
+        image[:] = (40, 140, 40)
+        for cx, cy in ((80, 120), (230, 100)):
+            image[(xx - cx) ** 2 + (yy - cy) ** 2 < 30 ** 2] = (200, 30, 20)
+        remote = avp.segment(image, "tomato", backend=f"remote://127.0.0.1:{port}/color")
+        local = avp.segment(image, "tomato", backend="color")
+        assert len(local["scores"]) > 0
+        np.testing.assert_array_equal(remote["masks"], local["masks"])
+        np.testing.assert_array_equal(remote["scores"], local["scores"])
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.wait(timeout=30)

@@ -66,6 +66,8 @@ struct PlanningRequest {
   std::vector<RigidTransform> fused_views;
   /// The class the prompt names.
   SemanticClass target_class = SemanticClass::kFruit;
+  /// The text prompt itself ("tomato"; planners written in Python see it, docs/python.md).
+  std::string prompt;
   /// The world the arm may not touch (the map's obstacles, declared objects, itself), or null:
   /// then IK is the only filter. Candidates whose IK joints collide are dropped before scoring.
   const motion::CollisionChecker* collision = nullptr;
