@@ -218,11 +218,17 @@ void Ros2RgbdSource::OnFruits(ros::msg::MarkerArray&& msg) {
   cv_.notify_all();
 }
 
-std::optional<std::pair<size_t, size_t>> Ros2RgbdSource::FindPair(int64_t not_before_ns) const {
+std::optional<std::pair<size_t, size_t>> Ros2RgbdSource::FindPair(int64_t not_before_ns,
+                                                                  bool with_labels) const {
   const int64_t skew = static_cast<int64_t>(options_.max_pair_skew_ms * 1e6);
+  const auto has_stamp = [](const std::deque<ros::msg::Image>& q, int64_t t) {
+    return std::any_of(q.begin(), q.end(), [&](const auto& m) { return StampNs(m.header) == t; });
+  };
+  if (with_labels && !have_fruits_) return std::nullopt;
   for (size_t i = 0; i < color_.size(); ++i) {
     const int64_t tc = StampNs(color_[i].header);
     if (tc < not_before_ns) continue;
+    if (with_labels && !(has_stamp(instance_, tc) && has_stamp(class_, tc))) continue;
     for (size_t j = 0; j < depth_.size(); ++j) {
       const int64_t td = StampNs(depth_[j].header);
       if (std::abs(td - tc) <= skew) return std::pair{i, j};
@@ -237,19 +243,12 @@ Result<robot::Observation> Ros2RgbdSource::Capture(const RigidTransform& X_WC, i
   std::unique_lock lock(mutex_);
   std::optional<std::pair<size_t, size_t>> pair;
   const bool labels = !options_.labels_prefix.empty();
-  auto ready = [&] {
-    pair = FindPair(not_before);
-    if (!pair) return false;
-    if (!labels) return true;
-    const int64_t t = StampNs(color_[pair->first].header);
-    const auto at = [&](const std::deque<ros::msg::Image>& q) {
-      return std::any_of(q.begin(), q.end(), [&](const auto& m) { return StampNs(m.header) == t; });
-    };
-    return have_fruits_ && at(instance_) && at(class_);
-  };
-  cv_.wait_until(lock, stop_, deadline, ready);
+  cv_.wait_until(lock, stop_, deadline, [&] {
+    pair = FindPair(not_before, labels);
+    return pair.has_value();
+  });
   if (stop_.stop_requested()) return CancelledError("stopped while waiting for a camera frame");
-  if (!pair) {
+  if (!pair && !FindPair(not_before, false)) {
     const auto newest = [](const std::deque<ros::msg::Image>& q) {
       return q.empty() ? std::string("none") : ros::msg::FormatStamp(StampNs(q.back().header));
     };
@@ -261,7 +260,7 @@ Result<robot::Observation> Ros2RgbdSource::Capture(const RigidTransform& X_WC, i
         newest(depth_), options_.max_pair_skew_ms,
         counters_.last_problem.empty() ? "" : "; last problem: ", counters_.last_problem));
   }
-  if (!ready()) {
+  if (!pair) {
     return DeadlineExceededError(fmt::format(
         "a frame pair arrived but not its simulator labels on {}/instance, /class and /fruits "
         "within {} s",

@@ -89,8 +89,10 @@ class Ros2RgbdSource final : public robot::RgbdSource {
   void OnLabel(ros::msg::Image&& msg, bool is_instance);
   void OnCameraInfo(ros::msg::CameraInfo&& msg);
   void OnFruits(ros::msg::MarkerArray&& msg);
-  /// The first pair stamped at or after `not_before_ns`; call with mutex_ held.
-  std::optional<std::pair<size_t, size_t>> FindPair(int64_t not_before_ns) const;
+  /// The first pair stamped at or after `not_before_ns`, and with `with_labels` the first whose
+  /// colour stamp also has both simulator label images (a frame whose labels were dropped is
+  /// passed over, not waited for); call with mutex_ held.
+  std::optional<std::pair<size_t, size_t>> FindPair(int64_t not_before_ns, bool with_labels) const;
   Result<robot::Observation> Assemble(const ros::msg::Image& color, const ros::msg::Image& depth,
                                       std::unique_lock<std::mutex>& lock);
 
