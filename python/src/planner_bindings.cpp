@@ -462,9 +462,13 @@ std::vector<std::string> CheckPlanner(const std::string& name) {
   }
   std::unique_ptr<planning::ViewPlanner> planner =
       Unwrap(ProgramRegistries().planners.Make(name, entry->options, planning::PlannerContext{}));
+  // Built once; its error raised with the GIL held (ThrowIfError may set a Python error).
   static const experiment::ContractWorld* world = [] {
-    py::gil_scoped_release release;
-    return Unwrap(experiment::MakeContractWorld()).release();
+    Result<std::unique_ptr<experiment::ContractWorld>> made = [] {
+      py::gil_scoped_release release;
+      return experiment::MakeContractWorld();
+    }();
+    return Unwrap(std::move(made)).release();
   }();
   py::gil_scoped_release release;
   return experiment::PlannerContractViolations(*planner, *world);
