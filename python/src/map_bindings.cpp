@@ -112,6 +112,13 @@ VoxelColumns CollectVoxels(const mapping::OccupancyGrid& grid, const std::string
   return out;
 }
 
+/// CollectVoxels of a map with the GIL released (its errors raised once it is held again).
+VoxelColumns CollectVoxelsReleased(const PyMap& m, const std::string& which) {
+  const mapping::OccupancyGrid& grid = m.map().grid();
+  py::gil_scoped_release release;
+  return CollectVoxels(grid, which);
+}
+
 SemanticClass ClassFromName(const std::string& name) {
   const std::optional<SemanticClass> c = SemanticClassFromString(name);
   if (!c) {
@@ -264,11 +271,7 @@ void BindMaps(py::module_& m) {
       .def(
           "voxels",
           [](const PyMap& l, const std::string& which) {
-            VoxelColumns columns = [&] {
-              py::gil_scoped_release release;
-              return CollectVoxels(l.map().grid(), which);
-            }();
-            return std::move(columns).ToDict();
+            return CollectVoxelsReleased(l, which).ToDict();
           },
           py::arg("which") = "occupied",
           "The voxels `which` names, as columns (a dict of 1-D arrays, pandas.DataFrame(...) "
@@ -280,10 +283,7 @@ void BindMaps(py::module_& m) {
       .def(
           "centers",
           [](const PyMap& l, const std::string& which) {
-            VoxelColumns c = [&] {
-              py::gil_scoped_release release;
-              return CollectVoxels(l.map().grid(), which);
-            }();
+            const VoxelColumns c = CollectVoxelsReleased(l, which);
             std::vector<double> xyz;
             xyz.reserve(c.x.size() * 3);
             for (size_t n = 0; n < c.x.size(); ++n) xyz.insert(xyz.end(), {c.x[n], c.y[n], c.z[n]});

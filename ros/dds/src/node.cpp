@@ -59,10 +59,10 @@ bool CycloneUriSet() {
 
 // 127.0.0.1 only; loopback has no multicast, so discovery goes by unicast to the ports of
 // participant indexes 0..MaxAutoParticipantIndex on 127.0.0.1 (shared/design/ros2-interop.md §5).
-// The receive buffer asks for 8 MB (no minimum: the kernel caps it at net.core.rmem_max): with
+// The receive buffer asks for 8 MB (no minimum: the kernel caps it at net.core.rmem_max). With
 // the default, best-effort images of 0.9-1.2 MB lost fragments and `avp live` got about half the
-// simulator's colour frames (12-15 colour against 22-52 depth in a 4-view episode; one capture
-// waited 8.9 s). With it: every frame (33 of 33), captures about 0.1 s.
+// colour frames of the simulator (12-15 colour against 22-52 depth in a 4-view episode; one
+// capture waited 8.9 s). With it: every frame (33 of 33), captures about 0.1 s.
 constexpr const char* kLoopbackConfig =
     "<General><Interfaces><NetworkInterface address=\"127.0.0.1\"/></Interfaces>"
     "<AllowMulticast>false</AllowMulticast></General>"
