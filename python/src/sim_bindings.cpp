@@ -18,6 +18,7 @@
 #include <avp/core/segmentation.h>
 #include <avp/core/semantic_class.h>
 #include <avp/core/simulator_labels.h>
+#include <avp/io/image_limits.h>
 #include <avp/robot/arm_model.h>
 #include <avp/segmentation/segment_image.h>
 #include <avp/sim/rgbd_renderer.h>
@@ -258,6 +259,9 @@ template <typename Image>
 Image ImageFrom(const py::handle& value, std::string_view what, const py::dtype& dtype,
                 std::vector<py::ssize_t> shape) {
   const py::array a = CheckedArray(value, what, dtype, shape);
+  // The image limits every reader of images keeps (io/image_limits.h), before anything is copied.
+  ThrowIfError(io::CheckImageSize(static_cast<uint64_t>(a.shape(1)),
+                                  static_cast<uint64_t>(a.shape(0)), what));
   Image image(static_cast<int>(a.shape(1)), static_cast<int>(a.shape(0)));
   const auto* d = static_cast<const typename Image::value_type*>(a.data());
   std::copy(d, d + image.data().size(), image.data().begin());
