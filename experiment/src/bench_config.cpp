@@ -479,7 +479,7 @@ Result<BenchConfig> ReadBenchConfigYaml(const YAML::Node& root, std::string_view
 }
 
 void FillBenchDefaults(BenchConfig& config, const Registries& registries) {
-  if (config.scenarios.empty()) config.scenarios = registries.scenarios.Names();
+  if (config.scenarios.empty()) config.scenarios = registries.scenarios.EvaluationNames();
   if (config.planners.empty()) config.planners = {"avp-nbv", "predefined", "reference-nbv"};
   if (config.seeds.empty()) {
     for (uint64_t i = 0; i < 10; ++i) config.seeds.push_back(i);

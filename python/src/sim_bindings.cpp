@@ -394,11 +394,13 @@ void BindSimulation(py::module_& m) {
           py::dict d;
           d["name"] = e.name;
           d["description"] = e.description;
+          d["training_only"] = e.training_only;
           out.append(d);
         }
         return out;
       },
-      "The built-in scenarios: name and description, as `avp scenes` lists them.");
+      "The built-in scenarios: name, description and training_only (the learned gain's "
+      "training family, never an evaluation scene), as `avp scenes` lists them.");
   m.attr("DEFAULT_SCENARIO") = std::string(sim::DefaultScenarioName());
   py::class_<PyScene, std::shared_ptr<PyScene>>(
       m, "Scene",

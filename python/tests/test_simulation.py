@@ -27,6 +27,9 @@ def arm():
 def test_scenarios_and_scenes():
     names = [s["name"] for s in avp.scenarios()]
     assert SCENARIO in names and avp.DEFAULT_SCENARIO in names
+    # The learned gain's training family is there, marked as such (never an evaluation scene).
+    training = [s["name"] for s in avp.scenarios() if s["training_only"]]
+    assert training == ["generic-training"]
     a, b = avp.Scene(SCENARIO, seed=2), avp.Scene(SCENARIO, seed=2)
     fa, fb = a.fruits(), b.fruits()
     assert len(fa["instance"]) > 0

@@ -11,6 +11,7 @@
 #include <avp/core/rng.h>
 #include <avp/core/text.h>
 #include <avp/sim/espalier.h>
+#include <avp/sim/generic_plant.h>
 #include <avp/sim/mesh_builder.h>
 #include <avp/sim/scenario.h>
 #include <avp/sim/scene_file.h>
@@ -190,6 +191,17 @@ std::vector<ScenarioEntry> BuiltinEntries() {
          SetStart(s, kEspalierUnorientedYawDeg);
          return s;
        })},
+      {std::string(kGenericTrainingScenario),
+       "TRAINING ONLY: generic plants (single, row or wall), random branches, leaves and fruit",
+       Finished([](uint64_t seed) {
+         Scene s;
+         Rng rng = PlantRng("generic-training", seed);
+         const GenericPlantDraw draw = DrawGenericLayout(rng);
+         SetStart(s, draw.start_yaw_deg);
+         AddGenericPlants(draw, s.X_WC_start, rng, s);
+         return s;
+       }),
+       /*training_only=*/true},
   };
   return entries;
 }
@@ -203,6 +215,14 @@ Result<Scene> ScenarioRegistry::Make(std::string_view name, uint64_t seed) const
   scene.description = e->description;
   scene.seed = seed;
   return scene;
+}
+
+std::vector<std::string> ScenarioRegistry::EvaluationNames() const {
+  std::vector<std::string> names;
+  for (const ScenarioEntry& e : entries()) {
+    if (!e.training_only) names.push_back(e.name);
+  }
+  return names;
 }
 
 void RegisterBuiltinScenarios(ScenarioRegistry& registry) { AddAll(registry, BuiltinEntries()); }

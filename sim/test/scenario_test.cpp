@@ -62,10 +62,10 @@ RigidTransform BackView(const Scene& scene) {
 TEST(ScenarioTest, ListIsStableAndStartsWithTheDefault) {
   const ScenarioRegistry registry = BuiltinScenarios();
   const std::vector<ScenarioEntry>& list = registry.entries();
-  const std::vector<std::string> expected = {"tomato-multiple-clusters", "tomato-full-occlusion",
-                                             "tomato-single-cluster",    "tomato-unoriented-start",
-                                             "espalier-multiple-fruits", "espalier-full-occlusion",
-                                             "espalier-unoriented-start"};
+  const std::vector<std::string> expected = {"tomato-multiple-clusters",  "tomato-full-occlusion",
+                                             "tomato-single-cluster",     "tomato-unoriented-start",
+                                             "espalier-multiple-fruits",  "espalier-full-occlusion",
+                                             "espalier-unoriented-start", "generic-training"};
   ASSERT_EQ(list.size(), expected.size());
   for (size_t i = 0; i < list.size(); ++i) {
     EXPECT_EQ(list[i].name, expected[i]);
@@ -74,6 +74,10 @@ TEST(ScenarioTest, ListIsStableAndStartsWithTheDefault) {
     EXPECT_LT(list[i].description.size(), 120u) << list[i].name;
   }
   EXPECT_EQ(DefaultScenarioName(), list.front().name);
+  // The training family is registered but never evaluated by default.
+  std::vector<std::string> evaluation(expected.begin(), expected.end() - 1);
+  EXPECT_EQ(registry.EvaluationNames(), evaluation);
+  EXPECT_TRUE(registry.Find(kGenericTrainingScenario)->training_only);
   ScenarioRegistry again = BuiltinScenarios();
   EXPECT_THROW(RegisterBuiltinScenarios(again), Error);
 }
@@ -172,7 +176,8 @@ TEST(ScenarioTest, EveryScenarioBuildsValidScenesForSeveralSeeds) {
       // The plant's bounds exclude the 4 x 4 m ground and contain every fruit.
       ASSERT_FALSE(s.plant_bounds.IsEmpty());
       EXPECT_LT(s.plant_bounds.size().x(), 1.5);
-      EXPECT_GT(s.plant_bounds.max().z(), 1.0);
+      // The training family draws plants from 0.5 m up (generic_plant.h).
+      EXPECT_GT(s.plant_bounds.max().z(), info.training_only ? 0.45 : 1.0);
       for (const FruitTruth& f : s.Fruits()) EXPECT_TRUE(s.plant_bounds.Contains(f.center_W));
       // Start: 6 URDF joints, camera consistent with the joint-1 yaw.
       ASSERT_EQ(s.start_joints_rad.size(), 6u);

@@ -25,6 +25,9 @@ struct ScenarioEntry {
   /// The scene for `seed` (deterministic: the same seed, the same scene on any machine). Make()
   /// sets its name, description and seed and finishes it (triangle counts, plant bounds).
   std::function<Result<Scene>(uint64_t seed)> build;
+  /// A family for training learned planners only: left out of the scenarios a bench runs when it
+  /// names none (ScenarioRegistry::EvaluationNames), so that no evaluation sees it by default.
+  bool training_only = false;
 
   bool Matches(std::string_view spec) const { return name == spec; }
   std::string DisplayName() const { return name; }
@@ -39,9 +42,18 @@ class ScenarioRegistry : public NamedRegistry<ScenarioEntry> {
   /// The scene of `name` for `seed`. Errors: NotFound naming the unknown scenario and listing
   /// the known ones; the builder's errors.
   Result<Scene> Make(std::string_view name, uint64_t seed) const;
+  /// The names of the scenarios that are not training_only, in registration order: the set a
+  /// bench runs when it names none.
+  std::vector<std::string> EvaluationNames() const;
 };
 
-/// Registers the built-in scenarios (the paper's four tomato experiments and three espaliers).
+/// The built-in scenario of the training plant family (sim/generic_plant.h): registered so that
+/// `avp run`, `avp bench` and `avp scene` can show and use it, but for training learned planners
+/// only; the tomato and espalier scenarios are the test set (docs/planning.md, "A learned gain").
+inline constexpr std::string_view kGenericTrainingScenario = "generic-training";
+
+/// Registers the built-in scenarios (the paper's four tomato experiments, three espaliers and the
+/// training family, kGenericTrainingScenario).
 /// @throws avp::Error if a name is already taken.
 void RegisterBuiltinScenarios(ScenarioRegistry& registry);
 /// A registry with RegisterBuiltinScenarios only.
