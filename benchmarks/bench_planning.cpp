@@ -209,6 +209,58 @@ void BM_AvpNbvPlan(benchmark::State& state) {
 }
 BENCHMARK(BM_AvpNbvPlan)->Apply(PlanStepRuns);
 
+/// One avp-nbv step with `options`, timed, beside the default step in the same run
+/// (hand_written_ms, and ratio = the variant's time / the default's).
+void PlanVariant(benchmark::State& state, const AvpNbvOptions& options) {
+  const Fixture& f = GetFixture();
+  const ThreadScope threads(BenchThreads(state));
+  AvpNbvPlanner planner(options);
+  AvpNbvPlanner hand_written(AvpNbvOptions{});
+  PlanResult result;
+  double hand_ms = 0.0;
+  for (auto _ : state) {
+    Rng rng = f.rng;
+    result = planner.Plan(f.request, rng);
+    benchmark::DoNotOptimize(result.ranked.data());
+    state.PauseTiming();
+    Rng hand_rng = f.rng;
+    const auto t0 = std::chrono::steady_clock::now();
+    benchmark::DoNotOptimize(hand_written.Plan(f.request, hand_rng).ranked.data());
+    hand_ms += Ms(std::chrono::steady_clock::now() - t0);
+    state.ResumeTiming();
+  }
+  if (!result.status.ok() || !result.warnings.empty()) {
+    state.SkipWithError(result.status.ok() ? result.warnings.front().c_str()
+                                           : result.status.ToString().c_str());
+    return;
+  }
+  hand_ms /= static_cast<double>(state.iterations());
+  state.counters["threads"] = static_cast<double>(BenchThreads(state));
+  state.counters["reachable"] = static_cast<double>(result.reachable);
+  state.counters["hand_written_ms"] = hand_ms;
+  // ratio = (time per iteration) / hand_ms: the rate hand_ms / time, inverted.
+  state.counters["ratio"] = benchmark::Counter(
+      hand_ms * 1e-3, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+}
+
+// The step ranked by the learned gain (configs/models/learned.onnx: the features of every
+// reachable candidate, then the model; docs/planning.md "A learned gain"). Budget: <= 0.5 s on
+// 2 cores.
+void BM_AvpNbvPlanLearned(benchmark::State& state) {
+  AvpNbvOptions o;
+  o.gain_model = "learned";
+  PlanVariant(state, o);
+}
+BENCHMARK(BM_AvpNbvPlanLearned)->Apply(PlanStepRuns);
+
+// The step with the non-myopic choice (two views looked ahead) on the hand-written gain.
+void BM_AvpNbvPlanLookahead(benchmark::State& state) {
+  AvpNbvOptions o;
+  o.lookahead_views = 2;
+  PlanVariant(state, o);
+}
+BENCHMARK(BM_AvpNbvPlanLookahead)->Apply(PlanStepRuns);
+
 // The same step with every candidate scored with every fine ray (coarse_ray_stride_px = 0), the
 // pass that coarse to fine replaces; same_choice = 1 when both choose the same view.
 void BM_AvpNbvPlanEveryRay(benchmark::State& state) {

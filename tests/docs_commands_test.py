@@ -3,8 +3,9 @@
 
 Every shell command in a fenced code block of README.md and docs/*.md is found and classified:
 
-  RUN   an avp command (or jq, scripts/calibrate-gain, a for loop of avp commands) that needs no
-        model, GPU, robot, ROS 2 peer, server or cluster: it is run, and must exit with 0 (or the
+  RUN   an avp command (or jq, scripts/calibrate-gain, scripts/learn-gain, a for loop of avp
+        commands) that needs no model, GPU, robot, ROS 2 peer, server or cluster: it is run, and
+        must exit with 0 (or the
         code EXPECT_RC gives), and print the figures FIGURES quotes for it;
   SKIP  a command matched by the SKIP table below, which says why it cannot run here;
   FAIL  a command that is neither: every new command in the docs must be classified.
@@ -65,7 +66,7 @@ SKIP = [
 ]
 
 # ---- What runs: an avp command, or these helpers. ----
-RUNNABLE = r"^(avp\b|jq\b|scripts/calibrate-gain\b|for .*\bdo\b[\s\S]*\bavp\b)"
+RUNNABLE = r"^(avp\b|jq\b|scripts/calibrate-gain\b|scripts/learn-gain\b|for .*\bdo\b[\s\S]*\bavp\b)"
 
 # ---- Commands run changed: shrunk (too long for a test), or kept in the scratch folder: (doc or
 # "*", regex, ("append", args) | ("sub", re, repl) | ("keep",), why); the first match applies. A
@@ -107,6 +108,8 @@ OVERRIDES = [
      "plant.ot was made earlier for the 'map info plant.ot' shown before it"),
     ("own-plant.md", r"^avp bench --config own\.yaml", ("append", SEEDS1), "120 episodes"),
     ("own-plant.md", r"^avp bench --scenarios", ("sub", r"--seeds 10", SEEDS1), "120 episodes"),
+    ("planning.md", r"gain-training\.yaml", ("append", "--seeds 1 --views 3 " + SMALL),
+     "80 training episodes"),
     ("planning.md", r"^avp bench",
      ("sub", r"--seeds 5", "--seeds 1 --views 3 --scenarios tomato-single-cluster " + SMALL),
      "35 episodes with the regret probe"),

@@ -10,6 +10,7 @@
 #include <avp/eval/statistics.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/planning/gain_grid.h>
+#include <avp/planning/view_features.h>
 
 namespace avp::eval {
 
@@ -161,6 +162,20 @@ planning::PlanResult OracleNbvPlanner::Plan(const planning::PlanningRequest& req
   return planning::RankCandidates(std::move(candidates), generated, name());
 }
 
+namespace {
+
+/// The feature rows of `candidates` on a gain grid with the default options.
+Result<std::vector<float>> FeatureRows(const planning::PlanningRequest& request,
+                                       const std::vector<planning::ViewCandidate>& candidates) {
+  AVP_ASSIGN_OR_RETURN(const planning::GainGrid grid,
+                       planning::GainGrid::Build(*request.map, request.target_class, request.roi));
+  AVP_ASSIGN_OR_RETURN(const planning::ViewFeatureExtractor extractor,
+                       planning::ViewFeatureExtractor::Build(request, grid));
+  return extractor.Compute(candidates);
+}
+
+}  // namespace
+
 planning::PlanResult RegretProbe::Plan(const planning::PlanningRequest& request, Rng& rng) {
   planning::PlanResult result = inner_.Plan(request, rng);
   const int call = calls_++;
@@ -171,6 +186,17 @@ planning::PlanResult RegretProbe::Plan(const planning::PlanningRequest& request,
         oracle_.TrueGain(*request.map, request.target_class, request.K, result.ranked[i].X_WC));
   });
   for (size_t i = 0; i < result.ranked.size(); ++i) predicted[i] = result.ranked[i].gain;
+  std::vector<float> features;
+  std::string features_error;
+  if (record_features_) {
+    Result<std::vector<float>> rows = FeatureRows(request, result.ranked);
+    if (rows.ok()) {
+      features = std::move(*rows);
+    } else {
+      features_error = rows.status().ToString();
+    }
+  }
+  const size_t width = planning::ViewFeatureCount();
   StepRegret r;
   r.step = call;
   r.candidates = result.ranked.size();
@@ -181,17 +207,24 @@ planning::PlanResult RegretProbe::Plan(const planning::PlanningRequest& request,
       1 + static_cast<size_t>(std::count_if(truth.begin(), truth.end(),
                                             [&](double t) { return t > r.chosen_true_gain; }));
   r.rank_correlation = SpearmanRankCorrelation(predicted, truth);
+  r.features_error = std::move(features_error);
   r.scored.reserve(result.ranked.size());
   for (size_t i = 0; i < result.ranked.size(); ++i) {
     const planning::ViewCandidate& c = result.ranked[i];
-    r.scored.push_back({.eye = c.X_WC.translation(),
-                        .forward = c.X_WC.rotation().col(2),
-                        .gain = c.gain,
-                        .utility = c.utility,
-                        .cost = c.cost,
-                        .true_gain = truth[i],
-                        .source = c.source,
-                        .gain_terms = c.gain_terms});
+    r.scored.push_back(
+        {.eye = c.X_WC.translation(),
+         .forward = c.X_WC.rotation().col(2),
+         .gain = c.gain,
+         .utility = c.utility,
+         .cost = c.cost,
+         .true_gain = truth[i],
+         .source = c.source,
+         .gain_terms = c.gain_terms,
+         .features =
+             features.empty()
+                 ? std::vector<float>()
+                 : std::vector<float>(features.begin() + static_cast<ptrdiff_t>(i * width),
+                                      features.begin() + static_cast<ptrdiff_t>((i + 1) * width))});
   }
   steps_.push_back(std::move(r));
   return result;

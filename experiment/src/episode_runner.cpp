@@ -170,7 +170,8 @@ Result<EpisodeParts> BuildParts(const CheckedRunConfig& checked, const EpisodeTr
     }
     e.probe_oracle =
         std::make_unique<eval::OracleNbvPlanner>(*truth.scene, *truth.gt, eval::OracleNbvOptions{});
-    e.probe = std::make_unique<eval::RegretProbe>(*e.planner, *e.probe_oracle);
+    e.probe = std::make_unique<eval::RegretProbe>(*e.planner, *e.probe_oracle,
+                                                  config.oracle_regret_features);
   }
   return e;
 }

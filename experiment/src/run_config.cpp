@@ -111,6 +111,8 @@ const OptionTable<RunConfig>& RunConfigTable() {
             "ground truth from an OctoMap .bt instead of the observable fruit surface");
     t->Flag("oracle_regret", &R::oracle_regret,
             "measure each plan step's regret with the truth (record.json oracle_regret)");
+    t->Flag("oracle_regret_features", &R::oracle_regret_features,
+            "with oracle_regret: each scored candidate's feature row too (learned gain data)");
     t->Flag("oracle_motion", &R::oracle_motion,
             "simulation, with motion.enabled: plan motion against the true scene instead of the "
             "map (collision-free motion's ceiling)");
@@ -122,6 +124,9 @@ const OptionTable<RunConfig>& RunConfigTable() {
     t->Nested("replay", &R::replay, ReplayConfigTable());
     t->Nested("motion", &R::motion, motion::MotionOptionTable());
     t->AddRule([](const R& c, std::vector<std::string>& errors) {
+      if (c.oracle_regret_features && !c.oracle_regret) {
+        errors.push_back("oracle_regret_features needs oracle_regret");
+      }
       if (!c.scenario.empty() && !c.scene_file.empty()) {
         errors.push_back(fmt::format("give a scenario ('{}') or a scene file ('{}'), not both",
                                      c.scenario, c.scene_file.string()));

@@ -275,6 +275,7 @@ bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidT
   step.candidates_generated = plan.generated;
   step.candidates_reachable = plan.reachable;
   step.candidates_in_collision = plan.in_collision;
+  step.plan_warnings = plan.warnings;
   for (size_t i = 0;
        i < plan.ranked.size() && static_cast<int>(i) < next.options.record_top_candidates; ++i) {
     step.top_candidates.push_back(plan.ranked[i]);

@@ -9,6 +9,7 @@
 #include <numeric>
 #include <optional>
 #include <string>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -18,6 +19,7 @@
 #include <avp/core/error.h>
 #include <avp/core/parallel.h>
 #include <avp/planning/avp_nbv_planner.h>
+#include <avp/planning/view_features.h>
 
 namespace avp::planning {
 
@@ -165,21 +167,42 @@ bool ClipRayToRoi(const Eigen::Vector3d& from, const Eigen::Vector3d& to, const 
 }
 
 /// One voxel's contribution; returns false when the ray ends there. Inlined into the walk: a call
-/// per voxel, with the GainVoxel materialised for it, was a fifth of a plan step. With kTerms,
-/// each contribution is also added to its part of the gain (terms[AvpGainTerm]).
-template <bool kTerms>
+/// per voxel, with the GainVoxel materialised for it, was a fifth of a plan step. Each
+/// contribution also goes to `sink(part, key, contribution)`: NoSink (the plain gain), TermSink
+/// (the gain by part) or KeySink (the voxels a view would reveal, for the lookahead).
+struct NoSink {
+  void operator()(AvpGainTerm, const VoxelKey&, double) const {}
+};
+struct TermSink {
+  double* terms;
+  void operator()(AvpGainTerm t, const VoxelKey&, double c) const { terms[t] += c; }
+};
+/// A voxel key packed into one integer (21 bits per axis, offset: keys within +-2^20 voxels,
+/// +-5 km at 5 mm) with a contribution.
+using KeyedContribution = std::pair<uint64_t, double>;
+uint64_t PackKey(const VoxelKey& k) {
+  const auto axis = [](int32_t v) { return static_cast<uint64_t>(v + (1 << 20)) & 0x1fffffu; };
+  return axis(k.x) | axis(k.y) << 21 | axis(k.z) << 42;
+}
+struct KeySink {
+  std::vector<KeyedContribution>* out;
+  void operator()(AvpGainTerm, const VoxelKey& k, double c) const {
+    out->emplace_back(PackKey(k), c);
+  }
+};
+template <typename Sink>
 [[gnu::always_inline]] inline bool Accumulate(const VoxelKey& k, const GainVoxel& v,
                                               SemanticClass target, double voxel_size_m,
                                               const CorePrior::View& prior,
                                               const Eigen::Vector3d& eye, const GainParams& o,
-                                              double& p_vis, double& gain, double* terms) {
+                                              double& p_vis, double& gain, const Sink& sink) {
   switch (v.state) {
     case mapping::VoxelState::kOccupied:
       if (v.cls == target) {
         const double c = p_vis * o.w_target_entropy * ClampedBinaryEntropyBits(v.p_target) *
                          RangeWeight(k, voxel_size_m, eye, o);
         gain += c;
-        if constexpr (kTerms) terms[kGainTargetEntropy] += c;
+        sink(kGainTargetEntropy, k, c);
       }
       return false;
     case mapping::VoxelState::kUnknown: {
@@ -198,11 +221,10 @@ template <bool kTerms>
       if (w > 0.0) {
         const double c = p_vis * w * RangeWeight(k, voxel_size_m, eye, o);
         gain += c;
-        if constexpr (kTerms) {
-          terms[v.predicted_target ? kGainPredictedTarget
-                : v.near_target    ? kGainUnknownNearTarget
-                                   : kGainUnknownRoi] += c;
-        }
+        sink(v.predicted_target ? kGainPredictedTarget
+             : v.near_target    ? kGainUnknownNearTarget
+                                : kGainUnknownRoi,
+             k, c);
       }
       p_vis *= 1.0 - occlusion;
       return p_vis > 1e-4;
@@ -262,6 +284,15 @@ const OptionTable<AvpNbvOptions>& AvpNbvOptionTable() {
             "keep each candidate's gain by part (ViewCandidate::gain_terms; for calibration)");
     t->Flag("surface_gain", &O::surface_gain,
             "an unknown voxel counts its weight times the chance the ray ends there");
+    t->Text("gain_model", &O::gain_model,
+            "a learned gain: a model name under <config dir>/models or an .onnx path (empty: "
+            "the hand-written gain)");
+    t->Integer("lookahead_views", &O::lookahead_views, "", ValueRange::Closed(0, 2),
+               "views looked ahead beyond the next one (0: greedy)");
+    t->Integer("lookahead_top", &O::lookahead_top, "", ValueRange::Closed(2, 64),
+               "candidates the lookahead considers (the best by utility)");
+    t->Real("lookahead_discount", &O::lookahead_discount, "", ValueRange::Closed(0, 1),
+            "weight of the views looked ahead against the next one");
     t->Nested("candidates", &O::candidates, ShellCandidateOptionTable());
     t->Nested("grid", &O::grid, GainGridOptionTable());
     t->AddRule([](const O& o, std::vector<std::string>& problems) {
@@ -297,17 +328,22 @@ Status AvpNbvOptions::Validate() const { return AvpNbvOptionTable().Validate(*th
 PlannerEntry AvpNbvPlannerEntry() {
   return MakePlannerEntry<AvpNbvOptions>(
       "avp-nbv", "avp's occlusion-aware next-best view (docs/planning.md)", AvpNbvOptionTable(),
-      AvpNbvOptions{}, [](AvpNbvOptions o, const PlannerContext&) {
-        return Result<std::unique_ptr<ViewPlanner>>(std::make_unique<AvpNbvPlanner>(o));
+      AvpNbvOptions{},
+      [](AvpNbvOptions o, const PlannerContext&) -> Result<std::unique_ptr<ViewPlanner>> {
+        std::shared_ptr<const LearnedGainModel> model;
+        if (!o.gain_model.empty()) {
+          AVP_ASSIGN_OR_RETURN(model, LearnedGainModel::Load(ResolveGainModelPath(o.gain_model)));
+        }
+        return std::unique_ptr<ViewPlanner>(std::make_unique<AvpNbvPlanner>(o, std::move(model)));
       });
 }
 
 namespace {
 
-template <bool kTerms = false>
+template <typename Sink = NoSink>
 double RayGain(const GainGrid& grid, const CorePrior& core_prior, const Eigen::Vector3d& eye,
                const Eigen::Vector3d& to_unclipped, const GainParams& params,
-               double* terms = nullptr) {
+               const Sink& sink = {}) {
   double p_vis = 1.0, gain = 0.0;
   const SemanticClass target = grid.target();
   const double s = grid.voxel_size_m();
@@ -320,7 +356,7 @@ double RayGain(const GainGrid& grid, const CorePrior& core_prior, const Eigen::V
   // Free voxels add nothing (Accumulate returns true and changes nothing): bricks flagged all-free
   // (GainGridOptions::skip_free_bricks, off by default) are walked through unread.
   grid.WalkSkippingFree(from, to, [&](const VoxelKey& k, const GainVoxel& v) {
-    return Accumulate<kTerms>(k, v, target, s, prior, from, options, p_vis, gain, terms);
+    return Accumulate(k, v, target, s, prior, from, options, p_vis, gain, sink);
   });
   return gain;
 }
@@ -359,8 +395,7 @@ double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3
   for (const VoxelKey& k : keys) {
     const GainVoxel v =
         ReadGainVoxel(map, k, target, roi, options.grid.near_target_radius_m, &spheres);
-    if (!Accumulate<false>(k, v, target, map.voxel_size_m(), prior, from, params, p_vis, gain,
-                           nullptr)) {
+    if (!Accumulate(k, v, target, map.voxel_size_m(), prior, from, params, p_vis, gain, NoSink{})) {
       break;
     }
   }
@@ -380,6 +415,36 @@ double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const Camer
   return gain;
 }
 
+struct AvpGainEvaluator::Impl {
+  Impl(const GainGrid& g, const AvpNbvOptions& o)
+      : grid(g),
+        options(o),
+        prior(CorePrior::Tabulated(g.roi(), g.voxel_size_m(), options)),
+        params(options, g.voxel_size_m()) {}
+  const GainGrid& grid;
+  const AvpNbvOptions options;  // before prior, which refers to it
+  const CorePrior prior;
+  const GainParams params;
+};
+
+AvpGainEvaluator::AvpGainEvaluator(const GainGrid& grid, const AvpNbvOptions& options) {
+  if (const Status s = options.Validate(); !s.ok()) throw Error(s.ToString());
+  impl_ = std::make_unique<Impl>(grid, options);
+}
+AvpGainEvaluator::~AvpGainEvaluator() = default;
+AvpGainEvaluator::AvpGainEvaluator(AvpGainEvaluator&&) noexcept = default;
+
+std::array<double, kGainTermCount> AvpGainEvaluator::Terms(
+    const RigidTransform& X_WC, std::span<const Eigen::Vector3d> dirs_C) const {
+  std::array<double, kGainTermCount> terms{};
+  const Eigen::Vector3d origin = X_WC.translation();
+  for (const Eigen::Vector3d& d_C : dirs_C) {
+    RayGain(impl_->grid, impl_->prior, origin, X_WC * (impl_->options.max_range_m * d_C),
+            impl_->params, TermSink{terms.data()});
+  }
+  return terms;
+}
+
 namespace {
 
 /// The gain of a candidate over `dirs`, times `scale`; with record_gain_terms its parts too.
@@ -396,8 +461,8 @@ double ViewGain(const GainGrid& grid, const CorePrior& prior, const GainParams& 
   }
   std::array<double, kGainTermCount> terms{};
   for (const Eigen::Vector3d& d_C : dirs) {
-    g += RayGain<true>(grid, prior, origin, c.X_WC * (options.max_range_m * d_C), params,
-                       terms.data());
+    g += RayGain(grid, prior, origin, c.X_WC * (options.max_range_m * d_C), params,
+                 TermSink{terms.data()});
   }
   c.gain_terms.clear();
   for (int t = 0; t < kGainTermCount; ++t) {
@@ -423,6 +488,54 @@ std::vector<double> ViewpointDiversity(const std::vector<ViewCandidate>& candida
   return diversity;
 }
 
+/// The reachable candidates, by index.
+std::vector<size_t> Reachable(const std::vector<ViewCandidate>& candidates) {
+  std::vector<size_t> reachable;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (candidates[i].reachable) reachable.push_back(i);
+  }
+  return reachable;
+}
+
+/// Utilities from the gains: U = G / max G - w_motion |dq| / max |dq| + w_diversity diversity;
+/// returns the largest gain.
+double SetUtilities(const AvpNbvOptions& options, const std::vector<size_t>& reachable,
+                    const std::vector<double>& diversity, std::vector<ViewCandidate>& candidates) {
+  double max_cost = 0.0, max_gain = 0.0;
+  for (size_t i : reachable) {
+    max_cost = std::max(max_cost, candidates[i].cost);
+    max_gain = std::max(max_gain, candidates[i].gain);
+  }
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    ViewCandidate& c = candidates[i];
+    const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
+    const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
+    c.utility = g - options.w_motion * m + options.w_diversity * diversity[i];
+  }
+  return max_gain;
+}
+
+/// The candidates' gains from the learned model (their feature rows through it) and utilities;
+/// returns the largest gain, or the model's error (the candidates' gains are then unchanged).
+Result<double> ScoreWithModel(const PlanningRequest& request, const GainGrid& grid,
+                              const AvpNbvOptions& options, const LearnedGainModel& model,
+                              std::vector<ViewCandidate>& candidates) {
+  const std::vector<size_t> reachable = Reachable(candidates);
+  std::vector<ViewCandidate> scored;
+  scored.reserve(reachable.size());
+  for (size_t i : reachable) scored.push_back(candidates[i]);
+  AVP_ASSIGN_OR_RETURN(const ViewFeatureExtractor features,
+                       ViewFeatureExtractor::Build(request, grid));
+  AVP_ASSIGN_OR_RETURN(const std::vector<float> predicted,
+                       model.Predict(features.Compute(scored), scored.size()));
+  for (size_t j = 0; j < reachable.size(); ++j) {
+    candidates[reachable[j]].gain = static_cast<double>(predicted[j]);
+  }
+  return SetUtilities(options, reachable,
+                      ViewpointDiversity(candidates, request.fused_views, options.diversity_m),
+                      candidates);
+}
+
 /// The candidates' gains (in parallel over candidates, each independent) and utilities; returns
 /// the largest gain. With coarse_ray_stride_px, every reachable candidate is first scored with the
 /// coarse rays (their gain scaled to the fine ray count), then the refine_top best by that utility
@@ -432,26 +545,10 @@ double ScoreCandidates(const PlanningRequest& request, const GainGrid& grid,
   const std::vector<Eigen::Vector3d> fine = RayDirections(request.K, options.ray_stride_px);
   const CorePrior prior = CorePrior::Tabulated(grid.roi(), grid.voxel_size_m(), options);
   const GainParams params(options, grid.voxel_size_m());
-  std::vector<size_t> reachable;
-  for (size_t i = 0; i < candidates.size(); ++i) {
-    if (candidates[i].reachable) reachable.push_back(i);
-  }
+  const std::vector<size_t> reachable = Reachable(candidates);
   const std::vector<double> diversity =
       ViewpointDiversity(candidates, request.fused_views, options.diversity_m);
-  double max_cost = 0.0;
-  for (size_t i : reachable) max_cost = std::max(max_cost, candidates[i].cost);
-  // Utilities from the gains; returns the largest gain.
-  auto score = [&]() {
-    double max_gain = 0.0;
-    for (size_t i : reachable) max_gain = std::max(max_gain, candidates[i].gain);
-    for (size_t i = 0; i < candidates.size(); ++i) {
-      ViewCandidate& c = candidates[i];
-      const double g = max_gain > 0.0 ? c.gain / max_gain : 0.0;
-      const double m = max_cost > 0.0 ? c.cost / max_cost : 0.0;
-      c.utility = g - options.w_motion * m + options.w_diversity * diversity[i];
-    }
-    return max_gain;
-  };
+  auto score = [&]() { return SetUtilities(options, reachable, diversity, candidates); };
   // Gains of the candidates `which` indexes, over `dirs` times `scale`.
   auto gains = [&](const std::vector<size_t>& which, const std::vector<Eigen::Vector3d>& dirs,
                    double scale) {
@@ -479,6 +576,87 @@ double ScoreCandidates(const PlanningRequest& request, const GainGrid& grid,
   return score();
 }
 
+/// The voxels a camera at X_WC would reveal with their gain contributions (keys packed, sorted,
+/// each once), over the rays `dirs`.
+std::vector<KeyedContribution> RevealedVoxels(const GainGrid& grid, const CorePrior& prior,
+                                              const GainParams& params, double max_range_m,
+                                              const RigidTransform& X_WC,
+                                              const std::vector<Eigen::Vector3d>& dirs) {
+  std::vector<KeyedContribution> out;
+  const KeySink sink{&out};
+  for (const Eigen::Vector3d& d_C : dirs) {
+    RayGain(grid, prior, X_WC.translation(), X_WC * (max_range_m * d_C), params, sink);
+  }
+  std::sort(out.begin(), out.end());
+  size_t w = 0;
+  for (size_t r = 0; r < out.size(); ++r) {
+    if (w > 0 && out[w - 1].first == out[r].first) {
+      out[w - 1].second += out[r].second;
+    } else {
+      out[w++] = out[r];
+    }
+  }
+  out.resize(w);
+  return out;
+}
+
+/// Non-myopic choice (AvpNbvOptions::lookahead_views): adds to the utility of each of the
+/// lookahead_top best candidates the discounted value of the views that would best follow it.
+void AddLookahead(const PlanningRequest& request, const GainGrid& grid,
+                  const AvpNbvOptions& options, std::vector<ViewCandidate>& candidates) {
+  const int depth = std::min(options.lookahead_views, request.views_total - 1 - request.view_index);
+  std::vector<size_t> top = Reachable(candidates);
+  double max_gain = 0.0;
+  for (size_t i : top) max_gain = std::max(max_gain, candidates[i].gain);
+  if (depth <= 0 || top.size() < 2 || !(max_gain > 0.0)) return;
+  std::stable_sort(top.begin(), top.end(), [&](size_t a, size_t b) {
+    return candidates[a].utility > candidates[b].utility;
+  });
+  top.resize(std::min(top.size(), static_cast<size_t>(options.lookahead_top)));
+  const std::vector<Eigen::Vector3d> dirs =
+      RayDirections(request.K, std::max(options.coarse_ray_stride_px, options.ray_stride_px));
+  const CorePrior prior = CorePrior::Tabulated(grid.roi(), grid.voxel_size_m(), options);
+  const GainParams params(options, grid.voxel_size_m());
+  std::vector<std::vector<KeyedContribution>> reveal(top.size());
+  std::vector<double> total(top.size(), 0.0);
+  ParallelFor(top.size(), [&](size_t a) {
+    reveal[a] =
+        RevealedVoxels(grid, prior, params, options.max_range_m, candidates[top[a]].X_WC, dirs);
+    for (const KeyedContribution& kc : reveal[a]) total[a] += kc.second;
+  });
+  std::vector<double> bonus(top.size(), 0.0);
+  ParallelFor(top.size(), [&](size_t a) {
+    std::unordered_set<uint64_t> seen;
+    for (const KeyedContribution& kc : reveal[a]) seen.insert(kc.first);
+    std::vector<bool> used(top.size(), false);
+    used[a] = true;
+    for (int t = 0; t < depth; ++t) {
+      size_t best = top.size();
+      double best_value = 0.0;
+      for (size_t b = 0; b < top.size(); ++b) {
+        if (used[b]) continue;
+        double covered = 0.0;
+        for (const KeyedContribution& kc : reveal[b]) {
+          if (seen.count(kc.first) > 0) covered += kc.second;
+        }
+        const double fresh = total[b] > 0.0 ? 1.0 - covered / total[b] : 1.0;
+        const double value = candidates[top[b]].gain / max_gain * fresh;
+        if (value > best_value) {
+          best_value = value;
+          best = b;
+        }
+      }
+      if (best == top.size()) break;
+      bonus[a] += best_value;
+      used[best] = true;
+      for (const KeyedContribution& kc : reveal[best]) seen.insert(kc.first);
+    }
+  });
+  for (size_t a = 0; a < top.size(); ++a) {
+    candidates[top[a]].utility += options.lookahead_discount * bonus[a];
+  }
+}
+
 /// The stopping rules: the best gain under min_gain_bits, or under min_gain_fraction of the
 /// episode's first plan's (`first_max_gain`, set on the episode's first plan).
 void ApplyStoppingRules(const AvpNbvOptions& options, const PlanningRequest& request,
@@ -504,8 +682,16 @@ void ApplyStoppingRules(const AvpNbvOptions& options, const PlanningRequest& req
 
 }  // namespace
 
-AvpNbvPlanner::AvpNbvPlanner(const AvpNbvOptions& options) : options_(options) {
+AvpNbvPlanner::AvpNbvPlanner(const AvpNbvOptions& options,
+                             std::shared_ptr<const LearnedGainModel> model)
+    : options_(options), model_(std::move(model)) {
   if (const Status s = options.Validate(); !s.ok()) throw Error(s.ToString());
+  if (!model_ && !options.gain_model.empty()) {
+    Result<std::shared_ptr<const LearnedGainModel>> loaded =
+        LearnedGainModel::Load(ResolveGainModelPath(options.gain_model));
+    if (!loaded.ok()) throw Error(loaded.status().ToString());
+    model_ = std::move(*loaded);
+  }
 }
 
 PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
@@ -524,8 +710,24 @@ PlanResult AvpNbvPlanner::Plan(const PlanningRequest& request, Rng& rng) {
   std::vector<ViewCandidate> candidates =
       GenerateShellCandidates(request, *grid, targets, options_.candidates, rng);
   const size_t generated = candidates.size();
-  const double max_gain = ScoreCandidates(request, *grid, options_, candidates);
+  double max_gain = 0.0;
+  std::vector<std::string> warnings;
+  if (model_) {
+    const Result<double> learned = ScoreWithModel(request, *grid, options_, *model_, candidates);
+    if (learned.ok()) {
+      max_gain = *learned;
+    } else {
+      warnings.push_back(fmt::format(
+          "the learned gain failed ({}): this step is ranked with the hand-written gain",
+          learned.status().ToString()));
+    }
+  }
+  if (!model_ || !warnings.empty()) {
+    max_gain = ScoreCandidates(request, *grid, options_, candidates);
+  }
+  AddLookahead(request, *grid, options_, candidates);
   result = RankCandidates(std::move(candidates), generated, name());
+  result.warnings = std::move(warnings);
   ApplyStoppingRules(options_, request, max_gain, first_max_gain_, result);
   return result;
 }

@@ -614,6 +614,46 @@ TEST_F(AvpNbvPlannerTest, GainTermsSumToTheGainAndChangeNoChoice) {
   }
 }
 
+TEST_F(AvpNbvPlannerTest, LookaheadPicksAmongTheBestAndIsGreedyWhenNothingFollows) {
+  const auto plan = [&](int views, double discount, int view_index) {
+    AvpNbvOptions o;
+    o.lookahead_views = views;
+    o.lookahead_discount = discount;
+    PlanningRequest r = Request();
+    r.view_index = view_index;
+    Rng rng(6);
+    return AvpNbvPlanner(o).Plan(r, rng);
+  };
+  const PlanResult greedy = plan(0, 0.5, 1);
+  ASSERT_TRUE(greedy.status.ok());
+  // A discount of 0, or no view left after this one: the greedy ranking, exactly.
+  for (const PlanResult& same : {plan(2, 0.0, 1), plan(2, 1.0, 7)}) {
+    ASSERT_EQ(same.ranked.size(), greedy.ranked.size());
+    for (size_t i = 0; i < greedy.ranked.size(); ++i) {
+      EXPECT_EQ(same.ranked[i].X_WC.translation(), greedy.ranked[i].X_WC.translation());
+      EXPECT_EQ(same.ranked[i].utility, greedy.ranked[i].utility);
+    }
+  }
+  // Looking ahead: only the 16 best by utility get a bonus, so the choice is one of them, and
+  // every bonus is at most the discount times the views looked ahead.
+  for (const int views : {1, 2}) {
+    const PlanResult ahead = plan(views, 1.0, 1);
+    ASSERT_EQ(ahead.ranked.size(), greedy.ranked.size());
+    std::vector<double> greedy_utilities;
+    for (const ViewCandidate& c : greedy.ranked) greedy_utilities.push_back(c.utility);
+    std::sort(greedy_utilities.rbegin(), greedy_utilities.rend());
+    const auto chosen =
+        std::find_if(greedy.ranked.begin(), greedy.ranked.end(), [&](const auto& c) {
+          return c.X_WC.translation() == ahead.ranked.front().X_WC.translation();
+        });
+    ASSERT_NE(chosen, greedy.ranked.end());
+    EXPECT_GE(chosen->utility, greedy_utilities[15]);
+    const double bonus = ahead.ranked.front().utility - chosen->utility;
+    EXPECT_GT(bonus, 0.0);
+    EXPECT_LE(bonus, views + 1e-9);
+  }
+}
+
 TEST_F(AvpNbvPlannerTest, SpreadFrontierTargetsCoverMoreOfTheBoundary) {
   const PlanningRequest r = Request();
   AvpNbvOptions o;

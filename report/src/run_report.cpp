@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <avp/io/json.h>
+#include <avp/planning/view_features.h>
 #include <avp/report/metrics_csv.h>
 #include <avp/report/run_report.h>
 
@@ -16,10 +17,10 @@ std::string FormatStepLine(const pipeline::StepRecord& s, std::string_view progr
           ? std::string()
           : fmt::format("  F1 {:.3f} (tol {:.3f})  fruits {:.0f}/{:.0f}", s.Metric("f1"),
                         s.Metric("f1_tol"), s.Metric("fruits_found"), s.Metric("fruits_total"));
-  const std::string problems = !s.capture_status.ok() ? "  capture: " + s.capture_status.ToString()
-                               : !s.segment_status.ok()
-                                   ? "  segment: " + s.segment_status.ToString()
-                                   : std::string();
+  std::string problems = !s.capture_status.ok()   ? "  capture: " + s.capture_status.ToString()
+                         : !s.segment_status.ok() ? "  segment: " + s.segment_status.ToString()
+                                                  : std::string();
+  for (const std::string& w : s.plan_warnings) problems += "  planner warning: " + w;
   const std::string candidates = s.planned
                                      ? fmt::format(", {} of {} candidates reachable",
                                                    s.candidates_reachable, s.candidates_generated)
@@ -132,6 +133,7 @@ json StepJson(const pipeline::StepRecord& s) {
                  {"in_collision", s.candidates_in_collision},
                  {"top_candidates", cands},
                  {"motion", MotionJson(s.motion)}};
+    if (!s.plan_warnings.empty()) j["plan"]["warnings"] = s.plan_warnings;
   }
   return j;
 }
@@ -212,15 +214,27 @@ json RegretJson(const std::vector<eval::StepRegret>& regret) {
                         {"true_gain", c.true_gain},
                         {"source", c.source},
                         {"gain_terms", std::move(terms)}});
+      if (!c.features.empty()) scored.back()["features"] = c.features;
     }
-    out.push_back({{"step", g.step},
-                   {"candidates", g.candidates},
-                   {"chosen_true_gain", g.chosen_true_gain},
-                   {"best_true_gain", g.best_true_gain},
-                   {"regret", g.regret},
-                   {"chosen_true_rank", g.chosen_true_rank},
-                   {"rank_correlation", Finite(g.rank_correlation)},
-                   {"scored", std::move(scored)}});
+    json step = {{"step", g.step},
+                 {"candidates", g.candidates},
+                 {"chosen_true_gain", g.chosen_true_gain},
+                 {"best_true_gain", g.best_true_gain},
+                 {"regret", g.regret},
+                 {"chosen_true_rank", g.chosen_true_rank},
+                 {"rank_correlation", Finite(g.rank_correlation)},
+                 {"scored", std::move(scored)}};
+    const bool has_features = !g.scored.empty() && !g.scored.front().features.empty();
+    if (has_features) {
+      // The columns of the rows, so that a data set names what it holds (docs/planning.md).
+      step["feature_version"] = planning::kViewFeatureVersion;
+      step["feature_hash"] = planning::ViewFeatureHash();
+      json names = json::array();
+      for (const std::string_view name : planning::ViewFeatureNames()) names.push_back(name);
+      step["feature_names"] = std::move(names);
+    }
+    if (!g.features_error.empty()) step["features_error"] = g.features_error;
+    out.push_back(std::move(step));
   }
   return out;
 }

@@ -129,6 +129,8 @@ struct ScoredCandidate {
   double true_gain = 0.0;                              ///< OracleNbvPlanner::TrueGain
   std::string source;
   std::vector<std::pair<std::string, double>> gain_terms;  ///< ViewCandidate::gain_terms
+  /// With RegretProbe's record_features: the candidate's row of planning::ViewFeatureNames().
+  std::vector<float> features;
 };
 
 struct StepRegret {
@@ -149,6 +151,8 @@ struct StepRegret {
   /// Every ranked candidate, in rank order (the chosen one first): the planner's numbers beside
   /// the true gain, the data to calibrate a gain on (docs/planning.md, "Regret of any planner").
   std::vector<ScoredCandidate> scored;
+  /// With RegretProbe's record_features: why this step has no feature rows (empty: it has them).
+  std::string features_error;
 };
 
 /// Wraps a planner and, after each of its plans, renders every ranked candidate in the true scene
@@ -157,9 +161,12 @@ struct StepRegret {
 /// the episode is the same as without it; only the plan times include the probe's rendering.
 class RegretProbe final : public planning::ViewPlanner {
  public:
-  /// `inner` and `oracle` must outlive the probe.
-  RegretProbe(planning::ViewPlanner& inner, const OracleNbvPlanner& oracle)
-      : inner_(inner), oracle_(oracle) {}
+  /// `inner` and `oracle` must outlive the probe. With `record_features`, each scored candidate
+  /// also gets its feature row (planning::ViewFeatureExtractor on a gain grid with the default
+  /// options): the data a learned gain is trained on.
+  RegretProbe(planning::ViewPlanner& inner, const OracleNbvPlanner& oracle,
+              bool record_features = false)
+      : inner_(inner), oracle_(oracle), record_features_(record_features) {}
   std::string_view name() const override { return inner_.name(); }
   planning::PlanResult Plan(const planning::PlanningRequest& request, Rng& rng) override;
   /// One entry per plan call that returned candidates, in order.
@@ -168,6 +175,7 @@ class RegretProbe final : public planning::ViewPlanner {
  private:
   planning::ViewPlanner& inner_;
   const OracleNbvPlanner& oracle_;
+  bool record_features_ = false;
   int calls_ = 0;
   std::vector<StepRegret> steps_;
 };

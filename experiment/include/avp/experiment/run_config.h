@@ -68,6 +68,10 @@ struct RunConfig {
   /// Measure each plan step's regret with the truth (eval::RegretProbe): the episode does not
   /// change, its plan times include the probe's rendering.
   bool oracle_regret = false;
+  /// With oracle_regret: each scored candidate also carries its feature row
+  /// (planning/view_features.h), the data a learned gain is trained on (docs/planning.md, "A
+  /// learned gain").
+  bool oracle_regret_features = false;
   /// Simulation only, with motion.enabled: the motion planner avoids the true scene (every
   /// object's surface voxelised at the map's voxel size; unknown space is free) instead of the
   /// map. Collision-free motion's ceiling: what the arm could reach if it knew the plant

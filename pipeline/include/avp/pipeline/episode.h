@@ -102,6 +102,8 @@ struct StepRecord {
   size_t candidates_reachable = 0;
   /// Candidates IK reached but the collision check dropped.
   size_t candidates_in_collision = 0;
+  /// PlanResult::warnings.
+  std::vector<std::string> plan_warnings;
   /// The best candidates as ranked (up to EpisodeOptions::record_top_candidates).
   std::vector<planning::ViewCandidate> top_candidates;
   /// Rank (0 = best) of the candidate the arm moved to; -1 when none.

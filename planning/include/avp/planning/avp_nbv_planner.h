@@ -1,12 +1,16 @@
 #pragma once
 
+#include <array>
 #include <limits>
+#include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include <avp/planning/candidates.h>
 #include <avp/planning/gain_grid.h>
+#include <avp/planning/learned_gain.h>
 #include <avp/planning/planner_registry.h>
 #include <avp/planning/view_planner.h>
 
@@ -98,6 +102,23 @@ struct AvpNbvOptions {
   /// summing to its gain): the data to calibrate the weights on (`--oracle-regret` records them
   /// beside the true gain). Changes no choice.
   bool record_gain_terms = false;
+  /// A learned gain (learned_gain.h, docs/planning.md "A learned gain"): empty (the default) for
+  /// the hand-written gain above; a model name under <config dir>/models ("learned") or a path to
+  /// an .onnx file. With one, each reachable candidate's feature row (view_features.h) goes
+  /// through the model and its prediction takes the place of G in the utility; should the model
+  /// fail at a step, that step falls back to the hand-written gain with a warning
+  /// (PlanResult::warnings).
+  std::string gain_model;
+  /// Non-myopic choice (0, the default: greedy). With N > 0 and views left after this one, each
+  /// of the `lookahead_top` best candidates by utility gets a bonus: the value of the N views
+  /// that would best follow it (at most as many as the budget has left), each chosen greedily
+  /// among the same candidates with its gain discounted by the share of it the views before it
+  /// would already reveal (the voxels each view's coarse rays reach, weighted as in the gain),
+  /// times `lookahead_discount`, in the units of G / max G. The plan goes to the first view of
+  /// the best sequence under that budget rather than to the best single view.
+  int lookahead_views = 0;
+  int lookahead_top = 16;
+  double lookahead_discount = 0.5;
   Status Validate() const;
 };
 
@@ -128,16 +149,38 @@ double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3
 double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const CameraIntrinsics& K,
                    const AvpNbvOptions& options);
 
+/// avp-nbv's gain by part (AvpGainTerm order, summing to the gain) of cameras on one grid: the
+/// per-step tables are built once, then Terms() is called per view (from any thread). The
+/// learned gain's features include these parts (view_features.h).
+class AvpGainEvaluator {
+ public:
+  /// `grid` must outlive the evaluator. @throws avp::Error if options.Validate() fails.
+  AvpGainEvaluator(const GainGrid& grid, const AvpNbvOptions& options);
+  ~AvpGainEvaluator();
+  AvpGainEvaluator(AvpGainEvaluator&&) noexcept;
+  /// The parts of the gain of a camera at X_WC over the rays `dirs_C` (unit directions in the
+  /// camera frame, each options.max_range_m long).
+  std::array<double, kGainTermCount> Terms(const RigidTransform& X_WC,
+                                           std::span<const Eigen::Vector3d> dirs_C) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 class AvpNbvPlanner final : public ViewPlanner {
  public:
-  /// @throws avp::Error if options.Validate() fails.
-  explicit AvpNbvPlanner(const AvpNbvOptions& options = {});
+  /// @throws avp::Error if options.Validate() fails, or if options.gain_model names a model that
+  /// does not load (the registry's factory returns that error as a status instead).
+  explicit AvpNbvPlanner(const AvpNbvOptions& options = {},
+                         std::shared_ptr<const LearnedGainModel> model = nullptr);
   std::string_view name() const override { return "avp-nbv"; }
   PlanResult Plan(const PlanningRequest& request, Rng& rng) override;
   const AvpNbvOptions& options() const { return options_; }
 
  private:
   AvpNbvOptions options_;
+  std::shared_ptr<const LearnedGainModel> model_;  ///< options_.gain_model, loaded
   /// The best gain of this episode's first plan (min_gain_fraction); NaN before it.
   double first_max_gain_ = std::numeric_limits<double>::quiet_NaN();
 };

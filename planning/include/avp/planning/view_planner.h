@@ -98,6 +98,9 @@ struct PlanResult {
   /// The planner's stopping rule fired (e.g. best gain below a threshold): the loop ends early.
   bool stop = false;
   std::string stop_reason;
+  /// What the planner wants a person to know about this step (e.g. a learned gain that failed
+  /// and the hand-written gain it fell back to); logged and kept in record.json.
+  std::vector<std::string> warnings;
 };
 
 /// Chooses the next camera view. Implementations must be deterministic given the request and
