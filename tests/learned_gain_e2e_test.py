@@ -92,7 +92,7 @@ check(all("warnings" not in s["plan"] for s in planned), "no fallback")
 # A model file that does not exist is refused before the episode, naming it.
 p = run(avp, "run", "--views", "2", "--planner-option", "gain_model=/no/such.onnx", "--out",
         os.path.join(scratch, "bad"), ok=False)
-check(p.returncode != 0 and "/no/such.onnx" in p.stderr, p.stderr)
+check(p.returncode != 0 and "/no/such.onnx" in p.stdout + p.stderr, p.stdout + p.stderr)
 
 # Data from a test scenario is refused by the training script.
 test_data = bench("test-data", "tomato-single-cluster")

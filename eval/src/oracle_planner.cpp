@@ -208,6 +208,12 @@ planning::PlanResult RegretProbe::Plan(const planning::PlanningRequest& request,
                                             [&](double t) { return t > r.chosen_true_gain; }));
   r.rank_correlation = SpearmanRankCorrelation(predicted, truth);
   r.features_error = std::move(features_error);
+  if (!features.empty()) {
+    r.feature_names.assign(planning::ViewFeatureNames().begin(),
+                           planning::ViewFeatureNames().end());
+    r.feature_version = planning::kViewFeatureVersion;
+    r.feature_hash = planning::ViewFeatureHash();
+  }
   r.scored.reserve(result.ranked.size());
   for (size_t i = 0; i < result.ranked.size(); ++i) {
     const planning::ViewCandidate& c = result.ranked[i];

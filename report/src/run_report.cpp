@@ -4,7 +4,6 @@
 #include <fmt/format.h>
 
 #include <avp/io/json.h>
-#include <avp/planning/view_features.h>
 #include <avp/report/metrics_csv.h>
 #include <avp/report/run_report.h>
 
@@ -224,14 +223,11 @@ json RegretJson(const std::vector<eval::StepRegret>& regret) {
                  {"chosen_true_rank", g.chosen_true_rank},
                  {"rank_correlation", Finite(g.rank_correlation)},
                  {"scored", std::move(scored)}};
-    const bool has_features = !g.scored.empty() && !g.scored.front().features.empty();
-    if (has_features) {
+    if (!g.feature_names.empty()) {
       // The columns of the rows, so that a data set names what it holds (docs/planning.md).
-      step["feature_version"] = planning::kViewFeatureVersion;
-      step["feature_hash"] = planning::ViewFeatureHash();
-      json names = json::array();
-      for (const std::string_view name : planning::ViewFeatureNames()) names.push_back(name);
-      step["feature_names"] = std::move(names);
+      step["feature_version"] = g.feature_version;
+      step["feature_hash"] = g.feature_hash;
+      step["feature_names"] = g.feature_names;
     }
     if (!g.features_error.empty()) step["features_error"] = g.features_error;
     out.push_back(std::move(step));

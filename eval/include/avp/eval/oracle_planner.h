@@ -153,6 +153,11 @@ struct StepRegret {
   std::vector<ScoredCandidate> scored;
   /// With RegretProbe's record_features: why this step has no feature rows (empty: it has them).
   std::string features_error;
+  /// With feature rows: their columns (planning::ViewFeatureNames, kViewFeatureVersion,
+  /// ViewFeatureHash), so that a data set names what it holds.
+  std::vector<std::string> feature_names;
+  int feature_version = 0;
+  std::string feature_hash;
 };
 
 /// Wraps a planner and, after each of its plans, renders every ranked candidate in the true scene
