@@ -166,10 +166,9 @@ bool ClipRayToRoi(const Eigen::Vector3d& from, const Eigen::Vector3d& to, const 
   return true;
 }
 
-/// One voxel's contribution; returns false when the ray ends there. Inlined into the walk: a call
-/// per voxel, with the GainVoxel materialised for it, was a fifth of a plan step. Each
-/// contribution also goes to `sink(part, key, contribution)`: NoSink (the plain gain), TermSink
-/// (the gain by part) or KeySink (the voxels a view would reveal, for the lookahead).
+/// Where Accumulate also sends each contribution, `sink(part, key, contribution)`: NoSink (the
+/// plain gain), TermSink (the gain by part) or KeySink (the voxels a view would reveal, for the
+/// lookahead).
 struct NoSink {
   void operator()(AvpGainTerm, const VoxelKey&, double) const {}
 };
@@ -190,6 +189,9 @@ struct KeySink {
     out->emplace_back(PackKey(k), c);
   }
 };
+
+/// One voxel's contribution; returns false when the ray ends there. Inlined into the walk: a call
+/// per voxel, with the GainVoxel materialised for it, was a fifth of a plan step.
 template <typename Sink>
 [[gnu::always_inline]] inline bool Accumulate(const VoxelKey& k, const GainVoxel& v,
                                               SemanticClass target, double voxel_size_m,

@@ -140,6 +140,13 @@ Result<std::shared_ptr<const LearnedGainModel>> LearnedGainModel::Load(
   if (!std::filesystem::is_regular_file(file, ec)) {
     return NotFoundError(fmt::format("learned gain model {}: no such file", Quoted(file)));
   }
+  // A gain model is a few trees (the committed one: 0.6 MB); ONNX Runtime would read anything.
+  if (const uintmax_t bytes = std::filesystem::file_size(file, ec);
+      ec || bytes > kMaxLearnedGainModelBytes) {
+    return bad(ec ? ec.message()
+                  : fmt::format("{} bytes is over the limit of {} bytes", bytes,
+                                kMaxLearnedGainModelBytes));
+  }
   std::shared_ptr<LearnedGainModel> model(new LearnedGainModel());
   model->file_ = file;
   model->session_ = std::make_unique<Session>();

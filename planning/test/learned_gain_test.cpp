@@ -109,6 +109,12 @@ TEST(LearnedGainModelTest, RefusesBadFilesByName) {
   EXPECT_THAT(error("other_names.onnx").message(), HasSubstr("feature_hash"));
   EXPECT_THAT(error("other_format.onnx").message(), HasSubstr("someone-elses/3"));
   EXPECT_THAT(error("wide_input.onnx").message(), HasSubstr("its input has shape"));
+  // Over the size limit: refused before ONNX Runtime reads it (a sparse file: no disk used).
+  const fs::path huge = ModelDir() / "huge.onnx";
+  { std::ofstream(huge).put('x'); }
+  fs::resize_file(huge, kMaxLearnedGainModelBytes + 1);
+  EXPECT_THAT(error("huge.onnx").message(), HasSubstr("over the limit"));
+  fs::remove(huge);
 }
 
 TEST(LearnedGainModelTest, ANonFinitePredictionIsAnErrorNamingTheRow) {

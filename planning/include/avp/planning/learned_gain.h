@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <span>
@@ -25,13 +26,16 @@ namespace avp::planning {
 ///   "training": the script, its settings and the hash of the model's trees,
 /// and one input [N, ViewFeatureCount()] float and one output [N] or [N, 1] float.
 ///
-/// Load refuses, naming the file and what differs: a missing or unreadable file, one that is not
-/// ONNX, no or malformed manifest, another format, feature version, hash, count or order, or
-/// inputs and outputs of other types or shapes. Predict refuses a row count that does not match,
-/// and any non-finite prediction (naming the row): the planner then falls back to its
-/// hand-written gain for that step, with a warning (never a silent wrong ranking).
+/// Load refuses, naming the file and what differs: a missing or unreadable file, one over
+/// kMaxLearnedGainModelBytes, one that is not ONNX, no or malformed manifest, another format,
+/// feature version, hash, count or order, or inputs and outputs of other types or shapes. Predict
+/// refuses a row count that does not match, and any non-finite prediction (naming the row): the
+/// planner then falls back to its hand-written gain for that step, with a warning (never a silent
+/// wrong ranking).
 inline constexpr std::string_view kLearnedGainManifestKey = "avp_manifest";
 inline constexpr std::string_view kLearnedGainFormat = "avp-learned-gain/1";
+/// The largest model file Load reads (64 MiB; the committed model is 0.6 MB).
+inline constexpr uintmax_t kMaxLearnedGainModelBytes = uintmax_t{64} << 20;
 
 class LearnedGainModel {
  public:
