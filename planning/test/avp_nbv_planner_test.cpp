@@ -27,6 +27,8 @@
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/scenario.h>
 
+#include "start_view_world.h"
+
 namespace avp::planning {
 namespace {
 
@@ -332,46 +334,25 @@ TEST(TargetSphereTest, FitsTheSeenHalfOfAFruitAndPredictsItsHiddenSide) {
 class AvpNbvPlannerTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    auto arm = robot::LoadDefaultArm();
-    ASSERT_TRUE(arm.ok());
-    arm_ = new robot::ArmModel(*arm);
-    auto scene = sim::MakeScenario("tomato-multiple-clusters", 2);
-    ASSERT_TRUE(scene.ok());
-    scene_ = new sim::Scene(*scene);
-    map_ = new mapping::SemanticMap(MakeMap(0.005));
-    const sim::RgbdRenderer renderer(*scene_);
-    q0_ = Eigen::Map<const Eigen::VectorXd>(scene_->start_joints_rad.data(), 6);
-    X0_ = arm_->CameraPose(q0_);
-    const sim::RenderedFrame f = renderer.Render(CameraIntrinsics::RealSenseD435(), X0_, 0);
-    const Segmentation seg = Segmentation::FromLabelImages(f.instance_ids, f.class_ids, 0.8f);
-    mapping::IntegratorOptions io;
-    io.carving = mapping::FreeSpaceCarving::kProjective;
-    ASSERT_TRUE(mapping::Integrator(io).Integrate(f.rgbd, &seg, *map_).ok());
+    std::string error;
+    world_ = test::MakeStartViewWorld("tomato-multiple-clusters", 2, 0.005, &error).release();
+    ASSERT_NE(world_, nullptr) << error;
+    arm_ = &world_->arm;
+    scene_ = &world_->scene;
+    map_ = &world_->map;
+    q0_ = world_->q0;
+    X0_ = world_->X0;
   }
-  static void TearDownTestSuite() {
-    delete arm_;
-    delete scene_;
-    delete map_;
-  }
-  PlanningRequest Request() const {
-    PlanningRequest r;
-    r.map = map_;
-    r.arm = arm_;
-    r.q_current = r.q_start = q0_;
-    r.X_WC_current = r.X_WC_start = X0_;
-    r.K = CameraIntrinsics::RealSenseD435();
-    r.roi = scene_->plant_bounds.Inflated(0.05);
-    r.view_index = 1;
-    r.views_total = 8;
-    r.fused_views = {X0_};
-    return r;
-  }
+  static void TearDownTestSuite() { delete world_; }
+  PlanningRequest Request() const { return world_->Request(); }
+  static test::StartViewWorld* world_;
   static robot::ArmModel* arm_;
   static sim::Scene* scene_;
   static mapping::SemanticMap* map_;
   static Eigen::VectorXd q0_;
   static RigidTransform X0_;
 };
+test::StartViewWorld* AvpNbvPlannerTest::world_ = nullptr;
 robot::ArmModel* AvpNbvPlannerTest::arm_ = nullptr;
 sim::Scene* AvpNbvPlannerTest::scene_ = nullptr;
 mapping::SemanticMap* AvpNbvPlannerTest::map_ = nullptr;

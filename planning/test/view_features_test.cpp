@@ -19,6 +19,8 @@
 #include <avp/sim/rgbd_renderer.h>
 #include <avp/sim/scenario.h>
 
+#include "start_view_world.h"
+
 namespace avp::planning {
 namespace {
 
@@ -35,42 +37,14 @@ size_t Column(std::string_view name) {
 class ViewFeaturesTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    auto arm = robot::LoadDefaultArm();
-    ASSERT_TRUE(arm.ok());
-    arm_ = new robot::ArmModel(*arm);
-    auto scene = sim::MakeScenario("tomato-multiple-clusters", 2);
-    ASSERT_TRUE(scene.ok());
-    scene_ = new sim::Scene(*scene);
-    mapping::MapOptions mo;
-    mo.grid.voxel_size_m = 0.005;
-    map_ = new mapping::SemanticMap(mo);
-    const sim::RgbdRenderer renderer(*scene_);
-    q0_ = Eigen::Map<const Eigen::VectorXd>(scene_->start_joints_rad.data(), 6);
-    X0_ = arm_->CameraPose(q0_);
-    const sim::RenderedFrame f = renderer.Render(CameraIntrinsics::RealSenseD435(), X0_, 0);
-    const Segmentation seg = Segmentation::FromLabelImages(f.instance_ids, f.class_ids, 0.8f);
-    mapping::IntegratorOptions io;
-    io.carving = mapping::FreeSpaceCarving::kProjective;
-    ASSERT_TRUE(mapping::Integrator(io).Integrate(f.rgbd, &seg, *map_).ok());
+    std::string error;
+    world_ = test::MakeStartViewWorld("tomato-multiple-clusters", 2, 0.005, &error).release();
+    ASSERT_NE(world_, nullptr) << error;
+    map_ = &world_->map;
+    X0_ = world_->X0;
   }
-  static void TearDownTestSuite() {
-    delete arm_;
-    delete scene_;
-    delete map_;
-  }
-  static PlanningRequest Request() {
-    PlanningRequest r;
-    r.map = map_;
-    r.arm = arm_;
-    r.q_current = r.q_start = q0_;
-    r.X_WC_current = r.X_WC_start = X0_;
-    r.K = CameraIntrinsics::RealSenseD435();
-    r.roi = scene_->plant_bounds.Inflated(0.05);
-    r.view_index = 1;
-    r.views_total = 8;
-    r.fused_views = {X0_};
-    return r;
-  }
+  static void TearDownTestSuite() { delete world_; }
+  static PlanningRequest Request() { return world_->Request(); }
   /// A candidate at `eye` looking at `target` (reachable, so that it counts in the step-relative
   /// columns).
   static ViewCandidate LookingAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,
@@ -82,16 +56,12 @@ class ViewFeaturesTest : public ::testing::Test {
     c.cost = 0.5;
     return c;
   }
-  static robot::ArmModel* arm_;
-  static sim::Scene* scene_;
-  static mapping::SemanticMap* map_;
-  static Eigen::VectorXd q0_;
+  static test::StartViewWorld* world_;
+  static const mapping::SemanticMap* map_;
   static RigidTransform X0_;
 };
-robot::ArmModel* ViewFeaturesTest::arm_ = nullptr;
-sim::Scene* ViewFeaturesTest::scene_ = nullptr;
-mapping::SemanticMap* ViewFeaturesTest::map_ = nullptr;
-Eigen::VectorXd ViewFeaturesTest::q0_;
+test::StartViewWorld* ViewFeaturesTest::world_ = nullptr;
+const mapping::SemanticMap* ViewFeaturesTest::map_ = nullptr;
 RigidTransform ViewFeaturesTest::X0_;
 
 TEST_F(ViewFeaturesTest, RowsDescribeWhatAViewWouldCrossAndSee) {
