@@ -436,15 +436,23 @@ AvpGainEvaluator::AvpGainEvaluator(const GainGrid& grid, const AvpNbvOptions& op
 AvpGainEvaluator::~AvpGainEvaluator() = default;
 AvpGainEvaluator::AvpGainEvaluator(AvpGainEvaluator&&) noexcept = default;
 
-std::array<double, kGainTermCount> AvpGainEvaluator::Terms(
-    const RigidTransform& X_WC, std::span<const Eigen::Vector3d> dirs_C) const {
-  std::array<double, kGainTermCount> terms{};
-  const Eigen::Vector3d origin = X_WC.translation();
-  for (const Eigen::Vector3d& d_C : dirs_C) {
-    RayGain(impl_->grid, impl_->prior, origin, X_WC * (impl_->options.max_range_m * d_C),
-            impl_->params, TermSink{terms.data()});
-  }
-  return terms;
+void AvpGainEvaluator::WalkRay(const Eigen::Vector3d& eye, const Eigen::Vector3d& to,
+                               std::array<double, kGainTermCount>& terms,
+                               const Visitor& visit) const {
+  const GainGrid& grid = impl_->grid;
+  const double s = grid.voxel_size_m();
+  Eigen::Vector3d end;
+  if (!ClipRayToRoi(eye, to, grid.roi(), s, &end)) return;
+  const CorePrior::View prior = impl_->prior.view();
+  const TermSink sink{terms.data()};
+  double p_vis = 1.0, gain = 0.0;
+  bool visible = true;
+  grid.Walk(eye, end, [&](const VoxelKey& k, const GainVoxel& v) {
+    if (visible) {
+      visible = Accumulate(k, v, grid.target(), s, prior, eye, impl_->params, p_vis, gain, sink);
+    }
+    return visit(k, v);
+  });
 }
 
 namespace {
@@ -615,8 +623,11 @@ void AddLookahead(const PlanningRequest& request, const GainGrid& grid,
     return candidates[a].utility > candidates[b].utility;
   });
   top.resize(std::min(top.size(), static_cast<size_t>(options.lookahead_top)));
-  const std::vector<Eigen::Vector3d> dirs =
-      RayDirections(request.K, std::max(options.coarse_ray_stride_px, options.ray_stride_px));
+  // The coarse rays, but never finer than every 40th pixel (16 x 12 rays on a 640 x 480 camera):
+  // each of up to 64 candidates keeps the list of voxels its rays reveal.
+  constexpr int kMinStridePx = 40;
+  const std::vector<Eigen::Vector3d> dirs = RayDirections(
+      request.K, std::max({kMinStridePx, options.coarse_ray_stride_px, options.ray_stride_px}));
   const CorePrior prior = CorePrior::Tabulated(grid.roi(), grid.voxel_size_m(), options);
   const GainParams params(options, grid.voxel_size_m());
   std::vector<std::vector<KeyedContribution>> reveal(top.size());

@@ -201,7 +201,7 @@ int64_t ProximityField::Threshold(double max_distance_m, double voxel_size_m) {
 }
 
 Result<ProximityField> ProximityField::Build(const mapping::SemanticMap& map, double max_distance_m,
-                                             size_t max_bytes) {
+                                             size_t max_bytes, const std::optional<Box3>& region) {
   if (!(max_distance_m >= 0.0 && max_distance_m <= kMaxProximityDistance)) {
     return InvalidArgumentError(
         fmt::format("proximity field: max_distance_m ({}) must be in [0, {}]", max_distance_m,
@@ -218,9 +218,19 @@ Result<ProximityField> ProximityField::Build(const mapping::SemanticMap& map, do
                     max_distance_m, f.voxel_size_m_));
   }
   const float occupied = grid.occupied_log_odds();
+  // A voxel within max_distance_m of the region has its centre within max_distance_m plus a
+  // voxel's half diagonal of it; a whole voxel more is margin.
+  Box3 keep;
+  if (region && !region->IsEmpty()) {
+    const Eigen::Vector3d margin =
+        Eigen::Vector3d::Constant(max_distance_m + 2.0 * f.voxel_size_m_);
+    keep = Box3(region->min() - margin, region->max() + margin);
+  }
   std::vector<VoxelKey> occ;
   grid.ForEachKnownVoxel([&](const VoxelKey& k, float log_odds) {
-    if (log_odds >= occupied) occ.push_back(k);
+    if (log_odds >= occupied && (!region || keep.Contains(k.Center(f.voxel_size_m_)))) {
+      occ.push_back(k);
+    }
   });
   if (occ.empty()) return f;
   VoxelKey lo = occ.front(), hi = occ.front();
@@ -249,8 +259,12 @@ Result<ProximityField> ProximityField::Build(const mapping::SemanticMap& map, do
     int32_t x, y, z;
     uint16_t d2;
   };
+  // The ball's offsets by dz (z outermost): offsets of layer dz are ball[first[dz + r], first[dz +
+  // r + 1]).
   std::vector<Offset> ball;
+  std::vector<size_t> first;
   for (int32_t z = -r; z <= r; ++z) {
+    first.push_back(ball.size());
     for (int32_t y = -r; y <= r; ++y) {
       for (int32_t x = -r; x <= r; ++x) {
         const int64_t d2 = int64_t{x} * x + int64_t{y} * y + int64_t{z} * z;
@@ -258,23 +272,40 @@ Result<ProximityField> ProximityField::Build(const mapping::SemanticMap& map, do
       }
     }
   }
+  first.push_back(ball.size());
+  // The surface voxels (an occupied voxel with a 6-neighbour that is not: an interior one is never
+  // the nearest to a voxel outside), by z layer of the field.
   static constexpr int kNeighbours[6][3] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
                                             {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
+  std::vector<std::vector<VoxelKey>> surface(static_cast<size_t>(nz));
   for (const VoxelKey& k : occ) {
     f.d2_[index(k.x, k.y, k.z)] = 0;
-    bool surface = false;
     for (const auto& d : kNeighbours) {
       if (grid.State({k.x + d[0], k.y + d[1], k.z + d[2]}) != mapping::VoxelState::kOccupied) {
-        surface = true;
+        surface[static_cast<size_t>(int64_t{k.z} - f.min_.z)].push_back(k);
         break;
       }
     }
-    if (!surface) continue;
-    for (const Offset& o : ball) {
-      uint16_t& cell = f.d2_[index(int64_t{k.x} + o.x, int64_t{k.y} + o.y, int64_t{k.z} + o.z)];
-      cell = std::min(cell, o.d2);
-    }
   }
+  // Each surface voxel stamps its ball; slabs of z layers in parallel, each writing only its own
+  // layers (the minimum does not depend on the order).
+  constexpr int64_t kSlab = 8;
+  const int64_t slabs = (nz + kSlab - 1) / kSlab;
+  ParallelFor(static_cast<size_t>(slabs), [&](size_t slab) {
+    const int64_t z0 = static_cast<int64_t>(slab) * kSlab, z1 = std::min(nz, z0 + kSlab);
+    for (int64_t zs = std::max<int64_t>(0, z0 - r); zs < std::min(nz, z1 + r); ++zs) {
+      for (const VoxelKey& k : surface[static_cast<size_t>(zs)]) {
+        const int64_t dz_lo = std::max<int64_t>(-r, z0 - zs),
+                      dz_hi = std::min<int64_t>(r, z1 - 1 - zs);
+        for (size_t i = first[static_cast<size_t>(dz_lo + r)];
+             i < first[static_cast<size_t>(dz_hi + r + 1)]; ++i) {
+          const Offset& o = ball[i];
+          uint16_t& cell = f.d2_[index(int64_t{k.x} + o.x, int64_t{k.y} + o.y, int64_t{k.z} + o.z)];
+          cell = std::min(cell, o.d2);
+        }
+      }
+    }
+  });
   return f;
 }
 

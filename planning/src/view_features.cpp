@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <fmt/format.h>
@@ -22,7 +23,8 @@ namespace {
 // The feature row, in order. Plan: the same for every candidate of a step. Geometry: the view
 // against the ROI, the start and the fused views. avp: avp-nbv's gain by part with its default
 // options, per ray. Rays: statistics of the rays walked through the map up to their first
-// occupied voxel or their exit from the ROI, per ray (metres are voxel counts times the edge).
+// occupied voxel or their exit from the ROI (a ray that misses the ROI is not walked), per ray
+// (metres are voxel counts times the edge).
 // Fruit: the spheres fitted to the target instances seen so far.
 enum Feature : int {
   kPlanProgress,      // view_index / views_total
@@ -67,8 +69,35 @@ enum Feature : int {
   kFruitNearestM,          // nearest fitted sphere centre, m (2 without spheres)
   kFruitInView,            // sphere centres inside the view's frustum
   kFruitNewSide,           // (1 - cos) / 2 of the newest angle onto a sphere in view
+  // Step-relative: each column over the largest of the step's reachable candidates (scale-free:
+  // a large plant or a wall gives every view more of everything).
+  kRelTargetEntropy,
+  kRelPredictedTarget,
+  kRelUnknownNearTarget,
+  kRelUnknownRoi,
+  kRelHitTarget,
+  kRelFree,
+  kRelUnknownNearTargetM,
+  kRelPredictedTargetM,
+  kRelUnknownCore,
   kFeatureCount
 };
+
+/// The step-relative columns and the column each is relative to.
+constexpr auto kRelative = std::to_array<std::pair<Feature, Feature>>({
+    {kAvpGainRelative, kAvpGainRelative},
+    {kRayUnknownRelative, kRayUnknownM},
+    {kRayNearPlantRelative, kRayUnknownNearPlantM},
+    {kRelTargetEntropy, kAvpTargetEntropy},
+    {kRelPredictedTarget, kAvpPredictedTarget},
+    {kRelUnknownNearTarget, kAvpUnknownNearTarget},
+    {kRelUnknownRoi, kAvpUnknownRoi},
+    {kRelHitTarget, kRayHitTarget},
+    {kRelFree, kRayFreeM},
+    {kRelUnknownNearTargetM, kRayUnknownNearTargetM},
+    {kRelPredictedTargetM, kRayPredictedTargetM},
+    {kRelUnknownCore, kRayUnknownCoreM},
+});
 
 constexpr std::array<std::string_view, kFeatureCount> kNames = {
     "plan_progress",
@@ -112,6 +141,15 @@ constexpr std::array<std::string_view, kFeatureCount> kNames = {
     "fruit_nearest_m",
     "fruit_in_view",
     "fruit_new_side",
+    "rel_avp_target_entropy",
+    "rel_avp_predicted_target",
+    "rel_avp_unknown_near_target",
+    "rel_avp_unknown_roi",
+    "rel_ray_hit_target",
+    "rel_ray_free_m",
+    "rel_ray_unknown_near_target_m",
+    "rel_ray_predicted_target_m",
+    "rel_ray_unknown_core_m",
 };
 
 /// What one ray saw, summed over a view's rays.
@@ -187,7 +225,8 @@ Result<ViewFeatureExtractor> ViewFeatureExtractor::Build(const PlanningRequest& 
   x.request_ = &request;
   x.grid_ = &grid;
   x.sampling_ = sampling;
-  AVP_ASSIGN_OR_RETURN(x.proximity_, ProximityField::Build(*request.map, sampling.near_plant_m));
+  AVP_ASSIGN_OR_RETURN(x.proximity_, ProximityField::Build(*request.map, sampling.near_plant_m,
+                                                           size_t{1} << 30, grid.roi()));
   x.spheres_ = FitTargetSpheres(*request.map, request.target_class);
   x.dirs_C_ = RayDirections(request.K, sampling.ray_stride_px);
   // avp-nbv's gain with its default options, whatever the planner's (a feature is one thing).
@@ -205,67 +244,83 @@ Result<ViewFeatureExtractor> ViewFeatureExtractor::Build(const PlanningRequest& 
 
 namespace {
 
-/// Walks one ray (the eye to max range) and adds what it saw to `sums`.
-void WalkRay(const GainGrid& grid, const ProximityField& proximity, const Eigen::Vector3d& eye,
-             const Eigen::Vector3d& to, const ViewFeatureSampling& sampling, RaySums& sums) {
-  const double s = grid.voxel_size_m();
-  const Box3& roi = grid.roi();
-  bool entered = false, hit = false;
-  double unknown = 0, free = 0, near_plant = 0, near_target = 0, predicted = 0, core = 0;
-  double first_unknown = sampling.max_range_m, end = sampling.max_range_m;
-  grid.Walk(eye, to, [&](const VoxelKey& k, const GainVoxel& v) {
-    if (!v.in_roi) {
-      if (entered) {
-        end = (k.Center(s) - eye).norm();
-        return false;
-      }
-      if (v.state == mapping::VoxelState::kOccupied) {
-        end = (k.Center(s) - eye).norm();
-        hit = true;
-        sums.hit_other += v.cls == grid.target() ? 0.0 : 1.0;
-        sums.hit_target += v.cls == grid.target() ? 1.0 : 0.0;
-        return false;
-      }
-      return true;
+/// The statistics of one ray, voxel by voxel as AvpGainEvaluator::WalkRay hands them over: up to
+/// its first occupied voxel or its exit from the ROI.
+class RayStatistics {
+ public:
+  RayStatistics(const GainGrid& grid, const ProximityField& proximity,
+                const ViewFeatureSampling& sampling, const Eigen::Vector3d& eye)
+      : grid_(grid), proximity_(proximity), sampling_(sampling), eye_(eye) {}
+
+  /// Starts the next ray.
+  void Begin() {
+    entered_ = hit_ = false;
+    unknown_ = free_ = near_plant_ = near_target_ = predicted_ = core_ = 0.0;
+    first_unknown_ = end_ = sampling_.max_range_m;
+  }
+
+  /// One voxel; false where the ray ends for the statistics.
+  bool Visit(const VoxelKey& k, const GainVoxel& v) {
+    const double s = grid_.voxel_size_m();
+    if (!v.in_roi && entered_) {  // the exit from the ROI
+      end_ = (k.Center(s) - eye_).norm();
+      return false;
     }
-    entered = true;
+    entered_ = entered_ || v.in_roi;
     switch (v.state) {
       case mapping::VoxelState::kOccupied:
-        end = (k.Center(s) - eye).norm();
-        hit = true;
-        (v.cls == grid.target() ? sums.hit_target : sums.hit_other) += 1.0;
+        end_ = (k.Center(s) - eye_).norm();
+        hit_ = true;
+        (v.cls == grid_.target() ? sums_.hit_target : sums_.hit_other) += 1.0;
         return false;
       case mapping::VoxelState::kFree:
-        free += s;
+        if (v.in_roi) free_ += s;
         return true;
       case mapping::VoxelState::kUnknown: {
+        if (!v.in_roi) return true;
         const Eigen::Vector3d c = k.Center(s);
-        if (unknown == 0.0) first_unknown = (c - eye).norm();
-        unknown += s;
-        if (proximity.DistanceToOccupied(k).has_value()) near_plant += s;
-        if (v.near_target) near_target += s;
-        if (v.predicted_target) predicted += s;
-        if (PlantCoreDistance(c, roi) <= sampling.core_band_m) core += s;
+        if (unknown_ == 0.0) first_unknown_ = (c - eye_).norm();
+        unknown_ += s;
+        if (proximity_.DistanceToOccupied(k).has_value()) near_plant_ += s;
+        if (v.near_target) near_target_ += s;
+        if (v.predicted_target) predicted_ += s;
+        if (PlantCoreDistance(c, grid_.roi()) <= sampling_.core_band_m) core_ += s;
         return true;
       }
     }
     return true;
-  });
-  sums.in_roi += entered ? 1.0 : 0.0;
-  sums.unknown += unknown;
-  if (hit) {
-    sums.hits += 1.0;
-    sums.unknown_before_hit += unknown;
   }
-  sums.free += free;
-  sums.roi += unknown + free;
-  sums.first_unknown_m += first_unknown;
-  sums.end_m += end;
-  sums.near_plant += near_plant;
-  sums.near_target += near_target;
-  sums.predicted += predicted;
-  sums.core += core;
-}
+
+  /// Ends the ray: adds it to the sums.
+  void End() {
+    sums_.in_roi += entered_ ? 1.0 : 0.0;
+    sums_.unknown += unknown_;
+    if (hit_) {
+      sums_.hits += 1.0;
+      sums_.unknown_before_hit += unknown_;
+    }
+    sums_.free += free_;
+    sums_.roi += unknown_ + free_;
+    sums_.first_unknown_m += first_unknown_;
+    sums_.end_m += end_;
+    sums_.near_plant += near_plant_;
+    sums_.near_target += near_target_;
+    sums_.predicted += predicted_;
+    sums_.core += core_;
+  }
+
+  const RaySums& sums() const { return sums_; }
+
+ private:
+  const GainGrid& grid_;
+  const ProximityField& proximity_;
+  const ViewFeatureSampling& sampling_;
+  const Eigen::Vector3d eye_;
+  RaySums sums_;
+  bool entered_ = false, hit_ = false;
+  double unknown_ = 0, free_ = 0, near_plant_ = 0, near_target_ = 0, predicted_ = 0, core_ = 0;
+  double first_unknown_ = 0, end_ = 0;
+};
 
 }  // namespace
 
@@ -299,19 +354,25 @@ void ViewFeatureExtractor::ComputeRow(const ViewCandidate& c, std::span<float> r
   set(kSourceFruit, c.source == "fruit-shell" ? 1.0 : 0.0);
   set(kSourceFrontier, c.source == "frontier" ? 1.0 : 0.0);
   set(kSourceRoi, c.source == "roi" ? 1.0 : 0.0);
-  // avp-nbv's parts (per ray) and the ray statistics.
+  // avp-nbv's parts (per ray) and the ray statistics, from one walk of each ray.
   const double rays = static_cast<double>(std::max<size_t>(1, dirs_C_.size()));
-  const std::array<double, kGainTermCount> terms = gain_->Terms(c.X_WC, dirs_C_);
+  std::array<double, kGainTermCount> terms{};
+  RayStatistics statistics(*grid_, proximity_, sampling_, eye);
+  const AvpGainEvaluator::Visitor visit = [&statistics](const VoxelKey& k, const GainVoxel& v) {
+    return statistics.Visit(k, v);
+  };
+  for (const Eigen::Vector3d& d_C : dirs_C_) {
+    statistics.Begin();
+    gain_->WalkRay(eye, c.X_WC * (sampling_.max_range_m * d_C), terms, visit);
+    statistics.End();
+  }
   double total = 0;
   for (int t = 0; t < kGainTermCount; ++t) {
     set(static_cast<Feature>(kAvpTargetEntropy + t), terms[t] / rays);
     total += terms[t];
   }
   set(kAvpGainRelative, total / rays);  // made relative in Compute
-  RaySums sums;
-  for (const Eigen::Vector3d& d_C : dirs_C_) {
-    WalkRay(*grid_, proximity_, eye, c.X_WC * (sampling_.max_range_m * d_C), sampling_, sums);
-  }
+  const RaySums& sums = statistics.sums();
   set(kRayHitTarget, sums.hit_target / rays);
   set(kRayHitOther, sums.hit_other / rays);
   set(kRayInRoi, sums.in_roi / rays);
@@ -355,9 +416,7 @@ std::vector<float> ViewFeatureExtractor::Compute(std::span<const ViewCandidate> 
   std::vector<float> rows(n * f, 0.0f);
   ParallelFor(n, [&](size_t i) { ComputeRow(candidates[i], std::span(rows).subspan(i * f, f)); });
   // The step-relative columns: each over the largest of the step's reachable candidates.
-  for (const auto& [column, source] :
-       {std::pair{kAvpGainRelative, kAvpGainRelative}, std::pair{kRayUnknownRelative, kRayUnknownM},
-        std::pair{kRayNearPlantRelative, kRayUnknownNearPlantM}}) {
+  for (const auto& [column, source] : kRelative) {
     float largest = 0.0f;
     for (size_t i = 0; i < n; ++i) {
       if (candidates[i].reachable) largest = std::max(largest, rows[i * f + source]);

@@ -234,6 +234,44 @@ TEST(IslerUtilitiesTest, ProximityFieldMatchesBruteForce) {
   EXPECT_TRUE(ProximityField::Build(MakeMap(0.005), 0.015).ok());  // empty: nothing near
 }
 
+TEST(IslerUtilitiesTest, AProximityFieldCroppedToARegionIsExactInsideIt) {
+  const mapping::SemanticMap map = RandomMap(1, 0.005);
+  // A region of 20 x 12 x 10 voxels inside the map; a voxel far outside it.
+  const Box3 region(Eigen::Vector3d(-0.05, -0.03, -0.02), Eigen::Vector3d(0.05, 0.03, 0.03));
+  const auto full = ProximityField::Build(map, 0.015);
+  const auto cropped = ProximityField::Build(map, 0.015, size_t{1} << 30, region);
+  ASSERT_TRUE(full.ok() && cropped.ok());
+  size_t inside = 0, near = 0;
+  for (int32_t z = -25; z < 25; ++z) {
+    for (int32_t y = -25; y < 25; ++y) {
+      for (int32_t x = -25; x < 25; ++x) {
+        const VoxelKey k{x, y, z};
+        if (!region.Contains(k.Center(0.005))) continue;
+        ++inside;
+        ASSERT_EQ(cropped->DistanceToOccupied(k), full->DistanceToOccupied(k))
+            << x << " " << y << " " << z;
+        near += full->DistanceToOccupied(k).has_value() ? 1 : 0;
+      }
+    }
+  }
+  EXPECT_GT(inside, 2000u);
+  EXPECT_GT(near, inside / 4);
+  // Far from the region the cropped field knows nothing: it was not built there.
+  const VoxelKey far{-24, -24, -24};
+  ASSERT_FALSE(region.Contains(far.Center(0.005)));
+  size_t far_known = 0, far_known_full = 0;
+  for (int32_t z = -25; z < -15; ++z) {
+    for (int32_t y = -25; y < -15; ++y) {
+      for (int32_t x = -25; x < -15; ++x) {
+        far_known += cropped->DistanceToOccupied({x, y, z}).has_value() ? 1 : 0;
+        far_known_full += full->DistanceToOccupied({x, y, z}).has_value() ? 1 : 0;
+      }
+    }
+  }
+  EXPECT_EQ(far_known, 0u);
+  EXPECT_GT(far_known_full, 0u);
+}
+
 TEST(IslerUtilitiesTest, FastEqualsSlowOnRandomRays) {
   const mapping::SemanticMap map = RandomMap(2, 0.005);
   const auto grid = GainGrid::Build(map, SemanticClass::kFruit, Box3());

@@ -113,6 +113,23 @@ TEST_F(ViewFeaturesTest, RowsDescribeWhatAViewWouldCrossAndSee) {
   EXPECT_EQ(at(2, "avp_gain_relative"), 0.0f);
   EXPECT_EQ(at(2, "fruit_in_view"), 0.0f);
   EXPECT_LT(at(2, "axis_roi_cos"), 0.5f);
+  // One walk per ray gives both the statistics and avp-nbv's gain parts: the parts sum to the
+  // gain avp-nbv computes for the same rays.
+  AvpNbvOptions o;
+  o.ray_stride_px = ViewFeatureSampling{}.ray_stride_px;
+  const double rays = static_cast<double>(RayDirections(r.K, o.ray_stride_px).size());
+  for (size_t view = 0; view < views.size(); ++view) {
+    double parts = 0.0;
+    for (const char* name : {"avp_target_entropy", "avp_predicted_target",
+                             "avp_unknown_near_target", "avp_unknown_roi"}) {
+      parts += at(view, name);
+    }
+    const double gain = AvpViewGain(*grid, views[view].X_WC, r.K, o);
+    EXPECT_NEAR(parts * rays, gain, 1e-5 * std::max(1.0, gain)) << "view " << view;
+    if (view == 1) {
+      EXPECT_GT(gain, 0.0);  // from behind: unknown space to gain
+    }
+  }
 }
 
 TEST_F(ViewFeaturesTest, RowsDoNotDependOnTheThreadCountOrTheCandidateOrder) {

@@ -32,7 +32,8 @@ struct PlantShape {
   double leaf_spacing_m = 0.05;
   int clusters = 3;
   int fruits_per_cluster_max = 5;
-  bool planar = false;  ///< wall: branches stay near the plane x = base.x
+  bool planar = false;              ///< wall, trellis: branches stay near the plane x = base.x
+  double child_length_scale = 1.0;  ///< trellis: long, near-horizontal trained arms
   bool far_side_fruit = false;
 };
 
@@ -101,7 +102,8 @@ void Grow(const PlantShape& shape, const std::vector<Eigen::Vector3d>& line, dou
     const double angle =
         rng.Uniform(shape.branch_angle_min_deg, shape.branch_angle_max_deg) * kPi / 180.0;
     const Eigen::Vector3d dir = Deviate(TangentAt(line, f), angle, shape.planar, rng);
-    const double child_length = length * rng.Uniform(0.25, 0.55) * (1.0 - 0.4 * f);
+    const double child_length = length * rng.Uniform(0.25, 0.55) * (1.0 - 0.4 * f) *
+                                (level == 0 ? shape.child_length_scale : 1.0);
     const double child_radius = std::max(0.0025, radius * rng.Uniform(0.4, 0.65));
     Grow(shape, BranchLine(at, dir, child_length, rng.Uniform(0.0, 0.35), rng), child_radius,
          level + 1, rng, branches);
@@ -232,17 +234,25 @@ PlantShape DrawShape(const GenericPlantDraw& draw, const Eigen::Vector3d& base, 
   PlantShape s;
   s.base_W = base;
   s.height_m = height;
-  s.planar = draw.layout == GenericPlantDraw::Layout::kWall;
-  s.stems = s.planar ? static_cast<int>(rng.UniformInt(4, 8))
-            : draw.layout == GenericPlantDraw::Layout::kRow
-                ? 1
-                : static_cast<int>(rng.UniformInt(1, 3));
+  using Layout = GenericPlantDraw::Layout;
+  const bool trellis = draw.layout == Layout::kTrellis;
+  s.planar = draw.layout == Layout::kWall || trellis;
+  s.stems = draw.layout == Layout::kWall  ? static_cast<int>(rng.UniformInt(4, 8))
+            : draw.layout == Layout::kRow ? 1
+                                          : static_cast<int>(rng.UniformInt(1, 3));
   s.stem_radius_m = rng.Uniform(0.006, 0.016);
   s.children_min = static_cast<int>(rng.UniformInt(2, 4));
   s.children_max = s.children_min + static_cast<int>(rng.UniformInt(0, 2));
   s.levels = static_cast<int>(rng.UniformInt(2, 3));
   s.branch_angle_min_deg = rng.Uniform(15.0, 40.0);
   s.branch_angle_max_deg = s.branch_angle_min_deg + rng.Uniform(15.0, 50.0);
+  if (trellis) {  // arms trained out along the plane, spurs off them
+    s.children_min = static_cast<int>(rng.UniformInt(3, 6));
+    s.children_max = s.children_min + static_cast<int>(rng.UniformInt(0, 3));
+    s.branch_angle_min_deg = rng.Uniform(65.0, 80.0);
+    s.branch_angle_max_deg = rng.Uniform(85.0, 100.0);
+    s.child_length_scale = rng.Uniform(1.6, 2.6);
+  }
   const double density = rng.Uniform(0.2, 1.8);
   s.leaf_length_m = rng.Uniform(0.03, 0.18);
   s.leaf_width_ratio = rng.Uniform(0.25, 0.7);
@@ -270,6 +280,28 @@ void GrowStems(const PlantShape& shape, double footprint_m, Rng& rng,
     const Eigen::Vector3d dir = Deviate(kUp, tilt, shape.planar, rng);
     const double h = shape.height_m * rng.Uniform(0.8, 1.0);
     Grow(shape, BranchLine(foot, dir, h, 0.0, rng), shape.stem_radius_m, 0, rng, branches);
+  }
+}
+
+/// Two round stakes beyond the ends of a wall or trellis `footprint_m` wide along y, and 1–4
+/// wires between them at random heights, a little in front of or behind the plane (class support).
+void AddSupports(const Eigen::Vector3d& centre, double footprint_m, Rng rng, Scene& scene) {
+  const double half = 0.5 * footprint_m + rng.Uniform(0.05, 0.15);
+  const double height = rng.Uniform(0.8, 1.6);
+  const double x = centre.x() + (rng.Bernoulli(0.5) ? 1.0 : -1.0) * rng.Uniform(0.01, 0.04);
+  const Eigen::Vector3f wood = VaryAlbedo({0.35f, 0.27f, 0.16f}, 0.2, rng);
+  for (const double side : {-1.0, 1.0}) {
+    const Eigen::Vector3d foot(x, centre.y() + side * half, centre.z());
+    scene.Add(fmt::format("generic/stake_{}", side < 0 ? 0 : 1), SemanticClass::kSupport, wood,
+              MakeCylinder(foot, foot + height * kUp, rng.Uniform(0.015, 0.035), 10, true));
+  }
+  const int wires = static_cast<int>(rng.UniformInt(1, 4));
+  for (int w = 0; w < wires; ++w) {
+    const double z = centre.z() + rng.Uniform(0.25, 0.95) * height;
+    const Eigen::Vector3d a(x, centre.y() - half, z), b(x, centre.y() + half, z);
+    scene.Add(fmt::format("generic/wire_{}", w), SemanticClass::kSupport,
+              VaryAlbedo({0.5f, 0.5f, 0.52f}, 0.1, rng),
+              MakeCylinder(a, b, rng.Uniform(0.001, 0.0025), 6, true));
   }
 }
 
@@ -303,6 +335,8 @@ const char* GenericLayoutName(GenericPlantDraw::Layout layout) {
       return "row";
     case GenericPlantDraw::Layout::kWall:
       return "wall";
+    case GenericPlantDraw::Layout::kTrellis:
+      return "trellis";
   }
   return "?";
 }
@@ -310,11 +344,14 @@ const char* GenericLayoutName(GenericPlantDraw::Layout layout) {
 GenericPlantDraw DrawGenericLayout(Rng& rng) {
   GenericPlantDraw d;
   const double u = rng.Uniform01();
-  d.layout = u < 0.5    ? GenericPlantDraw::Layout::kSingle
-             : u < 0.75 ? GenericPlantDraw::Layout::kRow
-                        : GenericPlantDraw::Layout::kWall;
-  d.plants =
-      d.layout == GenericPlantDraw::Layout::kRow ? static_cast<int>(rng.UniformInt(2, 4)) : 1;
+  using Layout = GenericPlantDraw::Layout;
+  d.layout = u < 0.4   ? Layout::kSingle
+             : u < 0.6 ? Layout::kRow
+             : u < 0.8 ? Layout::kWall
+                       : Layout::kTrellis;
+  d.plants = d.layout == Layout::kRow ? static_cast<int>(rng.UniformInt(2, 4)) : 1;
+  d.supports = (d.layout == Layout::kTrellis && rng.Bernoulli(0.7)) ||
+               (d.layout == Layout::kWall && rng.Bernoulli(0.3));
   d.occluded = rng.Bernoulli(0.3);
   d.far_side_fruit = rng.Bernoulli(0.3);
   if (rng.Bernoulli(0.3)) {
@@ -333,7 +370,10 @@ GenericPlantInfo AddGenericPlants(const GenericPlantDraw& draw, const RigidTrans
   const Eigen::Vector3d centre(place.Uniform(0.55, 0.85), place.Uniform(-0.35, 0.35), 0.0);
   const bool row = draw.layout == GenericPlantDraw::Layout::kRow;
   const double spacing = place.Uniform(0.25, 0.45);
-  const double footprint = place.Uniform(0.8, 1.4);  // a wall's width
+  // A wall's or a trellis's width.
+  const double footprint = draw.layout == GenericPlantDraw::Layout::kTrellis
+                               ? place.Uniform(1.0, 2.0)
+                               : place.Uniform(0.8, 1.4);
   std::vector<Ellipsoid> all_fruit;
   for (int p = 0; p < draw.plants; ++p) {
     Rng r = plant_rng.Fork(static_cast<uint64_t>(p + 1));
@@ -356,6 +396,7 @@ GenericPlantInfo AddGenericPlants(const GenericPlantDraw& draw, const RigidTrans
     AddFruit(shape, branches, name, r, scene, all_fruit, info);
     info.num_branches += static_cast<int>(branches.size());
   }
+  if (draw.supports) AddSupports(centre, footprint, plant_rng.Fork("supports"), scene);
   if (draw.occluded && !all_fruit.empty()) {
     OcclusionScreen screen;
     screen.enabled = true;

@@ -192,7 +192,8 @@ std::vector<ScenarioEntry> BuiltinEntries() {
          return s;
        })},
       {std::string(kGenericTrainingScenario),
-       "TRAINING ONLY: generic plants (single, row or wall), random branches, leaves and fruit",
+       "TRAINING ONLY: generic plants (single, row, wall or trellis), random branches, leaves and "
+       "fruit",
        Finished([](uint64_t seed) {
          Scene s;
          Rng rng = PlantRng("generic-training", seed);

@@ -16,7 +16,7 @@ using Layout = GenericPlantDraw::Layout;
 
 TEST(GenericPlantTest, SeedsCoverEveryLayoutOcclusionAndStart) {
   std::set<std::string> layouts;
-  int occluded = 0, yawed = 0, far_side = 0;
+  int occluded = 0, yawed = 0, far_side = 0, supported = 0;
   for (uint64_t seed = 0; seed < 40; ++seed) {
     Rng rng(seed);
     const GenericPlantDraw d = DrawGenericLayout(rng);
@@ -29,8 +29,11 @@ TEST(GenericPlantTest, SeedsCoverEveryLayoutOcclusionAndStart) {
       EXPECT_LE(std::abs(d.start_yaw_deg), 55.0);
     }
     EXPECT_EQ(d.plants > 1, d.layout == Layout::kRow);
+    EXPECT_TRUE(!d.supports || d.layout == Layout::kWall || d.layout == Layout::kTrellis);
+    supported += d.supports ? 1 : 0;
   }
-  EXPECT_EQ(layouts, (std::set<std::string>{"row", "single", "wall"}));
+  EXPECT_EQ(layouts, (std::set<std::string>{"row", "single", "trellis", "wall"}));
+  EXPECT_GT(supported, 0);
   // Each is drawn with probability 0.3: between 4 and 20 of 40 (binomial, p > 0.999).
   for (const int n : {occluded, yawed, far_side}) {
     EXPECT_GE(n, 4);
@@ -39,12 +42,13 @@ TEST(GenericPlantTest, SeedsCoverEveryLayoutOcclusionAndStart) {
 }
 
 TEST(GenericPlantTest, PlantsHaveSeparateFruitInsideTheirBoundsAndAreDeterministic) {
-  for (const Layout layout : {Layout::kSingle, Layout::kRow, Layout::kWall}) {
+  for (const Layout layout : {Layout::kSingle, Layout::kRow, Layout::kWall, Layout::kTrellis}) {
     for (uint64_t seed = 0; seed < 4; ++seed) {
       SCOPED_TRACE(std::string(GenericLayoutName(layout)) + " seed " + std::to_string(seed));
       GenericPlantDraw draw;
       draw.layout = layout;
       draw.plants = layout == Layout::kRow ? 3 : 1;
+      draw.supports = layout == Layout::kTrellis;
       Scene scene, again;
       Rng rng(seed), rng_again(seed);
       const GenericPlantInfo info = AddGenericPlants(draw, ReferenceStartCameraPose(), rng, scene);
@@ -71,9 +75,20 @@ TEST(GenericPlantTest, PlantsHaveSeparateFruitInsideTheirBoundsAndAreDeterminist
       for (size_t i = 0; i < fruits.size(); ++i) {
         EXPECT_EQ(again.Fruits()[i].center_W, fruits[i].center_W);
       }
-      if (layout == Layout::kWall) {
-        // A wall is wide along y and thin along x.
+      if (layout == Layout::kWall || layout == Layout::kTrellis) {
+        // A wall or a trellis is wide along y and thin along x.
         EXPECT_GT(scene.plant_bounds.size().y(), 1.5 * scene.plant_bounds.size().x());
+      }
+      size_t supports = 0;
+      for (const SceneObject& o : scene.objects) {
+        supports += o.semantic_class == SemanticClass::kSupport ? 1 : 0;
+      }
+      // Two stakes and 1-4 wires.
+      if (draw.supports) {
+        EXPECT_GE(supports, 3u);
+        EXPECT_LE(supports, 6u);
+      } else {
+        EXPECT_EQ(supports, 0u);
       }
     }
   }

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <span>
@@ -149,19 +150,25 @@ double AvpRayGainReference(const mapping::SemanticMap& map, const Eigen::Vector3
 double AvpViewGain(const GainGrid& grid, const RigidTransform& X_WC, const CameraIntrinsics& K,
                    const AvpNbvOptions& options);
 
-/// avp-nbv's gain by part (AvpGainTerm order, summing to the gain) of cameras on one grid: the
-/// per-step tables are built once, then Terms() is called per view (from any thread). The
-/// learned gain's features include these parts (view_features.h).
+/// avp-nbv's gain by part (AvpGainTerm order, summing to the gain) of rays on one grid, for a
+/// caller that wants statistics of the same walk: the per-step tables are built once, then
+/// WalkRay() is called per ray (from any thread). The learned gain's features include these parts
+/// and walk each ray once for both (view_features.h).
 class AvpGainEvaluator {
  public:
+  /// Called with every voxel a ray walks, in order; returns false to end the walk.
+  using Visitor = std::function<bool(const VoxelKey&, const GainVoxel&)>;
+
   /// `grid` must outlive the evaluator. @throws avp::Error if options.Validate() fails.
   AvpGainEvaluator(const GainGrid& grid, const AvpNbvOptions& options);
   ~AvpGainEvaluator();
   AvpGainEvaluator(AvpGainEvaluator&&) noexcept;
-  /// The parts of the gain of a camera at X_WC over the rays `dirs_C` (unit directions in the
-  /// camera frame, each options.max_range_m long).
-  std::array<double, kGainTermCount> Terms(const RigidTransform& X_WC,
-                                           std::span<const Eigen::Vector3d> dirs_C) const;
+  /// Walks the ray from `eye` to `to` once, clipped to the ROI as the gain is (no voxel when it
+  /// misses the ROI's box): adds its gain by part to `terms` (exactly AvpRayGain's parts) and
+  /// hands each voxel to `visit`, until `visit` returns false or the clipped end. A walk that
+  /// goes on after the gain's ray has ended (an occluded ray) adds nothing more to `terms`.
+  void WalkRay(const Eigen::Vector3d& eye, const Eigen::Vector3d& to,
+               std::array<double, kGainTermCount>& terms, const Visitor& visit) const;
 
  private:
   struct Impl;

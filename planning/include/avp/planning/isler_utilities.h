@@ -48,9 +48,13 @@ const std::vector<IslerUtility>& AllIslerUtilities();
 class ProximityField {
  public:
   ProximityField() = default;
-  /// InvalidArgument for max_distance_m not in [0, 0.2] m or a box above max_bytes.
+  /// InvalidArgument for max_distance_m not in [0, 0.2] m or a box above max_bytes. With
+  /// `region`, only the occupied voxels within max_distance_m of it are taken: the distances are
+  /// exact for voxels inside `region` (and the field no larger than it needs, however large the
+  /// map; e.g. a ground plane outside a plant's ROI).
   static Result<ProximityField> Build(const mapping::SemanticMap& map, double max_distance_m,
-                                      size_t max_bytes = size_t{1} << 30);
+                                      size_t max_bytes = size_t{1} << 30,
+                                      const std::optional<Box3>& region = std::nullopt);
 
   double max_distance_m() const { return max_distance_m_; }
   /// Distance in metres from the centre of `k` to the nearest occupied voxel centre, when it is

@@ -24,7 +24,7 @@ class AvpGainEvaluator;
 /// A model is trained on one version of this list: its manifest carries kViewFeatureVersion,
 /// the names in order and ViewFeatureHash(), and the planner refuses a model whose list differs.
 /// Change a feature's definition: bump the version.
-inline constexpr int kViewFeatureVersion = 1;
+inline constexpr int kViewFeatureVersion = 2;
 
 /// The names, in the order of a feature row.
 std::span<const std::string_view> ViewFeatureNames();

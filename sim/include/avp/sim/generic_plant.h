@@ -19,8 +19,11 @@ namespace avp::sim {
 /// random size and placement. One seed draws everything, including the layout, the occlusion and
 /// the start:
 ///
-/// - layout: a single plant (1–3 stems), a row of 2–4 smaller plants along y, or a wall (a hedge
-///   of 4–8 stems along y whose branches stay near one vertical plane);
+/// - layout: a single plant (1–3 stems, p 0.4), a row of 2–4 smaller plants along y (p 0.2), a
+///   wall (a hedge of 4–8 stems along y whose branches stay near one vertical plane, 0.8–1.4 m
+///   wide, p 0.2) or a trellis (1–3 stems in one plane 1–2 m wide, their long arms trained out
+///   near-horizontally, 65–100° from the stem, with spurs off them, p 0.2); a trellis stands
+///   between stakes with 1–4 wires with p 0.7, a wall with p 0.3;
 /// - the plant's place (its footprint centre x in [0.55, 0.85] m, y in [−0.35, 0.35] m), height
 ///   (0.6–1.3 m), branching (2–6 children per branch, 2–3 levels), leaf size (3–18 cm) and
 ///   density (0.2–1.8), fruit clusters (1–7 of 1–8 fruits, radii 1.5–4.5 cm, on any side, or
@@ -28,15 +31,16 @@ namespace avp::sim {
 /// - occlusion: with probability 0.3 an occlusion screen hides every fruit from the start view;
 /// - the start: with probability 0.3 the arm is yawed 15–55° away from the plant (either way).
 struct GenericPlantDraw {
-  enum class Layout { kSingle, kRow, kWall };
+  enum class Layout { kSingle, kRow, kWall, kTrellis };
   Layout layout = Layout::kSingle;
   int plants = 1;
+  bool supports = false;  ///< stakes and wires (class support), for a wall or a trellis
   bool occluded = false;
   bool far_side_fruit = false;
   double start_yaw_deg = 0.0;
 };
 
-/// "single", "row", "wall".
+/// "single", "row", "wall", "trellis".
 const char* GenericLayoutName(GenericPlantDraw::Layout layout);
 
 /// What AddGenericPlants built.
