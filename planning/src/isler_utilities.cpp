@@ -3,6 +3,7 @@
 // paper's exclusive product p_vis = Π_{j<i} (1 - p_j), not the update p_vis *= p_occ of
 // rpg_ig_active_reconstruction (nbv-literature.md §0). See docs/planning.md, "Isler utilities".
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <limits>
@@ -200,6 +201,56 @@ int64_t ProximityField::Threshold(double max_distance_m, double voxel_size_m) {
   return static_cast<int64_t>(std::floor(r * r + 1e-6));
 }
 
+namespace {
+
+/// Stamps the ball of squared radius `threshold` (voxel units, at most r voxels) around every
+/// voxel of `surface` (by z layer of the field) into the field `d2` (n[0] x n[1] x n[2] cells from
+/// key `min`), keeping each cell's smallest squared distance. Slabs of z layers run in parallel,
+/// each writing only its own layers (the minimum does not depend on the order).
+void StampBalls(const std::vector<std::vector<VoxelKey>>& surface, int64_t threshold, int32_t r,
+                const VoxelKey& min, const std::array<int64_t, 3>& n, std::vector<uint16_t>& d2) {
+  struct Offset {
+    int32_t x, y, z;
+    uint16_t d2;
+  };
+  // The ball's offsets by dz (z outermost): offsets of layer dz are ball[first[dz + r], first[dz +
+  // r + 1]).
+  std::vector<Offset> ball;
+  std::vector<size_t> first;
+  for (int32_t z = -r; z <= r; ++z) {
+    first.push_back(ball.size());
+    for (int32_t y = -r; y <= r; ++y) {
+      for (int32_t x = -r; x <= r; ++x) {
+        const int64_t q = int64_t{x} * x + int64_t{y} * y + int64_t{z} * z;
+        if (q <= threshold) ball.push_back({x, y, z, static_cast<uint16_t>(q)});
+      }
+    }
+  }
+  first.push_back(ball.size());
+  const auto [nx, ny, nz] = n;
+  constexpr int64_t kSlab = 8;
+  const int64_t slabs = (nz + kSlab - 1) / kSlab;
+  ParallelFor(static_cast<size_t>(slabs), [&](size_t slab) {
+    const int64_t z0 = static_cast<int64_t>(slab) * kSlab, z1 = std::min(nz, z0 + kSlab);
+    for (int64_t zs = std::max<int64_t>(0, z0 - r); zs < std::min(nz, z1 + r); ++zs) {
+      for (const VoxelKey& k : surface[static_cast<size_t>(zs)]) {
+        const int64_t dz_lo = std::max<int64_t>(-r, z0 - zs),
+                      dz_hi = std::min<int64_t>(r, z1 - 1 - zs);
+        for (size_t i = first[static_cast<size_t>(dz_lo + r)];
+             i < first[static_cast<size_t>(dz_hi + r + 1)]; ++i) {
+          const Offset& o = ball[i];
+          const int64_t x = int64_t{k.x} + o.x - min.x, y = int64_t{k.y} + o.y - min.y,
+                        z = int64_t{k.z} + o.z - min.z;
+          uint16_t& cell = d2[static_cast<size_t>(x + nx * (y + ny * z))];
+          cell = std::min(cell, o.d2);
+        }
+      }
+    }
+  });
+}
+
+}  // namespace
+
 Result<ProximityField> ProximityField::Build(const mapping::SemanticMap& map, double max_distance_m,
                                              size_t max_bytes, const std::optional<Box3>& region) {
   if (!(max_distance_m >= 0.0 && max_distance_m <= kMaxProximityDistance)) {
@@ -255,24 +306,6 @@ Result<ProximityField> ProximityField::Build(const mapping::SemanticMap& map, do
   auto index = [&](int64_t x, int64_t y, int64_t z) {
     return static_cast<size_t>((x - f.min_.x) + nx * ((y - f.min_.y) + ny * (z - f.min_.z)));
   };
-  struct Offset {
-    int32_t x, y, z;
-    uint16_t d2;
-  };
-  // The ball's offsets by dz (z outermost): offsets of layer dz are ball[first[dz + r], first[dz +
-  // r + 1]).
-  std::vector<Offset> ball;
-  std::vector<size_t> first;
-  for (int32_t z = -r; z <= r; ++z) {
-    first.push_back(ball.size());
-    for (int32_t y = -r; y <= r; ++y) {
-      for (int32_t x = -r; x <= r; ++x) {
-        const int64_t d2 = int64_t{x} * x + int64_t{y} * y + int64_t{z} * z;
-        if (d2 <= f.threshold_) ball.push_back({x, y, z, static_cast<uint16_t>(d2)});
-      }
-    }
-  }
-  first.push_back(ball.size());
   // The surface voxels (an occupied voxel with a 6-neighbour that is not: an interior one is never
   // the nearest to a voxel outside), by z layer of the field.
   static constexpr int kNeighbours[6][3] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
@@ -287,25 +320,7 @@ Result<ProximityField> ProximityField::Build(const mapping::SemanticMap& map, do
       }
     }
   }
-  // Each surface voxel stamps its ball; slabs of z layers in parallel, each writing only its own
-  // layers (the minimum does not depend on the order).
-  constexpr int64_t kSlab = 8;
-  const int64_t slabs = (nz + kSlab - 1) / kSlab;
-  ParallelFor(static_cast<size_t>(slabs), [&](size_t slab) {
-    const int64_t z0 = static_cast<int64_t>(slab) * kSlab, z1 = std::min(nz, z0 + kSlab);
-    for (int64_t zs = std::max<int64_t>(0, z0 - r); zs < std::min(nz, z1 + r); ++zs) {
-      for (const VoxelKey& k : surface[static_cast<size_t>(zs)]) {
-        const int64_t dz_lo = std::max<int64_t>(-r, z0 - zs),
-                      dz_hi = std::min<int64_t>(r, z1 - 1 - zs);
-        for (size_t i = first[static_cast<size_t>(dz_lo + r)];
-             i < first[static_cast<size_t>(dz_hi + r + 1)]; ++i) {
-          const Offset& o = ball[i];
-          uint16_t& cell = f.d2_[index(int64_t{k.x} + o.x, int64_t{k.y} + o.y, int64_t{k.z} + o.z)];
-          cell = std::min(cell, o.d2);
-        }
-      }
-    }
-  });
+  StampBalls(surface, f.threshold_, r, f.min_, {nx, ny, nz}, f.d2_);
   return f;
 }
 
