@@ -227,7 +227,7 @@ void StampBalls(const std::vector<std::vector<VoxelKey>>& surface, int64_t thres
     }
   }
   first.push_back(ball.size());
-  const auto [nx, ny, nz] = n;
+  const int64_t nx = n[0], ny = n[1], nz = n[2];
   constexpr int64_t kSlab = 8;
   const int64_t slabs = (nz + kSlab - 1) / kSlab;
   ParallelFor(static_cast<size_t>(slabs), [&](size_t slab) {
