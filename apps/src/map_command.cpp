@@ -183,7 +183,7 @@ void AddMapBuild(CLI::App& map_cmd, CommandContext& context) {
       ->check(CLI::IsMember({"reference-max", "bayesian"}))
       ->default_str(std::string(mapping::ToString(b.map.semantics.policy)));
   cmd->add_option("--carving", cli->carving, "Free-space carving")
-      ->check(CLI::IsMember({"raycast", "projective", "none"}))
+      ->check(CLI::IsMember(mapping::FreeSpaceCarvingNames()))
       ->default_str(std::string(mapping::ToString(b.integrator.carving)));
   AddKeyValueOption(*cmd, "--map-option", cli->map_options,
                     "Map option over the defaults (repeatable): grid.voxel_size_m, "

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
 #include <avp/experiment/run_config.h>
@@ -116,7 +117,8 @@ void AddEpisodeFlags(CLI::App& cmd, EpisodeFlags& flags) {
   AddVoxelSizeOption(cmd, flags.voxel_size_m);
   cmd.add_option("--policy", flags.policy, "Semantic fusion: bayesian or reference-max")
       ->default_str(std::string(mapping::ToString(d.map.semantics.policy)));
-  cmd.add_option("--carving", flags.carving, "Free space: projective, raycast or none")
+  cmd.add_option("--carving", flags.carving,
+                 fmt::format("Free space: {}", fmt::join(mapping::FreeSpaceCarvingNames(), ", ")))
       ->default_str(std::string(mapping::ToString(d.episode.integrator.carving)));
   cmd.add_flag("--no-noise", flags.no_noise,
                "Noise-free depth (the seeded D435-like depth noise is on by default in every "

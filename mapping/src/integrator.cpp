@@ -1,8 +1,11 @@
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <numeric>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -24,16 +27,23 @@ std::string_view ToString(FreeSpaceCarving carving) {
       return "projective";
     case FreeSpaceCarving::kNone:
       return "none";
+    case FreeSpaceCarving::kEndVoxelRays:
+      return "end-voxel";
   }
   return "invalid";
 }
 
 std::optional<FreeSpaceCarving> FreeSpaceCarvingFromString(std::string_view name) {
-  for (auto c :
-       {FreeSpaceCarving::kRayCast, FreeSpaceCarving::kProjective, FreeSpaceCarving::kNone}) {
+  for (FreeSpaceCarving c : kFreeSpaceCarvings) {
     if (ToString(c) == name) return c;
   }
   return std::nullopt;
+}
+
+std::vector<std::string> FreeSpaceCarvingNames() {
+  std::vector<std::string> names;
+  for (FreeSpaceCarving c : kFreeSpaceCarvings) names.emplace_back(ToString(c));
+  return names;
 }
 
 const OptionTable<IntegratorOptions>& IntegratorOptionTable() {
@@ -41,10 +51,9 @@ const OptionTable<IntegratorOptions>& IntegratorOptionTable() {
     auto* t = new OptionTable<IntegratorOptions>("integrator option");
     t->Real("max_range_m", &IntegratorOptions::max_range_m, "m", ValueRange::LeftOpen(0, 100),
             "returns beyond it carve free space up to it and mark no endpoint");
-    t->Choice("carving", &IntegratorOptions::carving,
-              {{FreeSpaceCarving::kProjective, "projective"},
-               {FreeSpaceCarving::kRayCast, "raycast"},
-               {FreeSpaceCarving::kNone, "none"}},
+    std::vector<std::pair<FreeSpaceCarving, std::string>> choices;
+    for (FreeSpaceCarving c : kFreeSpaceCarvings) choices.emplace_back(c, std::string(ToString(c)));
+    t->Choice("carving", &IntegratorOptions::carving, choices,
               "how free space is carved (docs/mapping.md)");
     return t;
   }();
@@ -119,97 +128,6 @@ void ApplyHits(const std::vector<RayEnd>& rays, OccupancyGrid& grid, bool collec
       }
     }
   }
-}
-
-/// Free space by ray casting: every voxel from the origin's up to (excluding) the end point's.
-void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, OccupancyGrid& grid,
-               int threads, IntegrationStats& stats) {
-  const double s = grid.voxel_size_m();
-  const float miss = grid.miss_log_odds();
-  if (threads <= 1) {
-    OccupancyGrid::Accessor acc(grid);
-    size_t updates = 0;
-    for (const RayEnd& r : rays) {
-      RayWalker w(origin, r.end, s);
-      if (!w.ok()) continue;
-      while (w.remaining() > 0) {
-        const VoxelKey k = w.key();
-        if (grid.Admits(k) && acc.UpdateOnce(k, miss)) ++updates;
-        w.Step();
-      }
-    }
-    stats.free_updates += updates;
-    return;
-  }
-
-  // 1. Blocks the rays cross, found by walking the block lattice (8x fewer steps), allocated and
-  //    prepared single-threaded in sorted order (deterministic layout).
-  std::vector<std::vector<BlockKey>> per_thread(static_cast<size_t>(threads));
-  const double block_size = s * kBlockEdge;
-  RunParallel(threads, [&](int t) {
-    std::vector<BlockKey>& out = per_thread[static_cast<size_t>(t)];
-    std::array<uint64_t, 4096> seen;
-    seen.fill(~uint64_t{0});
-    for (size_t i = static_cast<size_t>(t) * kChunk; i < rays.size();
-         i += static_cast<size_t>(threads) * kChunk) {
-      const size_t stop = std::min(rays.size(), i + kChunk);
-      for (size_t j = i; j < stop; ++j) {
-        RayWalker w(origin, rays[j].end, block_size);
-        if (!w.ok()) continue;
-        while (true) {
-          const VoxelKey k = w.key();  // a block key: the walk is on the block lattice
-          const BlockKey bk{k.x, k.y, k.z};
-          const uint64_t packed = OccupancyGrid::Pack(bk);
-          uint64_t& slot = seen[(packed * 0x9E3779B97F4A7C15ULL) >> 52];
-          if (slot != packed) {
-            slot = packed;
-            out.push_back(bk);
-          }
-          if (w.remaining() == 0) break;
-          w.Step();
-        }
-      }
-    }
-  });
-  std::vector<BlockKey> blocks;
-  for (auto& v : per_thread) blocks.insert(blocks.end(), v.begin(), v.end());
-  per_thread.clear();
-  grid.PrepareFrameBlocks(blocks);
-
-  // 2. Voxel walks in parallel; a voxel is claimed atomically, so each is updated once. Voxels
-  //    whose block was missed by the block walk (rounding at exact block corners) are deferred.
-  std::vector<size_t> updates(static_cast<size_t>(threads), 0);
-  std::vector<std::vector<VoxelKey>> deferred(static_cast<size_t>(threads));
-  RunParallel(threads, [&](int t) {
-    OccupancyGrid::NoAllocAccessor acc(grid);
-    size_t n = 0;
-    std::vector<VoxelKey>& later = deferred[static_cast<size_t>(t)];
-    for (size_t i = static_cast<size_t>(t) * kChunk; i < rays.size();
-         i += static_cast<size_t>(threads) * kChunk) {
-      const size_t stop = std::min(rays.size(), i + kChunk);
-      for (size_t j = i; j < stop; ++j) {
-        RayWalker w(origin, rays[j].end, s);
-        if (!w.ok()) continue;
-        while (w.remaining() > 0) {
-          const VoxelKey k = w.key();
-          if (acc.UpdateOnce(k, miss)) {
-            ++n;
-          } else if (acc.last_missing()) {
-            later.push_back(k);
-          }
-          w.Step();
-        }
-      }
-    }
-    updates[static_cast<size_t>(t)] = n;
-  });
-  OccupancyGrid::Accessor acc(grid);
-  for (const auto& later : deferred) {
-    for (const VoxelKey& k : later) {
-      if (acc.UpdateOnce(k, miss)) ++stats.free_updates;
-    }
-  }
-  for (size_t n : updates) stats.free_updates += n;
 }
 
 /// The ray through one pixel, for projective carving (CarveProjective).
@@ -639,6 +557,161 @@ void ApplyRemainingVoxels(const std::vector<BlockKey>& candidates,
   }
 }
 
+/// The voxels a frame's rays carve, one bit set per block, indexed by a dense array over the
+/// frame's box of blocks (or, for a box too large for it, an open-addressing table): walking a
+/// ray costs a bit per voxel and an array read per block, and the grid is not touched until the
+/// frame's carving is complete.
+class BlockBitSets {
+ public:
+  /// Blocks from `lo` to `hi` (inclusive) get a dense index when the box holds at most
+  /// kMaxDenseBlocks; other blocks (and all, beyond that) go through the table.
+  BlockBitSets(const BlockKey& lo, const BlockKey& hi) : lo_(lo) {
+    const int64_t nx = int64_t{hi.x} - lo.x + 1, ny = int64_t{hi.y} - lo.y + 1,
+                  nz = int64_t{hi.z} - lo.z + 1;
+    if (nx > 0 && ny > 0 && nz > 0 && nx * ny * nz <= kMaxDenseBlocks) {
+      nx_ = nx;
+      ny_ = ny;
+      nz_ = nz;
+      dense_.assign(static_cast<size_t>(nx * ny * nz), -1);
+    }
+  }
+
+  /// The set of block `b`, created empty on first use. Valid until the next call.
+  BlockBits& For(const BlockKey& b) {
+    const int64_t x = int64_t{b.x} - lo_.x, y = int64_t{b.y} - lo_.y, z = int64_t{b.z} - lo_.z;
+    if (x >= 0 && y >= 0 && z >= 0 && x < nx_ && y < ny_ && z < nz_) {
+      int32_t& i = dense_[static_cast<size_t>(x + nx_ * (y + ny_ * z))];
+      if (i < 0) i = Add(b);
+      return bits_[static_cast<size_t>(i)];
+    }
+    return bits_[static_cast<size_t>(FromTable(b))];
+  }
+  /// Adds every voxel of `other`.
+  void Merge(const BlockBitSets& other) {
+    for (size_t i = 0; i < other.keys_.size(); ++i) {
+      BlockBits& mine = For(other.keys_[i]);
+      for (int w = 0; w < kBlockWords; ++w) mine.words[w] |= other.bits_[i].words[w];
+    }
+  }
+  /// The blocks in key order and their sets, for applying to the grid deterministically.
+  std::pair<std::vector<BlockKey>, std::vector<BlockBits>> Sorted() const {
+    std::vector<size_t> order(keys_.size());
+    std::iota(order.begin(), order.end(), size_t{0});
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return keys_[a] < keys_[b]; });
+    std::pair<std::vector<BlockKey>, std::vector<BlockBits>> out;
+    out.first.reserve(order.size());
+    out.second.reserve(order.size());
+    for (size_t i : order) {
+      out.first.push_back(keys_[i]);
+      out.second.push_back(bits_[i]);
+    }
+    return out;
+  }
+
+ private:
+  /// 4 Mi blocks: a 16 MiB index, a box of 1.3 km^3 of 5 mm voxels (max range 1.5 m needs 3 m).
+  static constexpr int64_t kMaxDenseBlocks = int64_t{1} << 22;
+
+  int32_t Add(const BlockKey& b) {
+    keys_.push_back(b);
+    bits_.emplace_back();
+    return static_cast<int32_t>(keys_.size() - 1);
+  }
+  int32_t FromTable(const BlockKey& b) {
+    if (2 * (table_used_ + 1) > slots_.size()) Grow();
+    for (size_t slot = Slot(b);; slot = (slot + 1) & (slots_.size() - 1)) {
+      const int32_t i = slots_[slot];
+      if (i < 0) {
+        ++table_used_;
+        return slots_[slot] = Add(b);
+      }
+      if (keys_[static_cast<size_t>(i)] == b) return i;
+    }
+  }
+  size_t Slot(const BlockKey& b) const {
+    return (OccupancyGrid::Pack(b) * 0x9E3779B97F4A7C15ULL) >> shift_;
+  }
+  void Grow() {
+    const size_t size = std::max<size_t>(1024, 2 * slots_.size());
+    shift_ = 64 - std::countr_zero(size);
+    std::vector<int32_t> old = std::move(slots_);
+    slots_.assign(size, -1);
+    for (int32_t i : old) {
+      if (i < 0) continue;
+      size_t slot = Slot(keys_[static_cast<size_t>(i)]);
+      while (slots_[slot] >= 0) slot = (slot + 1) & (size - 1);
+      slots_[slot] = i;
+    }
+  }
+
+  BlockKey lo_;
+  int64_t nx_ = 0, ny_ = 0, nz_ = 0;
+  std::vector<int32_t> dense_;  // index into keys_ / bits_, or -1
+  std::vector<int32_t> slots_;  // the table, for blocks outside the dense box
+  size_t table_used_ = 0;
+  int shift_ = 64;
+  std::vector<BlockKey> keys_;
+  std::vector<BlockBits> bits_;
+};
+
+/// The box of blocks holding the origin and every ray's end point (all the rays' voxels).
+std::pair<BlockKey, BlockKey> RayBlockBox(const std::vector<RayEnd>& rays,
+                                          const Eigen::Vector3d& origin, double s) {
+  Eigen::Vector3d lo = origin, hi = origin;
+  for (const RayEnd& r : rays) {
+    lo = lo.cwiseMin(r.end);
+    hi = hi.cwiseMax(r.end);
+  }
+  const double block = s * kBlockEdge;
+  auto key = [&](const Eigen::Vector3d& p) {
+    const Eigen::Vector3d q = (p / block).array().floor().cwiseMax(-1e9).cwiseMin(1e9);
+    return BlockKey{static_cast<int32_t>(q.x()), static_cast<int32_t>(q.y()),
+                    static_cast<int32_t>(q.z())};
+  };
+  return {key(lo), key(hi)};
+}
+
+constexpr int32_t kNoBlock = std::numeric_limits<int32_t>::min();
+
+/// Free space by ray casting: every voxel from the origin's up to (excluding) the end point's.
+/// Each thread walks its share of the rays into its own bit sets (interleaved chunks balance near
+/// and far rays); the sets are merged and applied once per voxel, voxels hit in this frame keeping
+/// their hit. The result does not depend on the thread count.
+void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, OccupancyGrid& grid,
+               int threads, IntegrationStats& stats) {
+  const double s = grid.voxel_size_m();
+  const auto [box_lo, box_hi] = RayBlockBox(rays, origin, s);
+  std::vector<BlockBitSets> sets(static_cast<size_t>(threads), BlockBitSets(box_lo, box_hi));
+  RunParallel(threads, [&](int t) {
+    BlockBitSets& out = sets[static_cast<size_t>(t)];
+    for (size_t i = static_cast<size_t>(t) * kChunk; i < rays.size();
+         i += static_cast<size_t>(threads) * kChunk) {
+      const size_t stop = std::min(rays.size(), i + kChunk);
+      for (size_t j = i; j < stop; ++j) {
+        const RayWalker w(origin, rays[j].end, s);
+        if (!w.ok()) continue;
+        // No key of the walk has this block (keys stay within +-2^23, blocks within +-2^20).
+        BlockKey current{kNoBlock, kNoBlock, kNoBlock};
+        BlockBits* bits = nullptr;
+        w.ForEachKeyBeforeEnd([&](const VoxelKey& k) {
+          const BlockKey bk = BlockOf(k);
+          if (!(bk == current)) {
+            current = bk;
+            bits = &out.For(bk);
+          }
+          bits->set(LocalIndex(k));
+          return true;
+        });
+      }
+    }
+  });
+  for (size_t t = 1; t < sets.size(); ++t) sets[0].Merge(sets[t]);
+  auto [blocks, carve] = sets[0].Sorted();
+  sets.clear();
+  ApplyWholeBlocks(blocks, carve, grid, threads, stats);
+  ApplyRemainingVoxels(blocks, carve, NearCarving{}, grid, stats);
+}
+
 /// Free space by projection, with ray casting's result. A ray through pixel p (direction D_p from
 /// the optical centre o, parameter t = camera z) carves voxel V iff it passes through V before its
 /// end point and the end point is not in V (OctoMap's computeRayKeys excludes the end voxel). This
@@ -799,6 +872,59 @@ std::vector<RayEnd> BackProjectRays(const RgbdFrame& frame, const std::vector<in
   return rays;
 }
 
+/// kEndVoxelRays, OctoMap's insertPointCloud(discretize = true): `rays` arrive with their raw end
+/// points, every return a hit. Each return keeps its hit only if its voxel's centre lies within
+/// max_range (the counts in `stats` follow); the rays to carve are returned, one per distinct
+/// voxel, to its centre or cut at max_range towards it. A return too far for any key (beyond the
+/// ray traversal's range as well) is rejected and carves nothing.
+std::vector<RayEnd> EndVoxelRays(std::vector<RayEnd>& rays, const Eigen::Vector3d& origin,
+                                 double max_range, double s, IntegrationStats& stats) {
+  // An insert-only open-addressing set of the voxels seen (no key in range is kNoKey).
+  constexpr VoxelKey kNoKey{kMaxKeyMagnitude, kMaxKeyMagnitude, kMaxKeyMagnitude};
+  std::vector<VoxelKey> seen(std::bit_ceil(2 * rays.size() + 16), kNoKey);
+  const size_t mask = seen.size() - 1;
+  auto insert = [&](const VoxelKey& k) {
+    for (size_t slot = VoxelKeyHash{}(k)&mask;; slot = (slot + 1) & mask) {
+      if (seen[slot] == k) return false;
+      if (seen[slot] == kNoKey) {
+        seen[slot] = k;
+        return true;
+      }
+    }
+  };
+  std::vector<RayEnd> carve;
+  std::optional<VoxelKey> prev;  // neighbouring pixels mostly share a voxel: skip the set then
+  bool prev_hit = false;
+  for (RayEnd& r : rays) {
+    if (!r.hit) continue;
+    bool hit = false;
+    if (r.end.cwiseAbs().maxCoeff() < 1e5 && KeyInRange(FixedPointKey(r.end, s))) {
+      const VoxelKey k = FixedPointKey(r.end, s);
+      if (prev && *prev == k) {
+        hit = prev_hit;
+      } else {
+        const Eigen::Vector3d c = k.Center(s);
+        const double range = (c - origin).norm();
+        hit = range <= max_range;
+        if (insert(k)) {
+          carve.push_back(hit ? RayEnd{c, true}
+                              : RayEnd{origin + (c - origin) * (max_range / range)});
+        }
+        prev = k;
+        prev_hit = hit;
+      }
+      if (!hit) ++stats.beyond_max_range;
+    } else {
+      ++stats.rejected_points;
+    }
+    if (hit) continue;
+    --stats.endpoints;
+    if (r.label >= 0) --stats.masked_endpoints;
+    r.hit = false;
+  }
+  return carve;
+}
+
 }  // namespace
 
 Integrator::Integrator(const IntegratorOptions& options) : options_(options) {
@@ -827,7 +953,14 @@ Result<IntegrationStats> Integrator::Integrate(const RgbdFrame& frame,
   IntegrationStats stats;
   stats.pixels = static_cast<size_t>(w) * static_cast<size_t>(h);
   const std::vector<int32_t> label = PixelMaskLabels(segmentation, stats.pixels);
-  const std::vector<RayEnd> rays = BackProjectRays(frame, label, options_.max_range_m, stats);
+  const bool end_voxels = options_.carving == FreeSpaceCarving::kEndVoxelRays;
+  // End-voxel rays decide max range per voxel: back-project every return as a hit first.
+  std::vector<RayEnd> rays = BackProjectRays(
+      frame, label, end_voxels ? std::numeric_limits<double>::infinity() : options_.max_range_m,
+      stats);
+  const std::vector<RayEnd> voxel_rays =
+      end_voxels ? EndVoxelRays(rays, origin, options_.max_range_m, grid.voxel_size_m(), stats)
+                 : std::vector<RayEnd>{};
 
   const uint32_t frame_number = grid.BeginFrame();
   const bool semantics = segmentation != nullptr;
@@ -840,6 +973,9 @@ Result<IntegrationStats> Integrator::Integrate(const RgbdFrame& frame,
       break;
     case FreeSpaceCarving::kProjective:
       CarveProjective(frame, rays, grid, threads, stats);
+      break;
+    case FreeSpaceCarving::kEndVoxelRays:
+      CarveRays(voxel_rays, origin, grid, threads, stats);
       break;
     case FreeSpaceCarving::kNone:
       break;
@@ -872,7 +1008,10 @@ Result<IntegrationStats> Integrator::IntegratePointCloud(std::span<const Eigen::
   stats.pixels = points_W.size();
   std::vector<RayEnd> rays;
   rays.reserve(points_W.size());
-  const double max_range = options_.max_range_m;
+  const bool end_voxels = options_.carving == FreeSpaceCarving::kEndVoxelRays;
+  // End-voxel rays decide max range per voxel: every return is a hit first.
+  const double max_range =
+      end_voxels ? std::numeric_limits<double>::infinity() : options_.max_range_m;
   for (const Eigen::Vector3f& pf : points_W) {
     if (!pf.allFinite()) {
       ++stats.invalid_depth;
@@ -891,11 +1030,16 @@ Result<IntegrationStats> Integrator::IntegratePointCloud(std::span<const Eigen::
     }
     rays.push_back(r);
   }
+  const std::vector<RayEnd> voxel_rays =
+      end_voxels ? EndVoxelRays(rays, origin_W, options_.max_range_m, grid.voxel_size_m(), stats)
+                 : std::vector<RayEnd>{};
   grid.BeginFrame();
   std::vector<std::pair<VoxelKey, int32_t>> unused;
   ApplyHits(rays, grid, false, stats, unused);
   if (options_.carving == FreeSpaceCarving::kRayCast) {
     CarveRays(rays, origin_W, grid, Threads(), stats);
+  } else if (end_voxels) {
+    CarveRays(voxel_rays, origin_W, grid, Threads(), stats);
   }
   stats.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return stats;

@@ -1,8 +1,12 @@
 #pragma once
 
+#include <array>
 #include <cstddef>
+#include <optional>
 #include <span>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -25,16 +29,30 @@ enum class FreeSpaceCarving : uint8_t {
   kProjective = 1,
   /// No free space at all (the reference system's `process_free_space: False`).
   kNone = 2,
+  /// One ray per voxel holding a return, to that voxel's centre: OctoMap's
+  /// `insertPointCloud(..., discretize = true)`. Occupied voxels are kRayCast's (except a return
+  /// within max range whose voxel centre is beyond it: that voxel carves up to max range and is
+  /// not marked, as in OctoMap); free space differs from kRayCast only in thin slivers that one
+  /// return's ray crosses and its voxel centre's does not. Far fewer rays on dense clouds (a 5 mm
+  /// voxel holds ~20 returns of a 640x480 camera at 0.6 m), so it is the fastest exact mode:
+  /// meant for streams (frames fused while the arm moves). Works on images and clouds.
+  kEndVoxelRays = 3,
 };
+/// Every mode, in the order of the option's choices and the CLIs' lists.
+inline constexpr std::array<FreeSpaceCarving, 4> kFreeSpaceCarvings = {
+    FreeSpaceCarving::kProjective, FreeSpaceCarving::kRayCast, FreeSpaceCarving::kEndVoxelRays,
+    FreeSpaceCarving::kNone};
 std::string_view ToString(FreeSpaceCarving carving);
-/// "raycast", "projective" or "none".
+/// "raycast", "projective", "end-voxel" or "none".
 std::optional<FreeSpaceCarving> FreeSpaceCarvingFromString(std::string_view name);
+/// The names of kFreeSpaceCarvings, in that order (for command-line choices).
+std::vector<std::string> FreeSpaceCarvingNames();
 
 struct IntegratorOptions {
   /// Returns beyond this carve free space up to it and mark no endpoint (OctoMap's maxrange).
   double max_range_m = 1.5;
-  /// kProjective: kRayCast's result, much faster on depth images (IntegratePointCloud always
-  /// traces rays).
+  /// kProjective: kRayCast's result, much faster on depth images (IntegratePointCloud refuses
+  /// it: it needs the image); kEndVoxelRays: OctoMap's discretized insertion, fastest.
   FreeSpaceCarving carving = FreeSpaceCarving::kProjective;
   Status Validate() const;
 };
