@@ -557,157 +557,192 @@ void ApplyRemainingVoxels(const std::vector<BlockKey>& candidates,
   }
 }
 
-/// The voxels a frame's rays carve, one bit set per block, indexed by a dense array over the
-/// frame's box of blocks (or, for a box too large for it, an open-addressing table): walking a
-/// ray costs a bit per voxel and an array read per block, and the grid is not touched until the
-/// frame's carving is complete.
-class BlockBitSets {
+/// The box of voxels holding the origin's and every ray's end voxel (as RayWalker floors them):
+/// every voxel of every walk.
+std::pair<VoxelKey, VoxelKey> RayVoxelBox(const std::vector<RayEnd>& rays,
+                                          const Eigen::Vector3d& origin, double s) {
+  VoxelKey lo = FixedPointKey(origin, s), hi = lo;
+  for (const RayEnd& r : rays) {
+    if (!(r.end.cwiseAbs().maxCoeff() < 1e5)) continue;  // not walked (RayWalker is not ok())
+    const VoxelKey k = FixedPointKey(r.end, s);
+    lo = {std::min(lo.x, k.x), std::min(lo.y, k.y), std::min(lo.z, k.z)};
+    hi = {std::max(hi.x, k.x), std::max(hi.y, k.y), std::max(hi.z, k.z)};
+  }
+  return {lo, hi};
+}
+
+/// The voxels a frame's rays pass through, as one dense bit map over their box of blocks,
+/// block-major (a block's 512 bits are 8 consecutive words, in LocalIndex order), so that a
+/// voxel's bit is the sum of one table entry per axis and a walk marks its voxels without a
+/// lookup: the walk's decisions and the marking stay in registers (RayWalker::differences()).
+class FrameBitmap {
  public:
-  /// Blocks from `lo` to `hi` (inclusive) get a dense index when the box holds at most
-  /// kMaxDenseBlocks; other blocks (and all, beyond that) go through the table.
-  BlockBitSets(const BlockKey& lo, const BlockKey& hi) : lo_(lo) {
-    const int64_t nx = int64_t{hi.x} - lo.x + 1, ny = int64_t{hi.y} - lo.y + 1,
-                  nz = int64_t{hi.z} - lo.z + 1;
-    if (nx > 0 && ny > 0 && nz > 0 && nx * ny * nz <= kMaxDenseBlocks) {
-      nx_ = nx;
-      ny_ = ny;
-      nz_ = nz;
-      dense_.assign(static_cast<size_t>(nx * ny * nz), -1);
+  /// At most 2^28 bits (32 MiB): a 1.5 m max range at 5 mm needs 216 M at worst (3 m box).
+  static constexpr uint64_t kMaxBits = uint64_t{1} << 28;
+
+  /// Nothing when the box of blocks holding [lo, hi] exceeds kMaxBits.
+  static std::optional<FrameBitmap> ForBox(const VoxelKey& lo, const VoxelKey& hi) {
+    const BlockKey b0 = BlockOf(lo), b1 = BlockOf(hi);
+    const int64_t nx = int64_t{b1.x} - b0.x + 1, ny = int64_t{b1.y} - b0.y + 1,
+                  nz = int64_t{b1.z} - b0.z + 1;
+    const uint64_t blocks =
+        static_cast<uint64_t>(nx) * static_cast<uint64_t>(ny) * static_cast<uint64_t>(nz);
+    if (nx > (1 << 20) || ny > (1 << 20) || nz > (1 << 20) || blocks * kBlockVoxels > kMaxBits) {
+      return std::nullopt;
     }
+    return FrameBitmap(b0, nx, ny, nz);
   }
 
-  /// The set of block `b`, created empty on first use. Valid until the next call.
-  BlockBits& For(const BlockKey& b) {
-    const int64_t x = int64_t{b.x} - lo_.x, y = int64_t{b.y} - lo_.y, z = int64_t{b.z} - lo_.z;
-    if (x >= 0 && y >= 0 && z >= 0 && x < nx_ && y < ny_ && z < nz_) {
-      int32_t& i = dense_[static_cast<size_t>(x + nx_ * (y + ny_ * z))];
-      if (i < 0) i = Add(b);
-      return bits_[static_cast<size_t>(i)];
-    }
-    return bits_[static_cast<size_t>(FromTable(b))];
+  /// The table entry of key coordinate `k` on `axis`; sums of three are bit indices.
+  const int64_t* Entry(int axis, int32_t k) const {
+    const size_t a = static_cast<size_t>(axis);
+    return tables_[a].data() + kPad + (int64_t{k} - int64_t{origin_[a]} * kBlockEdge);
   }
-  /// Adds every voxel of `other`.
-  void Merge(const BlockBitSets& other) {
-    for (size_t i = 0; i < other.keys_.size(); ++i) {
-      BlockBits& mine = For(other.keys_[i]);
-      for (int w = 0; w < kBlockWords; ++w) mine.words[w] |= other.bits_[i].words[w];
+  /// Marks the voxels of `w`'s walk up to, not including, its end voxel.
+  void MarkWalk(const RayWalker& w) {
+    int64_t left = w.remaining();
+    if (left == 0) return;
+    const VoxelKey k = w.key();
+    const int64_t* px = Entry(0, k.x);
+    const int64_t* py = Entry(1, k.y);
+    const int64_t* pz = Entry(2, k.z);
+    uint64_t* const words = words_.data();
+    const uint64_t bits = words_.size() * 64;
+    if (w.exhausted_tie()) {
+      w.ForEachKeyBeforeEnd([&](const VoxelKey& v) {
+        const uint64_t bit =
+            static_cast<uint64_t>(*Entry(0, v.x) + *Entry(1, v.y) + *Entry(2, v.z));
+        if (bit < bits) words[bit >> 6] |= uint64_t{1} << (bit & 63);
+        return true;
+      });
+      return;
+    }
+    const RayWalker::Differences d = w.differences();
+    int64_t dxy = d.dxy, dxz = d.dxz, dyz = d.dyz;
+    const int64_t ix = d.inc_x, iy = d.inc_y, iz = d.inc_z;
+    const int64_t sx = d.step_x, sy = d.step_y, sz = d.step_z;
+    while (left > 0) {
+      // The offsets of a chunk first (the decisions alone), then their bits.
+      constexpr int kSteps = 32;
+      uint64_t offsets[kSteps];
+      const int n = static_cast<int>(std::min<int64_t>(left, kSteps));
+      for (int i = 0; i < n; ++i) {
+        offsets[i] = static_cast<uint64_t>(*px + *py + *pz);
+        // All-ones masks of d <= 0 (|d| < 2^62, so d - 1 cannot overflow).
+        const int64_t le_xy = (dxy - 1) >> 63, le_xz = (dxz - 1) >> 63, le_yz = (dyz - 1) >> 63;
+        const int64_t mx = le_xy & le_xz, my = ~mx & le_yz, mz = ~(mx | my);
+        px += sx & mx;
+        py += sy & my;
+        pz += sz & mz;
+        dxy += (iy & mx) - (ix & my);
+        dxz += (iz & mx) - (ix & mz);
+        dyz += (iz & my) - (iy & mz);
+      }
+      for (int i = 0; i < n; ++i) {
+        const uint64_t bit = offsets[i];
+        if (bit < bits) [[likely]]
+          words[bit >> 6] |= uint64_t{1} << (bit & 63);
+      }
+      left -= n;
     }
   }
-  /// The blocks in key order and their sets, for applying to the grid deterministically.
-  std::pair<std::vector<BlockKey>, std::vector<BlockBits>> Sorted() const {
-    std::vector<size_t> order(keys_.size());
-    std::iota(order.begin(), order.end(), size_t{0});
-    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return keys_[a] < keys_[b]; });
+  /// Adds every voxel of `other` (same box).
+  void Merge(const FrameBitmap& other) {
+    for (size_t i = 0; i < words_.size(); ++i) words_[i] |= other.words_[i];
+  }
+  /// The blocks with a marked voxel, in key order, and their bits.
+  std::pair<std::vector<BlockKey>, std::vector<BlockBits>> Blocks() const {
     std::pair<std::vector<BlockKey>, std::vector<BlockBits>> out;
-    out.first.reserve(order.size());
-    out.second.reserve(order.size());
-    for (size_t i : order) {
-      out.first.push_back(keys_[i]);
-      out.second.push_back(bits_[i]);
+    for (int64_t x = 0; x < n_[0]; ++x) {
+      for (int64_t y = 0; y < n_[1]; ++y) {
+        for (int64_t z = 0; z < n_[2]; ++z) {
+          const size_t first = static_cast<size_t>((x + n_[0] * (y + n_[1] * z)) * kBlockWords);
+          BlockBits b;
+          bool any = false;
+          for (int w = 0; w < kBlockWords; ++w) {
+            b.words[w] = words_[first + static_cast<size_t>(w)];
+            any |= b.words[w] != 0;
+          }
+          if (!any) continue;
+          out.first.push_back({static_cast<int32_t>(origin_[0] + x),
+                               static_cast<int32_t>(origin_[1] + y),
+                               static_cast<int32_t>(origin_[2] + z)});
+          out.second.push_back(b);
+        }
+      }
     }
     return out;
   }
 
  private:
-  /// 4 Mi blocks: a 16 MiB index, a box of 1.3 km^3 of 5 mm voxels (max range 1.5 m needs 3 m).
-  static constexpr int64_t kMaxDenseBlocks = int64_t{1} << 22;
+  /// Entries beyond the box on either side (never used by a walk inside it) hold kOutside, so a
+  /// stray key would give a bit index past the map instead of another voxel's.
+  static constexpr int64_t kPad = 2;
+  static constexpr int64_t kOutside = int64_t{1} << 40;
 
-  int32_t Add(const BlockKey& b) {
-    keys_.push_back(b);
-    bits_.emplace_back();
-    return static_cast<int32_t>(keys_.size() - 1);
-  }
-  int32_t FromTable(const BlockKey& b) {
-    if (2 * (table_used_ + 1) > slots_.size()) Grow();
-    for (size_t slot = Slot(b);; slot = (slot + 1) & (slots_.size() - 1)) {
-      const int32_t i = slots_[slot];
-      if (i < 0) {
-        ++table_used_;
-        return slots_[slot] = Add(b);
+  FrameBitmap(const BlockKey& b0, int64_t nx, int64_t ny, int64_t nz)
+      : origin_{int64_t{b0.x}, int64_t{b0.y}, int64_t{b0.z}}, n_{nx, ny, nz} {
+    words_.assign(static_cast<size_t>(nx * ny * nz * kBlockWords), 0);
+    // Block-major: bit = ((bx + nx (by + ny bz)) << 9) + lx + 8 ly + 64 lz.
+    const std::array<int64_t, 3> block_stride{1, nx, nx * ny};
+    for (int a = 0; a < 3; ++a) {
+      const size_t axis = static_cast<size_t>(a);
+      const int64_t voxels = n_[axis] * kBlockEdge;
+      std::vector<int64_t>& t = tables_[axis];
+      t.assign(static_cast<size_t>(voxels + 2 * kPad), kOutside);
+      for (int64_t v = 0; v < voxels; ++v) {
+        t[static_cast<size_t>(v + kPad)] =
+            (v / kBlockEdge) * block_stride[axis] * kBlockVoxels + (v % kBlockEdge << (3 * a));
       }
-      if (keys_[static_cast<size_t>(i)] == b) return i;
-    }
-  }
-  size_t Slot(const BlockKey& b) const {
-    return (OccupancyGrid::Pack(b) * 0x9E3779B97F4A7C15ULL) >> shift_;
-  }
-  void Grow() {
-    const size_t size = std::max<size_t>(1024, 2 * slots_.size());
-    shift_ = 64 - std::countr_zero(size);
-    std::vector<int32_t> old = std::move(slots_);
-    slots_.assign(size, -1);
-    for (int32_t i : old) {
-      if (i < 0) continue;
-      size_t slot = Slot(keys_[static_cast<size_t>(i)]);
-      while (slots_[slot] >= 0) slot = (slot + 1) & (size - 1);
-      slots_[slot] = i;
     }
   }
 
-  BlockKey lo_;
-  int64_t nx_ = 0, ny_ = 0, nz_ = 0;
-  std::vector<int32_t> dense_;  // index into keys_ / bits_, or -1
-  std::vector<int32_t> slots_;  // the table, for blocks outside the dense box
-  size_t table_used_ = 0;
-  int shift_ = 64;
-  std::vector<BlockKey> keys_;
-  std::vector<BlockBits> bits_;
+  std::array<int64_t, 3> origin_;  ///< the box's first block
+  std::array<int64_t, 3> n_;       ///< blocks per axis
+  std::array<std::vector<int64_t>, 3> tables_;
+  std::vector<uint64_t> words_;
 };
 
-/// The box of blocks holding the origin and every ray's end point (all the rays' voxels).
-std::pair<BlockKey, BlockKey> RayBlockBox(const std::vector<RayEnd>& rays,
-                                          const Eigen::Vector3d& origin, double s) {
-  Eigen::Vector3d lo = origin, hi = origin;
-  for (const RayEnd& r : rays) {
-    lo = lo.cwiseMin(r.end);
-    hi = hi.cwiseMax(r.end);
-  }
-  const double block = s * kBlockEdge;
-  auto key = [&](const Eigen::Vector3d& p) {
-    const Eigen::Vector3d q = (p / block).array().floor().cwiseMax(-1e9).cwiseMin(1e9);
-    return BlockKey{static_cast<int32_t>(q.x()), static_cast<int32_t>(q.y()),
-                    static_cast<int32_t>(q.z())};
-  };
-  return {key(lo), key(hi)};
-}
-
-constexpr int32_t kNoBlock = std::numeric_limits<int32_t>::min();
-
 /// Free space by ray casting: every voxel from the origin's up to (excluding) the end point's.
-/// Each thread walks its share of the rays into its own bit sets (interleaved chunks balance near
-/// and far rays); the sets are merged and applied once per voxel, voxels hit in this frame keeping
-/// their hit. The result does not depend on the thread count.
+/// The rays' voxels are marked in a dense bit map of their box (FrameBitmap; each thread its own
+/// map and an interleaved share of the rays), merged and applied once per voxel, voxels hit in
+/// this frame keeping their hit. A box too large for the bit map (a long max range) is walked
+/// voxel by voxel through the grid. The result does not depend on the thread count.
 void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, OccupancyGrid& grid,
                int threads, IntegrationStats& stats) {
   const double s = grid.voxel_size_m();
-  const auto [box_lo, box_hi] = RayBlockBox(rays, origin, s);
-  std::vector<BlockBitSets> sets(static_cast<size_t>(threads), BlockBitSets(box_lo, box_hi));
+  const auto [lo, hi] = RayVoxelBox(rays, origin, s);
+  std::optional<FrameBitmap> first = FrameBitmap::ForBox(lo, hi);
+  if (!first) {
+    OccupancyGrid::Accessor acc(grid);
+    const float miss = grid.miss_log_odds();
+    for (const RayEnd& r : rays) {
+      const RayWalker w(origin, r.end, s);
+      if (!w.ok()) continue;
+      w.ForEachKeyBeforeEnd([&](const VoxelKey& k) {
+        if (grid.Admits(k) && acc.UpdateOnce(k, miss)) ++stats.free_updates;
+        return true;
+      });
+    }
+    return;
+  }
+  std::vector<FrameBitmap> maps;
+  maps.push_back(std::move(*first));
+  for (int t = 1; t < threads; ++t) maps.push_back(maps[0]);
   RunParallel(threads, [&](int t) {
-    BlockBitSets& out = sets[static_cast<size_t>(t)];
+    FrameBitmap& map = maps[static_cast<size_t>(t)];
     for (size_t i = static_cast<size_t>(t) * kChunk; i < rays.size();
          i += static_cast<size_t>(threads) * kChunk) {
       const size_t stop = std::min(rays.size(), i + kChunk);
       for (size_t j = i; j < stop; ++j) {
         const RayWalker w(origin, rays[j].end, s);
-        if (!w.ok()) continue;
-        // No key of the walk has this block (keys stay within +-2^23, blocks within +-2^20).
-        BlockKey current{kNoBlock, kNoBlock, kNoBlock};
-        BlockBits* bits = nullptr;
-        w.ForEachKeyBeforeEnd([&](const VoxelKey& k) {
-          const BlockKey bk = BlockOf(k);
-          if (!(bk == current)) {
-            current = bk;
-            bits = &out.For(bk);
-          }
-          bits->set(LocalIndex(k));
-          return true;
-        });
+        if (w.ok()) map.MarkWalk(w);
       }
     }
   });
-  for (size_t t = 1; t < sets.size(); ++t) sets[0].Merge(sets[t]);
-  auto [blocks, carve] = sets[0].Sorted();
-  sets.clear();
+  for (size_t t = 1; t < maps.size(); ++t) maps[0].Merge(maps[t]);
+  auto [blocks, carve] = maps[0].Blocks();
+  maps.clear();
   ApplyWholeBlocks(blocks, carve, grid, threads, stats);
   ApplyRemainingVoxels(blocks, carve, NearCarving{}, grid, stats);
 }
@@ -879,27 +914,38 @@ std::vector<RayEnd> BackProjectRays(const RgbdFrame& frame, const std::vector<in
 /// ray traversal's range as well) is rejected and carves nothing.
 std::vector<RayEnd> EndVoxelRays(std::vector<RayEnd>& rays, const Eigen::Vector3d& origin,
                                  double max_range, double s, IntegrationStats& stats) {
-  // An insert-only open-addressing set of the voxels seen (no key in range is kNoKey).
+  std::vector<RayEnd> carve;
+  // An insert-only open-addressing set of the voxels seen (no key in range is kNoKey), at most
+  // half full; a voxel holds many returns, so it starts small.
   constexpr VoxelKey kNoKey{kMaxKeyMagnitude, kMaxKeyMagnitude, kMaxKeyMagnitude};
-  std::vector<VoxelKey> seen(std::bit_ceil(2 * rays.size() + 16), kNoKey);
-  const size_t mask = seen.size() - 1;
+  std::vector<VoxelKey> seen(std::bit_ceil(rays.size() / 8 + 1024), kNoKey);
+  auto slot_of = [&](const VoxelKey& k) {
+    const size_t mask = seen.size() - 1;
+    size_t slot = VoxelKeyHash{}(k)&mask;
+    while (!(seen[slot] == k) && !(seen[slot] == kNoKey)) slot = (slot + 1) & mask;
+    return slot;
+  };
   auto insert = [&](const VoxelKey& k) {
-    for (size_t slot = VoxelKeyHash{}(k)&mask;; slot = (slot + 1) & mask) {
-      if (seen[slot] == k) return false;
-      if (seen[slot] == kNoKey) {
-        seen[slot] = k;
-        return true;
+    const size_t slot = slot_of(k);
+    if (seen[slot] == k) return false;
+    seen[slot] = k;
+    if (2 * (carve.size() + 1) > seen.size()) {  // carve holds one ray per key inserted
+      std::vector<VoxelKey> old(seen.size() * 2, kNoKey);
+      old.swap(seen);
+      for (const VoxelKey& o : old) {
+        if (!(o == kNoKey)) seen[slot_of(o)] = o;
       }
     }
+    return true;
   };
-  std::vector<RayEnd> carve;
   std::optional<VoxelKey> prev;  // neighbouring pixels mostly share a voxel: skip the set then
   bool prev_hit = false;
   for (RayEnd& r : rays) {
     if (!r.hit) continue;
     bool hit = false;
-    if (r.end.cwiseAbs().maxCoeff() < 1e5 && KeyInRange(FixedPointKey(r.end, s))) {
-      const VoxelKey k = FixedPointKey(r.end, s);
+    const bool keyed = r.end.cwiseAbs().maxCoeff() < 1e5;
+    const VoxelKey k = keyed ? FixedPointKey(r.end, s) : VoxelKey{};
+    if (keyed && KeyInRange(k)) {
       if (prev && *prev == k) {
         hit = prev_hit;
       } else {

@@ -6,8 +6,10 @@
 #include <cstdio>
 #include <limits>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <fmt/format.h>
@@ -532,6 +534,39 @@ TEST(IntegratorTest, RaysLongerThanTheWalkerLimitAreNotSilentlyDropped) {
   EXPECT_EQ(r->free_updates, octomap_free) << "the 35 m ray carved no free space";
   EXPECT_EQ(grid.State(grid.KeyOf({10.0, 0.0013, 0.0017})), VoxelState::kFree);
   EXPECT_EQ(grid.CountKnownVoxels() - grid.CountOccupiedVoxels(), octomap_free);
+}
+
+TEST(IntegratorTest, RaysSpanningAHugeBoxAreCarvedVoxelByVoxel) {
+  // Rays of 30 m along three axes at 2 mm span a box of 15 000^3 voxels, too large for the
+  // frame's dense bit map: the voxels are then walked one by one through the grid, with the same
+  // result (every voxel of every walk, once).
+  GridOptions g;
+  g.voxel_size_m = 0.002;
+  OccupancyGrid grid(g);
+  IntegratorOptions o;
+  o.max_range_m = 32.0;  // 16 000 voxels: within the ray traversal's limit
+  o.carving = FreeSpaceCarving::kRayCast;
+  const Eigen::Vector3d origin(0.0011, 0.0013, 0.0017);
+  const std::vector<Eigen::Vector3f> points = {
+      {30.0011f, 0.0013f, 0.0017f},
+      {0.0011f, -30.0013f, 0.0017f},
+      {0.0011f, 0.0013f, 30.0017f},
+      {0.2011f, 0.1013f, 0.0517f}};  // and a short one that crosses the others' first voxels
+  std::set<std::tuple<int32_t, int32_t, int32_t>> expected;
+  for (const Eigen::Vector3f& p : points) {
+    const RayWalker w(origin, p.cast<double>(), 0.002);
+    ASSERT_TRUE(w.ok());
+    w.ForEachKeyBeforeEnd([&](const VoxelKey& k) {
+      expected.insert({k.x, k.y, k.z});
+      return true;
+    });
+  }
+  const auto r = Integrator(o).IntegratePointCloud(points, origin, grid);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->free_updates, expected.size());
+  EXPECT_GT(expected.size(), 44000u);
+  EXPECT_EQ(grid.CountKnownVoxels() - grid.CountOccupiedVoxels(), expected.size());
+  EXPECT_EQ(grid.State(grid.KeyOf({15.0, 0.0013, 0.0017})), VoxelState::kFree);
 }
 
 TEST(IntegratorTest, PointCloudInputValidation) {

@@ -18,9 +18,13 @@ struct VoxelKey {
 
   static VoxelKey FromPoint(const Eigen::Vector3d& p, double voxel_size_m) {
     const double inv = 1.0 / voxel_size_m;
-    return {static_cast<int32_t>(std::floor(p.x() * inv)),
-            static_cast<int32_t>(std::floor(p.y() * inv)),
-            static_cast<int32_t>(std::floor(p.z() * inv))};
+    return {Floor(p.x() * inv), Floor(p.y() * inv), Floor(p.z() * inv)};
+  }
+  /// floor(v) as a key coordinate, without a libm call (baseline x86-64 has no rounding
+  /// instruction): the same value as static_cast<int32_t>(std::floor(v)) wherever that is defined.
+  static int32_t Floor(double v) {
+    const auto t = static_cast<int64_t>(v);  // truncates toward zero
+    return static_cast<int32_t>(t - static_cast<int64_t>(v < static_cast<double>(t)));
   }
   Eigen::Vector3d Center(double voxel_size_m) const {
     return {(x + 0.5) * voxel_size_m, (y + 0.5) * voxel_size_m, (z + 0.5) * voxel_size_m};

@@ -148,6 +148,24 @@ class RayWalker {
     return calls;
   }
 
+  /// The walk's decisions as three pairwise differences, for loops that keep them in registers:
+  /// axis i steps before axis j iff d_ij <= 0, and a step along i adds inc_j to d_ij and
+  /// subtracts inc_i from d_ji (inc_i = 2^16 A_i). Without exhaustion guards these give Step()'s
+  /// walk for remaining() steps exactly when !exhausted_tie(): an exhausted axis's next crossing
+  /// then lies beyond the end point, every pending one before it.
+  struct Differences {
+    int64_t dxy, dxz, dyz;
+    int64_t inc_x, inc_y, inc_z;
+    int step_x, step_y, step_z;  ///< -1, 0 or 1
+  };
+  Differences differences() const {
+    return {diff_[0],   diff_[1], diff_[2], inc_[1][0], inc_[0][1],
+            inc_[0][2], step_[0], step_[1], step_[2]};
+  }
+  /// Some axis's next crossing after its last step lies exactly at the end point: the last steps
+  /// follow the exhausted-axis rule, which differences() does not know.
+  bool exhausted_tie() const { return exhausted_tie_; }
+
   /// Moves to the next voxel and returns the axis it stepped along. @pre remaining() > 0.
   int Step() {
     const bool xy = p_[0][1] <= p_[1][0];
