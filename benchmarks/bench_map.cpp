@@ -7,8 +7,10 @@
 //   2. inserts the clouds into an OcTree (insertPointCloud, max range 1.5 m, discretize off) and
 //      into an avp OccupancyGrid (Integrator::IntegratePointCloud, ray casting, 1 and 2 threads),
 //      plus the projective carving (Integrator::Integrate of the RGB-D frame: the ray-cast result
-//      computed voxel by voxel, its own row, gated like ray casting); per-cloud times, memory
-//      (library-reported and RSS delta) and bytes per known voxel;
+//      computed voxel by voxel, its own row, gated like ray casting), and one ray per end voxel:
+//      OctoMap's insertPointCloud(discretize = true) against avp's end-voxel rays (gated at
+//      99.9 %); per-cloud times, memory (library-reported and RSS delta) and bytes per known
+//      voxel;
 //   3. compares the maps: {unknown, free, occupied} agreement on every voxel centre of an ROI box
 //      around the plant and over the union of known voxels, occupied IoU;
 //   4. (plant-only cases) evaluates fixed NBV candidate sets (64 and 256 poses, 4 800 rays of 1 m
