@@ -177,8 +177,11 @@ PlanningSnapshot::RayCounts PlanningSnapshot::CastRay(const Eigen::Vector3d& fro
     c.visited = c.unknown = static_cast<uint32_t>(total);
     return c;
   }
-  int64_t dxy = d.dxy, dxz = d.dxz, dyz = d.dyz;
-  const int64_t ax = d.ax, ay = d.ay, az = d.az, sx = d.sx, sy = d.sy, sz = d.sz;
+  RayWalker::Differences diff = w.differences();
+  diff.dxy = d.dxy;
+  diff.dxz = d.dxz;
+  diff.dyz = d.dyz;
+  const int64_t sx = d.sx, sy = d.sy, sz = d.sz;
   const int64_t relx = d.relx, rely = d.rely, relz = d.relz;
 
   // Inside: the cell offset is a sum of three per-axis table entries, walked by pointer; leaving
@@ -200,15 +203,10 @@ PlanningSnapshot::RayCounts PlanningSnapshot::CastRay(const Eigen::Vector3d& fro
       // Start the cell's load now (a prefetch never faults, so offsets past the box are harmless).
       __builtin_prefetch(
           reinterpret_cast<const void*>(reinterpret_cast<uintptr_t>(cells) + offset));
-      // All-ones masks of d <= 0 (|d| < 2^62, so d - 1 cannot overflow).
-      const int64_t le_xy = (dxy - 1) >> 63, le_xz = (dxz - 1) >> 63, le_yz = (dyz - 1) >> 63;
-      const int64_t mx = le_xy & le_xz, my = ~mx & le_yz, mz = ~(mx | my);
+      const auto [mx, my, mz] = diff.Step();
       px += sx & mx;
       py += sy & my;
       pz += sz & mz;
-      dxy += (ay & mx) - (ax & my);
-      dxz += (az & mx) - (ax & mz);
-      dyz += (az & my) - (ay & mz);
     }
     for (int i = 0; i < n; ++i) {
       const uint64_t offset = offsets[i];

@@ -607,19 +607,17 @@ class FrameBitmap {
     const int64_t* py = Entry(1, k.y);
     const int64_t* pz = Entry(2, k.z);
     uint64_t* const words = words_.data();
-    const uint64_t bits = words_.size() * 64;
+    const uint64_t size = bits();
     if (w.exhausted_tie()) {
       w.ForEachKeyBeforeEnd([&](const VoxelKey& v) {
         const uint64_t bit =
             static_cast<uint64_t>(*Entry(0, v.x) + *Entry(1, v.y) + *Entry(2, v.z));
-        if (bit < bits) words[bit >> 6] |= uint64_t{1} << (bit & 63);
+        if (bit < size) words[bit >> 6] |= uint64_t{1} << (bit & 63);
         return true;
       });
       return;
     }
-    const RayWalker::Differences d = w.differences();
-    int64_t dxy = d.dxy, dxz = d.dxz, dyz = d.dyz;
-    const int64_t ix = d.inc_x, iy = d.inc_y, iz = d.inc_z;
+    RayWalker::Differences d = w.differences();
     const int64_t sx = d.step_x, sy = d.step_y, sz = d.step_z;
     while (left > 0) {
       // The offsets of a chunk first (the decisions alone), then their bits.
@@ -628,24 +626,20 @@ class FrameBitmap {
       const int n = static_cast<int>(std::min<int64_t>(left, kSteps));
       for (int i = 0; i < n; ++i) {
         offsets[i] = static_cast<uint64_t>(*px + *py + *pz);
-        // All-ones masks of d <= 0 (|d| < 2^62, so d - 1 cannot overflow).
-        const int64_t le_xy = (dxy - 1) >> 63, le_xz = (dxz - 1) >> 63, le_yz = (dyz - 1) >> 63;
-        const int64_t mx = le_xy & le_xz, my = ~mx & le_yz, mz = ~(mx | my);
+        const auto [mx, my, mz] = d.Step();
         px += sx & mx;
         py += sy & my;
         pz += sz & mz;
-        dxy += (iy & mx) - (ix & my);
-        dxz += (iz & mx) - (ix & mz);
-        dyz += (iz & my) - (iy & mz);
       }
       for (int i = 0; i < n; ++i) {
         const uint64_t bit = offsets[i];
-        if (bit < bits) [[likely]]
+        if (bit < size) [[likely]]
           words[bit >> 6] |= uint64_t{1} << (bit & 63);
       }
       left -= n;
     }
   }
+  uint64_t bits() const { return words_.size() * 64; }
   /// Adds every voxel of `other` (same box).
   void Merge(const FrameBitmap& other) {
     for (size_t i = 0; i < words_.size(); ++i) words_[i] |= other.words_[i];
@@ -726,13 +720,16 @@ void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, O
     }
     return;
   }
+  // One map per thread, within 2^29 bits (64 MiB) in all.
+  const int markers = static_cast<int>(
+      std::clamp<uint64_t>((uint64_t{1} << 29) / first->bits(), 1, static_cast<uint64_t>(threads)));
   std::vector<FrameBitmap> maps;
   maps.push_back(std::move(*first));
-  for (int t = 1; t < threads; ++t) maps.push_back(maps[0]);
-  RunParallel(threads, [&](int t) {
+  for (int t = 1; t < markers; ++t) maps.push_back(maps[0]);
+  RunParallel(markers, [&](int t) {
     FrameBitmap& map = maps[static_cast<size_t>(t)];
     for (size_t i = static_cast<size_t>(t) * kChunk; i < rays.size();
-         i += static_cast<size_t>(threads) * kChunk) {
+         i += static_cast<size_t>(markers) * kChunk) {
       const size_t stop = std::min(rays.size(), i + kChunk);
       for (size_t j = i; j < stop; ++j) {
         const RayWalker w(origin, rays[j].end, s);

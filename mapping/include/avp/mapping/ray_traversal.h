@@ -157,6 +157,18 @@ class RayWalker {
     int64_t dxy, dxz, dyz;
     int64_t inc_x, inc_y, inc_z;
     int step_x, step_y, step_z;  ///< -1, 0 or 1
+
+    /// One step, branch-free: updates the differences and returns the all-ones mask of the axis
+    /// it steps along in that axis's slot, 0 in the others.
+    [[gnu::always_inline]] std::array<int64_t, 3> Step() {
+      // All-ones masks of d <= 0 (|d| < 2^62, so d - 1 cannot overflow).
+      const int64_t le_xy = (dxy - 1) >> 63, le_xz = (dxz - 1) >> 63, le_yz = (dyz - 1) >> 63;
+      const int64_t mx = le_xy & le_xz, my = ~mx & le_yz, mz = ~(mx | my);
+      dxy += (inc_y & mx) - (inc_x & my);
+      dxz += (inc_z & mx) - (inc_x & mz);
+      dyz += (inc_z & my) - (inc_y & mz);
+      return {mx, my, mz};
+    }
   };
   Differences differences() const {
     return {diff_[0],   diff_[1], diff_[2], inc_[1][0], inc_[0][1],
