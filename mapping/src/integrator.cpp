@@ -598,48 +598,86 @@ class FrameBitmap {
     const size_t a = static_cast<size_t>(axis);
     return tables_[a].data() + kPad + (int64_t{k} - int64_t{origin_[a]} * kBlockEdge);
   }
+  /// A walk in progress over the bit map: its decisions (RayWalker::differences()), its key as
+  /// pointers into the per-axis tables, and the steps left.
+  struct Cursor {
+    RayWalker::Differences d;
+    const int64_t *px, *py, *pz;
+    int64_t left;
+
+    uint64_t Offset() const { return static_cast<uint64_t>(*px + *py + *pz); }
+    [[gnu::always_inline]] void Step() {
+      const auto [mx, my, mz] = d.Step();
+      px += d.step_x & mx;
+      py += d.step_y & my;
+      pz += d.step_z & mz;
+    }
+  };
+
+  /// The cursor of `w`'s walk, or nothing when its last steps follow the exhausted-axis rule
+  /// (exhausted_tie(): MarkWalk walks those).
+  std::optional<Cursor> CursorOf(const RayWalker& w) const {
+    if (w.exhausted_tie()) return std::nullopt;
+    const VoxelKey k = w.key();
+    return Cursor{w.differences(), Entry(0, k.x), Entry(1, k.y), Entry(2, k.z), w.remaining()};
+  }
+
   /// Marks the voxels of `w`'s walk up to, not including, its end voxel.
   void MarkWalk(const RayWalker& w) {
-    int64_t left = w.remaining();
-    if (left == 0) return;
-    const VoxelKey k = w.key();
-    const int64_t* px = Entry(0, k.x);
-    const int64_t* py = Entry(1, k.y);
-    const int64_t* pz = Entry(2, k.z);
-    uint64_t* const words = words_.data();
-    const uint64_t size = bits();
-    if (w.exhausted_tie()) {
-      w.ForEachKeyBeforeEnd([&](const VoxelKey& v) {
-        const uint64_t bit =
-            static_cast<uint64_t>(*Entry(0, v.x) + *Entry(1, v.y) + *Entry(2, v.z));
-        if (bit < size) words[bit >> 6] |= uint64_t{1} << (bit & 63);
-        return true;
-      });
+    if (std::optional<Cursor> c = CursorOf(w)) {
+      MarkWalks(*c, Cursor{c->d, c->px, c->py, c->pz, 0});
       return;
     }
-    RayWalker::Differences d = w.differences();
-    const int64_t sx = d.step_x, sy = d.step_y, sz = d.step_z;
-    while (left > 0) {
+    const uint64_t size = bits();
+    w.ForEachKeyBeforeEnd([&](const VoxelKey& v) {
+      const uint64_t bit = static_cast<uint64_t>(*Entry(0, v.x) + *Entry(1, v.y) + *Entry(2, v.z));
+      if (bit < size) words_[bit >> 6] |= uint64_t{1} << (bit & 63);
+      return true;
+    });
+  }
+
+  /// Marks two walks' voxels, their steps interleaved while both go on: two independent chains
+  /// of decisions keep the core busier than one.
+  void MarkWalks(Cursor a, Cursor b) {
+    constexpr int kSteps = 32;
+    uint64_t offsets[2 * kSteps];
+    while (a.left > 0 || b.left > 0) {
       // The offsets of a chunk first (the decisions alone), then their bits.
-      constexpr int kSteps = 32;
-      uint64_t offsets[kSteps];
-      const int n = static_cast<int>(std::min<int64_t>(left, kSteps));
-      for (int i = 0; i < n; ++i) {
-        offsets[i] = static_cast<uint64_t>(*px + *py + *pz);
-        const auto [mx, my, mz] = d.Step();
-        px += sx & mx;
-        py += sy & my;
-        pz += sz & mz;
+      int n = 0;
+      if (a.left > 0 && b.left > 0) {
+        const int both = static_cast<int>(std::min({a.left, b.left, int64_t{kSteps}}));
+        for (int i = 0; i < both; ++i) {
+          offsets[n++] = a.Offset();
+          a.Step();
+          offsets[n++] = b.Offset();
+          b.Step();
+        }
+        a.left -= both;
+        b.left -= both;
+      } else {
+        Cursor& c = a.left > 0 ? a : b;
+        const int one = static_cast<int>(std::min<int64_t>(c.left, kSteps));
+        for (int i = 0; i < one; ++i) {
+          offsets[n++] = c.Offset();
+          c.Step();
+        }
+        c.left -= one;
       }
-      for (int i = 0; i < n; ++i) {
-        const uint64_t bit = offsets[i];
-        if (bit < size) [[likely]]
-          words[bit >> 6] |= uint64_t{1} << (bit & 63);
-      }
-      left -= n;
+      Mark(offsets, n);
     }
   }
+
   uint64_t bits() const { return words_.size() * 64; }
+  /// Sets the bits `offsets[0, n)`; an offset past the map (a key outside the box) sets none.
+  void Mark(const uint64_t* offsets, int n) {
+    uint64_t* const words = words_.data();
+    const uint64_t size = bits();
+    for (int i = 0; i < n; ++i) {
+      const uint64_t bit = offsets[i];
+      if (bit < size) [[likely]]
+        words[bit >> 6] |= uint64_t{1} << (bit & 63);
+    }
+  }
   /// Adds every voxel of `other` (same box).
   void Merge(const FrameBitmap& other) {
     for (size_t i = 0; i < words_.size(); ++i) words_[i] |= other.words_[i];
@@ -731,10 +769,23 @@ void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, O
     for (size_t i = static_cast<size_t>(t) * kChunk; i < rays.size();
          i += static_cast<size_t>(markers) * kChunk) {
       const size_t stop = std::min(rays.size(), i + kChunk);
+      std::optional<FrameBitmap::Cursor> pending;  // walks go in pairs
       for (size_t j = i; j < stop; ++j) {
         const RayWalker w(origin, rays[j].end, s);
-        if (w.ok()) map.MarkWalk(w);
+        if (!w.ok()) continue;
+        std::optional<FrameBitmap::Cursor> c = map.CursorOf(w);
+        if (!c) {
+          map.MarkWalk(w);
+        } else if (pending) {
+          map.MarkWalks(*pending, *c);
+          pending.reset();
+        } else {
+          pending = c;
+        }
       }
+      if (pending)
+        map.MarkWalks(*pending,
+                      FrameBitmap::Cursor{pending->d, pending->px, pending->py, pending->pz, 0});
     }
   });
   for (size_t t = 1; t < maps.size(); ++t) maps[0].Merge(maps[t]);
