@@ -82,6 +82,10 @@ struct RayEnd {
   int32_t label = -1;  ///< mask index of the pixel (hits only), -1 outside every mask
 };
 
+/// Whether a point can have a voxel key at all: beyond 1e5 m it lies outside every key range
+/// (and llround's), and RayWalker refuses it.
+bool Keyable(const Eigen::Vector3d& p) { return p.cwiseAbs().maxCoeff() < 1e5; }
+
 /// Runs fn(thread_index) on `n` threads (the calling thread is thread 0).
 template <typename F>
 void RunParallel(int n, F&& fn) {
@@ -107,7 +111,7 @@ void ApplyHits(const std::vector<RayEnd>& rays, OccupancyGrid& grid, bool collec
   const float hit = grid.hit_log_odds();
   for (const RayEnd& r : rays) {
     if (!r.hit) continue;
-    if (!(r.end.cwiseAbs().maxCoeff() < 1e5)) {  // beyond any key range (and llround's)
+    if (!Keyable(r.end)) {
       ++stats.rejected_points;
       continue;
     }
@@ -563,7 +567,7 @@ std::pair<VoxelKey, VoxelKey> RayVoxelBox(const std::vector<RayEnd>& rays,
                                           const Eigen::Vector3d& origin, double s) {
   VoxelKey lo = FixedPointKey(origin, s), hi = lo;
   for (const RayEnd& r : rays) {
-    if (!(r.end.cwiseAbs().maxCoeff() < 1e5)) continue;  // not walked (RayWalker is not ok())
+    if (!Keyable(r.end)) continue;  // not walked (RayWalker is not ok())
     const VoxelKey k = FixedPointKey(r.end, s);
     lo = {std::min(lo.x, k.x), std::min(lo.y, k.y), std::min(lo.z, k.z)};
     hi = {std::max(hi.x, k.x), std::max(hi.y, k.y), std::max(hi.z, k.z)};
@@ -601,9 +605,9 @@ class FrameBitmap {
   /// A walk in progress over the bit map: its decisions (RayWalker::differences()), its key as
   /// pointers into the per-axis tables, and the steps left.
   struct Cursor {
-    RayWalker::Differences d;
-    const int64_t *px, *py, *pz;
-    int64_t left;
+    RayWalker::Differences d{};
+    const int64_t *px = nullptr, *py = nullptr, *pz = nullptr;
+    int64_t left = 0;  ///< 0: a finished (or no) walk, never dereferenced
 
     uint64_t Offset() const { return static_cast<uint64_t>(*px + *py + *pz); }
     [[gnu::always_inline]] void Step() {
@@ -625,13 +629,12 @@ class FrameBitmap {
   /// Marks the voxels of `w`'s walk up to, not including, its end voxel.
   void MarkWalk(const RayWalker& w) {
     if (std::optional<Cursor> c = CursorOf(w)) {
-      MarkWalks(*c, Cursor{c->d, c->px, c->py, c->pz, 0});
+      MarkWalks(*c, Cursor{});
       return;
     }
-    const uint64_t size = bits();
     w.ForEachKeyBeforeEnd([&](const VoxelKey& v) {
       const uint64_t bit = static_cast<uint64_t>(*Entry(0, v.x) + *Entry(1, v.y) + *Entry(2, v.z));
-      if (bit < size) words_[bit >> 6] |= uint64_t{1} << (bit & 63);
+      Mark(&bit, 1);
       return true;
     });
   }
@@ -783,9 +786,7 @@ void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, O
           pending = c;
         }
       }
-      if (pending)
-        map.MarkWalks(*pending,
-                      FrameBitmap::Cursor{pending->d, pending->px, pending->py, pending->pz, 0});
+      if (pending) map.MarkWalks(*pending, FrameBitmap::Cursor{});
     }
   });
   for (size_t t = 1; t < maps.size(); ++t) maps[0].Merge(maps[t]);
@@ -869,7 +870,7 @@ Status CheckRayLimits(const IntegratorOptions& options, const OccupancyGrid& gri
         "use a shorter max range or a coarser map",
         options.max_range_m, options.max_range_m / s, s, RayWalker::kMaxLengthVoxels - 2));
   }
-  if (!(origin.cwiseAbs().maxCoeff() < 1e5) || !KeyInRange(VoxelKey::FromPoint(origin, s))) {
+  if (!Keyable(origin) || !KeyInRange(VoxelKey::FromPoint(origin, s))) {
     return OutOfRangeError(fmt::format("sensor origin ({}, {}, {}) is outside the map's key range",
                                        origin.x(), origin.y(), origin.z()));
   }
@@ -991,7 +992,7 @@ std::vector<RayEnd> EndVoxelRays(std::vector<RayEnd>& rays, const Eigen::Vector3
   for (RayEnd& r : rays) {
     if (!r.hit) continue;
     bool hit = false;
-    const bool keyed = r.end.cwiseAbs().maxCoeff() < 1e5;
+    const bool keyed = Keyable(r.end);
     const VoxelKey k = keyed ? FixedPointKey(r.end, s) : VoxelKey{};
     if (keyed && KeyInRange(k)) {
       if (prev && *prev == k) {
