@@ -60,7 +60,21 @@ const OptionTable<IntegratorOptions>& IntegratorOptionTable() {
   return *table;
 }
 
-Status IntegratorOptions::Validate() const { return IntegratorOptionTable().Validate(*this); }
+Status IntegratorOptions::Validate() const {
+  AVP_RETURN_IF_ERROR(IntegratorOptionTable().Validate(*this));
+  if (pixel_stride < 1 || pixel_stride > 64 ||
+      (pixel_stride > 1 && carving == FreeSpaceCarving::kProjective)) {
+    return InvalidArgumentError(fmt::format(
+        "integrator option pixel_stride ({}) must be in [1, 64], and 1 with projective carving",
+        pixel_stride));
+  }
+  if (clip_box &&
+      (clip_box->IsEmpty() || !clip_box->min().allFinite() || !clip_box->max().allFinite())) {
+    return InvalidArgumentError(fmt::format(
+        "integrator option clip_box ({}) must be finite and non-empty", clip_box->ToString()));
+  }
+  return Status::Ok();
+}
 
 std::string IntegrationStats::ToString() const {
   return fmt::format(
@@ -564,13 +578,19 @@ void ApplyRemainingVoxels(const std::vector<BlockKey>& candidates,
 /// The box of voxels holding the origin's and every ray's end voxel (as RayWalker floors them):
 /// every voxel of every walk.
 std::pair<VoxelKey, VoxelKey> RayVoxelBox(const std::vector<RayEnd>& rays,
+                                          const std::vector<Eigen::Vector3d>* starts,
                                           const Eigen::Vector3d& origin, double s) {
-  VoxelKey lo = FixedPointKey(origin, s), hi = lo;
-  for (const RayEnd& r : rays) {
-    if (!Keyable(r.end)) continue;  // not walked (RayWalker is not ok())
-    const VoxelKey k = FixedPointKey(r.end, s);
+  VoxelKey lo = FixedPointKey(starts != nullptr && !starts->empty() ? starts->front() : origin, s);
+  VoxelKey hi = lo;
+  const auto grow = [&](const Eigen::Vector3d& p) {
+    const VoxelKey k = FixedPointKey(p, s);
     lo = {std::min(lo.x, k.x), std::min(lo.y, k.y), std::min(lo.z, k.z)};
     hi = {std::max(hi.x, k.x), std::max(hi.y, k.y), std::max(hi.z, k.z)};
+  };
+  for (size_t i = 0; i < rays.size(); ++i) {
+    if (!Keyable(rays[i].end)) continue;  // not walked (RayWalker is not ok())
+    grow(rays[i].end);
+    if (starts != nullptr) grow((*starts)[i]);
   }
   return {lo, hi};
 }
@@ -738,21 +758,26 @@ class FrameBitmap {
   std::vector<uint64_t> words_;
 };
 
-/// Free space by ray casting: every voxel from the origin's up to (excluding) the end point's.
+/// Free space by ray casting: every voxel from the origin's (or the ray's own start, `starts`)
+/// up to (excluding) the end point's.
 /// The rays' voxels are marked in a dense bit map of their box (FrameBitmap; each thread its own
 /// map and an interleaved share of the rays), merged and applied once per voxel, voxels hit in
 /// this frame keeping their hit. A box too large for the bit map (a long max range) is walked
 /// voxel by voxel through the grid. The result does not depend on the thread count.
-void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, OccupancyGrid& grid,
-               int threads, IntegrationStats& stats) {
+void CarveRays(const std::vector<RayEnd>& rays, const std::vector<Eigen::Vector3d>* starts,
+               const Eigen::Vector3d& origin, OccupancyGrid& grid, int threads,
+               IntegrationStats& stats) {
   const double s = grid.voxel_size_m();
-  const auto [lo, hi] = RayVoxelBox(rays, origin, s);
+  const auto start = [&](size_t i) -> const Eigen::Vector3d& {
+    return starts != nullptr ? (*starts)[i] : origin;
+  };
+  const auto [lo, hi] = RayVoxelBox(rays, starts, origin, s);
   std::optional<FrameBitmap> first = FrameBitmap::ForBox(lo, hi);
   if (!first) {
     OccupancyGrid::Accessor acc(grid);
     const float miss = grid.miss_log_odds();
-    for (const RayEnd& r : rays) {
-      const RayWalker w(origin, r.end, s);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      const RayWalker w(start(i), rays[i].end, s);
       if (!w.ok()) continue;
       w.ForEachKeyBeforeEnd([&](const VoxelKey& k) {
         if (grid.Admits(k) && acc.UpdateOnce(k, miss)) ++stats.free_updates;
@@ -774,7 +799,7 @@ void CarveRays(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin, O
       const size_t stop = std::min(rays.size(), i + kChunk);
       std::optional<FrameBitmap::Cursor> pending;  // walks go in pairs
       for (size_t j = i; j < stop; ++j) {
-        const RayWalker w(origin, rays[j].end, s);
+        const RayWalker w(start(j), rays[j].end, s);
         if (!w.ok()) continue;
         std::optional<FrameBitmap::Cursor> c = map.CursorOf(w);
         if (!c) {
@@ -920,14 +945,14 @@ std::vector<int32_t> PixelMaskLabels(const Segmentation* segmentation, size_t pi
 /// One ray per pixel of valid depth, from the sensor origin to its point (a hit, with its mask
 /// label) or cut at max_range (no hit); the pixel counts in `stats`.
 std::vector<RayEnd> BackProjectRays(const RgbdFrame& frame, const std::vector<int32_t>& label,
-                                    double max_range, IntegrationStats& stats) {
+                                    double max_range, int stride, IntegrationStats& stats) {
   const int w = frame.depth_m.width(), h = frame.depth_m.height();
   const CameraIntrinsics& K = frame.K;
   const Eigen::Vector3d origin = frame.X_WC.translation();
   std::vector<RayEnd> rays;
   rays.reserve(stats.pixels);
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
+  for (int v = 0; v < h; v += stride) {
+    for (int u = 0; u < w; u += stride) {
       const float d = frame.depth_m.at(u, v);
       if (!std::isfinite(d) || d <= 0.0f) {
         ++stats.invalid_depth;
@@ -954,6 +979,61 @@ std::vector<RayEnd> BackProjectRays(const RgbdFrame& frame, const std::vector<in
     }
   }
   return rays;
+}
+
+/// Returns outside `box` mark nothing: their hits are dropped (counted as rejected points).
+void DropHitsOutside(std::vector<RayEnd>& rays, const Box3& box, IntegrationStats& stats) {
+  for (RayEnd& r : rays) {
+    if (!r.hit || box.Contains(r.end)) continue;
+    r.hit = false;
+    --stats.endpoints;
+    if (r.label >= 0) --stats.masked_endpoints;
+    ++stats.rejected_points;
+  }
+}
+
+/// The rays to carve, from `origin`, cut to `box` (slabs): each ray's part inside it, from
+/// where it enters (its start, in `starts`) to its end, or to where it leaves (that voxel, on
+/// the box's boundary, then not carved); rays that miss the box are dropped.
+std::vector<RayEnd> ClipToBox(const std::vector<RayEnd>& rays, const Eigen::Vector3d& origin,
+                              const Box3& box, std::vector<Eigen::Vector3d>& starts) {
+  std::vector<RayEnd> out;
+  out.reserve(rays.size());
+  starts.clear();
+  starts.reserve(rays.size());
+  for (const RayEnd& r : rays) {
+    if (!Keyable(r.end)) continue;
+    const Eigen::Vector3d d = r.end - origin;
+    double t0 = 0.0, t1 = 1.0;
+    for (int a = 0; a < 3 && t0 < t1; ++a) {
+      if (d[a] == 0.0) {
+        if (origin[a] < box.min()[a] || origin[a] > box.max()[a]) t1 = -1.0;
+        continue;
+      }
+      double ta = (box.min()[a] - origin[a]) / d[a];
+      double tb = (box.max()[a] - origin[a]) / d[a];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    if (!(t0 < t1)) continue;
+    starts.push_back(origin + t0 * d);
+    out.push_back(RayEnd{t1 < 1.0 ? Eigen::Vector3d(origin + t1 * d) : r.end});
+  }
+  return out;
+}
+
+/// Carves `carve` from `origin` (CarveRays), only inside `clip` when it is given (ClipToBox).
+void CarveRaysWithin(const std::vector<RayEnd>& carve, const Eigen::Vector3d& origin,
+                     const std::optional<Box3>& clip, OccupancyGrid& grid, int threads,
+                     IntegrationStats& stats) {
+  if (!clip) {
+    CarveRays(carve, nullptr, origin, grid, threads, stats);
+    return;
+  }
+  std::vector<Eigen::Vector3d> starts;
+  const std::vector<RayEnd> inside = ClipToBox(carve, origin, *clip, starts);
+  CarveRays(inside, &starts, origin, grid, threads, stats);
 }
 
 /// kEndVoxelRays, OctoMap's insertPointCloud(discretize = true): `rays` arrive with their raw end
@@ -1046,12 +1126,14 @@ Result<IntegrationStats> Integrator::Integrate(const RgbdFrame& frame,
   const Eigen::Vector3d origin = frame.X_WC.translation();
   AVP_RETURN_IF_ERROR(CheckRayLimits(options_, grid, origin));
   IntegrationStats stats;
-  stats.pixels = static_cast<size_t>(w) * static_cast<size_t>(h);
-  const std::vector<int32_t> label = PixelMaskLabels(segmentation, stats.pixels);
+  const int n = options_.pixel_stride;
+  stats.pixels = static_cast<size_t>((w + n - 1) / n) * static_cast<size_t>((h + n - 1) / n);
+  const std::vector<int32_t> label =
+      PixelMaskLabels(segmentation, static_cast<size_t>(w) * static_cast<size_t>(h));
   const bool end_voxels = options_.carving == FreeSpaceCarving::kEndVoxelRays;
   // End-voxel rays decide max range per voxel: back-project every return as a hit first.
   std::vector<RayEnd> rays = BackProjectRays(
-      frame, label, end_voxels ? std::numeric_limits<double>::infinity() : options_.max_range_m,
+      frame, label, end_voxels ? std::numeric_limits<double>::infinity() : options_.max_range_m, n,
       stats);
   const std::vector<RayEnd> voxel_rays =
       end_voxels ? EndVoxelRays(rays, origin, options_.max_range_m, grid.voxel_size_m(), stats)
@@ -1060,17 +1142,18 @@ Result<IntegrationStats> Integrator::Integrate(const RgbdFrame& frame,
   const uint32_t frame_number = grid.BeginFrame();
   const bool semantics = segmentation != nullptr;
   std::vector<std::pair<VoxelKey, int32_t>> sem_hits;
+  if (options_.clip_box) DropHitsOutside(rays, *options_.clip_box, stats);
   ApplyHits(rays, grid, semantics, stats, sem_hits);
   const int threads = Threads();
   switch (options_.carving) {
     case FreeSpaceCarving::kRayCast:
-      CarveRays(rays, origin, grid, threads, stats);
+      CarveRaysWithin(rays, origin, options_.clip_box, grid, threads, stats);
       break;
     case FreeSpaceCarving::kProjective:
       CarveProjective(frame, rays, grid, threads, stats);
       break;
     case FreeSpaceCarving::kEndVoxelRays:
-      CarveRays(voxel_rays, origin, grid, threads, stats);
+      CarveRaysWithin(voxel_rays, origin, options_.clip_box, grid, threads, stats);
       break;
     case FreeSpaceCarving::kNone:
       break;
@@ -1130,11 +1213,12 @@ Result<IntegrationStats> Integrator::IntegratePointCloud(std::span<const Eigen::
                  : std::vector<RayEnd>{};
   grid.BeginFrame();
   std::vector<std::pair<VoxelKey, int32_t>> unused;
+  if (options_.clip_box) DropHitsOutside(rays, *options_.clip_box, stats);
   ApplyHits(rays, grid, false, stats, unused);
   if (options_.carving == FreeSpaceCarving::kRayCast) {
-    CarveRays(rays, origin_W, grid, Threads(), stats);
+    CarveRaysWithin(rays, origin_W, options_.clip_box, grid, Threads(), stats);
   } else if (end_voxels) {
-    CarveRays(voxel_rays, origin_W, grid, Threads(), stats);
+    CarveRaysWithin(voxel_rays, origin_W, options_.clip_box, grid, Threads(), stats);
   }
   stats.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return stats;

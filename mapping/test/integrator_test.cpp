@@ -1121,6 +1121,85 @@ TEST_F(IntegratorSceneTest, RoiRejectsEndpointsOutsideIt) {
   EXPECT_EQ(Contents(parallel.grid()), Contents(map.grid()));
 }
 
+TEST_F(IntegratorSceneTest, ClipBoxUpdatesOnlyTheBoxAndEqualsTheWholeFrameInside) {
+  // The sphere's region, not the wall: what fusion during motion does with the planning ROI.
+  const Box3 box(Eigen::Vector3d(0.0, -0.3, -0.3), Eigen::Vector3d(0.6, 0.3, 0.3));
+  // A camera off the voxel lattice (Poses()[0] stands on a voxel corner, where rays to voxel
+  // centres run through edges: a walk started elsewhere on the line may break those ties the
+  // other way, for ~0.1 % of the voxels).
+  const sim::RenderedFrame f =
+      Render(RigidTransform::LookAt({0.0213, -0.0117, 0.0161}, {1.0, 0.05, -0.03}));
+  for (const FreeSpaceCarving carving :
+       {FreeSpaceCarving::kRayCast, FreeSpaceCarving::kEndVoxelRays}) {
+    SCOPED_TRACE(std::string(ToString(carving)));
+    SemanticMap whole(DefaultMap()), clipped(DefaultMap());
+    ASSERT_TRUE(Integrator(Options(carving)).Integrate(f.rgbd, nullptr, whole).ok());
+    IntegratorOptions o = Options(carving);
+    o.clip_box = box;
+    const auto s = Integrator(o).Integrate(f.rgbd, nullptr, clipped);
+    ASSERT_TRUE(s.ok()) << s.status().ToString();
+    // Nothing outside the box (its entry voxels straddle the boundary: half a voxel of slack);
+    // every return on the wall is dropped.
+    const Box3 slack = box.Inflated(0.5 * kVoxel + 1e-9);
+    clipped.grid().ForEachKnownVoxel([&](const VoxelKey& k, float) {
+      EXPECT_TRUE(slack.Contains(k.Center(kVoxel))) << k.Center(kVoxel).transpose();
+    });
+    EXPECT_GT(s->rejected_points, 1000u);
+    // Inside, away from the boundary, the same log-odds voxel for voxel (the walk from where a
+    // ray enters visits the voxels the whole walk visits there).
+    const Box3 interior = box.Inflated(-1.5 * kVoxel);
+    const auto inside = [&](const OccupancyGrid& g) {
+      VoxelList out;
+      for (const auto& [k, v] : Contents(g)) {
+        if (interior.Contains(k.Center(kVoxel))) out.emplace_back(k, v);
+      }
+      return out;
+    };
+    const VoxelList a = inside(whole.grid()), b = inside(clipped.grid());
+    EXPECT_GT(a.size(), 20000u);
+    EXPECT_EQ(a, b);
+  }
+  // Bad boxes are named.
+  IntegratorOptions bad = Options(FreeSpaceCarving::kEndVoxelRays);
+  bad.clip_box = Box3();  // empty
+  EXPECT_NE(bad.Validate().message().find("clip_box"), std::string::npos);
+}
+
+TEST_F(IntegratorSceneTest, PixelStrideFusesTheSubsampledImage) {
+  // Every 2nd pixel of every 2nd row equals fusing the subsampled image with K halved (pixel
+  // centres at integer coordinates: pixel i of the half image is pixel 2i of the whole).
+  const sim::RenderedFrame f = Render(Poses()[1]);
+  RgbdFrame half = f.rgbd;
+  const int w = (f.rgbd.depth_m.width() + 1) / 2, h = (f.rgbd.depth_m.height() + 1) / 2;
+  half.depth_m = DepthImage(w, h, 0.0f);
+  half.rgb = ImageRgb8(w, h, 0);
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) half.depth_m.at(u, v) = f.rgbd.depth_m.at(2 * u, 2 * v);
+  }
+  half.K.width = w;
+  half.K.height = h;
+  half.K.fx /= 2.0;
+  half.K.fy /= 2.0;
+  half.K.cx /= 2.0;
+  half.K.cy /= 2.0;
+  for (const FreeSpaceCarving carving :
+       {FreeSpaceCarving::kRayCast, FreeSpaceCarving::kEndVoxelRays}) {
+    SCOPED_TRACE(std::string(ToString(carving)));
+    IntegratorOptions o = Options(carving);
+    o.pixel_stride = 2;
+    SemanticMap strided(DefaultMap()), reference(DefaultMap());
+    const auto s = Integrator(o).Integrate(f.rgbd, nullptr, strided);
+    ASSERT_TRUE(s.ok()) << s.status().ToString();
+    ASSERT_TRUE(Integrator(Options(carving)).Integrate(half, nullptr, reference).ok());
+    EXPECT_EQ(s->pixels, static_cast<size_t>(w) * static_cast<size_t>(h));
+    EXPECT_GT(strided.grid().CountOccupiedVoxels(), 500u);
+    EXPECT_EQ(Contents(strided.grid()), Contents(reference.grid()));
+  }
+  IntegratorOptions projective = Options(FreeSpaceCarving::kProjective);
+  projective.pixel_stride = 2;
+  EXPECT_NE(projective.Validate().message().find("pixel_stride"), std::string::npos);
+}
+
 // ---- Semantics ---------------------------------------------------------------------------------
 
 TEST_F(IntegratorSceneTest, FruitMasksLabelVoxelsOnTheFruitOnly) {

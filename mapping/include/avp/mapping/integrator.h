@@ -10,6 +10,7 @@
 
 #include <Eigen/Core>
 
+#include <avp/core/box.h>
 #include <avp/core/rgbd_frame.h>
 #include <avp/core/segmentation.h>
 #include <avp/core/status.h>
@@ -54,6 +55,16 @@ struct IntegratorOptions {
   /// kProjective: kRayCast's result, much faster on depth images (IntegratePointCloud refuses
   /// it: it needs the image); kEndVoxelRays: OctoMap's discretized insertion, fastest.
   FreeSpaceCarving carving = FreeSpaceCarving::kProjective;
+  /// Set by code, not a configuration key (fusion during motion sets the planning ROI): only
+  /// this box is updated. Returns outside it mark nothing; with the ray modes (raycast,
+  /// end-voxel) each ray is walked only where it is inside the box (from where it enters to its
+  /// end or to where it leaves, that last voxel excluded), which is what makes it cheaper; with
+  /// projective carving the free space is not cut. Must be finite and non-empty when set.
+  std::optional<Box3> clip_box;
+  /// Every pixel_stride-th pixel of every pixel_stride-th row is fused (1: all): a camera stream
+  /// decimated by subsampling, as the RealSense's decimation filter thins depth for high frame
+  /// rates. Set by code (fusion during motion); > 1 only with the ray modes.
+  int pixel_stride = 1;
   Status Validate() const;
 };
 
