@@ -170,6 +170,44 @@ TEST_F(ReplayTest, RecordedMasksRebuildTheSameMapAndMetrics) {
   EXPECT_EQ(record["replay"]["recorded_with"]["planner"], "avp-nbv");
 }
 
+TEST_F(ReplayTest, FramesFusedWhileMovingAreRecordedAndReplayedBetweenTheViews) {
+  // The same episode with fusion during motion (3 frames a second, to keep the file small):
+  // every moving frame is in the recording, and the replay fuses it between the views as the
+  // episode did, so the metrics and the map come out the same.
+  experiment::RunConfig c;
+  c.scenario = "tomato-multiple-clusters";
+  c.seed = 5;
+  c.episode.views = 3;
+  c.episode.motion_fusion.enabled = true;
+  c.episode.motion_fusion.rate_hz = 3.0;
+  c.threads = 2;
+  experiment::RunFolderOptions o;
+  o.out_dir = *dir_ / "moving-run";
+  o.record = true;
+  Result<experiment::RunSummary> run =
+      experiment::RunToFolder(experiment::CheckedRunConfig::Check(c, Registries()).value(), o);
+  ASSERT_TRUE(run.ok()) << run.status().ToString();
+  const pipeline::MotionTotals totals = pipeline::SumMotion(run->result.episode);
+  ASSERT_GE(totals.moving.fused, 4);
+  Result<experiment::ReplaySummary> r = Replay(o.out_dir / "episode.mcap", "moving-replay");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->views, 3u);
+  EXPECT_EQ(r->moving.fused, totals.moving.fused);
+  EXPECT_EQ(r->moving.segmented, totals.moving.segmented);
+  EXPECT_EQ(r->moving.known_delta, totals.moving.known_delta);
+  EXPECT_EQ(r->metrics_compared, 3u);
+  EXPECT_EQ(r->metrics_differ, 0u) << r->first_difference;
+  const json a = io::ReadJsonFile(o.out_dir / "record.json").value();
+  const json b = io::ReadJsonFile(*dir_ / "moving-replay" / "record.json").value();
+  EXPECT_EQ(a["final_metrics"], b["final_metrics"]);
+  for (size_t i = 0; i < a["steps"].size(); ++i) {
+    EXPECT_EQ(a["steps"][i]["known_voxels"], b["steps"][i]["known_voxels"]) << i;
+  }
+  EXPECT_EQ(b["replay"]["moving_frames"]["fused"], totals.moving.fused);
+  EXPECT_TRUE(test::ReadWholeFile(o.out_dir / "map.ot") ==
+              test::ReadWholeFile(*dir_ / "moving-replay" / "map.ot"));
+}
+
 TEST_F(ReplayTest, TheOracleRerunOnTheRecordedLabelsGivesTheSameMasks) {
   Result<experiment::ReplaySummary> r = Replay(Bag(), "oracle", "oracle");
   ASSERT_TRUE(r.ok()) << r.status().ToString();

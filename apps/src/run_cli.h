@@ -20,13 +20,14 @@ namespace avp::apps {
 
 /// The flags of an episode's configuration that `avp run` and `avp bench` share (a bench applies
 /// them to every episode), each applied only when given: --segmenter, --views, --prompt,
-/// --voxel-size, --policy, --carving, --no-noise, --oracle-regret, then the --segmenter-option,
+/// --voxel-size, --policy, --carving, --no-noise, --oracle-regret, --fuse-while-moving, then the
+/// --segmenter-option,
 /// --map-option and --set items, in that order.
 struct EpisodeFlags {
   std::string segmenter, prompt, policy, carving;
   int views = 0;
   double voxel_size_m = 0.0;
-  bool no_noise = false, oracle_regret = false;
+  bool no_noise = false, oracle_regret = false, fuse_while_moving = false;
   std::vector<std::string> segmenter_options, map_options, set;
 };
 

@@ -100,6 +100,7 @@ Status ApplyEpisodeFlags(const CLI::App& cmd, const EpisodeFlags& flags, experim
       ApplyIfGiven(cmd, "--carving", c, "episode.integrator.carving", flags.carving));
   if (flags.no_noise) c.depth_noise.enabled = false;
   if (flags.oracle_regret) c.oracle_regret = true;
+  if (flags.fuse_while_moving) c.episode.motion_fusion.enabled = true;
   AVP_RETURN_IF_ERROR(
       ApplyKeyValues(flags.segmenter_options, "segmenter option", "segmenter.options.", c));
   AVP_RETURN_IF_ERROR(ApplyKeyValues(flags.map_options, "map option", "map.", c));
@@ -120,6 +121,11 @@ void AddEpisodeFlags(CLI::App& cmd, EpisodeFlags& flags) {
   cmd.add_option("--carving", flags.carving,
                  fmt::format("Free space: {}", fmt::join(mapping::FreeSpaceCarvingNames(), ", ")))
       ->default_str(std::string(mapping::ToString(d.episode.integrator.carving)));
+  cmd.add_flag("--fuse-while-moving", flags.fuse_while_moving,
+               fmt::format("Fuse the camera's frames taken while the arm moves between views "
+                           "({} Hz; episode.motion_fusion.*, docs/sensing.md); off in the paper's "
+                           "protocol, which counts views",
+                           d.episode.motion_fusion.rate_hz));
   cmd.add_flag("--no-noise", flags.no_noise,
                "Noise-free depth (the seeded D435-like depth noise is on by default in every "
                "command)");

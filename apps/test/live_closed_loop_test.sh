@@ -17,8 +17,9 @@ SIM=
 cleanup() { kill "$SIM" 2>/dev/null || true; wait "$SIM" 2>/dev/null || true; }
 
 # One closed loop: MODE (straight: the arm goes straight to each view's joints; planned:
-# collision-free motion, each move one JointTrajectory that avp sim ros2 follows point by point),
-# then EXTRA run flags.
+# collision-free motion, each move one JointTrajectory that avp sim ros2 follows point by point;
+# moving: straight timed moves in real time, the camera's frames on the way fused as avp run
+# renders them, over reliable topics so that none is lost), then EXTRA run flags.
 closed_loop() {
   local mode=$1
   shift
@@ -26,13 +27,20 @@ closed_loop() {
   mkdir -p "$dir"
   "$AVP" run "${COMMON[@]}" "$@" --out "$dir/run" > "$dir/run.log"
 
-  "$AVP" sim ros2 "${COMMON[@]}" "$@" --sim-option time_scale=0 --sim-option camera_rate_hz=10 \
+  local sim_time=(--sim-option time_scale=0)
+  local wire=()
+  if [ "$mode" = moving ]; then
+    # Half speed, and room for 60 frames waiting: a loaded test machine must not drop one.
+    sim_time=(--sim-option time_scale=2 --sim-option best_effort=false)
+    wire=(--live-option camera.best_effort=false --live-option camera.queue=60)
+  fi
+  "$AVP" sim ros2 "${COMMON[@]}" "$@" "${sim_time[@]}" --sim-option camera_rate_hz=10 \
     --duration 240 > "$dir/sim.log" 2>&1 &
   SIM=$!
   trap cleanup EXIT
 
   local status=0
-  timeout 200 "$AVP" live "${COMMON[@]}" "$@" --out "$dir/live" \
+  timeout 200 "$AVP" live "${COMMON[@]}" "$@" --out "$dir/live" "${wire[@]}" \
     --live-option camera.labels_prefix=/avp/sim --live-option rviz.enabled=true \
     --live-option arm.min_duration_s=0 --live-option arm.max_joint_speed_rad_s=100 \
     --live-option camera.frame_timeout_s=20 --live-option arm.state_timeout_s=20 \
@@ -68,6 +76,14 @@ for r, l in zip(run["steps"], live["steps"]):
         assert r["plan"]["generated"] == l["plan"]["generated"], v
         rm, lm = r["plan"]["motion"], l["plan"]["motion"]
         assert rm["planned"] == lm["planned"] == (mode == "planned"), (v, rm, lm)
+        if mode == "moving":
+            # The same frames on the way, fused into the same map (known voxels above).
+            rf, lf = r["plan"]["motion_frames"], l["plan"]["motion_frames"]
+            assert rf["expected"] == lf["expected"] > 10, (v, rf, lf)
+            assert rf["fused"] == lf["fused"] == rf["expected"], (v, rf, lf)
+            assert rf["segmented"] == lf["segmented"] == rf["fused"], (v, rf, lf)
+            assert lf["dropped"] == 0 and lf["failed"] == 0, (v, lf)
+            assert (rf["known_delta"], rf["target_delta"]) == (lf["known_delta"], lf["target_delta"]), (v, rf, lf)
         if mode == "planned":
             # The same path, executed over DDS; only the simulator knows the contacts.
             assert rm["camera_path"] == lm["camera_path"], v
@@ -80,12 +96,19 @@ print("closed loop (%s): 4 views, identical poses and metrics; final F1 %.4f, fr
 w = live["live"]
 assert w["camera"]["pairs_used"] == 4, w["camera"]
 assert w["arm"]["goals_sent"] == (4 if mode == "planned" else 3), w["arm"]
+moving = sum(s["plan"]["motion_frames"]["fused"] for s in live["steps"] if "plan" in s and
+             "motion_frames" in s["plan"])
+assert w["camera"]["moving_pairs"] == moving, (w["camera"], moving)
+assert w["camera"]["moving_dropped"] == 0, w["camera"]
+if mode == "moving":
+    print("moving: %d frames fused on the way, as avp run" % moving)
 assert w["rviz_messages"] > 0, w
 PY
 }
 
 closed_loop straight
 closed_loop planned --set motion.enabled=true
+closed_loop moving --fuse-while-moving --set episode.motion_fusion.max_pending=60
 
 # Ctrl-C after the first view: the episode ends as interrupted, with its folder written.
 "$AVP" sim ros2 "${BASE[@]}" --sim-option time_scale=0 --sim-option camera_rate_hz=10 \

@@ -104,6 +104,11 @@ class VisibilityProbe final : public robot::RgbdSource {
     return obs;
   }
   CameraIntrinsics intrinsics() const override { return inner_.intrinsics(); }
+  /// The moving frames are the source's own (their visibility is not counted: the per-fruit
+  /// results count the views).
+  std::unique_ptr<robot::MoveStream> StreamMove(const robot::MoveStreamRequest& request) override {
+    return inner_.StreamMove(request);
+  }
 
   /// The fractions of the frame captured since the last call, if any (then forgotten).
   std::optional<std::unordered_map<uint16_t, double>> Take() {
@@ -354,7 +359,8 @@ Result<RunResult> RunEpisodeWithRobot(const CheckedRunConfig& checked, const Rob
                                                e.map.get(),
                                                robot.stop,
                                                motion_planner ? &*motion_planner : nullptr,
-                                               true_obstacles ? &*true_obstacles : nullptr};
+                                               true_obstacles ? &*true_obstacles : nullptr,
+                                               &config.motion};
   AVP_ASSIGN_OR_RETURN(pipeline::EpisodeResult episode,
                        pipeline::RunEpisode(components, eo, hook, observers));
   RunResult result;

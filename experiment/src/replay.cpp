@@ -19,6 +19,7 @@
 #include <avp/io/yaml.h>
 #include <avp/pipeline/view_fusion.h>
 #include <avp/report/metrics_csv.h>
+#include <avp/report/run_report.h>
 #include <avp/ros/bag/encode.h>
 #include <avp/ros/bag/layout.h>
 
@@ -282,6 +283,8 @@ json ReplayRecord(const ros::bag::BagReader& bag, const ReplaySummary& summary) 
                 {"bytes_read", bag.bytes_read()},
                 {"file_bytes", bag.info().file_bytes},
                 {"pairs", a.pairs},
+                {"moving_frames", summary.moving.streamed ? report::MovingFramesJson(summary.moving)
+                                                          : json(nullptr)},
                 {"left_out", a.left_out},
                 {"skipped_by_reason", a.skipped_by_reason},
                 {"skipped", a.skipped},
@@ -323,7 +326,7 @@ class ReplayEpisode {
     pipeline::ViewFusion fusion(*map, eo_);
     pipeline::EpisodeResult& episode = result_.episode;
     const auto t_episode = Clock::now();
-    for (int i = 0;; ++i) {
+    for (int i = 0;;) {
       if (stop.stop_requested()) {
         episode.end = pipeline::EpisodeEnd::kInterrupted;
         episode.end_reason = fmt::format("stop requested before view {}", i);
@@ -334,7 +337,18 @@ class ReplayEpisode {
       first_.reset();
       if (!view.ok()) return view.status();
       if (!*view) break;
-      AVP_RETURN_IF_ERROR(ReplayView(i, **view, fusion, stop, observers));
+      if ((*view)->moving) {
+        ReplayMovingFrame(**view, fusion, stop);
+        continue;
+      }
+      if (moving_.streamed) {
+        // The frames of the move before this view: what they added, so that the view's change
+        // is its own (as the episode recorded it).
+        fusion.RecordMoving(moving_);
+        pipeline::AddMovingFrames(moving_, summary_.moving);
+        moving_ = {};
+      }
+      AVP_RETURN_IF_ERROR(ReplayView(i++, **view, fusion, stop, observers));
     }
     summary_.views = episode.steps.size();
     EndOfReplay(episode);
@@ -364,6 +378,29 @@ class ReplayEpisode {
       }
     }
     return obs;
+  }
+
+  /// A frame the recorded episode fused while the arm moved, fused the same way
+  /// (episode.motion_fusion: its carving and decimation, the ROI only): with its recorded masks,
+  /// else the segmenter's (when one was given), else depth only.
+  void ReplayMovingFrame(const ros::bag::BagView& view, pipeline::ViewFusion& fusion,
+                         const std::stop_token& stop) {
+    moving_.streamed = true;
+    const robot::Observation obs = ObservationOf(view);
+    std::optional<Segmentation> masks;
+    if (view.segmentation) {
+      masks = *view.segmentation;
+    } else if (segmenter_ != nullptr) {
+      Result<Segmentation> seg = pipeline::SegmentObservation(
+          *segmenter_, obs, eo_, pipeline::MovingFrameIndex(view.index, view.moving_k), stop);
+      if (seg.ok()) {
+        masks = std::move(*seg);
+      } else {
+        ++moving_.segment_failed;
+        if (moving_.first_problem.empty()) moving_.first_problem = seg.status().ToString();
+      }
+    }
+    fusion.FuseMoving(obs, masks ? &*masks : nullptr, moving_);
   }
 
   /// Why the view cannot be segmented as chosen (no recorded masks, no labels for the oracle).
@@ -455,6 +492,8 @@ class ReplayEpisode {
   const eval::GroundTruth* gt_;
   segmentation::Segmenter* segmenter_;  ///< null: the recorded masks
   ReplaySummary& summary_;
+  /// The moving frames since the last view.
+  pipeline::MovingFramesRecord moving_;
   eval::EvalOptions eval_options_;
   eval::FruitTracker fruits_;
   RunResult result_;
@@ -482,7 +521,9 @@ Result<ReplaySummary> ReplayToFolder(ros::bag::BagReader& bag, RunConfig config,
   AVP_ASSIGN_OR_RETURN(const std::optional<eval::GroundTruth> gt, BagGroundTruth(bag, c, summary));
   const ReplayScene scene = SceneOfBag(bag, c, registries, gt.has_value(), summary);
 
-  const pipeline::EpisodeOptions& eo = c.episode;
+  // The episode's planning ROI: the moving frames updated only it (MotionFusionOptions).
+  pipeline::EpisodeOptions eo = c.episode;
+  eo.roi = scene.roi;
   std::unique_ptr<segmentation::Segmenter> segmenter;
   if (!recorded) {
     AVP_ASSIGN_OR_RETURN(

@@ -43,9 +43,8 @@ namespace {
 /// Senses at step.X_WC, segments and fuses the view into the map (depth only when segmentation
 /// failed; nothing when the capture failed), recording statuses, counts and times in `step` and
 /// what was seen in `seen`.
-void SenseAndFuse(const EpisodeComponents& c, ViewFusion& fusion, int view, StepRecord& step,
-                  ViewSeen& seen) {
-  const int64_t stamp_ns = static_cast<int64_t>(view) * 1'000'000'000;
+void SenseAndFuse(const EpisodeComponents& c, ViewFusion& fusion, int view, int64_t stamp_ns,
+                  StepRecord& step, ViewSeen& seen) {
   const auto t0 = Clock::now();
   Result<robot::Observation> obs = c.source->Capture(step.X_WC, stamp_ns);
   step.times.capture_ms = MsSince(t0);
@@ -99,7 +98,40 @@ struct NextViewContext {
   Rng arm_root;      ///< forked per view
   Eigen::VectorXd q_start;
   RigidTransform X_WC_start;
+  /// Fuses the frames taken while moving between views (EpisodeOptions::motion_fusion); null
+  /// when off.
+  MovingFusion* moving = nullptr;
 };
+
+/// A move between views with fusion during motion: who fuses, the view it leaves, the
+/// episode's stamp of its start and where its record goes.
+struct MovingMove {
+  MovingFusion& fusion;
+  int view = 0;
+  int64_t start_stamp_ns = 0;
+  MovingFramesRecord& rec;
+};
+
+/// The straight joint line from `q0` to `q1`, timed as the episode's straight moves are
+/// (EpisodeComponents::timing).
+Result<robot::JointTrajectory> StraightTrajectory(const EpisodeComponents& c,
+                                                  const Eigen::VectorXd& q0,
+                                                  const Eigen::VectorXd& q1) {
+  const motion::MotionOptions defaults;
+  const motion::MotionOptions& t = c.timing != nullptr ? *c.timing : defaults;
+  return robot::TimeParameterize(c.arm->model(), {q0, q1}, t.velocity_scaling,
+                                 t.acceleration_scaling, t.sample_period_s);
+}
+
+/// Executes `trajectory` on the arm, fusing the frames taken along it when `moving` is given.
+robot::MoveResult Follow(const EpisodeComponents& c, const robot::JointTrajectory& trajectory,
+                         const MovingMove* moving) {
+  robot::Arm& arm = *c.arm;
+  if (moving == nullptr) return arm.FollowTrajectory(trajectory);
+  return moving->fusion.Run(
+      *c.source, arm.model(), trajectory, moving->view, moving->start_stamp_ns,
+      [&] { return arm.FollowTrajectory(trajectory); }, moving->rec);
+}
 
 /// The planning request for the view after `view`, taken at the step's pose.
 planning::PlanningRequest PlanningRequestAfter(const NextViewContext& next, int view,
@@ -151,39 +183,64 @@ robot::MoveResult NotMoved(Status status) {
 /// Moves the arm to `q_goal` (or, when empty, to joints IK finds for `X_WC`): along a planned
 /// collision-free trajectory with a motion planner, else straight (unchecked). A plan that fails
 /// comes back as the move's status (not a robot fault: the next candidate is tried); `rec` gets
-/// the plan's figures, and the executed trajectory is marked as swept (free) space.
+/// the plan's figures, and the executed trajectory is marked as swept (free) space. With
+/// `moving`, the frames taken along the move are fused (a straight move then follows its timed
+/// trajectory).
 robot::MoveResult MoveTo(const EpisodeComponents& c, const Eigen::VectorXd& q_goal,
-                         const RigidTransform& X_WC, Rng& rng, MotionRecord& rec) {
+                         const RigidTransform& X_WC, Rng& rng, MotionRecord& rec,
+                         const MovingMove* moving = nullptr) {
   robot::Arm& arm = *c.arm;
   const int n = arm.model().num_joints();
+  const Eigen::VectorXd q_before = arm.CurrentJoints();
   robot::MoveResult move;
-  if (c.motion == nullptr) {
+  const robot::JointTrajectory* executed = nullptr;
+  std::optional<robot::JointTrajectory> timed;
+  if (c.motion == nullptr && moving == nullptr) {
     move = q_goal.size() == n ? arm.MoveToJoints(q_goal) : arm.MoveToCameraPose(X_WC, rng);
     rec.path_length_rad = move.joint_path_length;
   } else {
-    rec.planned = true;
+    rec.planned = c.motion != nullptr;
     Eigen::VectorXd goal = q_goal;
     if (goal.size() != n) {
-      const robot::IkResult ik = arm.model().SolveCameraIk(X_WC, arm.CurrentJoints(), rng);
+      const robot::IkResult ik = arm.model().SolveCameraIk(X_WC, q_before, rng);
       if (!ik.ok()) return NotMoved(ik.status);
       goal = ik.q;
     }
-    ++rec.attempts;
-    const motion::MotionPlan plan = c.motion->Plan(arm.CurrentJoints(), goal, rng);
-    rec.planning_ms += plan.planning_ms;
-    if (!plan.ok()) return NotMoved(plan.status);
-    move = arm.FollowTrajectory(plan.trajectory);
+    if (c.motion == nullptr) {
+      Result<robot::JointTrajectory> line = StraightTrajectory(c, q_before, goal);
+      if (!line.ok()) return NotMoved(line.status());
+      timed = std::move(*line);
+      executed = &*timed;
+      rec.straight = true;
+    } else {
+      ++rec.attempts;
+      const motion::MotionPlan plan = c.motion->Plan(q_before, goal, rng);
+      rec.planning_ms += plan.planning_ms;
+      if (!plan.ok()) return NotMoved(plan.status);
+      timed = plan.trajectory;
+      executed = &*timed;
+      rec.straight = plan.straight;
+      rec.samples = plan.samples;
+      rec.path_length_rad = plan.path_length;
+    }
+    move = Follow(c, *executed, moving);
     if (!move.ok()) return move;
-    rec.straight = plan.straight;
-    rec.samples = plan.samples;
-    rec.path_length_rad = plan.path_length;
-    for (const robot::TrajectoryPoint& p : plan.trajectory.points) {
+    if (c.motion == nullptr) rec.path_length_rad = move.joint_path_length;
+    for (const robot::TrajectoryPoint& p : executed->points) {
       rec.camera_path_W.push_back(arm.model().CameraPose(p.q).translation());
-      c.motion->checker().MarkSwept(p.q);
+      if (c.motion != nullptr) c.motion->checker().MarkSwept(p.q);
     }
   }
   if (move.ok()) {
     rec.execution_s = move.execution_s;
+    if (rec.execution_s == 0.0 && executed == nullptr) {
+      // A straight move the arm did not time: the duration of the same line timed as a straight
+      // move with fusion during motion is (episode time, per-second figures).
+      if (const Result<robot::JointTrajectory> line = StraightTrajectory(c, q_before, move.q);
+          line.ok()) {
+        rec.execution_s = line->duration_s();
+      }
+    }
     rec.contacts = move.contacts;
     rec.straight_line_contacts = move.straight_line_contacts;
   }
@@ -195,7 +252,7 @@ robot::MoveResult MoveTo(const EpisodeComponents& c, const Eigen::VectorXd& q_go
 /// Returns the refusals' messages (the first ~400 characters) for the episode's end reason.
 std::string MoveToBestCandidate(const EpisodeComponents& c,
                                 const std::vector<planning::ViewCandidate>& ranked, Rng& arm_rng,
-                                StepRecord& step) {
+                                MovingFusion* moving, int64_t stamp_ns, StepRecord& step) {
   std::string refusals;
   for (size_t i = 0; i < ranked.size(); ++i) {
     if (c.motion != nullptr && step.motion.attempts >= c.motion->options().max_attempts) {
@@ -203,7 +260,11 @@ std::string MoveToBestCandidate(const EpisodeComponents& c,
       break;
     }
     const planning::ViewCandidate& cand = ranked[i];
-    const robot::MoveResult move = MoveTo(c, cand.q, cand.X_WC, arm_rng, step.motion);
+    step.motion_frames = {};  // only the executed move's frames
+    std::optional<MovingMove> along;
+    if (moving != nullptr) along.emplace(*moving, step.view, stamp_ns, step.motion_frames);
+    const robot::MoveResult move =
+        MoveTo(c, cand.q, cand.X_WC, arm_rng, step.motion, along ? &*along : nullptr);
     if (move.ok()) {
       step.chosen_rank = static_cast<int>(i);
       step.chosen = cand;
@@ -251,11 +312,13 @@ void ReturnHome(const NextViewContext& next, EpisodeResult& result) {
   if (!move.ok()) rec.rejected.push_back("home: " + move.status.ToString());
 }
 
-/// Plans the view after `view` and moves there, recording both in `step`. Returns true, with the
+/// Plans the view after `view` (taken at the episode's stamp `stamp_ns`) and moves there,
+/// recording both in `step`. Returns true, with the
 /// end and its reason in `result`, when the episode ends here (the planner stopped, no valid
 /// candidate, every candidate refused).
-bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidTransform>& fused,
-                 StepRecord& step, EpisodeResult& result, ViewSeen& seen) {
+bool PlanAndMove(const NextViewContext& next, int view, int64_t stamp_ns,
+                 const std::vector<RigidTransform>& fused, StepRecord& step, EpisodeResult& result,
+                 ViewSeen& seen) {
   if (next.c.stop.stop_requested()) return Interrupted(result, "stop requested before planning");
   auto t0 = Clock::now();
   if (const Status s = UpdateMotionMap(next.c, next.options, step.motion); !s.ok()) {
@@ -300,7 +363,8 @@ bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidT
   // Move: the best candidate the arm accepts.
   t0 = Clock::now();
   Rng arm_rng = next.arm_root.Fork(static_cast<uint64_t>(view + 1));
-  const std::string refusals = MoveToBestCandidate(next.c, plan.ranked, arm_rng, step);
+  const std::string refusals =
+      MoveToBestCandidate(next.c, plan.ranked, arm_rng, next.moving, stamp_ns, step);
   step.times.move_ms = MsSince(t0);
   if (step.chosen_rank >= 0) return false;
   if (step.move_status.code() == StatusCode::kCancelled) {
@@ -318,6 +382,28 @@ bool PlanAndMove(const NextViewContext& next, int view, const std::vector<RigidT
 }
 
 }  // namespace
+
+/// Adds one move's moving-frame counts and times to `sum`.
+void AddMovingFrames(const MovingFramesRecord& f, MovingFramesRecord& sum) {
+  if (!f.streamed) return;
+  sum.streamed = true;
+  sum.expected += f.expected;
+  sum.fused += f.fused;
+  sum.segmented += f.segmented;
+  sum.dropped += f.dropped;
+  sum.skipped += f.skipped;
+  sum.failed += f.failed;
+  sum.segment_failed += f.segment_failed;
+  sum.move_s += f.move_s;
+  sum.capture_ms += f.capture_ms;
+  sum.segment_ms += f.segment_ms;
+  sum.integrate_ms += f.integrate_ms;
+  sum.busy_ms += f.busy_ms;
+  sum.wall_ms += f.wall_ms;
+  sum.known_delta += f.known_delta;
+  sum.target_delta += f.target_delta;
+  if (sum.first_problem.empty()) sum.first_problem = f.first_problem;
+}
 
 MotionTotals SumMotion(const EpisodeResult& result) {
   MotionTotals t;
@@ -338,7 +424,15 @@ MotionTotals SumMotion(const EpisodeResult& result) {
     if (m.straight_line_contacts) straight += *m.straight_line_contacts;
     all_straight = all_straight && m.straight_line_contacts.has_value();
   };
-  for (const StepRecord& s : result.steps) add(s.motion, s.chosen_rank >= 0);
+  for (const StepRecord& s : result.steps) {
+    add(s.motion, s.chosen_rank >= 0);
+    AddMovingFrames(s.motion_frames, t.moving);
+    t.robot_s += (s.times.segment_ms + s.times.integrate_ms + s.times.plan_ms) / 1e3;
+    if (s.chosen_rank >= 0) t.robot_s += s.motion.execution_s;
+    if (s.motion_frames.streamed) {
+      t.robot_s += std::max(0.0, (s.motion_frames.busy_ms / 1e3) - s.motion_frames.move_s);
+    }
+  }
   if (result.return_home) add(*result.return_home, result.return_home_status.ok());
   if (all_contacts && t.moves > 0) t.contacts = contacts;
   if (all_straight && t.moves > 0) t.straight_line_contacts = straight;
@@ -350,6 +444,61 @@ double StepRecord::Metric(std::string_view name) const {
     if (key == name) return value;
   }
   return std::numeric_limits<double>::quiet_NaN();
+}
+
+std::string_view ToString(MovingSemantics semantics) {
+  switch (semantics) {
+    case MovingSemantics::kAuto:
+      return "auto";
+    case MovingSemantics::kEveryFrame:
+      return "every-frame";
+    case MovingSemantics::kWhenFree:
+      return "when-free";
+    case MovingSemantics::kNone:
+      return "none";
+  }
+  return "unknown";
+}
+
+const OptionTable<MotionFusionOptions>& MotionFusionOptionTable() {
+  static const auto* table = [] {
+    using M = MotionFusionOptions;
+    auto* t = new OptionTable<M>("motion fusion option");
+    t->Flag("enabled", &M::enabled,
+            "fuse the camera's frames taken while the arm moves between views");
+    t->Real("rate_hz", &M::rate_hz, "Hz", ValueRange::LeftOpen(0, 120),
+            "frames a second along each move");
+    std::vector<std::pair<mapping::FreeSpaceCarving, std::string>> carvings;
+    for (mapping::FreeSpaceCarving c : mapping::kFreeSpaceCarvings) {
+      carvings.emplace_back(c, std::string(mapping::ToString(c)));
+    }
+    t->Choice("carving", &M::carving, carvings,
+              "how the moving frames carve free space (docs/mapping.md)");
+    t->Integer("decimation", &M::decimation, "", ValueRange::Closed(1, 8),
+               "every n-th pixel of every n-th row of a moving frame is fused (1 with "
+               "projective carving)");
+    std::vector<std::pair<MovingSemantics, std::string>> semantics;
+    for (MovingSemantics m : {MovingSemantics::kAuto, MovingSemantics::kEveryFrame,
+                              MovingSemantics::kWhenFree, MovingSemantics::kNone}) {
+      semantics.emplace_back(m, std::string(ToString(m)));
+    }
+    t->Choice("semantics", &M::semantics, semantics,
+              "which moving frames are segmented (auto: every frame for a segmenter that keeps "
+              "up with a camera, else the newest whenever it is free)");
+    t->Integer("max_pending", &M::max_pending, "", ValueRange::Closed(1, 120),
+               "a live stream keeps at most this many frames waiting for the map (older ones "
+               "are dropped and counted)");
+    t->AddRule([](const M& m, std::vector<std::string>& errors) {
+      if (m.decimation > 1 && m.carving == mapping::FreeSpaceCarving::kProjective) {
+        errors.push_back(fmt::format(
+            "motion_fusion.decimation ({}) needs a ray carving (end-voxel, raycast), not "
+            "projective",
+            m.decimation));
+      }
+    });
+    return t;
+  }();
+  return *table;
 }
 
 const OptionTable<EpisodeOptions>& EpisodeOptionTable() {
@@ -369,6 +518,7 @@ const OptionTable<EpisodeOptions>& EpisodeOptionTable() {
     t->Flag("return_home", &E::return_home,
             "with motion planning, the arm returns to its first pose at the end of the episode");
     t->Nested("integrator", &E::integrator, mapping::IntegratorOptionTable());
+    t->Nested("motion_fusion", &E::motion_fusion, MotionFusionOptionTable());
     t->AddRule([](const E& o, std::vector<std::string>& errors) {
       if (o.prompt.find_first_not_of(" ,\t") == std::string::npos) {
         errors.push_back(fmt::format("prompt ({}) names no class", QuoteText(o.prompt)));
@@ -434,12 +584,17 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
 
   EpisodeResult result;
   const auto t_episode = Clock::now();
+  std::optional<MovingFusion> moving;
+  if (options.motion_fusion.enabled) {
+    moving.emplace(fusion, *c.segmenter, options, c.stop, observers);
+  }
   const NextViewContext next{c,
                              options,
                              root.Fork("planner"),
                              root.Fork("arm"),
                              arm.CurrentJoints(),
-                             arm.CurrentCameraPose()};
+                             arm.CurrentCameraPose(),
+                             moving ? &*moving : nullptr};
   std::vector<RigidTransform> fused;
   if (c.motion != nullptr) {
     // A new episode: no map yet; where the arm stands is free.
@@ -449,6 +604,9 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
   }
 
   int segment_failures_in_a_row = 0;
+  // The episode's clock (frame stamps): view v at v seconds, plus the moves' durations when
+  // frames are taken while moving (those frames are stamped along the move).
+  int64_t moved_ns = 0;
   for (int view = 0; view < options.views; ++view) {
     if (c.stop.stop_requested()) {
       Interrupted(result, fmt::format("stop requested before view {}", view));
@@ -461,7 +619,8 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
     step.q = arm.CurrentJoints();
     step.X_WC = arm.CurrentCameraPose();
     ViewSeen seen;
-    SenseAndFuse(c, fusion, view, step, seen);
+    const int64_t stamp_ns = static_cast<int64_t>(view) * 1'000'000'000 + moved_ns;
+    SenseAndFuse(c, fusion, view, stamp_ns, step, seen);
     fused.push_back(step.X_WC);
     if (metrics) {
       const auto t0 = Clock::now();
@@ -480,7 +639,8 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
     }
     const bool stop =
         cancelled || SegmenterFault(step, segment_failures_in_a_row, options, result) ||
-        (view + 1 < options.views && PlanAndMove(next, view, fused, step, result, seen));
+        (view + 1 < options.views && PlanAndMove(next, view, stamp_ns, fused, step, result, seen));
+    if (step.motion_frames.streamed) moved_ns += std::llround(step.motion_frames.move_s * 1e9);
     step.times.total_ms = MsSince(t_step);
     result.steps.push_back(step);
     NotifyStep(observers, result.steps.back(), seen.Data(), map);

@@ -1,8 +1,12 @@
 // The active-vision loop with fake components: what "N views" counts, step records, observers,
 // and failures as outcomes (segmenter and capture errors, refused moves, no candidate, stop rule).
+#include <algorithm>
+#include <atomic>
+#include <cmath>
 #include <memory>
 #include <stop_token>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -637,6 +641,197 @@ TEST_F(EpisodeTest, ViewFusionRefusesMasksThatDoNotFitTheFrame) {
   // The next view's change is counted from the map as it was.
   fusion.RecordMap(step);
   EXPECT_EQ(step.known_delta, 0);
+}
+
+/// A wall source whose camera also streams while the arm moves: one frame per requested pose
+/// once the move ended (as the simulator's), every `fail_every`-th failing.
+class StreamingWallSource final : public robot::RgbdSource {
+ public:
+  WallSource wall;
+  std::vector<robot::MoveStreamRequest> requests;
+  std::vector<int64_t> moving_stamps;
+  std::vector<RigidTransform> moving_poses;
+  int fail_every = 0;
+
+  Result<robot::Observation> Capture(const RigidTransform& X_WC, int64_t stamp_ns) override {
+    return wall.Capture(X_WC, stamp_ns);
+  }
+  CameraIntrinsics intrinsics() const override { return SmallCamera(); }
+  std::unique_ptr<robot::MoveStream> StreamMove(const robot::MoveStreamRequest& r) override {
+    requests.push_back(r);
+    return std::make_unique<Stream>(*this, r);
+  }
+
+ private:
+  class Stream final : public robot::MoveStream {
+   public:
+    Stream(StreamingWallSource& s, robot::MoveStreamRequest r) : s_(s), r_(std::move(r)) {}
+    Result<std::optional<robot::Observation>> Next() override {
+      // Called on the fusion thread; End() comes from the episode's thread.
+      while (!ended_.load()) std::this_thread::yield();
+      if (!moved_ || next_ >= r_.poses.size()) return std::optional<robot::Observation>();
+      const robot::TimedCameraPose& p = r_.poses[next_++];
+      if (s_.fail_every > 0 && next_ % static_cast<size_t>(s_.fail_every) == 0) {
+        ++c_.failed;
+        return IoError("frame lost");
+      }
+      s_.moving_stamps.push_back(r_.start_stamp_ns + p.t_ns);
+      s_.moving_poses.push_back(p.X_WC);
+      ++c_.delivered;
+      Result<robot::Observation> obs = s_.wall.Capture(p.X_WC, r_.start_stamp_ns + p.t_ns);
+      if (!obs.ok()) return obs.status();
+      return std::optional<robot::Observation>(std::move(*obs));
+    }
+    void End(bool moved) override {
+      moved_ = moved;
+      ended_.store(true);
+    }
+    robot::MoveStreamCounters counters() const override { return c_; }
+
+   private:
+    StreamingWallSource& s_;
+    robot::MoveStreamRequest r_;
+    std::atomic<bool> ended_{false};
+    bool moved_ = false;
+    size_t next_ = 0;
+    robot::MoveStreamCounters c_;
+  };
+};
+
+class MotionFusionTest : public EpisodeTest {
+ protected:
+  Result<EpisodeResult> RunStreaming() {
+    EpisodeComponents c{&streaming_, &segmenter_, arm_.get(), &planner_, &map_, stop_.get_token()};
+    return RunEpisode(c, options_);
+  }
+  StreamingWallSource streaming_;
+};
+
+TEST_F(MotionFusionTest, FramesAlongEachMoveAreFusedBeforeTheNextPlan) {
+  planner_.script = {{Home(0.3)}, {Home(0.6)}, {Home(0.2)}};
+  options_.motion_fusion.enabled = true;
+  options_.motion_fusion.semantics = MovingSemantics::kEveryFrame;
+  auto r = RunStreaming();
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->views_fused(), 4);
+  ASSERT_EQ(streaming_.requests.size(), 3u);
+  int64_t moved_ns = 0;
+  size_t frame = 0;
+  for (int v = 0; v < 3; ++v) {
+    const StepRecord& s = r->steps[static_cast<size_t>(v)];
+    const MovingFramesRecord& f = s.motion_frames;
+    const robot::MoveStreamRequest& req = streaming_.requests[static_cast<size_t>(v)];
+    // The move is the straight line, timed: 0.3 rad at half the URDF's speed takes ~1 s.
+    EXPECT_TRUE(f.streamed);
+    EXPECT_GT(f.move_s, 0.5);
+    EXPECT_DOUBLE_EQ(s.motion.execution_s, f.move_s);
+    EXPECT_TRUE(s.motion.straight);
+    EXPECT_FALSE(s.motion.planned);
+    // A frame every 1/30 s strictly inside the move, each fused with its masks.
+    EXPECT_EQ(f.expected, static_cast<int>(req.poses.size()));
+    EXPECT_EQ(f.expected, static_cast<int>(std::ceil(f.move_s * 30.0)) - 1);
+    EXPECT_EQ(f.fused, f.expected);
+    EXPECT_EQ(f.segmented, f.expected);
+    EXPECT_EQ(f.dropped + f.failed + f.segment_failed, 0);
+    EXPECT_GT(f.integrate_ms, 0.0);
+    EXPECT_GT(f.map_rate_hz(), 0.0);
+    // Stamped along the episode's clock: view v at v s plus the moves so far.
+    EXPECT_EQ(req.start_stamp_ns, v * 1'000'000'000LL + moved_ns);
+    for (const robot::TimedCameraPose& p : req.poses) {
+      EXPECT_EQ(streaming_.moving_stamps[frame++], req.start_stamp_ns + p.t_ns);
+    }
+    moved_ns += std::llround(f.move_s * 1e9);
+    // The frames were segmented with their own indices.
+    EXPECT_NE(std::find(segmenter_.seen.begin(), segmenter_.seen.end(), MovingFrameIndex(v, 1)),
+              segmenter_.seen.end());
+  }
+  EXPECT_FALSE(r->steps[3].motion_frames.streamed);  // no move after the last view
+  EXPECT_EQ(streaming_.wall.captured, 4 + static_cast<int>(frame));
+  // The moving frames are between the views in pose: the first one of the first move is a
+  // little past the start view, towards view 2.
+  const double to_next = (r->steps[1].X_WC.translation() - r->steps[0].X_WC.translation()).norm();
+  const double first =
+      (streaming_.moving_poses.front().translation() - r->steps[0].X_WC.translation()).norm();
+  EXPECT_GT(first, 0.0);
+  EXPECT_LT(first, 0.1 * to_next);
+  // Totals: every moving frame, and the robot's time includes the moves.
+  const MotionTotals totals = SumMotion(*r);
+  EXPECT_EQ(totals.moving.fused, static_cast<int>(frame));
+  EXPECT_GT(totals.robot_s, totals.execution_s);
+}
+
+TEST_F(MotionFusionTest, MovingFramesAddToTheMapAndTheNextViewCountsOnlyItsOwnChange) {
+  planner_.script = {{Home(0.5)}};
+  options_.views = 2;
+  options_.motion_fusion.enabled = true;
+  options_.motion_fusion.semantics = MovingSemantics::kNone;
+  auto with = RunStreaming();
+  ASSERT_TRUE(with.ok()) << with.status().ToString();
+  const MovingFramesRecord& f = with->steps[0].motion_frames;
+  EXPECT_GT(f.fused, 10);
+  EXPECT_EQ(f.segmented, 0);  // depth only
+  EXPECT_GT(f.known_delta, 0);
+  // Known voxels after view 2 = after view 1 + the moving frames' + view 2's own change.
+  EXPECT_EQ(with->steps[1].known_voxels, with->steps[0].known_voxels +
+                                             static_cast<size_t>(f.known_delta) +
+                                             static_cast<size_t>(with->steps[1].known_delta));
+  // The same episode without fusion during motion knows less.
+  mapping::SemanticMap plain_map;
+  EpisodeOptions plain = options_;
+  plain.motion_fusion.enabled = false;
+  sim::SimArm arm(*model_);
+  ScriptedPlanner planner;
+  planner.script = planner_.script;
+  EpisodeComponents c{&streaming_, &segmenter_, &arm, &planner, &plain_map, {}};
+  const size_t requests = streaming_.requests.size();
+  auto without = RunEpisode(c, plain);
+  ASSERT_TRUE(without.ok());
+  EXPECT_EQ(streaming_.requests.size(), requests);  // no stream asked for
+  EXPECT_FALSE(without->steps[0].motion_frames.streamed);
+  EXPECT_LT(without->steps[1].known_voxels, with->steps[1].known_voxels);
+  // Its straight move is recorded with the duration of the same timed line.
+  EXPECT_DOUBLE_EQ(without->steps[0].motion.execution_s, with->steps[0].motion.execution_s);
+}
+
+TEST_F(MotionFusionTest, LostFramesAreCountedAndASourceThatCannotStreamJustMoves) {
+  planner_.script = {{Home(0.5)}};
+  options_.views = 2;
+  options_.motion_fusion.enabled = true;
+  streaming_.fail_every = 4;
+  auto r = RunStreaming();
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  const MovingFramesRecord& f = r->steps[0].motion_frames;
+  EXPECT_EQ(f.failed, f.expected / 4);
+  EXPECT_EQ(f.fused, f.expected - f.failed);
+  EXPECT_NE(f.first_problem.find("frame lost"), std::string::npos) << f.first_problem;
+  // WallSource does not stream: the move happens, nothing is fused on the way.
+  auto plain = Run();
+  ASSERT_TRUE(plain.ok());
+  EXPECT_FALSE(plain->steps[0].motion_frames.streamed);
+  EXPECT_EQ(plain->steps[0].chosen_rank, 0);
+}
+
+TEST_F(MotionFusionTest, ARefusedMoveStreamsNothingAndTheNextCandidateIsStreamed) {
+  planner_.script = {{OutOfLimits(), Home(0.4)}};
+  options_.views = 2;
+  options_.motion_fusion.enabled = true;
+  auto r = RunStreaming();
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  const StepRecord& s = r->steps[0];
+  EXPECT_EQ(s.chosen_rank, 1);
+  EXPECT_EQ(s.refused_moves, 1);
+  // Only the executed move's frames are recorded.
+  EXPECT_EQ(s.motion_frames.fused, s.motion_frames.expected);
+  EXPECT_EQ(static_cast<int>(streaming_.moving_stamps.size()), s.motion_frames.fused);
+}
+
+TEST_F(MotionFusionTest, OptionsAreCheckedAndNamed) {
+  options_.motion_fusion.rate_hz = 0.0;
+  options_.motion_fusion.max_pending = 0;
+  const Status s = options_.Validate();
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("rate_hz"), std::string::npos) << s.ToString();
+  EXPECT_NE(s.message().find("max_pending"), std::string::npos) << s.ToString();
 }
 
 }  // namespace

@@ -203,6 +203,18 @@ json MoveJson(const pipeline::MotionRecord& m) {
           {"straight_line_contacts", total(m.straight_line_contacts)}};
 }
 
+/// What fusion during motion did along the move (null when it did not run).
+json MovingFramesJson(const pipeline::MovingFramesRecord& f) {
+  if (!f.streamed) return nullptr;
+  return {{"fused", f.fused},
+          {"segmented", f.segmented},
+          {"dropped", f.dropped},
+          {"failed", f.failed},
+          {"known_delta", f.known_delta},
+          {"target_delta", f.target_delta},
+          {"map_rate_hz", Short(f.map_rate_hz())}};
+}
+
 void PutU16(std::string& out, uint32_t v) {
   out.push_back(static_cast<char>(v & 0xff));
   out.push_back(static_cast<char>((v >> 8) & 0xff));
@@ -344,6 +356,7 @@ void RunReportCollector::OnView(const pipeline::StepRecord& step, const pipeline
             {"image", masks},
             {"plan", data.plan != nullptr ? PlanJson(step, *data.plan, options_) : json(nullptr)},
             {"motion", MoveJson(step.motion)},
+            {"moving_frames", MovingFramesJson(step.motion_frames)},
             {"metrics", metrics},
             {"errors", errors},
             {"step_ms", Short(step.times.total_ms, 4)}};

@@ -20,15 +20,22 @@ std::string FormatStepLine(const pipeline::StepRecord& s, std::string_view progr
                          : !s.segment_status.ok() ? "  segment: " + s.segment_status.ToString()
                                                   : std::string();
   for (const std::string& w : s.plan_warnings) problems += "  planner warning: " + w;
+  const pipeline::MovingFramesRecord& f = s.motion_frames;
+  const std::string moving =
+      f.streamed ? fmt::format("  then {} frames fused while moving ({:.0f} frames/s{}{})", f.fused,
+                               f.map_rate_hz(),
+                               f.dropped > 0 ? fmt::format(", {} dropped", f.dropped) : "",
+                               f.failed > 0 ? fmt::format(", {} failed", f.failed) : "")
+                 : std::string();
   const std::string candidates = s.planned
                                      ? fmt::format(", {} of {} candidates reachable",
                                                    s.candidates_reachable, s.candidates_generated)
                                      : std::string();
   return fmt::format(
       "view {}/{}  eye ({:.3f}, {:.3f}, {:.3f})  {} masks{}  [segment {:.0f} ms, integrate {:.0f} "
-      "ms, plan {:.0f} ms{}]{}{}",
+      "ms, plan {:.0f} ms{}]{}{}{}",
       s.view + 1, s.views_total, eye.x(), eye.y(), eye.z(), s.masks, metrics, s.times.segment_ms,
-      s.times.integrate_ms, s.times.plan_ms, candidates,
+      s.times.integrate_ms, s.times.plan_ms, candidates, moving,
       progress.empty() ? std::string() : fmt::format("  {}", progress), problems);
 }
 
@@ -44,6 +51,27 @@ json ContactsJson(const std::optional<robot::MotionContacts>& c) {
   if (!c) return nullptr;
   return {{"total", c->total()}, {"plant", c->plant}, {"fruit", c->fruit}, {"support", c->support},
           {"ground", c->ground}, {"self", c->self},   {"first", c->first}};
+}
+
+json MovingFramesJson(const pipeline::MovingFramesRecord& f) {
+  return {{"streamed", f.streamed},
+          {"expected", f.expected},
+          {"fused", f.fused},
+          {"segmented", f.segmented},
+          {"dropped", f.dropped},
+          {"skipped", f.skipped},
+          {"failed", f.failed},
+          {"segment_failed", f.segment_failed},
+          {"move_s", f.move_s},
+          {"capture_ms", f.capture_ms},
+          {"segment_ms", f.segment_ms},
+          {"integrate_ms", f.integrate_ms},
+          {"busy_ms", f.busy_ms},
+          {"wall_ms", f.wall_ms},
+          {"map_rate_hz", f.map_rate_hz()},
+          {"known_delta", f.known_delta},
+          {"target_delta", f.target_delta},
+          {"first_problem", f.first_problem}};
 }
 
 json MotionJson(const pipeline::MotionRecord& m) {
@@ -86,6 +114,8 @@ json MotionTotalsJson(const pipeline::EpisodeResult& e) {
           {"planning_ms_max", sorted.empty() ? json(nullptr) : json(sorted.back())},
           {"contacts", ContactsJson(t.contacts)},
           {"straight_line_contacts", ContactsJson(t.straight_line_contacts)},
+          {"robot_s", t.robot_s},
+          {"moving_frames", t.moving.streamed ? MovingFramesJson(t.moving) : json(nullptr)},
           {"return_home", std::move(home)}};
 }
 
@@ -132,6 +162,7 @@ json StepJson(const pipeline::StepRecord& s) {
                  {"in_collision", s.candidates_in_collision},
                  {"top_candidates", cands},
                  {"motion", MotionJson(s.motion)}};
+    if (s.motion_frames.streamed) j["plan"]["motion_frames"] = MovingFramesJson(s.motion_frames);
     if (!s.plan_warnings.empty()) j["plan"]["warnings"] = s.plan_warnings;
   }
   return j;

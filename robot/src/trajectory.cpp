@@ -159,4 +159,41 @@ Result<JointTrajectory> TimeParameterize(const ArmModel& arm,
   return traj;
 }
 
+int64_t TimeNs(const TrajectoryPoint& point) { return static_cast<int64_t>(point.t_s * 1e9); }
+
+std::vector<int64_t> JointTrajectory::times_ns() const {
+  std::vector<int64_t> t;
+  t.reserve(points.size());
+  for (const TrajectoryPoint& p : points) t.push_back(TimeNs(p));
+  return t;
+}
+
+Eigen::VectorXd JointsAt(std::span<const Eigen::VectorXd> q, std::span<const int64_t> t_ns,
+                         int64_t at_ns) {
+  if (at_ns <= t_ns.front()) return q.front();
+  for (size_t i = 1; i < q.size(); ++i) {
+    if (at_ns > t_ns[i]) continue;
+    const int64_t span = t_ns[i] - t_ns[i - 1];
+    if (span <= 0) return q[i];
+    const double a = static_cast<double>(at_ns - t_ns[i - 1]) / static_cast<double>(span);
+    return q[i - 1] + a * (q[i] - q[i - 1]);
+  }
+  return q.back();
+}
+
+std::vector<FrameAlong> FramesAlong(const JointTrajectory& trajectory, double rate_hz) {
+  std::vector<FrameAlong> frames;
+  if (!(rate_hz > 0.0) || !std::isfinite(rate_hz) || trajectory.points.size() < 2) return frames;
+  const std::vector<int64_t> t_ns = trajectory.times_ns();
+  std::vector<Eigen::VectorXd> q;
+  q.reserve(trajectory.points.size());
+  for (const TrajectoryPoint& p : trajectory.points) q.push_back(p.q);
+  for (int k = 1;; ++k) {
+    const auto t = static_cast<int64_t>(std::llround(static_cast<double>(k) * 1e9 / rate_hz));
+    if (t >= t_ns.back()) break;
+    frames.push_back({k, t, JointsAt(q, t_ns, t)});
+  }
+  return frames;
+}
+
 }  // namespace avp::robot

@@ -120,5 +120,54 @@ TEST(JointTrajectoryTest, ValidateNamesTheBadPoint) {
   EXPECT_NE(names.Validate(arm).message().find("are not the arm's"), std::string::npos);
 }
 
+TEST(FramesAlongTest, FramesAtEveryPeriodStrictlyBetweenTheStartAndTheArrival) {
+  const ArmModel& arm = DefaultArm();
+  const Eigen::VectorXd a = arm.home_joints();
+  Eigen::VectorXd b = a;
+  b[0] += 1.0;
+  const Result<JointTrajectory> t = TimeParameterize(arm, {a, b}, 0.5, 0.5, 0.1);
+  ASSERT_TRUE(t.ok()) << t.status().ToString();
+  const std::vector<FrameAlong> frames = FramesAlong(*t, 30.0);
+  // 2.70 s at 30 Hz: frames 1 ... 81 (t = 2.7 s is at or past the arrival, not a moving frame).
+  const int64_t duration_ns = TimeNs(t->points.back());
+  ASSERT_FALSE(frames.empty());
+  EXPECT_EQ(static_cast<int64_t>(frames.size()), (duration_ns * 30 - 1) / 1'000'000'000);
+  for (size_t i = 0; i < frames.size(); ++i) {
+    EXPECT_EQ(frames[i].index, static_cast<int>(i) + 1);
+    EXPECT_EQ(frames[i].t_ns, std::llround((static_cast<double>(i) + 1) * 1e9 / 30.0));
+    EXPECT_LT(frames[i].t_ns, duration_ns);
+    // Joint 1 moves monotonically from a to b; the others stay.
+    EXPECT_GT(frames[i].q[0], a[0]);
+    EXPECT_LT(frames[i].q[0], b[0]);
+    if (i > 0) {
+      EXPECT_GT(frames[i].q[0], frames[i - 1].q[0]);
+    }
+    EXPECT_NEAR((frames[i].q.tail(5) - a.tail(5)).norm(), 0.0, 1e-12);
+  }
+  // Half way in time, a symmetric profile is half way in joint space.
+  const std::vector<int64_t> t_ns = t->times_ns();
+  std::vector<Eigen::VectorXd> q;
+  for (const TrajectoryPoint& p : t->points) q.push_back(p.q);
+  EXPECT_NEAR(JointsAt(q, t_ns, duration_ns / 2)[0], a[0] + 0.5, 1e-3);
+  EXPECT_TRUE(JointsAt(q, t_ns, -5).isApprox(a));
+  EXPECT_TRUE(JointsAt(q, t_ns, duration_ns + 5).isApprox(b));
+  // No frames without a rate or a move.
+  EXPECT_TRUE(FramesAlong(*t, 0.0).empty());
+  EXPECT_TRUE(FramesAlong(*t, std::nan("")).empty());
+  EXPECT_TRUE(FramesAlong(JointTrajectory{}, 30.0).empty());
+}
+
+TEST(FramesAlongTest, JointsAtInterpolatesLinearlyInWholeNanoseconds) {
+  const std::vector<Eigen::VectorXd> q = {Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 2),
+                                          Eigen::Vector2d(1, 2), Eigen::Vector2d(3, 2)};
+  const std::vector<int64_t> t = {0, 100, 100, 300};  // a repeated time: a jump, no division
+  EXPECT_TRUE(JointsAt(q, t, 50).isApprox(Eigen::Vector2d(0.5, 1.0)));
+  EXPECT_TRUE(JointsAt(q, t, 100).isApprox(Eigen::Vector2d(1, 2)));
+  EXPECT_TRUE(JointsAt(q, t, 200).isApprox(Eigen::Vector2d(2, 2)));
+  // A point's time as trajectory_msgs carries it: truncated to whole nanoseconds.
+  EXPECT_EQ(TimeNs(TrajectoryPoint{.q = {}, .qd = {}, .t_s = 0.1234567899}), 123'456'789);
+  EXPECT_EQ(TimeNs(TrajectoryPoint{.q = {}, .qd = {}, .t_s = 1.5}), 1'500'000'000);
+}
+
 }  // namespace
 }  // namespace avp::robot

@@ -496,6 +496,13 @@ function build(data) {
         "planned around obstacles") : "straight, unchecked"}, ${fmt(m.execution_s)} s` +
         `${m.rejected ? `, ${m.rejected} candidates rejected` : ""}${contacts}`);
     }
+    const f = s.moving_frames;
+    if (f) {
+      h("div", {}, candInfo, `while moving: ${f.fused} frames fused (${f.segmented} with masks` +
+        `${f.dropped ? `, ${f.dropped} dropped` : ""}${f.failed ? `, ${f.failed} failed` : ""}), ` +
+        `+${f.known_delta} known voxels, +${f.target_delta} fruit voxels; the map took ` +
+        `${fmt(f.map_rate_hz)} frames/s`);
+    }
     const table = h("table", { class: "avp" }, candInfo);
     const hr = h("tr", {}, table);
     for (const t of ["rank", "utility", "gain", "cost", "source"]) h("th", {}, hr, t);

@@ -683,10 +683,11 @@ struct BagReader::Impl {
       AVP_RETURN_IF_ERROR(EndMoment());
       moment_time = m.log_time;
     }
-    if (m.topic == kStepTopic || m.topic == o.color_topic || m.topic == o.depth_topic ||
-        m.topic == kInstancesTopic || IsLabelTopic(m.topic)) {
+    if (m.topic == kStepTopic || m.topic == kMovingFrameTopic || m.topic == o.color_topic ||
+        m.topic == o.depth_topic || m.topic == kInstancesTopic || IsLabelTopic(m.topic)) {
       if (topic_messages[m.topic] == 1) {
-        const bool text = m.topic == kStepTopic || m.topic == kInstancesTopic;
+        const bool text =
+            m.topic == kStepTopic || m.topic == kMovingFrameTopic || m.topic == kInstancesTopic;
         AVP_RETURN_IF_ERROR(CheckTopic(m, text ? "std_msgs/msg/String" : "sensor_msgs/msg/Image"));
       }
       if (IsLabelTopic(m.topic)) AddLabel(m);
@@ -696,6 +697,17 @@ struct BagReader::Impl {
   }
 
   Status EndMoment() {
+    if (moment.contains(std::string(kMovingFrameTopic)) &&
+        !moment.contains(std::string(kStepTopic)) && !done) {
+      Result<BagView> view = AvpMovingFrame();
+      if (view.ok()) {
+        ++account.moving_frames;
+        ready.push_back(std::move(*view));
+      } else {
+        Skip(static_cast<int>(account.pairs), static_cast<int64_t>(moment_time),
+             ReasonOf(view.status()), view.status().message());
+      }
+    }
     if (moment.contains(std::string(kStepTopic)) && !done) {
       ++account.pairs;
       Result<BagView> view = AvpStep();
@@ -732,6 +744,49 @@ struct BagReader::Impl {
     const auto md = moment.find(o.depth_topic);
     if (mc == moment.end() || md == moment.end()) {
       return NotFoundError(fmt::format("no {} image logged at the step's time",
+                                       mc == moment.end() ? o.color_topic : o.depth_topic));
+    }
+    AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(mc->second, md->second));
+    AVP_RETURN_IF_ERROR(StepPoseAndJoints(view));
+    AVP_RETURN_IF_ERROR(Rectify(view.observation.frame));
+    const RgbdFrame& frame = view.observation.frame;
+    AVP_ASSIGN_OR_RETURN(view.observation.labels,
+                         LabelsAt(moment_time, frame.rgb.width(), frame.rgb.height()));
+    if (auto mi = moment.find(std::string(kInstancesTopic)); mi != moment.end()) {
+      AVP_ASSIGN_OR_RETURN(view.segmentation, RecordedMasks(mi->second, frame));
+    }
+    return view;
+  }
+
+  /// A frame fused while the arm moved: its images, labels and masks, its exact pose.
+  Result<BagView> AvpMovingFrame() {
+    AVP_ASSIGN_OR_RETURN(
+        const ros::msg::String text,
+        ros::msg::Decode<ros::msg::String>(moment.at(std::string(kMovingFrameTopic))));
+    BagView view;
+    view.moving = true;
+    try {
+      view.step = nlohmann::json::parse(text.data);
+    } catch (const nlohmann::json::parse_error& e) {
+      return InvalidArgumentError(
+          fmt::format("{}: malformed JSON: {}", kMovingFrameTopic, EscapeText(e.what(), 200)));
+    }
+    const auto number = [&](const char* key) -> std::optional<int> {
+      const auto it = view.step.is_object() ? view.step.find(key) : view.step.end();
+      if (it == view.step.end() || !it->is_number_integer()) return std::nullopt;
+      return it->get<int>();
+    };
+    const std::optional<int> v = number("view"), k = number("k");
+    if (!v || !k || *v < 1 || *k < 1) {
+      return InvalidArgumentError(fmt::format("{}: needs whole numbers view >= 1 and k >= 1: {}",
+                                              kMovingFrameTopic, EscapeText(text.data, 200)));
+    }
+    view.index = *v - 1;
+    view.moving_k = *k;
+    const auto mc = moment.find(o.color_topic);
+    const auto md = moment.find(o.depth_topic);
+    if (mc == moment.end() || md == moment.end()) {
+      return NotFoundError(fmt::format("no {} image logged at the moving frame's time",
                                        mc == moment.end() ? o.color_topic : o.depth_topic));
     }
     AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(mc->second, md->second));

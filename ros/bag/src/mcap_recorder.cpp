@@ -62,22 +62,25 @@ Status McapRecorder::AddChannels() {
       Topic<ros::msg::Octomap>(kMapTopic),
       Topic<ros::msg::String>(kStepTopic),
   };
-  std::map<std::string_view, uint16_t> schemas;
+  for (const TopicInfo& t : topics) AVP_RETURN_IF_ERROR(AddChannel(t.topic, t.type, t.schema));
+  return Status::Ok();
+}
+
+Status McapRecorder::AddChannel(std::string_view topic, std::string_view type,
+                                std::string_view schema) {
+  auto it = schemas_.find(type);
+  if (it == schemas_.end()) {
+    AVP_ASSIGN_OR_RETURN(const uint16_t id, writer_->AddSchema(type, "ros2msg", schema));
+    it = schemas_.emplace(std::string(type), id).first;
+  }
+  // As rosbag2 (Jazzy) writes them: the QoS offered and the type's REP-2011 hash.
   const std::string qos =
       ros::mcap::OfferedQosProfiles(/*reliable=*/true, /*transient_local=*/false);
-  for (const TopicInfo& t : topics) {
-    auto it = schemas.find(t.type);
-    if (it == schemas.end()) {
-      AVP_ASSIGN_OR_RETURN(const uint16_t id, writer_->AddSchema(t.type, "ros2msg", t.schema));
-      it = schemas.emplace(t.type, id).first;
-    }
-    // As rosbag2 (Jazzy) writes them: the QoS offered and the type's REP-2011 hash.
-    AVP_ASSIGN_OR_RETURN(const std::string hash, ros::msg::TypeHashOf(t.type));
-    AVP_ASSIGN_OR_RETURN(const uint16_t channel, writer_->AddChannel(it->second, t.topic, "cdr",
-                                                                     {{"offered_qos_profiles", qos},
-                                                                      {"topic_type_hash", hash}}));
-    channels_.emplace(std::string(t.topic), channel);
-  }
+  AVP_ASSIGN_OR_RETURN(const std::string hash, ros::msg::TypeHashOf(type));
+  AVP_ASSIGN_OR_RETURN(const uint16_t channel, writer_->AddChannel(it->second, topic, "cdr",
+                                                                   {{"offered_qos_profiles", qos},
+                                                                    {"topic_type_hash", hash}}));
+  channels_.emplace(std::string(topic), channel);
   return Status::Ok();
 }
 
@@ -105,33 +108,7 @@ Status McapRecorder::WriteView(const pipeline::StepRecord& step, const pipeline:
   auto channel = [&](std::string_view topic) { return channels_.find(topic)->second; };
 
   ros::msg::Header base{ros::msg::ToTimeMsg(stamp), options_.base_frame};
-  if (obs != nullptr) {
-    const RgbdFrame& f = obs->frame;
-    const ros::msg::Header cam{ros::msg::ToTimeMsg(stamp), f.frame_id};
-    AVP_RETURN_IF_ERROR(Publish(channel(kColorTopic), t, ros::msg::ToColorImage(f.rgb, cam)));
-    AVP_RETURN_IF_ERROR(Publish(channel(kDepthTopic), t, ros::msg::ToDepthImage(f.depth_m, cam)));
-    AVP_RETURN_IF_ERROR(Publish(channel(kCameraInfoTopic), t, ros::msg::ToCameraInfo(f.K, cam)));
-    ros::msg::TFMessage tf;
-    tf.transforms.resize(1);
-    tf.transforms[0].header = base;
-    tf.transforms[0].child_frame_id = f.frame_id;
-    tf.transforms[0].transform = ros::msg::ToTransformMsg(f.X_WC);
-    AVP_RETURN_IF_ERROR(Publish(channel(kTfTopic), t, tf));
-    if (obs->labels) {
-      AVP_RETURN_IF_ERROR(Publish(
-          channel(kSimInstanceTopic), t,
-          ros::msg::ToInstanceIdImage(obs->labels->instance_ids, kSimInstanceEncoding, cam)));
-      AVP_RETURN_IF_ERROR(Publish(channel(kSimClassTopic), t,
-                                  ros::msg::ToClassIdImage(obs->labels->class_ids, cam)));
-    }
-    if (data.segmentation != nullptr) {
-      AVP_RETURN_IF_ERROR(Publish(channel(kInstanceImageTopic), t,
-                                  ros::msg::ToInstanceIdImage(InstanceIdImage(*data.segmentation),
-                                                              kInstanceImageEncoding, cam)));
-      AVP_RETURN_IF_ERROR(Publish(channel(kInstancesTopic), t,
-                                  ros::msg::String{InstancesToJson(*data.segmentation).dump()}));
-    }
-  }
+  if (obs != nullptr) AVP_RETURN_IF_ERROR(WriteFrame(*obs, data.segmentation, stamp));
   ros::msg::JointState joints;
   joints.header = ros::msg::Header{ros::msg::ToTimeMsg(stamp), ""};
   for (Eigen::Index i = 0; i < step.q.size(); ++i) {
@@ -162,6 +139,69 @@ Status McapRecorder::WriteView(const pipeline::StepRecord& step, const pipeline:
   // The view's chunk goes to the file now: a run killed later leaves this step readable.
   AVP_RETURN_IF_ERROR(writer_->Flush());
   ++views_;
+  return Status::Ok();
+}
+
+Status McapRecorder::WriteFrame(const robot::Observation& observation,
+                                const Segmentation* segmentation, int64_t stamp) {
+  const robot::Observation* obs = &observation;
+  const auto t = static_cast<uint64_t>(stamp);
+  auto channel = [&](std::string_view topic) { return channels_.find(topic)->second; };
+  ros::msg::Header base{ros::msg::ToTimeMsg(stamp), options_.base_frame};
+  const RgbdFrame& f = obs->frame;
+  const ros::msg::Header cam{ros::msg::ToTimeMsg(stamp), f.frame_id};
+  AVP_RETURN_IF_ERROR(Publish(channel(kColorTopic), t, ros::msg::ToColorImage(f.rgb, cam)));
+  AVP_RETURN_IF_ERROR(Publish(channel(kDepthTopic), t, ros::msg::ToDepthImage(f.depth_m, cam)));
+  AVP_RETURN_IF_ERROR(Publish(channel(kCameraInfoTopic), t, ros::msg::ToCameraInfo(f.K, cam)));
+  ros::msg::TFMessage tf;
+  tf.transforms.resize(1);
+  tf.transforms[0].header = base;
+  tf.transforms[0].child_frame_id = f.frame_id;
+  tf.transforms[0].transform = ros::msg::ToTransformMsg(f.X_WC);
+  AVP_RETURN_IF_ERROR(Publish(channel(kTfTopic), t, tf));
+  if (obs->labels) {
+    AVP_RETURN_IF_ERROR(
+        Publish(channel(kSimInstanceTopic), t,
+                ros::msg::ToInstanceIdImage(obs->labels->instance_ids, kSimInstanceEncoding, cam)));
+    AVP_RETURN_IF_ERROR(
+        Publish(channel(kSimClassTopic), t, ros::msg::ToClassIdImage(obs->labels->class_ids, cam)));
+  }
+  if (segmentation != nullptr) {
+    AVP_RETURN_IF_ERROR(Publish(
+        channel(kInstanceImageTopic), t,
+        ros::msg::ToInstanceIdImage(InstanceIdImage(*segmentation), kInstanceImageEncoding, cam)));
+    AVP_RETURN_IF_ERROR(Publish(channel(kInstancesTopic), t,
+                                ros::msg::String{InstancesToJson(*segmentation).dump()}));
+  }
+  return Status::Ok();
+}
+
+void McapRecorder::OnMovingFrame(const pipeline::MovingFrameData& frame,
+                                 const mapping::SemanticMap&) {
+  if (!status_.ok() || closed_ || frame.observation == nullptr) return;
+  status_ = WriteMovingFrame(frame);
+  if (!status_.ok() && stop_.stop_possible()) stop_.request_stop();
+}
+
+Status McapRecorder::WriteMovingFrame(const pipeline::MovingFrameData& frame) {
+  const int64_t stamp = std::max<int64_t>(0, frame.observation->frame.stamp_ns);
+  if (!channels_.contains(kMovingFrameTopic)) {
+    // Added with the first moving frame: a recording without fusion during motion has the
+    // channels it always had.
+    const TopicInfo t = Topic<ros::msg::String>(kMovingFrameTopic);
+    AVP_RETURN_IF_ERROR(AddChannel(t.topic, t.type, t.schema));
+  }
+  AVP_RETURN_IF_ERROR(WriteFrame(*frame.observation, frame.segmentation, stamp));
+  const nlohmann::json marker{{"view", frame.view + 1},
+                              {"k", frame.k},
+                              {"stamp_ns", stamp},
+                              {"segmented", frame.segmentation != nullptr},
+                              {"X_WC", PoseToJson(frame.observation->frame.X_WC)}};
+  AVP_RETURN_IF_ERROR(Publish(channels_.find(kMovingFrameTopic)->second,
+                              static_cast<uint64_t>(stamp), ros::msg::String{marker.dump()}));
+  // One chunk per frame: a move's frames (~2.5 MB each) are never held together.
+  AVP_RETURN_IF_ERROR(writer_->Flush());
+  ++moving_frames_;
   return Status::Ok();
 }
 

@@ -208,7 +208,7 @@ ros::msg::JointTrajectory Ros2Arm::ToMessage(const robot::JointTrajectory& traje
               : p.qd;
       point.velocities.assign(qd_out.data(), qd_out.data() + qd_out.size());
     }
-    point.time_from_start = ros::msg::Duration::FromNanoseconds(static_cast<int64_t>(p.t_s * 1e9));
+    point.time_from_start = ros::msg::Duration::FromNanoseconds(robot::TimeNs(p));
     traj.points.push_back(std::move(point));
   }
   return traj;

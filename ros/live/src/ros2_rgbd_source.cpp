@@ -198,7 +198,11 @@ void Ros2RgbdSource::OnImage(ros::msg::Image&& msg, bool is_color) {
     return s < StampNs(m.header);
   });
   q.insert(pos, std::move(msg));
-  while (q.size() > static_cast<size_t>(options_.queue)) q.pop_front();
+  while (q.size() > static_cast<size_t>(options_.queue)) {
+    if (is_color && active_stream_ != nullptr) TellTrimmed(StampNs(q.front().header));
+    q.pop_front();
+  }
+  ++generation_;
   cv_.notify_all();
 }
 
@@ -207,6 +211,7 @@ void Ros2RgbdSource::OnLabel(ros::msg::Image&& msg, bool is_instance) {
   std::deque<ros::msg::Image>& q = is_instance ? instance_ : class_;
   q.push_back(std::move(msg));
   while (q.size() > static_cast<size_t>(options_.queue)) q.pop_front();
+  ++generation_;
   cv_.notify_all();
 }
 
@@ -269,6 +274,7 @@ Result<robot::Observation> Ros2RgbdSource::Capture(const RigidTransform& X_WC, i
   const ros::msg::Image color = color_[pair->first];
   const ros::msg::Image depth = depth_[pair->second];
   (void)X_WC;
+  ++counters_.pairs_used;
   return Assemble(color, depth, lock);
 }
 
@@ -288,7 +294,6 @@ Result<robot::Observation> Ros2RgbdSource::Assemble(const ros::msg::Image& color
     }
   }
   const std::vector<GroundTruthFruit> fruits = fruits_;
-  ++counters_.pairs_used;
   lock.unlock();
 
   const std::string camera_frame =
@@ -331,6 +336,182 @@ Result<robot::Observation> Ros2RgbdSource::Assemble(const ros::msg::Image& color
     obs.labels = std::move(labels);
   }
   return obs;
+}
+
+/// Ros2RgbdSource's stream of one move: the pairs stamped in [start, end), in stamp order.
+class LiveMoveStream final : public robot::MoveStream {
+ public:
+  LiveMoveStream(Ros2RgbdSource& source, const robot::MoveStreamRequest& request)
+      : s_(source),
+        start_ns_(NowNs()),
+        period_ns_(static_cast<int64_t>(1e9 / request.rate_hz)),
+        max_pending_(static_cast<size_t>(std::max(1, request.max_pending))),
+        from_(request.X_WC_from),
+        to_(request.X_WC_to),
+        last_ns_(start_ns_ - 1) {
+    std::lock_guard lock(s_.mutex_);
+    s_.active_stream_ = this;
+  }
+  ~LiveMoveStream() override {
+    std::lock_guard lock(s_.mutex_);
+    if (s_.active_stream_ == this) s_.active_stream_ = nullptr;
+  }
+  LiveMoveStream(const LiveMoveStream&) = delete;
+  LiveMoveStream& operator=(const LiveMoveStream&) = delete;
+
+  /// A colour frame stamped `t` left the queue: dropped if it was one of the move's and not
+  /// handed over (the map fell more than the queue behind). Called with the mutex held.
+  void Trimmed(int64_t t) {
+    if (t <= last_ns_ || t < start_ns_ || (end_ns_ && t >= *end_ns_)) return;
+    ++counters_.dropped;
+    ++s_.counters_.moving_dropped;
+  }
+
+  Result<std::optional<robot::Observation>> Next() override {
+    std::unique_lock lock(s_.mutex_);
+    const bool labels = !s_.options_.labels_prefix.empty();
+    const auto timeout = Seconds(s_.options_.frame_timeout_s);
+    auto deadline = SteadyClock::now() + timeout;
+    while (true) {
+      if (s_.stop_.stop_requested()) return CancelledError("stopped while streaming a move");
+      std::vector<std::pair<size_t, size_t>> pending = Pending(labels);
+      if (!pending.empty()) {
+        Thin(pending);
+        if (!pending.empty()) {
+          const auto [ci, di] = pending.front();
+          last_ns_ = StampNs(s_.color_[ci].header);
+          const ros::msg::Image color = s_.color_[ci];
+          const ros::msg::Image depth = s_.depth_[di];
+          Result<robot::Observation> obs = s_.Assemble(color, depth, lock);
+          lock.lock();
+          if (!obs.ok()) {
+            ++counters_.failed;
+            return obs.status();
+          }
+          if (AtRest(obs->frame.X_WC)) {
+            // Before the arm started or after it arrived: the views' pose, not the move's.
+            ++counters_.skipped;
+            ++s_.counters_.moving_skipped;
+            continue;
+          }
+          ++counters_.delivered;
+          ++s_.counters_.moving_pairs;
+          return std::optional<robot::Observation>(std::move(*obs));
+        }
+      }
+      if (end_ns_) {
+        // Done once a colour frame stamped at or after the arrival came (the earlier ones came
+        // before it: one publisher, in order), or nothing more comes.
+        if (!*moved_ || NewestColor() >= *end_ns_ || SteadyClock::now() >= deadline) {
+          return std::optional<robot::Observation>();
+        }
+      } else if (SteadyClock::now() >= deadline) {
+        deadline = SteadyClock::now() + timeout;  // a long move: keep waiting, End() will come
+      }
+      const uint64_t seen = s_.generation_;
+      s_.cv_.wait_until(lock, s_.stop_, deadline, [&] { return s_.generation_ != seen; });
+    }
+  }
+
+  void End(bool moved) override {
+    std::lock_guard lock(s_.mutex_);
+    end_ns_ = NowNs();
+    moved_ = moved;
+    ++s_.generation_;
+    s_.cv_.notify_all();
+  }
+
+  robot::MoveStreamCounters counters() const override {
+    std::lock_guard lock(s_.mutex_);
+    return counters_;
+  }
+
+ private:
+  /// Pairs stamped after the last one handed over and inside the move, oldest first (with
+  /// labels: only colour frames whose labels came). Call with the source's mutex held.
+  std::vector<std::pair<size_t, size_t>> Pending(bool labels) const {
+    std::vector<std::pair<size_t, size_t>> out;
+    const int64_t skew = static_cast<int64_t>(s_.options_.max_pair_skew_ms * 1e6);
+    const auto has_stamp = [](const std::deque<ros::msg::Image>& q, int64_t t) {
+      return std::any_of(q.begin(), q.end(), [&](const auto& m) { return StampNs(m.header) == t; });
+    };
+    for (size_t i = 0; i < s_.color_.size(); ++i) {
+      const int64_t tc = StampNs(s_.color_[i].header);
+      if (tc <= last_ns_ || (end_ns_ && tc >= *end_ns_)) continue;
+      if (labels && !(has_stamp(s_.instance_, tc) && has_stamp(s_.class_, tc))) continue;
+      for (size_t j = 0; j < s_.depth_.size(); ++j) {
+        if (std::abs(StampNs(s_.depth_[j].header) - tc) <= skew) {
+          out.emplace_back(i, j);
+          break;
+        }
+      }
+    }
+    return out;
+  }
+
+  /// Drops what is above the rate and, past max_pending, the oldest; counts both.
+  void Thin(std::vector<std::pair<size_t, size_t>>& pending) {
+    std::vector<std::pair<size_t, size_t>> kept;
+    int64_t last = last_ns_;
+    for (const auto& p : pending) {
+      const int64_t t = StampNs(s_.color_[p.first].header);
+      if (last >= start_ns_ && t - last < period_ns_ * 3 / 4) {
+        ++counters_.skipped;
+        ++s_.counters_.moving_skipped;
+        last_ns_ = std::max(last_ns_, t);
+        continue;
+      }
+      kept.push_back(p);
+      last = t;
+    }
+    if (kept.size() > max_pending_) {
+      const size_t drop = kept.size() - max_pending_;
+      counters_.dropped += static_cast<int>(drop);
+      s_.counters_.moving_dropped += drop;
+      last_ns_ = std::max(last_ns_, StampNs(s_.color_[kept[drop - 1].first].header));
+      if (!warned_) {
+        spdlog::warn(
+            "fusion during motion: the map fell behind the camera; dropped {} frame(s) "
+            "(more than max_pending = {} waiting)",
+            drop, max_pending_);
+        warned_ = true;
+      }
+      kept.erase(kept.begin(), kept.begin() + static_cast<std::ptrdiff_t>(drop));
+    }
+    pending = std::move(kept);
+  }
+
+  int64_t NewestColor() const {
+    return s_.color_.empty() ? INT64_MIN : StampNs(s_.color_.back().header);
+  }
+
+  /// The camera stands where the move starts or ends (within 1 µm and 1 µrad: a simulator's
+  /// rest frames; a real arm's jitter is larger, and its frames at rest are fused, harmlessly).
+  bool AtRest(const RigidTransform& X_WC) const {
+    const auto same = [&](const RigidTransform& X) {
+      return (X.translation() - X_WC.translation()).norm() < 1e-6 &&
+             Eigen::AngleAxisd(X.rotation().transpose() * X_WC.rotation()).angle() < 1e-6;
+    };
+    return same(from_) || same(to_);
+  }
+
+  Ros2RgbdSource& s_;
+  int64_t start_ns_;
+  int64_t period_ns_;
+  size_t max_pending_;
+  RigidTransform from_, to_;
+  int64_t last_ns_;
+  std::optional<int64_t> end_ns_;
+  std::optional<bool> moved_;
+  robot::MoveStreamCounters counters_;
+  bool warned_ = false;
+};
+
+void Ros2RgbdSource::TellTrimmed(int64_t stamp_ns) { active_stream_->Trimmed(stamp_ns); }
+
+std::unique_ptr<robot::MoveStream> Ros2RgbdSource::StreamMove(
+    const robot::MoveStreamRequest& request) {
+  return std::make_unique<LiveMoveStream>(*this, request);
 }
 
 CameraIntrinsics Ros2RgbdSource::intrinsics() const {

@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <avp/robot/trajectory.h>
 #include <avp/ros/live/ros2_rgbd_source.h>
 #include <avp/ros/msg/convert.h>
 #include <avp/ros/msg/images.h>
@@ -34,6 +35,9 @@ const OptionTable<SimRobotOptions>& SimRobotOptionTable() {
     t->Text("depth_encoding", &O::depth_encoding, "32FC1 (metres) or 16UC1 (millimetres)");
     t->Real("camera_rate_hz", &O::camera_rate_hz, "Hz", ValueRange::LeftOpen(0, 200),
             "images per second while the arm rests");
+    t->Real("moving_rate_hz", &O::moving_rate_hz, "Hz", ValueRange::Closed(0, 120),
+            "images per second while the arm moves, each rendered where the arm is then "
+            "(0: none)");
     t->Real("joint_state_rate_hz", &O::joint_state_rate_hz, "Hz", ValueRange::LeftOpen(0, 1000),
             "joint states and /tf per second");
     t->Real("time_scale", &O::time_scale, "", ValueRange::Closed(0, 100),
@@ -133,16 +137,8 @@ Result<std::unique_ptr<SimRos2Robot>> SimRos2Robot::Create(
   return r;
 }
 
-Eigen::VectorXd SimRos2Robot::Motion::At(int64_t elapsed_ns) const {
-  if (elapsed_ns <= 0) return q.front();
-  for (size_t i = 1; i < q.size(); ++i) {
-    if (elapsed_ns > t_ns[i]) continue;
-    const int64_t span = t_ns[i] - t_ns[i - 1];
-    if (span <= 0) return q[i];
-    const double a = static_cast<double>(elapsed_ns - t_ns[i - 1]) / static_cast<double>(span);
-    return q[i - 1] + a * (q[i] - q[i - 1]);
-  }
-  return q.back();
+Eigen::VectorXd SimRos2Robot::Motion::At(int64_t at_ns) const {
+  return robot::JointsAt(q, t_ns, at_ns);
 }
 
 void SimRos2Robot::OnTrajectory(const ros::msg::JointTrajectory& msg) {
@@ -186,7 +182,7 @@ void SimRos2Robot::OnTrajectory(const ros::msg::JointTrajectory& msg) {
     }
     previous_t = t;
     goal.q.push_back(std::move(q));
-    goal.t_s.push_back(t * options_.time_scale);
+    goal.t_ns.push_back(point.time_from_start.ToNanoseconds());
   }
   std::lock_guard lock(mutex_);
   ++counters_.goals_received;
@@ -200,8 +196,9 @@ void SimRos2Robot::OnTrajectory(const ros::msg::JointTrajectory& msg) {
   pending_ = goal;
 }
 
-Status SimRos2Robot::RenderAtRest(int64_t stamp_ns) {
-  Result<robot::Observation> obs = source_.Capture(model_.CameraPose(q_), stamp_ns);
+Status SimRos2Robot::Render(int64_t stamp_ns, bool moving) {
+  Result<robot::Observation> obs = moving ? source_.CaptureMoving(model_.CameraPose(q_), stamp_ns)
+                                          : source_.Capture(model_.CameraPose(q_), stamp_ns);
   if (!obs.ok()) return obs.status();
   ros::msg::Header header;
   header.frame_id = options_.camera_frame;
@@ -279,32 +276,62 @@ Status SimRos2Robot::Run(std::stop_token stop, double max_seconds) {
         m.t_ns.push_back(0);
         for (size_t i = 0; i < pending_->q.size(); ++i) {
           m.q.push_back(pending_->q[i]);
-          m.t_ns.push_back(std::max<int64_t>(0, static_cast<int64_t>(pending_->t_s[i] * 1e9)));
+          m.t_ns.push_back(std::max<int64_t>(0, pending_->t_ns[i]));
         }
         m.start_ns = ros::live::NowNs();
+        if (options_.time_scale > 0.0 && options_.moving_rate_hz > 0.0) {
+          // The frames a camera at moving_rate_hz takes on the way (robot::FramesAlong's times).
+          for (int k = 1;; ++k) {
+            const auto t = static_cast<int64_t>(
+                std::llround(static_cast<double>(k) * 1e9 / options_.moving_rate_hz));
+            if (t >= m.duration_ns()) break;
+            m.frames_ns.push_back(t);
+          }
+        }
         motion_ = std::move(m);
         pending_.reset();
       }
     }
     if (motion_) {
-      const int64_t elapsed = ros::live::NowNs() - motion_->start_ns;
-      if (elapsed >= motion_->duration_ns()) {
+      // The motion's clock (trajectory time): wall time over time_scale, held at the next frame
+      // until that frame is rendered (a slow render delays the arm, never skips a frame).
+      const int64_t wall = ros::live::NowNs() - motion_->start_ns;
+      int64_t t = options_.time_scale > 0.0
+                      ? static_cast<int64_t>(static_cast<double>(wall) / options_.time_scale)
+                      : motion_->duration_ns();
+      const bool frame_due = motion_->next_frame < motion_->frames_ns.size() &&
+                             t >= motion_->frames_ns[motion_->next_frame];
+      if (motion_->next_frame < motion_->frames_ns.size()) {
+        t = std::min(t, motion_->frames_ns[motion_->next_frame]);
+      }
+      if (t >= motion_->duration_ns()) {
         q_ = motion_->q.back();  // exactly the goal
         motion_.reset();
         rendered_ = false;
         std::lock_guard lock(mutex_);
         ++counters_.arrivals;
       } else {
-        q_ = motion_->At(elapsed);
+        motion_->t = t;
+        q_ = motion_->At(t);
+        if (frame_due) {
+          // The state at the frame's stamp first (its TF), then the images.
+          const int64_t stamp = motion_->start_ns + t;
+          AVP_RETURN_IF_ERROR(PublishState(stamp));
+          AVP_RETURN_IF_ERROR(Render(stamp, true));
+          AVP_RETURN_IF_ERROR(PublishImages(stamp));
+          ++motion_->next_frame;
+          next_state = Clock::now() + state_period;
+        }
       }
     }
     if (tick >= next_state || (!motion_ && !rendered_)) {
-      AVP_RETURN_IF_ERROR(PublishState(ros::live::NowNs()));
+      AVP_RETURN_IF_ERROR(
+          PublishState(motion_ ? motion_->start_ns + motion_->t : ros::live::NowNs()));
       next_state = tick + state_period;
     }
     if (!motion_) {
       if (!rendered_) {
-        AVP_RETURN_IF_ERROR(RenderAtRest(ros::live::NowNs()));
+        AVP_RETURN_IF_ERROR(Render(ros::live::NowNs(), false));
         next_image = Clock::now();
       }
       if (Clock::now() >= next_image) {

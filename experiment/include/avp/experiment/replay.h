@@ -48,6 +48,9 @@ struct ReplaySummary {
     size_t masks_without_depth = 0;
   };
   std::vector<ViewMasks> view_masks;
+  /// avp recordings made with fusion during motion: the frames fused while moving (between the
+  /// views, as the episode fused them), summed.
+  pipeline::MovingFramesRecord moving;
   /// Over every view.
   size_t masks() const;
   size_t masks_without_depth() const;

@@ -64,6 +64,84 @@ struct MotionRecord {
   std::optional<robot::MotionContacts> straight_line_contacts;
 };
 
+/// Which frames taken while the arm moves get semantics (MotionFusionOptions::semantics): every
+/// frame gets its depth fused.
+enum class MovingSemantics : uint8_t {
+  /// kEveryFrame for a segmenter that keeps up with a camera stream
+  /// (segmentation::Segmenter::keeps_up_with_stream: the oracle, the colour filter), else
+  /// kWhenFree.
+  kAuto,
+  kEveryFrame,  ///< each frame is segmented before it is fused (the stream waits for it)
+  /// The segmenter takes the newest frame whenever it is free, on a thread of its own; that frame
+  /// is fused with its masks when they come, the others with depth only (which frames get masks
+  /// then depends on the segmenter's speed).
+  kWhenFree,
+  kNone,  ///< depth only
+};
+std::string_view ToString(MovingSemantics semantics);
+
+/// Fusion during motion (docs/sensing.md, "Seeing while moving"): the camera's frames taken
+/// between two views, while the arm moves, fused into the map before the next plan.
+struct MotionFusionOptions {
+  /// Off by default: the paper's protocol counts views, and fuses only them.
+  bool enabled = false;
+  /// Frames a second along each move (a camera streaming faster is thinned to it).
+  double rate_hz = 30.0;
+  /// How the moving frames carve free space: end-voxel rays (one exact ray per voxel holding a
+  /// return) keep up with a 30 Hz stream on a laptop; the views keep episode.integrator.carving.
+  mapping::FreeSpaceCarving carving = mapping::FreeSpaceCarving::kEndVoxelRays;
+  /// Every decimation-th pixel of every decimation-th row of a moving frame is fused (the
+  /// RealSense decimation filter's subsampling; mapping::IntegratorOptions::pixel_stride): 1
+  /// with projective carving.
+  int decimation = 2;
+  MovingSemantics semantics = MovingSemantics::kAuto;
+  /// A live stream keeps at most this many frames waiting for the map; older ones are dropped
+  /// and counted (robot::MoveStreamRequest::max_pending).
+  int max_pending = 4;
+};
+const OptionTable<MotionFusionOptions>& MotionFusionOptionTable();
+
+/// The frame index (SegmentationRequest::frame_index) of the k-th frame (k >= 1) taken during the
+/// move after view `view`: far above any view's index, and the same in `avp run` and `avp live`.
+inline uint64_t MovingFrameIndex(int view, int k) {
+  return (uint64_t{1} << 32) + static_cast<uint64_t>(view) * 1'000'000u + static_cast<uint64_t>(k);
+}
+
+/// What fusion during motion did along one move (StepRecord::motion_frames).
+struct MovingFramesRecord {
+  /// Fusion during motion ran for this move (options on, and a source that streams).
+  bool streamed = false;
+  /// Frames expected along the move at the rate (a simulator renders each).
+  int expected = 0;
+  /// Frames whose depth was fused, and of those the frames fused with masks.
+  int fused = 0;
+  int segmented = 0;
+  /// Frames the map was too slow for (dropped), thinned above the rate (skipped), that could not
+  /// be had or fused (failed), and frames whose segmentation failed (fused with depth only).
+  int dropped = 0;
+  int skipped = 0;
+  int failed = 0;
+  int segment_failed = 0;
+  /// The move's duration (the trajectory's, seconds).
+  double move_s = 0.0;
+  /// Summed over the frames: waiting for or rendering them, segmenting, integrating (ms).
+  double capture_ms = 0.0;
+  double segment_ms = 0.0;
+  double integrate_ms = 0.0;
+  /// Wall time the map's side spent on the frames (integrating, and segmenting where the stream
+  /// waits for it: kEveryFrame), ms; what must stay under the frame period to keep up.
+  double busy_ms = 0.0;
+  /// Wall time from the move's start until the last frame was fused (ms).
+  double wall_ms = 0.0;
+  /// What the moving frames added to the map (known voxels; occupied target voxels).
+  int64_t known_delta = 0;
+  int64_t target_delta = 0;
+  /// The first problem met (a frame, a segmentation), for a person.
+  std::string first_problem;
+  /// Frames a second the map's side sustains: fused / busy time, 0 when none.
+  double map_rate_hz() const;
+};
+
 /// Everything that happened in one step of the loop: one fused view (sense, segment, integrate),
 /// its metrics, and the choice of and move to the next view (absent after the last view).
 struct StepRecord {
@@ -115,6 +193,8 @@ struct StepRecord {
   double joint_path_length = 0.0;
   /// How the move was planned and what it touched.
   MotionRecord motion;
+  /// The frames fused while the arm moved (EpisodeOptions::motion_fusion).
+  MovingFramesRecord motion_frames;
 
   StageTimes times;
 
@@ -141,6 +221,8 @@ struct EpisodeOptions {
   /// With a motion planner: the arm returns to the episode's first pose at the end (not after an
   /// interruption or a robot fault), along a planned path.
   bool return_home = true;
+  /// Frames taken and fused while the arm moves between views (off by default).
+  MotionFusionOptions motion_fusion;
   /// The table's ranges, a prompt that names something (within the prompt limits of
   /// segmentation::SplitPrompt), a target class other than background and a finite, non-empty
   /// ROI.
@@ -148,8 +230,8 @@ struct EpisodeOptions {
 };
 
 /// The configurable fields of EpisodeOptions: views, prompt, score_threshold,
-/// record_top_candidates, max_segment_failures and integrator.* (the ROI, the target class and
-/// the seed come from the scene, the prompt and the run).
+/// record_top_candidates, max_segment_failures, integrator.* and motion_fusion.* (the ROI, the
+/// target class and the seed come from the scene, the prompt and the run).
 const OptionTable<EpisodeOptions>& EpisodeOptionTable();
 
 /// How the episode ended.
@@ -196,8 +278,18 @@ struct MotionTotals {
   /// Summed contacts where every move reported them (a simulator), else nullopt.
   std::optional<robot::MotionContacts> contacts;
   std::optional<robot::MotionContacts> straight_line_contacts;
+  /// The frames fused while moving, summed over the moves (streamed: any move streamed;
+  /// first_problem: the first move's with one).
+  MovingFramesRecord moving;
+  /// The episode's time on a robot, seconds: the moves between views (execution_s) plus the
+  /// views' segmentation, integration and planning, plus the time fusion during motion ran past
+  /// the end of a move (the robot waits for the map). The simulator's rendering is left out (a
+  /// camera takes its frames for free); so is the return home.
+  double robot_s = 0.0;
 };
 MotionTotals SumMotion(const EpisodeResult& result);
+/// Adds one move's moving-frame counts and times to `sum` (nothing when it did not stream).
+void AddMovingFrames(const MovingFramesRecord& frames, MovingFramesRecord& sum);
 
 /// What one view saw and what the planner weighed after it, for observers that keep more than
 /// the StepRecord (recordings, reports). Non-owning; valid only during the OnView call.
@@ -212,6 +304,16 @@ struct StepData {
   const planning::PlanResult* plan = nullptr;
 };
 
+/// A frame fused while the arm moved (fusion during motion), for observers that keep frames
+/// (recordings). Non-owning; valid only during the OnMovingFrame call.
+struct MovingFrameData {
+  int view = 0;  ///< the view the move left (0-based)
+  int k = 0;     ///< the frame's number along the move, from 1
+  const robot::Observation* observation = nullptr;
+  /// Its masks, when it was segmented; null for depth only.
+  const Segmentation* segmentation = nullptr;
+};
+
 /// Receives every step as soon as it is complete (before the next one starts), so a long run
 /// writes its results step by step.
 class EpisodeObserver {
@@ -221,6 +323,11 @@ class EpisodeObserver {
   virtual void OnView(const StepRecord& /*step*/, const StepData& /*data*/,
                       const mapping::SemanticMap& /*map*/) {}
   virtual void OnStep(const StepRecord& step, const mapping::SemanticMap& map) = 0;
+  /// Called for every frame fused while the arm moves, on the fusion thread while the episode's
+  /// thread waits for the move (never at the same time as the other calls), before the step the
+  /// move belongs to is handed over.
+  virtual void OnMovingFrame(const MovingFrameData& /*frame*/,
+                             const mapping::SemanticMap& /*map*/) {}
   virtual void OnEnd(const EpisodeResult& /*result*/, const mapping::SemanticMap& /*map*/) {}
 };
 
@@ -246,6 +353,10 @@ struct EpisodeComponents {
   /// With `motion`: the grid it avoids instead of the map (a simulator's true obstacles,
   /// RunConfig::oracle_motion), taken in before every plan like the map. Null: the map.
   const mapping::OccupancyGrid* motion_obstacles = nullptr;
+  /// The timing of straight moves (no motion planner): velocity and acceleration scaling and
+  /// the sample period of the trajectory a straight move follows when frames are fused while
+  /// moving, and of the duration recorded for it otherwise. Null: MotionOptions{}'s.
+  const motion::MotionOptions* timing = nullptr;
 };
 
 /// Occupied voxels of the target class in the grid (StepRecord::target_voxels).

@@ -6,6 +6,7 @@
 // through it; tests/architecture_test.cpp fails if any other library or command integrates.
 
 #include <cstddef>
+#include <functional>
 #include <optional>
 #include <stop_token>
 #include <vector>
@@ -16,7 +17,9 @@
 #include <avp/mapping/integrator.h>
 #include <avp/mapping/semantic_map.h>
 #include <avp/pipeline/episode.h>
+#include <avp/robot/arm_model.h>
 #include <avp/robot/rgbd_source.h>
+#include <avp/robot/trajectory.h>
 #include <avp/segmentation/segmenter.h>
 
 namespace avp::pipeline {
@@ -74,6 +77,15 @@ class ViewFusion {
   /// whose capture failed.
   void RecordMap(StepRecord& step);
 
+  /// Fuses a frame taken while the arm moved (options.motion_fusion.carving), with `segmentation`
+  /// or depth only, adding its times and counts to `rec` (a failed integration counts as failed,
+  /// named in rec.first_problem).
+  void FuseMoving(const robot::Observation& obs, const Segmentation* segmentation,
+                  MovingFramesRecord& rec);
+  /// Records in `rec` what the moving frames since the last view (or RecordMoving) added, and
+  /// takes the map as it is now as the next view's baseline.
+  void RecordMoving(MovingFramesRecord& rec);
+
   const mapping::SemanticMap& map() const { return map_; }
 
  private:
@@ -82,8 +94,39 @@ class ViewFusion {
   mapping::SemanticMap& map_;
   EpisodeOptions options_;
   mapping::Integrator integrator_;
+  mapping::Integrator moving_integrator_;
   size_t known_before_ = 0;
   size_t target_before_ = 0;
+};
+
+/// Fuses the frames a source streams while the arm moves (EpisodeOptions::motion_fusion), on a
+/// thread of its own while the arm executes the move, through a ViewFusion; which frames are
+/// segmented follows motion_fusion.semantics. Not thread-safe; one move at a time.
+class MovingFusion {
+ public:
+  /// `observers` see every frame fused (OnMovingFrame).
+  MovingFusion(ViewFusion& fusion, segmentation::Segmenter& segmenter,
+               const EpisodeOptions& options, std::stop_token stop,
+               std::vector<EpisodeObserver*> observers = {});
+
+  /// Streams the frames `source` takes while `move` executes `trajectory` (whose camera poses
+  /// come from `arm`) and fuses them as they come; returns `move`'s result once every frame of
+  /// the move was fused or dropped. `view`: the view the move leaves (frame indices);
+  /// `start_stamp_ns`: the episode's stamp of the move's start. A source that does not stream:
+  /// the move alone (rec.streamed false).
+  robot::MoveResult Run(robot::RgbdSource& source, const robot::ArmModel& arm,
+                        const robot::JointTrajectory& trajectory, int view, int64_t start_stamp_ns,
+                        const std::function<robot::MoveResult()>& move, MovingFramesRecord& rec);
+
+ private:
+  void Consume(robot::MoveStream& stream, int view, MovingFramesRecord& rec);
+
+  ViewFusion& fusion_;
+  segmentation::Segmenter& segmenter_;
+  EpisodeOptions options_;
+  MovingSemantics semantics_;
+  std::stop_token stop_;
+  std::vector<EpisodeObserver*> observers_;
 };
 
 /// Hands a completed step to every observer (OnView with what it saw, then OnStep); null

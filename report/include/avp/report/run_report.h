@@ -30,6 +30,8 @@ nlohmann::json ContactsJson(const std::optional<robot::MotionContacts>& contacts
 /// One move: planned or not, attempts, rejected candidates and why, times, path length,
 /// contacts, the camera's path.
 nlohmann::json MotionJson(const pipeline::MotionRecord& motion);
+/// What fusion during motion did along one move (pipeline::MovingFramesRecord), or summed.
+nlohmann::json MovingFramesJson(const pipeline::MovingFramesRecord& frames);
 /// The episode's moves summed (pipeline::SumMotion), with the return home.
 nlohmann::json MotionTotalsJson(const pipeline::EpisodeResult& episode);
 

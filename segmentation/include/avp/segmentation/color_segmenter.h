@@ -96,6 +96,7 @@ class ColorSegmenter : public Segmenter {
 
   std::string_view name() const override { return "color"; }
   Result<Segmentation> Segment(const SegmentationRequest& request) override;
+  bool keeps_up_with_stream() const override { return true; }
 
   const ColorOptions& options() const { return options_; }
 

@@ -116,6 +116,7 @@ class OracleSegmenter : public Segmenter {
 
   std::string_view name() const override { return "oracle"; }
   Result<Segmentation> Segment(const SegmentationRequest& request) override;
+  bool keeps_up_with_stream() const override { return true; }
 
   const OracleOptions& options() const { return options_; }
   uint64_t seed() const { return seed_; }

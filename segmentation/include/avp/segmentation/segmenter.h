@@ -58,6 +58,10 @@ class Segmenter {
   /// The masks of `request.frame`, all of the frame's size, each with a class and a calibrated
   /// confidence in [0, 1] (Segmentation::ValidateFor passes on success).
   virtual Result<Segmentation> Segment(const SegmentationRequest& request) = 0;
+  /// Whether it segments a frame well within a 30 Hz camera's period on a laptop's CPU, so that
+  /// fusion during motion segments every frame (pipeline::MovingSemantics::kAuto); false (the
+  /// default, a network): it takes the newest frame whenever it is free.
+  virtual bool keeps_up_with_stream() const { return false; }
 };
 
 /// Process-wide limits of a prompt (core/limits.h; `avp limits`, `avp --limit NAME=N`), checked by

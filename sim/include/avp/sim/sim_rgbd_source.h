@@ -23,9 +23,18 @@ class SimRgbdSource final : public robot::RgbdSource {
   SimRgbdSource(const Scene& scene, const CameraIntrinsics& K, const DepthNoiseConfig& noise,
                 uint64_t seed);
   Result<robot::Observation> Capture(const RigidTransform& X_WC, int64_t stamp_ns) override;
+  /// A frame taken while the arm moves (fusion during motion): as Capture, with the noise drawn
+  /// from a stream of its own (moving frame k uses draw k), so that the frames at rest are the
+  /// same whether or not frames are taken while moving.
+  Result<robot::Observation> CaptureMoving(const RigidTransform& X_WC, int64_t stamp_ns);
+  /// Renders request.poses (CaptureMoving, stamped request.start_stamp_ns + t_ns) one by one
+  /// from Next(), once End(true) was called; End(false): none. Never drops a frame: the
+  /// simulation waits for the map.
+  std::unique_ptr<robot::MoveStream> StreamMove(const robot::MoveStreamRequest& request) override;
 
   CameraIntrinsics intrinsics() const override { return K_; }
   int frames_captured() const { return frames_; }
+  int moving_frames_captured() const { return moving_frames_; }
 
  private:
   const Scene* scene_;
@@ -35,6 +44,9 @@ class SimRgbdSource final : public robot::RgbdSource {
   Rng noise_rng_;
   std::vector<GroundTruthFruit> fruits_;
   int frames_ = 0;
+  int moving_frames_ = 0;
+
+  Result<robot::Observation> Render(const RigidTransform& X_WC, int64_t stamp_ns, Rng noise);
 };
 
 }  // namespace avp::sim

@@ -83,6 +83,10 @@ struct BagView {
   Eigen::VectorXd q;
   /// avp recordings: the /avp/step JSON as recorded (metrics, candidates, ...); null otherwise.
   nlohmann::json step;
+  /// avp recordings: a frame fused while the arm moved (kMovingFrameTopic, whose JSON is `step`),
+  /// not a view: `index` is the view the move left (0-based), `moving_k` its number along the move.
+  bool moving = false;
+  int moving_k = 0;
 };
 
 /// What became of a bag's frames: each colour/depth pair (robot bags) or step (avp recordings)
@@ -92,6 +96,9 @@ struct FrameAccount {
   /// Colour/depth pairs found (robot bags), or steps (avp recordings).
   size_t pairs = 0;
   size_t fused = 0;
+  /// avp recordings: frames fused while the arm moved (kMovingFrameTopic), returned between the
+  /// views (not in `pairs` or `fused`).
+  size_t moving_frames = 0;
   /// Reason -> pairs: "before start_s", "after end_s", "moving", "every_nth", "fps",
   /// "max_views".
   std::map<std::string, size_t> left_out;

@@ -45,6 +45,14 @@ inline constexpr std::string_view kMapTopic = "/avp/map";
 /// metrics, every ranked candidate, the chosen rank, times.
 inline constexpr std::string_view kStepTopic = "/avp/step";
 
+// ---- Per frame fused while the arm moved (fusion during motion) ---------------------------------
+
+/// std_msgs/msg/String at the frame's stamp, beside its colour, depth, CameraInfo, TF, simulator
+/// labels and (when it was segmented) masks: {"view": the view the move left (1-based), "k": the
+/// frame's number along the move, "stamp_ns", "segmented", "X_WC": exact}. No /avp/step, map or
+/// candidates: a replay fuses it as a moving frame between the two views.
+inline constexpr std::string_view kMovingFrameTopic = "/avp/moving_frame";
+
 // ---- Encodings ----------------------------------------------------------------------------------
 
 inline constexpr std::string_view kColorEncoding = "rgb8";

@@ -49,6 +49,10 @@ class McapRecorder final : public pipeline::EpisodeObserver {
   void OnView(const pipeline::StepRecord& step, const pipeline::StepData& data,
               const mapping::SemanticMap& map) override;
   void OnStep(const pipeline::StepRecord&, const mapping::SemanticMap&) override {}
+  /// Writes a frame fused while the arm moved: the camera topics (and the masks, when it was
+  /// segmented) at its stamp, and kMovingFrameTopic; one chunk per frame.
+  void OnMovingFrame(const pipeline::MovingFrameData& frame,
+                     const mapping::SemanticMap& map) override;
 
   /// OK, or the first write error (naming the file).
   const Status& status() const { return status_; }
@@ -56,26 +60,35 @@ class McapRecorder final : public pipeline::EpisodeObserver {
   Status Close();
 
   const std::filesystem::path& path() const { return writer_->path(); }
-  /// Views written.
+  /// Views written, and frames fused while moving written.
   int views() const { return views_; }
+  int moving_frames() const { return moving_frames_; }
   /// Messages written per topic.
   const ros::mcap::Statistics& statistics() const { return writer_->statistics(); }
 
  private:
   McapRecorder(std::unique_ptr<ros::mcap::Writer> writer, RecorderOptions options);
   Status AddChannels();
+  /// A channel for `topic` (its schema added once per type), as rosbag2 writes them.
+  Status AddChannel(std::string_view topic, std::string_view type, std::string_view schema);
   Status WriteView(const pipeline::StepRecord& step, const pipeline::StepData& data,
                    const mapping::SemanticMap& map);
+  /// The camera topics of one frame (colour, depth, CameraInfo, TF, simulator labels, masks).
+  Status WriteFrame(const robot::Observation& observation, const Segmentation* segmentation,
+                    int64_t stamp);
+  Status WriteMovingFrame(const pipeline::MovingFrameData& frame);
   template <class T>
   Status Publish(uint16_t channel, uint64_t time_ns, const T& msg);
 
   std::unique_ptr<ros::mcap::Writer> writer_;
   RecorderOptions options_;
   std::map<std::string, uint16_t, std::less<>> channels_;
+  std::map<std::string, uint16_t, std::less<>> schemas_;
   std::map<uint16_t, uint32_t> sequences_;
   std::stop_source stop_{std::nostopstate};
   Status status_;
   int views_ = 0;
+  int moving_frames_ = 0;
   int64_t last_stamp_ns_ = -1;
   bool closed_ = false;
 };

@@ -24,6 +24,8 @@
 
 namespace avp::ros::live {
 
+class LiveMoveStream;
+
 /// Where a live camera's frames come from (docs/ros2.md): the topics and frames shared with
 /// `avp replay` (ros::msg::CameraTopics: color_topic, depth_topic, camera_info_topic, base_frame,
 /// camera_frame, max_pair_skew_ms) and what only a live source needs.
@@ -52,8 +54,14 @@ struct SourceCounters {
   uint64_t color = 0;
   uint64_t depth = 0;
   uint64_t camera_info = 0;
-  uint64_t refused = 0;  ///< images refused on arrival (encoding, size, step, a bad depth)
-  uint64_t pairs_used = 0;
+  uint64_t refused = 0;     ///< images refused on arrival (encoding, size, step, a bad depth)
+  uint64_t pairs_used = 0;  ///< frames captured at rest (the views)
+  /// Fusion during motion (StreamMove): frames handed over while the arm moved, dropped because
+  /// the map fell behind (more than max_pending waiting, or gone from the queue), and thinned
+  /// above the rate.
+  uint64_t moving_pairs = 0;
+  uint64_t moving_dropped = 0;
+  uint64_t moving_skipped = 0;
   std::string last_problem;
 };
 
@@ -79,9 +87,14 @@ class Ros2RgbdSource final : public robot::RgbdSource {
 
   Result<robot::Observation> Capture(const RigidTransform& X_WC, int64_t stamp_ns) override;
   CameraIntrinsics intrinsics() const override;
+  /// The pairs stamped from now until End() (the arm arrived), oldest first, at most
+  /// request.rate_hz a second; when more than request.max_pending wait, the oldest are dropped
+  /// (counted, logged once per move). The poses come from TF at each pair's stamp.
+  std::unique_ptr<robot::MoveStream> StreamMove(const robot::MoveStreamRequest& request) override;
   SourceCounters counters() const;
 
  private:
+  friend class LiveMoveStream;
   Ros2RgbdSource(ros::dds::Node& node, ros::msg::TfBuffer& tf, const CameraTopicsOptions& options,
                  const CameraIntrinsics& camera, std::stop_token stop);
   Status Subscribe();
@@ -93,6 +106,8 @@ class Ros2RgbdSource final : public robot::RgbdSource {
   /// colour stamp also has both simulator label images (a frame whose labels were dropped is
   /// passed over, not waited for); call with mutex_ held.
   std::optional<std::pair<size_t, size_t>> FindPair(int64_t not_before_ns, bool with_labels) const;
+  /// A colour frame stamped `stamp_ns` leaves the queue while a move is streamed (mutex held).
+  void TellTrimmed(int64_t stamp_ns);
   Result<robot::Observation> Assemble(const ros::msg::Image& color, const ros::msg::Image& depth,
                                       std::unique_lock<std::mutex>& lock);
 
@@ -109,6 +124,10 @@ class Ros2RgbdSource final : public robot::RgbdSource {
   std::vector<GroundTruthFruit> fruits_;
   bool have_fruits_ = false;
   SourceCounters counters_;
+  /// Bumped by every image that arrives and every move that ends (wakes a stream's wait).
+  uint64_t generation_ = 0;
+  /// The move being streamed, told about colour frames that leave the queue unconsumed.
+  LiveMoveStream* active_stream_ = nullptr;
   /// The lens of the latest CameraInfo (identity for a rectified camera).
   std::shared_ptr<const ros::msg::Rectifier> rectifier_;
 

@@ -39,8 +39,13 @@ struct SimRobotOptions : ros::msg::CameraTopics {
   std::string flange_frame = "igus_rebel_flange";
   /// "32FC1" (metres, exact) or "16UC1" (millimetres, as a RealSense).
   std::string depth_encoding = "32FC1";
-  /// Images are published at this rate while the arm rests (none while it moves).
+  /// Images are published at this rate while the arm rests.
   double camera_rate_hz = 15.0;
+  /// While the arm moves (time_scale > 0), a frame is rendered where the arm is at each 1 /
+  /// moving_rate_hz of the trajectory's time (robot::FramesAlong's times, so `avp live` with
+  /// fusion during motion sees the frames `avp run` renders) and published with that stamp and
+  /// its /tf; a slow render holds the arm rather than skip a frame. 0: none while moving.
+  double moving_rate_hz = 30.0;
   /// Joint states and /tf at this rate.
   double joint_state_rate_hz = 50.0;
   /// Trajectories take their time_from_start times this (0: the arm jumps to the goal).
@@ -87,24 +92,29 @@ class SimRos2Robot {
                const CameraIntrinsics& camera, const sim::DepthNoiseConfig& noise, uint64_t seed,
                const SimRobotOptions& options);
   void OnTrajectory(const ros::msg::JointTrajectory& msg);
-  Status RenderAtRest(int64_t stamp_ns);
+  /// Renders the camera where the arm is (`moving`: from the moving frames' noise stream).
+  Status Render(int64_t stamp_ns, bool moving);
   Status PublishImages(int64_t stamp_ns);
   Status PublishState(int64_t stamp_ns);
 
-  /// A trajectory's points (URDF joints) and their times (time_from_start × time_scale).
+  /// A trajectory's points (URDF joints) and their times (time_from_start, nanoseconds).
   struct Goal {
     std::vector<Eigen::VectorXd> q;
-    std::vector<double> t_s;
+    std::vector<int64_t> t_ns;
   };
   /// The motion under way: from the joints at its start through the goal's points, linearly
-  /// between consecutive points in time.
+  /// between consecutive points in time (robot::JointsAt), in the trajectory's time (wall time
+  /// over time_scale).
   struct Motion {
     std::vector<Eigen::VectorXd> q;  ///< q[0]: where the arm was when the goal came
     std::vector<int64_t> t_ns;       ///< t_ns[0] = 0
-    int64_t start_ns = 0;
+    int64_t start_ns = 0;            ///< wall clock at the start; frames are stamped from it
+    std::vector<int64_t> frames_ns;  ///< the moving frames' times
+    size_t next_frame = 0;
+    int64_t t = 0;  ///< the motion's clock at the last tick
     int64_t duration_ns() const { return t_ns.back(); }
-    /// The joints `elapsed_ns` after the start.
-    Eigen::VectorXd At(int64_t elapsed_ns) const;
+    /// The joints `at_ns` after the start.
+    Eigen::VectorXd At(int64_t at_ns) const;
   };
 
   const sim::Scene& scene_;
