@@ -740,11 +740,18 @@ struct BagReader::Impl {
     } else {
       view.index = static_cast<int>(account.pairs) - 1;
     }
+    AVP_RETURN_IF_ERROR(MomentFrame(view, "the step's time"));
+    return view;
+  }
+
+  /// The moment's frame into `view` (its JSON already in view.step): colour and depth (logged at
+  /// `when`), the exact pose, the lens rectified, the simulator labels and the recorded masks.
+  Status MomentFrame(BagView& view, std::string_view when) {
     const auto mc = moment.find(o.color_topic);
     const auto md = moment.find(o.depth_topic);
     if (mc == moment.end() || md == moment.end()) {
-      return NotFoundError(fmt::format("no {} image logged at the step's time",
-                                       mc == moment.end() ? o.color_topic : o.depth_topic));
+      return NotFoundError(fmt::format("no {} image logged at {}",
+                                       mc == moment.end() ? o.color_topic : o.depth_topic, when));
     }
     AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(mc->second, md->second));
     AVP_RETURN_IF_ERROR(StepPoseAndJoints(view));
@@ -755,7 +762,7 @@ struct BagReader::Impl {
     if (auto mi = moment.find(std::string(kInstancesTopic)); mi != moment.end()) {
       AVP_ASSIGN_OR_RETURN(view.segmentation, RecordedMasks(mi->second, frame));
     }
-    return view;
+    return Status::Ok();
   }
 
   /// A frame fused while the arm moved: its images, labels and masks, its exact pose.
@@ -783,21 +790,7 @@ struct BagReader::Impl {
     }
     view.index = *v - 1;
     view.moving_k = *k;
-    const auto mc = moment.find(o.color_topic);
-    const auto md = moment.find(o.depth_topic);
-    if (mc == moment.end() || md == moment.end()) {
-      return NotFoundError(fmt::format("no {} image logged at the moving frame's time",
-                                       mc == moment.end() ? o.color_topic : o.depth_topic));
-    }
-    AVP_ASSIGN_OR_RETURN(view.observation.frame, Frame(mc->second, md->second));
-    AVP_RETURN_IF_ERROR(StepPoseAndJoints(view));
-    AVP_RETURN_IF_ERROR(Rectify(view.observation.frame));
-    const RgbdFrame& frame = view.observation.frame;
-    AVP_ASSIGN_OR_RETURN(view.observation.labels,
-                         LabelsAt(moment_time, frame.rgb.width(), frame.rgb.height()));
-    if (auto mi = moment.find(std::string(kInstancesTopic)); mi != moment.end()) {
-      AVP_ASSIGN_OR_RETURN(view.segmentation, RecordedMasks(mi->second, frame));
-    }
+    AVP_RETURN_IF_ERROR(MomentFrame(view, "the moving frame's time"));
     return view;
   }
 
