@@ -262,7 +262,8 @@ std::string MoveToBestCandidate(const EpisodeComponents& c,
     const planning::ViewCandidate& cand = ranked[i];
     step.motion_frames = {};  // only the executed move's frames
     std::optional<MovingMove> along;
-    if (moving != nullptr) along.emplace(*moving, step.view, stamp_ns, step.motion_frames);
+    if (moving != nullptr)
+      along.emplace(MovingMove{*moving, step.view, stamp_ns, step.motion_frames});
     const robot::MoveResult move =
         MoveTo(c, cand.q, cand.X_WC, arm_rng, step.motion, along ? &*along : nullptr);
     if (move.ok()) {
