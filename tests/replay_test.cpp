@@ -3,6 +3,7 @@
 // its note); the oracle segmenter rerun on the recorded labels gives the same masks; the recording
 // read as a robot's bag (images, CameraInfo, TF only); truncated and corrupt recordings replay
 // their intact views and name the offset; the avp replay command end to end.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -11,6 +12,7 @@
 #include <sstream>
 #include <string>
 #include <unordered_set>
+#include <utility>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -106,6 +108,50 @@ class ReplayTest : public ::testing::Test {
     delete dir_;
   }
   static fs::path Run() { return *dir_ / "run"; }
+
+  /// The suite's episode with fusion during motion (3 frames a second, to keep the file small),
+  /// recorded once into dir_/moving-run. Returns its moving totals.
+  static const pipeline::MotionTotals& MovingRun() {
+    static const pipeline::MotionTotals totals = [] {
+      experiment::RunConfig c;
+      c.scenario = "tomato-multiple-clusters";
+      c.seed = 5;
+      c.episode.views = 3;
+      c.episode.motion_fusion.enabled = true;
+      c.episode.motion_fusion.rate_hz = 3.0;
+      c.threads = 2;
+      experiment::RunFolderOptions o;
+      o.out_dir = *dir_ / "moving-run";
+      o.record = true;
+      Result<experiment::RunSummary> run =
+          experiment::RunToFolder(experiment::CheckedRunConfig::Check(c, Registries()).value(), o);
+      EXPECT_TRUE(run.ok()) << run.status().ToString();
+      return run.ok() ? pipeline::SumMotion(run->result.episode) : pipeline::MotionTotals{};
+    }();
+    return totals;
+  }
+
+  /// `file` written to `path` with the message of `channel` logged at `log_time` replaced by a
+  /// std_msgs/String of `text`.
+  static void RewriteMessage(const ros::mcap::File& file, uint16_t channel, uint64_t log_time,
+                             const std::string& text, const fs::path& path) {
+    auto w = ros::mcap::Writer::Open(path).value();
+    for (const ros::mcap::Schema& s : file.schemas) {
+      ASSERT_TRUE(w->AddSchema(s.name, s.encoding, s.data).ok());
+    }
+    for (const ros::mcap::Channel& ch : file.channels) {
+      ASSERT_TRUE(w->AddChannel(ch.schema_id, ch.topic, ch.message_encoding, ch.metadata).ok());
+    }
+    for (const ros::mcap::Attachment& a : file.attachments) ASSERT_TRUE(w->WriteAttachment(a).ok());
+    for (const ros::mcap::Metadata& m : file.metadata) ASSERT_TRUE(w->WriteMetadata(m).ok());
+    for (ros::mcap::Message m : file.messages) {
+      if (m.channel_id == channel && m.log_time == log_time) {
+        m.data = ros::msg::Encode(ros::msg::String{text});
+      }
+      ASSERT_TRUE(w->Write(m).ok());
+    }
+    ASSERT_TRUE(w->Close().ok());
+  }
   static fs::path Bag() { return Run() / "episode.mcap"; }
 
   /// Replays `bag` (read with `bag_options`) into dir_/name.
@@ -171,25 +217,13 @@ TEST_F(ReplayTest, RecordedMasksRebuildTheSameMapAndMetrics) {
 }
 
 TEST_F(ReplayTest, FramesFusedWhileMovingAreRecordedAndReplayedBetweenTheViews) {
-  // The same episode with fusion during motion (3 frames a second, to keep the file small):
-  // every moving frame is in the recording, and the replay fuses it between the views as the
-  // episode did, so the metrics and the map come out the same.
-  experiment::RunConfig c;
-  c.scenario = "tomato-multiple-clusters";
-  c.seed = 5;
-  c.episode.views = 3;
-  c.episode.motion_fusion.enabled = true;
-  c.episode.motion_fusion.rate_hz = 3.0;
-  c.threads = 2;
-  experiment::RunFolderOptions o;
-  o.out_dir = *dir_ / "moving-run";
-  o.record = true;
-  Result<experiment::RunSummary> run =
-      experiment::RunToFolder(experiment::CheckedRunConfig::Check(c, Registries()).value(), o);
-  ASSERT_TRUE(run.ok()) << run.status().ToString();
-  const pipeline::MotionTotals totals = pipeline::SumMotion(run->result.episode);
+  // The same episode with fusion during motion: every moving frame is in the recording, and the
+  // replay fuses it between the views as the episode did, so the metrics and the map come out
+  // the same.
+  const pipeline::MotionTotals& totals = MovingRun();
   ASSERT_GE(totals.moving.fused, 4);
-  Result<experiment::ReplaySummary> r = Replay(o.out_dir / "episode.mcap", "moving-replay");
+  const fs::path run_dir = *dir_ / "moving-run";
+  Result<experiment::ReplaySummary> r = Replay(run_dir / "episode.mcap", "moving-replay");
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_EQ(r->views, 3u);
   EXPECT_EQ(r->moving.fused, totals.moving.fused);
@@ -197,15 +231,59 @@ TEST_F(ReplayTest, FramesFusedWhileMovingAreRecordedAndReplayedBetweenTheViews) 
   EXPECT_EQ(r->moving.known_delta, totals.moving.known_delta);
   EXPECT_EQ(r->metrics_compared, 3u);
   EXPECT_EQ(r->metrics_differ, 0u) << r->first_difference;
-  const json a = io::ReadJsonFile(o.out_dir / "record.json").value();
+  const json a = io::ReadJsonFile(run_dir / "record.json").value();
   const json b = io::ReadJsonFile(*dir_ / "moving-replay" / "record.json").value();
   EXPECT_EQ(a["final_metrics"], b["final_metrics"]);
   for (size_t i = 0; i < a["steps"].size(); ++i) {
     EXPECT_EQ(a["steps"][i]["known_voxels"], b["steps"][i]["known_voxels"]) << i;
   }
   EXPECT_EQ(b["replay"]["moving_frames"]["fused"], totals.moving.fused);
-  EXPECT_TRUE(test::ReadWholeFile(o.out_dir / "map.ot") ==
+  EXPECT_TRUE(test::ReadWholeFile(run_dir / "map.ot") ==
               test::ReadWholeFile(*dir_ / "moving-replay" / "map.ot"));
+}
+
+TEST_F(ReplayTest, BadMovingFrameIsSkippedNamingTheValue) {
+  // A /avp/moving_frame message that is not JSON, or lacks whole numbers view >= 1 and k >= 1:
+  // that frame is skipped with its reason, the views and the other frames are read.
+  const pipeline::MotionTotals& totals = MovingRun();
+  ASSERT_GE(totals.moving.fused, 4);
+  const fs::path recording = *dir_ / "moving-run" / "episode.mcap";
+  const ros::mcap::File file = ros::mcap::ReadIndexed(recording).value();
+  uint16_t channel = 0;
+  for (const ros::mcap::Channel& c : file.channels) {
+    if (c.topic == ros::bag::kMovingFrameTopic) channel = c.id;
+  }
+  ASSERT_NE(channel, 0);
+  uint64_t first = 0;
+  for (const ros::mcap::Message& m : file.messages) {
+    if (m.channel_id == channel) {
+      first = m.log_time;
+      break;
+    }
+  }
+  ASSERT_GT(first, 0u);
+  const std::string needs = "/avp/moving_frame: needs whole numbers view >= 1 and k >= 1";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"{not json", "/avp/moving_frame: malformed JSON"},
+      {R"({"view": 0, "k": 1})", needs},
+      {R"({"view": 1})", needs},
+      {R"({"view": 1, "k": 1.5})", needs},
+      {R"({"view": 1, "k": -3})", needs},
+      {"[1, 2]", needs},
+  };
+  for (const auto& [text, expected] : cases) {
+    const fs::path path = *dir_ / "bad_moving_frame.mcap";
+    RewriteMessage(file, channel, first, text, path);
+    Result<ros::bag::Bag> bag = ros::bag::ReadBag(path);
+    ASSERT_TRUE(bag.ok()) << bag.status().ToString();
+    const auto moving = static_cast<size_t>(std::count_if(
+        bag->views.begin(), bag->views.end(), [](const ros::bag::BagView& v) { return v.moving; }));
+    EXPECT_EQ(bag->views.size() - moving, 3u) << text;
+    EXPECT_EQ(moving, static_cast<size_t>(totals.moving.fused) - 1) << text;
+    EXPECT_EQ(bag->account.moving_frames, moving) << text;
+    ASSERT_EQ(bag->account.skipped_count(), 1u) << text;
+    EXPECT_THAT(bag->account.skipped[0], HasSubstr(expected)) << text;
+  }
 }
 
 TEST_F(ReplayTest, TheOracleRerunOnTheRecordedLabelsGivesTheSameMasks) {
@@ -325,22 +403,7 @@ TEST_F(ReplayTest, BadStepOrMasksSkipTheViewNamingTheValue) {
   };
   for (const Case& c : cases) {
     const fs::path path = *dir_ / "bad_step.mcap";
-    auto w = ros::mcap::Writer::Open(path).value();
-    for (const ros::mcap::Schema& s : file.schemas) {
-      ASSERT_TRUE(w->AddSchema(s.name, s.encoding, s.data).ok());
-    }
-    for (const ros::mcap::Channel& ch : file.channels) {
-      ASSERT_TRUE(w->AddChannel(ch.schema_id, ch.topic, ch.message_encoding, ch.metadata).ok());
-    }
-    for (const ros::mcap::Attachment& a : file.attachments) ASSERT_TRUE(w->WriteAttachment(a).ok());
-    for (const ros::mcap::Metadata& m : file.metadata) ASSERT_TRUE(w->WriteMetadata(m).ok());
-    for (ros::mcap::Message m : file.messages) {
-      if (m.channel_id == c.channel && m.log_time == view1) {
-        m.data = ros::msg::Encode(ros::msg::String{c.text});
-      }
-      ASSERT_TRUE(w->Write(m).ok());
-    }
-    ASSERT_TRUE(w->Close().ok());
+    RewriteMessage(file, c.channel, view1, c.text, path);
     Result<ros::bag::Bag> bag = ros::bag::ReadBag(path);
     ASSERT_TRUE(bag.ok()) << bag.status().ToString();
     ASSERT_EQ(bag->views.size(), 2u) << c.text;

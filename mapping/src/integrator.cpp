@@ -46,14 +46,18 @@ std::vector<std::string> FreeSpaceCarvingNames() {
   return names;
 }
 
+std::vector<std::pair<FreeSpaceCarving, std::string>> FreeSpaceCarvingChoices() {
+  std::vector<std::pair<FreeSpaceCarving, std::string>> choices;
+  for (FreeSpaceCarving c : kFreeSpaceCarvings) choices.emplace_back(c, std::string(ToString(c)));
+  return choices;
+}
+
 const OptionTable<IntegratorOptions>& IntegratorOptionTable() {
   static const auto* table = [] {
     auto* t = new OptionTable<IntegratorOptions>("integrator option");
     t->Real("max_range_m", &IntegratorOptions::max_range_m, "m", ValueRange::LeftOpen(0, 100),
             "returns beyond it carve free space up to it and mark no endpoint");
-    std::vector<std::pair<FreeSpaceCarving, std::string>> choices;
-    for (FreeSpaceCarving c : kFreeSpaceCarvings) choices.emplace_back(c, std::string(ToString(c)));
-    t->Choice("carving", &IntegratorOptions::carving, choices,
+    t->Choice("carving", &IntegratorOptions::carving, FreeSpaceCarvingChoices(),
               "how free space is carved (docs/mapping.md)");
     return t;
   }();

@@ -469,11 +469,7 @@ const OptionTable<MotionFusionOptions>& MotionFusionOptionTable() {
             "fuse the camera's frames taken while the arm moves between views");
     t->Real("rate_hz", &M::rate_hz, "Hz", ValueRange::LeftOpen(0, 120),
             "frames a second along each move");
-    std::vector<std::pair<mapping::FreeSpaceCarving, std::string>> carvings;
-    for (mapping::FreeSpaceCarving c : mapping::kFreeSpaceCarvings) {
-      carvings.emplace_back(c, std::string(mapping::ToString(c)));
-    }
-    t->Choice("carving", &M::carving, carvings,
+    t->Choice("carving", &M::carving, mapping::FreeSpaceCarvingChoices(),
               "how the moving frames carve free space (docs/mapping.md)");
     t->Integer("decimation", &M::decimation, "", ValueRange::Closed(1, 8),
                "every n-th pixel of every n-th row of a moving frame is fused (1 with "

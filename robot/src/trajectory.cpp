@@ -181,17 +181,28 @@ Eigen::VectorXd JointsAt(std::span<const Eigen::VectorXd> q, std::span<const int
   return q.back();
 }
 
+std::vector<int64_t> FrameTimesNs(int64_t duration_ns, double rate_hz) {
+  std::vector<int64_t> times;
+  if (!(rate_hz > 0.0) || !std::isfinite(rate_hz)) return times;
+  for (int64_t k = 1;; ++k) {
+    const auto t = static_cast<int64_t>(std::llround(static_cast<double>(k) * 1e9 / rate_hz));
+    if (t >= duration_ns) break;
+    times.push_back(t);
+  }
+  return times;
+}
+
 std::vector<FrameAlong> FramesAlong(const JointTrajectory& trajectory, double rate_hz) {
   std::vector<FrameAlong> frames;
-  if (!(rate_hz > 0.0) || !std::isfinite(rate_hz) || trajectory.points.size() < 2) return frames;
+  if (trajectory.points.size() < 2) return frames;
   const std::vector<int64_t> t_ns = trajectory.times_ns();
   std::vector<Eigen::VectorXd> q;
   q.reserve(trajectory.points.size());
   for (const TrajectoryPoint& p : trajectory.points) q.push_back(p.q);
-  for (int k = 1;; ++k) {
-    const auto t = static_cast<int64_t>(std::llround(static_cast<double>(k) * 1e9 / rate_hz));
-    if (t >= t_ns.back()) break;
-    frames.push_back({k, t, JointsAt(q, t_ns, t)});
+  const std::vector<int64_t> times = FrameTimesNs(t_ns.back(), rate_hz);
+  frames.reserve(times.size());
+  for (size_t i = 0; i < times.size(); ++i) {
+    frames.push_back({static_cast<int>(i + 1), times[i], JointsAt(q, t_ns, times[i])});
   }
   return frames;
 }

@@ -1,4 +1,5 @@
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -155,6 +156,25 @@ TEST(FramesAlongTest, FramesAtEveryPeriodStrictlyBetweenTheStartAndTheArrival) {
   EXPECT_TRUE(FramesAlong(*t, 0.0).empty());
   EXPECT_TRUE(FramesAlong(*t, std::nan("")).empty());
   EXPECT_TRUE(FramesAlong(JointTrajectory{}, 30.0).empty());
+  // The one rule `avp sim ros2` publishes its frames by: the same times.
+  const std::vector<int64_t> times = FrameTimesNs(duration_ns, 30.0);
+  ASSERT_EQ(times.size(), frames.size());
+  for (size_t i = 0; i < times.size(); ++i) EXPECT_EQ(times[i], frames[i].t_ns);
+}
+
+TEST(FramesAlongTest, FrameTimesAreStrictlyBeforeTheArrival) {
+  // At 30 Hz the 30th frame falls on 1 s exactly: the arrival's own frame, not a moving one.
+  EXPECT_EQ(FrameTimesNs(1'000'000'000, 30.0).size(), 29u);
+  EXPECT_EQ(FrameTimesNs(1'000'000'001, 30.0).size(), 30u);
+  EXPECT_EQ(FrameTimesNs(1'000'000'001, 30.0).back(), 1'000'000'000);
+  // Rounded to whole nanoseconds: 1/3 s at 3 Hz.
+  EXPECT_EQ(FrameTimesNs(2'000'000'000, 3.0),
+            (std::vector<int64_t>{333'333'333, 666'666'667, 1'000'000'000, 1'333'333'333,
+                                  1'666'666'667}));
+  EXPECT_TRUE(FrameTimesNs(0, 30.0).empty());
+  EXPECT_TRUE(FrameTimesNs(1'000'000'000, 0.0).empty());
+  EXPECT_TRUE(FrameTimesNs(1'000'000'000, -30.0).empty());
+  EXPECT_TRUE(FrameTimesNs(1'000'000'000, std::numeric_limits<double>::infinity()).empty());
 }
 
 TEST(FramesAlongTest, JointsAtInterpolatesLinearlyInWholeNanoseconds) {

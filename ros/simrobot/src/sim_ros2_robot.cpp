@@ -281,12 +281,7 @@ Status SimRos2Robot::Run(std::stop_token stop, double max_seconds) {
         m.start_ns = ros::live::NowNs();
         if (options_.time_scale > 0.0 && options_.moving_rate_hz > 0.0) {
           // The frames a camera at moving_rate_hz takes on the way (robot::FramesAlong's times).
-          for (int k = 1;; ++k) {
-            const auto t = static_cast<int64_t>(
-                std::llround(static_cast<double>(k) * 1e9 / options_.moving_rate_hz));
-            if (t >= m.duration_ns()) break;
-            m.frames_ns.push_back(t);
-          }
+          m.frames_ns = robot::FrameTimesNs(m.duration_ns(), options_.moving_rate_hz);
         }
         motion_ = std::move(m);
         pending_.reset();

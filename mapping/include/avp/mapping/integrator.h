@@ -6,6 +6,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -48,6 +49,8 @@ std::string_view ToString(FreeSpaceCarving carving);
 std::optional<FreeSpaceCarving> FreeSpaceCarvingFromString(std::string_view name);
 /// The names of kFreeSpaceCarvings, in that order (for command-line choices).
 std::vector<std::string> FreeSpaceCarvingNames();
+/// Each of kFreeSpaceCarvings with its name, in that order (an option table's choices).
+std::vector<std::pair<FreeSpaceCarving, std::string>> FreeSpaceCarvingChoices();
 
 struct IntegratorOptions {
   /// Returns beyond this carve free space up to it and mark no endpoint (OctoMap's maxrange).

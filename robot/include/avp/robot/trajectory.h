@@ -52,6 +52,13 @@ struct FrameAlong {
   Eigen::VectorXd q;  ///< the joints then (JointsAt)
 };
 
+/// The times of the frames a camera streaming at `rate_hz` takes during a move of
+/// `duration_ns`: t_k = round(k / rate_hz) in whole nanoseconds for k = 1, 2, ... while t_k is
+/// before `duration_ns` (the move's start and its arrival are the views' own frames). The one
+/// rule for FramesAlong and for `avp sim ros2`'s published frames, so that both see the same
+/// poses. Empty for a rate <= 0 or not finite.
+std::vector<int64_t> FrameTimesNs(int64_t duration_ns, double rate_hz);
+
 /// The frames a camera streaming at `rate_hz` takes while the arm follows `trajectory`, in time
 /// order: t_k = k / rate_hz (rounded to whole nanoseconds) for k = 1, 2, ... while t_k is
 /// before the trajectory's last time (its start and its arrival are the views' own frames).
