@@ -117,7 +117,6 @@ class SimRos2Robot {
     Eigen::VectorXd At(int64_t at_ns) const;
   };
 
-  const sim::Scene& scene_;
   robot::ArmModel model_;
   SimRobotOptions options_;
   CameraIntrinsics camera_;
