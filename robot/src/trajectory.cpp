@@ -185,7 +185,10 @@ std::vector<int64_t> FrameTimesNs(int64_t duration_ns, double rate_hz) {
   std::vector<int64_t> times;
   if (!(rate_hz > 0.0) || !std::isfinite(rate_hz)) return times;
   for (int64_t k = 1;; ++k) {
-    const auto t = static_cast<int64_t>(std::llround(static_cast<double>(k) * 1e9 / rate_hz));
+    // Compared before rounding too: a tiny rate would overflow the rounding (and never end).
+    const double at = static_cast<double>(k) * 1e9 / rate_hz;
+    if (!(at < static_cast<double>(duration_ns) + 1.0)) break;
+    const auto t = static_cast<int64_t>(std::llround(at));
     if (t >= duration_ns) break;
     times.push_back(t);
   }

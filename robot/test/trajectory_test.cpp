@@ -175,6 +175,9 @@ TEST(FramesAlongTest, FrameTimesAreStrictlyBeforeTheArrival) {
   EXPECT_TRUE(FrameTimesNs(1'000'000'000, 0.0).empty());
   EXPECT_TRUE(FrameTimesNs(1'000'000'000, -30.0).empty());
   EXPECT_TRUE(FrameTimesNs(1'000'000'000, std::numeric_limits<double>::infinity()).empty());
+  // A rate so low that k / rate overflows: no frame, and the loop ends.
+  EXPECT_TRUE(FrameTimesNs(1'000'000'000, 1e-300).empty());
+  EXPECT_TRUE(FrameTimesNs(std::numeric_limits<int64_t>::max(), 1e-300).empty());
 }
 
 TEST(FramesAlongTest, JointsAtInterpolatesLinearlyInWholeNanoseconds) {
