@@ -207,49 +207,42 @@ void CollisionChecker::SetStartView(const RigidTransform& X_WC, const Box3& roi)
   clear_halfspace_ = Eigen::Vector4d(n.x(), n.y(), n.z(), n.dot(X_WC.translation()));
 }
 
-StateCheck CollisionChecker::Check(const Eigen::VectorXd& q) const {
+CollisionChecker::Hit CollisionChecker::Find(const Eigen::VectorXd& q) const {
   states_checked_->fetch_add(1, std::memory_order_relaxed);
   const robot::ArmModel& arm = robot_.arm();
-  if (!arm.WithinLimits(q)) {
-    return {Obstacle::kJointLimits, arm.CheckJoints(q).message()};
-  }
+  if (!arm.WithinLimits(q)) return {Obstacle::kJointLimits};
   const std::vector<Eigen::Isometry3d> links = robot_.LinkPoses(q);
   const std::vector<RobotBody>& bodies = robot_.bodies();
   const double margin = options_.margin_m;
   // The map and the declared planes, against each moving body's spheres.
-  for (const RobotBody& body : bodies) {
+  for (size_t i = 0; i < bodies.size(); ++i) {
+    const RobotBody& body = bodies[i];
     if (!body.moves) continue;
     const Eigen::Isometry3d& X_WL = links[static_cast<size_t>(body.link)];
     for (const Sphere& s : body.spheres) {
       const Eigen::Vector3d c = X_WL * s.center;
       if (!field_->empty()) {
         const double clearance = field_->Distance(c) - s.radius;
-        if (clearance < margin) {
-          return {Obstacle::kMap, fmt::format("'{}' within {:.3f} m of the map's obstacles "
-                                              "(margin {} m)",
-                                              body.name, std::max(clearance, 0.0), margin)};
-        }
+        if (clearance < margin) return {Obstacle::kMap, i, 0, clearance};
       }
-      for (const auto& object : world_) {
-        if (!object->is_plane) continue;
-        const double clearance = object->normal_W.dot(c) - object->offset - s.radius;
-        if (clearance < margin) {
-          return {Obstacle::kWorld,
-                  fmt::format("'{}' within {:.3f} m of '{}' (margin {} m)", body.name,
-                              std::max(clearance, 0.0), object->name, margin)};
-        }
+      for (size_t k = 0; k < world_.size(); ++k) {
+        const WorldObject& object = *world_[k];
+        if (!object.is_plane) continue;
+        const double clearance = object.normal_W.dot(c) - object.offset - s.radius;
+        if (clearance < margin) return {Obstacle::kWorld, i, k, clearance};
       }
     }
   }
   // Other declared objects, with FCL against the bodies' true shapes.
-  for (const RobotBody& body : bodies) {
+  for (size_t i = 0; i < bodies.size(); ++i) {
+    const RobotBody& body = bodies[i];
     if (!body.moves) continue;
     const Eigen::Isometry3d X_WG = links[static_cast<size_t>(body.link)] * body.X_LG;
-    for (const auto& object : world_) {
-      if (object->is_plane) continue;
-      if (WithinDistance(*body.geometry, X_WG, *object->geometry, object->X_WO, margin)) {
-        return {Obstacle::kWorld,
-                fmt::format("'{}' within {} m of '{}'", body.name, margin, object->name)};
+    for (size_t k = 0; k < world_.size(); ++k) {
+      const WorldObject& object = *world_[k];
+      if (object.is_plane) continue;
+      if (WithinDistance(*body.geometry, X_WG, *object.geometry, object.X_WO, margin)) {
+        return {Obstacle::kWorld, i, k, std::nan("")};
       }
     }
   }
@@ -262,10 +255,43 @@ StateCheck CollisionChecker::Check(const Eigen::VectorXd& q) const {
     }
     if (WithinDistance(*ba.geometry, links[static_cast<size_t>(ba.link)] * ba.X_LG, *bb.geometry,
                        links[static_cast<size_t>(bb.link)] * bb.X_LG, options_.self_margin_m)) {
-      return {Obstacle::kSelf, fmt::format("'{}' – '{}'", ba.name, bb.name)};
+      return {Obstacle::kSelf, static_cast<size_t>(a), static_cast<size_t>(b)};
     }
   }
   return {};
+}
+
+StateCheck CollisionChecker::Describe(const Eigen::VectorXd& q, const Hit& hit) const {
+  const std::vector<RobotBody>& bodies = robot_.bodies();
+  const double margin = options_.margin_m;
+  switch (hit.obstacle) {
+    case Obstacle::kNone:
+      return {};
+    case Obstacle::kJointLimits:
+      return {hit.obstacle, robot_.arm().CheckJoints(q).message()};
+    case Obstacle::kMap:
+      return {hit.obstacle,
+              fmt::format("'{}' within {:.3f} m of the map's obstacles (margin {} m)",
+                          bodies[hit.body].name, std::max(hit.clearance, 0.0), margin)};
+    case Obstacle::kWorld:
+      if (std::isnan(hit.clearance)) {
+        return {hit.obstacle, fmt::format("'{}' within {} m of '{}'", bodies[hit.body].name, margin,
+                                          world_[hit.other]->name)};
+      }
+      return {hit.obstacle,
+              fmt::format("'{}' within {:.3f} m of '{}' (margin {} m)", bodies[hit.body].name,
+                          std::max(hit.clearance, 0.0), world_[hit.other]->name, margin)};
+    case Obstacle::kSelf:
+      return {hit.obstacle,
+              fmt::format("'{}' – '{}'", bodies[hit.body].name, bodies[hit.other].name)};
+  }
+  return {};
+}
+
+StateCheck CollisionChecker::Check(const Eigen::VectorXd& q) const { return Describe(q, Find(q)); }
+
+bool CollisionChecker::IsFree(const Eigen::VectorXd& q) const {
+  return Find(q).obstacle == Obstacle::kNone;
 }
 
 SegmentCheck CollisionChecker::CheckSegment(const Eigen::VectorXd& a, const Eigen::VectorXd& b,
@@ -276,11 +302,12 @@ SegmentCheck CollisionChecker::CheckSegment(const Eigen::VectorXd& a, const Eige
   const int steps = std::max(1, static_cast<int>(std::ceil(travel / options_.max_step_m)));
   const auto check = [&](int i) {
     const double f = static_cast<double>(i) / steps;
-    StateCheck state = Check(a + f * dq);
+    const Eigen::VectorXd q = a + f * dq;
+    const Hit hit = Find(q);
     ++result.states;
-    if (state.free()) return true;
+    if (hit.obstacle == Obstacle::kNone) return true;
     result.free = false;
-    result.first_collision = std::move(state);
+    result.first_collision = Describe(q, hit);  // once per segment: the check stops here
     result.at_fraction = f;
     return false;
   };

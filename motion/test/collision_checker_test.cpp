@@ -1,3 +1,4 @@
+#include <map>
 #include <string>
 #include <vector>
 
@@ -107,6 +108,32 @@ TEST(CollisionCheckerTest, DeclaredWorldObjectsAreNamed) {
     EXPECT_LT(lowest, 0.02);
   }
   EXPECT_GT(below, 0);
+}
+
+TEST(CollisionCheckerTest, IsFreeAgreesWithCheckOnEveryKindOfObstacle) {
+  // IsFree skips the message; its verdict must be Check's, whatever the arm meets.
+  const robot::CollisionShape table = robot::CollisionShape::Box(
+      "table", Eigen::Vector3d(0.3, 0.6, 0.05), RigidTransform(Eigen::Vector3d(0.45, 0, 0.3)));
+  const robot::CollisionShape ground = robot::CollisionShape::Plane("ground", RigidTransform());
+  CollisionChecker c = Checker(KnownOnly(), {ground, table});
+  mapping::OccupancyGrid grid;
+  FillOccupied(grid, Box3(Eigen::Vector3d(0.3, -0.2, 0.5), Eigen::Vector3d(0.35, 0.2, 0.7)));
+  ASSERT_TRUE(
+      c.SetMap(grid, Box3(Eigen::Vector3d(0.1, -0.3, 0.3), Eigen::Vector3d(0.6, 0.3, 1.0))).ok());
+  Rng rng(11);
+  std::map<Obstacle, int> seen;
+  for (int k = 0; k < 3000; ++k) {
+    Eigen::VectorXd q = DefaultArm().RandomJoints(rng);
+    if (k % 100 == 0) q[1] = DefaultArm().upper_limits()[1] + 0.1;
+    const StateCheck check = c.Check(q);
+    ASSERT_EQ(c.IsFree(q), check.free()) << "state " << k << ": " << check.detail;
+    EXPECT_EQ(check.free(), check.detail.empty()) << check.detail;
+    ++seen[check.obstacle];
+  }
+  for (const Obstacle kind : {Obstacle::kNone, Obstacle::kJointLimits, Obstacle::kMap,
+                              Obstacle::kWorld, Obstacle::kSelf}) {
+    EXPECT_GT(seen[kind], 0) << ToString(kind) << " never met: the test does not cover it";
+  }
 }
 
 TEST(CollisionCheckerTest, ASegmentIsCheckedFinelyEnoughToCatchAThinObstacle) {

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <atomic>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -94,7 +95,8 @@ class CollisionChecker {
   void SetStartView(const RigidTransform& X_WC, const Box3& roi);
 
   StateCheck Check(const Eigen::VectorXd& q) const;
-  bool IsFree(const Eigen::VectorXd& q) const { return Check(q).free(); }
+  /// Check without the message (the planner's hot path: most states it samples collide).
+  bool IsFree(const Eigen::VectorXd& q) const;
   /// The straight segment a → b (joint space), checked at the max_step_m resolution: the ends,
   /// then midpoints coarse to fine (a colliding segment is rejected early), or with `in_order`
   /// from a to b (the first colliding state).
@@ -118,6 +120,18 @@ class CollisionChecker {
   CollisionChecker(RobotGeometry robot, CollisionOptions options);
 
   struct WorldObject;
+  /// What Find met at a state: body indexes into robot_.bodies(), other into world_ (kWorld) or
+  /// bodies (kSelf); clearance for the map and planes (NaN for FCL's boolean queries).
+  struct Hit {
+    Obstacle obstacle = Obstacle::kNone;
+    size_t body = 0;
+    size_t other = 0;
+    double clearance = 0.0;
+  };
+  Hit Find(const Eigen::VectorXd& q) const;
+  /// The verdict with its message, formatted only when a caller wants it.
+  StateCheck Describe(const Eigen::VectorXd& q, const Hit& hit) const;
+
   RobotGeometry robot_;
   CollisionOptions options_;
   std::vector<std::shared_ptr<const WorldObject>> world_;
