@@ -126,6 +126,48 @@ double PathLength(const std::vector<Eigen::VectorXd>& path) {
   return length;
 }
 
+/// A point along `path` at arc length `s`: the segment it lies on (i: from path[i] to
+/// path[i + 1]) and the point.
+std::pair<size_t, Eigen::VectorXd> PointAt(const std::vector<Eigen::VectorXd>& path, double s) {
+  for (size_t i = 0; i + 1 < path.size(); ++i) {
+    const double l = (path[i + 1] - path[i]).norm();
+    if (s <= l || i + 2 == path.size()) {
+      const double f = l > 0.0 ? std::clamp(s / l, 0.0, 1.0) : 0.0;
+      return {i, path[i] + f * (path[i + 1] - path[i])};
+    }
+    s -= l;
+  }
+  return {0, path.front()};
+}
+
+/// Partial shortcuts (MotionOptions::shortcut_tries): two points drawn along the path, on
+/// different segments, are joined straight when that is free; every try that is taken makes the
+/// path shorter (the triangle inequality), and the draws come from `rng` (reproducible).
+std::vector<Eigen::VectorXd> ShortcutPartially(std::vector<Eigen::VectorXd> path,
+                                               const CollisionChecker& checker, int tries,
+                                               Rng& rng) {
+  for (int t = 0; t < tries && path.size() > 2; ++t) {
+    const double length = PathLength(path);
+    double a = rng.Uniform(0.0, length), b = rng.Uniform(0.0, length);
+    if (a > b) std::swap(a, b);
+    auto [ia, pa] = PointAt(path, a);
+    auto [ib, pb] = PointAt(path, b);
+    if (ib <= ia) continue;  // the same segment: nothing to cut
+    if (!checker.CheckSegment(pa, pb).free) continue;
+    std::vector<Eigen::VectorXd> cut(path.begin(), path.begin() + static_cast<long>(ia) + 1);
+    cut.push_back(std::move(pa));
+    cut.push_back(std::move(pb));
+    cut.insert(cut.end(), path.begin() + static_cast<long>(ib) + 1, path.end());
+    // Drop a point that coincides with its neighbour (a draw at a vertex).
+    std::vector<Eigen::VectorXd> kept{cut.front()};
+    for (size_t i = 1; i < cut.size(); ++i) {
+      if ((cut[i] - kept.back()).norm() > 1e-9) kept.push_back(std::move(cut[i]));
+    }
+    path = std::move(kept);
+  }
+  return path;
+}
+
 void QuietOmpl() {
   static std::once_flag once;
   std::call_once(once, [] { ompl::msg::setLogLevel(ompl::msg::LOG_WARN); });
@@ -197,6 +239,9 @@ const OptionTable<MotionOptions>& MotionOptionTable() {
             "RRT-Connect stops after this wall time (a safety net)");
     t->Real("range_rad", &M::range_rad, "rad", ValueRange::Closed(0, 100),
             "RRT-Connect's step in joint space (0: OMPL's default, 0.2 of the space's extent)");
+    t->Integer("shortcut_tries", &M::shortcut_tries, "", ValueRange::Closed(0, 100'000),
+               "tries at a partial shortcut between two points drawn along a searched path (0: "
+               "vertex shortcuts only)");
     t->Real("velocity_scaling", &M::velocity_scaling, "", ValueRange::LeftOpen(0, 1),
             "fraction of each joint's velocity limit the trajectory uses");
     t->Real("acceleration_scaling", &M::acceleration_scaling, "", ValueRange::LeftOpen(0, 1),
@@ -265,6 +310,12 @@ MotionPlan MotionPlanner::Plan(const Eigen::VectorXd& q_start, const Eigen::Vect
           100.0 * plan.straight_check.at_fraction, plan.straight_check.first_collision.detail)));
     }
     plan.path = Shortcut(found, *checker);
+    if (options_.shortcut_tries > 0 && plan.path.size() > 2) {
+      Rng shortcuts(rng.NextU64());
+      plan.path = Shortcut(
+          ShortcutPartially(std::move(plan.path), *checker, options_.shortcut_tries, shortcuts),
+          *checker);
+    }
   }
   plan.path_length = PathLength(plan.path);
   Result<robot::JointTrajectory> trajectory =

@@ -29,6 +29,10 @@ struct MotionOptions {
   double timeout_s = 5.0;
   /// RRT-Connect's step (joint space, radians); 0: OMPL's default (0.2 of the space's extent).
   double range_rad = 0.0;
+  /// After the greedy vertex shortcuts, this many tries at a partial shortcut: two points drawn
+  /// along the path (from the run's generator), joined straight when that segment is free and
+  /// shorter (MoveIt's and OMPL's shortcutting, made reproducible). 0: vertex shortcuts only.
+  int shortcut_tries = 100;
   /// Fractions of the joints' velocity (URDF) and acceleration (arm config) limits the
   /// trajectory uses.
   double velocity_scaling = 0.5;
