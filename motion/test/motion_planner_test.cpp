@@ -139,10 +139,10 @@ TEST(MotionPlannerTest, PartialShortcutsShortenTheSearchedPathAndKeepItFree) {
   // The same search (the seed's first draw) shortened with vertex shortcuts only, and with the
   // partial shortcuts after them: never longer, shorter on most seeds, still free of the post.
   PostScene scene;
-  MotionOptions vertex_only;
-  vertex_only.shortcut_tries = 0;
-  const MotionPlanner planner(scene.checker, MotionOptions{});
-  const MotionPlanner greedy(scene.checker, vertex_only);
+  MotionOptions partial;
+  partial.shortcut_tries = 100;
+  const MotionPlanner planner(scene.checker, partial);
+  const MotionPlanner greedy(scene.checker, MotionOptions{});  // vertex shortcuts only
   int shorter = 0;
   double sum_ratio = 0.0;
   constexpr int kSeeds = 10;
