@@ -89,18 +89,26 @@ class ReplayTest : public ::testing::Test {
     dir_ = new fs::path(fs::path(::testing::TempDir()) /
                         ("avp_replay_test_" + std::to_string(::getpid())));
     fs::remove_all(*dir_);
+    Result<experiment::RunSummary> run = RecordRun(SuiteRunConfig(), *dir_ / "run");
+    ASSERT_TRUE(run.ok()) << run.status().ToString();
+    ASSERT_EQ(run->result.episode.views_fused(), 3);
+  }
+  /// The suite's episode: tomato-multiple-clusters, seed 5, 3 views.
+  static experiment::RunConfig SuiteRunConfig() {
     experiment::RunConfig c;
     c.scenario = "tomato-multiple-clusters";
     c.seed = 5;
     c.episode.views = 3;
     c.threads = 2;
+    return c;
+  }
+  /// Runs `c` into `out_dir`, recorded as MCAP.
+  static Result<experiment::RunSummary> RecordRun(const experiment::RunConfig& c,
+                                                  const fs::path& out_dir) {
     experiment::RunFolderOptions o;
-    o.out_dir = *dir_ / "run";
+    o.out_dir = out_dir;
     o.record = true;
-    Result<experiment::RunSummary> run =
-        experiment::RunToFolder(experiment::CheckedRunConfig::Check(c, Registries()).value(), o);
-    ASSERT_TRUE(run.ok()) << run.status().ToString();
-    ASSERT_EQ(run->result.episode.views_fused(), 3);
+    return experiment::RunToFolder(experiment::CheckedRunConfig::Check(c, Registries()).value(), o);
   }
   static void TearDownTestSuite() {
     std::error_code ec;
@@ -113,18 +121,10 @@ class ReplayTest : public ::testing::Test {
   /// recorded once into dir_/moving-run. Returns its moving totals.
   static const pipeline::MotionTotals& MovingRun() {
     static const pipeline::MotionTotals totals = [] {
-      experiment::RunConfig c;
-      c.scenario = "tomato-multiple-clusters";
-      c.seed = 5;
-      c.episode.views = 3;
+      experiment::RunConfig c = SuiteRunConfig();
       c.episode.motion_fusion.enabled = true;
       c.episode.motion_fusion.rate_hz = 3.0;
-      c.threads = 2;
-      experiment::RunFolderOptions o;
-      o.out_dir = *dir_ / "moving-run";
-      o.record = true;
-      Result<experiment::RunSummary> run =
-          experiment::RunToFolder(experiment::CheckedRunConfig::Check(c, Registries()).value(), o);
+      Result<experiment::RunSummary> run = RecordRun(c, *dir_ / "moving-run");
       EXPECT_TRUE(run.ok()) << run.status().ToString();
       return run.ok() ? pipeline::SumMotion(run->result.episode) : pipeline::MotionTotals{};
     }();

@@ -210,7 +210,7 @@ void CollisionChecker::SetStartView(const RigidTransform& X_WC, const Box3& roi)
 CollisionChecker::Hit CollisionChecker::Find(const Eigen::VectorXd& q) const {
   states_checked_->fetch_add(1, std::memory_order_relaxed);
   const robot::ArmModel& arm = robot_.arm();
-  if (!arm.WithinLimits(q)) return {Obstacle::kJointLimits};
+  if (!arm.WithinLimits(q)) return {Obstacle::kJointLimits, 0, 0, std::nullopt};
   const std::vector<Eigen::Isometry3d> links = robot_.LinkPoses(q);
   const std::vector<RobotBody>& bodies = robot_.bodies();
   const double margin = options_.margin_m;
@@ -242,7 +242,7 @@ CollisionChecker::Hit CollisionChecker::Find(const Eigen::VectorXd& q) const {
       const WorldObject& object = *world_[k];
       if (object.is_plane) continue;
       if (WithinDistance(*body.geometry, X_WG, *object.geometry, object.X_WO, margin)) {
-        return {Obstacle::kWorld, i, k, std::nan("")};
+        return {Obstacle::kWorld, i, k, std::nullopt};
       }
     }
   }
@@ -255,7 +255,7 @@ CollisionChecker::Hit CollisionChecker::Find(const Eigen::VectorXd& q) const {
     }
     if (WithinDistance(*ba.geometry, links[static_cast<size_t>(ba.link)] * ba.X_LG, *bb.geometry,
                        links[static_cast<size_t>(bb.link)] * bb.X_LG, options_.self_margin_m)) {
-      return {Obstacle::kSelf, static_cast<size_t>(a), static_cast<size_t>(b)};
+      return {Obstacle::kSelf, static_cast<size_t>(a), static_cast<size_t>(b), std::nullopt};
     }
   }
   return {};
@@ -272,15 +272,15 @@ StateCheck CollisionChecker::Describe(const Eigen::VectorXd& q, const Hit& hit) 
     case Obstacle::kMap:
       return {hit.obstacle,
               fmt::format("'{}' within {:.3f} m of the map's obstacles (margin {} m)",
-                          bodies[hit.body].name, std::max(hit.clearance, 0.0), margin)};
+                          bodies[hit.body].name, std::max(*hit.clearance, 0.0), margin)};
     case Obstacle::kWorld:
-      if (std::isnan(hit.clearance)) {
+      if (!hit.clearance) {  // FCL's boolean query: within the margin, no distance
         return {hit.obstacle, fmt::format("'{}' within {} m of '{}'", bodies[hit.body].name, margin,
                                           world_[hit.other]->name)};
       }
       return {hit.obstacle,
               fmt::format("'{}' within {:.3f} m of '{}' (margin {} m)", bodies[hit.body].name,
-                          std::max(hit.clearance, 0.0), world_[hit.other]->name, margin)};
+                          std::max(*hit.clearance, 0.0), world_[hit.other]->name, margin)};
     case Obstacle::kSelf:
       return {hit.obstacle,
               fmt::format("'{}' – '{}'", bodies[hit.body].name, bodies[hit.other].name)};

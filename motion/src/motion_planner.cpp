@@ -239,7 +239,7 @@ const OptionTable<MotionOptions>& MotionOptionTable() {
             "RRT-Connect stops after this wall time (a safety net)");
     t->Real("range_rad", &M::range_rad, "rad", ValueRange::Closed(0, 100),
             "RRT-Connect's step in joint space (0: OMPL's default, 0.2 of the space's extent)");
-    t->Integer("shortcut_tries", &M::shortcut_tries, "", ValueRange::Closed(0, 100'000),
+    t->Integer("shortcut_tries", &M::shortcut_tries, "", ValueRange::Closed(0, 10'000),
                "tries at a partial shortcut between two points drawn along a searched path (0: "
                "vertex shortcuts only)");
     t->Real("velocity_scaling", &M::velocity_scaling, "", ValueRange::LeftOpen(0, 1),

@@ -121,12 +121,12 @@ class CollisionChecker {
 
   struct WorldObject;
   /// What Find met at a state: body indexes into robot_.bodies(), other into world_ (kWorld) or
-  /// bodies (kSelf); clearance for the map and planes (NaN for FCL's boolean queries).
+  /// bodies (kSelf); clearance for the map and planes (none from FCL's boolean queries).
   struct Hit {
     Obstacle obstacle = Obstacle::kNone;
     size_t body = 0;
     size_t other = 0;
-    double clearance = 0.0;
+    std::optional<double> clearance;
   };
   Hit Find(const Eigen::VectorXd& q) const;
   /// The verdict with its message, formatted only when a caller wants it.
