@@ -33,7 +33,8 @@ struct LiveCli {
 int Live(const CLI::App& cmd, const LiveCli& cli, const experiment::Registries& registries) {
   YAML::Node section;
   const Result<experiment::CheckedRunConfig> config = ResolveConfig(
-      cmd, cli.run, registries, {.name = "live", .node = &section, .default_scene = false});
+      cmd, cli.run, registries,
+      {.name = "live", .node = &section, .default_scene = false, .plan_motion = true});
   if (!config.ok()) return Failed("live", config.status());
   const Result<ros::live::LiveOptions> options =
       ResolveSectionOptions(ros::live::LiveOptionTable(), section, cli.live_options,

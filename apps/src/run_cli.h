@@ -65,11 +65,14 @@ void AddRecordOption(CLI::App& cmd, RunCli& cli);
 void AddRunOptions(CLI::App& cmd, RunCli& cli);
 
 /// A section of the --config file that is not the run configuration's (`live:`), handed to the
-/// command; and whether the default scenario applies when none is named.
+/// command; whether the default scenario applies when none is named; and whether the arm's moves
+/// are planned collision-free unless the configuration says otherwise (motion.enabled: a real
+/// arm's default, docs/motion.md).
 struct ConfigSection {
   std::string name;
   YAML::Node* node = nullptr;
   bool default_scene = true;
+  bool plan_motion = false;
 };
 
 /// The configuration: the defaults, --config (without `section`), the shorthand flags, the

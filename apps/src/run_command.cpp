@@ -147,6 +147,7 @@ Result<experiment::CheckedRunConfig> ResolveConfig(const CLI::App& cmd, const Ru
                                                    const experiment::Registries& registries,
                                                    const ConfigSection& section) {
   experiment::RunConfig c;
+  c.motion.enabled = section.plan_motion;
   if (!cli.config_file.empty()) {
     AVP_ASSIGN_OR_RETURN(YAML::Node root, io::LoadYamlFile(cli.config_file));
     if (!section.name.empty() && root.IsMap() && root[section.name]) {

@@ -106,11 +106,23 @@ assert w["rviz_messages"] > 0, w
 PY
 }
 
-closed_loop straight
-closed_loop planned --set motion.enabled=true
-closed_loop moving --fuse-while-moving --set episode.motion_fusion.max_pending=60
+# avp live plans its moves by default (a real arm); avp run and avp sim ros2 move straight unless
+# told otherwise: each loop names its motion, so that all three agree.
+motion_enabled() { awk '/^motion:/ { m = 1; next } m && /^  enabled:/ { print $2; exit }'; }
+[ "$("$AVP" live --print-config | motion_enabled)" = true ] ||
+  { echo "avp live does not plan its moves by default"; exit 1; }
+[ "$("$AVP" live --set motion.enabled=false --print-config | motion_enabled)" = false ] ||
+  { echo "avp live ignored motion.enabled=false"; exit 1; }
+[ "$("$AVP" run --print-config | motion_enabled)" = false ] ||
+  { echo "avp run plans its moves by default"; exit 1; }
 
-# Ctrl-C after the first view: the episode ends as interrupted, with its folder written.
+closed_loop straight --set motion.enabled=false
+closed_loop planned --set motion.enabled=true
+closed_loop moving --fuse-while-moving --set episode.motion_fusion.max_pending=60 \
+  --set motion.enabled=false
+
+# Ctrl-C after the first view: the episode ends as interrupted, with its folder written (avp live
+# with its default, planned moves, which avp sim ros2 follows point by point).
 "$AVP" sim ros2 "${BASE[@]}" --sim-option time_scale=0 --sim-option camera_rate_hz=10 \
   --duration 240 > "$WORK/sim2.log" 2>&1 &
 SIM=$!

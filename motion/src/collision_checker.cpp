@@ -35,6 +35,9 @@ const OptionTable<ObstacleFieldOptions>& FieldOptionTable() {
             "unknown voxels inside the region of interest are obstacles");
     t->Flag("unknown_behind_start_is_free", &F::unknown_behind_start_is_free,
             "unknown space behind the first view's image plane (the robot's side) is free");
+    t->Real("start_clearance_m", &F::start_clearance_m, "m", ValueRange::Closed(0, 0.5),
+            "free space assumed around the arm at its start pose (it was placed clear of the "
+            "plant)");
     t->Real("unknown_band_m", &F::unknown_band_m, "m", ValueRange::Closed(0, 10),
             "only unknown voxels this close to an occupied one are obstacles (0: all in the ROI)");
     t->Real("max_distance_m", &F::max_distance_m, "m", ValueRange::LeftOpen(0, 10),
@@ -173,16 +176,23 @@ void CollisionChecker::MarkSwept(const Eigen::VectorXd& q) {
   // A state within a centimetre of travel of the last one marked adds nothing the pad does not
   // already cover: the swept list grows with the distance travelled, not with the states.
   if (last_swept_.size() == q.size() && robot_.MaxDisplacement(q - last_swept_) < 0.01) return;
+  MarkFree(q, options_.margin_m);
+}
+
+void CollisionChecker::MarkStart(const Eigen::VectorXd& q) {
+  MarkFree(q, options_.field.start_clearance_m);
+}
+
+void CollisionChecker::MarkFree(const Eigen::VectorXd& q, double clearance_m) {
   last_swept_ = q;
   const std::vector<Eigen::Isometry3d> links = robot_.LinkPoses(q);
+  // Padded, as MoveIt's self-filter pads the robot: the clearance, plus the field's conservatism
+  // (a cell centre within half a cell diagonal of the point, a value up to a cell diagonal low),
+  // so that q itself is clearance_m from the unknown space around it.
+  const double pad = clearance_m + 1.5 * std::sqrt(3.0) * options_.field.resolution_m + 1e-3;
   for (const RobotBody& body : robot_.bodies()) {
     if (!body.moves) continue;
     const Eigen::Isometry3d& X_WL = links[static_cast<size_t>(body.link)];
-    // Padded, as MoveIt's self-filter pads the robot, so that the state itself passes the check
-    // against the unknown space around it: the margin, plus the field's conservatism (a cell
-    // centre within half a cell diagonal of the point, a value up to a cell diagonal low).
-    const double pad =
-        options_.margin_m + 1.5 * std::sqrt(3.0) * options_.field.resolution_m + 1e-3;
     for (const Sphere& s : body.spheres) swept_.push_back({X_WL * s.center, s.radius + pad});
   }
 }

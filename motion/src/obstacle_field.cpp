@@ -400,6 +400,9 @@ Status ObstacleFieldOptions::Validate() const {
   if (!(std::isfinite(max_distance_m) && max_distance_m > 0.0)) {
     bad.push_back(fmt::format("max_distance_m ({}) must be finite and > 0", max_distance_m));
   }
+  if (!(std::isfinite(start_clearance_m) && start_clearance_m >= 0.0)) {
+    bad.push_back(fmt::format("start_clearance_m ({}) must be finite and >= 0", start_clearance_m));
+  }
   if (!(unknown_band_m >= 0.0) || !std::isfinite(unknown_band_m)) {
     bad.push_back(fmt::format("unknown_band_m ({}) must be finite and >= 0", unknown_band_m));
   }

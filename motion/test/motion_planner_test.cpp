@@ -222,5 +222,42 @@ TEST(MotionPlannerTest, BadOptionsAreNamed) {
   EXPECT_NE(s.message().find("max_samples (1)"), std::string::npos) << s.ToString();
 }
 
+/// Nothing is known around the arm at home (all of it inside the ROI): the start clearance is the
+/// free space avp assumes there. The arm at home is that far from the unseen space (within a
+/// field cell); a move of the camera 1 cm into it is planned when the assumption covers it and
+/// refused with 0, where only the space the bodies fill is free and the first move keeps the
+/// start's own clearance.
+TEST(MotionPlannerTest, StartClearanceIsTheFreeSpaceAssumedAroundTheStartPose) {
+  const robot::ArmModel& arm = DefaultArm();
+  const Eigen::VectorXd home = arm.home_joints();
+  const Eigen::Vector3d eye = arm.CameraPose(home).translation();
+  const Box3 roi(eye - Eigen::Vector3d(0.5, 0.5, 0.5), eye + Eigen::Vector3d(0.5, 0.5, 0.5));
+  // Joint 2 tilts the arm forward: the camera 1 cm from where it stands.
+  Eigen::VectorXd forward = home;
+  while ((arm.CameraPose(forward).translation() - eye).norm() < 0.01) forward[1] += 0.0005;
+  const mapping::OccupancyGrid unknown;
+  for (const double start_clearance : {0.0, 0.02, 0.05}) {
+    SCOPED_TRACE(start_clearance);
+    CollisionOptions options;
+    options.field.start_clearance_m = start_clearance;
+    CollisionChecker checker = CollisionChecker::Create(DefaultGeometry(), {}, options).value();
+    checker.MarkStart(home);
+    ASSERT_TRUE(checker.SetMap(unknown, roi).ok());
+    // Measured: 3.9, 23.3 and 54.3 mm.
+    EXPECT_GE(checker.MapClearance(home), start_clearance);
+    EXPECT_LE(checker.MapClearance(home), start_clearance + options.field.resolution_m);
+    EXPECT_EQ(checker.IsFree(home), start_clearance >= options.margin_m);
+    const MotionPlanner planner(checker, MotionOptions{});
+    Rng rng(3);
+    const MotionPlan into = planner.Plan(home, forward, rng);
+    if (start_clearance == 0.0) {
+      EXPECT_NE(into.status.message().find("the goal is in collision (map"), std::string::npos)
+          << into.status.ToString();
+    } else if (start_clearance == 0.05) {
+      EXPECT_TRUE(into.ok()) << into.status.ToString();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace avp::motion

@@ -86,17 +86,21 @@ TEST(ObstacleFieldOptionsTest, ErrorsNameEveryBadValue) {
   o.resolution_m = std::numeric_limits<double>::quiet_NaN();
   o.max_distance_m = -0.5;
   o.max_cells = 0;
+  o.start_clearance_m = -0.01;
   s = o.Validate();
   EXPECT_THAT(s.message(), HasSubstr("resolution_m (nan) must be in [0.002, 0.1]"));
+  EXPECT_THAT(s.message(), HasSubstr("start_clearance_m (-0.01) must be finite and >= 0"));
   EXPECT_THAT(s.message(), HasSubstr("max_distance_m (-0.5) must be finite and > 0"));
   EXPECT_THAT(s.message(), HasSubstr("max_cells (0) must be >= 1"));
 
   o = {};
   o.resolution_m = 0.2;
   o.max_distance_m = std::numeric_limits<double>::infinity();
+  o.start_clearance_m = std::numeric_limits<double>::quiet_NaN();
   s = o.Validate();
   EXPECT_THAT(s.message(), HasSubstr("resolution_m (0.2) must be in [0.002, 0.1]"));
   EXPECT_THAT(s.message(), HasSubstr("max_distance_m (inf) must be finite and > 0"));
+  EXPECT_THAT(s.message(), HasSubstr("start_clearance_m (nan) must be finite and >= 0"));
 }
 
 TEST(ObstacleFieldTest, BuildRefusesBadOptionsBoundsAndFreeSpace) {

@@ -596,7 +596,7 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
   if (c.motion != nullptr) {
     // A new episode: no map yet; where the arm stands is free.
     c.motion->checker().ClearMap();
-    c.motion->checker().MarkSwept(next.q_start);
+    c.motion->checker().MarkStart(next.q_start);
     c.motion->checker().SetStartView(next.X_WC_start, options.roi);
   }
 

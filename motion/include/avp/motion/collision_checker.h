@@ -80,12 +80,16 @@ class CollisionChecker {
   /// (options.field.unknown_is_obstacle), except in the space the arm has swept (MarkSwept).
   /// The field covers the arm's reach. Errors from ObstacleField::Build.
   Status SetMap(const mapping::OccupancyGrid& grid, const Box3& roi);
-  /// Records that the arm occupied state q (it moved through it): the space of its bodies there,
-  /// padded by margin_m and 1.5 field-cell diagonals (as MoveIt's self-filter pads the robot,
-  /// so that q itself passes the check), holds
-  /// nothing it did not touch, so unknown voxels there are not obstacles at the next SetMap
-  /// (occupied ones still are).
+  /// Records that the arm occupied state q (it moved through it): the space of its bodies there
+  /// holds nothing it did not touch, so unknown voxels there are not obstacles at the next SetMap
+  /// (occupied ones still are). Padded by margin_m and 1.5 field-cell diagonals, as MoveIt's
+  /// self-filter pads the robot, so that q itself passes the check: on a planned path the space
+  /// within margin_m was already free; the cell diagonals beyond it are taken as free too.
   void MarkSwept(const Eigen::VectorXd& q);
+  /// The arm stands at q when the episode starts: unknown space within
+  /// options.field.start_clearance_m of its bodies (padded by the field's conservatism) is free.
+  /// Below margin_m, the first move plans with the start's own clearance (MotionPlanner::Plan).
+  void MarkStart(const Eigen::VectorXd& q);
   /// Forgets the map, the swept space and the start view (a new episode).
   void ClearMap();
   /// With options.field.unknown_behind_start_is_free: unknown space on the robot's side of the
@@ -129,6 +133,9 @@ class CollisionChecker {
     std::optional<double> clearance;
   };
   Hit Find(const Eigen::VectorXd& q) const;
+  /// Unknown space within clearance_m of the arm's bodies at q (plus the field's conservatism) is
+  /// free at the next SetMap.
+  void MarkFree(const Eigen::VectorXd& q, double clearance_m);
   /// The verdict with its message, formatted only when a caller wants it.
   StateCheck Describe(const Eigen::VectorXd& q, const Hit& hit) const;
 

@@ -15,10 +15,11 @@ namespace avp::motion {
 
 /// How moves are planned and timed (the run config's `motion.*`).
 struct MotionOptions {
-  /// Plan every move collision-free. Off (for now the default: in the tomato scenarios most views
-  /// are reachable only through space the camera has not seen, docs/motion.md "What it costs"):
-  /// the arm is sent straight to each view's joints, unchecked (the paper's loop, where IK is the
-  /// only filter); the simulator still counts what those moves touch.
+  /// Plan every move collision-free (avp live's default: a real arm). Off (the default in
+  /// simulation: in the tomato scenarios most views are reachable only through space the camera
+  /// has not seen, docs/motion.md "What it costs"): the arm is sent straight to each view's
+  /// joints, unchecked (the paper's loop, where IK is the only filter); the simulator still
+  /// counts what those moves touch.
   bool enabled = false;
   CollisionOptions collision;
   /// OMPL's RRT-Connect: stop after this many samples (deterministic: the same seed gives the

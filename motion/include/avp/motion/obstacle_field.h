@@ -34,6 +34,11 @@ struct ObstacleFieldOptions {
   /// starts in front of the plant, with nothing of it between the camera and the base
   /// (CollisionChecker::SetStartView). Off: only the space the arm swept is.
   bool unknown_behind_start_is_free = true;
+  /// The arm's start pose has at least this much free space (metres) around its bodies: the
+  /// operator placed it there, clear of the plant, and the camera cannot see what is that close
+  /// (CollisionChecker::MarkStart). 0: only the space the bodies fill is free, and the first
+  /// move keeps the start's own clearance from everything unseen.
+  double start_clearance_m = 0.02;
   /// Distances are resolved up to this (metres, and at most 4096 cells); beyond it the field
   /// reports this value (a lower bound). The EDT runs over the whole grid whatever the cap.
   double max_distance_m = 0.3;
