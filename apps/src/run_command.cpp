@@ -196,6 +196,13 @@ void PrintMotionSummary(const pipeline::EpisodeResult& episode) {
               ms.back());
   if (m.contacts && m.contacts->total() > 0)
     std::printf("  first contact: %s\n", m.contacts->first.c_str());
+  if (episode.start_clearance && episode.start_clearance->broken()) {
+    std::printf(
+        "  start clearance broken: %s %.3f m apart at the start, inside the %.3f m the "
+        "planner took as free (motion.collision.map.start_clearance_m and the field's cells)\n",
+        episode.start_clearance->truth->nearest.c_str(), episode.start_clearance->truth->distance_m,
+        episode.start_clearance->assumed_m);
+  }
 }
 
 void PrintSummary(const experiment::RunConfig& config, const experiment::RunSummary& summary,

@@ -183,13 +183,20 @@ void CollisionChecker::MarkStart(const Eigen::VectorXd& q) {
   MarkFree(q, options_.field.start_clearance_m);
 }
 
+double CollisionChecker::FieldRounding() const {
+  return 1.5 * std::sqrt(3.0) * options_.field.resolution_m + 1e-3;
+}
+
+double CollisionChecker::StartFreeDistance() const {
+  return options_.field.start_clearance_m + FieldRounding();
+}
+
 void CollisionChecker::MarkFree(const Eigen::VectorXd& q, double clearance_m) {
   last_swept_ = q;
   const std::vector<Eigen::Isometry3d> links = robot_.LinkPoses(q);
-  // Padded, as MoveIt's self-filter pads the robot: the clearance, plus the field's conservatism
-  // (a cell centre within half a cell diagonal of the point, a value up to a cell diagonal low),
-  // so that q itself is clearance_m from the unknown space around it.
-  const double pad = clearance_m + 1.5 * std::sqrt(3.0) * options_.field.resolution_m + 1e-3;
+  // Padded, as MoveIt's self-filter pads the robot: the clearance plus the field's rounding, so
+  // that q itself is clearance_m from the unknown space around it.
+  const double pad = clearance_m + FieldRounding();
   for (const RobotBody& body : robot_.bodies()) {
     if (!body.moves) continue;
     const Eigen::Isometry3d& X_WL = links[static_cast<size_t>(body.link)];

@@ -598,6 +598,8 @@ Result<EpisodeResult> RunEpisode(const EpisodeComponents& c, const EpisodeOption
     c.motion->checker().ClearMap();
     c.motion->checker().MarkStart(next.q_start);
     c.motion->checker().SetStartView(next.X_WC_start, options.roi);
+    const double assumed = c.motion->checker().StartFreeDistance();
+    result.start_clearance = {assumed, arm.TrueClearanceNow(assumed)};
   }
 
   int segment_failures_in_a_row = 0;

@@ -104,6 +104,16 @@ json MotionTotalsJson(const pipeline::EpisodeResult& e) {
     home = MotionJson(*e.return_home);
     home["status"] = e.return_home_status.ToString();
   }
+  json start = nullptr;
+  if (e.start_clearance) {
+    const auto& truth = e.start_clearance->truth;
+    const bool near = truth && std::isfinite(truth->distance_m);
+    start = {{"assumed_m", e.start_clearance->assumed_m},
+             {"checked", truth.has_value()},
+             {"nearest_m", near ? json(truth->distance_m) : json(nullptr)},
+             {"nearest", near ? json(truth->nearest) : json(nullptr)},
+             {"broken", e.start_clearance->broken()}};
+  }
   return {{"moves", t.moves},
           {"attempts", t.attempts},
           {"rejected", t.rejected},
@@ -116,7 +126,8 @@ json MotionTotalsJson(const pipeline::EpisodeResult& e) {
           {"straight_line_contacts", ContactsJson(t.straight_line_contacts)},
           {"robot_s", t.robot_s},
           {"moving_frames", t.moving.streamed ? MovingFramesJson(t.moving) : json(nullptr)},
-          {"return_home", std::move(home)}};
+          {"return_home", std::move(home)},
+          {"start_clearance", std::move(start)}};
 }
 
 json StepJson(const pipeline::StepRecord& s) {

@@ -182,6 +182,19 @@ bool Collide(const fcl::CollisionGeometryd& a, const Eigen::Isometry3d& X_A,
   }
 }
 
+/// The distance between the two solids (0 when they touch; FCL's distance query, which can throw
+/// where collide can: then 0).
+double Distance(const fcl::CollisionGeometryd& a, const Eigen::Isometry3d& X_A,
+                const fcl::CollisionGeometryd& b, const Eigen::Isometry3d& X_B) {
+  const fcl::DistanceRequestd request;
+  fcl::DistanceResultd result;
+  try {
+    return std::max(0.0, fcl::distance(&a, X_A, &b, X_B, request, result));
+  } catch (const std::exception&) {
+    return 0.0;
+  }
+}
+
 Result<std::shared_ptr<const fcl::CollisionGeometryd>> MeshGeometry(const TriangleMesh& mesh,
                                                                     const std::string& name,
                                                                     Box3& bounds,
@@ -497,6 +510,33 @@ robot::MotionContacts ContactCounter::CountAlong(
 
 robot::MotionContacts ContactCounter::CountAt(const Eigen::VectorXd& q) const {
   return Summarize(impl_->List({q}), false);
+}
+
+robot::TrueClearance ContactCounter::NearestAt(const Eigen::VectorXd& q, double up_to_m) const {
+  impl_->CheckWaypoints({q});
+  if (!(std::isfinite(up_to_m) && up_to_m >= 0.0)) {
+    throw Error(
+        fmt::format("ContactCounter::NearestAt: up_to_m ({}) must be finite and >= 0", up_to_m));
+  }
+  const std::vector<motion::RobotBody>& bodies = impl_->robot.bodies();
+  const std::vector<Eigen::Isometry3d> X = impl_->robot.BodyPoses(q);
+  robot::TrueClearance nearest;
+  for (const int i : impl_->moving) {
+    const size_t b = static_cast<size_t>(i);
+    const BodyBound& bound = impl_->bounds[b];
+    const Eigen::Vector3d center_W = X[b] * bound.center_G;
+    const double reach = bound.radius + up_to_m;
+    for (const SceneItem& item : impl_->objects) {
+      if (bound.bounded && SquaredDistanceToBox(center_W, item.bounds) > reach * reach) continue;
+      const double d = Distance(*bodies[b].geometry, X[b], *item.geometry, item.X_WG);
+      if (d <= up_to_m && d < nearest.distance_m) {
+        nearest.distance_m = d;
+        nearest.nearest =
+            fmt::format("{} – {} '{}'", bodies[b].name, ToString(item.semantic_class), item.name);
+      }
+    }
+  }
+  return nearest;
 }
 
 std::vector<ContactInterval> ContactCounter::ListAlong(

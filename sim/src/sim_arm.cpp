@@ -41,6 +41,11 @@ robot::MoveResult SimArm::DoMoveToJoints(const Eigen::VectorXd& q) {
   return result;
 }
 
+std::optional<robot::TrueClearance> SimArm::DoTrueClearanceNow(double up_to_m) const {
+  if (counter_ == nullptr) return std::nullopt;
+  return counter_->NearestAt(q_, up_to_m);
+}
+
 robot::MoveResult SimArm::DoFollowTrajectory(const robot::JointTrajectory& trajectory) {
   robot::MoveResult result;
   const Eigen::VectorXd& q_end = trajectory.points.back().q;

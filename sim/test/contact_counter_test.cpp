@@ -287,6 +287,34 @@ TEST(ContactCounterTest, MeshContactIsExactToAMillimetre) {
   }
 }
 
+TEST(ContactCounterTest, NearestAtNamesTheNearestObjectWithinTheDistanceAskedFor) {
+  // A small horizontal leaf 12 mm above the camera body's top face, or 1 mm into it.
+  const Eigen::Isometry3d X_WG = CameraBodyPose(Home());
+  const double top_z = X_WG.translation().z() + 0.0125;
+  const auto leaf_at = [&](double gap) {
+    TriangleMesh leaf = MakeQuad(0.01, 0.01);
+    leaf.Transform(RigidTransform(
+        Eigen::Vector3d(X_WG.translation().x(), X_WG.translation().y(), top_z + gap)));
+    return Counter(SceneWith("tomato/leaf_11", SemanticClass::kLeaf, leaf));
+  };
+  const ContactCounter near = leaf_at(0.012);
+  const robot::TrueClearance within = near.NearestAt(Home(), 0.02);
+  EXPECT_NEAR(within.distance_m, 0.012, 1e-6);
+  EXPECT_THAT(within.nearest, HasSubstr("d435 – leaf 'tomato/leaf_11'"));
+  const robot::TrueClearance beyond = near.NearestAt(Home(), 0.01);
+  EXPECT_EQ(beyond.distance_m, std::numeric_limits<double>::infinity());
+  EXPECT_EQ(beyond.nearest, "");
+  EXPECT_EQ(leaf_at(-0.001).NearestAt(Home(), 0.0).distance_m, 0.0);
+  EXPECT_THROW(near.NearestAt(Home(), -0.01), Error);
+  EXPECT_THROW(near.NearestAt(Home(), std::numeric_limits<double>::quiet_NaN()), Error);
+  // The simulated arm answers for its current joints; without a counter it cannot.
+  SimArm arm(Arm(), Home());
+  EXPECT_FALSE(arm.TrueClearanceNow(0.02).has_value());
+  arm.SetContactCounter(std::make_shared<const ContactCounter>(near));
+  ASSERT_TRUE(arm.TrueClearanceNow(0.02).has_value());
+  EXPECT_NEAR(arm.TrueClearanceNow(0.02)->distance_m, 0.012, 1e-6);
+}
+
 TEST(ContactCounterTest, ContactWithALinkCylinderIsExactToAMillimetre) {
   // link_7's cylinder (radius 4 cm, axis G's z, centred): a fruit and a leaf beside its middle,
   // 1 mm off its surface or 1 mm into it.

@@ -86,10 +86,15 @@ class CollisionChecker {
   /// self-filter pads the robot, so that q itself passes the check: on a planned path the space
   /// within margin_m was already free; the cell diagonals beyond it are taken as free too.
   void MarkSwept(const Eigen::VectorXd& q);
-  /// The arm stands at q when the episode starts: unknown space within
-  /// options.field.start_clearance_m of its bodies (padded by the field's conservatism) is free.
-  /// Below margin_m, the first move plans with the start's own clearance (MotionPlanner::Plan).
+  /// The arm stands at q when the episode starts: unknown space within StartFreeDistance() of its
+  /// bodies' sphere cover is free. With start_clearance_m below margin_m, the first move plans
+  /// with the start's own clearance (MotionPlanner::Plan).
   void MarkStart(const Eigen::VectorXd& q);
+  /// How far from the arm's bodies (their sphere cover) MarkStart frees unknown space, metres:
+  /// options.field.start_clearance_m plus the field's rounding, 1.5 cell diagonals and 1 mm
+  /// (0.047 m at the defaults), so that the start itself is start_clearance_m from what is
+  /// left; the arm may move into that rounding where the field's cells allow.
+  double StartFreeDistance() const;
   /// Forgets the map, the swept space and the start view (a new episode).
   void ClearMap();
   /// With options.field.unknown_behind_start_is_free: unknown space on the robot's side of the
@@ -136,6 +141,9 @@ class CollisionChecker {
   /// Unknown space within clearance_m of the arm's bodies at q (plus the field's conservatism) is
   /// free at the next SetMap.
   void MarkFree(const Eigen::VectorXd& q, double clearance_m);
+  /// What the field's cells can understate a distance by, and 1 mm: 1.5 cell diagonals (a cell
+  /// centre within half a diagonal of the point, a value up to a diagonal low).
+  double FieldRounding() const;
   /// The verdict with its message, formatted only when a caller wants it.
   StateCheck Describe(const Eigen::VectorXd& q, const Hit& hit) const;
 

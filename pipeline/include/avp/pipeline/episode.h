@@ -260,6 +260,16 @@ struct EpisodeResult {
   /// The move back to the first pose (EpisodeOptions::return_home), when one was made or tried.
   std::optional<MotionRecord> return_home;
   Status return_home_status;
+  /// With collision-free motion: how far around the arm at its start the planner took unknown
+  /// space as free (motion::CollisionChecker::StartFreeDistance: start_clearance_m and the
+  /// field's rounding), and, where the arm sees the true world (a simulator), the nearest object
+  /// within it: one there is an assumption broken (docs/motion.md).
+  struct StartClearance {
+    double assumed_m = 0.0;
+    std::optional<robot::TrueClearance> truth;
+    bool broken() const { return truth && truth->distance_m < assumed_m; }
+  };
+  std::optional<StartClearance> start_clearance;
   double total_ms = 0.0;
   int views_fused() const { return static_cast<int>(steps.size()); }
 };

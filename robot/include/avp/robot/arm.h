@@ -1,5 +1,6 @@
 #pragma once
 
+#include <limits>
 #include <optional>
 #include <string>
 #include <utility>
@@ -28,6 +29,16 @@ struct MotionContacts {
 
   int total() const { return plant + fruit + support + ground + self; }
   MotionContacts& operator+=(const MotionContacts& other);
+};
+
+/// How close the arm's moving bodies are to the true world at one state, as only a simulator
+/// can measure (the start-clearance check, docs/motion.md).
+struct TrueClearance {
+  /// The smallest distance between a moving body and a scene object, metres (0 when they touch);
+  /// +infinity when nothing is within the distance that was asked for.
+  double distance_m = std::numeric_limits<double>::infinity();
+  /// "flange/d435 – leaf 'tomato/leaf_11'" when distance_m is finite.
+  std::string nearest;
 };
 
 /// Outcome of one motion request.
@@ -82,6 +93,11 @@ class Arm {
   /// trajectory that fails JointTrajectory::Validate or does not start within 1e-3 rad (or m) of
   /// the current joints, naming the value.
   MoveResult FollowTrajectory(const JointTrajectory& trajectory);
+  /// Where the arm can see the true world (a simulator): how close its moving bodies are to it
+  /// now, looking as far as `up_to_m`; nullopt where it cannot (a real arm).
+  std::optional<TrueClearance> TrueClearanceNow(double up_to_m) const {
+    return DoTrueClearanceNow(up_to_m);
+  }
 
   /// Statistics over this arm's lifetime: successful moves, their summed joint-space path length
   /// (radians; metres for prismatic joints), and refused requests.
@@ -99,6 +115,10 @@ class Arm {
   /// point (DoMoveToJoints), for arms that cannot follow a trajectory; the path length is then
   /// the trajectory's and the execution time its duration.
   virtual MoveResult DoFollowTrajectory(const JointTrajectory& trajectory);
+  /// The default: the true world is unknown.
+  virtual std::optional<TrueClearance> DoTrueClearanceNow(double /*up_to_m*/) const {
+    return std::nullopt;
+  }
 
  private:
   MoveResult Record(MoveResult result);

@@ -101,6 +101,11 @@ class ContactCounter {
   /// Cost: one sample of CountAlong (tens of microseconds to a few milliseconds, depending on
   /// how much of the scene the arm's bodies reach). @throws avp::Error as CountAlong.
   robot::MotionContacts CountAt(const Eigen::VectorXd& q) const;
+  /// The scene object nearest to the arm's moving bodies at `q`, if within `up_to_m` (FCL
+  /// distance between the true shapes, 0 when they touch), else distance_m = +infinity.
+  /// Cost: one FCL distance query per moving body and object whose bounds it reaches within
+  /// up_to_m. @throws avp::Error as CountAlong, or for an up_to_m that is not finite and >= 0.
+  robot::TrueClearance NearestAt(const Eigen::VectorXd& q, double up_to_m) const;
 
   /// The contacts CountAlong counts, one entry per interval, in order of their first sample.
   /// @throws avp::Error as CountAlong.

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 
 #include <Eigen/Core>
 
@@ -42,6 +43,8 @@ class SimArm final : public robot::Arm {
   /// Moves to the trajectory's last point at once; the path length is the summed |Δq| over its
   /// points and the execution time its duration (as robot::Arm's default), plus the contacts.
   robot::MoveResult DoFollowTrajectory(const robot::JointTrajectory& trajectory) override;
+  /// With a contact counter: ContactCounter::NearestAt at the current joints.
+  std::optional<robot::TrueClearance> DoTrueClearanceNow(double up_to_m) const override;
 
  private:
   Eigen::VectorXd q_;
