@@ -236,6 +236,9 @@ void TakeResults(const RunResult& r, report::BenchEpisode& j) {
     j.straight_line_contacts = motion.straight_line_contacts->total();
   j.motion_s = motion.execution_s;
   j.move_planning_ms = motion.planning_ms;
+  if (const auto& start = r.episode.start_clearance; start && start->truth) {
+    j.start_clearance_broken = start->broken() ? 1.0 : 0.0;
+  }
   for (const eval::FruitResult& f : r.fruits) {
     j.fruits.push_back({.best_visible_fraction = f.best_visible_fraction,
                         .episode_visible_fraction = f.episode_visible_fraction,

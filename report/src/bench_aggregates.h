@@ -31,6 +31,8 @@ struct BenchAggregates {
   /// planning time.
   std::map<BenchKey, std::vector<double>> contacts, straight_line_contacts, motion_s,
       move_planning_ms;
+  /// Per episode whose start the simulator checked: 1 when it broke the start clearance.
+  std::map<BenchKey, std::vector<double>> start_clearance_broken;
   std::map<BenchKey, size_t> failed;
   size_t failed_total = 0;
   std::vector<std::string> metric_order;
@@ -79,6 +81,9 @@ inline BenchAggregates Aggregate(const std::vector<BenchEpisode>& episodes, int 
       a.straight_line_contacts[key].push_back(j.straight_line_contacts);
     }
     if (std::isfinite(j.motion_s)) a.motion_s[key].push_back(j.motion_s);
+    if (std::isfinite(j.start_clearance_broken)) {
+      a.start_clearance_broken[key].push_back(j.start_clearance_broken);
+    }
     a.move_planning_ms[key].insert(a.move_planning_ms[key].end(), j.move_planning_ms.begin(),
                                    j.move_planning_ms.end());
   }

@@ -91,7 +91,8 @@ std::string SummaryCsv(const Aggregates& a, const BenchDescription& bench) {
     for (const auto& [name, values] :
          {std::pair{"contacts", &a.contacts},
           std::pair{"straight_line_contacts", &a.straight_line_contacts},
-          std::pair{"motion_s", &a.motion_s}}) {
+          std::pair{"motion_s", &a.motion_s},
+          std::pair{"start_clearance_broken", &a.start_clearance_broken}}) {
       const auto it = values->find(key);
       if (it == values->end() || it->second.empty()) continue;
       csv += fmt::format("{},{},{},{},{},{}\n", key.scenario, key.planner, bench.segmenter,
@@ -216,14 +217,21 @@ std::string MeanCell(const std::map<Key, std::vector<double>>& series, const Key
   return fmt::format("{:.{}f}", MeanOf(it->second), digits);
 }
 
-/// Contacts per episode: "mean (straight line: mean)", with the most in one episode when any.
+/// Contacts per episode: "mean (straight line: mean)", with the most in one episode when any,
+/// and the episodes that started with an object inside the assumed start clearance.
 std::string ContactsCell(const Aggregates& a, const Key& key) {
   const auto it = a.contacts.find(key);
   if (it == a.contacts.end() || it->second.empty()) return "–";
   const double most = *std::max_element(it->second.begin(), it->second.end());
-  return fmt::format("{}{} ({})", MeanCell(a.contacts, key, 2),
-                     most > 0 ? fmt::format(", at most {:.0f}", most) : std::string(),
-                     MeanCell(a.straight_line_contacts, key, 2));
+  double broken = 0.0;
+  if (const auto b = a.start_clearance_broken.find(key); b != a.start_clearance_broken.end()) {
+    for (const double v : b->second) broken += v;
+  }
+  return fmt::format(
+      "{}{} ({}){}", MeanCell(a.contacts, key, 2),
+      most > 0 ? fmt::format(", at most {:.0f}", most) : std::string(),
+      MeanCell(a.straight_line_contacts, key, 2),
+      broken > 0 ? fmt::format("; start clearance broken in {:.0f}", broken) : std::string());
 }
 
 /// The final view's table of one scenario; appends its cells.

@@ -260,6 +260,10 @@ Result<BenchEpisode> ReadBenchEpisode(const fs::path& dir, const std::string& sc
       for (const nlohmann::json& t : m->value("planning_ms", nlohmann::json::array())) {
         e.move_planning_ms.push_back(JsonNumber(t));
       }
+      if (const auto start = m->find("start_clearance");
+          start != m->end() && start->is_object() && start->value("checked", false)) {
+        e.start_clearance_broken = start->value("broken", false) ? 1.0 : 0.0;
+      }
     }
     for (const nlohmann::json& f : rec.at("fruits")) {
       e.fruits.push_back({.best_visible_fraction = JsonNumber(f.at("best_visible_fraction")),

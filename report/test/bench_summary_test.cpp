@@ -146,21 +146,25 @@ TEST_F(BenchSummaryFilesTest, WritesContactsAndMotionTimePerEpisode) {
   a0.straight_line_contacts = 5;
   a0.motion_s = 10;
   a0.move_planning_ms = {1, 3};
+  a0.start_clearance_broken = 1;
   BenchEpisode a1 = Episode("a", 1, {{0.5, true}});
   a1.contacts = 2;
   a1.straight_line_contacts = 3;
   a1.motion_s = 20;
   a1.move_planning_ms = {2};
+  a1.start_clearance_broken = 0;
   const std::vector<BenchEpisode> episodes = {a0, a1, Episode("b", 0, {{0.5, true}})};
   ASSERT_TRUE(WriteBenchSummary(dir_, d, episodes, 1.0).ok());
   const std::string md = ReadAll(dir_ / "summary.md");
   EXPECT_THAT(md, HasSubstr("contacts/episode (straight line) | motion s |"));
-  EXPECT_THAT(md, HasSubstr("| 1.00, at most 2 (4.00) | 15.0 |")) << md;
+  EXPECT_THAT(md, HasSubstr("| 1.00, at most 2 (4.00); start clearance broken in 1 | 15.0 |"))
+      << md;
   EXPECT_THAT(md, HasSubstr("| – | – |")) << md;  // b: no motion recorded
   const std::string csv = ReadAll(dir_ / "summary.csv");
   EXPECT_THAT(csv, HasSubstr("s,a,oracle,1,contacts,1,"));
   EXPECT_THAT(csv, HasSubstr("s,a,oracle,1,straight_line_contacts,4,"));
   EXPECT_THAT(csv, HasSubstr("s,a,oracle,1,motion_s,15,"));
+  EXPECT_THAT(csv, HasSubstr("s,a,oracle,1,start_clearance_broken,0.5,"));
   EXPECT_THAT(csv, Not(HasSubstr("planning_ms")));  // wall times: not reproducible
   EXPECT_THAT(csv, Not(HasSubstr("s,b,oracle,1,contacts")));
 }

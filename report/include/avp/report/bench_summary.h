@@ -54,6 +54,10 @@ struct BenchEpisode {
   /// move's planning time.
   double motion_s = std::numeric_limits<double>::quiet_NaN();
   std::vector<double> move_planning_ms;
+  /// 1 when the simulator found an object inside the free space assumed around the arm at its
+  /// start (record.json motion.start_clearance.broken), 0 when it checked and found none, NaN
+  /// when it did not check (straight moves, a real robot, an older record).
+  double start_clearance_broken = std::numeric_limits<double>::quiet_NaN();
   /// Every ground-truth fruit of the episode (empty for a ground truth without fruits).
   std::vector<BenchFruit> fruits;
   /// Per plan step with the run configuration's oracle_regret (empty otherwise).
