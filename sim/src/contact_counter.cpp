@@ -521,20 +521,25 @@ robot::TrueClearance ContactCounter::NearestAt(const Eigen::VectorXd& q, double 
   const std::vector<motion::RobotBody>& bodies = impl_->robot.bodies();
   const std::vector<Eigen::Isometry3d> X = impl_->robot.BodyPoses(q);
   robot::TrueClearance nearest;
+  uint64_t nearest_key = 0;  // the body and the object, as a contact's key
   for (const int i : impl_->moving) {
     const size_t b = static_cast<size_t>(i);
     const BodyBound& bound = impl_->bounds[b];
     const Eigen::Vector3d center_W = X[b] * bound.center_G;
     const double reach = bound.radius + up_to_m;
-    for (const SceneItem& item : impl_->objects) {
+    for (size_t o = 0; o < impl_->objects.size(); ++o) {
+      const SceneItem& item = impl_->objects[o];
       if (bound.bounded && SquaredDistanceToBox(center_W, item.bounds) > reach * reach) continue;
       const double d = Distance(*bodies[b].geometry, X[b], *item.geometry, item.X_WG);
       if (d <= up_to_m && d < nearest.distance_m) {
         nearest.distance_m = d;
-        nearest.nearest =
-            fmt::format("{} – {} '{}'", bodies[b].name, ToString(item.semantic_class), item.name);
+        nearest_key = (uint64_t{static_cast<uint32_t>(i)} << 32) | o;
       }
     }
+  }
+  // Named as a contact is: "flange/d435 – leaf 'tomato/leaf_11'".
+  if (std::isfinite(nearest.distance_m)) {
+    nearest.nearest = impl_->NewInterval(nearest_key, 0, 0.0).Describe(/*with_position=*/false);
   }
   return nearest;
 }
